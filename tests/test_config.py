@@ -1,0 +1,75 @@
+"""Config validation, YAML round trip, and CLI exit codes for bad input."""
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig, load_config, save_config
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("box_width", 0.0, "scene.box_width"),
+    ("box_height", -0.1, "scene.box_height"),
+    ("box_mass", 0.0, "scene.box_mass"),
+    ("mu", 0.0, "scene.mu"),
+    ("mu", math.nan, "scene.mu"),
+    ("box_mass", math.inf, "scene.box_mass"),
+])
+def test_invalid_scene_values_name_the_field_and_range(field, value, message):
+    with pytest.raises(ConfigError, match=message) as info:
+        SceneConfig(**{field: value})
+    assert "valid range" in str(info.value)
+
+
+def test_search_displacements_must_be_odd():
+    with pytest.raises(ConfigError, match="num_displacements"):
+        SearchConfig(num_displacements=16)
+
+
+def test_yaml_round_trip_and_partial_files(tmp_path):
+    config = Config(scene=SceneConfig(box_width=0.16, mu=0.5))
+    path = tmp_path / "c.yaml"
+    save_config(config, path)
+    assert load_config(path) == config
+    path.write_text("scene:\n  box_mass: 0.1\n")
+    loaded = load_config(path)
+    assert loaded.scene.box_mass == 0.1 and loaded.scene.box_width == 0.2
+
+
+@pytest.mark.parametrize("text, message", [
+    ("scene:\n  box_colour: red\n", "box_colour"),
+    ("scenery: {}\n", "scenery"),
+    ("scene:\n  box_mass: -2\n", "scene.box_mass"),
+    ("scene: [1, 2\n", "not valid YAML"),
+])
+def test_bad_yaml_is_a_named_error(tmp_path, text, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "trajectotree.cli", *args], capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["scene", "--mass", "0"], "scene.box_mass"),
+    (["scene", "--mu", "nan"], "scene.mu"),
+    (["scene", "--box-size", "0.2", "-0.1"], "scene.box_height"),
+    (["scene", "--config", "/nonexistent.yaml"], "does not exist"),
+])
+def test_cli_invalid_input_exits_2(args, message):
+    result = run_cli(*args)
+    assert result.returncode == 2
+    assert message in result.stderr
+
+
+def test_cli_version_and_scene_summary(tmp_path):
+    assert run_cli("--version").stdout.strip().startswith("trajectotree ")
+    result = run_cli("scene", "--mass", "0.08", "--json", "--figure", str(tmp_path / "m.png"))
+    assert result.returncode == 0, result.stderr
+    assert '"mass_kg": 0.08' in result.stdout
+    assert (tmp_path / "m.png").stat().st_size > 10_000

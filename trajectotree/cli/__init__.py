@@ -1,0 +1,50 @@
+"""The `trajectotree` command. Each subcommand lives in its own module of this
+package and exposes `register(subparsers)`; `main` adds those named in COMMANDS.
+
+Exit codes: 0 success (a plan that did not converge is still a success of the
+command, reported as "success": false), 2 invalid input, 1 unexpected error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from trajectotree import __version__
+from trajectotree.config import ConfigError
+
+# Subcommand modules, in the order `--help` lists them.
+COMMANDS = ("scene",)
+
+
+class InputError(ConfigError):
+    """Invalid user input outside the config (paths, files, methods): exit code 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="trajectotree",
+        description="Plan, execute and evaluate multi-contact finger-gaiting manipulation "
+                    "with TrajectoTree (contact-sequence search + CITO on Drake).")
+    parser.add_argument("--version", action="version", version=f"trajectotree {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"trajectotree.cli.{name}_cmd").register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except ConfigError as e:  # invalid input: name the value and the valid range
+        print(f"trajectotree {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"trajectotree {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,5 @@
+import sys
+
+from trajectotree.cli import main
+
+sys.exit(main())

@@ -1,0 +1,236 @@
+"""Typed configuration: every parameter a user may change, with its unit.
+
+Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each
+dataclass validates itself on construction and raises `ConfigError` naming the
+field, its value and the valid range. `load_config` / `save_config` read and
+write the whole `Config` as YAML with Drake's typed YAML loader.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+
+class ConfigError(ValueError):
+    """An invalid configuration or command-line value (CLI exit code 2)."""
+
+
+def check_range(name: str, value, low: float | None = None, high: float | None = None,
+                *, low_open: bool = False, high_open: bool = False) -> None:
+    """Raises ConfigError unless `value` is a finite number within [low, high]."""
+    lo = "-inf" if low is None else f"{low:g}"
+    hi = "inf" if high is None else f"{high:g}"
+    interval = f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{name} = {value!r} is not a finite number; valid range: {interval}")
+    too_low = low is not None and (value <= low if low_open else value < low)
+    too_high = high is not None and (value >= high if high_open else value > high)
+    if too_low or too_high:
+        raise ConfigError(f"{name} = {value!r} is out of range; valid range: {interval}")
+
+
+def check_integer(name: str, value, low: int, high: int | None = None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{name} = {value!r} must be an integer >= {low}")
+    check_range(name, value, low, high)
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """The hand, the object and the world."""
+
+    box_width: float = 0.20        # m, object extent along its x axis
+    box_height: float = 0.10       # m, object extent along its y axis
+    box_depth: float = 0.05        # m, extent along z (only for 3D geometry; the task is planar)
+    box_mass: float = 0.05         # kg
+    mu: float = 0.7                # friction coefficient between fingertips and object
+    gravity: float = 9.81          # m/s^2, magnitude; gravity points along -y in W
+    initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m, m, rad) object pose x_0 in W
+    corner_margin: float = 0.015   # m, contacts closer than this (arclength) to a corner are not allowed
+
+    def __post_init__(self):
+        for name in ("box_width", "box_height", "box_depth", "box_mass", "mu", "gravity"):
+            check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
+        check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
+        check_range("scene.box_height", self.box_height, 0.0, 0.30, low_open=True)
+        check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
+        if len(self.initial_pose) != 3:
+            raise ConfigError(f"scene.initial_pose = {self.initial_pose!r} must have 3 entries (x m, y m, theta rad)")
+        for i, v in enumerate(self.initial_pose):
+            check_range(f"scene.initial_pose[{i}]", v, -1.0, 1.0)
+        half_short = min(self.box_width, self.box_height) / 2
+        check_range("scene.corner_margin", self.corner_margin, 0.0, half_short, high_open=True)
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The contact-sequence planner (paper Sec. III-A, Algorithm 1)."""
+
+    num_nodes: int = 10                 # N, nodes in the object path (tree depth), incl. the start
+    num_displacements: int = 17         # |D_cp|, contact displacements per free finger (odd, incl. zero)
+    displacement_step: float = 0.01     # m, arclength spacing of the displacements in D_cp
+    # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
+    # from the corner (+w/2, -h/2). None picks the default grasp (see trajectotree.search).
+    initial_arclengths: tuple[float, float, float, float] | None = None
+    nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
+    min_closure_margin: float = 1e-3    # N, form-closure LP margin d* must exceed this
+    max_expansions: int = 20000         # node budget of the search
+    time_budget_s: float = 30.0         # s, wall-clock budget of the search
+
+    def __post_init__(self):
+        check_integer("search.num_nodes", self.num_nodes, 2, 100)
+        check_integer("search.num_displacements", self.num_displacements, 1, 201)
+        if self.num_displacements % 2 == 0:
+            raise ConfigError(f"search.num_displacements = {self.num_displacements} must be odd "
+                              "(symmetric around the zero displacement); valid range: odd integers in [1, 201]")
+        check_range("search.displacement_step", self.displacement_step, 0.0, 0.2, low_open=True)
+        if self.initial_arclengths is not None:
+            if len(self.initial_arclengths) != 4:
+                raise ConfigError(f"search.initial_arclengths = {self.initial_arclengths!r} must have 4 entries")
+            for i, s in enumerate(self.initial_arclengths):
+                check_range(f"search.initial_arclengths[{i}]", s, 0.0, 10.0)
+        check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
+        check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
+        check_integer("search.max_expansions", self.max_expansions, 1)
+        check_range("search.time_budget_s", self.time_budget_s, 0.0, None, low_open=True)
+
+
+@dataclass(frozen=True)
+class CitoConfig:
+    """Contact-implicit trajectory optimization (paper Sec. III-B, III-C) and IPOPT."""
+
+    knots_per_segment: int = 12     # M_hat, time steps per transition segment
+    dt: float = 0.1                 # s, collocation time step
+    weight_pose: tuple[float, float, float] = (10.0, 10.0, 1.0)  # Q diagonal, on (x m, y m, theta rad)
+    weight_torque: float = 1.0      # R = weight_torque * I, on tau (N m)
+    weight_force: float = 0.01      # L = weight_force * I, on lambda (N)
+    weight_slack: float = 100.0     # weight of the L1 slack penalty ||gamma||_1
+    # Regularization (not in the paper): sum of squared accelerations; needed for
+    # IPOPT's L-BFGS to converge (DESIGN.md sec. 7). Set to 0 to disable.
+    weight_acceleration: float = 1e-3
+    sdf_sharpness: float = 200.0    # 1/m, log-sum-exp sharpness of the smooth box distance
+    tol: float = 1e-6               # IPOPT tol
+    constr_viol_tol: float = 1e-6   # IPOPT constr_viol_tol
+    acceptable_tol: float = 1e-3    # IPOPT acceptable_tol
+    acceptable_constr_viol_tol: float = 1e-6  # IPOPT acceptable_constr_viol_tol
+    acceptable_iter: int = 5        # IPOPT acceptable_iter
+    max_iter: int = 1000            # IPOPT max_iter
+    lbfgs_history: int = 3          # IPOPT limited_memory_max_history
+    print_level: int = 0            # IPOPT print_level (0 silent, 5 verbose)
+
+    def __post_init__(self):
+        check_integer("cito.knots_per_segment", self.knots_per_segment, 2, 200)
+        check_range("cito.dt", self.dt, 0.0, 1.0, low_open=True)
+        if len(self.weight_pose) != 3:
+            raise ConfigError(f"cito.weight_pose = {self.weight_pose!r} must have 3 entries")
+        for i, v in enumerate(self.weight_pose):
+            check_range(f"cito.weight_pose[{i}]", v, 0.0, None)
+        for name in ("weight_torque", "weight_force", "weight_slack", "weight_acceleration"):
+            check_range(f"cito.{name}", getattr(self, name), 0.0, None)
+        check_range("cito.sdf_sharpness", self.sdf_sharpness, 10.0, 1e5)
+        for name in ("tol", "constr_viol_tol", "acceptable_tol", "acceptable_constr_viol_tol"):
+            check_range(f"cito.{name}", getattr(self, name), 0.0, 1.0, low_open=True)
+        check_integer("cito.acceptable_iter", self.acceptable_iter, 0)
+        check_integer("cito.max_iter", self.max_iter, 1)
+        check_integer("cito.lbfgs_history", self.lbfgs_history, 1, 100)
+        check_integer("cito.print_level", self.print_level, 0, 12)
+
+
+@dataclass(frozen=True)
+class ControllerGains:
+    """Fingertip impedance controller, paper eq. 20 (same gains for every method)."""
+
+    kp: float = 200.0   # N/m, fingertip position stiffness
+    kv: float = 5.0     # N s/m, fingertip velocity damping
+
+    def __post_init__(self):
+        check_range("controller.kp", self.kp, 0.0, None)
+        check_range("controller.kv", self.kv, 0.0, None)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Full-dynamics execution in a discrete MultibodyPlant."""
+
+    time_step: float = 1e-3       # s, discrete plant step
+    settle_time: float = 0.5      # s, simulated after the plan ends (the last reference is held)
+    drop_distance: float = 0.05   # m, the box is dropped once its position is this far from the plan
+
+    def __post_init__(self):
+        check_range("sim.time_step", self.time_step, 0.0, 0.01, low_open=True)
+        check_range("sim.settle_time", self.settle_time, 0.0, 10.0)
+        check_range("sim.drop_distance", self.drop_distance, 0.0, 1.0, low_open=True)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything one trial uses; saved into every plan.json."""
+
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    search: SearchConfig = field(default_factory=SearchConfig)
+    cito: CitoConfig = field(default_factory=CitoConfig)
+    controller: ControllerGains = field(default_factory=ControllerGains)
+    sim: SimConfig = field(default_factory=SimConfig)
+
+
+def _from_dict(cls, data, where: str):
+    """Builds dataclass `cls` from a plain dict, rejecting unknown keys by name."""
+    if data is None:
+        return cls()
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where or 'config'} must be a mapping, got {data!r}")
+    fields = {f.name: f for f in dc.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ConfigError(f"unknown key(s) {unknown} in {where or 'config'}; valid keys: {sorted(fields)}")
+    kwargs = {}
+    for name, value in data.items():
+        sub = f"{where}.{name}" if where else name
+        f = fields[name]
+        if dc.is_dataclass(f.default_factory if f.default_factory is not dc.MISSING else None):
+            kwargs[name] = _from_dict(f.default_factory, value, sub)
+        elif isinstance(value, list):
+            kwargs[name] = tuple(value)
+        else:
+            kwargs[name] = value
+    try:
+        return cls(**kwargs)
+    except TypeError as e:  # e.g. a nested mapping where a number belongs
+        raise ConfigError(f"invalid value in {where or 'config'}: {e}") from None
+
+
+def config_from_dict(data: dict) -> Config:
+    """Builds a Config from nested dicts (as read from YAML or plan.json)."""
+    return _from_dict(Config, data, "")
+
+
+def config_to_dict(config: Config) -> dict:
+    """Plain nested dicts (tuples as lists), suitable for JSON and YAML."""
+    def plain(v):
+        if isinstance(v, dict):
+            return {k: plain(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [plain(x) for x in v]
+        return v
+    return plain(dc.asdict(config))
+
+
+def load_config(path: str | Path) -> Config:
+    """Reads a YAML file; missing keys keep their defaults, unknown keys are errors."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {str(path)!r} does not exist")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
+    return config_from_dict(data or {})
+
+
+def save_config(config: Config, path: str | Path) -> None:
+    Path(path).write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False))

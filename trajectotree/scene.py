@@ -1,0 +1,218 @@
+"""The hand and the box in a Drake MultibodyPlant, built from models/ and SceneConfig.
+
+`add_hand_and_box` adds both models to any plant (continuous for planning
+queries, discrete for simulation). `build_scene` makes a finalized plant with a
+SceneGraph for kinematic and collision queries, and reads from it the finger
+geometry (`FingerGeometry`) that the planners' closed-form kinematics use, so
+the SDF stays the single source of truth for the hand.
+
+Frames: W world (x right, y up, gravity -y), B box, F_i fingertip i (the centre
+of its sphere). Plant positions are ordered [x, y, theta, q_0 ... q_7] where
+q_2i, q_2i+1 are the two joints of finger i (see `Scene.hand_q_indices`).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from functools import cached_property
+from importlib import resources
+
+import numpy as np
+from pydrake.geometry import SceneGraph
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint
+from pydrake.systems.framework import DiagramBuilder
+
+from trajectotree.config import SceneConfig
+
+NUM_FINGERS = 4
+JOINTS_PER_FINGER = 2
+NUM_HAND_JOINTS = NUM_FINGERS * JOINTS_PER_FINGER
+MODELS_DIR = resources.files("trajectotree") / "models"
+
+
+def _sub(text: str, pattern: str, value: str) -> str:
+    new, count = re.subn(pattern, value, text)
+    if count == 0:
+        raise RuntimeError(f"model template lost the pattern {pattern!r}")
+    return new
+
+
+def _set_friction(text: str, mu: float) -> str:
+    text = _sub(text, r"<drake:mu_dynamic>[^<]*</drake:mu_dynamic>", f"<drake:mu_dynamic>{mu!r}</drake:mu_dynamic>")
+    return _sub(text, r"<drake:mu_static>[^<]*</drake:mu_static>", f"<drake:mu_static>{mu!r}</drake:mu_static>")
+
+
+def box_sdf(config: SceneConfig) -> str:
+    """box.sdf with the size, mass, inertia and friction of `config`."""
+    w, h, d, m = config.box_width, config.box_height, config.box_depth, config.box_mass
+    ixx, iyy, izz = m * (h * h + d * d) / 12, m * (w * w + d * d) / 12, m * (w * w + h * h) / 12
+    text = (MODELS_DIR / "box.sdf").read_text()
+    text = _sub(text, r"<size>[^<]*</size>", f"<size>{w!r} {h!r} {d!r}</size>")
+    text = _sub(text, r"<mass>[^<]*</mass>", f"<mass>{m!r}</mass>")
+    text = _sub(text, r"<ixx>[^<]*</ixx>", f"<ixx>{ixx!r}</ixx>")
+    text = _sub(text, r"<iyy>[^<]*</iyy>", f"<iyy>{iyy!r}</iyy>")
+    text = _sub(text, r"<izz>[^<]*</izz>", f"<izz>{izz!r}</izz>")
+    return _set_friction(text, config.mu)
+
+
+def hand_sdf(config: SceneConfig) -> str:
+    """planar_hand.sdf with the fingertip friction of `config` (Drake combines
+    the two friction coefficients of a contact pair; equal values keep mu)."""
+    return _set_friction((MODELS_DIR / "planar_hand.sdf").read_text(), config.mu)
+
+
+def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig):
+    """Adds the hand (joints to W) and the box (planar joint in the x-y plane)
+    to an unfinalized plant, sets gravity. Returns (hand, box) model instances."""
+    parser = Parser(plant)
+    parser.package_map().Add("trajectotree", str(MODELS_DIR))
+    (hand,) = parser.AddModelsFromString(hand_sdf(config), "sdf")
+    (box,) = parser.AddModelsFromString(box_sdf(config), "sdf")
+    plant.AddJoint(PlanarJoint("box_planar", plant.world_frame(), plant.GetFrameByName("box", box)))
+    plant.mutable_gravity_field().set_gravity_vector([0.0, -config.gravity, 0.0])
+    return hand, box
+
+
+@dataclass(frozen=True)
+class FingerGeometry:
+    """One finger as the closed-form kinematics and dynamics see it, read from the plant."""
+
+    p_W_base: np.ndarray   # (2,) m, joint-1 axis position in W
+    psi: float             # rad, direction of link 1 in W when q1 = 0
+    l1: float              # m, joint 1 to joint 2
+    l2: float              # m, joint 2 to fingertip centre
+    q_lower: np.ndarray    # (2,) rad, joint lower limits
+    q_upper: np.ndarray    # (2,) rad, joint upper limits
+    tau_max: np.ndarray    # (2,) N m, torque limits
+    masses: np.ndarray     # (2,) kg, link masses
+    coms: np.ndarray       # (2,) m, link centre of mass along the link's x axis
+    inertias: np.ndarray   # (2,) kg m^2, link rotational inertia about z at its COM
+
+    def fingertip(self, q) -> np.ndarray:
+        """p_WF, the fingertip centre in W (closed-form 2-link kinematics)."""
+        a1, a12 = self.psi + q[0], self.psi + q[0] + q[1]
+        return self.p_W_base + self.l1 * np.array([np.cos(a1), np.sin(a1)]) + self.l2 * np.array([np.cos(a12), np.sin(a12)])
+
+    def jacobian(self, q) -> np.ndarray:
+        """J_WF (2x2), d p_WF / d q."""
+        a1, a12 = self.psi + q[0], self.psi + q[0] + q[1]
+        s1, c1, s12, c12 = np.sin(a1), np.cos(a1), np.sin(a12), np.cos(a12)
+        return np.array([[-self.l1 * s1 - self.l2 * s12, -self.l2 * s12],
+                         [self.l1 * c1 + self.l2 * c12, self.l2 * c12]])
+
+
+@dataclass
+class Scene:
+    """A finalized plant with its SceneGraph, for planning-time queries."""
+
+    config: SceneConfig
+    diagram: object
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    hand: object          # ModelInstanceIndex
+    box: object           # ModelInstanceIndex
+
+    @cached_property
+    def hand_q_indices(self) -> np.ndarray:
+        """Indices of the 8 hand joints (finger-major) in the plant's positions."""
+        return np.array([self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).position_start()
+                         for i in range(NUM_FINGERS) for j in (1, 2)])
+
+    @cached_property
+    def hand_v_indices(self) -> np.ndarray:
+        return np.array([self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).velocity_start()
+                         for i in range(NUM_FINGERS) for j in (1, 2)])
+
+    @cached_property
+    def box_q_indices(self) -> np.ndarray:
+        joint = self.plant.GetJointByName("box_planar")
+        return np.arange(joint.position_start(), joint.position_start() + 3)
+
+    def tip_frame(self, i: int):
+        return self.plant.GetFrameByName(f"finger{i}_tip", self.hand)
+
+    @cached_property
+    def tip_radius(self) -> float:
+        inspector = self.scene_graph.model_inspector()
+        body = self.plant.GetBodyByName("finger0_link2", self.hand)
+        for gid in self.plant.GetCollisionGeometriesForBody(body):
+            shape = inspector.GetShape(gid)
+            if type(shape).__name__ == "Sphere":
+                return float(shape.radius())
+        raise RuntimeError("finger0_link2 has no sphere collision geometry")
+
+    @cached_property
+    def fingers(self) -> tuple[FingerGeometry, ...]:
+        return tuple(self._read_finger(i) for i in range(NUM_FINGERS))
+
+    def _read_finger(self, i: int) -> FingerGeometry:
+        plant, ctx = self.plant, self.plant.CreateDefaultContext()
+        plant.SetPositions(ctx, self.hand, np.zeros(NUM_HAND_JOINTS))
+        joints = [plant.GetJointByName(f"finger{i}_joint{j}", self.hand) for j in (1, 2)]
+        links = [plant.GetBodyByName(f"finger{i}_link{j}", self.hand) for j in (1, 2)]
+        X_W1 = joints[0].frame_on_child().CalcPoseInWorld(ctx)
+        X_W2 = joints[1].frame_on_child().CalcPoseInWorld(ctx)
+        p_WF = self.tip_frame(i).CalcPoseInWorld(ctx).translation()
+        x_axis = X_W1.rotation().matrix()[:2, 0]
+        inertia = [b.default_spatial_inertia() for b in links]
+        return FingerGeometry(
+            p_W_base=X_W1.translation()[:2].copy(),
+            psi=float(np.arctan2(x_axis[1], x_axis[0])),
+            l1=float(np.linalg.norm(X_W2.translation() - X_W1.translation())),
+            l2=float(np.linalg.norm(p_WF - X_W2.translation())),
+            q_lower=np.array([j.position_lower_limits()[0] for j in joints]),
+            q_upper=np.array([j.position_upper_limits()[0] for j in joints]),
+            tau_max=np.array([plant.get_joint_actuator(a).effort_limit() for a in self._actuators(i)]),
+            masses=np.array([s.get_mass() for s in inertia]),
+            coms=np.array([s.get_com()[0] for s in inertia]),
+            inertias=np.array([s.Shift(s.get_com()).CalcRotationalInertia()[2, 2] for s in inertia]),
+        )
+
+    def _actuators(self, i: int):
+        names = {f"finger{i}_joint1": 0, f"finger{i}_joint2": 1}
+        found = [None, None]
+        for a in self.plant.GetJointActuatorIndices(self.hand):
+            joint_name = self.plant.get_joint_actuator(a).joint().name()
+            if joint_name in names:
+                found[names[joint_name]] = a
+        return found
+
+    def positions(self, object_pose, q) -> np.ndarray:
+        """The plant's position vector for an object pose (x, y, theta) and 8 joint angles."""
+        positions = np.zeros(self.plant.num_positions())
+        positions[self.box_q_indices] = object_pose
+        positions[self.hand_q_indices] = q
+        return positions
+
+    def fingertip_positions(self, q, context=None) -> np.ndarray:
+        """p_WF of the 4 fingertip centres (4, 2), from the plant."""
+        context = context or self.plant.CreateDefaultContext()
+        self.plant.SetPositions(context, self.positions(self.config.initial_pose, q))
+        return np.array([self.tip_frame(i).CalcPoseInWorld(context).translation()[:2] for i in range(NUM_FINGERS)])
+
+    def fingertip_jacobians(self, q, context=None) -> np.ndarray:
+        """J_WF (4, 2, 8): d p_WF_i / d q_hand, from the plant."""
+        plant = self.plant
+        context = context or plant.CreateDefaultContext()
+        plant.SetPositions(context, self.positions(self.config.initial_pose, q))
+        out = np.zeros((NUM_FINGERS, 2, NUM_HAND_JOINTS))
+        for i in range(NUM_FINGERS):
+            J = plant.CalcJacobianTranslationalVelocity(
+                context, JacobianWrtVariable.kV, self.tip_frame(i), np.zeros(3),
+                plant.world_frame(), plant.world_frame())
+            out[i] = J[:2, self.hand_v_indices]
+        return out
+
+
+def build_scene(config: SceneConfig | None = None) -> Scene:
+    """A continuous-time plant + SceneGraph with the hand and box, finalized."""
+    config = config or SceneConfig()
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
+    hand, box = add_hand_and_box(plant, config)
+    plant.Finalize()
+    diagram = builder.Build()
+    return Scene(config=config, diagram=diagram, plant=plant, scene_graph=scene_graph, hand=hand, box=box)
