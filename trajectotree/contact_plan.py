@@ -1,0 +1,83 @@
+"""The contact-sequence planner's output: the value on the arrow from search to CITO.
+
+A `ContactPlan` holds N `ContactNode`s, one per object pose x*_n of the path.
+Node n's `switching_finger` is the finger that moved to a new contact between
+node n-1 and node n (None when no finger moved, and always for node 0), so
+transition segment s = n - 1 has that finger free and the other three fixed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ContactNode:
+    object_pose: np.ndarray        # (3,) x*_n = (x m, y m, theta rad) in W
+    q: np.ndarray                  # (8,) rad, joint angles q*_n from IK (finger-major)
+    arclengths: np.ndarray         # (4,) m, each finger's contact along the box boundary
+    p_BC: np.ndarray               # (4, 2) m, contact points in the box frame B
+    n_B: np.ndarray                # (4, 2) outward unit normals at the contacts, in B
+    switching_finger: int | None   # finger that moved between node n-1 and node n
+    closure_margin: float          # N, the form-closure LP's margin d* (> 0: in form closure)
+
+    def to_json(self) -> dict:
+        return {
+            "object_pose": [float(v) for v in self.object_pose],
+            "q": [float(v) for v in self.q],
+            "switching_finger": self.switching_finger,
+            "closure_margin": float(self.closure_margin),
+            "contacts": [{"arclength": float(s), "p_B": [float(v) for v in p], "n_B": [float(v) for v in n]}
+                         for s, p, n in zip(self.arclengths, self.p_BC, self.n_B)],
+        }
+
+    @staticmethod
+    def from_json(data: dict) -> "ContactNode":
+        contacts = data["contacts"]
+        return ContactNode(
+            object_pose=np.array(data["object_pose"], dtype=float),
+            q=np.array(data["q"], dtype=float),
+            arclengths=np.array([c["arclength"] for c in contacts], dtype=float),
+            p_BC=np.array([c["p_B"] for c in contacts], dtype=float),
+            n_B=np.array([c["n_B"] for c in contacts], dtype=float),
+            switching_finger=data["switching_finger"],
+            closure_margin=float(data.get("closure_margin", np.nan)),
+        )
+
+
+@dataclass(frozen=True)
+class SearchStats:
+    expanded: int = 0        # nodes popped from the open set
+    generated: int = 0       # neighbour nodes inserted into the tree
+    lp_calls: int = 0        # form-closure LP solves
+    ik_calls: int = 0        # inverse-kinematics solves
+    time_s: float = 0.0      # wall-clock search time, s
+
+    def to_json(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class ContactPlan:
+    goal: float                                   # rad, goal rotation of the object
+    success: bool                                 # a path of N nodes reached the goal pose
+    reason: str                                   # why not, when success is False ("" otherwise)
+    nodes: tuple[ContactNode, ...] = ()           # N nodes on success, () otherwise
+    stats: SearchStats = field(default_factory=SearchStats)
+
+    @property
+    def object_path(self) -> np.ndarray:
+        """(N, 3) the object poses x*_n."""
+        return np.array([n.object_pose for n in self.nodes])
+
+    def to_json(self) -> dict:
+        return {"goal": float(self.goal), "success": self.success, "reason": self.reason,
+                "stats": self.stats.to_json(), "contact_sequence": [n.to_json() for n in self.nodes]}
+
+    @staticmethod
+    def from_json(data: dict) -> "ContactPlan":
+        return ContactPlan(goal=float(data["goal"]), success=bool(data["success"]), reason=data.get("reason", ""),
+                           nodes=tuple(ContactNode.from_json(n) for n in data.get("contact_sequence") or ()),
+                           stats=SearchStats(**data.get("stats", {})))
