@@ -1,0 +1,30 @@
+"""`trajectotree report SWEEP_DIR`: the paper's Figs. 2-3 (PNG and PDF) and a summary
+table (Markdown and CSV) beside the paper's numbers, from a sweep's finished trials."""
+
+from __future__ import annotations
+
+from trajectotree.cli.common import print_json
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("report", help="figures and summary table of a sweep", description=__doc__)
+    p.add_argument("sweep_dir", metavar="SWEEP_DIR", help="directory written by `trajectotree sweep`")
+    p.add_argument("--out", metavar="DIR", help="where to write (default: SWEEP_DIR/report)")
+    p.add_argument("--json", action="store_true", help="print the table and file paths as JSON")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from trajectotree.report import make_report, table_markdown
+    files, table = make_report(args.sweep_dir, args.out)
+    if args.json:
+        print_json({"files": files.__dict__, "table": table})
+        return 0
+    print(table_markdown(table), end="")
+    print(f"Fig. 2 (planning time, cost): {', '.join(files.figure_time_cost)}")
+    if files.figure_tracking:
+        print(f"Fig. 3 (tracking errors):     {', '.join(files.figure_tracking)}")
+    else:
+        print("Fig. 3 (tracking errors):     none, the sweep ran without --simulate")
+    print(f"table: {files.table_md}, {files.table_csv}")
+    return 0

@@ -1,0 +1,230 @@
+"""The paper's figures and a summary table from a sweep directory (Sec. IV, Figs. 2-3).
+
+Fig. 2: box plots of total planning time (search + build + solve, every trial with a
+plan result) and of the final cost (converged plans), per method, means as crosses.
+Fig. 3: mean absolute error of the box's x, y and theta against the plan over time, per
+method, with 95% Student-t confidence bands across the simulated trials.
+Table: success rate, mean and median planning time, TrajectoTree's speedup over each
+baseline (ratio of mean planning times, as the paper's 98 s / 14 s), mean cost, drop
+rate and mean tracking errors, beside the paper's numbers where it gives them.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from trajectotree.config import ConfigError
+from trajectotree.metrics import mean_confidence_interval
+from trajectotree.sweep import MANIFEST_FILE, TRIALS_DIR, read_rows, write_atomic
+
+METHOD_LABELS = {"trajectotree": "TrajectoTree", "cito": "CITO", "cito-warm": "CITO, warm-start"}
+METHOD_COLORS = {"trajectotree": "tab:blue", "cito": "tab:orange", "cito-warm": "tab:green"}
+# The paper's numbers (Sec. IV-C): mean total planning time over 60 goals, s.
+PAPER_MEAN_TIME_S = {"trajectotree": 14.0, "cito": 98.0, "cito-warm": 76.0}
+REFERENCE = "trajectotree"
+ERROR_LABELS = ("x [m]", "y [m]", r"$\theta$ [rad]")
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    figure_time_cost: tuple[str, str]   # PNG, PDF
+    figure_tracking: tuple[str, str] | None
+    table_md: str
+    table_csv: str
+
+
+def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
+    """(manifest, rows of the finished trials); ConfigError if it is not a sweep directory."""
+    sweep_dir = Path(sweep_dir)
+    path = sweep_dir / MANIFEST_FILE
+    if not path.is_file():
+        raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {MANIFEST_FILE}); "
+                          "make one with `trajectotree sweep --out DIR`")
+    try:
+        manifest = json.loads(path.read_text())
+        rows = read_rows(sweep_dir)
+    except (OSError, json.JSONDecodeError) as e:
+        raise ConfigError(f"{str(sweep_dir)!r} holds an unreadable file: {e}") from None
+    if not rows:
+        raise ConfigError(f"{str(sweep_dir)!r} has no finished trials yet")
+    return manifest, rows
+
+
+def _values(rows, field):
+    return np.array([r[field] for r in rows if r.get(field) is not None], dtype=float)
+
+
+def method_summary(rows: list[dict], method: str, reference_mean_time_s: float | None) -> dict:
+    mine = [r for r in rows if r["method"] == method]
+    times = _values(mine, "total_time_s")
+    costs = _values([r for r in mine if r.get("success")], "cost")
+    simulated = [r for r in mine if r.get("simulated")]
+    mean_time = float(times.mean()) if times.size else None
+    speedup = None
+    if method != REFERENCE and reference_mean_time_s and mean_time is not None:
+        speedup = mean_time / reference_mean_time_s
+    paper_time = PAPER_MEAN_TIME_S.get(method)
+    paper_speedup = (paper_time / PAPER_MEAN_TIME_S[REFERENCE]) if method != REFERENCE and paper_time else None
+    return {
+        "method": method, "label": METHOD_LABELS.get(method, method), "trials": len(mine),
+        "errors": sum(r.get("error") is not None for r in mine),
+        "success_rate": sum(bool(r.get("success")) for r in mine) / len(mine) if mine else None,
+        "mean_time_s": mean_time, "paper_mean_time_s": paper_time,
+        "median_time_s": float(np.median(times)) if times.size else None,
+        "speedup": speedup, "paper_speedup": paper_speedup,
+        "mean_cost": float(costs.mean()) if costs.size else None,
+        "simulated": len(simulated),
+        "drop_rate": sum(bool(r.get("dropped")) for r in simulated) / len(simulated) if simulated else None,
+        **{f"mae_{c}": (float(_values(simulated, f"mae_{c}").mean()) if simulated else None)
+           for c in ("x", "y", "theta")},
+    }
+
+
+def summary_table(rows: list[dict], methods: list[str]) -> list[dict]:
+    reference = _values([r for r in rows if r["method"] == REFERENCE], "total_time_s")
+    reference_mean = float(reference.mean()) if reference.size else None
+    return [method_summary(rows, m, reference_mean) for m in methods]
+
+
+def _fmt(value, spec: str, suffix: str = "") -> str:
+    return "n/a" if value is None else f"{value:{spec}}{suffix}"
+
+
+def table_markdown(table: list[dict]) -> str:
+    header = ("| method | trials | success | mean time [s] | paper | median time [s] | TrajectoTree speedup | paper "
+              "| mean cost | simulated | drop rate | MAE x [mm] | MAE y [mm] | MAE theta [rad] |")
+    lines = [header, "|" + "---|" * header.count(" | ") + "---|"]
+    for s in table:
+        mae_mm = [None if s[f"mae_{c}"] is None else 1e3 * s[f"mae_{c}"] for c in ("x", "y")]
+        cells = [s["label"], str(s["trials"]), _fmt(s["success_rate"], ".0%"), _fmt(s["mean_time_s"], ".2f"),
+                 _fmt(s["paper_mean_time_s"], ".0f"), _fmt(s["median_time_s"], ".2f"),
+                 "-" if s["method"] == REFERENCE else _fmt(s["speedup"], ".1f", "x"),
+                 "-" if s["method"] == REFERENCE else _fmt(s["paper_speedup"], ".1f", "x"),
+                 _fmt(s["mean_cost"], ".4g"), str(s["simulated"]), _fmt(s["drop_rate"], ".0%"),
+                 _fmt(mae_mm[0], ".2f"), _fmt(mae_mm[1], ".2f"), _fmt(s["mae_theta"], ".3f")]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def table_csv(table: list[dict]) -> str:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(table[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows({k: ("" if v is None else v) for k, v in s.items()} for s in table)
+    return buffer.getvalue()
+
+
+def figure_time_and_cost(rows: list[dict], methods: list[str]):
+    """Fig. 2: planning time (left) and final cost (right) per method."""
+    import matplotlib.pyplot as plt
+
+    from trajectotree.plotting import plot_boxes_with_means
+    fig, (ax_time, ax_cost) = plt.subplots(1, 2, figsize=(8, 3.6))
+    labels = [METHOD_LABELS.get(m, m) for m in methods]
+    colors = [METHOD_COLORS.get(m, "0.6") for m in methods]
+    by_method = {m: [r for r in rows if r["method"] == m] for m in methods}
+    plot_boxes_with_means(ax_time, [_values(by_method[m], "total_time_s") for m in methods], labels, colors=colors)
+    plot_boxes_with_means(ax_cost, [_values([r for r in by_method[m] if r.get("success")], "cost") for m in methods],
+                          labels, colors=colors)
+    ax_time.set_ylabel("total planning time [s]")
+    ax_cost.set_ylabel("final cost (converged plans)")
+    for ax in (ax_time, ax_cost):
+        ax.grid(axis="y", alpha=0.3)
+    ax_time.legend(handles=[ax_time.lines[-1]], loc="upper right", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def load_tracking(sweep_dir: Path, rows: list[dict]) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    """method -> [(t (T,), abs_error (T, 3))] of the simulated trials."""
+    tracks: dict[str, list] = {}
+    for r in rows:
+        if r.get("simulated"):
+            with np.load(sweep_dir / TRIALS_DIR / r["key"] / "sim.npz") as data:
+                tracks.setdefault(r["method"], []).append((data["t"], data["abs_error"]))
+    return tracks
+
+
+def tracking_bands(tracks: list[tuple[np.ndarray, np.ndarray]], grid: np.ndarray):
+    """Mean and 95% CI of the absolute errors on a common time grid. Each trial is
+    interpolated inside its own time span; at a grid time, only the trials that
+    cover it count (equal configs give equal spans)."""
+    samples = np.full((len(tracks), grid.size, 3), np.nan)
+    for i, (t, err) in enumerate(tracks):
+        inside = (grid >= t[0]) & (grid <= t[-1])
+        samples[i, inside] = np.column_stack([np.interp(grid[inside], t, err[:, c]) for c in range(3)])
+    mean, lower, upper = (np.full((grid.size, 3), np.nan) for _ in range(3))
+    covered = ~np.isnan(samples[:, :, 0])
+    for mask in np.unique(covered.T, axis=0):
+        if not mask.any():
+            continue
+        columns = np.all(covered.T == mask, axis=1)
+        ci = mean_confidence_interval(samples[mask][:, columns], 0.95, axis=0)
+        mean[columns], lower[columns], upper[columns] = ci.mean, ci.lower, ci.upper
+    return mean, lower, upper
+
+
+def figure_tracking(tracks: dict[str, list], methods: list[str]):
+    """Fig. 3: mean absolute error of x, y, theta over time with 95% confidence bands."""
+    import matplotlib.pyplot as plt
+
+    from trajectotree.plotting import plot_mean_band
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
+    all_t = [t for m in methods for t, _ in tracks.get(m, ())]
+    step = min(float(np.median(np.diff(t))) for t in all_t if t.size > 1)
+    grid = np.arange(0.0, max(t[-1] for t in all_t) + step / 2, step)
+    for m in methods:
+        if not tracks.get(m):
+            continue
+        mean, lower, upper = tracking_bands(tracks[m], grid)
+        for c, ax in enumerate(axes):
+            plot_mean_band(ax, grid, mean[:, c], lower[:, c], upper[:, c], color=METHOD_COLORS.get(m),
+                           label=f"{METHOD_LABELS.get(m, m)} (n={len(tracks[m])})")
+    for ax, label in zip(axes, ERROR_LABELS):
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(f"mean absolute error, {label}")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _save(fig, stem: Path) -> tuple[str, str]:
+    import matplotlib.pyplot as plt
+    paths = []
+    for ext in ("png", "pdf"):
+        target = stem.with_suffix(f".{ext}")
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format=ext, dpi=150)
+        write_atomic(target, buffer.getvalue())
+        paths.append(str(target))
+    plt.close(fig)
+    return paths[0], paths[1]
+
+
+def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tuple[ReportFiles, list[dict]]:
+    """Writes the figures and the table (default: SWEEP_DIR/report/); returns their
+    paths and the table rows."""
+    import matplotlib
+    matplotlib.use("Agg")
+
+    sweep_dir = Path(sweep_dir)
+    manifest, rows = load_sweep(sweep_dir)
+    methods = [m for m in manifest["methods"] if any(r["method"] == m for r in rows)]
+    out = Path(out_dir) if out_dir is not None else sweep_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    table = summary_table(rows, methods)
+    write_atomic(out / "summary.md", table_markdown(table).encode())
+    write_atomic(out / "summary.csv", table_csv(table).encode())
+    fig2 = _save(figure_time_and_cost(rows, methods), out / "fig2_time_cost")
+    tracks = load_tracking(sweep_dir, rows)
+    fig3 = _save(figure_tracking(tracks, methods), out / "fig3_tracking") if tracks else None
+    files = ReportFiles(figure_time_cost=fig2, figure_tracking=fig3, table_md=str(out / "summary.md"),
+                        table_csv=str(out / "summary.csv"))
+    return files, table
