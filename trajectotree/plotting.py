@@ -41,3 +41,28 @@ def plot_hand(ax, scene, q, *, colors=FINGER_COLORS, **kwargs):
 def plot_workspace(ax, finger, *, color="0.6"):
     """Outer reach circle of one finger around its base (dashed)."""
     return [ax.add_patch(Circle(finger.p_W_base, finger.l1 + finger.l2, fill=False, ls="--", color=color, lw=0.8))]
+
+
+def plot_boxes_with_means(ax, samples, labels, *, colors=None, mean_marker="x"):
+    """Standard box plots (median, quartiles, 1.5 IQR whiskers, outliers) of each 1-D
+    sample, with the sample means marked by crosses (the paper's Fig. 2). An empty
+    sample leaves its slot blank."""
+    samples = [np.asarray(s, dtype=float) for s in samples]
+    positions = np.arange(1, len(samples) + 1)
+    parts = ax.boxplot(samples, positions=positions, tick_labels=labels, patch_artist=True, widths=0.5,
+                       medianprops={"color": "k"}, flierprops={"marker": ".", "markersize": 4})
+    for patch, color in zip(parts["boxes"], colors or ()):
+        patch.set_facecolor(color)
+        patch.set_alpha(0.5)
+    filled = [(p, s.mean()) for p, s in zip(positions, samples) if s.size]
+    means = ax.plot([p for p, _ in filled], [m for _, m in filled], mean_marker, color="k", ms=8, mew=2,
+                    ls="none", label="mean", zorder=5)
+    return [artist for group in parts.values() for artist in group] + means
+
+
+def plot_mean_band(ax, t, mean, lower, upper, *, color=None, label=None, alpha=0.25):
+    """A mean curve over t with a shaded band between lower and upper (e.g. a 95%
+    confidence interval, the paper's Fig. 3)."""
+    (line,) = ax.plot(t, mean, color=color, label=label, lw=1.5)
+    band = ax.fill_between(t, lower, upper, color=line.get_color(), alpha=alpha, lw=0)
+    return [line, band]
