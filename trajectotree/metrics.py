@@ -1,0 +1,70 @@
+"""Tracking metrics of an executed plan (pure numpy functions).
+
+Errors compare the simulated object pose (x, y, theta) with the planned one at
+the same times. theta is the planar joint's unwrapped angle, so a box that spins
+a full turn counts as 2 pi off, not 0.
+
+Drop rule: the box is dropped at the first sample where its position is farther
+than `drop_distance` (SimConfig, default 5 cm, a quarter of the box's length)
+from the planned position. A box that leaves the fingers falls under gravity
+and crosses this distance within ~0.1 s; a held box stays within millimetres.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+
+def absolute_error(pose, pose_ref) -> np.ndarray:
+    """(T, 3) |pose - pose_ref| per sample for (x m, y m, theta rad)."""
+    return np.abs(np.asarray(pose, dtype=float) - np.asarray(pose_ref, dtype=float))
+
+
+def mean_absolute_error(abs_error) -> np.ndarray:
+    """(3,) the time mean of an absolute error series (T, 3) (uniform samples)."""
+    return np.mean(np.asarray(abs_error, dtype=float), axis=0)
+
+
+def final_error(abs_error) -> np.ndarray:
+    """(3,) the absolute error at the last sample."""
+    return np.asarray(abs_error, dtype=float)[-1].copy()
+
+
+def detect_drop(t, pose, pose_ref, drop_distance: float) -> tuple[bool, float | None]:
+    """(dropped, time of the first sample beyond drop_distance, or None)."""
+    distance = np.linalg.norm(np.asarray(pose, dtype=float)[:, :2] - np.asarray(pose_ref, dtype=float)[:, :2], axis=1)
+    beyond = np.flatnonzero(distance > drop_distance)
+    if beyond.size == 0:
+        return False, None
+    return True, float(np.asarray(t)[beyond[0]])
+
+
+@dataclass(frozen=True)
+class ConfidenceInterval:
+    mean: np.ndarray    # sample mean across trials
+    lower: np.ndarray   # lower bound of the interval
+    upper: np.ndarray   # upper bound of the interval
+    count: int          # number of trials
+
+
+def mean_confidence_interval(samples, confidence: float = 0.95, axis: int = 0) -> ConfidenceInterval:
+    """Mean across trials (along `axis`) with a two-sided Student-t confidence
+    interval: mean +- t_{(1+c)/2, n-1} s / sqrt(n). With one trial the bounds are
+    the mean itself (no spread to estimate); NaN samples are rejected."""
+    data = np.asarray(samples, dtype=float)
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence = {confidence!r} is out of range; valid range: (0, 1)")
+    if data.size == 0 or data.shape[axis] == 0:
+        raise ValueError("mean_confidence_interval needs at least one trial")
+    if np.any(np.isnan(data)):
+        raise ValueError("mean_confidence_interval got NaN samples")
+    n = data.shape[axis]
+    mean = np.mean(data, axis=axis)
+    if n == 1:
+        return ConfidenceInterval(mean=mean, lower=mean.copy(), upper=mean.copy(), count=1)
+    half = stats.t.ppf((1.0 + confidence) / 2.0, n - 1) * np.std(data, axis=axis, ddof=1) / math.sqrt(n)
+    return ConfidenceInterval(mean=mean, lower=mean - half, upper=mean + half, count=n)

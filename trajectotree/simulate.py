@@ -1,0 +1,185 @@
+"""Executing a plan in a full-dynamics Drake simulation (paper Sec. III-D, IV-D).
+
+The execution Diagram: a discrete MultibodyPlant with the hand and box from
+models/ (point contact between fingertip spheres, links and the box, friction
+from the config, gravity -y), reference sources from the plan (fingertip
+positions, velocities and forces, held at their last value for
+SimConfig.settle_time after the plan ends), the ImpedanceController (eq. 20),
+a logger of the plant state and, optionally, a Meshcat visualizer.
+
+The run starts in the plan's initial state (x_0, q_0, at rest). Finger-finger
+collisions are filtered out: the planners do not model them, and the fingers
+only meet when the plan itself is infeasible for the hand.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Meshcat
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from trajectotree import metrics, playback
+from trajectotree.config import Config
+from trajectotree.control import ImpedanceController
+from trajectotree.reference import Reference, reference_from_plan
+from trajectotree.scene import NUM_FINGERS, add_hand_and_box, build_scene
+
+
+@dataclass(frozen=True)
+class SimResult:
+    t: np.ndarray            # (T,) s, sample times
+    x: np.ndarray            # (T, 3) simulated object pose (x m, y m, theta rad)
+    q: np.ndarray            # (T, 8) rad, simulated joint angles (finger-major)
+    x_plan: np.ndarray       # (T, 3) planned object pose at the same times
+    abs_error: np.ndarray    # (T, 3) |x - x_plan|
+    mae_x: float             # m, time mean of |x error|
+    mae_y: float             # m
+    mae_theta: float         # rad
+    final_error: tuple[float, float, float]  # (m, m, rad) absolute error at the last sample
+    dropped: bool            # the drop rule fired (trajectotree.metrics.detect_drop)
+    drop_time_s: float | None  # s, when it fired
+    sim_time_s: float        # s, wall-clock time of the simulation
+
+    def to_json(self) -> dict:
+        """The DESIGN.md sim.json keys, plus the run's length and sample count."""
+        return {"mae_x": self.mae_x, "mae_y": self.mae_y, "mae_theta": self.mae_theta,
+                "final_error": list(self.final_error), "dropped": self.dropped, "drop_time_s": self.drop_time_s,
+                "sim_time_s": self.sim_time_s, "duration_s": float(self.t[-1]), "num_samples": int(len(self.t))}
+
+
+@dataclass
+class ExecutionDiagram:
+    diagram: object
+    plant: object
+    hand: object               # ModelInstanceIndex
+    box: object                # ModelInstanceIndex
+    state_logger: object       # VectorLogSink of the plant's full state
+    visualizer: object | None  # MeshcatVisualizer or None
+    duration: float            # s, plan length + settle time
+
+    def initial_context(self, reference: Reference):
+        """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
+        context = self.diagram.CreateDefaultContext()
+        plant_context = self.plant.GetMyMutableContextFromRoot(context)
+        self.plant.SetPositions(plant_context, self.box, reference.x[0])
+        self.plant.SetPositions(plant_context, self.hand, reference.q[0])
+        return context
+
+
+def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
+    """First-order hold through (times, values (K, n)), then constant for `hold` seconds."""
+    if hold > 0:
+        times = np.append(times, times[-1] + hold)
+        values = np.vstack([values, values[-1]])
+    return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
+
+
+def exclude_finger_finger_collisions(plant, scene_graph, hand) -> None:
+    """Filters contact between different fingers (each finger's own links are adjacent)."""
+    fingers = []
+    for i in range(NUM_FINGERS):
+        bodies = [plant.GetBodyByName(f"finger{i}_link{j}", hand) for j in (1, 2)]
+        fingers.append(plant.CollectRegisteredGeometries(bodies))
+    manager = scene_graph.collision_filter_manager()
+    for a in range(NUM_FINGERS):
+        for b in range(a + 1, NUM_FINGERS):
+            manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
+
+
+def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
+                            controlled: bool = True) -> ExecutionDiagram:
+    """The Diagram that executes `reference`; controlled=False applies zero torque
+    (the open-loop hand, for checking that the controller is what holds the box)."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
+    hand, box = add_hand_and_box(plant, config.scene)
+    plant.Finalize()
+    exclude_finger_finger_collisions(plant, scene_graph, hand)
+    hold = config.sim.settle_time
+    if controlled:
+        controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
+        flat = lambda a: a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
+        for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
+            source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))
+            builder.Connect(source.get_output_port(), controller.GetInputPort(name))
+        builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
+        builder.Connect(controller.actuation_port, plant.get_actuation_input_port())
+    else:
+        zero = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
+        builder.Connect(zero.get_output_port(), plant.get_actuation_input_port())
+    state_logger = LogVectorOutput(plant.get_state_output_port(), builder, config.sim.log_period)
+    visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
+    return ExecutionDiagram(diagram=builder.Build(), plant=plant, hand=hand, box=box, state_logger=state_logger,
+                            visualizer=visualizer, duration=reference.duration + hold)
+
+
+def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t (T,), object pose (T, 3), joint angles (T, 8)) from the plant-state log."""
+    plant = execution.plant
+    box_start = plant.GetJointByName("box_planar").position_start()
+    hand_q = [plant.GetJointByName(f"finger{i}_joint{j}", execution.hand).position_start()
+              for i in range(NUM_FINGERS) for j in (1, 2)]
+    data = log.data()
+    return log.sample_times().copy(), data[box_start:box_start + 3].T.copy(), data[hand_q].T.copy()
+
+
+def evaluate(reference: Reference, config: Config, t, x, q, sim_time_s: float) -> SimResult:
+    """Metrics of a simulated run against the planned object trajectory."""
+    x_plan = reference.object_pose_at(t)
+    abs_error = metrics.absolute_error(x, x_plan)
+    mae = metrics.mean_absolute_error(abs_error)
+    dropped, drop_time = metrics.detect_drop(t, x, x_plan, config.sim.drop_distance)
+    return SimResult(t=t, x=x, q=q, x_plan=x_plan, abs_error=abs_error, mae_x=float(mae[0]), mae_y=float(mae[1]),
+                     mae_theta=float(mae[2]), final_error=tuple(float(v) for v in metrics.final_error(abs_error)),
+                     dropped=dropped, drop_time_s=drop_time, sim_time_s=sim_time_s)
+
+
+def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
+                       html_path: str | Path | None = None, controlled: bool = True,
+                       realtime_rate: float = 0.0) -> SimResult:
+    """Runs the execution Diagram for the plan's length plus the settle time."""
+    if html_path is not None and meshcat is None:
+        meshcat = playback.start_meshcat()
+    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled)
+    simulator = Simulator(execution.diagram, execution.initial_context(reference))
+    simulator.set_target_realtime_rate(realtime_rate)
+    if meshcat is not None:
+        playback.set_planar_view(meshcat)
+        playback.add_plan_ghost(meshcat, config.scene)
+        animation = execution.visualizer.StartRecording()
+    start = time.perf_counter()
+    simulator.AdvanceTo(execution.duration)
+    sim_time_s = time.perf_counter() - start
+    log = execution.state_logger.FindLog(simulator.get_context())
+    result = evaluate(reference, config, *split_state_log(execution, log), sim_time_s)
+    if meshcat is not None:
+        frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
+        playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))
+        if html_path is not None:
+            playback.save_recording_html(meshcat, execution.visualizer, html_path)
+        else:
+            execution.visualizer.StopRecording()
+            execution.visualizer.PublishRecording()
+    return result
+
+
+def run_simulation(*, plan, config: Config, meshcat: Meshcat | None = None, html_path: str | Path | None = None,
+                   gif_path: str | Path | None = None) -> SimResult:
+    """Executes `plan` (a PlanResult, or a Reference) with the impedance controller.
+    A live `meshcat` runs in real time; `html_path` writes the recorded playback,
+    `gif_path` a matplotlib GIF of the run."""
+    scene = build_scene(config.scene)
+    reference = reference_from_plan(plan, scene)
+    result = simulate_reference(reference, config, meshcat=meshcat, html_path=html_path,
+                                realtime_rate=1.0 if meshcat is not None else 0.0)
+    if gif_path is not None:
+        playback.write_gif(scene, result.t, result.x, result.q, gif_path, planned_poses=result.x_plan)
+    return result
