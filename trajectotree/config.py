@@ -160,11 +160,13 @@ class SimConfig:
     time_step: float = 1e-3       # s, discrete plant step
     settle_time: float = 0.5      # s, simulated after the plan ends (the last reference is held)
     drop_distance: float = 0.05   # m, the box is dropped once its position is this far from the plan
+    log_period: float = 0.01      # s, sampling period of the logged box pose and hand state (metrics use it)
 
     def __post_init__(self):
         check_range("sim.time_step", self.time_step, 0.0, 0.01, low_open=True)
         check_range("sim.settle_time", self.settle_time, 0.0, 10.0)
         check_range("sim.drop_distance", self.drop_distance, 0.0, 1.0, low_open=True)
+        check_range("sim.log_period", self.log_period, self.time_step, 1.0)
 
 
 @dataclass(frozen=True)
