@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import Config, SceneConfig
+from trajectotree.io import write_bytes_atomic
 from trajectotree.scene import add_hand_and_box
 
 VIEW_HALF_WIDTH = 0.32   # m, the planar view shows [-0.32, 0.32]^2: the hand's full reach
@@ -62,26 +62,11 @@ def animate_plan_ghost(animation, times, poses) -> None:
         animation.SetTransform(animation.frame(float(t)), PLAN_GHOST_PATH, pose_transform(pose))
 
 
-def write_text_atomic(path: str | Path, text: str) -> None:
-    """Writes `text` to `path` via a temporary file in the same folder and os.replace."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; the file is meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def save_recording_html(meshcat: Meshcat, visualizer: MeshcatVisualizer, path: str | Path) -> None:
     """Stops the visualizer's recording, publishes it and writes the static HTML."""
     visualizer.StopRecording()
     visualizer.PublishRecording()
-    write_text_atomic(path, meshcat.StaticHtml())
+    write_bytes_atomic(path, meshcat.StaticHtml().encode())
 
 
 def write_pose_html(config: Config, times, object_poses, joint_angles, path: str | Path,

@@ -122,7 +122,7 @@ def static_grasp_forces(p_BC, n_B, pose, *, mass: float, gravity: float, mu: flo
         prog.AddLinearConstraint(lam_n[i] >= min_normal_force)
         prog.AddLinearConstraint(lam_t[i] <= mu_eff * lam_n[i])
         prog.AddLinearConstraint(-lam_t[i] <= mu_eff * lam_n[i])
-    prog.AddQuadraticCost(lam_n @ lam_n + lam_t @ lam_t)
+    prog.AddQuadraticCost(2 * np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), np.r_[lam_n, lam_t], is_convex=True)
     result = Solve(prog)
     if not result.is_success():
         return None
