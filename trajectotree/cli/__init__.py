@@ -15,7 +15,7 @@ from trajectotree import __version__
 from trajectotree.config import ConfigError
 
 # Subcommand modules, in the order `--help` lists them.
-COMMANDS = ("scene", "sweep", "report")
+COMMANDS = ("scene", "simulate", "sweep", "report")
 
 
 class InputError(ConfigError):

@@ -1,0 +1,111 @@
+"""`trajectotree simulate PLAN_DIR`: execute a saved plan in a full-dynamics Drake
+simulation with the impedance controller; writes PLAN_DIR/sim.json and sim.npz."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from trajectotree.cli import InputError
+from trajectotree.cli.common import print_json
+from trajectotree.config import Config, config_from_dict, load_config
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("simulate", help="execute a saved plan with the impedance controller",
+                              description=__doc__)
+    p.add_argument("plan_dir", metavar="PLAN_DIR", help="folder with plan.npz and plan.json (from `trajectotree plan`)")
+    p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the run")
+    p.add_argument("--gif", metavar="FILE", help="write a matplotlib GIF of the run (no WebGL needed)")
+    p.add_argument("--meshcat", action="store_true", help="watch live in Meshcat on localhost (runs in real time)")
+    p.add_argument("--json", action="store_true", help="print sim.json to stdout")
+    group = p.add_argument_group("execution settings (default: the plan's config; the scene must match the plan)")
+    group.add_argument("--config", metavar="FILE.yaml", help="YAML file with the Config to execute with")
+    group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"), help="box width and height, m")
+    group.add_argument("--mass", type=float, metavar="KG", help="box mass, kg")
+    group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+    group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of the impedance controller")
+    group.add_argument("--kv", type=float, metavar="NS/M", help="fingertip damping of the impedance controller")
+    p.set_defaults(run=run)
+
+
+def read_plan_dir(plan_dir: str) -> tuple[dict[str, np.ndarray], Config]:
+    """The plan.npz arrays and the Config in plan.json; InputError when missing or corrupt."""
+    from trajectotree.reference import check_plan_arrays
+    folder = Path(plan_dir)
+    if not folder.is_dir():
+        raise InputError(f"PLAN_DIR {plan_dir!r} is not a directory")
+    json_path, npz_path = folder / "plan.json", folder / "plan.npz"
+    for path in (json_path, npz_path):
+        if not path.is_file():
+            raise InputError(f"{str(path)!r} is missing; PLAN_DIR must hold plan.json and plan.npz "
+                             "from a successful `trajectotree plan`")
+    try:
+        data = json.loads(json_path.read_text())
+        config = config_from_dict(data["config"])
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
+        raise InputError(f"{str(json_path)!r} is not a valid plan.json ({type(e).__name__}: {e})") from None
+    try:
+        with np.load(npz_path) as npz:
+            arrays = check_plan_arrays({name: npz[name] for name in npz.files})
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+        raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
+    return arrays, config
+
+
+def execution_config(args, plan_config: Config) -> Config:
+    """The plan's config (or --config) with the options on top; its scene must be the plan's."""
+    config = load_config(args.config) if args.config else plan_config
+    scene, gains = {}, {}
+    if args.box_size is not None:
+        scene["box_width"], scene["box_height"] = args.box_size
+    if args.mass is not None:
+        scene["box_mass"] = args.mass
+    if args.mu is not None:
+        scene["mu"] = args.mu
+    if args.kp is not None:
+        gains["kp"] = args.kp
+    if args.kv is not None:
+        gains["kv"] = args.kv
+    config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
+                                 controller=dataclasses.replace(config.controller, **gains))
+    differ = [f"scene.{f.name} = {getattr(config.scene, f.name)!r} (the plan's: {getattr(plan_config.scene, f.name)!r})"
+              for f in dataclasses.fields(config.scene)
+              if getattr(config.scene, f.name) != getattr(plan_config.scene, f.name)]
+    if differ:
+        raise InputError("the given scene differs from the one the plan was made for: " + "; ".join(differ))
+    return config
+
+
+def run(args) -> int:
+    from trajectotree.io import save_sim
+    from trajectotree.playback import start_meshcat
+    from trajectotree.reference import reference_from_arrays
+    from trajectotree.scene import build_scene
+    from trajectotree.simulate import run_simulation
+
+    arrays, plan_config = read_plan_dir(args.plan_dir)
+    config = execution_config(args, plan_config)
+    meshcat = None
+    if args.meshcat:
+        meshcat = start_meshcat()
+        print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
+    reference = reference_from_arrays(arrays, build_scene(config.scene))
+    result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif)
+    save_sim(result, args.plan_dir)
+    summary = result.to_json()
+    if args.json:
+        print_json(summary)
+    else:
+        drop = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
+        print(f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: box {drop}; "
+              f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad")
+        print(f"wrote {Path(args.plan_dir) / 'sim.json'}" + "".join(f", {p}" for p in (args.html, args.gif) if p))
+    if meshcat is not None and sys.stdin.isatty():
+        input("Meshcat shows the recording; press Enter to exit. ")
+    return 0
