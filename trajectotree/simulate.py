@@ -22,7 +22,7 @@ import numpy as np
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Meshcat
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -115,7 +115,8 @@ def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Me
     else:
         zero = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
         builder.Connect(zero.get_output_port(), plant.get_actuation_input_port())
-    state_logger = LogVectorOutput(plant.get_state_output_port(), builder, config.sim.log_period)
+    state_logger = LogVectorOutput(plant.get_state_output_port(), builder,
+                                   {TriggerType.kPeriodic, TriggerType.kForced}, config.sim.log_period)
     visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
     return ExecutionDiagram(diagram=builder.Build(), plant=plant, hand=hand, box=box, state_logger=state_logger,
                             visualizer=visualizer, duration=reference.duration + hold)
@@ -158,7 +159,10 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
     start = time.perf_counter()
     simulator.AdvanceTo(execution.duration)
     sim_time_s = time.perf_counter() - start
+    logger_context = execution.state_logger.GetMyContextFromRoot(simulator.get_context())
     log = execution.state_logger.FindLog(simulator.get_context())
+    if log.sample_times()[-1] < execution.duration - 1e-9:  # the periodic log can miss the end by rounding
+        execution.state_logger.ForcedPublish(logger_context)
     result = evaluate(reference, config, *split_state_log(execution, log), sim_time_s)
     if meshcat is not None:
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)

@@ -1,0 +1,120 @@
+"""The self-contained Meshcat HTML playback, opened in Debian's Chromium (apt
+package `chromium`, installed by .ci/run) through playwright, with software WebGL.
+No browser is downloaded: playwright drives /usr/bin/chromium."""
+
+import dataclasses
+import io
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trajectotree.config import Config, SceneConfig
+from trajectotree.playback import VIEW_HALF_WIDTH, write_plan_html
+from trajectotree.reference import Reference, static_hold_reference
+from trajectotree.scene import build_scene
+from trajectotree.simulate import simulate_reference
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                 "--disable-background-networking", "--disable-component-update", "--disable-default-apps",
+                 "--disable-sync", "--disable-extensions", "--no-first-run", "--mute-audio"]
+VIEWPORT = {"width": 640, "height": 640}
+
+
+@pytest.fixture(scope="module")
+def drop_html(tmp_path_factory):
+    """Playback of a real run that moves the box: the hand lets go (zero torque) and
+    the box slides down between the fingers for 0.3 s."""
+    config = Config()
+    config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=0.0))
+    reference = static_hold_reference(build_scene(config.scene), (0.56, 0.14, 0.26, 0.44),
+                                      min_normal_force=1.0, duration=0.3)
+    path = tmp_path_factory.mktemp("playback") / "drop.html"
+    result = simulate_reference(reference, config, controlled=False, html_path=path)
+    assert result.dropped and result.x[-1, 1] < -0.05   # the box moved well within the view
+    return path
+
+
+@pytest.fixture(scope="module")
+def plan_html(tmp_path_factory):
+    """Playback of a planned (kinematic) motion: the grasped box lifted by 4 cm and
+    turned by 0.3 rad in 1 s, joint angles by IK at both ends."""
+    holds = [static_hold_reference(build_scene(SceneConfig(initial_pose=pose)), (0.56, 0.14, 0.26, 0.44),
+                                   min_normal_force=1.0, duration=1.0) for pose in ((0, 0, 0), (0, 0.04, 0.3))]
+    plan = Reference(t=np.array([0.0, 1.0]), **{name: np.stack([getattr(h, name)[0] for h in holds])
+                                                for name in ("x", "q", "p_WF", "v_WF", "f_W")})
+    path = tmp_path_factory.mktemp("playback") / "plan.html"
+    write_plan_html(plan, Config(), path)
+    return path
+
+
+class Page:
+    """A Chromium page on a local HTML file that records every request and page error."""
+
+    def __init__(self, browser, html: Path):
+        self.requests, self.errors = [], []
+        self.page = browser.new_page(viewport=VIEWPORT)
+        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        self.page.goto(html.resolve().as_uri())
+        for _ in range(100):  # up to 20 s for the viewer; a page error (e.g. no WebGL) ends the wait
+            if self.errors or self.page.evaluate("() => !!(window.viewer && window.viewer.animator)"):
+                break
+            self.page.wait_for_timeout(200)
+        assert self.errors == [], f"page errors: {self.errors}"
+
+    def frame_at(self, t: float) -> np.ndarray:
+        """RGB screenshot (H, W, 3) of the paused animation at time t."""
+        from PIL import Image
+        self.page.evaluate(f"() => {{ viewer.animator.pause(); viewer.animator.seek({t}); }}")
+        self.page.wait_for_timeout(400)
+        return np.asarray(Image.open(io.BytesIO(self.page.screenshot())).convert("RGB")).astype(int)
+
+
+def box_pixels(rgb: np.ndarray) -> np.ndarray:
+    """Mask of the box's blue (SDF diffuse 0.20 0.45 0.80); links are grey, tips orange,
+    the plan outline green, the background white."""
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return (b > 150) & (b - r > 80) & (b - g > 30)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not CHROMIUM.exists():
+        pytest.fail("Debian's chromium is missing: `apt-get install chromium` (.ci/run does it)")
+    from playwright.sync_api import sync_playwright
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
+
+
+def test_html_playback_renders_offline_and_animates(browser, drop_html):
+    page = Page(browser, drop_html)
+    duration = page.page.evaluate("() => viewer.animator.duration")
+    assert duration == pytest.approx(0.3, abs=0.05)
+    start, later = page.frame_at(0.0), page.frame_at(0.25)
+    # offline: the only request is the file itself; nothing failed on the page
+    assert page.requests == [drop_html.resolve().as_uri()]
+    assert page.errors == []
+    # the scene renders: the box covers thousands of pixels, the frame is not blank
+    mask0, mask1 = box_pixels(start), box_pixels(later)
+    assert mask0.sum() > 2000 and mask1.sum() > 2000
+    assert len(np.unique(start.reshape(-1, 3), axis=0)) > 50
+    # +y is up: the box starts in the middle of the view and is lower (larger row) later
+    rows0, cols0 = np.nonzero(mask0)
+    rows1, cols1 = np.nonzero(mask1)
+    assert abs(rows0.mean() - VIEWPORT["height"] / 2) < 20 and abs(cols0.mean() - VIEWPORT["width"] / 2) < 20
+    assert rows1.mean() - rows0.mean() > 30
+
+
+def test_plan_playback_shows_the_planned_motion(browser, plan_html):
+    page = Page(browser, plan_html)
+    assert page.page.evaluate("() => viewer.animator.duration") == pytest.approx(1.0, abs=0.05)
+    start, end = box_pixels(page.frame_at(0.0)), box_pixels(page.frame_at(1.0))
+    assert page.requests == [plan_html.resolve().as_uri()] and page.errors == []
+    rows0, _ = np.nonzero(start)
+    rows1, _ = np.nonzero(end)
+    pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
+    assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)   # lifted 4 cm (+y up)
