@@ -80,3 +80,25 @@ def test_without_the_controller_the_box_falls(hold_reference, hold_config):
     assert result.dropped
     assert result.drop_time_s < 0.5
     assert result.x[-1, 1] < hold_reference.x[0, 1] - hold_config.sim.drop_distance  # it fell (gravity -y)
+
+
+def in_grasp_rotation(scene, angle: float, duration: float, knots: int = 21):
+    """A quasi-static reference that turns the grasped box by `angle` about its centre:
+    the static hold at every knot (IK, balanced forces), fingertip velocities by
+    finite differences."""
+    from trajectotree.reference import Reference
+    times = np.linspace(0.0, duration, knots)
+    holds = [static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=duration,
+                                   pose=(0.0, 0.0, angle * t / duration)) for t in times]
+    assert all(h is not None for h in holds)
+    p_WF = np.stack([h.p_WF[0] for h in holds])
+    return Reference(t=times, x=np.stack([h.x[0] for h in holds]), q=np.stack([h.q[0] for h in holds]),
+                     p_WF=p_WF, v_WF=np.gradient(p_WF, times, axis=0), f_W=np.stack([h.f_W[0] for h in holds]))
+
+
+def test_controller_tracks_a_slow_in_grasp_rotation(scene, hold_config):
+    reference = in_grasp_rotation(scene, 0.25, 2.0)
+    result = simulate_reference(reference, hold_config)
+    assert not result.dropped
+    assert result.x[-1, 2] == pytest.approx(0.25, abs=0.03)
+    assert result.mae_theta < 0.03 and result.mae_x < 3e-3 and result.mae_y < 3e-3

@@ -130,14 +130,14 @@ def static_grasp_forces(p_BC, n_B, pose, *, mass: float, gravity: float, mu: flo
     return -ln[:, None] * n_W + lt[:, None] * t_W
 
 
-def static_hold_reference(scene: Scene, arclengths, *, min_normal_force: float,
-                          duration: float) -> Reference | None:
-    """A constant reference that holds the box at the scene's initial pose with
-    contacts at `arclengths`: fingertip centres one tip radius outside the faces,
-    joint angles by IK, forces from `static_grasp_forces`. None if unreachable
-    or not holdable."""
+def static_hold_reference(scene: Scene, arclengths, *, min_normal_force: float, duration: float,
+                          pose=None) -> Reference | None:
+    """A constant reference that holds the box at `pose` (default: the scene's
+    initial pose) with contacts at `arclengths`: fingertip centres one tip radius
+    outside the faces, joint angles by IK, forces from `static_grasp_forces`.
+    None if unreachable or not holdable."""
     c = scene.config
-    pose = np.asarray(c.initial_pose, dtype=float)
+    pose = np.asarray(c.initial_pose if pose is None else pose, dtype=float)
     boundary = BoxBoundary(c.box_width, c.box_height)
     points = [boundary.point(s) for s in arclengths]
     p_BC = np.array([p for p, _ in points])
