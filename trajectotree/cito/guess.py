@@ -1,0 +1,104 @@
+"""Initial guesses: static equilibrium (`cito`) and from the contact plan
+(`trajectotree`, `cito-warm`), both as CitoVariables of numbers.
+
+Contact forces of a guess hold the object in static equilibrium with the fingers
+that touch it: lambda = lambda_pref + G^+ (w - G lambda_pref), the least-change
+solution of G lambda = w from a preferred squeeze lambda_n = m g per finger
+(G: the grasp map of the touching fingers, w: minus the gravity wrench).
+Torques then balance the hand statically: tau = J_C^T f_W - tau_g.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trajectotree.cito.knot import KnotRows
+from trajectotree.cito.program import ProgramSpec
+from trajectotree.cito.transition import knot_poses
+from trajectotree.cito.variables import GROUPS, CitoVariables
+from trajectotree.contact_plan import ContactPlan
+from trajectotree.geometry import rotation_2d
+from trajectotree.scene import NUM_FINGERS
+
+# Height (m) the switching finger is lifted off the surface halfway through its
+# move in the plan-based guess, so the guessed path does not cut through the box.
+LIFT_HEIGHT = 0.015
+# Initial slack value; IPOPT moves it into the interior of slack >= 0 anyway.
+SLACK_GUESS = 1e-3
+
+
+def static_guess(rows: KnotRows, spec: ProgramSpec) -> CitoVariables:
+    """The object at x_0 and the hand at q_0 over the whole horizon, in static
+    equilibrium (the paper's `cito` baseline initialization)."""
+    K = spec.num_knots
+    return _complete(rows, spec, np.tile(spec.x0, (K, 1)), np.tile(spec.q0, (K, 1)), moving=False)
+
+
+def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVariables:
+    """Object poses interpolated along the plan's path, joint angles by closed-form IK
+    to the planned contacts (the switching finger lifted between its old and new
+    contact), velocities by finite differences, static-equilibrium forces."""
+    M = spec.segment_length
+    x = knot_poses(plan.object_path, M)
+    hand = rows.body.hand
+    q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
+    for s in range(len(plan.nodes) - 1):
+        old, new = plan.nodes[s], plan.nodes[s + 1]
+        for j in range(M + 1):
+            k = s * M + j
+            tau = j / M
+            for i in range(NUM_FINGERS):
+                target_B = rows.c_B[k, i]
+                if not rows.pinned[k, i]:
+                    target_B = _lifted(rows.c_B[s * M, i], rows.c_B[(s + 1) * M, i],
+                                       old.n_B[i], new.n_B[i], tau)
+                qi = hand.ik(i, x[k, :2] + rotation_2d(x[k, 2]) @ target_B)
+                q[k, 2 * i:2 * i + 2] = qi if qi is not None else (1 - tau) * old.q[2 * i:2 * i + 2] + tau * new.q[2 * i:2 * i + 2]
+    return _complete(rows, spec, x, q, moving=True)
+
+
+def _lifted(c_old, c_new, n_old, n_new, tau):
+    n = n_old + n_new
+    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-6 else n_old
+    return (1 - tau) * c_old + tau * c_new + LIFT_HEIGHT * np.sin(np.pi * tau) * n
+
+
+def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *, moving: bool) -> CitoVariables:
+    K = spec.num_knots
+    x[0], q[0] = spec.x0, spec.q0
+    zeros = {name: np.zeros((K, w)) for name, w in GROUPS}
+    zeros.update(x=x, q=q, slack=np.full((K, NUM_FINGERS), SLACK_GUESS))
+    if moving:
+        for pos, vel, acc in (("x", "xd", "xdd"), ("q", "qd", "qdd")):
+            zeros[vel] = np.gradient(zeros[pos], spec.dt, axis=0)
+            zeros[vel][spec.rest_knots] = 0.0
+            zeros[acc] = np.gradient(zeros[vel], spec.dt, axis=0)
+    guess = CitoVariables(**zeros)
+    ln, lt = _static_forces(rows, guess)
+    guess = CitoVariables(**{**zeros, "lambda_n": ln, "lambda_t": lt})
+    kin = rows.kinematics(guess.stacked())
+    hand, r = rows.body.hand, rows.body.radius
+    JTf = np.einsum("kiab,kia->kib", kin.J, kin.f_W) - r * lt[..., None]
+    tau = np.clip((JTf - hand.gravity_forces(q)).reshape(K, -1), -hand.tau_max, hand.tau_max)
+    return CitoVariables(**{**zeros, "lambda_n": ln, "lambda_t": lt, "tau": tau})
+
+
+def _static_forces(rows: KnotRows, guess: CitoVariables, touch_tol: float = 1e-3):
+    """(lambda_n, lambda_t) (K, 4) holding the object statically with the fingers that
+    are pinned or within touch_tol of the surface."""
+    b = rows.body
+    kin = rows.kinematics(guess.stacked())
+    touching = rows.pinned | (kin.phi_tip < touch_tol)                 # (K, 4)
+    cols_n = np.concatenate([-kin.n_W, _cross(kin.arm, -kin.n_W)[..., None]], axis=-1)   # (K, 4, 3)
+    cols_t = np.concatenate([kin.t_W, _cross(kin.arm, kin.t_W)[..., None]], axis=-1)
+    G = np.concatenate([cols_n * touching[..., None], cols_t * touching[..., None]], axis=1).transpose(0, 2, 1)
+    weight = b.mass * np.linalg.norm(b.gravity)
+    w = np.concatenate([-b.mass * b.gravity, [0.0]])                    # (0, m g, 0)
+    pref = np.concatenate([weight * touching, np.zeros(touching.shape)], axis=1)
+    lam = pref + np.einsum("kij,kj->ki", np.linalg.pinv(G), w - np.einsum("kij,kj->ki", G, pref))
+    ln = np.maximum(lam[:, :NUM_FINGERS], 0.0)
+    return ln, np.clip(lam[:, NUM_FINGERS:], -b.mu * ln, b.mu * ln)
+
+
+def _cross(a, f):
+    return a[..., 0] * f[..., 1] - a[..., 1] * f[..., 0]

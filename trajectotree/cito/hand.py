@@ -1,0 +1,123 @@
+"""The four two-link fingers in closed form, vectorized over fingers.
+
+Everything here is read from the plant through `scene.FingerGeometry`, so the
+SDF stays the single source of truth; tests compare these against the plant
+(`CalcMassMatrix`, `CalcGravityGeneralizedForces`, frame kinematics).
+Coriolis and centrifugal terms are omitted, as in the paper (eq. 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.scene import NUM_FINGERS, Scene
+
+# K @ v rotates a planar vector by +90 degrees: K v = z x v.
+K90 = np.array([[0.0, -1.0], [1.0, 0.0]])
+
+
+def _per_finger(q: np.ndarray) -> np.ndarray:
+    """(..., 8) joint angles as (..., 4, 2)."""
+    return q.reshape(q.shape[:-1] + (NUM_FINGERS, 2))
+
+
+@dataclass(frozen=True)
+class HandModel:
+    """Per-finger parameters as arrays with a leading finger axis (4, ...)."""
+
+    base: np.ndarray      # (4, 2) m, p_W of joint 1
+    psi: np.ndarray       # (4,) rad, link-1 direction at q1 = 0
+    l1: np.ndarray        # (4,) m
+    l2: np.ndarray        # (4,) m
+    mass_a: np.ndarray    # (4,) kg m^2, M11 = a + 2 b cos q2
+    mass_b: np.ndarray    # (4,) kg m^2, M12 = c + b cos q2
+    mass_c: np.ndarray    # (4,) kg m^2, M22 = c
+    grav_1: np.ndarray    # (4,) N m, g (m1 c1 + m2 l1): gravity moment of link 1 terms
+    grav_2: np.ndarray    # (4,) N m, g m2 c2
+    q_lower: np.ndarray   # (8,) rad
+    q_upper: np.ndarray   # (8,) rad
+    tau_max: np.ndarray   # (8,) N m
+
+    @staticmethod
+    def from_scene(scene: Scene) -> "HandModel":
+        f = scene.fingers
+        m1, m2 = (np.array([fi.masses[j] for fi in f]) for j in (0, 1))
+        c1, c2 = (np.array([fi.coms[j] for fi in f]) for j in (0, 1))
+        i1, i2 = (np.array([fi.inertias[j] for fi in f]) for j in (0, 1))
+        l1, l2 = np.array([fi.l1 for fi in f]), np.array([fi.l2 for fi in f])
+        g = scene.config.gravity
+        return HandModel(
+            base=np.array([fi.p_W_base for fi in f]), psi=np.array([fi.psi for fi in f]), l1=l1, l2=l2,
+            mass_a=i1 + i2 + m1 * c1 ** 2 + m2 * (l1 ** 2 + c2 ** 2), mass_b=m2 * l1 * c2, mass_c=i2 + m2 * c2 ** 2,
+            grav_1=g * (m1 * c1 + m2 * l1), grav_2=g * m2 * c2,
+            q_lower=np.concatenate([fi.q_lower for fi in f]), q_upper=np.concatenate([fi.q_upper for fi in f]),
+            tau_max=np.concatenate([fi.tau_max for fi in f]))
+
+    def angles(self, q: np.ndarray):
+        """(a1, a12): absolute angles of link 1 and link 2, each (..., 4), from q (..., 8)."""
+        Q = _per_finger(q)
+        a1 = self.psi + Q[..., 0]
+        return a1, a1 + Q[..., 1]
+
+    def links(self, q: np.ndarray):
+        """(r1, r2): link vectors l1 e(a1) and l2 e(a12), each (..., 4, 2)."""
+        a1, a12 = self.angles(q)
+        r1 = self.l1[:, None] * np.stack([np.cos(a1), np.sin(a1)], axis=-1)
+        r2 = self.l2[:, None] * np.stack([np.cos(a12), np.sin(a12)], axis=-1)
+        return r1, r2
+
+    def fingertips(self, q: np.ndarray) -> np.ndarray:
+        """p_WF (..., 4, 2), the fingertip sphere centres."""
+        r1, r2 = self.links(q)
+        return self.base + r1 + r2
+
+    @staticmethod
+    def jacobians_from_links(r1, r2) -> np.ndarray:
+        """J_WF (..., 4, 2, 2) = [K (r1 + r2), K r2]."""
+        return np.stack([(r1 + r2) @ K90.T, r2 @ K90.T], axis=-1)
+
+    def jacobians(self, q: np.ndarray) -> np.ndarray:
+        return self.jacobians_from_links(*self.links(q))
+
+    def mass_matrices(self, q: np.ndarray) -> np.ndarray:
+        """M (..., 4, 2, 2), each finger's joint-space mass matrix."""
+        c2 = np.cos(_per_finger(q)[..., 1])
+        m12 = self.mass_c + self.mass_b * c2
+        return np.stack([np.stack([self.mass_a + 2 * self.mass_b * c2, m12], -1),
+                         np.stack([m12, np.broadcast_to(self.mass_c, c2.shape)], -1)], -2)
+
+    def gravity_forces(self, q: np.ndarray) -> np.ndarray:
+        """tau_g (..., 4, 2): generalized gravity forces (positive where gravity accelerates q)."""
+        a1, a12 = self.angles(q)
+        t2 = -self.grav_2 * np.cos(a12)
+        return np.stack([-self.grav_1 * np.cos(a1) + t2, t2], axis=-1)
+
+    def gravity_derivatives(self, q: np.ndarray) -> np.ndarray:
+        """d tau_g / d q (..., 4, 2, 2)."""
+        a1, a12 = self.angles(q)
+        d2 = self.grav_2 * np.sin(a12)
+        d1 = self.grav_1 * np.sin(a1) + d2
+        return np.stack([np.stack([d1, d2], -1), np.stack([d2, d2], -1)], -2)
+
+    def mass_derivatives(self, q: np.ndarray) -> np.ndarray:
+        """d M / d q2 (..., 4, 2, 2) (M does not depend on q1)."""
+        s2 = np.sin(_per_finger(q)[..., 1])
+        return np.stack([np.stack([-2 * self.mass_b * s2, -self.mass_b * s2], -1),
+                         np.stack([-self.mass_b * s2, np.zeros_like(s2)], -1)], -2)
+
+    def ik(self, i: int, p_WF: np.ndarray) -> np.ndarray | None:
+        """Closed-form IK of finger i (elbow branch q2 > 0, the joint limits' side);
+        None when the point is out of reach or the solution violates the limits."""
+        d = np.asarray(p_WF, dtype=float) - self.base[i]
+        l1, l2 = self.l1[i], self.l2[i]
+        c2 = (d @ d - l1 ** 2 - l2 ** 2) / (2 * l1 * l2)
+        if abs(c2) > 1.0:
+            return None
+        q2 = np.arccos(c2)
+        q1 = np.arctan2(d[1], d[0]) - self.psi[i] - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
+        q1 = (q1 + np.pi) % (2 * np.pi) - np.pi
+        q = np.array([q1, q2])
+        lo, hi = self.q_lower[2 * i:2 * i + 2], self.q_upper[2 * i:2 * i + 2]
+        return q if np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9) else None

@@ -1,0 +1,204 @@
+"""The CITO program builder shared by all three methods (general CITO, eqs. 1-10;
+the plan-constrained variant of transition.py only changes the `ProgramSpec`).
+
+Knots k = 0..K-1, dt apart. Linear parts go through Drake's native sparse linear
+constraints and bounds: trapezoidal collocation (x_{k+1} = x_k + dt/2 (xd_k + xd_{k+1}),
+the same for xd/xdd, q/qd, qd/qdd), the friction cone mu lambda_n >= |lambda_t|,
+lambda_n >= 0, slack >= 0, joint and torque limits, fixed x_0 and q_0, rest knots.
+The nonlinear rows of a knot (knot.KnotRows) form one Python constraint per knot
+with an analytic Jacobian and its sparsity pattern.
+
+Speed: IPOPT evaluates a Python constraint per knot; each call crosses into Python.
+All knots are evaluated at once (vectorized) by a visualization callback, which
+Drake runs with the full decision vector whenever IPOPT evaluates the cost: the
+Jacobians IPOPT asks for next are then cache hits. A knot whose variables differ
+from the cached ones (IPOPT evaluates trial-point constraint values before the
+cost) is evaluated on its own, so results never depend on the call order.
+Costs are many small native quadratic costs: Drake differentiates every cost
+binding with AutoDiff over its own variables, which is cubic in their number.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+from pydrake.solvers import MathematicalProgram
+
+from trajectotree.cito.knot import BodyParams, KnotRows
+from trajectotree.cito.variables import KNOT_SIZE, CitoVariables
+from trajectotree.config import CitoConfig
+from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
+
+
+@dataclass(frozen=True)
+class ProgramSpec:
+    """What distinguishes one CITO program from another."""
+
+    dt: float                      # s, knot spacing
+    pinned: np.ndarray             # (K, 4) bool, finger pinned to a planned contact at knot k
+    c_B: np.ndarray                # (K, 4, 2) m, pinned fingertip-centre target in B
+    n_B: np.ndarray                # (K, 4, 2) planned contact normal in B
+    x0: np.ndarray                 # (3,) fixed initial object pose
+    q0: np.ndarray                 # (8,) fixed initial joint angles
+    rest_knots: np.ndarray         # knots where object and joint velocities are zero
+    goal_poses: tuple              # per knot, an (n_k, 3) array of incremental goals x*_n (eq. 11)
+    segment_length: int = 0        # M_hat knots per segment (0: not segmented)
+
+    @property
+    def num_knots(self) -> int:
+        return self.pinned.shape[0]
+
+
+@dataclass
+class CitoProgram:
+    prog: MathematicalProgram
+    variables: CitoVariables
+    rows: KnotRows
+    spec: ProgramSpec
+    knot_bindings: list = field(default_factory=list)
+    build_time_s: float = 0.0
+
+
+class _KnotCache:
+    """All knots' values and Jacobians at the last full decision vector seen."""
+
+    def __init__(self, rows: KnotRows, num_knots: int):
+        self.rows, self.num_knots = rows, num_knots
+        self.Z = None
+        self.val = self.jac = None
+
+    def prime(self, values: np.ndarray) -> None:
+        Z = np.asarray(values).reshape(self.num_knots, KNOT_SIZE)
+        if self.Z is not None and np.array_equal(Z, self.Z):
+            return
+        self.val, self.jac = self.rows.evaluate(Z, True)
+        self.Z = Z.copy()
+
+
+class _KnotConstraint:
+    """Drake's evaluator for knot k: float input gives values, AutoDiffXd input gives
+    values and gradients (analytic Jacobian times the input's gradient)."""
+
+    def __init__(self, cache: _KnotCache, k: int):
+        self.cache, self.k = cache, k
+        self.single = cache.rows.knot(k)
+        self.n = int(self.single.num_rows[0])
+
+    def _rows(self, z: np.ndarray, with_jacobian: bool):
+        c = self.cache
+        if c.Z is not None and np.array_equal(c.Z[self.k], z):
+            return c.val[self.k, :self.n], c.jac[self.k, :self.n]
+        val, jac = self.single.evaluate(z[None], with_jacobian)
+        return val[0, :self.n], (None if jac is None else jac[0, :self.n])
+
+    def __call__(self, z):
+        if z.dtype == object:
+            val, jac = self._rows(ExtractValue(z)[:, 0], True)
+            return InitializeAutoDiff(val, jac @ ExtractGradient(z))[:, 0]
+        return self._rows(np.asarray(z, dtype=float), False)[0]
+
+
+def _collocation(prog, a: np.ndarray, b: np.ndarray, dt: float):
+    """a_{k+1} - a_k - dt/2 (b_k + b_{k+1}) = 0 for all k, one sparse binding."""
+    K, n = a.shape
+    D = sp.diags([-np.ones(K - 1), np.ones(K - 1)], [0, 1], shape=(K - 1, K))
+    S = sp.diags([np.ones(K - 1), np.ones(K - 1)], [0, 1], shape=(K - 1, K))
+    I = sp.identity(n)
+    A = sp.hstack([sp.kron(D, I), -0.5 * dt * sp.kron(S, I)]).tocsc()
+    return prog.AddLinearEqualityConstraint(A, np.zeros(A.shape[0]), np.concatenate([a.ravel(), b.ravel()]))
+
+
+def _bounds(v: CitoVariables, spec: ProgramSpec, body: BodyParams):
+    """Per-group (lower, upper) arrays of the bounding boxes."""
+    hand = body.hand
+    inf = np.inf
+    lo = {name: np.full(getattr(v, name).shape, -inf) for name in ("x", "xd", "q", "qd", "tau", "lambda_n", "slack")}
+    hi = {name: np.full(getattr(v, name).shape, inf) for name in lo}
+    lo["q"][:], hi["q"][:] = hand.q_lower, hand.q_upper
+    lo["tau"][:], hi["tau"][:] = -hand.tau_max, hand.tau_max
+    lo["lambda_n"][:] = 0.0
+    lo["slack"][:] = 0.0
+    lo["x"][0] = hi["x"][0] = spec.x0
+    lo["q"][0] = hi["q"][0] = spec.q0
+    rest = np.asarray(spec.rest_knots, dtype=int)
+    for name in ("xd", "qd"):
+        lo[name][rest] = hi[name][rest] = 0.0
+    return lo, hi
+
+
+def build_program(scene, config: CitoConfig, spec: ProgramSpec, body: BodyParams | None = None) -> CitoProgram:
+    """The whole CITO program for `spec`, built once per solve."""
+    t0 = time.perf_counter()
+    body = body or BodyParams(scene, config.sdf_sharpness)
+    prog = MathematicalProgram()
+    K = spec.num_knots
+    v = CitoVariables.from_prog(prog, K)
+    rows = KnotRows(body, spec.pinned, spec.c_B, spec.n_B)
+
+    # Dynamics: linear collocation; the nonlinear rows per knot below.
+    for a, b in (("x", "xd"), ("xd", "xdd"), ("q", "qd"), ("qd", "qdd")):
+        _collocation(prog, getattr(v, a), getattr(v, b), spec.dt)
+    # Friction cone, linear: mu lambda_n - lambda_t >= 0 and mu lambda_n + lambda_t >= 0.
+    mu, n = scene.config.mu, K * NUM_FINGERS
+    I = sp.identity(n)
+    A = sp.vstack([sp.hstack([mu * I, -I]), sp.hstack([mu * I, I])]).tocsc()
+    prog.AddLinearConstraint(A, np.zeros(2 * n), np.full(2 * n, np.inf),
+                             np.concatenate([v.lambda_n.ravel(), v.lambda_t.ravel()]))
+    lo, hi = _bounds(v, spec, body)
+    for name in lo:
+        prog.AddBoundingBoxConstraint(lo[name].ravel(), hi[name].ravel(), getattr(v, name).ravel())
+
+    cache = _KnotCache(rows, K)
+    prog.AddVisualizationCallback(cache.prime, v.stacked().ravel())
+    bindings = []
+    for k in range(K):
+        evaluator = _KnotConstraint(cache, k)
+        lower, upper = rows.bounds(k)
+        binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
+        binding.evaluator().SetGradientSparsityPattern(rows.sparsity(k))
+        bindings.append(binding)
+    _add_costs(prog, v, spec, config)
+    return CitoProgram(prog=prog, variables=v, rows=rows, spec=spec, knot_bindings=bindings,
+                       build_time_s=time.perf_counter() - t0)
+
+
+def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) -> None:
+    """Eq. 11: incremental-goal pose cost, tau'R tau, lambda'L lambda, L1 slack penalty,
+    plus the acceleration regularization (CitoConfig.weight_acceleration)."""
+    Q = np.diag(config.weight_pose)
+    eye8, eye11 = np.eye(NUM_HAND_JOINTS), np.eye(3 + NUM_HAND_JOINTS)
+    for k in range(spec.num_knots):
+        goals = np.asarray(spec.goal_poses[k], dtype=float).reshape(-1, 3)
+        if len(goals):
+            # sum_j (x - g_j)' Q (x - g_j) = x' (n Q) x - 2 (Q sum_j g_j)' x + sum_j g_j' Q g_j
+            prog.AddQuadraticCost(2 * len(goals) * Q, -2 * Q @ goals.sum(0),
+                                  float(np.einsum("ja,ab,jb->", goals, Q, goals)), v.x[k], is_convex=True)
+        prog.AddQuadraticCost(2 * config.weight_torque * eye8, np.zeros(8), v.tau[k], is_convex=True)
+        prog.AddQuadraticCost(2 * config.weight_force * eye8, np.zeros(8),
+                              np.concatenate([v.lambda_n[k], v.lambda_t[k]]), is_convex=True)
+        prog.AddLinearCost(config.weight_slack * np.ones(NUM_FINGERS), 0.0, v.slack[k])
+        if config.weight_acceleration > 0:
+            prog.AddQuadraticCost(2 * config.weight_acceleration * eye11, np.zeros(11),
+                                  np.concatenate([v.xdd[k], v.qdd[k]]), is_convex=True)
+
+
+def general_spec(*, x0, q0, object_path, config: CitoConfig, dt: float | None = None) -> ProgramSpec:
+    """General CITO (eqs. 1-10, the baselines): every finger free at every knot, fixed
+    x_0 and q_0, at rest at the first and last knot, and the incremental goals of the
+    object path x*_1..x*_{N-1} over segments of M_hat knots (eq. 11, as the paper's
+    baselines use the same cost)."""
+    M = config.knots_per_segment
+    path = np.asarray(object_path, dtype=float)
+    K = (len(path) - 1) * M + 1
+    goals = [[] for _ in range(K)]
+    for s in range(len(path) - 1):
+        for k in range(s * M, (s + 1) * M + 1):
+            goals[k].append(path[s + 1])
+    return ProgramSpec(dt=dt or config.dt, pinned=np.zeros((K, NUM_FINGERS), bool),
+                       c_B=np.zeros((K, NUM_FINGERS, 2)), n_B=np.tile([1.0, 0.0], (K, NUM_FINGERS, 1)),
+                       x0=np.asarray(x0, float), q0=np.asarray(q0, float), rest_knots=np.array([0, K - 1]),
+                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M)

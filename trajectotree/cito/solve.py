@@ -1,0 +1,124 @@
+"""IPOPT on a CitoProgram: options, the solve, and the per-group violation report.
+
+Options follow DESIGN.md sec. 7: SPRAL with metis ordering, no scaling and
+nemin 4 (SPRAL's defaults redo the analysis every iteration), L-BFGS (Drake
+passes no Hessian), and every tolerance set explicitly (Drake's default is 1e-10).
+IPOPT writes its summary to a temporary file, from which the iteration count and
+the timing statistics (function evaluations vs IPOPT's own time) are read.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.solvers import IpoptSolver, SolverOptions
+
+from trajectotree.cito.program import CitoProgram
+from trajectotree.cito.variables import CitoVariables
+from trajectotree.geometry import BoxBoundary
+from trajectotree.config import CitoConfig
+
+VIOLATION_GROUPS = ("dynamics", "friction_cone", "complementarity", "contact_point", "penetration")
+
+
+@dataclass(frozen=True)
+class SolveOutcome:
+    success: bool
+    status: str                 # IPOPT's return status name
+    iterations: int             # -1 when IPOPT's summary could not be read
+    cost: float
+    solution: CitoVariables
+    solve_time_s: float
+    timing: dict = field(default_factory=dict)   # IPOPT's timing statistics (s), when printed
+
+
+def ipopt_options(config: CitoConfig, output_file: str | None = None) -> SolverOptions:
+    options = SolverOptions()
+    settings = {
+        "linear_solver": "spral", "spral_order": "metis", "spral_scaling": "none", "spral_nemin": 4,
+        "hessian_approximation": "limited-memory", "limited_memory_max_history": config.lbfgs_history,
+        "tol": config.tol, "constr_viol_tol": config.constr_viol_tol, "acceptable_tol": config.acceptable_tol,
+        "acceptable_constr_viol_tol": config.acceptable_constr_viol_tol, "acceptable_iter": config.acceptable_iter,
+        "max_iter": config.max_iter, "print_level": config.print_level,
+    }
+    if output_file:
+        settings.update(output_file=output_file, file_print_level=3, print_timing_statistics="yes")
+    for name, value in settings.items():
+        options.SetOption(IpoptSolver.id(), name, value)
+    return options
+
+
+def solve(program: CitoProgram, guess: CitoVariables, config: CitoConfig) -> SolveOutcome:
+    prog, v = program.prog, program.variables
+    v.set_initial_guess(prog, guess)
+    fd, log_path = tempfile.mkstemp(prefix="trajectotree_ipopt_", suffix=".txt")
+    os.close(fd)
+    try:
+        t0 = time.perf_counter()
+        result = IpoptSolver().Solve(prog, None, ipopt_options(config, log_path))
+        solve_time = time.perf_counter() - t0
+        summary = _read(log_path)
+    finally:
+        os.unlink(log_path)
+    details = result.get_solver_details()
+    status = details.ConvertStatusToString()
+    return SolveOutcome(success=bool(result.is_success()), status=status, iterations=_iterations(summary),
+                        cost=float(result.get_optimal_cost()), solution=v.eval_result(result),
+                        solve_time_s=solve_time, timing=_timing(summary))
+
+
+def _read(path: str) -> str:
+    try:
+        with open(path) as f:
+            return f.read()
+    except OSError:
+        return ""
+
+
+def _iterations(summary: str) -> int:
+    m = re.search(r"Number of Iterations\.*:\s*(\d+)", summary)
+    return int(m.group(1)) if m else -1
+
+
+def _timing(summary: str) -> dict:
+    """Seconds from IPOPT's timing statistics: total, in function evaluations, own."""
+    out = {}
+    for key, pattern in (("ipopt_total_s", r"OverallAlgorithm\.*:\s*([\d.]+)"),
+                         ("function_evaluations_s", r"Function Evaluations\.*:\s*([\d.]+)"),
+                         ("ipopt_without_function_evaluations_s", r"Total seconds in IPOPT \(w/o function evaluations\)\s*=\s*([\d.]+)"),
+                         ("nlp_function_evaluations_s", r"Total seconds in NLP function evaluations\s*=\s*([\d.]+)")):
+        m = re.search(pattern, summary)
+        if m:
+            out[key] = float(m.group(1))
+    return out
+
+
+def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
+    """Max absolute violation per constraint group, physical (without the slacks):
+    dynamics (object and hand rows, collocation), friction_cone, complementarity
+    (phi lambda_n and |v_rel| lambda_n of free fingers), contact_point (distance of
+    pinned fingertips from their planned points) and penetration (exact distance)."""
+    rows, dt = program.rows, program.spec.dt
+    Z = sol.stacked()
+    val, _ = rows.evaluate(Z, False)
+    kin = rows.kinematics(Z)
+    col = [np.abs(np.diff(a, axis=0) - 0.5 * dt * (b[1:] + b[:-1])).max()
+           for a, b in ((sol.x, sol.xd), (sol.xd, sol.xdd), (sol.q, sol.qd), (sol.qd, sol.qdd))]
+    mu = scene.config.mu
+    ln, lt = sol.lambda_n, sol.lambda_t
+    free = ~rows.pinned
+    comp = np.maximum(np.abs(kin.phi_tip) * ln, np.linalg.norm(kin.v, axis=-1) * ln)
+    boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+    exact = np.array([[boundary.signed_distance(p) for p in knot] for knot in kin.p_BF]) - rows.body.radius
+    return {
+        "dynamics": float(max(np.abs(val[:, :11]).max(), *col)),
+        "friction_cone": float(max(0.0, (np.abs(lt) - mu * ln).max(), (-ln).max())),
+        "complementarity": float(comp[free].max()) if free.any() else 0.0,
+        "contact_point": float(np.linalg.norm(kin.e, axis=-1)[rows.pinned].max()) if rows.pinned.any() else 0.0,
+        "penetration": float(max(0.0, -exact.min())),
+    }

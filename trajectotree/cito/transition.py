@@ -1,0 +1,80 @@
+"""The plan-constrained (TrajectoTree) program, paper eqs. 11-19, as a ProgramSpec.
+
+Segment s = 0..N-2 joins nodes s and s+1 of the contact plan over knots
+s M_hat .. (s+1) M_hat; consecutive segments share their boundary knot, so
+K = (N-1) M_hat + 1 (the paper's M = (N-1) M_hat time steps). In segment s:
+  - fixed fingers are pinned at their planned contacts at every knot (eq. 15);
+  - the switching finger of node s+1 is pinned at its old contact at the first
+    knot and at its new one at the last (eqs. 12-13), and free with the
+    complementarity rows in between (eq. 14);
+  - the object and joints are at rest at the segment's first and last knot
+    (eqs. 18-19); x_0 and q_0 are fixed (eqs. 16-17);
+  - the running pose cost targets x*_{s+1} (eq. 11).
+Pinning means the fingertip centre sits at p*_BC + r n*_B in the box frame, relaxed
+by the finger's penalized slack, with the planned contact frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trajectotree.cito.program import ProgramSpec
+from trajectotree.config import CitoConfig, ConfigError
+from trajectotree.contact_plan import ContactPlan
+from trajectotree.scene import NUM_FINGERS
+
+
+def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
+    """Raises ConfigError when the plan cannot belong to this scene."""
+    if len(plan.nodes) < min_nodes:
+        raise ConfigError(f"contact plan has {len(plan.nodes)} nodes; at least {min_nodes} needed")
+    c = scene.config
+    if not np.allclose(plan.nodes[0].object_pose, c.initial_pose, atol=1e-9):
+        raise ConfigError(f"contact plan starts at pose {list(plan.nodes[0].object_pose)}, "
+                          f"the scene at {list(c.initial_pose)}")
+    for n, node in enumerate(plan.nodes):
+        if np.shape(node.q) != (2 * NUM_FINGERS,) or np.shape(node.p_BC) != (NUM_FINGERS, 2):
+            raise ConfigError(f"contact plan node {n} has q shape {np.shape(node.q)} and p_BC shape "
+                              f"{np.shape(node.p_BC)}; expected (8,) and (4, 2)")
+        # Every contact must lie on this scene's box boundary.
+        gap = np.abs(np.abs(node.p_BC) - [c.box_width / 2, c.box_height / 2]).min(axis=1)
+        outside = np.any(np.abs(node.p_BC) > [c.box_width / 2 + 1e-6, c.box_height / 2 + 1e-6], axis=1)
+        if np.any(gap > 1e-6) or np.any(outside):
+            raise ConfigError(f"contact plan node {n} has contacts {node.p_BC.tolist()} off the boundary of the "
+                              f"{c.box_width} x {c.box_height} m box of the scene")
+        if node.switching_finger is not None and node.switching_finger not in range(NUM_FINGERS):
+            raise ConfigError(f"contact plan node {n} has switching_finger {node.switching_finger}; valid: 0-3 or null")
+
+
+def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> ProgramSpec:
+    """The TrajectoTree program's spec for a successful contact plan."""
+    M = config.knots_per_segment
+    N = len(plan.nodes)
+    K = (N - 1) * M + 1
+    pinned = np.ones((K, NUM_FINGERS), bool)
+    c_B = np.zeros((K, NUM_FINGERS, 2))
+    n_B = np.zeros((K, NUM_FINGERS, 2))
+    goals = [[] for _ in range(K)]
+    for s in range(N - 1):
+        old, new = plan.nodes[s], plan.nodes[s + 1]
+        ks = np.arange(s * M, (s + 1) * M + 1)
+        c_B[ks] = old.p_BC + radius * old.n_B
+        n_B[ks] = old.n_B
+        f = new.switching_finger
+        if f is not None:
+            pinned[ks[1:-1], f] = False
+        c_B[ks[-1]] = new.p_BC + radius * new.n_B
+        n_B[ks[-1]] = new.n_B
+        for k in ks:
+            goals[k].append(new.object_pose)
+    return ProgramSpec(dt=config.dt, pinned=pinned, c_B=c_B, n_B=n_B, x0=np.asarray(plan.nodes[0].object_pose, float),
+                       q0=np.asarray(plan.nodes[0].q, float), rest_knots=np.arange(0, K, M),
+                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
+
+
+def knot_poses(path: np.ndarray, segment_length: int) -> np.ndarray:
+    """(K, 3) object poses linearly interpolated between the nodes' poses."""
+    path = np.asarray(path, dtype=float)
+    tau = np.linspace(0.0, 1.0, segment_length + 1)[:-1]
+    poses = [path[s] + np.outer(tau, path[s + 1] - path[s]) for s in range(len(path) - 1)]
+    return np.vstack(poses + [path[-1:]])
