@@ -1,0 +1,227 @@
+"""Kinematic reachability of fingertip contacts (paper Sec. III-A, IsFeasible).
+
+A contact at arclength s of the box at object pose x is reachable by finger i when the
+fingertip sphere touches the box there: the sphere centre p_WF = p_WC + r n_W is reached
+within the joint limits (Drake `InverseKinematics` on the scene's plant, SNOPT), and
+neither link of the finger penetrates the box.
+
+Two stages keep the search cheap:
+- `closed_form` solves the 2-link IK analytically (both elbow branches, q1 wrapped into
+  its limits). A planar 2-link chain has no other solutions, so when none lies within the
+  limits the contact is unreachable and Drake IK would fail too: this is an exact filter.
+- `solve` runs Drake IK seeded with the closed-form answer and keeps its joint angles.
+
+Collision test (links vs box): an exact planar separating-axis test between the box and
+each link's collision box from the SDF (read from SceneGraph's inspector, expressed in the
+frame of the joint that moves it). All collision geometry is centred on the z = 0 plane,
+so planar overlap is 3D overlap; tests/test_reach.py checks it against SceneGraph's
+signed-distance queries. The fingertip sphere is not tested: it touches by construction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.solvers import SnoptSolver
+
+from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
+from trajectotree.scene import NUM_FINGERS, FingerGeometry, Scene
+
+IK_TOLERANCE = 1e-6   # m, fingertip position tolerance of the IK constraint
+KEY_DIGITS = 9        # poses and arclengths equal to 1e-9 share a cache entry
+
+
+@dataclass(frozen=True)
+class FingerReach:
+    reachable: bool
+    q: np.ndarray      # (2,) rad, the finger's joint angles (nan when unreachable)
+    reason: str        # why not, "" when reachable
+
+
+def closed_form_ik(finger: FingerGeometry, p_WF) -> list[np.ndarray]:
+    """All joint solutions (2,) within the joint limits that put the fingertip centre at p_WF."""
+    dx, dy = float(p_WF[0]) - finger.p_W_base[0], float(p_WF[1]) - finger.p_W_base[1]
+    l1, l2 = finger.l1, finger.l2
+    c2 = (dx * dx + dy * dy - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    if abs(c2) > 1.0:
+        return []
+    (lo1, lo2), (hi1, hi2) = finger.q_lower, finger.q_upper
+    solutions = []
+    for q2 in sorted({math.acos(c2), -math.acos(c2)}, reverse=True):
+        if not lo2 <= q2 <= hi2:
+            continue
+        q1 = math.atan2(dy, dx) - finger.psi - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2))
+        q1 = math.remainder(q1, 2 * math.pi)
+        for wrap in (-2 * math.pi, 0.0, 2 * math.pi):  # limits may exceed pi
+            if lo1 <= q1 + wrap <= hi1:
+                solutions.append(np.array([q1 + wrap, q2]))
+    return solutions
+
+
+@dataclass(frozen=True)
+class LinkRectangle:
+    """A link's collision box in the plane, in the frame J of the joint that moves the link."""
+
+    p_JG: np.ndarray    # (2,) m, box centre
+    angle_JG: float     # rad, box x axis relative to J's x axis
+    half_length: float  # m, half extent along the box x axis
+    half_width: float   # m, half extent along the box y axis (in the plane)
+
+    def corners(self, p_WJ, angle_WJ: float) -> np.ndarray:
+        """(4, 2) corners in W when frame J is at p_WJ with angle angle_WJ."""
+        hl, hw = self.half_length, self.half_width
+        local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]]) @ rotation_2d(self.angle_JG).T + self.p_JG
+        return np.asarray(p_WJ) + local @ rotation_2d(angle_WJ).T
+
+
+def rectangle_overlaps_box(center, angle: float, half_length: float, half_width: float, a: float, b: float) -> bool:
+    """Separating-axis test: does the rectangle (centre, angle, half sizes), expressed in the
+    box frame, overlap the box [-a, a] x [-b, b]? Touching counts as not overlapping."""
+    cx, cy = center
+    ux, uy = math.cos(angle), math.sin(angle)
+    return (abs(cx) < a + half_length * abs(ux) + half_width * abs(uy)
+            and abs(cy) < b + half_length * abs(uy) + half_width * abs(ux)
+            and abs(cx * ux + cy * uy) < half_length + a * abs(ux) + b * abs(uy)
+            and abs(-cx * uy + cy * ux) < half_width + a * abs(uy) + b * abs(ux))
+
+
+class Reachability:
+    """Reachability queries for one scene, cached by (object pose, finger, arclength)."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+        self.tip_radius = scene.tip_radius
+        self.fingers = scene.fingers
+        self._rectangles = [self._read_link_rectangles(i) for i in range(NUM_FINGERS)]
+        self._iks = [self._make_ik(i) for i in range(NUM_FINGERS)]
+        self._solver = SnoptSolver()
+        self._cache: dict[tuple, FingerReach] = {}
+        self._closed_form_cache: dict[tuple, FingerReach] = {}
+        self._points: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self.ik_calls = 0  # Drake IK solves so far (cache hits and closed-form rejections excluded)
+
+    # -- geometry -------------------------------------------------------------------------
+    def contact(self, arclength: float) -> tuple[np.ndarray, np.ndarray]:
+        """(p_BC, n_B) at `arclength`, memoized (the search asks for the same few hundred)."""
+        key = round(float(arclength) % self.boundary.perimeter, KEY_DIGITS)
+        if key not in self._points:
+            self._points[key] = self.boundary.point(key)
+        return self._points[key]
+
+    def tip_target(self, pose, arclength: float) -> np.ndarray:
+        """p_WF: where the fingertip centre must be to touch the box at `arclength`."""
+        p_BC, n_B = self.contact(arclength)
+        return box_to_world(pose, p_BC + self.tip_radius * n_B)
+
+    def _joint_frames(self, finger: int, q):
+        """(p_WJ, angle_WJ) of the joint-1 and joint-2 frames at joint angles q."""
+        f = self.fingers[finger]
+        a1, a12 = f.psi + q[0], f.psi + q[0] + q[1]
+        elbow = f.p_W_base + f.l1 * np.array([math.cos(a1), math.sin(a1)])
+        return (f.p_W_base, a1), (elbow, a12)
+
+    def link_polygons(self, finger: int, q) -> list[np.ndarray]:
+        """Corners (4, 2) in W of the finger's link collision boxes at joint angles q."""
+        return [rect.corners(p_WJ, angle) for rect, (p_WJ, angle)
+                in zip(self._rectangles[finger], self._joint_frames(finger, q))]
+
+    def links_penetrate(self, pose, finger: int, q) -> bool:
+        """True when a link collision box of `finger` at q overlaps the box at `pose`."""
+        a, b = self.boundary.width / 2, self.boundary.height / 2
+        R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
+        for rect, (p_WJ, angle_WJ) in zip(self._rectangles[finger], self._joint_frames(finger, q)):
+            p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
+            if rectangle_overlaps_box(R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
+                                      rect.half_length, rect.half_width, a, b):
+                return True
+        return False
+
+    def _read_link_rectangles(self, i: int) -> list[LinkRectangle]:
+        """Each link's box collision geometry from SceneGraph, in its joint frame (joint 1 for
+        link 1, joint 2 for link 2), read from the plant at q = 0."""
+        plant, inspector = self.scene.plant, self.scene.scene_graph.model_inspector()
+        context = plant.CreateDefaultContext()
+        rectangles = []
+        for j in (1, 2):
+            joint = plant.GetJointByName(f"finger{i}_joint{j}", self.scene.hand)
+            body = plant.GetBodyByName(f"finger{i}_link{j}", self.scene.hand)
+            boxes = [g for g in plant.GetCollisionGeometriesForBody(body) if type(inspector.GetShape(g)).__name__ == "Box"]
+            if len(boxes) != 1:
+                raise RuntimeError(f"finger{i}_link{j} must have exactly one box collision geometry, has {len(boxes)}")
+            shape = inspector.GetShape(boxes[0])
+            X_WG = body.EvalPoseInWorld(context) @ inspector.GetPoseInFrame(boxes[0])
+            X_JG = joint.frame_on_child().CalcPoseInWorld(context).inverse() @ X_WG
+            R_JG = X_JG.rotation().matrix()
+            rectangles.append(LinkRectangle(p_JG=X_JG.translation()[:2].copy(), angle_JG=math.atan2(R_JG[1, 0], R_JG[0, 0]),
+                                            half_length=shape.width() / 2, half_width=shape.depth() / 2))
+        return rectangles
+
+    # -- IK -------------------------------------------------------------------------------
+    def _make_ik(self, i: int):
+        """IK for finger i alone: the box and the other fingers are locked in the context."""
+        plant, scene = self.scene.plant, self.scene
+        diagram_context = scene.diagram.CreateDefaultContext()
+        context = plant.GetMyMutableContextFromRoot(diagram_context)
+        plant.GetJointByName("box_planar").Lock(context)
+        for k in range(NUM_FINGERS):
+            if k != i:
+                for j in (1, 2):
+                    plant.GetJointByName(f"finger{k}_joint{j}", scene.hand).Lock(context)
+        ik = InverseKinematics(plant, context, with_joint_limits=True)
+        position = ik.AddPositionConstraint(scene.tip_frame(i), np.zeros(3), plant.world_frame(),
+                                            np.zeros(3), np.zeros(3))
+        indices = scene.hand_q_indices[2 * i:2 * i + 2]
+        return ik, position, diagram_context, indices
+
+    def _drake_ik(self, finger: int, p_WF, q_guess) -> np.ndarray | None:
+        ik, position, diagram_context, indices = self._iks[finger]
+        target = np.array([p_WF[0], p_WF[1], 0.0])
+        position.evaluator().set_bounds(target - IK_TOLERANCE, target + IK_TOLERANCE)
+        guess = np.zeros(self.scene.plant.num_positions())
+        guess[indices] = q_guess
+        self.ik_calls += 1
+        result = self._solver.Solve(ik.prog(), guess)
+        return result.GetSolution(ik.q())[indices] if result.is_success() else None
+
+    # -- queries --------------------------------------------------------------------------
+    def _key(self, pose, finger: int, arclength: float) -> tuple:
+        return (tuple(round(float(v), KEY_DIGITS) for v in pose), finger,
+                round(float(arclength) % self.boundary.perimeter, KEY_DIGITS))
+
+    def closed_form(self, pose, finger: int, arclength: float) -> FingerReach:
+        """Closed-form reachability (joint limits and link collision), no solver call; memoized."""
+        key = self._key(pose, finger, arclength)
+        if key not in self._closed_form_cache:
+            self._closed_form_cache[key] = self._closed_form(pose, finger, arclength)
+        return self._closed_form_cache[key]
+
+    def _closed_form(self, pose, finger: int, arclength: float) -> FingerReach:
+        solutions = closed_form_ik(self.fingers[finger], self.tip_target(pose, arclength))
+        if not solutions:
+            return FingerReach(False, np.full(2, np.nan), "out of reach within joint limits")
+        free = [q for q in solutions if not self.links_penetrate(pose, finger, q)]
+        if not free:
+            return FingerReach(False, solutions[0], "finger links penetrate the box")
+        return FingerReach(True, free[0], "")
+
+    def solve(self, pose, finger: int, arclength: float) -> FingerReach:
+        """Drake IK (seeded by the closed form) + collision test: the node's joint angles; memoized."""
+        key = self._key(pose, finger, arclength)
+        if key not in self._cache:
+            self._cache[key] = self._solve(pose, finger, arclength)
+        return self._cache[key]
+
+    def _solve(self, pose, finger: int, arclength: float) -> FingerReach:
+        guess = self.closed_form(pose, finger, arclength)
+        if not guess.reachable:
+            return guess
+        q = self._drake_ik(finger, self.tip_target(pose, arclength), guess.q)
+        if q is None:
+            return FingerReach(False, np.full(2, np.nan), "inverse kinematics failed")
+        if self.links_penetrate(pose, finger, q):
+            return FingerReach(False, q, "finger links penetrate the box")
+        return FingerReach(True, q, "")

@@ -1,0 +1,248 @@
+"""The contact-sequence planner: the paper's Algorithm 1 (Sec. III-A).
+
+A depth-first tree search over contact configurations along a fixed object path of N
+poses (linear interpolation from the initial pose to the goal rotation). A node at depth
+n holds the object pose x*_n, the four contacts (arclengths along the box boundary) and
+the joint angles. Expanding a node (GetNeighbors) moves one free finger (the other three
+alone are in frictional form closure) by a displacement from D_cp, or keeps every finger
+(zero displacement), at pose x*_{n+1}. SelectNode takes the deepest open node, ties
+broken by the paper's heuristic sum_i |q2_i - nominal_joint2|.
+
+IsFeasible runs when a node is selected, as in Algorithm 1: frictional form closure (LP,
+trajectotree.grasp) and reachability by Drake IK without the links entering the box
+(trajectotree.reach). GetNeighbors already drops candidates that fail the cheap exact
+tests (corner margin, overlapping fingertips, closed-form reachability), so the LP and
+the IK run only for nodes the search actually visits. States reached twice at the same
+depth are inserted once (their subtrees are identical).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.config import ConfigError, SearchConfig
+from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
+from trajectotree.geometry import BoxBoundary
+from trajectotree.grasp import FormClosure
+from trajectotree.reach import Reachability
+from trajectotree.scene import NUM_FINGERS, Scene
+
+# Default initial grasp, as fractions of the faces (see default_initial_arclengths).
+DEFAULT_GRASP_FACE_FRACTIONS = ((3, 0.75), (1, 0.25), (1, 0.75), (3, 0.25))
+
+
+def default_initial_arclengths(scene: Scene) -> np.ndarray:
+    """The initial grasp used for every trial (paper Sec. IV-A: the same for all goals).
+
+    Two fingers below and two above, each on the long face nearest its base, a quarter of
+    the face in from the corner: finger 0 (bottom right) and finger 3 (bottom left) on the
+    bottom face, finger 1 (top right) and finger 2 (top left) on the top face. The two
+    opposed pairs squeeze the box along y (gravity), the grasp is in frictional form closure
+    with any one finger lifted (every finger starts free), and every finger reaches its
+    contact with its second joint near the heuristic's 45-90 degrees. It scales with the
+    box size, so it stays valid for other boxes.
+    """
+    boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+    corners = boundary.corner_arclengths()
+    lengths = np.diff(np.r_[corners, boundary.perimeter])
+    return np.array([corners[face] + fraction * lengths[face] for face, fraction in DEFAULT_GRASP_FACE_FRACTIONS])
+
+
+def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
+    """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
+    x0 = np.asarray(initial_pose, dtype=float)
+    return x0 + np.outer(np.linspace(0.0, 1.0, num_nodes), [0.0, 0.0, goal])
+
+
+@dataclass(frozen=True)
+class _Node:
+    depth: int
+    arclengths: tuple[float, ...]
+    switching_finger: int | None
+    parent: "_Node | None"
+
+
+class _Search:
+    """One run of Algorithm 1; holds the LP and IK caches and the counters."""
+
+    def __init__(self, scene: Scene, goal: float, config: SearchConfig):
+        self.scene, self.config = scene, config
+        self.boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+        self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
+        self.closure = FormClosure(self.boundary, scene.config.mu, config.min_closure_margin)
+        self.reach = Reachability(scene)
+        half = (config.num_displacements - 1) // 2
+        self.displacements = config.displacement_step * np.arange(-half, half + 1)
+        self.expanded = self.generated = 0
+        self.min_switches: list[list[dict[float, int]]] = []  # [finger][depth][arclength] -> switches
+
+    def wrap(self, s: float) -> float:
+        """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
+        return round(float(s) % self.boundary.perimeter, 9)
+
+    # -- admissible pruning -----------------------------------------------------------------
+    def plan_switch_bounds(self, start) -> None:
+        """For each finger alone, the fewest contact switches that keep it on a reachable,
+        corner-free contact from each (depth, arclength) to the last node. A node whose fingers
+        together need more switches than steps remain has no completion (one switch per step),
+        so pruning it never removes a plan; it only spares the DFS hopeless subtrees."""
+        margin, last = self.scene.config.corner_margin, self.config.num_nodes - 1
+        steps = [d for d in self.displacements if d != 0.0]
+
+        def ok(finger, depth, s):
+            return (self.boundary.corner_distance(s) >= margin
+                    and self.reach.closed_form(self.poses[depth], finger, s).reachable)
+
+        for finger, s0 in enumerate(start):
+            layers = [{s0}]
+            for depth in range(1, last + 1):  # forward: contacts reachable from s0 at all
+                candidates = {self.wrap(s + d) for s in layers[-1] for d in [0.0, *steps]}
+                layers.append({s for s in candidates if ok(finger, depth, s)})
+            cost = [dict.fromkeys(layers[last], 0)]
+            for depth in range(last - 1, -1, -1):  # backward: fewest switches to the end
+                after, here = cost[0], {}
+                for s in layers[depth]:
+                    stay = after.get(s, np.inf)
+                    move = 1 + min((after.get(self.wrap(s + d), np.inf) for d in steps), default=np.inf)
+                    here[s] = min(stay, move)
+                cost.insert(0, here)
+            self.min_switches.append(cost)
+
+    def switches_needed(self, depth: int, arclengths) -> float:
+        return sum(self.min_switches[i][depth].get(s, np.inf) for i, s in enumerate(arclengths))
+
+    # -- IsFeasible -----------------------------------------------------------------------
+    def contacts_allowed(self, arclengths) -> str:
+        """Why these contacts are not allowed on the boundary ("" when they are)."""
+        margin = self.scene.config.corner_margin
+        if any(self.boundary.corner_distance(s) < margin for s in arclengths):
+            return f"a contact lies within {margin} m of a corner"
+        centres = [p + self.reach.tip_radius * n for p, n in map(self.reach.contact, arclengths)]
+        for a, b in itertools.combinations(centres, 2):
+            if np.linalg.norm(a - b) < 2 * self.reach.tip_radius:
+                return "two fingertips overlap"
+        return ""
+
+    def infeasibility(self, node: _Node) -> str:
+        """Why `node` is a dead end ("" when it is feasible): closure LP, then Drake IK."""
+        closure = self.closure.check(node.arclengths)
+        if not closure.in_closure:
+            return f"not in frictional form closure (margin {closure.margin:.3g})"
+        pose = self.poses[node.depth]
+        for i, s in enumerate(node.arclengths):
+            reach = self.reach.solve(pose, i, s)
+            if not reach.reachable:
+                return f"finger {i} cannot reach its contact: {reach.reason}"
+        return ""
+
+    # -- GetNeighbors ---------------------------------------------------------------------
+    def neighbors(self, node: _Node):
+        """(heuristic, child) for each candidate child that passes the cheap exact tests."""
+        free = [i for i in range(NUM_FINGERS) if self.closure.is_free(node.arclengths, i)]
+        if not free:
+            return []
+        candidates = {node.arclengths: None}  # the zero displacement: no finger moves
+        for i in free:
+            for d in self.displacements:
+                if d != 0.0:
+                    moved = list(node.arclengths)
+                    moved[i] = self.wrap(moved[i] + d)
+                    candidates.setdefault(tuple(moved), i)
+        out, steps_left = [], self.config.num_nodes - 2 - node.depth
+        for arclengths, finger in candidates.items():
+            if self.switches_needed(node.depth + 1, arclengths) > steps_left:
+                continue
+            if finger is not None and self.contacts_allowed(arclengths):
+                continue
+            h = self.heuristic(node.depth + 1, arclengths)
+            if h is not None:
+                out.append((h, _Node(node.depth + 1, arclengths, finger, node)))
+        return out
+
+    def heuristic(self, depth: int, arclengths) -> float | None:
+        """sum_i |q2_i - nominal| from closed-form IK; None if a finger cannot reach."""
+        total = 0.0
+        for i, s in enumerate(arclengths):
+            reach = self.reach.closed_form(self.poses[depth], i, s)
+            if not reach.reachable:
+                return None
+            total += abs(reach.q[1] - self.config.nominal_joint2)
+        return total
+
+    # -- Algorithm 1 ----------------------------------------------------------------------
+    def run(self, start: tuple[float, ...], t0: float) -> tuple[_Node | None, str]:
+        reason = self.contacts_allowed(start)
+        if reason:
+            return None, f"initial grasp not allowed: {reason}"
+        self.plan_switch_bounds(start)
+        needed = self.switches_needed(0, start)
+        if needed > self.config.num_nodes - 1:
+            return None, (f"the goal needs at least {needed} contact switches (each finger must stay on reachable "
+                          f"contacts), more than the {self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes")
+        counter = itertools.count()
+        open_set = [(0, 0.0, next(counter), _Node(0, start, None, None))]
+        inserted = {(0, start)}
+        goal_depth = self.config.num_nodes - 1
+        last_dead_end = ""
+        while open_set:
+            if self.expanded >= self.config.max_expansions:
+                return None, f"node budget exhausted ({self.config.max_expansions} expansions)"
+            if time.perf_counter() - t0 > self.config.time_budget_s:
+                return None, f"time budget exhausted ({self.config.time_budget_s} s)"
+            *_, node = heapq.heappop(open_set)  # SelectNode: deepest, then lowest heuristic
+            self.expanded += 1
+            dead_end = self.infeasibility(node)
+            if dead_end:
+                if node.depth == 0:
+                    return None, f"initial grasp infeasible: {dead_end}"
+                last_dead_end = dead_end
+                continue
+            if node.depth == goal_depth:
+                return node, ""
+            for h, child in self.neighbors(node):
+                if (child.depth, child.arclengths) not in inserted:
+                    inserted.add((child.depth, child.arclengths))
+                    self.generated += 1
+                    heapq.heappush(open_set, (-child.depth, h, next(counter), child))
+        return None, ("no contact sequence reaches the goal in "
+                      f"{self.config.num_nodes} nodes (tree exhausted; last dead end: {last_dead_end or 'none'})")
+
+    def contact_node(self, node: _Node) -> ContactNode:
+        pose = self.poses[node.depth]
+        points = [self.reach.contact(s) for s in node.arclengths]
+        q = np.concatenate([self.reach.solve(pose, i, s).q for i, s in enumerate(node.arclengths)])
+        return ContactNode(object_pose=pose.copy(), q=q, arclengths=np.array(node.arclengths),
+                           p_BC=np.array([p for p, _ in points]), n_B=np.array([n for _, n in points]),
+                           switching_finger=node.switching_finger,
+                           closure_margin=self.closure.check(node.arclengths).margin)
+
+    def stats(self, t0: float) -> SearchStats:
+        return SearchStats(expanded=self.expanded, generated=self.generated, lp_calls=self.closure.lp_calls,
+                           ik_calls=self.reach.ik_calls, time_s=time.perf_counter() - t0)
+
+
+def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> ContactPlan:
+    """Algorithm 1 for the rotation `goal` (rad) of scene's box: N nodes from the initial
+    grasp (node 0) to the goal pose, each in frictional form closure and reachable, with
+    at most one finger changing contact between consecutive nodes. A search that finds no
+    plan within the budgets returns success=False with the reason."""
+    if not np.isfinite(goal):
+        raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
+    t0 = time.perf_counter()
+    search = _Search(scene, float(goal), config)
+    initial = config.initial_arclengths if config.initial_arclengths is not None else default_initial_arclengths(scene)
+    start = tuple(search.wrap(s) for s in initial)
+    leaf, reason = search.run(start, t0)
+    if leaf is None:
+        return ContactPlan(goal=float(goal), success=False, reason=reason, stats=search.stats(t0))
+    path = []
+    while leaf is not None:
+        path.append(leaf)
+        leaf = leaf.parent
+    nodes = tuple(search.contact_node(n) for n in reversed(path))
+    return ContactPlan(goal=float(goal), success=True, reason="", nodes=nodes, stats=search.stats(t0))
