@@ -73,7 +73,9 @@ class SearchConfig:
 
     num_nodes: int = 10                 # N, nodes in the object path (tree depth), incl. the start
     num_displacements: int = 17         # |D_cp|, contact displacements per free finger (odd, incl. zero)
-    displacement_step: float = 0.01     # m, arclength spacing of the displacements in D_cp
+    # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m; with 0.01
+    # m the 0.20 m reach of this hand cannot follow a pi rotation in 9 steps, see trajectotree.search)
+    displacement_step: float = 0.02
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
     # from the corner (+w/2, -h/2). None picks the default grasp (see trajectotree.search).
     initial_arclengths: tuple[float, float, float, float] | None = None
@@ -106,7 +108,9 @@ class CitoConfig:
 
     knots_per_segment: int = 12     # M_hat, time steps per transition segment
     dt: float = 0.1                 # s, collocation time step
-    weight_pose: tuple[float, float, float] = (10.0, 10.0, 1.0)  # Q diagonal, on (x m, y m, theta rad)
+    # Q diagonal, on (x m, y m, theta rad); theta's weight keeps the final orientation within a few
+    # degrees of the goal (with 1.0 a 0.3 rad goal ended at 0.58 rad: torques were cheaper).
+    weight_pose: tuple[float, float, float] = (100.0, 100.0, 30.0)
     weight_torque: float = 1.0      # R = weight_torque * I, on tau (N m)
     weight_force: float = 0.01      # L = weight_force * I, on lambda (N)
     weight_slack: float = 100.0     # weight of the L1 slack penalty ||gamma||_1
@@ -120,7 +124,7 @@ class CitoConfig:
     acceptable_constr_viol_tol: float = 1e-6  # IPOPT acceptable_constr_viol_tol
     acceptable_iter: int = 5        # IPOPT acceptable_iter
     max_iter: int = 1000            # IPOPT max_iter
-    lbfgs_history: int = 3          # IPOPT limited_memory_max_history
+    lbfgs_history: int = 6          # IPOPT limited_memory_max_history (3: 157 iterations, 6: 89 on a 3-segment plan)
     print_level: int = 0            # IPOPT print_level (0 silent, 5 verbose)
 
     def __post_init__(self):

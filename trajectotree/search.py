@@ -33,7 +33,7 @@ from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
 
 # Default initial grasp, as fractions of the faces (see default_initial_arclengths).
-DEFAULT_GRASP_FACE_FRACTIONS = ((3, 0.75), (1, 0.25), (1, 0.75), (3, 0.25))
+DEFAULT_GRASP_FACE_FRACTIONS = ((3, 0.7), (1, 0.1), (2, 0.6), (3, 0.4))
 
 
 def default_initial_arclengths(scene: Scene) -> np.ndarray:

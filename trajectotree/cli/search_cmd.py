@@ -1,0 +1,86 @@
+"""`trajectotree search`: the contact-sequence planner alone (paper Sec. III-A, Algorithm 1).
+
+Prints the plan (or why none was found) and the search statistics; exits 0 whether or
+not a plan was found (`"success": false` with a reason), 2 on invalid input.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+
+from trajectotree.cli.common import add_config_options, check_goal, config_from_args, print_json
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("search", help="find a finger-gaiting contact sequence for a goal rotation",
+                              description=__doc__)
+    p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, rad, in [-pi, pi]")
+    add_config_options(p)
+    p.add_argument("--figure", metavar="FILE.png", help="draw the sequence as keyframes (like the paper's Fig. 1)")
+    p.add_argument("--json", action="store_true", help="print the plan as JSON (DESIGN.md sec. 5 node format)")
+    p.set_defaults(run=run)
+
+
+def draw_plan(scene, plan, path: str) -> None:
+    """One panel per node; written to a temporary name first, then moved into place."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from trajectotree.plotting import plot_contact_node
+    cols = min(5, len(plan.nodes))
+    rows = math.ceil(len(plan.nodes) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.6 * rows + 0.4), squeeze=False)
+    for n, ax in enumerate(axes.flat):
+        ax.set_axis_off()
+        if n >= len(plan.nodes):
+            continue
+        node = plan.nodes[n]
+        plot_contact_node(ax, scene, node, mu=scene.config.mu, previous=plan.nodes[n - 1] if n else None)
+        ax.set_aspect("equal")
+        ax.set_xlim(-0.26, 0.26)
+        ax.set_ylim(-0.26, 0.26)
+        moved = "initial grasp" if n == 0 else ("no switch" if node.switching_finger is None
+                                                 else f"finger {node.switching_finger} moves")
+        ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
+    fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
+    fig.tight_layout()
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(suffix=".png", dir=directory)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=110)
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def run(args) -> int:
+    from trajectotree.scene import build_scene
+    from trajectotree.search import find_contact_plan
+    goal = check_goal(args.goal)
+    config = config_from_args(args)
+    scene = build_scene(config.scene)
+    plan = find_contact_plan(scene, goal, config.search)
+    if args.figure and plan.success:
+        draw_plan(scene, plan, args.figure)
+    if args.json:
+        print_json(plan.to_json())
+        return 0
+    s = plan.stats
+    print(f"goal {goal:+.4f} rad, N = {config.search.num_nodes}: "
+          f"{'plan found' if plan.success else 'no plan: ' + plan.reason}")
+    print(f"search {s.time_s:.3f} s, {s.expanded} nodes expanded, {s.generated} generated, "
+          f"{s.lp_calls} LP and {s.ik_calls} IK solves")
+    for n, node in enumerate(plan.nodes):
+        moved = "-" if node.switching_finger is None else str(node.switching_finger)
+        contacts = " ".join(f"{v:.3f}" for v in node.arclengths)
+        print(f"  node {n}: theta {node.object_pose[2]:+.3f}  switching finger {moved}  "
+              f"arclengths [{contacts}] m  closure margin {node.closure_margin:.3f}")
+    if args.figure:
+        print(f"figure: {args.figure}" if plan.success else "figure: not drawn (no plan)")
+    return 0
