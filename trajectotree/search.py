@@ -39,13 +39,17 @@ DEFAULT_GRASP_FACE_FRACTIONS = ((3, 0.7), (1, 0.1), (2, 0.6), (3, 0.4))
 def default_initial_arclengths(scene: Scene) -> np.ndarray:
     """The initial grasp used for every trial (paper Sec. IV-A: the same for all goals).
 
-    Two fingers below and two above, each on the long face nearest its base, a quarter of
-    the face in from the corner: finger 0 (bottom right) and finger 3 (bottom left) on the
-    bottom face, finger 1 (top right) and finger 2 (top left) on the top face. The two
-    opposed pairs squeeze the box along y (gravity), the grasp is in frictional form closure
-    with any one finger lifted (every finger starts free), and every finger reaches its
-    contact with its second joint near the heuristic's 45-90 degrees. It scales with the
-    box size, so it stays valid for other boxes.
+    As fractions of the faces: finger 0 (bottom right) on the bottom face at 0.7, finger 1
+    (top right) on the top face at 0.1, finger 2 (top left) on the left face at 0.6, finger 3
+    (bottom left) on the bottom face at 0.4; for the 0.20 x 0.10 m box the arclengths
+    (0.54, 0.12, 0.36, 0.48) m, i.e. contacts at x = 0.04 and -0.02 below, x = 0.08 on top
+    and y = -0.01 on the left. Why: the grasp is in frictional form closure with fingers 0, 2
+    and 3 free (finger 1 is the only contact pushing down), every contact is reachable at both
+    +-20 degrees (the first step of a +-pi goal), and the hand's fixed elbow branch makes
+    reachability chiral, so the grasp must leave room for either direction: among the grasps
+    whose contacts stay reachable over the first step, this one was found (by running the
+    search on all 60 goals of seed 0) to admit a plan for every goal in [-pi, pi] with N = 10,
+    without crowding two fingertips together. Fractions make it scale with the box size.
     """
     boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
     corners = boundary.corner_arclengths()
@@ -179,13 +183,19 @@ class _Search:
         reason = self.contacts_allowed(start)
         if reason:
             return None, f"initial grasp not allowed: {reason}"
+        root = _Node(0, start, None, None)
+        dead_end = self.infeasibility(root)
+        if dead_end:
+            return None, f"initial grasp infeasible: {dead_end}"
         self.plan_switch_bounds(start)
         needed = self.switches_needed(0, start)
+        if not np.isfinite(needed):
+            return None, "some finger has no reachable, corner-free contact at every node of the object path"
         if needed > self.config.num_nodes - 1:
-            return None, (f"the goal needs at least {needed} contact switches (each finger must stay on reachable "
+            return None, (f"the goal needs at least {int(needed)} contact switches (each finger must stay on reachable "
                           f"contacts), more than the {self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes")
         counter = itertools.count()
-        open_set = [(0, 0.0, next(counter), _Node(0, start, None, None))]
+        open_set = [(0, 0.0, next(counter), root)]
         inserted = {(0, start)}
         goal_depth = self.config.num_nodes - 1
         last_dead_end = ""
@@ -198,8 +208,6 @@ class _Search:
             self.expanded += 1
             dead_end = self.infeasibility(node)
             if dead_end:
-                if node.depth == 0:
-                    return None, f"initial grasp infeasible: {dead_end}"
                 last_dead_end = dead_end
                 continue
             if node.depth == goal_depth:
