@@ -169,3 +169,23 @@ def test_simulate_command_rejects_a_different_scene(scene, short_config, tmp_pat
     assert "controller.kp" in capsys.readouterr().err
 
 
+
+
+@pytest.mark.slow
+def test_a_trajectotree_plan_executes_end_to_end(tmp_path):
+    """Plan a 0.3 rad turn in 2 segments with TrajectoTree, execute it, save and reload."""
+    from trajectotree.planners import plan
+    config = Config()
+    config = dataclasses.replace(config, search=dataclasses.replace(config.search, num_nodes=3))
+    result = plan(scene=build_scene(config.scene), goal=0.3, method="trajectotree", config=config)
+    assert result.success, result.status
+    sim = run_simulation(plan=result, config=config)
+    plan_end = result.trajectory.t[-1]
+    assert sim.t[-1] == pytest.approx(plan_end + config.sim.settle_time)
+    assert not sim.dropped
+    assert sim.mae_theta < 0.1 and sim.mae_x < 0.01 and sim.mae_y < 0.01
+    # the box turned with the plan: near the planned pose when the plan ends
+    k = np.searchsorted(sim.t, plan_end)
+    assert sim.x[k, 2] > 0.2 and abs(sim.x[k, 2] - sim.x_plan[k, 2]) < 0.1
+    save_sim(sim, tmp_path)
+    assert load_sim(tmp_path).to_json() == sim.to_json()
