@@ -28,3 +28,33 @@ def test_tracking_bands_on_a_common_grid_match_closed_form():
 def test_report_of_a_missing_sweep_is_an_input_error(tmp_path, capsys):
     assert main(["report", str(tmp_path / "nothing")]) == 2
     assert "not a sweep directory" in capsys.readouterr().err
+
+
+def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, tmp_path, capsys):
+    import csv
+    import json
+
+    from trajectotree.sweep import read_rows
+    assert main(["report", str(resumed_sweep.out), "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    for stem in ("fig2_time_cost", "fig3_tracking"):
+        assert (tmp_path / f"{stem}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert (tmp_path / f"{stem}.pdf").read_bytes()[:5] == b"%PDF-"
+        assert str(tmp_path / f"{stem}.png") in printed
+    table = list(csv.DictReader((tmp_path / "summary.csv").open()))
+    markdown = (tmp_path / "summary.md").read_text()
+    assert [t["method"] for t in table] == ["trajectotree", "cito-warm"]
+    rows = read_rows(resumed_sweep.out)
+    for t in table:  # the table's numbers are those of the trial rows
+        mine = [r for r in rows if r["method"] == t["method"]]
+        assert float(t["success_rate"]) == pytest.approx(np.mean([bool(r["success"]) for r in mine]))
+        assert float(t["mean_time_s"]) == pytest.approx(np.mean([r["total_time_s"] for r in mine]))
+        executed = [r for r in mine if r["simulated"]]
+        assert int(t["simulated"]) == len(executed)
+        if executed:
+            assert float(t["drop_rate"]) == pytest.approx(np.mean([bool(r["dropped"]) for r in executed]))
+            assert float(t["mae_theta"]) == pytest.approx(np.mean([r["mae_theta"] for r in executed]))
+    assert table[0]["paper_mean_time_s"] == "14.0" and table[1]["paper_mean_time_s"] == "76.0"
+    assert "| TrajectoTree |" in markdown and "| CITO, warm-start |" in markdown and "5.4x" in markdown
+    assert main(["report", str(resumed_sweep.out), "--out", str(tmp_path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["table"][0]["method"] == "trajectotree"

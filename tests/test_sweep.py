@@ -64,3 +64,99 @@ def test_rerun_with_different_arguments_is_an_error(tmp_path, capsys):
     assert (out / MANIFEST_FILE).read_bytes() == manifest
     with pytest.raises(ConfigError, match="non-empty directory"):
         run_sweep(small_spec(), tmp_path, progress=False)  # a directory that is not a sweep
+
+
+def test_killed_sweep_reruns_only_unfinished_trials(resumed_sweep):
+    out, before = resumed_sweep.out, resumed_sweep.before
+    assert resumed_sweep.rerun.returncode == 0, resumed_sweep.rerun.stderr
+    keys = [t.key for t in SweepSpec(goals=2, seed=0, methods=("trajectotree", "cito-warm")).tasks()]
+    assert 1 <= len(before) < len(keys)  # killed mid-way
+    assert f"{len(keys) - len(before)} now, {len(before)} before" in resumed_sweep.rerun.stdout
+    after = {d.name: d for d in (out / TRIALS_DIR).iterdir()}
+    assert sorted(after) == sorted(keys)
+    for key, files in before.items():  # finished trials were not recomputed, not even rewritten
+        assert {f.name: (f.stat().st_ino, f.stat().st_mtime_ns, f.stat().st_size)
+                for f in after[key].iterdir()} == files
+    assert not [p for p in out.rglob("*") if p.name.startswith(".tmp-")]
+    rows = [json.loads(line) for line in (out / ROWS_FILE).read_text().splitlines()]
+    assert sorted(r["key"] for r in rows) == sorted(keys) and rows == read_rows(out)
+    for row in rows:  # every file is complete and agrees with the row
+        assert row["error"] is None
+        trial = out / TRIALS_DIR / row["key"]
+        plan_json = json.loads((trial / "plan.json").read_text())
+        assert (plan_json["method"], plan_json["success"], plan_json["total_time_s"]) == \
+            (row["method"], row["success"], row["total_time_s"])
+        with np.load(trial / "plan.npz") as npz:
+            arrays = {name: npz[name] for name in npz.files}
+        if row["simulated"]:
+            assert arrays["x"].shape[1] == 3 and np.all(np.isfinite(arrays["x"]))
+            sim_json = json.loads((trial / "sim.json").read_text())
+            with np.load(trial / "sim.npz") as npz:
+                assert npz["abs_error"].shape == (npz["t"].size, 3)
+            assert sim_json["mae_theta"] == row["mae_theta"]
+
+
+def test_trials_follow_the_seed(resumed_sweep):
+    """The manifest's goals come from the seed, and each trial's contact sequence is the
+    one the contact search finds for that goal (run here, in this process)."""
+    from trajectotree.config import config_from_dict
+    from trajectotree.scene import build_scene
+    from trajectotree.search import find_contact_plan
+
+    manifest = json.loads((resumed_sweep.out / MANIFEST_FILE).read_text())
+    np.testing.assert_array_equal(manifest["goal_values"], sample_goals(2, 0, 0.3))
+    config = config_from_dict(manifest["config"])
+    scene = build_scene(config.scene)
+    for row in read_rows(resumed_sweep.out):
+        if row["method"] != "trajectotree":
+            continue
+        plan_json = json.loads((resumed_sweep.out / TRIALS_DIR / row["key"] / "plan.json").read_text())
+        expected = find_contact_plan(scene, row["goal"], config.search)
+        assert plan_json["search"]["success"] == expected.success
+        assert row["switching_fingers"] == [n.switching_finger for n in expected.nodes]
+        for node, saved in zip(expected.nodes, plan_json["contact_sequence"]):
+            np.testing.assert_allclose([c["arclength"] for c in saved["contacts"]], node.arclengths, atol=1e-12)
+            np.testing.assert_allclose(saved["q"], node.q, atol=1e-9)
+
+
+def test_dask_cluster_gives_the_same_trials(resumed_sweep, tmp_path):
+    from distributed import LocalCluster
+
+    from trajectotree.config import config_from_dict
+    manifest = json.loads((resumed_sweep.out / MANIFEST_FILE).read_text())
+    spec = SweepSpec(goals=2, seed=0, methods=("trajectotree",), config=config_from_dict(manifest["config"]),
+                     max_goal=0.3)
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp", host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        summary = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False)
+    assert summary.ran == 2 and summary.errors == 0
+    local = {r["key"]: r for r in read_rows(resumed_sweep.out)}
+    for row in read_rows(tmp_path / "dask"):
+        mine = local[row["key"]]
+        for field in ("goal", "success", "status", "iterations", "switching_fingers"):
+            assert row[field] == mine[field], field
+        if row["cost"] is not None:
+            assert row["cost"] == pytest.approx(mine["cost"], rel=1e-9)
+        seq = json.loads((tmp_path / "dask" / TRIALS_DIR / row["key"] / "plan.json").read_text())["contact_sequence"]
+        ref = json.loads((resumed_sweep.out / TRIALS_DIR / row["key"] / "plan.json").read_text())["contact_sequence"]
+        assert seq == ref
+
+
+def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
+    from trajectotree.trial import execute_trial
+
+    # Past its time limit: the child is killed; the sweep records both trials and finishes.
+    summary = run_sweep(small_spec(time_limit_s=0.2), tmp_path / "limit", workers=2, progress=False)
+    rows = read_rows(tmp_path / "limit")
+    assert summary.ran == 2 and summary.errors == 2 and len(rows) == 2
+    assert all(r["error"].startswith("timeout: exceeded the trial time limit of 0.2 s") for r in rows)
+    again = run_sweep(small_spec(time_limit_s=0.2), tmp_path / "limit", workers=2, progress=False)
+    assert (again.ran, again.skipped) == (0, 2)
+    retried = run_sweep(small_spec(time_limit_s=0.2), tmp_path / "limit", workers=2, progress=False,
+                        retry_errors=True)
+    assert (retried.ran, retried.skipped) == (2, 0)
+    # A trial that raises (a goal the planner rejects) is a row with the exception's message.
+    task = small_spec().tasks()[0]
+    outcome = execute_trial(dataclasses.replace(task, goal=float("nan")))
+    assert outcome.row["error"].endswith("ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad") and outcome.row["success"] is None
+    assert "Traceback" in outcome.files["log.txt"].decode()

@@ -205,13 +205,17 @@ def connect_scheduler(address: str, timeout_s: float):
 def _local_results(tasks: list[TrialTask], workers: int):
     """Yields (task, outcome or exception) as trials finish on `workers` local processes."""
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="trial")
+    completed = False
     try:
         futures = {pool.submit(execute_trial, t): t for t in tasks}
         for future in as_completed(futures):
             yield futures[future], _result_or_error(future)
+        completed = True
     finally:
-        kill_children()  # only live children of an interrupted sweep; none after a normal end
+        if not completed:  # interrupted: stop the running trials, start no queued one
+            kill_children()
         pool.shutdown(wait=True, cancel_futures=True)
+        allow_trials()
 
 
 def _dask_results(tasks: list[TrialTask], client):
@@ -303,7 +307,6 @@ def run_sweep(spec: SweepSpec, out_dir: str | Path, *, workers: int | None = Non
         prepare_dir(out_dir, spec)
         write_rows_file(out_dir)  # drops a line torn by a kill
         tasks, skipped = pending_tasks(out_dir, spec, retry_errors)
-        allow_trials()
         results = _dask_results(tasks, client) if client else _local_results(tasks, workers)
         ran = 0
         with closing(results), tqdm(total=skipped + len(tasks), initial=skipped, unit="trial", desc="sweep", disable=not progress,
