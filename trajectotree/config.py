@@ -113,7 +113,10 @@ class CitoConfig:
     weight_pose: tuple[float, float, float] = (100.0, 100.0, 30.0)
     weight_torque: float = 1.0      # R = weight_torque * I, on tau (N m)
     weight_force: float = 0.01      # L = weight_force * I, on lambda (N)
-    weight_slack: float = 100.0     # weight of the L1 slack penalty ||gamma||_1
+    weight_slack: float = 100.0     # L1 penalty on the complementarity slacks gamma (eqs. 5-6), per unit slack
+    # L1 penalty on the slacks of the plan's contact-point equalities (eqs. 12-15, TrajectoTree only), per m.
+    # Large enough that they hold: with 100, a fixed finger sank 1.2 mm into the box (goal -0.3).
+    weight_contact_slack: float = 1.0e4
     # Regularization (not in the paper): sum of squared accelerations; needed for
     # IPOPT's L-BFGS to converge (DESIGN.md sec. 7). Set to 0 to disable.
     weight_acceleration: float = 1e-3
@@ -134,7 +137,7 @@ class CitoConfig:
             raise ConfigError(f"cito.weight_pose = {self.weight_pose!r} must have 3 entries")
         for i, v in enumerate(self.weight_pose):
             check_range(f"cito.weight_pose[{i}]", v, 0.0, None)
-        for name in ("weight_torque", "weight_force", "weight_slack", "weight_acceleration"):
+        for name in ("weight_torque", "weight_force", "weight_slack", "weight_contact_slack", "weight_acceleration"):
             check_range(f"cito.{name}", getattr(self, name), 0.0, None)
         check_range("cito.sdf_sharpness", self.sdf_sharpness, 10.0, 1e5)
         for name in ("tol", "constr_viol_tol", "acceptable_tol", "acceptable_constr_viol_tol"):

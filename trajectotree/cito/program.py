@@ -92,8 +92,10 @@ class _KnotConstraint:
         c = self.cache
         if c.Z is not None and np.array_equal(c.Z[self.k], z):
             return c.val[self.k, :self.n], c.jac[self.k, :self.n]
-        val, jac = self.single.evaluate(z[None], with_jacobian)
-        return val[0, :self.n], (None if jac is None else jac[0, :self.n])
+        if not with_jacobian:
+            return self.single.values_one(z), None
+        val, jac = self.single.evaluate(z[None], True)
+        return val[0, :self.n], jac[0, :self.n]
 
     def __call__(self, z):
         if z.dtype == object:
@@ -167,8 +169,9 @@ def build_program(scene, config: CitoConfig, spec: ProgramSpec, body: BodyParams
 
 
 def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) -> None:
-    """Eq. 11: incremental-goal pose cost, tau'R tau, lambda'L lambda, L1 slack penalty,
-    plus the acceleration regularization (CitoConfig.weight_acceleration)."""
+    """Eq. 11: incremental-goal pose cost, tau'R tau, lambda'L lambda, L1 slack penalty
+    (weight_contact_slack for pinned fingers' contact-point slacks, weight_slack for the
+    complementarity slacks), plus the acceleration regularization (weight_acceleration)."""
     Q = np.diag(config.weight_pose)
     eye8, eye11 = np.eye(NUM_HAND_JOINTS), np.eye(3 + NUM_HAND_JOINTS)
     for k in range(spec.num_knots):
@@ -180,7 +183,8 @@ def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) ->
         prog.AddQuadraticCost(2 * config.weight_torque * eye8, np.zeros(8), v.tau[k], is_convex=True)
         prog.AddQuadraticCost(2 * config.weight_force * eye8, np.zeros(8),
                               np.concatenate([v.lambda_n[k], v.lambda_t[k]]), is_convex=True)
-        prog.AddLinearCost(config.weight_slack * np.ones(NUM_FINGERS), 0.0, v.slack[k])
+        slack_weights = np.where(spec.pinned[k], config.weight_contact_slack, config.weight_slack)
+        prog.AddLinearCost(slack_weights, 0.0, v.slack[k])
         if config.weight_acceleration > 0:
             prog.AddQuadraticCost(2 * config.weight_acceleration * eye11, np.zeros(11),
                                   np.concatenate([v.xdd[k], v.qdd[k]]), is_convex=True)

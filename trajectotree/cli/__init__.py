@@ -15,7 +15,7 @@ from trajectotree import __version__
 from trajectotree.config import ConfigError
 
 # Subcommand modules, in the order `--help` lists them.
-COMMANDS = ("scene", "simulate", "sweep", "report")
+COMMANDS = ("demo", "scene", "search", "plan", "simulate", "sweep", "report")
 
 
 class InputError(ConfigError):

@@ -1,0 +1,195 @@
+"""End-to-end planning on small goals: the physics of the saved plan checked from
+plan.npz alone (Newton-Euler under the trapezoidal rule, friction cones,
+penetration, contact points, complementarity), the files, and bad input."""
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from trajectotree.cli import InputError
+from trajectotree.config import CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, save_config
+from trajectotree.geometry import BoxBoundary, box_to_world, world_to_box
+from trajectotree.io import load_plan, save_plan
+from trajectotree.planners import plan
+from trajectotree.scene import build_scene
+
+CONFIG = Config(search=SearchConfig(num_nodes=3))      # 2 segments, 25 knots: seconds per solve
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_scene(CONFIG.scene)
+
+
+@pytest.fixture(scope="module")
+def plans(scene, tmp_path_factory):
+    """Each (method, goal) planned once, saved and loaded back from its files."""
+    out = {}
+    for method, goal in (("trajectotree", 0.3), ("trajectotree", -0.3), ("cito-warm", 0.3)):
+        folder = tmp_path_factory.mktemp(f"{method}_{goal:+.1f}")
+        result = plan(scene=scene, goal=goal, method=method, config=CONFIG)
+        save_plan(result, folder)
+        out[method, goal] = (result, folder)
+    return out
+
+
+def npz(folder):
+    with np.load(folder / "plan.npz") as data:
+        return {k: data[k] for k in data.files}
+
+
+def check_newton_euler(a, scene_config: SceneConfig, radius: float, tol=1e-5):
+    """m (v_{k+1} - v_k)/dt = (F_k + F_{k+1})/2 + m g and the same for the rotation, with
+    F the sum of the finger forces f_W and the moments of f_W about the box centre,
+    applied at the contact points p_W_tip - r n_W (which adds -r lambda_t per finger)."""
+    m, w, h = scene_config.box_mass, scene_config.box_width, scene_config.box_height
+    inertia = m * (w * w + h * h) / 12
+    t, x, xd, f = a["t"], a["x"], a["xdot"], a["f_W"]
+    dt = np.diff(t)[:, None]
+    np.testing.assert_allclose(np.diff(x, axis=0), dt / 2 * (xd[1:] + xd[:-1]), atol=1e-7)
+    arm = a["p_W_tip"] - x[:, None, :2]
+    moment = np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0] - radius * a["lambda_t"], axis=1)
+    wrench = np.concatenate([f.sum(1) + m * np.array([0.0, -scene_config.gravity]), moment[:, None]], axis=1)
+    inertia_diag = np.array([m, m, inertia])
+    residual = inertia_diag * np.diff(xd, axis=0) / dt - 0.5 * (wrench[1:] + wrench[:-1])
+    assert np.abs(residual).max() < tol
+    # The force is the contact-frame force in W: |f_W| = |(lambda_n, lambda_t)|.
+    np.testing.assert_allclose(np.linalg.norm(f, axis=2), np.hypot(a["lambda_n"], a["lambda_t"]), atol=1e-9)
+
+
+def tip_distances(a, scene_config, radius):
+    """(K, 4) exact distance of each fingertip sphere to the box (negative: penetration)."""
+    box = BoxBoundary(scene_config.box_width, scene_config.box_height)
+    return np.array([[box.signed_distance(world_to_box(x, p)) - radius for p in tips]
+                     for x, tips in zip(a["x"], a["p_W_tip"])])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("key", [("trajectotree", 0.3), ("trajectotree", -0.3), ("cito-warm", 0.3)])
+def test_plan_is_physical(plans, scene, key):
+    result, folder = plans[key]
+    assert result.success, result.status
+    a = npz(folder)
+    c, r = scene.config, scene.tip_radius
+    check_newton_euler(a, c, r)
+    ln, lt = a["lambda_n"], a["lambda_t"]
+    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= c.mu * ln + 1e-7)          # friction cones
+    dist = tip_distances(a, c, r)
+    assert dist.min() > -1e-3                                                         # no tip 1 mm inside
+    away = dist > 2e-3                                                                # complementarity
+    assert np.all(ln[away] < 5e-3), ln[away].max()
+    assert np.all(ln[away] * dist[away] < 1e-5)
+    assert abs(a["x"][-1, 2] - key[1]) < np.deg2rad(5)                              # reaches the goal
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("goal", [0.3, -0.3])
+def test_trajectotree_keeps_fixed_fingers_on_their_planned_contacts(plans, scene, goal):
+    result, folder = plans["trajectotree", goal]
+    a = npz(folder)
+    nodes = result.contact_plan.nodes
+    M = result.config.cito.knots_per_segment
+    r = scene.tip_radius
+    for s in range(len(nodes) - 1):
+        moving = nodes[s + 1].switching_finger
+        for k in range(s * M, (s + 1) * M + 1):
+            for i in range(4):
+                node = nodes[s + 1] if (k == (s + 1) * M or i != moving) else nodes[s]
+                if i == moving and s * M < k < (s + 1) * M:
+                    continue                                                        # free in between
+                target = box_to_world(a["x"][k], node.p_BC[i] + r * node.n_B[i])
+                assert np.linalg.norm(a["p_W_tip"][k, i] - target) < 2e-3, (s, k, i)
+    assert result.violations["contact_point"] < 2e-3
+    assert result.violations["penetration"] < 1e-3
+
+
+@pytest.mark.slow
+def test_saved_plan_round_trips_and_matches_design(plans):
+    result, folder = plans["trajectotree", 0.3]
+    data = json.loads((folder / "plan.json").read_text())
+    for key in ("method", "goal", "success", "status", "search_time_s", "solve_time_s", "total_time_s", "cost",
+                "iterations", "contact_sequence", "violations", "config"):
+        assert key in data
+    assert set(data["violations"]) == {"dynamics", "friction_cone", "complementarity", "contact_point", "penetration"}
+    node = data["contact_sequence"][1]
+    assert set(node) >= {"object_pose", "q", "switching_finger", "contacts"}
+    assert set(node["contacts"][0]) >= {"arclength", "p_B", "n_B"}
+    a = npz(folder)
+    K = 2 * CONFIG.cito.knots_per_segment + 1
+    shapes = {"t": (K,), "x": (K, 3), "xdot": (K, 3), "q": (K, 8), "qdot": (K, 8), "tau": (K, 8),
+              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2)}
+    assert {k: v.shape for k, v in a.items()} == shapes
+    loaded = load_plan(folder)
+    assert loaded.config == result.config and loaded.status == result.status
+    np.testing.assert_array_equal(loaded.trajectory.f_W, result.trajectory.f_W)
+    assert loaded.contact_plan.nodes[1].switching_finger == result.contact_plan.nodes[1].switching_finger
+
+
+@pytest.mark.slow
+def test_cito_baseline_from_static_guess_and_times(scene):
+    result = plan(scene=scene, goal=0.3, method="cito", config=CONFIG)
+    assert result.success, result.status
+    assert result.search_time_s == 0.0 and len(result.contact_plan.nodes) == 1
+    assert result.total_time_s == pytest.approx(result.build_time_s + result.solve_time_s)
+    assert result.violations["dynamics"] < 1e-5
+
+
+def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):
+    with pytest.raises(InputError, match="missing"):
+        load_plan(tmp_path / "nothing")
+    (tmp_path / "plan.json").write_text("{not json")
+    (tmp_path / "plan.npz").write_bytes(b"junk")
+    with pytest.raises(InputError, match="plan.json"):
+        load_plan(tmp_path)
+
+
+def test_bad_input_raises_config_errors(scene):
+    with pytest.raises(ConfigError, match="goal"):
+        plan(scene=scene, goal=float("nan"), method="trajectotree", config=CONFIG)
+    with pytest.raises(ConfigError, match="goal"):
+        plan(scene=scene, goal=4.0, method="trajectotree", config=CONFIG)
+    with pytest.raises(ConfigError, match="method"):
+        plan(scene=scene, goal=0.3, method="rrt", config=CONFIG)
+    other = dataclasses.replace(CONFIG, scene=SceneConfig(box_width=0.16))
+    with pytest.raises(ConfigError, match="SceneConfig"):
+        plan(scene=scene, goal=0.3, method="cito", config=other)
+
+
+def test_contact_plan_not_matching_the_scene_is_rejected(scene):
+    from trajectotree.planners import initial_grasp_plan
+    small = build_scene(SceneConfig(box_width=0.16))
+    config = dataclasses.replace(CONFIG, scene=small.config)
+    grasp = initial_grasp_plan(scene, 0.3, CONFIG)                  # contacts on the 0.20 m box
+    two = dataclasses.replace(grasp, nodes=grasp.nodes * 2)
+    with pytest.raises(ConfigError, match="off the boundary"):
+        plan(scene=small, goal=0.3, method="trajectotree", config=config, contact_plan=two)
+
+
+def run_cli(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "trajectotree.cli", "plan", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
+    for args in (["--goal", "nan"], ["--goal", "0.3", "--method", "chomp"], ["--goal", "7"]):
+        proc = run_cli(*args, "--out", str(tmp_path / "out"), cwd=tmp_path)
+        assert proc.returncode == 2, proc.stderr
+        assert "error" in proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_cli_non_converged_plan_is_written_with_status(tmp_path):
+    config = dataclasses.replace(CONFIG, cito=CitoConfig(max_iter=3))
+    save_config(config, tmp_path / "c.yaml")
+    proc = run_cli("--goal", "0.2", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "p"), "--json",
+                   cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    data = json.loads(proc.stdout)
+    assert data["success"] is False and "iteration" in data["status"].lower() and data["iterations"] == 3
+    assert json.loads((tmp_path / "p" / "plan.json").read_text())["status"] == data["status"]
+    assert npz(tmp_path / "p")["x"].shape == (25, 3)

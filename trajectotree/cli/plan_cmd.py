@@ -1,0 +1,46 @@
+"""`trajectotree plan --goal RAD`: plan a rotation of the box with TrajectoTree or a
+CITO baseline; writes DIR/plan.npz (the trajectory at every knot) and DIR/plan.json
+(the solve report, the contact sequence and the config). A plan that does not
+converge is still written, with "success": false and IPOPT's status (exit code 0)."""
+
+from __future__ import annotations
+
+from trajectotree.cli.common import add_config_options, check_goal, config_from_args, print_json
+
+
+def register(subparsers) -> None:
+    from trajectotree.planners import METHODS
+    p = subparsers.add_parser("plan", help="plan a box rotation (contact search + trajectory optimization)",
+                              description=__doc__)
+    p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, in [-pi, pi]")
+    p.add_argument("--method", default="trajectotree", metavar="METHOD",
+                   help=f"planner (default: trajectotree; valid: {', '.join(METHODS)})")
+    add_config_options(p)
+    p.add_argument("--out", metavar="DIR", help="output folder (default: plan_<method>_<goal>)")
+    p.add_argument("--json", action="store_true", help="print plan.json to stdout")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from trajectotree.io import plan_to_json, save_plan
+    from trajectotree.planners import check_method, plan
+    from trajectotree.scene import build_scene
+    goal = check_goal(args.goal)
+    method = check_method(args.method)
+    config = config_from_args(args)
+    out = args.out or f"plan_{method}_{goal:+.3f}"
+    result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config)
+    save_plan(result, out)
+    if args.json:
+        print_json(plan_to_json(result))
+        return 0
+    v = ", ".join(f"{k} {val:.1e}" for k, val in result.violations.items())
+    print(f"{method}: goal {goal:+.3f} rad, {'converged' if result.success else 'NOT converged'} ({result.status}), "
+          f"{result.iterations} iterations, cost {result.cost:.4g}")
+    print(f"time: search {result.search_time_s:.2f} s, build {result.build_time_s:.2f} s, "
+          f"solve {result.solve_time_s:.2f} s, total {result.total_time_s:.2f} s")
+    if result.trajectory is not None:
+        x = result.trajectory.x[-1]
+        print(f"final pose: x {x[0]:+.4f} m, y {x[1]:+.4f} m, theta {x[2]:+.4f} rad; max violations: {v}")
+    print(f"wrote {out}/plan.json and {out}/plan.npz")
+    return 0
