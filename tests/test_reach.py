@@ -112,3 +112,24 @@ def test_link_polygons_follow_the_plant(scene, reach):
     direction = np.array([np.cos(f.psi + q.sum()), np.sin(f.psi + q.sum())])
     far_end = polygons[1][:2].mean(axis=0)
     np.testing.assert_allclose(far_end, elbow + 0.085 * direction, atol=1e-9)
+
+
+@pytest.mark.parametrize("box", [(0.20, 0.10), (0.16, 0.08)])
+def test_vectorized_closed_form_matches_the_scalar_one(box):
+    from trajectotree.config import SceneConfig
+    reach = Reachability(build_scene(SceneConfig(box_width=box[0], box_height=box[1])))
+    rng = np.random.default_rng(5)
+    reachable = 0
+    for _ in range(60):
+        pose = (rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02), rng.uniform(-np.pi, np.pi))
+        finger = int(rng.integers(NUM_FINGERS))
+        arclengths = rng.uniform(0, reach.boundary.perimeter, 40)
+        p_BC, n_B = reach.contacts(arclengths)
+        for s, q, p, n in zip(arclengths, reach.closed_form_many(pose, finger, arclengths), p_BC, n_B):
+            scalar = reach.closed_form(pose, finger, s)
+            assert scalar.reachable == bool(np.isfinite(q[0]))
+            if scalar.reachable:
+                np.testing.assert_allclose(q, scalar.q, atol=1e-12)
+                reachable += 1
+            np.testing.assert_allclose((p, n), reach.boundary.point(s), atol=1e-12)
+    assert reachable > 100

@@ -160,6 +160,63 @@ class Reachability:
                                             half_length=shape.width() / 2, half_width=shape.depth() / 2))
         return rectangles
 
+    # -- vectorized closed form (many arclengths at one pose) ---------------------------------
+    def contacts(self, arclengths) -> tuple[np.ndarray, np.ndarray]:
+        """(p_BC (k, 2), n_B (k, 2)) for an array of arclengths (vectorized BoxBoundary.point)."""
+        s = np.mod(np.asarray(arclengths, dtype=float), self.boundary.perimeter)
+        a, b = self.boundary.width / 2, self.boundary.height / 2
+        corners = self.boundary.corner_arclengths()
+        face = np.clip(np.searchsorted(corners, s, side="left") - 1, 0, 3)
+        starts = np.array([[a, -b], [a, b], [-a, b], [-a, -b]])
+        directions = np.array([[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]])
+        normals = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+        return starts[face] + (s - corners[face])[:, None] * directions[face], normals[face]
+
+    def closed_form_many(self, pose, finger: int, arclengths) -> np.ndarray:
+        """`closed_form` for many arclengths at once: joint angles (k, 2), nan rows where the
+        contact is unreachable (same solution choice as `closed_form`)."""
+        f = self.fingers[finger]
+        p_BC, n_B = self.contacts(arclengths)
+        R_WB = rotation_2d(pose[2])
+        p_WF = np.asarray(pose[:2], dtype=float) + (p_BC + self.tip_radius * n_B) @ R_WB.T
+        d = p_WF - f.p_W_base
+        c2 = (np.sum(d * d, axis=1) - f.l1 ** 2 - f.l2 ** 2) / (2 * f.l1 * f.l2)
+        acos = np.arccos(np.clip(c2, -1.0, 1.0))
+        candidates = []  # same order as closed_form_ik: positive branch first, then the wraps
+        for q2 in (acos, -acos):
+            q1 = np.arctan2(d[:, 1], d[:, 0]) - f.psi - np.arctan2(f.l2 * np.sin(q2), f.l1 + f.l2 * np.cos(q2))
+            q1 = np.remainder(q1 + np.pi, 2 * np.pi) - np.pi
+            candidates += [np.stack([q1 + wrap, q2], axis=1) for wrap in (-2 * np.pi, 0.0, 2 * np.pi)]
+        candidates = np.stack(candidates)  # (6, k, 2)
+        valid = (np.abs(c2) <= 1.0)[None, :] & np.all((candidates >= f.q_lower) & (candidates <= f.q_upper), axis=2)
+        valid[valid] = ~self._links_penetrate_many(pose, finger, candidates[valid])
+        out = np.full((len(d), 2), np.nan)
+        found = valid.any(axis=0)
+        out[found] = candidates[np.argmax(valid, axis=0)[found], np.flatnonzero(found)]
+        return out
+
+    def _links_penetrate_many(self, pose, finger: int, q: np.ndarray) -> np.ndarray:
+        """Vectorized links_penetrate for joint angles q (k, 2)."""
+        f = self.fingers[finger]
+        a, b = self.boundary.width / 2, self.boundary.height / 2
+        a1, a12 = f.psi + q[:, 0], f.psi + q[:, 0] + q[:, 1]
+        elbow = f.p_W_base + f.l1 * np.stack([np.cos(a1), np.sin(a1)], axis=1)
+        hit = np.zeros(len(q), dtype=bool)
+        for rect, origin, angle in zip(self._rectangles[finger], (np.broadcast_to(f.p_W_base, elbow.shape), elbow), (a1, a12)):
+            c, s = np.cos(angle), np.sin(angle)
+            p_WG = origin + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1)
+            rel = p_WG - np.asarray(pose[:2], dtype=float)
+            ct, st = math.cos(pose[2]), math.sin(pose[2])
+            cx, cy = ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]
+            g = angle + rect.angle_JG - pose[2]
+            ux, uy = np.abs(np.cos(g)), np.abs(np.sin(g))
+            ux_s, uy_s = np.cos(g), np.sin(g)
+            hl, hw = rect.half_length, rect.half_width
+            hit |= ((np.abs(cx) < a + hl * ux + hw * uy) & (np.abs(cy) < b + hl * uy + hw * ux)
+                    & (np.abs(cx * ux_s + cy * uy_s) < hl + a * ux + b * uy)
+                    & (np.abs(-cx * uy_s + cy * ux_s) < hw + a * uy + b * ux))
+        return hit
+
     # -- IK -------------------------------------------------------------------------------
     def _make_ik(self, i: int):
         """IK for finger i alone: the box and the other fingers are locked in the context."""

@@ -83,38 +83,43 @@ class _Search:
         half = (config.num_displacements - 1) // 2
         self.displacements = config.displacement_step * np.arange(-half, half + 1)
         self.expanded = self.generated = 0
-        self.min_switches: list[list[dict[float, int]]] = []  # [finger][depth][arclength] -> switches
+        self.min_switches: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> switches
+        self.joint2: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> q2 (reachable only)
 
     def wrap(self, s: float) -> float:
         """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
         return round(float(s) % self.boundary.perimeter, 9)
 
-    # -- admissible pruning -----------------------------------------------------------------
+    # -- per-finger grid and admissible pruning ------------------------------------------------
     def plan_switch_bounds(self, start) -> None:
-        """For each finger alone, the fewest contact switches that keep it on a reachable,
-        corner-free contact from each (depth, arclength) to the last node. A node whose fingers
-        together need more switches than steps remain has no completion (one switch per step),
-        so pruning it never removes a plan; it only spares the DFS hopeless subtrees."""
-        margin, last = self.scene.config.corner_margin, self.config.num_nodes - 1
+        """Per finger, over the arclengths it can ever hold (its initial contact plus sums of
+        displacements), which are corner-free and reachable (closed form, vectorized) at each
+        depth, with their joint-2 angle for the heuristic; then the fewest contact switches
+        that keep that finger alone on such contacts from each (depth, arclength) to the last
+        node. A node whose fingers together need more switches than steps remain has no
+        completion (one switch per step), so pruning it never removes a plan; it only spares
+        the DFS hopeless subtrees."""
+        last = self.config.num_nodes - 1
         steps = [d for d in self.displacements if d != 0.0]
-
-        def ok(finger, depth, s):
-            return (self.boundary.corner_distance(s) >= margin
-                    and self.reach.closed_form(self.poses[depth], finger, s).reachable)
-
+        corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
         for finger, s0 in enumerate(start):
-            layers = [{s0}]
-            for depth in range(1, last + 1):  # forward: contacts reachable from s0 at all
-                candidates = {self.wrap(s + d) for s in layers[-1] for d in [0.0, *steps]}
-                layers.append({s for s in candidates if ok(finger, depth, s)})
+            layers = [{s0: np.nan}]
+            for depth in range(1, last + 1):  # forward: contacts this finger can hold at all
+                held = np.fromiter(layers[-1], dtype=float)
+                candidates = np.unique(np.round(np.mod(held[:, None] + self.displacements[None, :], per), 9))
+                gap = np.abs(candidates[:, None] - corners[None, :])
+                corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
+                q = self.reach.closed_form_many(self.poses[depth], finger, candidates)
+                layers.append({float(s): float(q2) for s, q2, ok in zip(candidates, q[:, 1], corner_free)
+                               if ok and np.isfinite(q2)})
             cost = [dict.fromkeys(layers[last], 0)]
             for depth in range(last - 1, -1, -1):  # backward: fewest switches to the end
                 after, here = cost[0], {}
                 for s in layers[depth]:
-                    stay = after.get(s, np.inf)
                     move = 1 + min((after.get(self.wrap(s + d), np.inf) for d in steps), default=np.inf)
-                    here[s] = min(stay, move)
+                    here[s] = min(after.get(s, np.inf), move)
                 cost.insert(0, here)
+            self.joint2.append(layers)
             self.min_switches.append(cost)
 
     def switches_needed(self, depth: int, arclengths) -> float:
@@ -126,11 +131,16 @@ class _Search:
         margin = self.scene.config.corner_margin
         if any(self.boundary.corner_distance(s) < margin for s in arclengths):
             return f"a contact lies within {margin} m of a corner"
-        centres = [p + self.reach.tip_radius * n for p, n in map(self.reach.contact, arclengths)]
-        for a, b in itertools.combinations(centres, 2):
-            if np.linalg.norm(a - b) < 2 * self.reach.tip_radius:
-                return "two fingertips overlap"
+        if any(self.tips_overlap(arclengths, i) for i in range(NUM_FINGERS)):
+            return "two fingertips overlap"
         return ""
+
+    def tips_overlap(self, arclengths, finger: int) -> bool:
+        """Finger `finger`'s fingertip sphere would overlap another finger's."""
+        r = self.reach.tip_radius
+        p, n = self.reach.contact(arclengths[finger])
+        return any(np.linalg.norm(p + r * n - q - r * m) < 2 * r
+                   for i, (q, m) in enumerate(map(self.reach.contact, arclengths)) if i != finger)
 
     def infeasibility(self, node: _Node) -> str:
         """Why `node` is a dead end ("" when it is feasible): closure LP, then Drake IK."""
@@ -157,26 +167,16 @@ class _Search:
                     moved = list(node.arclengths)
                     moved[i] = self.wrap(moved[i] + d)
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left = [], self.config.num_nodes - 2 - node.depth
+        out, steps_left, depth = [], self.config.num_nodes - 2 - node.depth, node.depth + 1
         for arclengths, finger in candidates.items():
-            if self.switches_needed(node.depth + 1, arclengths) > steps_left:
+            q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
+            if None in q2 or self.switches_needed(depth, arclengths) > steps_left:
+                continue  # a finger cannot reach (closed form), or no completion exists
+            if finger is not None and self.tips_overlap(arclengths, finger):
                 continue
-            if finger is not None and self.contacts_allowed(arclengths):
-                continue
-            h = self.heuristic(node.depth + 1, arclengths)
-            if h is not None:
-                out.append((h, _Node(node.depth + 1, arclengths, finger, node)))
+            h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
+            out.append((h, _Node(depth, arclengths, finger, node)))
         return out
-
-    def heuristic(self, depth: int, arclengths) -> float | None:
-        """sum_i |q2_i - nominal| from closed-form IK; None if a finger cannot reach."""
-        total = 0.0
-        for i, s in enumerate(arclengths):
-            reach = self.reach.closed_form(self.poses[depth], i, s)
-            if not reach.reachable:
-                return None
-            total += abs(reach.q[1] - self.config.nominal_joint2)
-        return total
 
     # -- Algorithm 1 ----------------------------------------------------------------------
     def run(self, start: tuple[float, ...], t0: float) -> tuple[_Node | None, str]:
