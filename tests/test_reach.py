@@ -129,7 +129,7 @@ def test_vectorized_closed_form_matches_the_scalar_one(box):
             scalar = reach.closed_form(pose, finger, s)
             assert scalar.reachable == bool(np.isfinite(q[0]))
             if scalar.reachable:
-                np.testing.assert_allclose(q, scalar.q, atol=1e-12)
+                np.testing.assert_allclose(q, scalar.q, atol=1e-6)  # the scalar path rounds s to 1 nm
                 reachable += 1
-            np.testing.assert_allclose((p, n), reach.boundary.point(s), atol=1e-12)
+            np.testing.assert_allclose(np.array([p, n]), np.array(reach.boundary.point(s)), atol=1e-12)
     assert reachable > 100
