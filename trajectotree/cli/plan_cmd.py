@@ -18,6 +18,7 @@ def register(subparsers) -> None:
     add_config_options(p)
     p.add_argument("--out", metavar="DIR", help="output folder (default: plan_<method>_<goal>)")
     p.add_argument("--json", action="store_true", help="print plan.json to stdout")
+    p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the planned trajectory")
     p.set_defaults(run=run)
 
 
@@ -31,6 +32,9 @@ def run(args) -> int:
     out = args.out or f"plan_{method}_{goal:+.3f}"
     result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config)
     save_plan(result, out)
+    if args.html and result.trajectory is not None:
+        from trajectotree.playback import write_plan_html
+        write_plan_html(result, config, args.html)
     if args.json:
         print_json(plan_to_json(result))
         return 0
