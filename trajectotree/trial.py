@@ -13,6 +13,8 @@ pickled: each child builds its own scene. The cost is one interpreter start per 
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -179,9 +181,19 @@ def kill_children() -> None:
             child.kill()
 
 
+def _exit_with_parent(parent_pid: int, out_dir: Path) -> None:
+    """Ends this child, removing its files, once its sweep process is gone (killed
+    with SIGKILL), so no orphaned trial keeps a core busy."""
+    while os.getppid() == parent_pid:
+        time.sleep(1.0)
+    shutil.rmtree(out_dir, ignore_errors=True)
+    os._exit(1)
+
+
 def main(argv: list[str]) -> int:
     """Child entry point: task JSON on stdin, files into argv[0]."""
     out_dir = Path(argv[0])
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(), out_dir), daemon=True).start()
     task = TrialTask(**json.loads(sys.stdin.read()))
     row = run_trial(task, out_dir)
     (out_dir / ROW_FILE).write_text(json.dumps(row, indent=2))

@@ -11,6 +11,7 @@ the workers). Then: trajectotree report OUT.
 from __future__ import annotations
 
 import math
+import signal
 
 from trajectotree.cli.common import add_config_options, config_from_args, print_json
 from trajectotree.sweep import METHODS, SweepSpec, run_sweep
@@ -43,7 +44,12 @@ def register(subparsers) -> None:
     p.set_defaults(run=run)
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt  # SIGTERM stops the running trials like Ctrl-C does
+
+
 def run(args) -> int:
+    signal.signal(signal.SIGTERM, _interrupt)
     spec = SweepSpec(goals=args.goals, seed=args.seed, methods=tuple(args.methods), simulate=args.simulate,
                      config=config_from_args(args), max_goal=args.max_goal, time_limit_s=args.time_limit)
     summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler,
