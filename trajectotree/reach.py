@@ -172,13 +172,16 @@ class Reachability:
         normals = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
         return starts[face] + (s - corners[face])[:, None] * directions[face], normals[face]
 
-    def closed_form_many(self, pose, finger: int, arclengths) -> np.ndarray:
-        """`closed_form` for many arclengths at once: joint angles (k, 2), nan rows where the
-        contact is unreachable (same solution choice as `closed_form`)."""
+    def closed_form_many(self, poses, finger: int, arclengths) -> np.ndarray:
+        """`closed_form` for many contacts at once: `poses` (3,) or one per contact (k, 3).
+        Joint angles (k, 2), nan rows where the contact is unreachable (same solution choice
+        as `closed_form`)."""
         f = self.fingers[finger]
         p_BC, n_B = self.contacts(arclengths)
-        R_WB = rotation_2d(pose[2])
-        p_WF = np.asarray(pose[:2], dtype=float) + (p_BC + self.tip_radius * n_B) @ R_WB.T
+        poses = np.broadcast_to(np.asarray(poses, dtype=float), (len(p_BC), 3))
+        p_BF = p_BC + self.tip_radius * n_B
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        p_WF = poses[:, :2] + np.stack([c * p_BF[:, 0] - s * p_BF[:, 1], s * p_BF[:, 0] + c * p_BF[:, 1]], axis=1)
         d = p_WF - f.p_W_base
         c2 = (np.sum(d * d, axis=1) - f.l1 ** 2 - f.l2 ** 2) / (2 * f.l1 * f.l2)
         acos = np.arccos(np.clip(c2, -1.0, 1.0))
@@ -189,28 +192,28 @@ class Reachability:
             candidates += [np.stack([q1 + wrap, q2], axis=1) for wrap in (-2 * np.pi, 0.0, 2 * np.pi)]
         candidates = np.stack(candidates)  # (6, k, 2)
         valid = (np.abs(c2) <= 1.0)[None, :] & np.all((candidates >= f.q_lower) & (candidates <= f.q_upper), axis=2)
-        valid[valid] = ~self._links_penetrate_many(pose, finger, candidates[valid])
+        rows = np.broadcast_to(poses, (6, *poses.shape))[valid]
+        valid[valid] = ~self._links_penetrate_many(rows, finger, candidates[valid])
         out = np.full((len(d), 2), np.nan)
         found = valid.any(axis=0)
         out[found] = candidates[np.argmax(valid, axis=0)[found], np.flatnonzero(found)]
         return out
 
-    def _links_penetrate_many(self, pose, finger: int, q: np.ndarray) -> np.ndarray:
-        """Vectorized links_penetrate for joint angles q (k, 2)."""
+    def _links_penetrate_many(self, poses: np.ndarray, finger: int, q: np.ndarray) -> np.ndarray:
+        """Vectorized links_penetrate: object poses (k, 3), joint angles (k, 2)."""
         f = self.fingers[finger]
         a, b = self.boundary.width / 2, self.boundary.height / 2
         a1, a12 = f.psi + q[:, 0], f.psi + q[:, 0] + q[:, 1]
         elbow = f.p_W_base + f.l1 * np.stack([np.cos(a1), np.sin(a1)], axis=1)
+        ct, st = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         hit = np.zeros(len(q), dtype=bool)
-        for rect, origin, angle in zip(self._rectangles[finger], (np.broadcast_to(f.p_W_base, elbow.shape), elbow), (a1, a12)):
+        for rect, origin, angle in zip(self._rectangles[finger], (f.p_W_base, elbow), (a1, a12)):
             c, s = np.cos(angle), np.sin(angle)
-            p_WG = origin + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1)
-            rel = p_WG - np.asarray(pose[:2], dtype=float)
-            ct, st = math.cos(pose[2]), math.sin(pose[2])
-            cx, cy = ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]
-            g = angle + rect.angle_JG - pose[2]
-            ux, uy = np.abs(np.cos(g)), np.abs(np.sin(g))
+            rel = origin + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1) - poses[:, :2]
+            cx, cy = ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]  # box centre in B
+            g = angle + rect.angle_JG - poses[:, 2]
             ux_s, uy_s = np.cos(g), np.sin(g)
+            ux, uy = np.abs(ux_s), np.abs(uy_s)
             hl, hw = rect.half_length, rect.half_width
             hit |= ((np.abs(cx) < a + hl * ux + hw * uy) & (np.abs(cy) < b + hl * uy + hw * ux)
                     & (np.abs(cx * ux_s + cy * uy_s) < hl + a * ux + b * uy)

@@ -102,16 +102,21 @@ class _Search:
         last = self.config.num_nodes - 1
         steps = [d for d in self.displacements if d != 0.0]
         corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
+        reach_steps = np.arange(-last * (len(self.displacements) // 2), last * (len(self.displacements) // 2) + 1)
         for finger, s0 in enumerate(start):
+            # every arclength the finger can ever hold, at every depth, in one vectorized call
+            grid = np.array(sorted({self.wrap(s) for s in s0 + self.config.displacement_step * reach_steps}))
+            gap = np.abs(grid[:, None] - corners[None, :])
+            corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
+            q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger,
+                                             np.tile(grid, last))[:, 1].reshape(last, len(grid))
+            allowed = [dict(zip(grid[ok].tolist(), row[ok].tolist()))
+                       for row in q2 for ok in [corner_free & np.isfinite(row)]]
             layers = [{s0: np.nan}]
-            for depth in range(1, last + 1):  # forward: contacts this finger can hold at all
+            for depth in range(1, last + 1):  # forward: contacts reachable from s0 by displacements
                 held = np.fromiter(layers[-1], dtype=float)
-                candidates = np.unique(np.round(np.mod(held[:, None] + self.displacements[None, :], per), 9))
-                gap = np.abs(candidates[:, None] - corners[None, :])
-                corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
-                q = self.reach.closed_form_many(self.poses[depth], finger, candidates)
-                layers.append({float(s): float(q2) for s, q2, ok in zip(candidates, q[:, 1], corner_free)
-                               if ok and np.isfinite(q2)})
+                candidates = {self.wrap(s) for s in (held[:, None] + self.displacements[None, :]).ravel()}
+                layers.append({s: allowed[depth - 1][s] for s in candidates if s in allowed[depth - 1]})
             cost = [dict.fromkeys(layers[last], 0)]
             for depth in range(last - 1, -1, -1):  # backward: fewest switches to the end
                 after, here = cost[0], {}
