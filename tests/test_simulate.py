@@ -10,7 +10,6 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, config_to_dict
 from trajectotree.control import ImpedanceController
-from trajectotree.geometry import rotation_2d
 from trajectotree.io import load_sim, save_sim
 from trajectotree.reference import check_plan_arrays, reference_from_arrays, static_hold_reference
 from trajectotree.scene import build_scene
@@ -99,7 +98,6 @@ def test_the_hold_plan_forces_balance_gravity(scene):
     np.testing.assert_allclose(np.sum(r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]), 0.0, atol=1e-6)
     assert np.all(arrays["lambda_n"] >= 1.0 - 1e-6)
     assert np.all(np.abs(arrays["lambda_t"]) <= c.mu * arrays["lambda_n"] + 1e-9)
-    np.testing.assert_allclose(rotation_2d(0.0), np.eye(2))
 
 
 def test_run_simulation_result_files_and_gif(scene, short_config, tmp_path):
