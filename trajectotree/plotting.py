@@ -66,3 +66,46 @@ def plot_mean_band(ax, t, mean, lower, upper, *, color=None, label=None, alpha=0
     (line,) = ax.plot(t, mean, color=color, label=label, lw=1.5)
     band = ax.fill_between(t, lower, upper, color=line.get_color(), alpha=alpha, lw=0)
     return [line, band]
+
+
+def plot_contacts(ax, pose, p_BC, n_B, *, colors=FINGER_COLORS, size=18):
+    """Contact points p_BC (k, 2) of the box at `pose`, one colour per finger, with their
+    outward normals n_B as short arrows."""
+    p_W = np.array([box_to_world(pose, p) for p in p_BC])
+    n_W = np.array([box_to_world((0.0, 0.0, pose[2]), n) for n in n_B])
+    artists = [ax.scatter(p_W[:, 0], p_W[:, 1], s=size, c=list(colors[:len(p_W)]), edgecolors="k", zorder=6)]
+    artists.append(ax.quiver(p_W[:, 0], p_W[:, 1], n_W[:, 0], n_W[:, 1], angles="xy", scale_units="xy",
+                             scale=1 / 0.02, width=0.004, color="k", zorder=6))
+    return artists
+
+
+def plot_friction_cones(ax, pose, p_BC, n_B, mu: float, *, length=0.03, color="tab:cyan", alpha=0.4):
+    """The friction cone of each contact: the forces a finger can apply on the box,
+    -n + [-mu, mu] t, drawn as a wedge from the contact point into the box."""
+    artists = []
+    for p, n in zip(p_BC, n_B):
+        t = np.array([-n[1], n[0]])
+        edges = [(-n + sign * mu * t) / np.hypot(1.0, mu) for sign in (-1.0, 1.0)]
+        wedge = [box_to_world(pose, p)] + [box_to_world(pose, p + length * e) for e in edges]
+        artists.append(ax.add_patch(Polygon(np.array(wedge), closed=True, facecolor=color, edgecolor=color,
+                                            alpha=alpha, zorder=5)))
+    return artists
+
+
+def plot_contact_node(ax, scene, node, *, mu: float, previous=None):
+    """One node of a contact plan (a ContactNode) like the paper's Fig. 1 keyframes: box,
+    hand at the node's joint angles, contacts with friction cones; the switching finger is
+    drawn thick, with its previous contact (from `previous`, a ContactNode) as a hollow marker."""
+    c = scene.config
+    artists = plot_box(ax, c.box_width, c.box_height, node.object_pose)
+    for i, finger in enumerate(scene.fingers):
+        switching = i == node.switching_finger
+        artists += plot_finger(ax, finger, node.q[2 * i:2 * i + 2], scene.tip_radius,
+                               color="k" if switching else "0.55", lw=4.0 if switching else 2.0,
+                               tip_color=FINGER_COLORS[i])
+    artists += plot_friction_cones(ax, node.object_pose, node.p_BC, node.n_B, mu)
+    artists += plot_contacts(ax, node.object_pose, node.p_BC, node.n_B)
+    if previous is not None and node.switching_finger is not None:
+        p_W = box_to_world(node.object_pose, previous.p_BC[node.switching_finger])
+        artists += ax.plot(*p_W, "o", mfc="none", mec=FINGER_COLORS[node.switching_finger], ms=7, mew=1.5, zorder=7)
+    return artists
