@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import ConfigError
+from trajectotree.io import write_bytes_atomic
 from trajectotree.metrics import mean_confidence_interval
-from trajectotree.sweep import MANIFEST_FILE, TRIALS_DIR, read_rows, write_atomic
+from trajectotree.sweep import MANIFEST_FILE, TRIALS_DIR, read_rows
 
 METHOD_LABELS = {"trajectotree": "TrajectoTree", "cito": "CITO", "cito-warm": "CITO, warm-start"}
 METHOD_COLORS = {"trajectotree": "tab:blue", "cito": "tab:orange", "cito-warm": "tab:green"}
@@ -223,7 +224,7 @@ def _save(fig, stem: Path) -> tuple[str, str]:
         target = stem.with_suffix(f".{ext}")
         buffer = io.BytesIO()
         fig.savefig(buffer, format=ext, dpi=150)
-        write_atomic(target, buffer.getvalue())
+        write_bytes_atomic(target, buffer.getvalue())
         paths.append(str(target))
     plt.close(fig)
     return paths[0], paths[1]
@@ -241,8 +242,8 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     out = Path(out_dir) if out_dir is not None else sweep_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
     table = summary_table(rows, methods)
-    write_atomic(out / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())
-    write_atomic(out / "summary.csv", table_csv(table).encode())
+    write_bytes_atomic(out / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())
+    write_bytes_atomic(out / "summary.csv", table_csv(table).encode())
     fig2 = _save(figure_time_and_cost(rows, methods), out / "fig2_time_cost")
     tracks = load_tracking(sweep_dir, rows)
     fig3 = _save(figure_tracking(tracks, methods), out / "fig3_tracking") if tracks else None

@@ -31,6 +31,7 @@ import numpy as np
 
 from trajectotree import __version__
 from trajectotree.config import Config, ConfigError, check_integer, check_range, config_to_dict
+from trajectotree.io import write_bytes_atomic
 from trajectotree.trial import (ROW_FILE, TrialInterrupted, TrialOutcome, TrialTask, allow_trials, empty_row,
                                 execute_trial, kill_children)
 
@@ -95,16 +96,6 @@ def trial_key(goal_index: int, method: str) -> str:
 
 # ---- the directory ---------------------------------------------------------------
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Writes through a temporary file in the same directory, then renames."""
-    tmp = path.with_name(f"{TMP_PREFIX}{path.name}.{os.getpid()}")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def _manifest_differences(old: dict, new: dict) -> list[str]:
     diffs = []
     for key in sorted(set(old) | set(new)):
@@ -120,7 +111,7 @@ def check_manifest(out_dir: Path, spec: SweepSpec) -> bool:
     raises ConfigError when it holds a different one (nothing is touched)."""
     path = out_dir / MANIFEST_FILE
     if not path.exists():
-        if out_dir.is_dir() and any(p.name != ".DS_Store" for p in out_dir.iterdir()):
+        if out_dir.is_dir() and any(out_dir.iterdir()):
             raise ConfigError(f"--out {str(out_dir)!r} is a non-empty directory without {MANIFEST_FILE}; "
                               "give a new or empty directory, or the directory of the sweep to resume")
         return False
@@ -143,10 +134,10 @@ def prepare_dir(out_dir: Path, spec: SweepSpec) -> None:
     (out_dir / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
     if not exists:
         manifest = dict(spec.manifest(), version=__version__)
-        write_atomic(out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2).encode())
+        write_bytes_atomic(out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2).encode())
     for leftover in (out_dir / TRIALS_DIR).glob(f"{TMP_PREFIX}*"):
         shutil.rmtree(leftover) if leftover.is_dir() else leftover.unlink()
-    for leftover in out_dir.glob(f"{TMP_PREFIX}*"):
+    for leftover in out_dir.glob(".*.tmp"):  # write_bytes_atomic's temporary files
         leftover.unlink()
 
 
@@ -162,7 +153,7 @@ def read_rows(out_dir: str | Path) -> list[dict]:
 
 def write_rows_file(out_dir: Path) -> None:
     rows = read_rows(out_dir)
-    write_atomic(out_dir / ROWS_FILE, "".join(json.dumps(r) + "\n" for r in rows).encode())
+    write_bytes_atomic(out_dir / ROWS_FILE, "".join(json.dumps(r) + "\n" for r in rows).encode())
 
 
 def store_trial(out_dir: Path, outcome: TrialOutcome) -> None:
