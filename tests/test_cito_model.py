@@ -141,3 +141,14 @@ def test_static_object_rows_balance_gravity(scene, rows):
     # Symmetric lever arms cancel only if the tips are symmetric; check the force rows.
     np.testing.assert_allclose(one.evaluate(z[None], False)[0][0, 0:2], 0.0, atol=1e-12)
     np.testing.assert_allclose(kin.f_W.sum(1)[0], [0.0, body.mass * 9.81], atol=1e-12)
+
+
+def test_default_sharpness_is_tight_where_fingertips_round_corners():
+    """A tip centre 9 mm beside a face and 1 mm past the corner is 9.07 mm from the box;
+    the default sharpness must not over-estimate that (with k = 200 it said 10 mm)."""
+    from trajectotree.config import CitoConfig
+    offsets = face_offsets(0.20, 0.10)
+    p = np.array([[-0.10907, 0.05112]])
+    exact = BoxBoundary(0.20, 0.10).signed_distance(p[0])
+    assert smooth_distance(p, offsets, CitoConfig().sdf_sharpness)[0][0] <= exact + 1e-4
+    assert smooth_distance(p, offsets, 200.0)[0][0] > exact + 5e-4

@@ -1,11 +1,12 @@
 """Initial guesses: static equilibrium (`cito`) and from the contact plan
 (`trajectotree`, `cito-warm`), both as CitoVariables of numbers.
 
-Contact forces of a guess hold the object in static equilibrium with the fingers
+Contact forces of a guess produce the guessed object acceleration with the fingers
 that touch it: lambda = lambda_pref + G^+ (w - G lambda_pref), the least-change
 solution of G lambda = w from a preferred squeeze lambda_n = m g per finger
-(G: the grasp map of the touching fingers, w: minus the gravity wrench).
-Torques then balance the hand statically: tau = J_C^T f_W - tau_g.
+(G: the grasp map of the touching fingers, w = M_obj x_dd - m g), clipped to the
+friction cones. Torques then satisfy the hand dynamics: tau = M q_dd - tau_g + J_C^T f_W.
+A guess that satisfies the dynamics rows lets IPOPT start nearly feasible.
 """
 
 from __future__ import annotations
@@ -79,13 +80,14 @@ def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *
     kin = rows.kinematics(guess.stacked())
     hand, r = rows.body.hand, rows.body.radius
     JTf = np.einsum("kiab,kia->kib", kin.J, kin.f_W) - r * lt[..., None]
-    tau = np.clip((JTf - hand.gravity_forces(q)).reshape(K, -1), -hand.tau_max, hand.tau_max)
+    Mqdd = np.einsum("kiab,kib->kia", hand.mass_matrices(q), guess.qdd.reshape(K, NUM_FINGERS, 2))
+    tau = np.clip((Mqdd + JTf - hand.gravity_forces(q)).reshape(K, -1), -hand.tau_max, hand.tau_max)
     return CitoVariables(**{**zeros, "lambda_n": ln, "lambda_t": lt, "tau": tau})
 
 
 def _static_forces(rows: KnotRows, guess: CitoVariables, touch_tol: float = 1e-3):
-    """(lambda_n, lambda_t) (K, 4) holding the object statically with the fingers that
-    are pinned or within touch_tol of the surface."""
+    """(lambda_n, lambda_t) (K, 4) giving the object its guessed acceleration with the
+    fingers that are pinned or within touch_tol of the surface."""
     b = rows.body
     kin = rows.kinematics(guess.stacked())
     touching = rows.pinned | (kin.phi_tip < touch_tol)                 # (K, 4)
@@ -93,7 +95,7 @@ def _static_forces(rows: KnotRows, guess: CitoVariables, touch_tol: float = 1e-3
     cols_t = np.concatenate([kin.t_W, _cross(kin.arm, kin.t_W)[..., None]], axis=-1)
     G = np.concatenate([cols_n * touching[..., None], cols_t * touching[..., None]], axis=1).transpose(0, 2, 1)
     weight = b.mass * np.linalg.norm(b.gravity)
-    w = np.concatenate([-b.mass * b.gravity, [0.0]])                    # (0, m g, 0)
+    w = np.concatenate([b.mass * (guess.xdd[:, :2] - b.gravity), b.inertia * guess.xdd[:, 2:]], axis=1)
     pref = np.concatenate([weight * touching, np.zeros(touching.shape)], axis=1)
     lam = pref + np.einsum("kij,kj->ki", np.linalg.pinv(G), w - np.einsum("kij,kj->ki", G, pref))
     ln = np.maximum(lam[:, :NUM_FINGERS], 0.0)
