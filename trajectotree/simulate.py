@@ -155,6 +155,7 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
     if meshcat is not None:
         playback.set_planar_view(meshcat)
         playback.add_plan_ghost(meshcat, config.scene)
+        meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
         animation = execution.visualizer.StartRecording()
     start = time.perf_counter()
     simulator.AdvanceTo(execution.duration)
