@@ -95,6 +95,7 @@ class _Search:
         self.expanded = self.generated = 0
         self.min_switches: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> switches
         self.joint2: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> q2 (reachable only)
+        self._moves: dict[float, list[float]] = {}
 
     def wrap(self, s: float) -> float:
         """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
@@ -110,32 +111,38 @@ class _Search:
         completion (one switch per step), so pruning it never removes a plan; it only spares
         the DFS hopeless subtrees."""
         last = self.config.num_nodes - 1
-        steps = [d for d in self.displacements if d != 0.0]
         corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
-        reach_steps = np.arange(-last * (len(self.displacements) // 2), last * (len(self.displacements) // 2) + 1)
         for finger, s0 in enumerate(start):
-            # every arclength the finger can ever hold, at every depth, in one vectorized call
-            grid = np.array(sorted({self.wrap(s) for s in s0 + self.config.displacement_step * reach_steps}))
+            grid, frontier = {s0}, {s0}  # every arclength the finger can ever hold
+            for _ in range(last):
+                frontier = {m for s in frontier for m in self.moves(s)} - grid
+                grid |= frontier
+            grid = np.array(sorted(grid))
             gap = np.abs(grid[:, None] - corners[None, :])
             corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
+            # reachability of the whole grid at every depth in one vectorized call
             q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger,
                                              np.tile(grid, last))[:, 1].reshape(last, len(grid))
             allowed = [dict(zip(grid[ok].tolist(), row[ok].tolist()))
                        for row in q2 for ok in [corner_free & np.isfinite(row)]]
             layers = [{s0: np.nan}]
             for depth in range(1, last + 1):  # forward: contacts reachable from s0 by displacements
-                held = np.fromiter(layers[-1], dtype=float)
-                candidates = {self.wrap(s) for s in (held[:, None] + self.displacements[None, :]).ravel()}
+                candidates = {m for s in layers[-1] for m in self.moves(s)}
                 layers.append({s: allowed[depth - 1][s] for s in candidates if s in allowed[depth - 1]})
             cost = [dict.fromkeys(layers[last], 0)]
             for depth in range(last - 1, -1, -1):  # backward: fewest switches to the end
                 after, here = cost[0], {}
                 for s in layers[depth]:
-                    move = 1 + min((after.get(self.wrap(s + d), np.inf) for d in steps), default=np.inf)
-                    here[s] = min(after.get(s, np.inf), move)
+                    here[s] = min(after.get(s, np.inf), 1 + min(after.get(m, np.inf) for m in self.moves(s)))
                 cost.insert(0, here)
             self.joint2.append(layers)
             self.min_switches.append(cost)
+
+    def moves(self, s: float) -> list[float]:
+        """The arclengths s + d for every d in D_cp (wrapped keys), memoized."""
+        if s not in self._moves:
+            self._moves[s] = [self.wrap(s + d) for d in self.displacements]
+        return self._moves[s]
 
     def switches_needed(self, depth: int, arclengths) -> float:
         return sum(self.min_switches[i][depth].get(s, np.inf) for i, s in enumerate(arclengths))
@@ -177,10 +184,10 @@ class _Search:
             return []
         candidates = {node.arclengths: None}  # the zero displacement: no finger moves
         for i in free:
-            for d in self.displacements:
-                if d != 0.0:
+            for s in self.moves(node.arclengths[i]):
+                if s != node.arclengths[i]:
                     moved = list(node.arclengths)
-                    moved[i] = self.wrap(moved[i] + d)
+                    moved[i] = s
                     candidates.setdefault(tuple(moved), i)
         out, steps_left, depth = [], self.config.num_nodes - 2 - node.depth, node.depth + 1
         for arclengths, finger in candidates.items():
