@@ -7,6 +7,7 @@ prints their success, time and cost beside TrajectoTree's."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import time
 
@@ -58,8 +59,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="goal sampling seed (default 0)")
     parser.add_argument("--baselines", type=int, default=0, metavar="K",
                         help="also plan the first K goals with cito and cito-warm")
+    parser.add_argument("--segments", type=int, default=None,
+                        help="transition segments N - 1 (default: the config's, 9 as in the paper)")
     args = parser.parse_args()
     config = Config()
+    if args.segments is not None:
+        config = dataclasses.replace(config, search=dataclasses.replace(config.search, num_nodes=args.segments + 1))
     scene = build_scene(config.scene)
     goals = sample_goals(args.goals, args.seed)
     print("  i       method    goal  succ iters search  build   solve   total      cost err_deg  evals  status")
@@ -70,7 +75,8 @@ def main() -> None:
         for method in methods:
             rows.append(row(plan(scene=scene, goal=float(goal), method=method, config=config)))
             print_row(i, rows[-1])
-    print(f"--- {len(goals)} goals, seed {args.seed}, wall {time.perf_counter() - t0:.0f} s")
+    print(f"--- {len(goals)} goals, seed {args.seed}, {config.search.num_nodes - 1} segments, "
+          f"wall {time.perf_counter() - t0:.0f} s")
     for method in ("trajectotree", "cito-warm", "cito"):
         summarize(rows, method)
 

@@ -161,12 +161,12 @@ def test_bad_input_raises_config_errors(scene):
 
 def test_contact_plan_not_matching_the_scene_is_rejected(scene):
     from trajectotree.planners import initial_grasp_plan
-    small = build_scene(SceneConfig(box_width=0.16))
-    config = dataclasses.replace(CONFIG, scene=small.config)
-    grasp = initial_grasp_plan(scene, 0.3, CONFIG)                  # contacts on the 0.20 m box
+    flat = build_scene(SceneConfig(box_height=0.08))
+    config = dataclasses.replace(CONFIG, scene=flat.config)
+    grasp = initial_grasp_plan(scene, 0.3, CONFIG)                  # contacts on the 0.10 m high box
     two = dataclasses.replace(grasp, nodes=grasp.nodes * 2)
     with pytest.raises(ConfigError, match="off the boundary"):
-        plan(scene=small, goal=0.3, method="trajectotree", config=config, contact_plan=two)
+        plan(scene=flat, goal=0.3, method="trajectotree", config=config, contact_plan=two)
 
 
 def run_cli(*args, cwd):
