@@ -73,8 +73,8 @@ class SearchConfig:
 
     num_nodes: int = 10                 # N, nodes in the object path (tree depth), incl. the start
     num_displacements: int = 17         # |D_cp|, contact displacements per free finger (odd, incl. zero)
-    # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m; with 0.01
-    # m the 0.20 m reach of this hand cannot follow a pi rotation in 9 steps, see trajectotree.search)
+    # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m). With 0.01 m
+    # a +-pi goal needs >= 13 contact switches from the default grasp (9 allowed) on this hand.
     displacement_step: float = 0.02
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
     # from the corner (+w/2, -h/2). None picks the default grasp (see trajectotree.search).
