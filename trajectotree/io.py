@@ -58,3 +58,81 @@ def load_sim(plan_dir: str | Path):
         if isinstance(e, FileNotFoundError):
             raise
         raise ValueError(f"{plan_dir}: malformed {SIM_JSON} / {SIM_NPZ}: {e}") from None
+
+
+PLAN_JSON = "plan.json"
+PLAN_NPZ = "plan.npz"
+
+
+def plan_to_json(result) -> dict:
+    """plan.json (DESIGN.md sec. 5): the solve report, the contact sequence and the config."""
+    from trajectotree.config import config_to_dict
+    finite = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731 (JSON has no NaN)
+    return {
+        "method": result.method, "goal": float(result.goal), "success": bool(result.success),
+        "status": result.status, "search_time_s": float(result.search_time_s),
+        "build_time_s": float(result.build_time_s), "solve_time_s": float(result.solve_time_s),
+        "total_time_s": float(result.total_time_s), "cost": finite(result.cost), "iterations": int(result.iterations),
+        "violations": {k: finite(v) for k, v in result.violations.items()},
+        "search": {"success": result.contact_plan.success, "reason": result.contact_plan.reason,
+                   "stats": result.contact_plan.stats.to_json()},
+        "contact_sequence": [n.to_json() for n in result.contact_plan.nodes],
+        "solver_timing": dict(result.solver_timing),
+        "config": config_to_dict(result.config),
+    }
+
+
+def save_plan(result, out_dir: str | Path) -> None:
+    """out_dir/plan.npz (the Trajectory arrays at every knot; empty when nothing was
+    solved) and out_dir/plan.json (plan_to_json), each written atomically."""
+    from trajectotree.planners import TRAJECTORY_ARRAYS
+    buffer = _io.BytesIO()
+    arrays = {} if result.trajectory is None else {n: getattr(result.trajectory, n) for n in TRAJECTORY_ARRAYS}
+    np.savez(buffer, **arrays)
+    write_bytes_atomic(Path(out_dir) / PLAN_NPZ, buffer.getvalue())
+    write_bytes_atomic(Path(out_dir) / PLAN_JSON, (json.dumps(plan_to_json(result), indent=2) + "\n").encode())
+
+
+def load_plan(out_dir: str | Path):
+    """The PlanResult saved by save_plan. Raises trajectotree.cli.InputError naming the
+    file when the folder, plan.json or plan.npz is missing or malformed."""
+    from trajectotree.cli import InputError
+    from trajectotree.config import ConfigError, config_from_dict
+    from trajectotree.contact_plan import ContactPlan, SearchStats
+    from trajectotree.planners import TRAJECTORY_ARRAYS, PlanResult, Trajectory
+    out_dir = Path(out_dir)
+    json_path, npz_path = out_dir / PLAN_JSON, out_dir / PLAN_NPZ
+    for path in (json_path, npz_path):
+        if not path.is_file():
+            raise InputError(f"{str(path)!r} is missing; a plan folder holds {PLAN_JSON} and {PLAN_NPZ} "
+                             "(written by `trajectotree plan`)")
+    try:
+        data = json.loads(json_path.read_text())
+        search = data.get("search", {})
+        contact_plan = ContactPlan.from_json({"goal": data["goal"], "success": search.get("success", True),
+                                              "reason": search.get("reason", ""), "stats": search.get("stats", {}),
+                                              "contact_sequence": data["contact_sequence"]})
+        nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
+        fields = dict(method=data["method"], goal=float(data["goal"]), success=bool(data["success"]),
+                      status=str(data["status"]), search_time_s=float(data["search_time_s"]),
+                      build_time_s=float(data["build_time_s"]), solve_time_s=float(data["solve_time_s"]),
+                      total_time_s=float(data["total_time_s"]), cost=nan(data["cost"]),
+                      iterations=int(data["iterations"]), contact_plan=contact_plan,
+                      violations={k: nan(v) for k, v in data["violations"].items()},
+                      config=config_from_dict(data["config"]), solver_timing=data.get("solver_timing", {}))
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
+        if isinstance(e, ConfigError):
+            raise InputError(f"{str(json_path)!r} holds an invalid config: {e}") from None
+        raise InputError(f"{str(json_path)!r} is not a valid plan.json ({type(e).__name__}: {e})") from None
+    try:
+        with np.load(npz_path) as npz:
+            arrays = {name: np.array(npz[name]) for name in npz.files}
+    except (OSError, ValueError, EOFError) as e:
+        raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
+    trajectory = None
+    if arrays:
+        missing = [n for n in TRAJECTORY_ARRAYS if n not in arrays]
+        if missing:
+            raise InputError(f"{str(npz_path)!r} lacks the arrays {missing}")
+        trajectory = Trajectory(**{n: arrays[n] for n in TRAJECTORY_ARRAYS})
+    return PlanResult(**fields, trajectory=trajectory)
