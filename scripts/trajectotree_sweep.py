@@ -25,7 +25,7 @@ def row(result) -> dict:
             "iterations": result.iterations, "search_s": result.search_time_s, "build_s": result.build_time_s,
             "solve_s": result.solve_time_s, "total_s": result.total_time_s, "cost": result.cost,
             "final_error_deg": math.degrees(abs(final - result.goal)),
-            "eval_share": _eval_share(result.solver_timing)}
+            "eval_share": _eval_share(result.solver_timing), "violations": dict(result.violations)}
 
 
 def _eval_share(timing: dict) -> float:
@@ -51,6 +51,9 @@ def summarize(rows: list[dict], method: str) -> None:
           f"within 5 deg: {int(np.sum(err <= 5.0))}/{len(rows)}; total time mean {total.mean():.2f} s, "
           f"median {np.median(total):.2f} s; mean iterations {np.mean([r['iterations'] for r in rows]):.0f}; "
           f"mean cost (converged) {np.mean([r['cost'] for r in ok]) if ok else float('nan'):.3f}")
+    if ok:
+        worst = {k: max(r["violations"][k] for r in ok) for k in ok[0]["violations"]}
+        print(f"  max violation over converged goals: " + ", ".join(f"{k} {v:.1e}" for k, v in worst.items()))
 
 
 def main() -> None:
