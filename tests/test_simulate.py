@@ -155,6 +155,9 @@ def test_simulate_command_rejects_bad_plan_dirs(scene, short_config, tmp_path, c
     wrong_shape["q"] = wrong_shape["q"][:, :6]
     assert main(["simulate", str(write_plan_dir(tmp_path / "shape", wrong_shape, short_config))]) == 2
     assert "'q'" in capsys.readouterr().err
+    unsolved = write_plan_dir(tmp_path / "unsolved", {}, short_config)
+    assert main(["simulate", str(unsolved)]) == 2
+    assert "no trajectory" in capsys.readouterr().err
 
 
 def test_simulate_command_rejects_a_different_scene(scene, short_config, tmp_path, capsys):

@@ -52,10 +52,16 @@ def read_plan_dir(plan_dir: str) -> tuple[dict[str, np.ndarray], Config]:
         raise InputError(f"{str(json_path)!r} is not a valid plan.json ({type(e).__name__}: {e})") from None
     try:
         with np.load(npz_path) as npz:
-            arrays = check_plan_arrays({name: npz[name] for name in npz.files})
+            arrays = {name: npz[name] for name in npz.files}
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
         raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
-    return arrays, config
+    if not arrays:  # save_plan writes an empty plan.npz when planning produced nothing
+        raise InputError(f"{str(npz_path)!r} holds no trajectory: planning produced none "
+                         f"(plan.json status: {data.get('status')!r})")
+    try:
+        return check_plan_arrays(arrays), config
+    except ValueError as e:
+        raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
 
 
 def execution_config(args, plan_config: Config) -> Config:
