@@ -157,7 +157,7 @@ def figure_time_and_cost(rows: list[dict], methods: list[str]):
     ax_cost.set_ylabel("final cost (converged plans)")
     for ax in (ax_time, ax_cost):
         ax.grid(axis="y", alpha=0.3)
-    ax_time.legend(handles=[ax_time.lines[-1]], loc="upper right", fontsize=8)
+    ax_time.legend(handles=[ax_time.lines[-1]], loc="upper left", fontsize=8)
     fig.tight_layout()
     return fig
 
