@@ -96,14 +96,21 @@ def trial_key(goal_index: int, method: str) -> str:
 
 # ---- the directory ---------------------------------------------------------------
 
+def _flatten(data: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
 def _manifest_differences(old: dict, new: dict) -> list[str]:
-    diffs = []
-    for key in sorted(set(old) | set(new)):
-        if key == "config" and old.get(key) != new.get(key):
-            diffs.append("config (see manifest.json)")
-        elif key not in ("config", "goal_values", "version") and old.get(key) != new.get(key):
-            diffs.append(f"{key}: {old.get(key)!r} there, {new.get(key)!r} now")
-    return diffs
+    """'name: old there, new now' for each differing argument or config field."""
+    old, new = (_flatten({k: v for k, v in d.items() if k not in ("goal_values", "version")}) for d in (old, new))
+    return [f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
+            for key in sorted(set(old) | set(new)) if old.get(key) != new.get(key)]
 
 
 def check_manifest(out_dir: Path, spec: SweepSpec) -> bool:
@@ -119,9 +126,7 @@ def check_manifest(out_dir: Path, spec: SweepSpec) -> bool:
         old = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ConfigError(f"{str(path)!r} is not a readable sweep manifest: {e}") from None
-    new = spec.manifest()
-    old.pop("version", None)
-    diffs = _manifest_differences(old, new)
+    diffs = _manifest_differences(old, spec.manifest())
     if diffs:
         raise ConfigError(f"{str(out_dir)!r} holds a sweep with different arguments ({'; '.join(diffs)}); "
                           "rerun with the same arguments to resume it, or choose another --out")
