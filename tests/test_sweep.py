@@ -61,6 +61,8 @@ def test_rerun_with_different_arguments_is_an_error(tmp_path, capsys):
     assert main(["sweep", "--out", str(out), *SMALL, "--methods", "trajectotree", "cito"]) == 2
     err = capsys.readouterr().err
     assert "different arguments" in err and "methods" in err
+    assert main(["sweep", "--out", str(out), *SMALL, "--methods", "trajectotree", "--mu", "0.5"]) == 2
+    assert "config.scene.mu: 0.7 there, 0.5 now" in capsys.readouterr().err
     assert (out / MANIFEST_FILE).read_bytes() == manifest
     with pytest.raises(ConfigError, match="non-empty directory"):
         run_sweep(small_spec(), tmp_path, progress=False)  # a directory that is not a sweep
