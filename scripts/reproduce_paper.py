@@ -24,7 +24,8 @@ from trajectotree.sweep import METHODS, SweepSpec, run_sweep
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="paper-sweep", metavar="SWEEP_DIR", help="sweep directory (default: %(default)s)")
+    parser.add_argument("--out", default="paper-sweep", metavar="SWEEP_DIR",
+                        help="sweep directory (default: %(default)s)")
     parser.add_argument("--report-dir", default="docs/results", metavar="DIR",
                         help="where the figures and the table go (default: %(default)s)")
     parser.add_argument("--goals", type=int, default=60, help="number of goals (default: 60, the paper's)")

@@ -3,12 +3,6 @@
 import dataclasses
 import json
 import math
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -38,6 +32,11 @@ def test_same_seed_gives_same_goals_in_range():
     np.testing.assert_array_equal(spec.goal_values(), a)
     keys = [t.key for t in spec.tasks()]
     assert len(keys) == len(set(keys)) == 180 and keys[:3] == ["0000_trajectotree", "0000_cito", "0000_cito-warm"]
+
+
+def test_sweep_methods_are_the_planners():
+    from trajectotree import planners, sweep
+    assert sweep.METHODS == planners.METHODS  # sweep keeps its own copy so `--help` needs no Drake import
 
 
 @pytest.mark.parametrize("args, message", [
@@ -163,5 +162,6 @@ def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
     # A trial that raises (a goal the planner rejects) is a row with the exception's message.
     task = small_spec().tasks()[0]
     outcome = execute_trial(dataclasses.replace(task, goal=float("nan")))
-    assert outcome.row["error"].endswith("ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad") and outcome.row["success"] is None
+    assert outcome.row["error"].endswith("ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad")
+    assert outcome.row["success"] is None
     assert "Traceback" in outcome.files["log.txt"].decode()

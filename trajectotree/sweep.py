@@ -227,11 +227,11 @@ def _dask_results(tasks: list[TrialTask], client):
 
 
 def _result_or_error(future):
+    """The TrialOutcome, or the exception: TrialInterrupted, or the executor's own
+    failure (a lost Dask worker, a process that could not start)."""
     try:
         return future.result()
-    except TrialInterrupted as e:
-        return e
-    except Exception as e:  # the executor itself failed (a lost Dask worker, no process could start)
+    except Exception as e:
         return e
 
 
@@ -305,8 +305,9 @@ def run_sweep(spec: SweepSpec, out_dir: str | Path, *, workers: int | None = Non
         tasks, skipped = pending_tasks(out_dir, spec, retry_errors)
         results = _dask_results(tasks, client) if client else _local_results(tasks, workers)
         ran = 0
-        with closing(results), tqdm(total=skipped + len(tasks), initial=skipped, unit="trial", desc="sweep", disable=not progress,
-                  dynamic_ncols=True) as bar:
+        bar = tqdm(total=skipped + len(tasks), initial=skipped, unit="trial", desc="sweep", disable=not progress,
+                   dynamic_ncols=True)
+        with closing(results), bar:
             for task, outcome in results:
                 if isinstance(outcome, TrialInterrupted):
                     continue

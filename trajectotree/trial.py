@@ -151,7 +151,8 @@ def execute_trial(task: TrialTask) -> TrialOutcome:
         if _stopping.is_set() or child.returncode in (-signal.SIGINT, -signal.SIGTERM):
             raise TrialInterrupted(task.key)
         if timed_out:
-            return _error_outcome(task, f"timeout: exceeded the trial time limit of {task.time_limit_s:g} s", wall_s, log)
+            return _error_outcome(task, f"timeout: exceeded the trial time limit of {task.time_limit_s:g} s",
+                                  wall_s, log)
         if child.returncode < 0:
             return _error_outcome(task, f"crashed: the trial process died from {_signal_name(child.returncode)}",
                                   wall_s, log)
