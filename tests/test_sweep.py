@@ -36,7 +36,7 @@ def test_same_seed_gives_same_goals_in_range():
 
 def test_sweep_methods_are_the_planners():
     from trajectotree import planners, sweep
-    assert sweep.METHODS == planners.METHODS  # sweep keeps its own copy so `--help` needs no Drake import
+    assert sweep.METHODS == planners.METHODS  # a copy: sweep.py itself imports no Drake
 
 
 @pytest.mark.parametrize("args, message", [
