@@ -15,10 +15,9 @@ import numpy as np
 
 from trajectotree.cito.knot import KnotRows
 from trajectotree.cito.program import ProgramSpec
-from trajectotree.cito.transition import knot_poses
 from trajectotree.cito.variables import GROUPS, CitoVariables
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.geometry import rotation_2d
+from trajectotree.geometry import BoxBoundary, rotation_2d
 from trajectotree.scene import NUM_FINGERS
 
 # Height (m) the switching finger is lifted off the surface halfway through its
@@ -36,32 +35,47 @@ def static_guess(rows: KnotRows, spec: ProgramSpec) -> CitoVariables:
 
 
 def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVariables:
-    """Object poses interpolated along the plan's path, joint angles by closed-form IK
-    to the planned contacts (the switching finger lifted between its old and new
-    contact), velocities by finite differences, static-equilibrium forces."""
+    """Object poses along the plan's path with a rest-to-rest time scaling per segment,
+    joint angles by closed-form IK to the planned contacts (the switching finger
+    following the box boundary between its old and new contact, lifted off it), and
+    static-equilibrium forces."""
     M = spec.segment_length
-    x = knot_poses(plan.object_path, M)
-    hand = rows.body.hand
+    progress = rest_to_rest_progress(M)
+    x = np.vstack([node.object_pose + np.outer(progress[:-1], nxt.object_pose - node.object_pose)
+                   for node, nxt in zip(plan.nodes[:-1], plan.nodes[1:])] + [plan.nodes[-1].object_pose[None]])
+    hand, r = rows.body.hand, rows.body.radius
+    w, h = 2 * rows.body.offsets[:2]
+    boundary = BoxBoundary(w, h)
     q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
     for s in range(len(plan.nodes) - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]
-        for j in range(M + 1):
+        for j, u in enumerate(progress):
             k = s * M + j
-            tau = j / M
             for i in range(NUM_FINGERS):
-                target_B = rows.c_B[k, i]
-                if not rows.pinned[k, i]:
-                    target_B = _lifted(rows.c_B[s * M, i], rows.c_B[(s + 1) * M, i],
-                                       old.n_B[i], new.n_B[i], tau)
-                qi = hand.ik(i, x[k, :2] + rotation_2d(x[k, 2]) @ target_B)
-                q[k, 2 * i:2 * i + 2] = qi if qi is not None else (1 - tau) * old.q[2 * i:2 * i + 2] + tau * new.q[2 * i:2 * i + 2]
+                if i == new.switching_finger:
+                    c_B = _lifted(boundary, old.arclengths[i], new.arclengths[i], u, r)
+                else:
+                    c_B = old.p_BC[i] + r * old.n_B[i]
+                qi = hand.ik(i, x[k, :2] + rotation_2d(x[k, 2]) @ c_B)
+                q[k, 2 * i:2 * i + 2] = qi if qi is not None else (1 - u) * old.q[2 * i:2 * i + 2] + u * new.q[2 * i:2 * i + 2]
     return _complete(rows, spec, x, q, moving=True)
 
 
-def _lifted(c_old, c_new, n_old, n_new, tau):
-    n = n_old + n_new
-    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-6 else n_old
-    return (1 - tau) * c_old + tau * c_new + LIFT_HEIGHT * np.sin(np.pi * tau) * n
+def rest_to_rest_progress(M: int) -> np.ndarray:
+    """(M + 1,) progress 0 -> 1 over a segment of M steps, at rest at both ends: the
+    trapezoidal integral of a sin^2 velocity bump."""
+    v = np.sin(np.pi * np.arange(M + 1) / M) ** 2
+    u = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))])
+    return u / u[-1]
+
+
+def _lifted(boundary: BoxBoundary, s_old: float, s_new: float, tau: float, radius: float) -> np.ndarray:
+    """Fingertip centre in B for the switching finger at phase tau of its move: along
+    the boundary the short way round, LIFT_HEIGHT off it at mid-move."""
+    P = boundary.perimeter
+    ds = (s_new - s_old + P / 2) % P - P / 2
+    p, n = boundary.point(s_old + tau * ds)
+    return p + (radius + LIFT_HEIGHT * np.sin(np.pi * tau)) * n
 
 
 def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *, moving: bool) -> CitoVariables:
