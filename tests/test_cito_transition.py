@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from trajectotree.cito.program import build_program, general_spec
-from trajectotree.cito.transition import check_plan, knot_poses, transition_spec
+from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import CitoConfig, ConfigError, SceneConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import BoxBoundary
@@ -52,11 +52,6 @@ def test_transition_spec_pins_fixed_fingers_and_frees_the_switching_one(plan):
     assert [len(g) for g in spec.goal_poses] == [1] * M + [2] + [1] * M          # shared knot: both goals
     np.testing.assert_allclose(spec.goal_poses[1][0], [0.0, 0.0, 0.1])
     np.testing.assert_allclose(spec.goal_poses[-1][0], [0.0, 0.0, 0.2])
-
-
-def test_knot_poses_interpolate_the_path():
-    poses = knot_poses(np.array([[0, 0, 0.0], [0, 0, 0.4], [0, 0, 0.6]]), 4)
-    np.testing.assert_allclose(poses[:, 2], [0, 0.1, 0.2, 0.3, 0.4, 0.45, 0.5, 0.55, 0.6])
 
 
 def test_programs_have_the_expected_size(scene, plan):

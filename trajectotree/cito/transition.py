@@ -71,10 +71,3 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
                        q0=np.asarray(plan.nodes[0].q, float), rest_knots=np.arange(0, K, M),
                        goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
 
-
-def knot_poses(path: np.ndarray, segment_length: int) -> np.ndarray:
-    """(K, 3) object poses linearly interpolated between the nodes' poses."""
-    path = np.asarray(path, dtype=float)
-    tau = np.linspace(0.0, 1.0, segment_length + 1)[:-1]
-    poses = [path[s] + np.outer(tau, path[s + 1] - path[s]) for s in range(len(path) - 1)]
-    return np.vstack(poses + [path[-1:]])
