@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from trajectotree.metrics import (absolute_error, detect_drop, final_error, mean_absolute_error,
+from trajectotree.metrics import (absolute_error, detect_drop, final_error, hold_after_drop, mean_absolute_error,
                                   mean_confidence_interval)
 
 
@@ -38,6 +38,20 @@ def test_free_fall_is_detected_when_it_passes_the_drop_distance():
     spin = ref.copy()
     spin[:, 2] = 3.0
     assert detect_drop(t, spin, ref, 0.05) == (False, None)
+
+
+def test_error_is_held_after_the_drop():
+    t = np.arange(0.0, 1.0, 0.01)
+    ref = np.zeros((t.size, 3))
+    fall = ref.copy()
+    fall[:, 1] = -0.5 * 9.81 * t ** 2
+    dropped, when = detect_drop(t, fall, ref, 0.05)
+    held = hold_after_drop(t, absolute_error(fall, ref), when)
+    at_drop = np.flatnonzero(t == when)[0]
+    np.testing.assert_array_equal(held[:at_drop + 1], absolute_error(fall, ref)[:at_drop + 1])
+    assert np.all(held[at_drop:, 1] == held[at_drop, 1]) and held[-1, 1] == pytest.approx(0.5 * 9.81 * when ** 2)
+    # without a drop nothing changes
+    np.testing.assert_array_equal(hold_after_drop(t, absolute_error(fall, ref), None), absolute_error(fall, ref))
 
 
 def test_confidence_interval_matches_the_student_t_formula():

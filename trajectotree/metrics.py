@@ -8,6 +8,9 @@ Drop rule: the box is dropped at the first sample where its position is farther
 than `drop_distance` (SimConfig, default 5 cm, a quarter of the box's length)
 from the planned position. A box that leaves the fingers falls under gravity
 and crosses this distance within ~0.1 s; a held box stays within millimetres.
+There is no floor, so a dropped box falls for ever: from the drop on, the tracking
+error is held at its value at the drop (`hold_after_drop`), as if the box lay where
+it left the hand; otherwise metres of free fall would swamp every mean.
 """
 
 from __future__ import annotations
@@ -41,6 +44,16 @@ def detect_drop(t, pose, pose_ref, drop_distance: float) -> tuple[bool, float | 
     if beyond.size == 0:
         return False, None
     return True, float(np.asarray(t)[beyond[0]])
+
+
+def hold_after_drop(t, abs_error, drop_time: float | None) -> np.ndarray:
+    """(T, 3) abs_error with every sample after drop_time replaced by the one at it."""
+    held = np.array(abs_error, dtype=float)
+    if drop_time is not None:
+        after = np.asarray(t) > drop_time
+        if after.any():
+            held[after] = held[np.flatnonzero(~after)[-1]]
+    return held
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ class SimResult:
     x: np.ndarray            # (T, 3) simulated object pose (x m, y m, theta rad)
     q: np.ndarray            # (T, 8) rad, simulated joint angles (finger-major)
     x_plan: np.ndarray       # (T, 3) planned object pose at the same times
-    abs_error: np.ndarray    # (T, 3) |x - x_plan|
+    abs_error: np.ndarray    # (T, 3) |x - x_plan|, held at its drop-time value after a drop
     mae_x: float             # m, time mean of |x error|
     mae_y: float             # m
     mae_theta: float         # rad
@@ -135,9 +135,9 @@ def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.nd
 def evaluate(reference: Reference, config: Config, t, x, q, sim_time_s: float) -> SimResult:
     """Metrics of a simulated run against the planned object trajectory."""
     x_plan = reference.object_pose_at(t)
-    abs_error = metrics.absolute_error(x, x_plan)
-    mae = metrics.mean_absolute_error(abs_error)
     dropped, drop_time = metrics.detect_drop(t, x, x_plan, config.sim.drop_distance)
+    abs_error = metrics.hold_after_drop(t, metrics.absolute_error(x, x_plan), drop_time)
+    mae = metrics.mean_absolute_error(abs_error)
     return SimResult(t=t, x=x, q=q, x_plan=x_plan, abs_error=abs_error, mae_x=float(mae[0]), mae_y=float(mae[1]),
                      mae_theta=float(mae[2]), final_error=tuple(float(v) for v in metrics.final_error(abs_error)),
                      dropped=dropped, drop_time_s=drop_time, sim_time_s=sim_time_s)

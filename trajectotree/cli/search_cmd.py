@@ -6,11 +6,11 @@ not a plan was found (`"success": false` with a reason), 2 on invalid input.
 
 from __future__ import annotations
 
+import io
 import math
-import os
-import tempfile
 
 from trajectotree.cli.common import add_config_options, check_goal, config_from_args, print_json
+from trajectotree.io import write_bytes_atomic
 
 
 def register(subparsers) -> None:
@@ -47,17 +47,12 @@ def draw_plan(scene, plan, path: str) -> None:
         ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
     fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
     fig.tight_layout()
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=directory)
-    os.close(fd)
+    buffer = io.BytesIO()
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
+        fig.savefig(buffer, format="png", dpi=110)
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.remove(tmp)
-
+    write_bytes_atomic(path, buffer.getvalue())
 
 def run(args) -> int:
     from trajectotree.scene import build_scene
