@@ -25,11 +25,17 @@ def test_theta_error_is_not_wrapped():
     assert err[0, 2] == pytest.approx(2 * math.pi)
 
 
-def test_free_fall_is_detected_when_it_passes_the_drop_distance():
+def free_fall():
+    """(t, planned pose at rest, pose of a box falling from it) over 1 s."""
     t = np.arange(0.0, 1.0, 0.01)
     ref = np.zeros((t.size, 3))
     fall = ref.copy()
     fall[:, 1] = -0.5 * 9.81 * t ** 2
+    return t, ref, fall
+
+
+def test_free_fall_is_detected_when_it_passes_the_drop_distance():
+    t, ref, fall = free_fall()
     dropped, when = detect_drop(t, fall, ref, 0.05)
     assert dropped
     expected = t[np.argmax(0.5 * 9.81 * t ** 2 > 0.05)]   # first sample beyond 5 cm: sqrt(0.1/9.81) = 0.101 s
@@ -41,11 +47,8 @@ def test_free_fall_is_detected_when_it_passes_the_drop_distance():
 
 
 def test_error_is_held_after_the_drop():
-    t = np.arange(0.0, 1.0, 0.01)
-    ref = np.zeros((t.size, 3))
-    fall = ref.copy()
-    fall[:, 1] = -0.5 * 9.81 * t ** 2
-    dropped, when = detect_drop(t, fall, ref, 0.05)
+    t, ref, fall = free_fall()
+    _, when = detect_drop(t, fall, ref, 0.05)
     held = hold_after_drop(t, absolute_error(fall, ref), when)
     at_drop = np.flatnonzero(t == when)[0]
     np.testing.assert_array_equal(held[:at_drop + 1], absolute_error(fall, ref)[:at_drop + 1])
