@@ -131,8 +131,11 @@ def execute_trial(task: TrialTask) -> TrialOutcome:
         raise TrialInterrupted(task.key)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix=f"trajectotree-{task.key}-") as tmp:
+        # One OpenMP thread for SPRAL unless the user chose otherwise: trials run side by side anyway,
+        # and a threaded factorization may round differently from run to run (same trial, same result).
+        env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
         child = subprocess.Popen([sys.executable, "-m", "trajectotree.trial", tmp], stdin=subprocess.PIPE,
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         with _children_lock:
             _children.add(child)
         try:
