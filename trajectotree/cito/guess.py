@@ -44,8 +44,7 @@ def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVari
     x = np.vstack([node.object_pose + np.outer(progress[:-1], nxt.object_pose - node.object_pose)
                    for node, nxt in zip(plan.nodes[:-1], plan.nodes[1:])] + [plan.nodes[-1].object_pose[None]])
     hand, r = rows.body.hand, rows.body.radius
-    w, h = 2 * rows.body.offsets[:2]
-    boundary = BoxBoundary(w, h)
+    boundary = BoxBoundary(*(2 * rows.body.offsets[:2]))   # face offsets start with w/2, h/2
     q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
     for s in range(len(plan.nodes) - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]

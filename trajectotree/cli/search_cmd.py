@@ -54,6 +54,7 @@ def draw_plan(scene, plan, path: str) -> None:
         plt.close(fig)
     write_bytes_atomic(path, buffer.getvalue())
 
+
 def run(args) -> int:
     from trajectotree.scene import build_scene
     from trajectotree.search import find_contact_plan
