@@ -78,3 +78,19 @@ def test_check_plan_rejects_plans_of_another_box(scene, plan):
         check_plan(moved, scene)
     with pytest.raises(ConfigError, match="nodes"):
         check_plan(dataclasses.replace(plan, nodes=plan.nodes[:1]), scene)
+
+
+def test_switch_clearance_lifts_the_switching_finger_mid_move(scene, plan):
+    M, h = CONFIG.knots_per_segment, 0.01
+    assert not transition_spec(plan, radius=scene.tip_radius, config=CONFIG).clearance.any()  # the paper's: none
+    config = dataclasses.replace(CONFIG, switch_clearance=h)
+    spec = transition_spec(plan, radius=scene.tip_radius, config=config)
+    expected = np.zeros((spec.num_knots, 4))
+    expected[:M + 1, 2] = h * np.sin(np.pi * np.arange(M + 1) / M)          # finger 2 switches in segment 0
+    np.testing.assert_allclose(spec.clearance, expected, atol=1e-15)
+    program = build_program(scene, config, spec)
+    for k, binding in enumerate(program.knot_bindings):
+        lower = binding.evaluator().lower_bound()
+        free_row = program.rows.row_start[k, 2]
+        assert lower[free_row] == pytest.approx(expected[k, 2] if 0 < k < M else 0.0)
+        assert np.count_nonzero(lower) == (1 if 0 < k < M else 0)

@@ -108,6 +108,24 @@ def test_trajectotree_keeps_fixed_fingers_on_their_planned_contacts(plans, scene
 
 
 @pytest.mark.slow
+def test_switch_clearance_lifts_the_switching_finger(scene):
+    h = 0.01
+    config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, switch_clearance=h))
+    result = plan(scene=scene, goal=0.3, method="trajectotree", config=config)
+    assert result.success, result.status
+    traj, M = result.trajectory, config.cito.knots_per_segment
+    gaps = tip_distances({"x": traj.x, "p_W_tip": traj.p_W_tip}, config.scene, scene.tip_radius)
+    switches = [(s, node.switching_finger) for s, node in enumerate(result.contact_plan.nodes[1:])
+                if node.switching_finger is not None]
+    assert switches
+    j = np.arange(1, M)
+    for s, finger in switches:
+        mid = gaps[s * M + j, finger]
+        # The smooth distance the program uses over-estimates the exact one near corners by <= log(2)/1000 m.
+        assert np.all(mid >= h * np.sin(np.pi * j / M) - 1e-3), (s, mid)
+
+
+@pytest.mark.slow
 def test_saved_plan_round_trips_and_matches_design(plans):
     result, folder = plans["trajectotree", 0.3]
     data = json.loads((folder / "plan.json").read_text())

@@ -47,6 +47,7 @@ class ProgramSpec:
     rest_knots: np.ndarray         # knots where object and joint velocities are zero
     goal_poses: tuple              # per knot, an (n_k, 3) array of incremental goals x*_n (eq. 11)
     segment_length: int = 0        # M_hat knots per segment (0: not segmented)
+    clearance: np.ndarray | None = None  # (K, 4) m, least fingertip-surface gap of free fingers (None: 0)
 
     @property
     def num_knots(self) -> int:
@@ -159,7 +160,7 @@ def build_program(scene, config: CitoConfig, spec: ProgramSpec, body: BodyParams
     bindings = []
     for k in range(K):
         evaluator = _KnotConstraint(cache, k)
-        lower, upper = rows.bounds(k)
+        lower, upper = rows.bounds(k, None if spec.clearance is None else spec.clearance[k])
         binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
         binding.evaluator().SetGradientSparsityPattern(rows.sparsity(k))
         bindings.append(binding)

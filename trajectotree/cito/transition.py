@@ -6,7 +6,8 @@ K = (N-1) M_hat + 1 (the paper's M = (N-1) M_hat time steps). In segment s:
   - fixed fingers are pinned at their planned contacts at every knot (eq. 15);
   - the switching finger of node s+1 is pinned at its old contact at the first
     knot and at its new one at the last (eqs. 12-13), and free with the
-    complementarity rows in between (eq. 14);
+    complementarity rows in between (eq. 14), lifted off the box by at least
+    switch_clearance sin(pi j / M_hat) at its j-th knot (not in the paper; 0 by default);
   - the object and joints are at rest at the segment's first and last knot
     (eqs. 18-19); x_0 and q_0 are fixed (eqs. 16-17);
   - the running pose cost targets x*_{s+1} (eq. 11).
@@ -54,6 +55,8 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
     pinned = np.ones((K, NUM_FINGERS), bool)
     c_B = np.zeros((K, NUM_FINGERS, 2))
     n_B = np.zeros((K, NUM_FINGERS, 2))
+    clearance = np.zeros((K, NUM_FINGERS))
+    lift = config.switch_clearance * np.sin(np.pi * np.arange(M + 1) / M)
     goals = [[] for _ in range(K)]
     for s in range(N - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]
@@ -63,11 +66,12 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
         f = new.switching_finger
         if f is not None:
             pinned[ks[1:-1], f] = False
+            clearance[ks, f] = lift
         c_B[ks[-1]] = new.p_BC + radius * new.n_B
         n_B[ks[-1]] = new.n_B
         for k in ks:
             goals[k].append(new.object_pose)
     return ProgramSpec(dt=config.dt, pinned=pinned, c_B=c_B, n_B=n_B, x0=np.asarray(plan.nodes[0].object_pose, float),
                        q0=np.asarray(plan.nodes[0].q, float), rest_knots=np.arange(0, K, M),
-                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
+                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M, clearance=clearance)
 
