@@ -79,14 +79,13 @@ class KnotRows:
     def knot(self, k: int) -> "KnotRows":
         return KnotRows(self.body, self.pinned[k:k + 1], self.c_B[k:k + 1], self.n_B[k:k + 1])
 
-    def bounds(self, k: int, clearance=None):
-        """(lower, upper) of knot k's rows; `clearance` (4,) m raises the lower bound of
-        each free finger's non-penetration row phi - r >= clearance."""
+    def bounds(self, k: int, clearance):
+        """(lower, upper) of knot k's rows; `clearance` (4,) m is the lower bound of each
+        free finger's non-penetration row phi - r >= clearance."""
         n = self.num_rows[k]
         lower = np.zeros(n)
-        if clearance is not None:
-            free = ~self.pinned[k]
-            lower[self.row_start[k, free]] = np.asarray(clearance, dtype=float)[free]
+        free = ~self.pinned[k]
+        lower[self.row_start[k, free]] = np.asarray(clearance, dtype=float)[free]
         return lower, np.concatenate([np.zeros(NUM_BODY_ROWS), np.full(n - NUM_BODY_ROWS, np.inf)])
 
     def kinematics(self, Z: np.ndarray) -> SimpleNamespace:

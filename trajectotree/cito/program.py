@@ -42,12 +42,12 @@ class ProgramSpec:
     pinned: np.ndarray             # (K, 4) bool, finger pinned to a planned contact at knot k
     c_B: np.ndarray                # (K, 4, 2) m, pinned fingertip-centre target in B
     n_B: np.ndarray                # (K, 4, 2) planned contact normal in B
+    clearance: np.ndarray          # (K, 4) m, least fingertip-surface gap of free fingers
     x0: np.ndarray                 # (3,) fixed initial object pose
     q0: np.ndarray                 # (8,) fixed initial joint angles
     rest_knots: np.ndarray         # knots where object and joint velocities are zero
     goal_poses: tuple              # per knot, an (n_k, 3) array of incremental goals x*_n (eq. 11)
     segment_length: int = 0        # M_hat knots per segment (0: not segmented)
-    clearance: np.ndarray | None = None  # (K, 4) m, least fingertip-surface gap of free fingers (None: 0)
 
     @property
     def num_knots(self) -> int:
@@ -160,7 +160,7 @@ def build_program(scene, config: CitoConfig, spec: ProgramSpec, body: BodyParams
     bindings = []
     for k in range(K):
         evaluator = _KnotConstraint(cache, k)
-        lower, upper = rows.bounds(k, None if spec.clearance is None else spec.clearance[k])
+        lower, upper = rows.bounds(k, spec.clearance[k])
         binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
         binding.evaluator().SetGradientSparsityPattern(rows.sparsity(k))
         bindings.append(binding)
@@ -205,5 +205,6 @@ def general_spec(*, x0, q0, object_path, config: CitoConfig, dt: float | None = 
             goals[k].append(path[s + 1])
     return ProgramSpec(dt=dt or config.dt, pinned=np.zeros((K, NUM_FINGERS), bool),
                        c_B=np.zeros((K, NUM_FINGERS, 2)), n_B=np.tile([1.0, 0.0], (K, NUM_FINGERS, 1)),
+                       clearance=np.zeros((K, NUM_FINGERS)),
                        x0=np.asarray(x0, float), q0=np.asarray(q0, float), rest_knots=np.array([0, K - 1]),
                        goal_poses=tuple(np.array(g) for g in goals), segment_length=M)

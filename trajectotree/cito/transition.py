@@ -71,7 +71,8 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
         n_B[ks[-1]] = new.n_B
         for k in ks:
             goals[k].append(new.object_pose)
-    return ProgramSpec(dt=config.dt, pinned=pinned, c_B=c_B, n_B=n_B, x0=np.asarray(plan.nodes[0].object_pose, float),
-                       q0=np.asarray(plan.nodes[0].q, float), rest_knots=np.arange(0, K, M),
-                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M, clearance=clearance)
+    return ProgramSpec(dt=config.dt, pinned=pinned, c_B=c_B, n_B=n_B, clearance=clearance,
+                       x0=np.asarray(plan.nodes[0].object_pose, float), q0=np.asarray(plan.nodes[0].q, float),
+                       rest_knots=np.arange(0, K, M),
+                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
 
