@@ -11,7 +11,7 @@ def test_demo_writes_the_plan_run_figure_playback_and_summary(tmp_path, capsys):
     printed = capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
     assert summary["files"] == ["plan.json", "plan.npz", "keyframes.png", "sim.json", "sim.npz", "playback.html",
-                                "summary.json"]
+                                "forces.png", "summary.json"]
     for name in summary["files"]:
         assert (out / name).stat().st_size > 0, name
     plan_json = json.loads((out / "plan.json").read_text())
@@ -21,6 +21,7 @@ def test_demo_writes_the_plan_run_figure_playback_and_summary(tmp_path, capsys):
         assert summary["plan"][key] == plan_json[key], key
     assert summary["simulation"] == sim_json
     assert (out / "keyframes.png").read_bytes()[:4] == b"\x89PNG"
+    assert (out / "forces.png").read_bytes()[:4] == b"\x89PNG"
     assert "<html" in (out / "playback.html").read_text()[:2000].lower()
     assert f"{plan_json['total_time_s']:.2f} s" in printed and str(out) in printed
 

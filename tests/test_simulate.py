@@ -13,7 +13,7 @@ from trajectotree.control import ImpedanceController
 from trajectotree.io import load_sim, save_sim
 from trajectotree.reference import check_plan_arrays, reference_from_arrays, static_hold_reference
 from trajectotree.scene import build_scene
-from trajectotree.simulate import held_trajectory, run_simulation
+from trajectotree.simulate import held_trajectory, run_simulation, simulate_reference
 
 HOLD_ARCLENGTHS = (0.56, 0.14, 0.26, 0.44)
 SIM_JSON_KEYS = {"mae_x", "mae_y", "mae_theta", "final_error", "dropped", "drop_time_s", "sim_time_s"}
@@ -117,22 +117,42 @@ def test_run_simulation_result_files_and_gif(scene, short_config, tmp_path):
     assert json.loads((tmp_path / "sim.json").read_text()) == pytest.approx(summary)
     loaded = load_sim(tmp_path)
     np.testing.assert_allclose(loaded.abs_error, result.abs_error)
+    np.testing.assert_allclose(loaded.f_W, result.f_W)
     assert loaded.to_json() == summary
     from PIL import Image
     with Image.open(gif) as image:
         assert image.format == "GIF" and image.n_frames >= 7
 
 
+def test_simulated_finger_forces_hold_the_box_up_as_planned(scene, short_config):
+    """Newton on the held box: the logged finger forces sum to its weight, and each
+    finger presses with about the planned (static-grasp) force."""
+    reference = reference_from_arrays(hold_plan_arrays(scene, 0.5), scene)
+    result = run_simulation(plan=reference, config=short_config)
+    assert result.f_W.shape == result.f_W_plan.shape == (len(result.t), 4, 2)
+    np.testing.assert_allclose(result.f_W_plan, np.broadcast_to(reference.f_W[0], result.f_W.shape))
+    c = scene.config
+    late = result.t > 0.2
+    np.testing.assert_allclose(result.f_W[late].sum(axis=1), np.tile([0.0, c.box_mass * c.gravity], (late.sum(), 1)),
+                               atol=0.02)
+    np.testing.assert_allclose(result.f_W[late], result.f_W_plan[late], atol=0.1)
+    # without the controller the fingers let go: no force on the falling box at the end
+    open_loop = simulate_reference(reference, short_config, controlled=False)
+    assert open_loop.dropped and np.all(open_loop.f_W[-1] == 0.0)
+
+
 def test_simulate_command_writes_sim_json(scene, short_config, tmp_path, capsys):
     plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), short_config)
     html = tmp_path / "run.html"
-    assert main(["simulate", str(plan_dir), "--json", "--html", str(html)]) == 0
+    forces = tmp_path / "forces.png"
+    assert main(["simulate", str(plan_dir), "--json", "--html", str(html), "--forces", str(forces)]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert SIM_JSON_KEYS <= set(printed) and printed["dropped"] is False
     assert json.loads((plan_dir / "sim.json").read_text()) == printed
     text = html.read_text()
     assert "<html" in text.lower() and "animation" in text
     assert len(text) > 500_000  # the viewer's scripts are inlined: the file is self-contained
+    assert forces.read_bytes()[:4] == b"\x89PNG"
 
 
 def test_simulate_command_rejects_bad_plan_dirs(scene, short_config, tmp_path, capsys):
@@ -168,6 +188,10 @@ def test_simulate_command_rejects_a_different_scene(scene, short_config, tmp_pat
     assert not (plan_dir / "sim.json").exists()
     assert main(["simulate", str(plan_dir), "--kp", "-1"]) == 2
     assert "controller.kp" in capsys.readouterr().err
+    assert main(["simulate", str(plan_dir), "--forces", str(tmp_path / "forces.gif")]) == 2
+    err = capsys.readouterr().err
+    assert "forces.gif" in err and ".png" in err
+    assert not (plan_dir / "sim.json").exists() and not (tmp_path / "forces.gif").exists()
 
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 SIM_JSON = "sim.json"
 SIM_NPZ = "sim.npz"
-SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error")
+SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error", "f_W", "f_W_plan")
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:
@@ -33,7 +33,8 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
 
 def save_sim(result, plan_dir: str | Path) -> None:
     """plan_dir/sim.json (SimResult.to_json) and plan_dir/sim.npz (t (T,), abs_error
-    (T, 3), and the simulated pose x, joint angles q and planned pose x_plan)."""
+    (T, 3), the simulated pose x, joint angles q and planned pose x_plan, and the
+    simulated and planned finger forces f_W, f_W_plan (T, 4, 2))."""
     buffer = _io.BytesIO()
     np.savez(buffer, **{name: getattr(result, name) for name in SIM_ARRAYS})
     write_bytes_atomic(Path(plan_dir) / SIM_NPZ, buffer.getvalue())

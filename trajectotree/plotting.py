@@ -68,6 +68,17 @@ def plot_mean_band(ax, t, mean, lower, upper, *, color=None, label=None, alpha=0
     return [line, band]
 
 
+def plot_finger_force(ax, t, f_sim, f_plan, *, color=None, drop_time=None):
+    """Magnitudes of one finger's simulated (solid) and planned (dashed) force on the
+    box over time; f_sim, f_plan (T, 2). A dotted line marks the drop, if any."""
+    (sim,) = ax.plot(t, np.linalg.norm(f_sim, axis=1), color=color, lw=1.2, label="simulated")
+    (plan,) = ax.plot(t, np.linalg.norm(f_plan, axis=1), color=sim.get_color(), lw=1.2, ls="--", label="planned")
+    artists = [sim, plan]
+    if drop_time is not None:
+        artists.append(ax.axvline(drop_time, color="k", ls=":", lw=1.0, label="drop"))
+    return artists
+
+
 def plot_contacts(ax, pose, p_BC, n_B, *, colors=FINGER_COLORS, size=18):
     """Contact points p_BC (k, 2) of the box at `pose`, one colour per finger, with their
     outward normals n_B as short arrows."""

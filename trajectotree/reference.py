@@ -39,6 +39,13 @@ class Reference:
         times = np.asarray(times, dtype=float)
         return np.stack([np.interp(times, self.t, self.x[:, j]) for j in range(3)], axis=1)
 
+    def forces_at(self, times) -> np.ndarray:
+        """(T, 4, 2) planned finger forces on the box, linearly interpolated, held after the end."""
+        flat = self.f_W.reshape(len(self.t), -1)
+        times = np.asarray(times, dtype=float)
+        return np.stack([np.interp(times, self.t, flat[:, j]) for j in range(flat.shape[1])], axis=1).reshape(
+            len(times), NUM_FINGERS, 2)
+
 
 def check_plan_arrays(arrays) -> dict[str, np.ndarray]:
     """The plan.npz arrays as float arrays with consistent shapes; raises ValueError

@@ -217,17 +217,39 @@ def figure_tracking(tracks: dict[str, list], methods: list[str]):
     return fig
 
 
+def figure_finger_forces(result):
+    """Each finger's simulated vs planned force on the box over one executed plan
+    (a SimResult): where the run leaves the plan's contact forces, and when."""
+    import matplotlib.pyplot as plt
+
+    from trajectotree.plotting import FINGER_COLORS, plot_finger_force
+    fingers = result.f_W.shape[1]
+    fig, axes = plt.subplots(fingers, 1, figsize=(8, 1.6 * fingers + 0.6), sharex=True)
+    for i, ax in enumerate(axes):
+        plot_finger_force(ax, result.t, result.f_W[:, i], result.f_W_plan[:, i], color=FINGER_COLORS[i],
+                          drop_time=result.drop_time_s)
+        ax.set_ylabel(f"finger {i} [N]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=3, loc="upper right")
+    axes[0].set_title("force of each finger on the box: simulated (solid) vs planned (dashed)", fontsize=10)
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    return fig
+
+
+def save_figure(fig, path: str | Path) -> str:
+    """Writes fig to path atomically, in the format its suffix names."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format=Path(path).suffix.lstrip("."), dpi=150)
+    write_bytes_atomic(path, buffer.getvalue())
+    return str(path)
+
+
 def _save(fig, stem: Path) -> tuple[str, str]:
     import matplotlib.pyplot as plt
-    paths = []
-    for ext in ("png", "pdf"):
-        target = stem.with_suffix(f".{ext}")
-        buffer = io.BytesIO()
-        fig.savefig(buffer, format=ext, dpi=150)
-        write_bytes_atomic(target, buffer.getvalue())
-        paths.append(str(target))
+    png, pdf = (save_figure(fig, stem.with_suffix(f".{ext}")) for ext in ("png", "pdf"))
     plt.close(fig)
-    return paths[0], paths[1]
+    return png, pdf
 
 
 def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tuple[ReportFiles, list[dict]]:

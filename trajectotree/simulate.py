@@ -5,7 +5,9 @@ models/ (point contact between fingertip spheres, links and the box, friction
 from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), the ImpedanceController (eq. 20),
-a logger of the plant state and, optionally, a Meshcat visualizer.
+loggers of the plant state and of each finger's simulated force on the box
+(`FingertipForces`, compared with the planned forces in `SimResult`) and,
+optionally, a Meshcat visualizer.
 
 The run starts in the plan's initial state (x_0, q_0, at rest). Finger-finger
 collisions are filtered out: the planners do not model them, and the fingers
@@ -22,13 +24,15 @@ import numpy as np
 from pydrake.geometry import CollisionFilterDeclaration, Meshcat
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, TriggerType
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.plant import ContactResults
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from trajectotree import metrics, playback
 from trajectotree.config import Config
-from trajectotree.control import ImpedanceController
+from trajectotree.control import FINGERTIP_VECTOR_SIZE, ImpedanceController
 from trajectotree.reference import Reference, reference_from_plan
 from trajectotree.scene import NUM_FINGERS, add_hand_and_box, build_scene
 
@@ -40,6 +44,8 @@ class SimResult:
     q: np.ndarray            # (T, 8) rad, simulated joint angles (finger-major)
     x_plan: np.ndarray       # (T, 3) planned object pose at the same times
     abs_error: np.ndarray    # (T, 3) |x - x_plan|, held at its drop-time value after a drop
+    f_W: np.ndarray          # (T, 4, 2) N, simulated force of each finger on the box, in W
+    f_W_plan: np.ndarray     # (T, 4, 2) N, planned force of each finger on the box at the same times
     mae_x: float             # m, time mean of |x error|
     mae_y: float             # m
     mae_theta: float         # rad
@@ -55,6 +61,32 @@ class SimResult:
                 "sim_time_s": self.sim_time_s, "duration_s": float(self.t[-1]), "num_samples": int(len(self.t))}
 
 
+class FingertipForces(LeafSystem):
+    """Input port `contact_results` (the plant's); output port `f_W` (8, finger-major
+    (x, y)): the force of each finger's second link (fingertip sphere and link) on the
+    box, in W, summed over its point contacts."""
+
+    def __init__(self, plant, hand, box):
+        super().__init__()
+        self._finger_of_body = {plant.GetBodyByName(f"finger{i}_link2", hand).index(): i for i in range(NUM_FINGERS)}
+        self._box_body = plant.GetBodyByName("box", box).index()
+        self.contact_results_port = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
+        self.DeclareVectorOutputPort("f_W", FINGERTIP_VECTOR_SIZE, self.CalcForces)
+
+    def CalcForces(self, context, output):
+        results = self.contact_results_port.Eval(context)
+        f_W = np.zeros((NUM_FINGERS, 2))
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            a, b = info.bodyA_index(), info.bodyB_index()
+            f_on_b = info.contact_force()[:2]   # the force on body B, in W
+            if b == self._box_body and a in self._finger_of_body:
+                f_W[self._finger_of_body[a]] += f_on_b
+            elif a == self._box_body and b in self._finger_of_body:
+                f_W[self._finger_of_body[b]] -= f_on_b
+        output.SetFromVector(f_W.ravel())
+
+
 @dataclass
 class ExecutionDiagram:
     diagram: object
@@ -62,6 +94,7 @@ class ExecutionDiagram:
     hand: object               # ModelInstanceIndex
     box: object                # ModelInstanceIndex
     state_logger: object       # VectorLogSink of the plant's full state
+    force_logger: object       # VectorLogSink of FingertipForces (8)
     visualizer: object | None  # MeshcatVisualizer or None
     duration: float            # s, plan length + settle time
 
@@ -115,11 +148,14 @@ def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Me
     else:
         zero = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
         builder.Connect(zero.get_output_port(), plant.get_actuation_input_port())
-    state_logger = LogVectorOutput(plant.get_state_output_port(), builder,
-                                   {TriggerType.kPeriodic, TriggerType.kForced}, config.sim.log_period)
+    triggers = {TriggerType.kPeriodic, TriggerType.kForced}
+    state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
+    forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box))
+    builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
+    force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
     return ExecutionDiagram(diagram=builder.Build(), plant=plant, hand=hand, box=box, state_logger=state_logger,
-                            visualizer=visualizer, duration=reference.duration + hold)
+                            force_logger=force_logger, visualizer=visualizer, duration=reference.duration + hold)
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -132,13 +168,14 @@ def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.nd
     return log.sample_times().copy(), data[box_start:box_start + 3].T.copy(), data[hand_q].T.copy()
 
 
-def evaluate(reference: Reference, config: Config, t, x, q, sim_time_s: float) -> SimResult:
+def evaluate(reference: Reference, config: Config, t, x, q, f_W, sim_time_s: float) -> SimResult:
     """Metrics of a simulated run against the planned object trajectory."""
     x_plan = reference.object_pose_at(t)
     dropped, drop_time = metrics.detect_drop(t, x, x_plan, config.sim.drop_distance)
     abs_error = metrics.hold_after_drop(t, metrics.absolute_error(x, x_plan), drop_time)
     mae = metrics.mean_absolute_error(abs_error)
-    return SimResult(t=t, x=x, q=q, x_plan=x_plan, abs_error=abs_error, mae_x=float(mae[0]), mae_y=float(mae[1]),
+    return SimResult(t=t, x=x, q=q, x_plan=x_plan, abs_error=abs_error, f_W=f_W, f_W_plan=reference.forces_at(t),
+                     mae_x=float(mae[0]), mae_y=float(mae[1]),
                      mae_theta=float(mae[2]), final_error=tuple(float(v) for v in metrics.final_error(abs_error)),
                      dropped=dropped, drop_time_s=drop_time, sim_time_s=sim_time_s)
 
@@ -160,11 +197,15 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
     start = time.perf_counter()
     simulator.AdvanceTo(execution.duration)
     sim_time_s = time.perf_counter() - start
-    logger_context = execution.state_logger.GetMyContextFromRoot(simulator.get_context())
-    log = execution.state_logger.FindLog(simulator.get_context())
-    if log.sample_times()[-1] < execution.duration - 1e-9:  # the periodic log can miss the end by rounding
-        execution.state_logger.ForcedPublish(logger_context)
-    result = evaluate(reference, config, *split_state_log(execution, log), sim_time_s)
+    logs = []
+    for logger in (execution.state_logger, execution.force_logger):
+        log = logger.FindLog(simulator.get_context())
+        if log.sample_times()[-1] < execution.duration - 1e-9:  # the periodic log can miss the end by rounding
+            logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
+        logs.append(log)
+    t, x, q = split_state_log(execution, logs[0])
+    f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
+    result = evaluate(reference, config, t, x, q, f_W, sim_time_s)
     if meshcat is not None:
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
         playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))

@@ -5,7 +5,8 @@ search, then the plan-constrained CITO solved with IPOPT), executes the plan in 
 full-dynamics Drake simulation with the impedance controller, and writes into --out:
 plan.json + plan.npz (the plan), sim.json + sim.npz (the run and its tracking errors),
 keyframes.png (the contact sequence), playback.html (Meshcat playback of the run, opens
-offline in any browser) and summary.json (the numbers printed at the end).
+offline in any browser), forces.png (each finger's simulated vs planned force on the box)
+and summary.json (the numbers printed at the end).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from trajectotree.cli.common import add_config_options, check_goal, config_from_
 
 KEYFRAMES = "keyframes.png"
 PLAYBACK = "playback.html"
+FORCES = "forces.png"
 SUMMARY = "summary.json"
 
 
@@ -68,6 +70,7 @@ def run(args) -> int:
     from trajectotree.io import save_plan, save_sim, write_bytes_atomic
     from trajectotree.planners import plan
     from trajectotree.playback import start_meshcat
+    from trajectotree.report import figure_finger_forces, save_figure
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
@@ -93,7 +96,8 @@ def run(args) -> int:
         print("simulating the plan with the impedance controller ...", file=log, flush=True)
         sim = run_simulation(plan=result, config=config, meshcat=meshcat, html_path=out / PLAYBACK)
         save_sim(sim, out)
-        files += ["sim.json", "sim.npz", PLAYBACK]
+        save_figure(figure_finger_forces(sim), out / FORCES)
+        files += ["sim.json", "sim.npz", PLAYBACK, FORCES]
     summary = {"plan": plan_summary(result), "simulation": None if sim is None else sim.to_json(),
                "files": files + [SUMMARY]}
     write_bytes_atomic(out / SUMMARY, (json.dumps(summary, indent=2) + "\n").encode())

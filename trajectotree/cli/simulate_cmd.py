@@ -15,6 +15,8 @@ from trajectotree.cli import InputError
 from trajectotree.cli.common import print_json
 from trajectotree.config import Config, config_from_dict, load_config
 
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("simulate", help="execute a saved plan with the impedance controller",
@@ -22,6 +24,8 @@ def register(subparsers) -> None:
     p.add_argument("plan_dir", metavar="PLAN_DIR", help="folder with plan.npz and plan.json (from `trajectotree plan`)")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the run")
     p.add_argument("--gif", metavar="FILE", help="write a matplotlib GIF of the run (no WebGL needed)")
+    p.add_argument("--forces", metavar="FILE.png",
+                   help="plot each finger's simulated vs planned force on the box (.png, .pdf or .svg)")
     p.add_argument("--meshcat", action="store_true", help="watch live in Meshcat on localhost (runs in real time)")
     p.add_argument("--json", action="store_true", help="print sim.json to stdout")
     group = p.add_argument_group("execution settings (default: the plan's config; the scene must match the plan)")
@@ -91,10 +95,13 @@ def execution_config(args, plan_config: Config) -> Config:
 def run(args) -> int:
     from trajectotree.io import save_sim
     from trajectotree.playback import start_meshcat
+    from trajectotree.report import figure_finger_forces, save_figure
     from trajectotree.reference import reference_from_arrays
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
+    if args.forces and Path(args.forces).suffix not in FIGURE_SUFFIXES:
+        raise InputError(f"--forces {args.forces!r}: the file name must end in one of {', '.join(FIGURE_SUFFIXES)}")
     arrays, plan_config = read_plan_dir(args.plan_dir)
     config = execution_config(args, plan_config)
     meshcat = None
@@ -104,6 +111,8 @@ def run(args) -> int:
     reference = reference_from_arrays(arrays, build_scene(config.scene))
     result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif)
     save_sim(result, args.plan_dir)
+    if args.forces:
+        save_figure(figure_finger_forces(result), args.forces)
     summary = result.to_json()
     if args.json:
         print_json(summary)
@@ -111,7 +120,7 @@ def run(args) -> int:
         drop = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
         print(f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: box {drop}; "
               f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad")
-        print(f"wrote {Path(args.plan_dir) / 'sim.json'}" + "".join(f", {p}" for p in (args.html, args.gif) if p))
+        print(f"wrote {Path(args.plan_dir) / 'sim.json'}" + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p))
     if meshcat is not None and sys.stdin.isatty():
         input("Meshcat shows the recording; press Enter to exit. ")
     return 0
