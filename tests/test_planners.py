@@ -123,6 +123,8 @@ def test_switch_clearance_lifts_the_switching_finger(scene):
         mid = gaps[s * M + j, finger]
         # The smooth distance the program uses over-estimates the exact one near corners by <= log(2)/1000 m.
         assert np.all(mid >= h * np.sin(np.pi * j / M) - 1e-3), (s, mid)
+        # ... and, held off the box, it does not push it (no force across the gap)
+        assert np.all(traj.lambda_n[s * M + j, finger] <= 1e-9), (s, traj.lambda_n[s * M + j, finger])
 
 
 @pytest.mark.slow

@@ -124,6 +124,9 @@ def _bounds(v: CitoVariables, spec: ProgramSpec, body: BodyParams):
     lo["q"][:], hi["q"][:] = hand.q_lower, hand.q_upper
     lo["tau"][:], hi["tau"][:] = -hand.tau_max, hand.tau_max
     lo["lambda_n"][:] = 0.0
+    # A finger held off the box (clearance > 0) cannot push it; without this bound the relaxed
+    # complementarity (eq. 5) lets it push through the gap at the price of a slack.
+    hi["lambda_n"][spec.clearance > 0] = 0.0
     lo["slack"][:] = 0.0
     lo["x"][0] = hi["x"][0] = spec.x0
     lo["q"][0] = hi["q"][0] = spec.q0
