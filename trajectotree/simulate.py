@@ -21,11 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import CollisionFilterDeclaration, Meshcat
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-from pydrake.systems.analysis import Simulator
 from pydrake.common.value import AbstractValue
-from pydrake.multibody.plant import ContactResults
+from pydrake.geometry import CollisionFilterDeclaration, Meshcat
+from pydrake.multibody.plant import AddMultibodyPlant, ContactResults, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial

@@ -95,8 +95,8 @@ def execution_config(args, plan_config: Config) -> Config:
 def run(args) -> int:
     from trajectotree.io import save_sim
     from trajectotree.playback import start_meshcat
-    from trajectotree.report import figure_finger_forces, save_figure
     from trajectotree.reference import reference_from_arrays
+    from trajectotree.report import figure_finger_forces, save_figure
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
