@@ -88,6 +88,7 @@ def test_switch_clearance_lifts_the_switching_finger_mid_move(scene, plan):
     expected = np.zeros((spec.num_knots, 4))
     expected[:M + 1, 2] = h * np.sin(np.pi * np.arange(M + 1) / M)          # finger 2 switches in segment 0
     np.testing.assert_allclose(spec.clearance, expected, atol=1e-15)
+    assert not spec.clearance[spec.pinned].any()   # not even sin(pi) * h at the arrival knot: it may push there
     program = build_program(scene, config, spec)
     for k, binding in enumerate(program.knot_bindings):
         lower = binding.evaluator().lower_bound()

@@ -66,7 +66,7 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
         f = new.switching_finger
         if f is not None:
             pinned[ks[1:-1], f] = False
-            clearance[ks, f] = lift
+            clearance[ks[1:-1], f] = lift[1:-1]   # free knots only: pinned at both ends
         c_B[ks[-1]] = new.p_BC + radius * new.n_B
         n_B[ks[-1]] = new.n_B
         for k in ks:
