@@ -36,15 +36,18 @@ class Reference:
 
     def object_pose_at(self, times) -> np.ndarray:
         """(T, 3) planned object pose, linearly interpolated, held after the end."""
-        times = np.asarray(times, dtype=float)
-        return np.stack([np.interp(times, self.t, self.x[:, j]) for j in range(3)], axis=1)
+        return self._at(self.x, times)
 
     def forces_at(self, times) -> np.ndarray:
         """(T, 4, 2) planned finger forces on the box, linearly interpolated, held after the end."""
-        flat = self.f_W.reshape(len(self.t), -1)
+        return self._at(self.f_W, times)
+
+    def _at(self, values: np.ndarray, times) -> np.ndarray:
+        """values (K, ...) at the knots, linearly interpolated to times (T,): (T, ...)."""
         times = np.asarray(times, dtype=float)
-        return np.stack([np.interp(times, self.t, flat[:, j]) for j in range(flat.shape[1])], axis=1).reshape(
-            len(times), NUM_FINGERS, 2)
+        flat = values.reshape(len(self.t), -1)
+        columns = [np.interp(times, self.t, flat[:, j]) for j in range(flat.shape[1])]
+        return np.stack(columns, axis=1).reshape((len(times),) + values.shape[1:])
 
 
 def check_plan_arrays(arrays) -> dict[str, np.ndarray]:
