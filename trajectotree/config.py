@@ -130,9 +130,9 @@ class CitoConfig:
     # switch_clearance sin(pi j / M_hat) between fingertip and box at its segment's j-th knot.
     # 0 leaves it to complementarity, and the optimum then skims the box (gaps 0-3 mm,
     # touching down mid-move). While lifted the finger's normal force is bounded to 0 (it cannot
-    # push across the gap). With 0.01 on goals 0-7 of seed 0 (scripts/bench_planning.py): 78.5
-    # instead of 113 IPOPT iterations, 9.7 s instead of 17.0 s, cost +16 %; 5 instead of 6 of the
-    # 8 executed plans dropped. Off by default: the paper's formulation has no such bound.
+    # push across the gap). With 0.01 on goals 0-7 of seed 0 (scripts/bench_planning.py): 78.6
+    # instead of 113 IPOPT iterations, 11.6 s instead of 16.6 s, cost +15 %; on the 60 goals 44
+    # instead of 47 executed plans dropped. Off by default: the paper's formulation has no such bound.
     switch_clearance: float = 0.0
     # IPOPT tol, on the scaled optimality error; constraints are held to constr_viol_tol regardless.
     # 1e-3 instead of 1e-6: 67 instead of 88 iterations on a 3-segment plan, objective 0.007 % higher.
