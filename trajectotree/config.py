@@ -81,6 +81,9 @@ class SearchConfig:
     initial_arclengths: tuple[float, float, float, float] | None = None
     nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
     min_closure_margin: float = 1e-3    # N, form-closure LP margin d* must exceed this
+    # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
+    # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
+    friction_safety: float = 0.7
     max_expansions: int = 20000         # node budget of the search
     time_budget_s: float = 30.0         # s, wall-clock budget of the search
 
@@ -98,6 +101,7 @@ class SearchConfig:
                 check_range(f"search.initial_arclengths[{i}]", s, 0.0, 10.0)
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
+        check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_integer("search.max_expansions", self.max_expansions, 1)
         check_range("search.time_budget_s", self.time_budget_s, 0.0, None, low_open=True)
 
