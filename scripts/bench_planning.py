@@ -2,7 +2,8 @@
 the paper's 60, seed 0) with each method and prints, per method, the mean and median
 total planning time, the search / build / solve split, IPOPT iterations, the share of
 IPOPT's time spent in function evaluations, build time relative to solve time, the
-success rate, and TrajectoTree's speedup over each baseline measured in this run.
+success rate (with how many solved plans failed the physics check of trajectotree.physics
+and the largest force on a fingertip off the box), and TrajectoTree's speedup over each baseline measured in this run.
 
 Targets (issue 7): TrajectoTree mean total <= 3 s, >= 10x faster than CITO, search
 median <= 0.2 s, function evaluations <= 30 % of solve time, build <= 10 % of solve.
@@ -32,24 +33,29 @@ def run(goals, methods, config: Config) -> dict[str, list[dict]]:
         for goal in goals:
             for method in methods:
                 r = plan(scene=scene, goal=float(goal), method=method, config=config)
-                timing = r.solver_timing
+                timing, check = r.solver_timing, r.physics_check
                 rows[method].append({
                     "goal": r.goal, "success": r.success, "total_s": r.total_time_s, "search_s": r.search_time_s,
                     "build_s": r.build_time_s, "solve_s": r.solve_time_s, "iterations": r.iterations,
                     "cost": r.cost, "function_evaluations_share": timing.get("nlp_function_evaluations_s", np.nan)
-                    / timing.get("ipopt_total_s", np.nan)})
+                    / timing.get("ipopt_total_s", np.nan),
+                    # a solved plan whose arrays fail trajectotree.physics (counted in success = False)
+                    "physics_failed": check is not None and not check.passed,
+                    "force_at_distance_N": np.nan if check is None else check.force_at_distance_N,
+                    "status": r.status})
                 bar.update()
     return rows
 
 
 def summary_line(method: str, rows: list[dict]) -> str:
-    col = {key: np.array([r[key] for r in rows], dtype=float) for key in rows[0]}
-    return (f"{method:13s} success {int(col['success'].sum())}/{len(rows)}  total mean {col['total_s'].mean():6.2f} s "
+    col = {key: np.array([r[key] for r in rows], dtype=float) for key in rows[0] if key != "status"}
+    return (f"{method:13s} success {int(col['success'].sum())}/{len(rows)} (physics check failed "
+            f"{int(col['physics_failed'].sum())}, max force at a distance {np.nanmax(col['force_at_distance_N']):.3g} N)  total mean {col['total_s'].mean():6.2f} s "
             f"median {np.median(col['total_s']):6.2f} s  | search {col['search_s'].mean():.3f} s "
             f"(median {np.median(col['search_s']):.3f})  build {col['build_s'].mean():.2f} s  "
             f"solve {col['solve_s'].mean():6.2f} s  | iterations {col['iterations'].mean():5.1f}  "
             f"function evals {100 * np.nanmean(col['function_evaluations_share']):4.1f} % of IPOPT time  "
-            f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  cost mean {col['cost'].mean():.1f}")
+            f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  cost mean {np.nanmean(col['cost']):.1f}")
 
 
 def main() -> None:

@@ -10,6 +10,7 @@ from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.transition import transition_spec
 from trajectotree.config import Config
 from trajectotree.geometry import BoxBoundary, world_to_box
+from trajectotree.planners import planning_mu
 from trajectotree.scene import build_scene
 from trajectotree.search import find_contact_plan
 
@@ -26,7 +27,7 @@ def setup():
 
 def distances(scene, guess):
     """(K, 4) exact distance of each fingertip sphere from the box, m."""
-    tips = BodyParams(scene, 1000.0).hand.fingertips(guess.q)
+    tips = BodyParams(scene, 1000.0, mu=scene.config.mu).hand.fingertips(guess.q)
     box = BoxBoundary(scene.config.box_width, scene.config.box_height)
     return np.array([[box.signed_distance(world_to_box(x, p)) for p in p_WF] for x, p_WF in zip(guess.x, tips)]) \
         - scene.tip_radius
@@ -47,7 +48,7 @@ def test_plan_guess_keeps_contacts_and_lifts_the_switching_finger(setup, method)
         spec = transition_spec(plan, radius=scene.tip_radius, config=c)
     else:
         spec = general_spec(x0=plan.nodes[0].object_pose, q0=plan.nodes[0].q, object_path=plan.object_path, config=c)
-    program = build_program(scene, c, spec)
+    program = build_program(c, spec, BodyParams(scene, c.sdf_sharpness, mu=planning_mu(CONFIG)))
     guess = plan_guess(program.rows, spec, plan)
     phi = distances(scene, guess)
     M = c.knots_per_segment

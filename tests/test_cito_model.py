@@ -92,7 +92,7 @@ def rows(scene):
     rng = np.random.default_rng(2)
     pinned = np.array([[1, 1, 1, 1], [0, 0, 0, 0], [1, 0, 1, 0], [0, 1, 1, 1]], bool)
     normals = np.tile(np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]]), (4, 1, 1))
-    return KnotRows(BodyParams(scene, 200.0), pinned, rng.uniform(-0.1, 0.1, (4, 4, 2)), normals)
+    return KnotRows(BodyParams(scene, 200.0, mu=scene.config.mu), pinned, rng.uniform(-0.1, 0.1, (4, 4, 2)), normals)
 
 
 def random_knots(n, seed=3):

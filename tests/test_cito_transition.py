@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import CitoConfig, ConfigError, SceneConfig
@@ -18,6 +19,10 @@ CONFIG = CitoConfig(knots_per_segment=4)
 @pytest.fixture(scope="module")
 def scene():
     return build_scene()
+
+
+def body(scene, config: CitoConfig, mu: float = 0.5) -> BodyParams:
+    return BodyParams(scene, config.sdf_sharpness, mu=mu)
 
 
 def node(theta, arclengths, switching):
@@ -56,7 +61,7 @@ def test_transition_spec_pins_fixed_fingers_and_frees_the_switching_one(plan):
 
 def test_programs_have_the_expected_size(scene, plan):
     spec = transition_spec(plan, radius=scene.tip_radius, config=CONFIG)
-    prog = build_program(scene, CONFIG, spec)
+    prog = build_program(CONFIG, spec, body(scene, CONFIG))
     K = spec.num_knots
     assert prog.prog.num_vars() == 53 * K
     assert len(prog.knot_bindings) == K
@@ -65,6 +70,19 @@ def test_programs_have_the_expected_size(scene, plan):
         + 6 * (~spec.pinned).sum()
     general = general_spec(x0=[0, 0, 0], q0=np.zeros(8), object_path=plan.object_path, config=CONFIG)
     assert not general.pinned.any() and list(general.rest_knots) == [0, K - 1]
+
+
+def test_friction_cones_use_the_planning_friction(scene, plan):
+    """The linear cone rows are mu_plan lambda_n -/+ lambda_t >= 0 with body.mu, for every finger and knot."""
+    spec = transition_spec(plan, radius=scene.tip_radius, config=CONFIG)
+    program = build_program(CONFIG, spec, body(scene, CONFIG, mu=0.42))
+    n = spec.num_knots * 4
+    cones = [b for b in program.prog.linear_constraints() if b.evaluator().num_constraints() == 2 * n]
+    assert len(cones) == 1
+    A = cones[0].evaluator().GetDenseA()
+    np.testing.assert_array_equal(A[:, :n], 0.42 * np.vstack([np.eye(n), np.eye(n)]))
+    np.testing.assert_array_equal(A[:, n:], np.vstack([-np.eye(n), np.eye(n)]))
+    assert [v.get_name() for v in cones[0].variables()[:1]] == [program.variables.lambda_n[0, 0].get_name()]
 
 
 def test_check_plan_rejects_plans_of_another_box(scene, plan):
@@ -82,14 +100,16 @@ def test_check_plan_rejects_plans_of_another_box(scene, plan):
 
 def test_switch_clearance_lifts_the_switching_finger_mid_move(scene, plan):
     M, h = CONFIG.knots_per_segment, 0.01
-    assert not transition_spec(plan, radius=scene.tip_radius, config=CONFIG).clearance.any()  # the paper's: none
+    paper = dataclasses.replace(CONFIG, switch_clearance=0.0)
+    assert not transition_spec(plan, radius=scene.tip_radius, config=paper).clearance.any()  # the paper's: none
+    assert CitoConfig().switch_clearance == h                                               # the default lifts
     config = dataclasses.replace(CONFIG, switch_clearance=h)
     spec = transition_spec(plan, radius=scene.tip_radius, config=config)
     expected = np.zeros((spec.num_knots, 4))
     expected[:M + 1, 2] = h * np.sin(np.pi * np.arange(M + 1) / M)          # finger 2 switches in segment 0
     np.testing.assert_allclose(spec.clearance, expected, atol=1e-15)
     assert not spec.clearance[spec.pinned].any()   # not even sin(pi) * h at the arrival knot: it may push there
-    program = build_program(scene, config, spec)
+    program = build_program(config, spec, body(scene, config))
     for k, binding in enumerate(program.knot_bindings):
         lower = binding.evaluator().lower_bound()
         free_row = program.rows.row_start[k, 2]

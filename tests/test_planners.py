@@ -1,6 +1,7 @@
 """End-to-end planning on small goals: the physics of the saved plan checked from
-plan.npz alone (Newton-Euler under the trapezoidal rule, friction cones,
-penetration, contact points, complementarity), the files, and bad input."""
+plan.npz alone (Newton-Euler under the trapezoidal rule with forces at p_W_C,
+friction cones at mu_plan, penetration, contact points, no force from a fingertip
+off the box, the lifted switching finger), the files, the paper's config, and bad input."""
 
 import dataclasses
 import json
@@ -11,10 +12,12 @@ import numpy as np
 import pytest
 
 from trajectotree.cli import InputError
-from trajectotree.config import CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, save_config
+from pathlib import Path
+
+from trajectotree.config import CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, load_config, save_config
 from trajectotree.geometry import BoxBoundary, box_to_world, world_to_box
 from trajectotree.io import load_plan, save_plan
-from trajectotree.planners import plan
+from trajectotree.planners import plan, planning_mu
 from trajectotree.scene import build_scene
 
 CONFIG = Config(search=SearchConfig(num_nodes=3))      # 2 segments, 25 knots: seconds per solve
@@ -42,21 +45,26 @@ def npz(folder):
         return {k: data[k] for k in data.files}
 
 
-def check_newton_euler(a, scene_config: SceneConfig, radius: float, tol=1e-5):
+def check_newton_euler(a, scene_config: SceneConfig, tol=1e-5, moment_tol=1e-4):
     """m (v_{k+1} - v_k)/dt = (F_k + F_{k+1})/2 + m g and the same for the rotation, with
     F the sum of the finger forces f_W and the moments of f_W about the box centre,
-    applied at the contact points p_W_tip - r n_W (which adds -r lambda_t per finger)."""
+    applied at the saved points p_W_C on the box surface. The moments hold to moment_tol
+    (N m): the program applies a pinned finger's force at its fingertip, which may sit its
+    contact-point slack (~1e-5 m) away from the planned point p_W_C."""
     m, w, h = scene_config.box_mass, scene_config.box_width, scene_config.box_height
     inertia = m * (w * w + h * h) / 12
     t, x, xd, f = a["t"], a["x"], a["xdot"], a["f_W"]
     dt = np.diff(t)[:, None]
     np.testing.assert_allclose(np.diff(x, axis=0), dt / 2 * (xd[1:] + xd[:-1]), atol=1e-7)
-    arm = a["p_W_tip"] - x[:, None, :2]
-    moment = np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0] - radius * a["lambda_t"], axis=1)
+    box = BoxBoundary(w, h)
+    assert max(abs(box.signed_distance(world_to_box(xk, p))) for xk, ps in zip(x, a["p_W_C"]) for p in ps) < 1e-12
+    arm = a["p_W_C"] - x[:, None, :2]
+    moment = np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0], axis=1)
     wrench = np.concatenate([f.sum(1) + m * np.array([0.0, -scene_config.gravity]), moment[:, None]], axis=1)
     inertia_diag = np.array([m, m, inertia])
     residual = inertia_diag * np.diff(xd, axis=0) / dt - 0.5 * (wrench[1:] + wrench[:-1])
-    assert np.abs(residual).max() < tol
+    assert np.abs(residual[:, :2]).max() < tol
+    assert np.abs(residual[:, 2]).max() < moment_tol
     # The force is the contact-frame force in W: |f_W| = |(lambda_n, lambda_t)|.
     np.testing.assert_allclose(np.linalg.norm(f, axis=2), np.hypot(a["lambda_n"], a["lambda_t"]), atol=1e-9)
 
@@ -75,14 +83,16 @@ def test_plan_is_physical(plans, scene, key):
     assert result.success, result.status
     a = npz(folder)
     c, r = scene.config, scene.tip_radius
-    check_newton_euler(a, c, r)
+    check_newton_euler(a, c)
     ln, lt = a["lambda_n"], a["lambda_t"]
-    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= c.mu * ln + 1e-7)          # friction cones
+    mu_plan = planning_mu(CONFIG)
+    assert mu_plan == pytest.approx(0.7 * c.mu)                                      # the default safety
+    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= mu_plan * ln + 1e-7)        # cones at mu_plan
     dist = tip_distances(a, c, r)
     assert dist.min() > -1e-3                                                         # no tip 1 mm inside
-    away = dist > 2e-3                                                                # complementarity
-    assert np.all(ln[away] < 5e-3), ln[away].max()
-    assert np.all(ln[away] * dist[away] < 1e-5)
+    away = dist > 1e-4                                                                # no force at a distance
+    assert np.all(np.linalg.norm(a["f_W"], axis=2)[away] <= 0.01), np.linalg.norm(a["f_W"], axis=2)[away].max()
+    assert result.physics_check.passed and result.physics_check.mu == pytest.approx(mu_plan)
     assert abs(a["x"][-1, 2] - key[1]) < np.deg2rad(5)                              # reaches the goal
 
 
@@ -108,13 +118,13 @@ def test_trajectotree_keeps_fixed_fingers_on_their_planned_contacts(plans, scene
 
 
 @pytest.mark.slow
-def test_switch_clearance_lifts_the_switching_finger(scene):
-    h = 0.01
-    config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, switch_clearance=h))
-    result = plan(scene=scene, goal=0.3, method="trajectotree", config=config)
-    assert result.success, result.status
-    traj, M = result.trajectory, config.cito.knots_per_segment
-    gaps = tip_distances({"x": traj.x, "p_W_tip": traj.p_W_tip}, config.scene, scene.tip_radius)
+@pytest.mark.parametrize("goal", [0.3, -0.3])
+def test_the_switching_finger_lifts_off_and_carries_no_force(plans, scene, goal):
+    result, folder = plans["trajectotree", goal]
+    a, config = npz(folder), result.config
+    h, M = config.cito.switch_clearance, config.cito.knots_per_segment
+    assert h > 0                                                                     # the default lifts it
+    gaps = tip_distances(a, config.scene, scene.tip_radius)
     switches = [(s, node.switching_finger) for s, node in enumerate(result.contact_plan.nodes[1:])
                 if node.switching_finger is not None]
     assert switches
@@ -123,8 +133,10 @@ def test_switch_clearance_lifts_the_switching_finger(scene):
         mid = gaps[s * M + j, finger]
         # The smooth distance the program uses over-estimates the exact one near corners by <= log(2)/1000 m.
         assert np.all(mid >= h * np.sin(np.pi * j / M) - 1e-3), (s, mid)
+        assert mid.max() >= 0.8 * h                                                 # clears the face
         # ... and, held off the box, it does not push it (no force across the gap)
-        assert np.all(traj.lambda_n[s * M + j, finger] <= 1e-9), (s, traj.lambda_n[s * M + j, finger])
+        assert np.abs(a["f_W"][s * M + j, finger]).max() <= 1e-8, (s, a["f_W"][s * M + j, finger])
+        assert np.all(a["lambda_n"][s * M + j, finger] <= 1e-8)
 
 
 @pytest.mark.slow
@@ -141,10 +153,12 @@ def test_saved_plan_round_trips_and_matches_design(plans):
     a = npz(folder)
     K = 2 * CONFIG.cito.knots_per_segment + 1
     shapes = {"t": (K,), "x": (K, 3), "xdot": (K, 3), "q": (K, 8), "qdot": (K, 8), "tau": (K, 8),
-              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2)}
+              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2), "p_W_C": (K, 4, 2)}
     assert {k: v.shape for k, v in a.items()} == shapes
+    assert data["physics_check"]["passed"] is True and data["physics_check"]["force_tol_N"] == 0.01
     loaded = load_plan(folder)
     assert loaded.config == result.config and loaded.status == result.status
+    assert loaded.physics_check == result.physics_check
     np.testing.assert_array_equal(loaded.trajectory.f_W, result.trajectory.f_W)
     assert loaded.contact_plan.nodes[1].switching_finger == result.contact_plan.nodes[1].switching_finger
 
@@ -156,6 +170,25 @@ def test_cito_baseline_from_static_guess_and_times(scene):
     assert result.search_time_s == 0.0 and len(result.contact_plan.nodes) == 1
     assert result.total_time_s == pytest.approx(result.build_time_s + result.solve_time_s)
     assert result.violations["dynamics"] < 1e-5
+
+
+@pytest.mark.slow
+def test_plan_files_without_p_W_C_are_refused_by_name(plans, tmp_path):
+    _, folder = plans["trajectotree", 0.3]
+    (tmp_path / "plan.json").write_text((folder / "plan.json").read_text())
+    np.savez(tmp_path / "plan.npz", **{k: v for k, v in npz(folder).items() if k != "p_W_C"})
+    with pytest.raises(InputError, match="p_W_C"):
+        load_plan(tmp_path)
+
+
+def test_paper_config_loads_with_the_papers_formulation():
+    config = load_config(Path(__file__).parents[1] / "configs" / "paper.yaml")
+    assert config.search.friction_safety == 1.0 and config.cito.switch_clearance == 0.0
+    assert planning_mu(config) == config.scene.mu
+    default = Config()
+    assert dataclasses.replace(config, search=default.search, cito=default.cito) == default   # nothing else differs
+    assert dataclasses.replace(config.search, friction_safety=default.search.friction_safety) == default.search
+    assert dataclasses.replace(config.cito, switch_clearance=default.cito.switch_clearance) == default.cito
 
 
 def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):

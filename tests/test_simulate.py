@@ -44,7 +44,8 @@ def hold_plan_arrays(scene, duration: float, knots: int = 6) -> dict:
     return {"t": np.linspace(0.0, duration, K), "x": np.tile(ref.x[0], (K, 1)), "xdot": np.zeros((K, 3)),
             "q": np.tile(q0, (K, 1)), "qdot": np.zeros((K, 8)), "tau": np.tile(tau, (K, 1)),
             "lambda_n": np.tile(-np.sum(f_W * n_W, axis=1), (K, 1)), "lambda_t": np.tile(np.sum(f_W * t_W, axis=1), (K, 1)),
-            "f_W": np.tile(f_W, (K, 1, 1)), "p_W_tip": np.tile(ref.p_WF[0], (K, 1, 1))}
+            "f_W": np.tile(f_W, (K, 1, 1)), "p_W_tip": np.tile(ref.p_WF[0], (K, 1, 1)),
+            "p_W_C": np.tile(ref.p_WF[0] - scene.tip_radius * n_W, (K, 1, 1))}
 
 
 def write_plan_dir(folder, arrays, config: Config):
@@ -64,7 +65,8 @@ def test_reference_velocities_are_the_fingertip_velocities(scene):
     p = np.array([scene.fingertip_positions(qk) for qk in q])
     K = t.size
     arrays = {"t": t, "x": np.zeros((K, 3)), "xdot": np.zeros((K, 3)), "q": q, "qdot": qdot, "tau": np.zeros((K, 8)),
-              "lambda_n": np.zeros((K, 4)), "lambda_t": np.zeros((K, 4)), "f_W": np.zeros((K, 4, 2)), "p_W_tip": p}
+              "lambda_n": np.zeros((K, 4)), "lambda_t": np.zeros((K, 4)), "f_W": np.zeros((K, 4, 2)), "p_W_tip": p,
+              "p_W_C": p}
     ref = reference_from_arrays(arrays, scene)
     fd = np.gradient(p, t, axis=0)
     np.testing.assert_allclose(ref.v_WF[1:-1], fd[1:-1], atol=2e-5)

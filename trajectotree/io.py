@@ -75,6 +75,7 @@ def plan_to_json(result) -> dict:
         "build_time_s": float(result.build_time_s), "solve_time_s": float(result.solve_time_s),
         "total_time_s": float(result.total_time_s), "cost": finite(result.cost), "iterations": int(result.iterations),
         "violations": {k: finite(v) for k, v in result.violations.items()},
+        "physics_check": None if result.physics_check is None else result.physics_check.to_json(),
         "search": {"success": result.contact_plan.success, "reason": result.contact_plan.reason,
                    "stats": result.contact_plan.stats.to_json()},
         "contact_sequence": [n.to_json() for n in result.contact_plan.nodes],
@@ -100,6 +101,7 @@ def load_plan(out_dir: str | Path):
     from trajectotree.cli import InputError
     from trajectotree.config import ConfigError, config_from_dict
     from trajectotree.contact_plan import ContactPlan, SearchStats
+    from trajectotree.physics import PhysicsCheck
     from trajectotree.planners import TRAJECTORY_ARRAYS, PlanResult, Trajectory
     out_dir = Path(out_dir)
     json_path, npz_path = out_dir / PLAN_JSON, out_dir / PLAN_NPZ
@@ -121,6 +123,9 @@ def load_plan(out_dir: str | Path):
                       iterations=int(data["iterations"]), contact_plan=contact_plan,
                       violations={k: nan(v) for k, v in data["violations"].items()},
                       config=config_from_dict(data["config"]), solver_timing=data.get("solver_timing", {}))
+        check = data.get("physics_check")
+        names = PhysicsCheck.__dataclass_fields__
+        fields["physics_check"] = None if check is None else PhysicsCheck(**{k: check[k] for k in names})
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         if isinstance(e, ConfigError):
             raise InputError(f"{str(json_path)!r} holds an invalid config: {e}") from None
@@ -134,6 +139,7 @@ def load_plan(out_dir: str | Path):
     if arrays:
         missing = [n for n in TRAJECTORY_ARRAYS if n not in arrays]
         if missing:
-            raise InputError(f"{str(npz_path)!r} lacks the arrays {missing}")
+            raise InputError(f"{str(npz_path)!r} lacks the arrays {missing}"
+                             + (" (written before plan.npz had p_W_C; plan it again)" if missing == ["p_W_C"] else ""))
         trajectory = Trajectory(**{n: arrays[n] for n in TRAJECTORY_ARRAYS})
     return PlanResult(**fields, trajectory=trajectory)

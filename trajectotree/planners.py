@@ -9,9 +9,13 @@
   (closed-form IK) and its incremental goals x*_n the same interpolated object path,
   so its total time is build + solve only; `contact_plan` then holds node 0 alone.
 
-All three share the program builder, the cost (eq. 11), the solver options and the
-violation report. Times: search_time_s (0 for cito), build_time_s (program and
-guess), solve_time_s (IPOPT), total_time_s = their sum.
+All three share the program builder, the cost (eq. 11), the friction cones at
+mu_plan = search.friction_safety * scene.mu (`planning_mu`), the solver options, the
+violation report and the physics check of the plan's arrays (trajectotree.physics):
+a converged plan that fails it (e.g. a fingertip pushing the box from a distance) is
+reported with success False and the check's reason in its status. Times:
+search_time_s (0 for cito), build_time_s (program and guess), solve_time_s (IPOPT),
+total_time_s = their sum.
 """
 
 from __future__ import annotations
@@ -30,10 +34,11 @@ from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import Config, ConfigError
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import BoxBoundary, box_to_world
+from trajectotree.physics import BoxModel, PhysicsCheck, check_physics, contact_points
 from trajectotree.scene import NUM_FINGERS, Scene
 
 METHODS = ("trajectotree", "cito", "cito-warm")
-TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip")
+TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
 
 
 @dataclass(frozen=True)
@@ -50,15 +55,21 @@ class Trajectory:
     lambda_t: np.ndarray   # (K, 4) N, tangential force (along t_B = z x n_B)
     f_W: np.ndarray        # (K, 4, 2) N, force of each finger ON the box, in W
     p_W_tip: np.ndarray    # (K, 4, 2) m, fingertip positions in W: the sphere centres
-    #                        (finger{i}_tip frames); the contact point is p_W_tip - r n_W
+    #                        (finger{i}_tip frames)
+    p_W_C: np.ndarray      # (K, 4, 2) m, where each finger's force acts on the box surface, in W: the
+    #                        planned contact of a pinned finger, else the box point nearest the tip
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """{plan.npz name: array}."""
+        return {name: getattr(self, name) for name in TRAJECTORY_ARRAYS}
 
 
 @dataclass(frozen=True)
 class PlanResult:
     method: str
     goal: float                      # rad
-    success: bool                    # IPOPT converged (the search too, where used)
-    status: str                      # IPOPT status name, or why the search failed
+    success: bool                    # IPOPT converged, the physics check passed (the search too, where used)
+    status: str                      # IPOPT status name (+ why the physics check failed), or why the search failed
     search_time_s: float
     build_time_s: float
     solve_time_s: float
@@ -70,6 +81,12 @@ class PlanResult:
     violations: dict                 # max abs violation per group (solve.VIOLATION_GROUPS)
     config: Config
     solver_timing: dict = field(default_factory=dict)  # IPOPT's timing statistics, s
+    physics_check: PhysicsCheck | None = None          # the check of the plan's arrays (None: nothing solved)
+
+
+def planning_mu(config: Config) -> float:
+    """mu_plan = search.friction_safety * scene.mu, the friction every plan may use."""
+    return config.search.friction_safety * config.scene.mu
 
 
 def check_method(method: str) -> str:
@@ -108,28 +125,42 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
     check_plan(contact_plan, scene, min_nodes=1 if method == "cito" else 2)
 
     t0 = time.perf_counter()
-    body = BodyParams(scene, config.cito.sdf_sharpness)
+    body = BodyParams(scene, config.cito.sdf_sharpness, mu=planning_mu(config))
     if method == "trajectotree":
         spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
     else:
         node0 = contact_plan.nodes[0]
         path = _object_path(scene, goal, config) if method == "cito" else contact_plan.object_path
         spec = general_spec(x0=node0.object_pose, q0=node0.q, config=config.cito, object_path=path)
-    program = build_program(scene, config.cito, spec, body)
+    program = build_program(config.cito, spec, body)
     guess = static_guess(program.rows, spec) if method == "cito" else plan_guess(program.rows, spec, contact_plan)
     build_time = time.perf_counter() - t0
 
     outcome = solve(program, guess, config.cito)
     sol = outcome.solution
-    kin = program.rows.kinematics(sol.stacked())
-    trajectory = Trajectory(t=np.arange(spec.num_knots) * spec.dt, x=sol.x, xdot=sol.xd, q=sol.q, qdot=sol.qd,
-                            tau=sol.tau, lambda_n=sol.lambda_n, lambda_t=sol.lambda_t, f_W=kin.f_W, p_W_tip=kin.p_WF)
-    return PlanResult(method=method, goal=goal, success=outcome.success and contact_plan.success,
-                      status=outcome.status, search_time_s=search_time, build_time_s=build_time,
+    trajectory = _trajectory(program, sol, scene)
+    check = check_physics(trajectory.arrays(), BoxModel.from_scene(scene), body.mu)
+    status = outcome.status
+    if outcome.success and not check.passed:
+        status = f"{outcome.status}, physics check failed: {check.reason}"
+    return PlanResult(method=method, goal=goal, success=outcome.success and contact_plan.success and check.passed,
+                      status=status, search_time_s=search_time, build_time_s=build_time,
                       solve_time_s=outcome.solve_time_s, total_time_s=search_time + build_time + outcome.solve_time_s,
                       cost=outcome.cost, iterations=outcome.iterations, contact_plan=contact_plan,
                       trajectory=trajectory, violations=violations(program, sol, scene), config=config,
-                      solver_timing=outcome.timing)
+                      solver_timing=outcome.timing, physics_check=check)
+
+
+def _trajectory(program, sol, scene: Scene) -> Trajectory:
+    """The plan.npz arrays of a solution; p_W_C from the planned contacts (pinned) and
+    the box points nearest the fingertips (free)."""
+    spec, kin = program.spec, program.rows.kinematics(sol.stacked())
+    p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B          # c_B is the fingertip centre's target
+    c = scene.config
+    p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.box_width, c.box_height)
+    return Trajectory(t=np.arange(spec.num_knots) * spec.dt, x=sol.x, xdot=sol.xd, q=sol.q, qdot=sol.qd,
+                      tau=sol.tau, lambda_n=sol.lambda_n, lambda_t=sol.lambda_t, f_W=kin.f_W, p_W_tip=kin.p_WF,
+                      p_W_C=p_W_C)
 
 
 def _object_path(scene: Scene, goal: float, config: Config) -> np.ndarray:

@@ -18,7 +18,7 @@ from pydrake.solvers import MathematicalProgram, Solve
 from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
 from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene
 
-PLAN_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip")
+PLAN_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ def check_plan_arrays(arrays) -> dict[str, np.ndarray]:
     out = {name: np.asarray(arrays[name], dtype=float) for name in PLAN_ARRAYS}
     K = out["t"].shape[0] if out["t"].ndim == 1 else -1
     shapes = {"t": (K,), "x": (K, 3), "xdot": (K, 3), "q": (K, 8), "qdot": (K, 8), "tau": (K, 8),
-              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2)}
+              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2), "p_W_C": (K, 4, 2)}
     for name, shape in shapes.items():
         if K < 2 or out[name].shape != shape:
             raise ValueError(f"plan array {name!r} has shape {out[name].shape}, expected {shape} with K >= 2 knots")

@@ -42,13 +42,15 @@ NUM_BODY_ROWS, PINNED_ROWS, FREE_ROWS = 11, 4, 6
 
 
 class BodyParams:
-    """The constants the rows need, read once from the scene."""
+    """The constants the rows need, read once from the scene. `mu` is the friction
+    coefficient the plan may use (mu_plan = search.friction_safety * scene.mu, see
+    planners.planning_mu), not necessarily the scene's."""
 
-    def __init__(self, scene, sharpness: float):
+    def __init__(self, scene, sharpness: float, *, mu: float):
         c = scene.config
         self.hand = HandModel.from_scene(scene)
         self.mass = c.box_mass
-        self.mu = c.mu
+        self.mu = float(mu)
         self.inertia = c.box_mass * (c.box_width ** 2 + c.box_height ** 2) / 12.0
         self.gravity = np.array([0.0, -c.gravity])
         self.radius = scene.tip_radius

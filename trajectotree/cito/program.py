@@ -3,7 +3,7 @@ the plan-constrained variant of transition.py only changes the `ProgramSpec`).
 
 Knots k = 0..K-1, dt apart. Linear parts go through Drake's native sparse linear
 constraints and bounds: trapezoidal collocation (x_{k+1} = x_k + dt/2 (xd_k + xd_{k+1}),
-the same for xd/xdd, q/qd, qd/qdd), the friction cone mu lambda_n >= |lambda_t|,
+the same for xd/xdd, q/qd, qd/qdd), the friction cone mu_plan lambda_n >= |lambda_t|,
 lambda_n >= 0, slack >= 0, joint and torque limits, fixed x_0 and q_0, rest knots.
 The nonlinear rows of a knot (knot.KnotRows) form one Python constraint per knot
 with an analytic Jacobian and its sparsity pattern.
@@ -136,10 +136,10 @@ def _bounds(v: CitoVariables, spec: ProgramSpec, body: BodyParams):
     return lo, hi
 
 
-def build_program(scene, config: CitoConfig, spec: ProgramSpec, body: BodyParams | None = None) -> CitoProgram:
-    """The whole CITO program for `spec`, built once per solve."""
+def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> CitoProgram:
+    """The whole CITO program for `spec`, built once per solve; `body` carries the
+    scene's constants and the planning friction coefficient body.mu."""
     t0 = time.perf_counter()
-    body = body or BodyParams(scene, config.sdf_sharpness)
     prog = MathematicalProgram()
     K = spec.num_knots
     v = CitoVariables.from_prog(prog, K)
@@ -148,8 +148,9 @@ def build_program(scene, config: CitoConfig, spec: ProgramSpec, body: BodyParams
     # Dynamics: linear collocation; the nonlinear rows per knot below.
     for a, b in (("x", "xd"), ("xd", "xdd"), ("q", "qd"), ("qd", "qdd")):
         _collocation(prog, getattr(v, a), getattr(v, b), spec.dt)
-    # Friction cone, linear: mu lambda_n - lambda_t >= 0 and mu lambda_n + lambda_t >= 0.
-    mu, n = scene.config.mu, K * NUM_FINGERS
+    # Friction cone, linear: mu lambda_n - lambda_t >= 0 and mu lambda_n + lambda_t >= 0, with the
+    # planning friction mu_plan (body.mu), below the scene's mu by search.friction_safety.
+    mu, n = body.mu, K * NUM_FINGERS
     I = sp.identity(n)
     A = sp.vstack([sp.hstack([mu * I, -I]), sp.hstack([mu * I, I])]).tocsc()
     prog.AddLinearConstraint(A, np.zeros(2 * n), np.full(2 * n, np.inf),

@@ -109,7 +109,7 @@ def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
     kin = rows.kinematics(Z)
     col = [np.abs(np.diff(a, axis=0) - 0.5 * dt * (b[1:] + b[:-1])).max()
            for a, b in ((sol.x, sol.xd), (sol.xd, sol.xdd), (sol.q, sol.qd), (sol.qd, sol.qdd))]
-    mu = scene.config.mu
+    mu = rows.body.mu                   # the planning friction mu_plan the cones were built with
     ln, lt = sol.lambda_n, sol.lambda_t
     free = ~rows.pinned
     comp = np.maximum(np.abs(kin.phi_tip) * ln, np.linalg.norm(kin.v, axis=-1) * ln)

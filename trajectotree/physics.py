@@ -1,0 +1,150 @@
+"""The physics of a plan checked from its plan.npz arrays alone (pure numpy).
+
+Anyone holding plan.npz can recompute these numbers (DESIGN.md sec. 5):
+  - newton_euler: the box's Newton-Euler residual under the trapezoidal rule the plan
+    was made with, m (v_{k+1} - v_k) / dt - (F_k + F_{k+1}) / 2 with F = sum f_W + m g
+    (translation, N), and the same for the rotation with the moments of f_W applied at
+    p_W_C about the box centre (N m);
+  - friction_cone: max(|lambda_t| - mu lambda_n, -lambda_n) (N), with mu the friction
+    the plan was made with (mu_plan = search.friction_safety * scene.mu);
+  - force at a distance: the largest force |f_W| of a fingertip whose sphere is more than
+    GAP_TOL from the box (N), where it is and how far off;
+  - contact_point_off_surface: how far any p_W_C lies from the box boundary (m).
+A plan passes when no fingertip more than GAP_TOL off the box carries more than
+FORCE_TOL, the cones hold to CONE_TOL and Newton-Euler to NEWTON_EULER_TOL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+# m, a fingertip sphere farther than this from the box is off it (issue 13's rule).
+GAP_TOL = 1e-4
+# N, the most force a fingertip off the box may carry (issue 13's rule).
+FORCE_TOL = 0.01
+# N, friction-cone violation tolerated (IPOPT holds the linear cone rows to ~1e-8).
+CONE_TOL = 1e-6
+# N and N m, Newton-Euler residual tolerated: 1e-4 N is 0.02 % of the default box's weight.
+NEWTON_EULER_TOL = 1e-4
+
+
+@dataclass(frozen=True)
+class BoxModel:
+    """What the check needs to know about the box and the fingertips."""
+
+    mass: float        # kg
+    width: float       # m, extent along the box's x axis
+    height: float      # m, extent along the box's y axis
+    gravity: float     # m/s^2, magnitude, along -y in W
+    tip_radius: float  # m, fingertip sphere radius
+
+    @property
+    def inertia(self) -> float:
+        """kg m^2, about the box centre (a uniform rectangle)."""
+        return self.mass * (self.width ** 2 + self.height ** 2) / 12.0
+
+    @staticmethod
+    def from_scene(scene) -> "BoxModel":
+        c = scene.config
+        return BoxModel(mass=c.box_mass, width=c.box_width, height=c.box_height, gravity=c.gravity,
+                        tip_radius=scene.tip_radius)
+
+
+@dataclass(frozen=True)
+class PhysicsCheck:
+    newton_euler_force_N: float        # max |translational residual| over knots, N
+    newton_euler_moment_Nm: float      # max |rotational residual| over knots, N m
+    friction_cone_N: float             # max cone violation (<= 0 inside), N
+    mu: float                          # the friction coefficient the cones were checked with
+    force_at_distance_N: float         # max |f_W| of a fingertip more than GAP_TOL off the box (0 if none), N
+    force_at_distance_knot: int        # where that force is (-1 if none)
+    force_at_distance_finger: int
+    force_at_distance_gap_m: float     # that fingertip's distance from the box, m
+    contact_point_off_surface_m: float  # max distance of p_W_C from the box boundary, m
+    passed: bool
+    reason: str                        # why it failed ("" if passed)
+
+    def to_json(self) -> dict:
+        return {**asdict(self), "gap_tol_m": GAP_TOL, "force_tol_N": FORCE_TOL, "cone_tol_N": CONE_TOL,
+                "newton_euler_tol": NEWTON_EULER_TOL}
+
+
+def _rot(theta: np.ndarray) -> np.ndarray:
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)   # (K, 2, 2) R_WB
+
+
+def to_box(x: np.ndarray, p_W: np.ndarray) -> np.ndarray:
+    """p_B (K, P, 2) of world points p_W (K, P, 2) at object poses x (K, 3)."""
+    return np.einsum("kba,kpb->kpa", _rot(x[:, 2]), p_W - x[:, None, :2])
+
+
+def to_world(x: np.ndarray, p_B: np.ndarray) -> np.ndarray:
+    return x[:, None, :2] + np.einsum("kab,kpb->kpa", _rot(x[:, 2]), p_B)
+
+
+def signed_distance(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
+    """Exact signed distance (..., ) of points p_B (..., 2) to the box (negative inside)."""
+    q = np.abs(p_B) - np.array([width / 2, height / 2])
+    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
+
+
+def closest_boundary_points(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
+    """The box-boundary point (..., 2) nearest to each p_B (..., 2), in B."""
+    half = np.array([width / 2, height / 2])
+    clipped = np.clip(p_B, -half, half)
+    inside = np.all(np.abs(p_B) < half, axis=-1)
+    # Inside: out through the nearest face, along the axis with the smallest gap to its face.
+    axis = np.argmin(half - np.abs(p_B), axis=-1)
+    sign = np.where(p_B >= 0, 1.0, -1.0)
+    pushed = np.where(np.arange(2) == axis[..., None], sign * half, p_B)
+    return np.where(inside[..., None], pushed, clipped)
+
+
+def contact_points(x, p_W_tip, pinned, p_BC_planned, width: float, height: float) -> np.ndarray:
+    """p_W_C (K, 4, 2), where each finger's force acts on the box: the planned contact
+    point p_BC_planned (K, 4, 2, in B) where pinned (K, 4), else the box-boundary point
+    closest to the fingertip centre."""
+    x = np.asarray(x, dtype=float)
+    nearest = closest_boundary_points(to_box(x, np.asarray(p_W_tip, dtype=float)), width, height)
+    p_BC = np.where(np.asarray(pinned, dtype=bool)[..., None], p_BC_planned, nearest)
+    return to_world(x, p_BC)
+
+
+def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
+    """The check of a plan's arrays (a mapping with the plan.npz names t, x, xdot,
+    lambda_n, lambda_t, f_W, p_W_tip, p_W_C) against `box` and friction `mu`."""
+    a = {name: np.asarray(arrays[name], dtype=float)
+         for name in ("t", "x", "xdot", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")}
+    x, f = a["x"], a["f_W"]
+    dt = np.diff(a["t"])[:, None]
+    weight = np.array([0.0, -box.mass * box.gravity])
+    arm = a["p_W_C"] - x[:, None, :2]
+    wrench = np.concatenate([f.sum(1) + weight, np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0], axis=1)[:, None]],
+                            axis=1)
+    residual = np.array([box.mass, box.mass, box.inertia]) * np.diff(a["xdot"], axis=0) / dt \
+        - 0.5 * (wrench[1:] + wrench[:-1])
+    ne_force, ne_moment = float(np.abs(residual[:, :2]).max()), float(np.abs(residual[:, 2]).max())
+    ln, lt = a["lambda_n"], a["lambda_t"]
+    cone = float(np.maximum(np.abs(lt) - mu * ln, -ln).max())
+    gap = signed_distance(to_box(x, a["p_W_tip"]), box.width, box.height) - box.tip_radius   # (K, 4)
+    force = np.linalg.norm(f, axis=-1)
+    away = np.where(gap > GAP_TOL, force, 0.0)
+    k, i = np.unravel_index(int(np.argmax(away)), away.shape)
+    worst = float(away[k, i])
+    off_surface = float(np.abs(signed_distance(to_box(x, a["p_W_C"]), box.width, box.height)).max())
+    reasons = []
+    if worst > FORCE_TOL:
+        reasons.append(f"finger {i} pushes the box with {worst:.3g} N from {1e3 * gap[k, i]:.2f} mm away at knot {k} "
+                       f"(limit {FORCE_TOL} N beyond {1e3 * GAP_TOL:g} mm)")
+    if cone > CONE_TOL:
+        reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
+    if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
+        reasons.append(f"Newton-Euler residual {ne_force:.3g} N, {ne_moment:.3g} N m (limit {NEWTON_EULER_TOL:g})")
+    return PhysicsCheck(newton_euler_force_N=ne_force, newton_euler_moment_Nm=ne_moment, friction_cone_N=cone, mu=float(mu),
+                        force_at_distance_N=worst, force_at_distance_knot=int(k) if worst > 0 else -1,
+                        force_at_distance_finger=int(i) if worst > 0 else -1,
+                        force_at_distance_gap_m=float(gap[k, i]) if worst > 0 else 0.0,
+                        contact_point_off_surface_m=off_surface, passed=not reasons, reason="; ".join(reasons))
