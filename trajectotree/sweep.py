@@ -1,11 +1,17 @@
 """The paper's experiment (Sec. IV): random goal rotations x methods, run as a resumable sweep.
 
 A sweep directory holds
-  manifest.json          what the sweep is (goals, methods, simulate, time limit, the full
-                         config); rerunning with other arguments in the same directory is an error
+  manifest.json          what the sweep is (goals, methods, simulate, the full config, and the
+                         latest run's time limit); rerunning with other arguments in the same
+                         directory is an error, except --time-limit (not part of a trial's identity)
   trials/<i>_<method>/   one finished trial: trial.json (its row), plan.json + plan.npz,
                          sim.json + sim.npz with --simulate, log.txt when the child printed
+  trials/.tmp-*          a running trial's scratch (its files and its TMPDIR, e.g. IPOPT's log)
+                         and trials being stored; removed when the sweep starts again
   trials.jsonl           one JSON row per finished trial (rebuilt from trials/ on every run)
+  corrupt/               trials whose trial.json could not be read, moved aside (then recomputed)
+  .lock                  held (flock) by the running sweep, with its pid; a second sweep on the
+                         same directory is refused; the kernel releases it when its holder dies
 
 Trials run on an executor: local worker processes (`workers` at a time), or a Dask
 cluster (`scheduler` address). Either way each trial is its own child process
@@ -16,14 +22,18 @@ sweep leaves no partial trial, and the rerun skips every finished one.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
 import shutil
+import socket
+import sys
 import time
 from collections import Counter
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from contextlib import closing
+from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +51,18 @@ TRIALS_DIR = "trials"
 ROWS_FILE = "trials.jsonl"
 MANIFEST_FORMAT = "trajectotree-sweep/1"
 TMP_PREFIX = ".tmp-"
+LOCK_FILE = ".lock"
+CORRUPT_DIR = "corrupt"
+# Manifest keys that may change between runs of one sweep: not part of a trial's identity.
+RUN_SETTINGS = ("goal_values", "version", "time_limit_s")
+
+
+class CorruptTrialError(ConfigError):
+    """A finished trial's trial.json cannot be read (the message names the file)."""
+
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{str(path)!r} is unreadable ({reason}); rerun the sweep to recompute that trial")
+        self.path, self.reason = path, reason
 
 
 def sample_goals(count: int, seed: int, max_abs: float = math.pi) -> np.ndarray:
@@ -108,7 +130,7 @@ def _flatten(data: dict, prefix: str = "") -> dict:
 
 def _manifest_differences(old: dict, new: dict) -> list[str]:
     """'name: old there, new now' for each differing argument or config field."""
-    old, new = (_flatten({k: v for k, v in d.items() if k not in ("goal_values", "version")}) for d in (old, new))
+    old, new = (_flatten({k: v for k, v in d.items() if k not in RUN_SETTINGS}) for d in (old, new))
     return [f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
             for key in sorted(set(old) | set(new)) if old.get(key) != new.get(key)]
 
@@ -118,7 +140,7 @@ def check_manifest(out_dir: Path, spec: SweepSpec) -> bool:
     raises ConfigError when it holds a different one (nothing is touched)."""
     path = out_dir / MANIFEST_FILE
     if not path.exists():
-        if out_dir.is_dir() and any(out_dir.iterdir()):
+        if out_dir.is_dir() and any(p.name != LOCK_FILE for p in out_dir.iterdir()):
             raise ConfigError(f"--out {str(out_dir)!r} is a non-empty directory without {MANIFEST_FILE}; "
                               "give a new or empty directory, or the directory of the sweep to resume")
         return False
@@ -133,27 +155,92 @@ def check_manifest(out_dir: Path, spec: SweepSpec) -> bool:
     return True
 
 
-def prepare_dir(out_dir: Path, spec: SweepSpec) -> None:
-    """Creates the sweep directory (or reopens it) and removes leftovers of a killed run."""
+def prepare_dir(out_dir: Path, spec: SweepSpec) -> list[str]:
+    """Creates the sweep directory (or reopens it), removes leftovers of a killed run and
+    moves corrupt trials aside (they are recomputed); returns a message per moved trial.
+    The caller holds the directory's lock (sweep_lock)."""
     exists = check_manifest(out_dir, spec)
     (out_dir / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
-    if not exists:
-        manifest = dict(spec.manifest(), version=__version__)
-        write_bytes_atomic(out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2).encode())
-    for leftover in (out_dir / TRIALS_DIR).glob(f"{TMP_PREFIX}*"):
+    manifest = dict(spec.manifest(), version=__version__)
+    if exists:  # keep what the sweep is; record this run's time limit
+        manifest = dict(json.loads((out_dir / MANIFEST_FILE).read_text()), time_limit_s=spec.time_limit_s)
+    write_bytes_atomic(out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2).encode())
+    for leftover in (out_dir / TRIALS_DIR).glob(f"{TMP_PREFIX}*"):  # incl. killed trials' scratch folders
         shutil.rmtree(leftover) if leftover.is_dir() else leftover.unlink()
     for leftover in out_dir.glob(".*.tmp"):  # write_bytes_atomic's temporary files
         leftover.unlink()
+    return set_aside_corrupt_trials(out_dir)
+
+
+@contextmanager
+def sweep_lock(out_dir: Path) -> Iterator[None]:
+    """Holds OUT/.lock (flock, released by the kernel if this process dies) while the sweep
+    runs; ConfigError naming the holder's pid if another sweep holds it. The file keeps the
+    holder's pid while held and is emptied on release, so a pid found on taking it belonged
+    to a sweep that died (its stale lock is taken over, with a note on stderr)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / LOCK_FILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        previous = os.pread(fd, 256, 0).decode(errors="replace").strip()
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = previous or "unknown pid"
+            raise ConfigError(f"--out {str(out_dir)!r} is in use by another sweep (process {holder}; lock file "
+                              f"{str(path)!r}); wait for it to finish or stop it, or choose another --out") from None
+        if previous:
+            print(f"sweep {out_dir}: taking over the stale lock of process {previous}, which is gone", file=sys.stderr)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
+        try:
+            yield
+        finally:
+            os.ftruncate(fd, 0)
+    finally:
+        os.close(fd)
+
+
+def read_row(trial_dir: Path) -> dict:
+    """A finished trial's row; CorruptTrialError naming the file when it is unreadable."""
+    path = trial_dir / ROW_FILE
+    try:
+        row = json.loads(path.read_text())
+        if not isinstance(row, dict) or row.get("key") != trial_dir.name or not isinstance(row.get("method"), str):
+            raise ValueError(f"not the row of trial {trial_dir.name!r}")
+    except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError
+        raise CorruptTrialError(path, f"{type(e).__name__}: {e}") from None
+    return row
+
+
+def _finished_trial_dirs(out_dir: Path) -> list[Path]:
+    trials = out_dir / TRIALS_DIR
+    if not trials.is_dir():
+        return []
+    return [d for d in sorted(trials.iterdir())
+            if d.is_dir() and not d.name.startswith(TMP_PREFIX) and (d / ROW_FILE).is_file()]
 
 
 def read_rows(out_dir: str | Path) -> list[dict]:
     """The rows of every finished trial, in goal-major order (trial directories are
-    authoritative; trials.jsonl is a convenience copy)."""
-    trials = Path(out_dir) / TRIALS_DIR
-    if not trials.is_dir():
-        return []
-    return [json.loads((d / ROW_FILE).read_text()) for d in sorted(trials.iterdir())
-            if d.is_dir() and not d.name.startswith(TMP_PREFIX) and (d / ROW_FILE).is_file()]
+    authoritative; trials.jsonl is a convenience copy). CorruptTrialError names an unreadable one."""
+    return [read_row(d) for d in _finished_trial_dirs(Path(out_dir))]
+
+
+def set_aside_corrupt_trials(out_dir: Path) -> list[str]:
+    """Moves each trial whose trial.json is unreadable to OUT/corrupt/ (kept for inspection),
+    so the sweep recomputes it; returns one message per trial moved."""
+    messages = []
+    for trial_dir in _finished_trial_dirs(out_dir):
+        try:
+            read_row(trial_dir)
+        except CorruptTrialError as e:
+            target = out_dir / CORRUPT_DIR / f"{trial_dir.name}-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}"
+            target.parent.mkdir(exist_ok=True)
+            os.replace(trial_dir, target)
+            messages.append(f"{str(e.path)!r} was unreadable ({e.reason}); moved the trial to {str(target)!r}; "
+                            "it is recomputed")
+    return messages
 
 
 def write_rows_file(out_dir: Path) -> None:
@@ -198,12 +285,13 @@ def connect_scheduler(address: str, timeout_s: float):
                           f"({type(e).__name__}: {e})") from None
 
 
-def _local_results(tasks: list[TrialTask], workers: int):
-    """Yields (task, outcome or exception) as trials finish on `workers` local processes."""
+def _local_results(tasks: list[TrialTask], workers: int, scratch_root: str | None = None):
+    """Yields (task, outcome or exception) as trials finish on `workers` local processes,
+    each with its scratch folder under scratch_root (default: the system's temp folder)."""
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="trial")
     completed = False
     try:
-        futures = {pool.submit(execute_trial, t): t for t in tasks}
+        futures = {pool.submit(execute_trial, t, scratch_root): t for t in tasks}
         for future in as_completed(futures):
             yield futures[future], _result_or_error(future)
         completed = True
@@ -292,36 +380,44 @@ def run_sweep(spec: SweepSpec, out_dir: str | Path, *, workers: int | None = Non
               scheduler_timeout_s: float = 30.0, retry_errors: bool = False, progress: bool = True) -> SweepSummary:
     """Runs every unfinished trial of `spec` into out_dir and returns the summary.
     Invalid input raises ConfigError before anything is written."""
-    from tqdm import tqdm
-
     out_dir = Path(out_dir)
     workers = check_executor(workers, scheduler, scheduler_timeout_s)
     check_manifest(out_dir, spec)
     client = connect_scheduler(scheduler, scheduler_timeout_s) if scheduler else None
     start = time.perf_counter()
     try:
-        prepare_dir(out_dir, spec)
-        write_rows_file(out_dir)  # drops a line torn by a kill
-        tasks, skipped = pending_tasks(out_dir, spec, retry_errors)
-        results = _dask_results(tasks, client) if client else _local_results(tasks, workers)
-        ran = 0
-        bar = tqdm(total=skipped + len(tasks), initial=skipped, unit="trial", desc="sweep", disable=not progress,
-                   dynamic_ncols=True)
-        with closing(results), bar:
-            for task, outcome in results:
-                if isinstance(outcome, TrialInterrupted):
-                    continue
-                if isinstance(outcome, Exception):
-                    outcome = executor_error(task, outcome)
-                store_trial(out_dir, outcome)
-                ran += 1
-                bar.update(1)
-                if outcome.row.get("error") is not None:
-                    bar.write(f"{task.key}: {outcome.row['error']}")
-        write_rows_file(out_dir)
+        with sweep_lock(out_dir):
+            return _run_locked(spec, out_dir, client, workers, retry_errors, progress, start)
     finally:
         if client is not None:
             client.close()
+
+
+def _run_locked(spec: SweepSpec, out_dir: Path, client, workers: int, retry_errors: bool, progress: bool,
+                start: float) -> SweepSummary:
+    from tqdm import tqdm
+
+    for message in prepare_dir(out_dir, spec):
+        print(f"sweep {out_dir}: {message}", file=sys.stderr)
+    write_rows_file(out_dir)  # drops a line torn by a kill
+    tasks, skipped = pending_tasks(out_dir, spec, retry_errors)
+    scratch = str(out_dir / TRIALS_DIR)  # trials' scratch folders (.tmp-scratch-*), cleaned on every start
+    results = _dask_results(tasks, client) if client else _local_results(tasks, workers, scratch)
+    ran = 0
+    bar = tqdm(total=skipped + len(tasks), initial=skipped, unit="trial", desc="sweep", disable=not progress,
+               dynamic_ncols=True)
+    with closing(results), bar:
+        for task, outcome in results:
+            if isinstance(outcome, TrialInterrupted):
+                continue
+            if isinstance(outcome, Exception):
+                outcome = executor_error(task, outcome)
+            store_trial(out_dir, outcome)
+            ran += 1
+            bar.update(1)
+            if outcome.row.get("error") is not None:
+                bar.write(f"{task.key}: {outcome.row['error']}")
+    write_rows_file(out_dir)
     return summarize_rows(out_dir, spec, skipped, ran, time.perf_counter() - start)
 
 

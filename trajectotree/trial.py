@@ -1,7 +1,10 @@
 """One trial of a sweep: plan one goal with one method, and optionally execute the plan.
 
-Every trial runs in a child process of its own (`python -m trajectotree.trial OUT_DIR`
-with the task as JSON on stdin). That gives the sweep a hard per-trial time limit
+Every trial runs in a child process of its own (`python -m trajectotree.trial SCRATCH`
+with the task as JSON on stdin; it writes its files into SCRATCH/out and its temporary
+files, e.g. IPOPT's log, into SCRATCH/tmp, its TMPDIR). A sweep puts SCRATCH inside its
+directory (trials/.tmp-scratch-*), so a killed trial leaves nothing in the system's temp
+folder and the next run of the sweep removes what it left. That gives the sweep a hard per-trial time limit
 (a solver deep in C++ cannot be interrupted any other way), survives a crash inside
 a solver, and works the same on a local machine and on a Dask worker: `execute_trial`
 supervises the child and returns the trial's files as bytes, so the sweep's single
@@ -33,6 +36,7 @@ ROW_FIELDS = ("key", "goal_index", "goal", "method") + PLAN_FIELDS + ("switching
 ROW_FILE = "trial.json"
 LOG_FILE = "log.txt"
 STDERR_TAIL_CHARS = 4000
+SCRATCH_PREFIX = ".tmp-scratch-"  # sweep.prepare_dir removes trials/.tmp-* leftovers
 
 
 @dataclass(frozen=True)
@@ -124,17 +128,21 @@ def _last_line(text: str) -> str:
     return lines[-1].strip() if lines else ""
 
 
-def execute_trial(task: TrialTask) -> TrialOutcome:
+def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutcome:
     """Runs the task in a child process with its time limit; returns its files.
-    A child that raises, crashes or runs out of time gives a row with `error` set."""
+    A child that raises, crashes or runs out of time gives a row with `error` set.
+    The child's scratch folder is made in scratch_root (default: the system's temp folder)."""
     if _stopping.is_set():
         raise TrialInterrupted(task.key)
     start = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix=f"trajectotree-{task.key}-") as tmp:
+    with tempfile.TemporaryDirectory(prefix=f"{SCRATCH_PREFIX}{task.key}-", dir=scratch_root) as scratch:
+        out_dir, tmp_dir = Path(scratch) / "out", Path(scratch) / "tmp"
+        out_dir.mkdir()
+        tmp_dir.mkdir()
         # One OpenMP thread for SPRAL unless the user chose otherwise: trials run side by side anyway,
         # and a threaded factorization may round differently from run to run (same trial, same result).
-        env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
-        child = subprocess.Popen([sys.executable, "-m", "trajectotree.trial", tmp], stdin=subprocess.PIPE,
+        env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"), "TMPDIR": str(tmp_dir)}
+        child = subprocess.Popen([sys.executable, "-m", "trajectotree.trial", scratch], stdin=subprocess.PIPE,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         with _children_lock:
             _children.add(child)
@@ -162,7 +170,7 @@ def execute_trial(task: TrialTask) -> TrialOutcome:
         if child.returncode != 0:
             return _error_outcome(task, _last_line(err) or f"the trial process exited with code {child.returncode}",
                                   wall_s, log)
-        files = {p.name: p.read_bytes() for p in sorted(Path(tmp).iterdir()) if p.is_file()}
+        files = {p.name: p.read_bytes() for p in sorted(out_dir.iterdir()) if p.is_file()}
     row = json.loads(files[ROW_FILE])
     row["trial_wall_s"] = wall_s
     files[ROW_FILE] = json.dumps(row, indent=2).encode()
@@ -185,19 +193,21 @@ def kill_children() -> None:
             child.kill()
 
 
-def _exit_with_parent(parent_pid: int, out_dir: Path) -> None:
-    """Ends this child, removing its files, once its sweep process is gone (killed
-    with SIGKILL), so no orphaned trial keeps a core busy."""
+def _exit_with_parent(parent_pid: int, scratch: Path) -> None:
+    """Ends this child, removing its scratch folder, once its sweep process is gone
+    (killed with SIGKILL), so no orphaned trial keeps a core busy."""
     while os.getppid() == parent_pid:
         time.sleep(1.0)
-    shutil.rmtree(out_dir, ignore_errors=True)
+    shutil.rmtree(scratch, ignore_errors=True)
     os._exit(1)
 
 
 def main(argv: list[str]) -> int:
-    """Child entry point: task JSON on stdin, files into argv[0]."""
-    out_dir = Path(argv[0])
-    threading.Thread(target=_exit_with_parent, args=(os.getppid(), out_dir), daemon=True).start()
+    """Child entry point: task JSON on stdin, files into argv[0]/out."""
+    scratch = Path(argv[0])
+    out_dir = scratch / "out"
+    out_dir.mkdir(exist_ok=True)
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(), scratch), daemon=True).start()
     task = TrialTask(**json.loads(sys.stdin.read()))
     row = run_trial(task, out_dir)
     (out_dir / ROW_FILE).write_text(json.dumps(row, indent=2))
