@@ -54,17 +54,22 @@ class SceneConfig:
     corner_margin: float = 0.015   # m, contacts closer than this (arclength) to a corner are not allowed
 
     def __post_init__(self):
-        for name in ("box_width", "box_height", "box_depth", "box_mass", "mu", "gravity"):
-            check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
         check_range("scene.box_height", self.box_height, 0.0, 0.30, low_open=True)
+        for name in ("box_depth", "box_mass", "gravity"):
+            check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
         if len(self.initial_pose) != 3:
             raise ConfigError(f"scene.initial_pose = {self.initial_pose!r} must have 3 entries (x m, y m, theta rad)")
         for i, v in enumerate(self.initial_pose):
             check_range(f"scene.initial_pose[{i}]", v, -1.0, 1.0)
-        half_short = min(self.box_width, self.box_height) / 2
-        check_range("scene.corner_margin", self.corner_margin, 0.0, half_short, high_open=True)
+        check_range("scene.corner_margin", self.corner_margin, 0.0, None)
+        shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
+        if min(self.box_width, self.box_height) <= shortest:
+            raise ConfigError(f"scene.box_width x scene.box_height = {self.box_width:g} x {self.box_height:g} m is "
+                              f"too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
+                              f"corner, so each side must be longer than {shortest:g} m; valid range of each side: "
+                              f"({shortest:g}, 0.3] m")
 
 
 @dataclass(frozen=True)
@@ -254,6 +259,8 @@ def config_to_dict(config: Config) -> dict:
 def load_config(path: str | Path) -> Config:
     """Reads a YAML file; missing keys keep their defaults, unknown keys are errors."""
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"config file {str(path)!r} is a folder; give a YAML file")
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
     try:

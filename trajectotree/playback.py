@@ -9,6 +9,7 @@ stable view with +y up; `StaticHtml()` inlines every script (no network).
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from pathlib import Path
@@ -29,8 +30,16 @@ PLAN_GHOST_PATH = "/plan/box"
 
 
 def start_meshcat() -> Meshcat:
-    """A Meshcat server on loopback only (a free port from 7000 up)."""
-    return Meshcat(MeshcatParams(host="localhost"))
+    """A Meshcat server on loopback only (a free port from 7000 up). Drake's "Meshcat
+    listening for connections" line is muted: most servers only record a playback, and
+    the commands that serve a live view (--meshcat) print its URL themselves."""
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(max(level, logging.WARNING))
+    try:
+        return Meshcat(MeshcatParams(host="localhost"))
+    finally:
+        logger.setLevel(level)
 
 
 def set_planar_view(meshcat: Meshcat) -> None:

@@ -262,6 +262,8 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     manifest, rows = load_sweep(sweep_dir)
     methods = [m for m in manifest["methods"] if any(r["method"] == m for r in rows)]
     out = Path(out_dir) if out_dir is not None else sweep_dir / "report"
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"the report folder {str(out)!r} is an existing file; remove it or give --out DIR")
     out.mkdir(parents=True, exist_ok=True)
     table = summary_table(rows, methods)
     write_bytes_atomic(out / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())

@@ -9,6 +9,7 @@ the timing statistics (function evaluations vs IPOPT's own time) are read.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import tempfile
@@ -53,15 +54,25 @@ def ipopt_options(config: CitoConfig, output_file: str | None = None) -> SolverO
     return options
 
 
+# Optional, for a progress display (trajectotree.cli.progress): called with the path of IPOPT's
+# log, it returns a context manager that is active while IPOPT runs. The log then also holds
+# IPOPT's iteration lines (file_print_level 5); the solve itself is unchanged.
+log_observer = None
+
+
 def solve(program: CitoProgram, guess: CitoVariables, config: CitoConfig) -> SolveOutcome:
     prog, v = program.prog, program.variables
     v.set_initial_guess(prog, guess)
     fd, log_path = tempfile.mkstemp(prefix="trajectotree_ipopt_", suffix=".txt")
     os.close(fd)
     try:
-        t0 = time.perf_counter()
-        result = IpoptSolver().Solve(prog, None, ipopt_options(config, log_path))
-        solve_time = time.perf_counter() - t0
+        options = ipopt_options(config, log_path)
+        if log_observer is not None:
+            options.SetOption(IpoptSolver.id(), "file_print_level", 5)
+        with log_observer(log_path) if log_observer is not None else contextlib.nullcontext():
+            t0 = time.perf_counter()
+            result = IpoptSolver().Solve(prog, None, options)
+            solve_time = time.perf_counter() - t0
         summary = _read(log_path)
     finally:
         os.unlink(log_path)

@@ -6,9 +6,17 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import sys
+from pathlib import Path
 
 from trajectotree.config import Config, ConfigError, check_integer, load_config
+
+# One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
+SEGMENTS_HELP = ("transition segments S between the N = S + 1 poses of the contact sequence, each with one "
+                 "contact switch at most (default 9, i.e. the paper's N = 10 nodes)")
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
+HTML_SUFFIXES = (".html", ".htm")
 
 
 def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True) -> None:
@@ -18,8 +26,8 @@ def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True
     group.add_argument("--mass", type=float, metavar="KG", help="box mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
     if segments:
-        group.add_argument("--segments", type=int, metavar="N",
-                           help="number of transition segments, N - 1 (the paper: 9, i.e. N = 10 nodes)")
+        group.add_argument("--segments", type=int, metavar="S",
+                           help=SEGMENTS_HELP)
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
@@ -35,17 +43,74 @@ def config_from_args(args: argparse.Namespace) -> Config:
     if getattr(args, "segments", None) is not None:
         check_integer("--segments", args.segments, 1, 99)
         search["num_nodes"] = args.segments + 1
-    return dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
-                               search=dataclasses.replace(config.search, **search))
+    try:
+        return dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
+                                   search=dataclasses.replace(config.search, **search))
+    except ConfigError as e:
+        raise ConfigError(in_option_terms(str(e), args)) from None
+
+
+# Config fields set by command-line options, as the user wrote them (longest names first).
+OPTION_NAMES = (("scene.box_width x scene.box_height", "box_size", "--box-size W H"),
+                ("scene.box_width", "box_size", "--box-size W"), ("scene.box_height", "box_size", "--box-size H"),
+                ("scene.box_mass", "mass", "--mass"), ("scene.mu", "mu", "--mu"))
+
+
+def in_option_terms(message: str, args: argparse.Namespace) -> str:
+    """A config error about a field the user set with an option, named by that option."""
+    for field, attribute, option in OPTION_NAMES:
+        if getattr(args, attribute, None) is not None and message.startswith(field + " "):
+            return f"{option} ({field}){message[len(field):]}"
+    return message
 
 
 def check_goal(goal: float) -> float:
     """The goal rotation (rad); the paper samples goals in [-pi, pi]."""
     if not math.isfinite(goal) or abs(goal) > math.pi + 1e-9:
-        raise ConfigError(f"--goal = {goal!r} is out of range; valid range: [-pi, pi] rad ([-3.1416, 3.1416])")
+        raise ConfigError(f"--goal = {goal!r} is out of range; valid range: [-pi, pi] rad, "
+                          f"i.e. [-{math.pi:.6f}, {math.pi:.6f}]")
     return goal
 
 
 def print_json(data) -> None:
     json.dump(data, sys.stdout, indent=2)
     sys.stdout.write("\n")
+
+
+def _nearest_existing(path: Path) -> Path:
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def check_output_dir(option: str, path: str | Path) -> Path:
+    """An output folder (created later if missing): never an existing file, and its nearest
+    existing ancestor a writable folder. Checked before any work starts (InputError: exit 2)."""
+    from trajectotree.cli import InputError
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option} {str(path)!r} is an existing file, not a folder; "
+                         "give a folder (it is created if missing)")
+    base = _nearest_existing(path.absolute())
+    if not base.is_dir():
+        raise InputError(f"{option} {str(path)!r} cannot be created: {str(base)!r} is a file, not a folder")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise InputError(f"{option} {str(path)!r} cannot be written: no write permission in {str(base)!r}")
+    return path
+
+
+def check_output_file(option: str, path: str | Path, suffixes: tuple[str, ...]) -> Path:
+    """An output file: its name ends in one of `suffixes`, it is not a folder, and it goes
+    into an existing, writable folder. Checked before any work starts (InputError: exit 2)."""
+    from trajectotree.cli import InputError
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise InputError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")
+    if path.is_dir():
+        raise InputError(f"{option} {str(path)!r} is a folder; give a file name ending in {' or '.join(suffixes)}")
+    folder = path.absolute().parent
+    if not folder.is_dir():
+        raise InputError(f"{option} {str(path)!r}: the folder {str(path.parent)!r} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{option} {str(path)!r} cannot be written: no write permission in {str(path.parent)!r}")
+    return path

@@ -16,12 +16,17 @@ import math
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import add_config_options, check_goal, config_from_args, print_json
+from trajectotree.cli.common import add_config_options, check_goal, check_output_dir, config_from_args, print_json
+from trajectotree.cli.progress import ipopt_progress
+from trajectotree.cli.progress import wanted as progress_wanted
 
 KEYFRAMES = "keyframes.png"
 PLAYBACK = "playback.html"
 FORCES = "forces.png"
 SUMMARY = "summary.json"
+# Written only when planning gets that far: removed first, so a rerun into the same
+# folder never leaves an older run's files beside the new plan.
+DERIVED_FILES = ("sim.json", "sim.npz", KEYFRAMES, PLAYBACK, FORCES, SUMMARY)
 
 
 def register(subparsers) -> None:
@@ -67,6 +72,7 @@ def print_summary(summary: dict, out: Path) -> None:
 
 def run(args) -> int:
     from trajectotree.cli.search_cmd import draw_plan
+    from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
     from trajectotree.io import save_plan, save_sim, write_bytes_atomic
     from trajectotree.planners import plan
     from trajectotree.playback import start_meshcat
@@ -76,7 +82,7 @@ def run(args) -> int:
 
     goal = check_goal(args.goal)
     config = config_from_args(args)
-    out = Path(args.out)
+    out = check_output_dir("--out", args.out)
     out.mkdir(parents=True, exist_ok=True)
     meshcat = start_meshcat() if args.meshcat else None
     log = sys.stderr if args.json else sys.stdout
@@ -85,7 +91,10 @@ def run(args) -> int:
 
     print(f"planning a {goal:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
     scene = build_scene(config.scene)
-    result = plan(scene=scene, goal=goal, method="trajectotree", config=config)
+    with ipopt_progress(progress_wanted(args)):
+        result = plan(scene=scene, goal=goal, method="trajectotree", config=config)
+    for name in DERIVED_FILES:
+        (out / name).unlink(missing_ok=True)
     save_plan(result, out)
     files = ["plan.json", "plan.npz"]
     if result.contact_plan.success:
@@ -96,9 +105,10 @@ def run(args) -> int:
         print("simulating the plan with the impedance controller ...", file=log, flush=True)
         sim = run_simulation(plan=result, config=config, meshcat=meshcat, html_path=out / PLAYBACK)
         save_sim(sim, out)
+        sim_json = save_sim_json_with_plan_status(sim, str(out), result.success)
         save_figure(figure_finger_forces(sim), out / FORCES)
         files += ["sim.json", "sim.npz", PLAYBACK, FORCES]
-    summary = {"plan": plan_summary(result), "simulation": None if sim is None else sim.to_json(),
+    summary = {"plan": plan_summary(result), "simulation": None if sim is None else sim_json,
                "files": files + [SUMMARY]}
     write_bytes_atomic(out / SUMMARY, (json.dumps(summary, indent=2) + "\n").encode())
     if args.json:

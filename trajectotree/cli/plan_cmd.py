@@ -5,7 +5,16 @@ converge is still written, with "success": false and IPOPT's status (exit code 0
 
 from __future__ import annotations
 
-from trajectotree.cli.common import add_config_options, check_goal, config_from_args, print_json
+import sys
+from pathlib import Path
+
+from trajectotree.cli.common import (HTML_SUFFIXES, add_config_options, check_goal, check_output_dir,
+                                      check_output_file, config_from_args, print_json)
+from trajectotree.cli.progress import ipopt_progress
+from trajectotree.cli.progress import wanted as progress_wanted
+
+# Files derived from a plan (by `simulate`): stale once a new plan replaces it.
+DERIVED_FILES = ("sim.json", "sim.npz")
 
 
 def register(subparsers) -> None:
@@ -16,7 +25,8 @@ def register(subparsers) -> None:
     p.add_argument("--method", default="trajectotree", metavar="METHOD",
                    help=f"planner (default: trajectotree; valid: {', '.join(METHODS)})")
     add_config_options(p)
-    p.add_argument("--out", metavar="DIR", help="output folder (default: plan_<method>_<goal>)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: plan_<method>_<goal>); a previous "
+                   "plan's sim.json and sim.npz there are removed")
     p.add_argument("--json", action="store_true", help="print plan.json to stdout")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the planned trajectory")
     p.set_defaults(run=run)
@@ -29,9 +39,16 @@ def run(args) -> int:
     goal = check_goal(args.goal)
     method = check_method(args.method)
     config = config_from_args(args)
-    out = args.out or f"plan_{method}_{goal:+.3f}"
-    result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config)
+    out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}")
+    if args.html:
+        check_output_file("--html", args.html, HTML_SUFFIXES)
+    with ipopt_progress(progress_wanted(args)):
+        result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config)
+    removed = remove_derived_files(out)
     save_plan(result, out)
+    if removed:
+        print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces",
+              file=sys.stderr)
     if args.html and result.trajectory is not None:
         from trajectotree.playback import write_plan_html
         write_plan_html(result, config, args.html)
@@ -48,3 +65,13 @@ def run(args) -> int:
         print(f"final pose: x {x[0]:+.4f} m, y {x[1]:+.4f} m, theta {x[2]:+.4f} rad; max violations: {v}")
     print(f"wrote {out}/plan.json and {out}/plan.npz")
     return 0
+
+
+def remove_derived_files(out: Path) -> list[str]:
+    """Removes a previous plan's simulation results from `out`; returns their names."""
+    removed = []
+    for name in DERIVED_FILES:
+        if (out / name).is_file():
+            (out / name).unlink()
+            removed.append(name)
+    return removed

@@ -3,7 +3,7 @@ table (Markdown and CSV) beside the paper's numbers, from a sweep's finished tri
 
 from __future__ import annotations
 
-from trajectotree.cli.common import print_json
+from trajectotree.cli.common import check_output_dir, print_json
 
 
 def register(subparsers) -> None:
@@ -16,6 +16,8 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.report import make_report, table_markdown
+    if args.out:  # the default, SWEEP_DIR/report, is checked with the sweep directory
+        check_output_dir("--out", args.out)
     files, table = make_report(args.sweep_dir, args.out)
     if args.json:
         print_json({"files": files.__dict__, "table": table})

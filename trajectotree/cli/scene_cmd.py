@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from trajectotree.cli.common import add_config_options, config_from_args, print_json
+from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args,
+                                      print_json)
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("scene", help="build the hand and box plant and summarize it",
                               description=__doc__)
     add_config_options(p, segments=False)
-    p.add_argument("--figure", metavar="FILE.png", help="draw the model (hand, box, reach circles)")
+    p.add_argument("--figure", metavar="FILE.png", help="draw the model (hand, box, reach circles); .png, .pdf or .svg")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(run=run)
 
@@ -60,6 +61,8 @@ def draw_model(scene, path: str) -> None:
 
 def run(args) -> int:
     from trajectotree.scene import build_scene
+    if args.figure:
+        check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     scene = build_scene(config_from_args(args).scene)
     summary = summarize(scene)
     if args.figure:

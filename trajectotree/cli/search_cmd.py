@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import io
 import math
+from pathlib import Path
 
-from trajectotree.cli.common import add_config_options, check_goal, config_from_args, print_json
+from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_goal, check_output_file,
+                                      config_from_args, print_json)
 from trajectotree.io import write_bytes_atomic
 
 
@@ -18,8 +20,10 @@ def register(subparsers) -> None:
                               description=__doc__)
     p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, rad, in [-pi, pi]")
     add_config_options(p)
-    p.add_argument("--figure", metavar="FILE.png", help="draw the sequence as keyframes (like the paper's Fig. 1)")
-    p.add_argument("--json", action="store_true", help="print the plan as JSON (DESIGN.md sec. 5 node format)")
+    p.add_argument("--figure", metavar="FILE.png",
+                   help="draw the sequence as keyframes (like the paper's Fig. 1); .png, .pdf or .svg")
+    p.add_argument("--json", action="store_true",
+                   help="print the plan as JSON (each node: object_pose, q, switching_finger, contacts)")
     p.set_defaults(run=run)
 
 
@@ -49,7 +53,7 @@ def draw_plan(scene, plan, path: str) -> None:
     fig.tight_layout()
     buffer = io.BytesIO()
     try:
-        fig.savefig(buffer, format="png", dpi=110)
+        fig.savefig(buffer, format=Path(path).suffix.lstrip(".").lower() or "png", dpi=110)
     finally:
         plt.close(fig)
     write_bytes_atomic(path, buffer.getvalue())
@@ -60,6 +64,8 @@ def run(args) -> int:
     from trajectotree.search import find_contact_plan
     goal = check_goal(args.goal)
     config = config_from_args(args)
+    if args.figure:
+        check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     scene = build_scene(config.scene)
     plan = find_contact_plan(scene, goal, config.search)
     if args.figure and plan.success:

@@ -12,10 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cli import InputError
-from trajectotree.cli.common import print_json
+from trajectotree.cli.common import FIGURE_SUFFIXES, HTML_SUFFIXES, check_output_file, print_json
 from trajectotree.config import Config, config_from_dict, load_config
-
-FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 
 def register(subparsers) -> None:
@@ -92,6 +90,21 @@ def execution_config(args, plan_config: Config) -> Config:
     return config
 
 
+def plan_success_and_status(plan_dir: str) -> tuple[bool, str]:
+    """plan.json's success and status (read_plan_dir has checked that it parses)."""
+    data = json.loads((Path(plan_dir) / "plan.json").read_text())
+    return bool(data.get("success")), str(data.get("status"))
+
+
+def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) -> dict:
+    """Rewrites sim.json (save_sim writes the SimResult's keys) with `plan_success`, so a
+    run of an unconverged plan cannot pass for the run of a converged one; returns it."""
+    from trajectotree.io import SIM_JSON, write_bytes_atomic
+    summary = dict(result.to_json(), plan_success=plan_success)
+    write_bytes_atomic(Path(plan_dir) / SIM_JSON, (json.dumps(summary, indent=2) + "\n").encode())
+    return summary
+
+
 def run(args) -> int:
     from trajectotree.io import save_sim
     from trajectotree.playback import start_meshcat
@@ -100,10 +113,16 @@ def run(args) -> int:
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
-    if args.forces and Path(args.forces).suffix not in FIGURE_SUFFIXES:
-        raise InputError(f"--forces {args.forces!r}: the file name must end in one of {', '.join(FIGURE_SUFFIXES)}")
+    for option, path, suffixes in (("--html", args.html, HTML_SUFFIXES), ("--gif", args.gif, (".gif",)),
+                                   ("--forces", args.forces, FIGURE_SUFFIXES)):
+        if path:
+            check_output_file(option, path, suffixes)
     arrays, plan_config = read_plan_dir(args.plan_dir)
     config = execution_config(args, plan_config)
+    plan_status = plan_success_and_status(args.plan_dir)
+    if not plan_status[0]:
+        print(f"trajectotree simulate: warning: the plan in {args.plan_dir} did not converge (IPOPT status "
+              f"{plan_status[1]!r}); executing it anyway, sim.json records plan_success: false", file=sys.stderr)
     meshcat = None
     if args.meshcat:
         meshcat = start_meshcat()
@@ -111,9 +130,9 @@ def run(args) -> int:
     reference = reference_from_arrays(arrays, build_scene(config.scene))
     result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif)
     save_sim(result, args.plan_dir)
+    summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_status[0])
     if args.forces:
         save_figure(figure_finger_forces(result), args.forces)
-    summary = result.to_json()
     if args.json:
         print_json(summary)
     else:

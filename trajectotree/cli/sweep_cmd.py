@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import signal
 
-from trajectotree.cli.common import add_config_options, config_from_args, print_json
+from trajectotree.cli.common import add_config_options, check_output_dir, config_from_args, print_json
 from trajectotree.sweep import METHODS, SweepSpec, run_sweep
 
 
@@ -50,6 +50,7 @@ def _interrupt(signum, frame):
 
 def run(args) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
+    check_output_dir("--out", args.out)
     spec = SweepSpec(goals=args.goals, seed=args.seed, methods=tuple(args.methods), simulate=args.simulate,
                      config=config_from_args(args), max_goal=args.max_goal, time_limit_s=args.time_limit)
     summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler,
