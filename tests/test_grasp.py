@@ -87,3 +87,59 @@ def test_lp_is_built_once_and_updated():
     bad = grasp_matrix(np.array(p), np.array(n))
     margins = [lp.solve(G)[0] for G in (good, bad, good)]
     assert margins[0] == pytest.approx(0.7, abs=1e-6) and margins[1] <= 1e-9 and margins[2] == pytest.approx(margins[0])
+
+
+def test_required_mu_of_two_contacts_is_the_angle_of_their_line():
+    closure = FormClosure(BOX, mu=0.7, min_margin=1e-3)
+    # Nguyen: two contacts hold iff the line between them lies inside both cones. Top (0.05, 0.05)
+    # and bottom (-0.05, -0.05): the line is 45 degrees off both normals, mu* = tan 45 = 1.
+    assert closure.required_mu([TOP_X05, BOTTOM_XM05]) == pytest.approx(1.0, abs=1e-6)
+    # top x = 0.06, bottom x = -0.01: mu* = |dx| / height = 0.07 / 0.1
+    assert closure.required_mu([0.14, 0.49]) == pytest.approx(0.7, abs=1e-6)
+    # right y = 0.03, left y = -0.01 (arclength 0.36): mu* = |dy| / width = 0.04 / 0.2
+    assert closure.required_mu([0.08, 0.36]) == pytest.approx(0.2, abs=1e-6)
+    # antipodal through the centre: any friction will do (an infimum, 0)
+    assert closure.required_mu([RIGHT_MID, LEFT_MID]) == pytest.approx(0.0, abs=1e-6)
+    # all on one face, or a single contact: never, whatever the friction
+    assert closure.required_mu([0.42, 0.47, 0.52, 0.57]) == np.inf
+    assert closure.required_mu([RIGHT_MID]) == np.inf
+
+
+def test_required_mu_of_three_contacts_against_its_closed_form():
+    # Top contact at x1, bottom contacts at x2 < x3. All normals are vertical, so the
+    # horizontal forces are friction only: with N_t = N_2 + N_3, torque balance about the
+    # centre gives 2 b f_t = -x1 N_t + x2 N_2 + x3 N_3 and |f_t| <= mu N_t. If x1 lies
+    # between x2 and x3 no friction is needed (mu* = 0); if x1 > x3, the least friction is
+    # with the bottom load on x3: mu* = (x1 - x3) / (2 b).
+    closure = FormClosure(BOX, mu=0.7, min_margin=1e-3)
+    b = 0.05
+
+    def top(x):
+        return 0.1 + (0.1 - x)
+
+    def bottom(x):
+        return 0.5 + x
+    assert closure.required_mu([top(0.06), bottom(-0.06), bottom(0.02)]) == pytest.approx((0.06 - 0.02) / (2 * b), abs=1e-6)
+    assert closure.required_mu([top(0.08), bottom(-0.02), bottom(0.04)]) == pytest.approx((0.08 - 0.04) / (2 * b), abs=1e-6)
+    assert closure.required_mu([top(0.01), bottom(-0.06), bottom(0.02)]) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_required_mu_is_the_lps_threshold():
+    # On random contact sets the LP (an independent test) agrees: in closure 1 % above
+    # required_mu, not 1 % below it.
+    rng = np.random.default_rng(1)
+    exact = FormClosure(BOX, mu=0.7, min_margin=1e-3)
+    checked = 0
+    for _ in range(200):
+        s = rng.uniform(0, BOX.perimeter, rng.integers(2, 5))
+        mu = exact.required_mu(s)
+        if np.isinf(mu):
+            assert not FormClosure(BOX, mu=9.0, min_margin=1e-9).check(s).in_closure
+        elif mu > 1e-3:
+            assert FormClosure(BOX, mu=1.01 * mu, min_margin=1e-9).check(s).in_closure
+            assert not FormClosure(BOX, mu=0.99 * mu, min_margin=1e-9).check(s).in_closure
+            checked += 1
+    assert checked > 50
+    # the batch call gives the same numbers as one call per set
+    sets = [[0.14, 0.44, 0.52], [0.14, 0.49], [0.12, 0.36, 0.48, 0.54]]
+    assert FormClosure(BOX, mu=0.7, min_margin=1e-3).required_mus(sets) == [exact.required_mu(s) for s in sets]

@@ -9,11 +9,17 @@ import sys
 import numpy as np
 import pytest
 
-from trajectotree.config import ConfigError, SceneConfig, SearchConfig
+from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig
+from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
 from trajectotree.grasp import FormClosure
+from trajectotree.initial_grasp import initial_grasp_candidates
+from trajectotree.planners import initial_grasp_plan
+from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, build_scene
-from trajectotree.search import default_initial_arclengths, find_contact_plan
+from trajectotree.search import _Node, _Search, choose_initial_grasp, find_contact_plan
+
+OLD_DEFAULT_GRASP = (0.54, 0.12, 0.36, 0.48)  # its stance of fingers 1, 2, 3 needs mu 0.67
 
 from test_reach import signed_distances
 
@@ -31,21 +37,28 @@ def small_slippery_scene():
 def check_plan(scene, plan, config: SearchConfig):
     c = scene.config
     boundary = BoxBoundary(c.box_width, c.box_height)
-    closure = FormClosure(boundary, c.mu, config.min_closure_margin)
+    mu_plan = config.friction_safety * c.mu
+    closure = FormClosure(boundary, mu_plan, config.min_closure_margin)
     assert plan.success, plan.reason
+    assert plan.mu_plan == pytest.approx(mu_plan)
     assert len(plan.nodes) == config.num_nodes
     # object path: linear interpolation from the initial pose to the goal rotation
     np.testing.assert_allclose(plan.object_path[0], c.initial_pose)
     np.testing.assert_allclose(plan.object_path[-1], np.add(c.initial_pose, (0, 0, plan.goal)))
     np.testing.assert_allclose(np.diff(plan.object_path, axis=0), plan.goal / (config.num_nodes - 1) * np.array([[0, 0, 1]] * (config.num_nodes - 1)), atol=1e-12)
-    # node 0 is the initial grasp
-    initial = config.initial_arclengths or default_initial_arclengths(scene)
-    np.testing.assert_allclose(plan.nodes[0].arclengths, np.mod(initial, boundary.perimeter), atol=1e-9)
-    assert plan.nodes[0].switching_finger is None
+    # node 0 is the user's initial grasp, or one of the chooser's candidates
+    if config.initial_arclengths is not None:
+        np.testing.assert_allclose(plan.nodes[0].arclengths, np.mod(config.initial_arclengths, boundary.perimeter),
+                                   atol=1e-9)
+    else:
+        candidates = [c.arclengths for c in initial_grasp_candidates(scene, config).candidates]
+        assert tuple(plan.nodes[0].arclengths) in candidates
+    assert plan.nodes[0].switching_finger is None and plan.nodes[0].stance_required_mu is None
     for n, node in enumerate(plan.nodes):
-        result = closure.check(node.arclengths)
+        result = closure.check(node.arclengths)  # a fresh LP at mu_plan
         assert result.in_closure and result.margin > config.min_closure_margin
         assert node.closure_margin == pytest.approx(result.margin, abs=1e-6)
+        assert node.required_mu == pytest.approx(closure.required_mu(node.arclengths)) and node.required_mu < mu_plan
         for i in range(NUM_FINGERS):
             p, normal = boundary.point(node.arclengths[i])
             np.testing.assert_allclose(node.p_BC[i], p, atol=1e-12)
@@ -69,7 +82,11 @@ def check_plan(scene, plan, config: SearchConfig):
         assert changed == ([] if node.switching_finger is None else [node.switching_finger])
         if node.switching_finger is not None:  # the moving finger was free: the other three held the box
             others = [s for i, s in enumerate(before.arclengths) if i != node.switching_finger]
-            assert closure.check(others).in_closure
+            assert closure.check(others).in_closure  # at mu_plan, by the LP
+            assert node.stance_required_mu == pytest.approx(closure.required_mu(others))
+            assert node.stance_required_mu < mu_plan
+        else:
+            assert node.stance_required_mu is None
 
 
 @pytest.mark.parametrize("goal", [np.pi, -np.pi, 1.1, -2.3])
@@ -88,16 +105,71 @@ def test_non_default_box_and_friction(small_slippery_scene, goal):
     check_plan(small_slippery_scene, plan, config)
 
 
-def test_default_grasp_is_in_closure_and_reachable(scene):
-    boundary = BoxBoundary(0.20, 0.10)
-    grasp = default_initial_arclengths(scene)
-    np.testing.assert_allclose(grasp, [0.54, 0.12, 0.36, 0.48], atol=1e-12)
-    closure = FormClosure(boundary, 0.7, 1e-3)
-    assert closure.check(grasp).in_closure
-    # finger 1 is the only contact on top; any of the others may let go
-    assert [closure.is_free(grasp, i) for i in range(NUM_FINGERS)] == [True, False, True, True]
-    plan = find_contact_plan(scene, 0.0, SearchConfig(num_nodes=2))
-    check_plan(scene, plan, SearchConfig(num_nodes=2))
+def test_initial_grasp_candidates(scene):
+    config = SearchConfig()
+    table = initial_grasp_candidates(scene, config)
+    mu_plan = config.friction_safety * scene.config.mu
+    boundary, reach = BoxBoundary(0.20, 0.10), Reachability(scene)
+    closure = FormClosure(boundary, mu_plan, 1e-9)
+    assert table.mu_plan == pytest.approx(mu_plan) and table.reason == ""
+    assert 100 < len(table.candidates) <= table.assignments
+    worst = [c.worst_stance_mu for c in table.candidates]
+    assert np.all(np.diff(np.round(worst, 4)) >= 0)  # ranked by the worst stance that may let go
+    for c in table.candidates[:40]:
+        for i, s in enumerate(c.arclengths):
+            assert boundary.corner_distance(s) >= scene.config.corner_margin
+            assert reach.solve(scene.config.initial_pose, i, s).reachable  # Drake IK, no link in the box
+            others = [v for j, v in enumerate(c.arclengths) if j != i]
+            assert c.stance_required_mu[i] == pytest.approx(closure.required_mu(others), abs=1e-6)
+            assert closure.is_free(c.arclengths, i) == (c.stance_required_mu[i] < mu_plan)
+        assert closure.check(c.arclengths).in_closure
+        tips = [reach.contact(s)[0] + reach.tip_radius * reach.contact(s)[1] for s in c.arclengths]
+        assert min(np.linalg.norm(a - b) for k, a in enumerate(tips) for b in tips[k + 1:]) >= 2 * reach.tip_radius
+    # the old fixed grasp is a candidate, but finger 0 may not let go at mu_plan 0.49
+    old = next(c for c in table.candidates if np.allclose(c.arclengths, OLD_DEFAULT_GRASP))
+    assert old.stance_required_mu[0] == pytest.approx(0.6698, abs=1e-4) and old.free_fingers == 2
+
+
+def test_search_refuses_a_stance_below_the_margin(scene):
+    # Fingers 1, 2, 3 of the old default grasp need mu 0.67: finger 0 may let go at
+    # mu_plan 0.7 (friction_safety 1, the paper) but not at 0.49 (the default 0.7).
+    def children_moving(safety):
+        search = _Search(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP, friction_safety=safety))
+        search.plan_switch_bounds([{s} for s in OLD_DEFAULT_GRASP])
+        return {child.switching_finger for _, child in search.neighbors(_Node(0, OLD_DEFAULT_GRASP, None, None))}
+    assert 0 in children_moving(1.0) and 0 not in children_moving(0.7)
+    paper = find_contact_plan(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP, friction_safety=1.0))
+    assert paper.success and paper.nodes[1].switching_finger == 0
+    assert paper.nodes[1].stance_required_mu == pytest.approx(0.6698, abs=1e-4)
+    refused = find_contact_plan(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP))
+    assert not refused.success and "finger 0 held: stance (1, 2, 3)" in refused.reason
+    # the chooser's grasps find the goal with the margin
+    check_plan(scene, find_contact_plan(scene, -1.0, SearchConfig()), SearchConfig())
+
+
+def test_cito_uses_the_choosers_first_choice(scene):
+    for goal in (-2.5, 0.4):
+        chosen, reason = choose_initial_grasp(scene, goal, SearchConfig())
+        assert reason == "" and chosen in [c.arclengths for c in initial_grasp_candidates(scene, SearchConfig()).candidates]
+        node = initial_grasp_plan(scene, goal, Config()).nodes[0]
+        np.testing.assert_allclose(node.arclengths, chosen)
+        assert node.required_mu < 0.49 and node.closure_margin > 1e-3
+    given = SearchConfig(initial_arclengths=(0.52, 0.14, 0.32, 0.5))
+    assert choose_initial_grasp(scene, 0.8, given) == ((0.52, 0.14, 0.32, 0.5), "")
+
+
+def test_plan_json_keeps_required_friction(scene):
+    plan = find_contact_plan(scene, 0.7, SearchConfig())
+    data = json.loads(json.dumps(plan.to_json()))
+    again = ContactPlan.from_json(data)
+    assert again.mu_plan == pytest.approx(plan.mu_plan)
+    for a, b in zip(again.nodes, plan.nodes):
+        assert a.required_mu == pytest.approx(b.required_mu) and a.stance_required_mu == b.stance_required_mu
+    for node in data["contact_sequence"]:  # a file written before these keys existed still loads
+        del node["required_mu"], node["stance_required_mu"]
+    del data["mu_plan"]
+    old = ContactPlan.from_json(data)
+    assert np.isnan(old.nodes[1].required_mu) and old.nodes[1].stance_required_mu is None and np.isnan(old.mu_plan)
 
 
 def test_custom_initial_grasp_and_segments(scene):
@@ -111,6 +183,8 @@ def test_failures_are_results_with_a_reason(scene):
     assert not plan.success and "initial grasp" in plan.reason and plan.nodes == ()
     # a half turn in 3 nodes needs more contact switches than 2 steps allow
     plan = find_contact_plan(scene, np.pi, SearchConfig(num_nodes=3))
+    assert not plan.success and "skipped by cheap checks" in plan.reason and plan.stats.initial_grasps_searched == 0
+    plan = find_contact_plan(scene, np.pi, SearchConfig(num_nodes=3, initial_arclengths=(0.52, 0.14, 0.32, 0.5)))
     assert not plan.success and "contact switches" in plan.reason
     # a tiny node budget
     plan = find_contact_plan(scene, np.pi, SearchConfig(max_expansions=3))

@@ -21,7 +21,12 @@ class ContactNode:
     p_BC: np.ndarray               # (4, 2) m, contact points in the box frame B
     n_B: np.ndarray                # (4, 2) outward unit normals at the contacts, in B
     switching_finger: int | None   # finger that moved between node n-1 and node n
-    closure_margin: float          # N, the form-closure LP's margin d* (> 0: in form closure)
+    closure_margin: float          # N, the form-closure LP's margin d* at mu_plan (> 0: in form closure)
+    # smallest friction coefficient at which the node's four contacts are in frictional form closure
+    required_mu: float = float("nan")
+    # the same for the three fingers that held the box while switching_finger moved to this node
+    # (segment n-1 -> n); None when no finger moved (and for node 0)
+    stance_required_mu: float | None = None
 
     def to_json(self) -> dict:
         return {
@@ -29,6 +34,8 @@ class ContactNode:
             "q": [float(v) for v in self.q],
             "switching_finger": self.switching_finger,
             "closure_margin": float(self.closure_margin),
+            "required_mu": _finite_or_none(self.required_mu),
+            "stance_required_mu": _finite_or_none(self.stance_required_mu),
             "contacts": [{"arclength": float(s), "p_B": [float(v) for v in p], "n_B": [float(v) for v in n]}
                          for s, p, n in zip(self.arclengths, self.p_BC, self.n_B)],
         }
@@ -44,7 +51,18 @@ class ContactNode:
             n_B=np.array([c["n_B"] for c in contacts], dtype=float),
             switching_finger=data["switching_finger"],
             closure_margin=float(data.get("closure_margin", np.nan)),
+            required_mu=_float_or_nan(data.get("required_mu")),  # older files lack both keys
+            stance_required_mu=None if data.get("stance_required_mu") is None else float(data["stance_required_mu"]),
         )
+
+
+def _finite_or_none(value) -> float | None:
+    """JSON has no nan/inf: unknown or unbounded values are written as null."""
+    return None if value is None or not np.isfinite(value) else float(value)
+
+
+def _float_or_nan(value) -> float:
+    return float("nan") if value is None else float(value)
 
 
 @dataclass(frozen=True)
@@ -54,6 +72,8 @@ class SearchStats:
     lp_calls: int = 0        # form-closure LP solves
     ik_calls: int = 0        # inverse-kinematics solves
     time_s: float = 0.0      # wall-clock search time, s
+    initial_grasps_searched: int = 0   # candidate initial grasps the tree search was rooted at
+    initial_grasp_candidates: int = 0  # ranked candidate initial grasps (1 when the user gave one)
 
     def to_json(self) -> dict:
         return dict(self.__dict__)
@@ -66,6 +86,7 @@ class ContactPlan:
     reason: str                                   # why not, when success is False ("" otherwise)
     nodes: tuple[ContactNode, ...] = ()           # N nodes on success, () otherwise
     stats: SearchStats = field(default_factory=SearchStats)
+    mu_plan: float = float("nan")                 # friction coefficient the plan was searched with
 
     @property
     def object_path(self) -> np.ndarray:
@@ -74,10 +95,11 @@ class ContactPlan:
 
     def to_json(self) -> dict:
         return {"goal": float(self.goal), "success": self.success, "reason": self.reason,
+                "mu_plan": _finite_or_none(self.mu_plan),
                 "stats": self.stats.to_json(), "contact_sequence": [n.to_json() for n in self.nodes]}
 
     @staticmethod
     def from_json(data: dict) -> "ContactPlan":
         return ContactPlan(goal=float(data["goal"]), success=bool(data["success"]), reason=data.get("reason", ""),
                            nodes=tuple(ContactNode.from_json(n) for n in data.get("contact_sequence") or ()),
-                           stats=SearchStats(**data.get("stats", {})))
+                           stats=SearchStats(**data.get("stats", {})), mu_plan=_float_or_nan(data.get("mu_plan")))

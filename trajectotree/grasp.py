@@ -16,6 +16,14 @@ Frictional form closure is tested with the LP of the Springer Handbook of Roboti
 and the grasp is in frictional form closure iff rank G = 3 and d* > 0 (here d* must exceed
 SearchConfig.min_closure_margin). The LP depends only on the contacts in the box frame,
 never on the object pose, so results are cached by contact arclengths.
+
+`required_mu` is the smallest friction coefficient at which contacts are in frictional form
+closure, a number users can compare with the scene's mu. It uses an exact, vectorized test
+instead of the LP: the 2k cone edges w = G_i (1, +-mu) positively span R^3 iff they span it
+(rank 3) and no plane through the origin has them all on one side. If the cone is not R^3,
+one of its facets is such a plane and contains two edges, so testing the planes through every
+pair of edges is exact. Closure only grows with mu (the cones grow), so bisection on mu finds
+the threshold; tests/test_grasp.py checks it against closed forms and against the LP.
 """
 
 from __future__ import annotations
@@ -29,6 +37,9 @@ from trajectotree.geometry import BoxBoundary
 
 WRENCH_DIM = 3      # planar wrench (f_x, f_y, tau_z)
 ARCLENGTH_KEY_DIGITS = 9  # arclengths equal to 1 nm share a cache entry
+MU_CAP = 10.0       # required_mu above this is reported as inf (scene.mu is at most 5)
+MU_BISECTIONS = 30  # bisection steps of required_mu: MU_CAP / 2^30 ~ 1e-8
+SIDE_TOLERANCE = 1e-12  # relative; an edge this close to a plane counts as on it (not strictly on a side)
 
 
 def grasp_matrix(p_BC, n_B) -> np.ndarray:
@@ -41,6 +52,56 @@ def grasp_matrix(p_BC, n_B) -> np.ndarray:
             G[:2, 2 * i + j] = direction
             G[2, 2 * i + j] = p[0] * direction[1] - p[1] * direction[0]
     return G
+
+
+def closure_edges_parts(p_BC, n_B) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B), each (..., k, 3): contact i's cone edges are A_i +- mu B_i, the wrenches of a
+    unit push (lambda_n = 1) and a unit tangential force. Works on stacks (..., k, 2)."""
+    p, n = np.asarray(p_BC, dtype=float), np.asarray(n_B, dtype=float)
+    t = np.stack([-n[..., 1], n[..., 0]], axis=-1)
+
+    def wrench(f):
+        return np.concatenate([f, (p[..., 0] * f[..., 1] - p[..., 1] * f[..., 0])[..., None]], axis=-1)
+    return wrench(-n), wrench(t)
+
+
+def spans_wrench_space(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(M,) rank G = 3: the edges span R^3 at every mu > 0."""
+    return np.linalg.matrix_rank(np.concatenate([A, B], axis=1), tol=1e-9) == WRENCH_DIM
+
+
+def in_closure_many(A: np.ndarray, B: np.ndarray, mu, spans: np.ndarray | None = None) -> np.ndarray:
+    """Exact frictional form closure of stacks of k contacts (A, B from closure_edges_parts,
+    shape (M, k, 3)) at friction mu > 0 (scalar or (M,)): (M,) bool, margin-free (d* > 0).
+    `spans` (spans_wrench_space) may be passed to skip the rank test."""
+    mu = np.broadcast_to(np.asarray(mu, dtype=float), A.shape[:1])[:, None, None]
+    edges = np.concatenate([A + mu * B, A - mu * B], axis=1)  # (M, 2k, 3)
+    j, l = np.triu_indices(edges.shape[1], 1)
+    planes = np.cross(edges[:, j], edges[:, l])  # (M, P, 3) normals of the planes through edge pairs
+    side = np.einsum("mpc,mec->mpe", planes, edges)
+    scale = SIDE_TOLERANCE * np.linalg.norm(planes, axis=2)[..., None] * np.linalg.norm(edges, axis=2)[:, None, :]
+    split = np.any(side > scale, axis=2) & np.any(side < -scale, axis=2)
+    degenerate = np.linalg.norm(planes, axis=2) <= SIDE_TOLERANCE * np.max(np.linalg.norm(edges, axis=2), axis=1)[:, None] ** 2
+    spans = spans_wrench_space(A, B) if spans is None else spans
+    return spans & np.all(split | degenerate, axis=1)
+
+
+def required_mu_many(p_BC, n_B) -> np.ndarray:
+    """(M,) the smallest friction coefficient at which each stack of contacts (M, k, 2) is in
+    frictional form closure (an infimum: ~0 for, e.g., an antipodal pair), inf if not even at
+    MU_CAP. Accurate to MU_CAP / 2^MU_BISECTIONS."""
+    A, B = closure_edges_parts(p_BC, n_B)
+    spans = spans_wrench_space(A, B)
+    out = np.where(in_closure_many(A, B, MU_CAP, spans), np.nan, np.inf)
+    todo = np.flatnonzero(np.isnan(out))
+    A, B, spans = A[todo], B[todo], spans[todo]
+    lo, hi = np.zeros(len(todo)), np.full(len(todo), MU_CAP)
+    for _ in range(MU_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        ok = in_closure_many(A, B, mid, spans)
+        hi, lo = np.where(ok, mid, hi), np.where(ok, lo, mid)
+    out[todo] = hi
+    return out
 
 
 @dataclass(frozen=True)
@@ -88,6 +149,7 @@ class FormClosure:
         self.boundary, self.mu, self.min_margin = boundary, mu, min_margin
         self._lps: dict[int, FormClosureLp] = {}
         self._cache: dict[tuple[float, ...], ClosureResult] = {}
+        self._required_mu: dict[tuple[float, ...], float] = {}
         self.lp_calls = 0  # LP solves so far (cache hits excluded)
 
     def key(self, arclengths) -> tuple[float, ...]:
@@ -100,6 +162,23 @@ class FormClosure:
         if key not in self._cache:
             self._cache[key] = self._solve(key)
         return self._cache[key]
+
+    def required_mu(self, arclengths) -> float:
+        """The smallest friction coefficient at which these contacts are in frictional form
+        closure (exact test, bisection to ~1e-8; see the module doc); memoized."""
+        return self.required_mus([arclengths])[0]
+
+    def required_mus(self, contact_sets) -> list[float]:
+        """required_mu of several contact sets, one vectorized bisection per contact count."""
+        keys = [self.key(arclengths) for arclengths in contact_sets]
+        for k in {len(key) for key in keys}:
+            todo = sorted({key for key in keys if len(key) == k and key not in self._required_mu})
+            if todo:
+                points = [[self.boundary.point(s) for s in key] for key in todo]
+                values = required_mu_many(np.array([[p for p, _ in row] for row in points]),
+                                          np.array([[n for _, n in row] for row in points]))
+                self._required_mu.update(zip(todo, values.tolist()))
+        return [self._required_mu[key] for key in keys]
 
     def is_free(self, arclengths, finger: int) -> bool:
         """Finger `finger` may let go: the other contacts alone are in form closure."""

@@ -5,8 +5,8 @@
 - "cito-warm": contact search, then the general CITO (eqs. 1-10), object poses and
   joint angles initialized from the plan (the contact constraints are not used).
 - "cito": the general CITO initialized in static equilibrium over the whole horizon.
-  It uses no search: its initial grasp q*_0 is the search's default initial grasp
-  (closed-form IK) and its incremental goals x*_n the same interpolated object path,
+  It uses no search: its initial grasp q*_0 is the search's initial-grasp chooser's
+  first choice for the goal (`initial_grasp_plan`; closed-form IK) and its incremental goals x*_n the same interpolated object path,
   so its total time is build + solve only; `contact_plan` then holds node 0 alone.
 
 All three share the program builder, the cost (eq. 11), the friction cones at
@@ -171,16 +171,21 @@ def _object_path(scene: Scene, goal: float, config: Config) -> np.ndarray:
 
 
 def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan:
-    """A one-node ContactPlan with the initial grasp (the search's default, or
-    config.search.initial_arclengths), for `cito`; success False with the reason
-    when a contact is out of reach."""
+    """A one-node ContactPlan with the initial grasp, for `cito` (which has no search):
+    config.search.initial_arclengths, or else the search's initial-grasp chooser's first
+    choice for this goal (trajectotree.search.choose_initial_grasp: the best-ranked candidate
+    whose fingers pass the search's cheap checks for the goal; the search itself may root at a
+    later one). success False with the reason when no grasp qualifies or a contact is out of reach."""
     from trajectotree.grasp import FormClosure
-    from trajectotree.search import default_initial_arclengths
+    from trajectotree.initial_grasp import mu_plan
+    from trajectotree.search import choose_initial_grasp
     from trajectotree.cito.hand import HandModel
     c = scene.config
     boundary = BoxBoundary(c.box_width, c.box_height)
-    arclengths = np.asarray(config.search.initial_arclengths if config.search.initial_arclengths is not None
-                            else default_initial_arclengths(scene), dtype=float) % boundary.perimeter
+    chosen, reason = choose_initial_grasp(scene, goal, config.search)
+    if chosen is None:
+        return ContactPlan(goal=goal, success=False, reason=reason, mu_plan=mu_plan(c, config.search))
+    arclengths = np.asarray(chosen, dtype=float) % boundary.perimeter
     points = [boundary.point(s) for s in arclengths]
     p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
     hand = HandModel.from_scene(scene)
@@ -188,10 +193,11 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan
     q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
     if any(qi is None for qi in q):
         return ContactPlan(goal=goal, success=False, reason="initial grasp out of reach of the fingers")
-    margin = FormClosure(boundary, c.mu, config.search.min_closure_margin).check(arclengths).margin
+    closure = FormClosure(boundary, mu_plan(c, config.search), config.search.min_closure_margin)
     node = ContactNode(object_pose=x0, q=np.concatenate(q), arclengths=arclengths, p_BC=p_BC, n_B=n_B,
-                       switching_finger=None, closure_margin=float(margin))
-    return ContactPlan(goal=goal, success=True, reason="", nodes=(node,))
+                       switching_finger=None, closure_margin=float(closure.check(arclengths).margin),
+                       required_mu=closure.required_mu(arclengths))
+    return ContactPlan(goal=goal, success=True, reason="", nodes=(node,), mu_plan=closure.mu)
 
 
 def _unsolved(method, goal, status, search_time, contact_plan, config) -> PlanResult:

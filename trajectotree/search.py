@@ -24,6 +24,18 @@ Two additions to the paper, neither of which changes which plans exist:
   than steps remain is a dead end and is not inserted. Without this bound the DFS spends
   seconds in subtrees that cannot reach the goal (this hand reaches only ~0.15-0.2 m of
   the boundary from each base, so large rotations need most of the nine steps).
+
+Friction margin (issue 13; not in the paper, whose setting is search.friction_safety = 1):
+every LP uses mu_plan = friction_safety x scene.mu, so every node's grasp and every
+three-finger stance held while a finger switches (is_free) is in frictional form closure
+with friction to spare. Each plan node reports `required_mu` (its grasp) and
+`stance_required_mu` (the three fingers that held the box while it was reached).
+
+Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
+ranked candidates of trajectotree.initial_grasp, best first; a candidate whose fingers
+cannot reach the goal with one switch per step (the bound above) is skipped without a
+search, and each searched candidate gets at most search.root_expansions expansions, up to
+search.max_initial_grasps candidates. States found dead from one root stay dead for the next.
 """
 
 from __future__ import annotations
@@ -31,6 +43,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import time
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,33 +52,9 @@ from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.geometry import BoxBoundary
 from trajectotree.grasp import FormClosure
+from trajectotree.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
-
-# Default initial grasp, as fractions of the faces (see default_initial_arclengths).
-DEFAULT_GRASP_FACE_FRACTIONS = ((3, 0.7), (1, 0.1), (2, 0.6), (3, 0.4))
-
-
-def default_initial_arclengths(scene: Scene) -> np.ndarray:
-    """The initial grasp used for every trial (paper Sec. IV-A: the same for all goals).
-
-    As fractions of the faces: finger 0 (bottom right) on the bottom face at 0.7, finger 1
-    (top right) on the top face at 0.1, finger 2 (top left) on the left face at 0.6, finger 3
-    (bottom left) on the bottom face at 0.4; for the 0.20 x 0.10 m box the arclengths
-    (0.54, 0.12, 0.36, 0.48) m, i.e. contacts at x = 0.04 and -0.02 below, x = 0.08 on top
-    and y = -0.01 on the left. Why: the grasp is in frictional form closure with fingers 0, 2
-    and 3 free (finger 1 is the only contact pushing down), every contact is reachable at both
-    +-20 degrees (the first step of a +-pi goal), and the hand's fixed elbow branch makes
-    reachability chiral, so the grasp must leave room for either direction: among the grasps
-    whose contacts stay reachable over the first step, this one was found (by running the
-    search on all 60 goals of seed 0) to admit a plan for every goal in [-pi, pi] with N = 10,
-    without crowding two fingertips together. Fractions make it scale with the box size.
-    """
-    boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
-    corners = boundary.corner_arclengths()
-    lengths = np.diff(np.r_[corners, boundary.perimeter])
-    return np.array([corners[face] + fraction * lengths[face] for face, fraction in DEFAULT_GRASP_FACE_FRACTIONS])
-
 
 def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
     """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
@@ -88,8 +77,11 @@ class _Search:
         self.scene, self.config = scene, config
         self.boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
         self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
-        self.closure = FormClosure(self.boundary, scene.config.mu, config.min_closure_margin)
+        self.mu_plan = mu_plan(scene.config, config)
+        self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
+        self.refused: Counter = Counter()  # why moves were not generated, for the failure reason
+        self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         half = (config.num_displacements - 1) // 2
         self.displacements = config.displacement_step * np.arange(-half, half + 1)
         self.expanded = self.generated = 0
@@ -102,18 +94,18 @@ class _Search:
         return round(float(s) % self.boundary.perimeter, 9)
 
     # -- per-finger grid and admissible pruning ------------------------------------------------
-    def plan_switch_bounds(self, start) -> None:
-        """Per finger, over the arclengths it can ever hold (its initial contact plus sums of
-        displacements), which are corner-free and reachable (closed form, vectorized) at each
-        depth, with their joint-2 angle for the heuristic; then the fewest contact switches
-        that keep that finger alone on such contacts from each (depth, arclength) to the last
-        node. A node whose fingers together need more switches than steps remain has no
-        completion (one switch per step), so pruning it never removes a plan; it only spares
-        the DFS hopeless subtrees."""
+    def plan_switch_bounds(self, starts) -> None:
+        """Per finger, over the arclengths it can ever hold (its initial contacts, one per
+        candidate root, plus sums of displacements), which are corner-free and reachable
+        (closed form, vectorized) at each depth, with their joint-2 angle for the heuristic;
+        then the fewest contact switches that keep that finger alone on such contacts from
+        each (depth, arclength) to the last node. A node whose fingers together need more
+        switches than steps remain has no completion (one switch per step), so pruning it
+        never removes a plan; it only spares the DFS hopeless subtrees."""
         last = self.config.num_nodes - 1
         corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
-        for finger, s0 in enumerate(start):
-            grid, frontier = {s0}, {s0}  # every arclength the finger can ever hold
+        for finger, s0s in enumerate(starts):
+            grid, frontier = set(s0s), set(s0s)  # every arclength the finger can ever hold
             for _ in range(last):
                 frontier = {m for s in frontier for m in self.moves(s)} - grid
                 grid |= frontier
@@ -125,7 +117,7 @@ class _Search:
                                              np.tile(grid, last))[:, 1].reshape(last, len(grid))
             allowed = [dict(zip(grid[ok].tolist(), row[ok].tolist()))
                        for row in q2 for ok in [corner_free & np.isfinite(row)]]
-            layers = [{s0: np.nan}]
+            layers = [dict.fromkeys(s0s, np.nan)]
             for depth in range(1, last + 1):  # forward: contacts reachable from s0 by displacements
                 candidates = {m for s in layers[-1] for m in self.moves(s)}
                 layers.append({s: allowed[depth - 1][s] for s in candidates if s in allowed[depth - 1]})
@@ -166,9 +158,16 @@ class _Search:
 
     def infeasibility(self, node: _Node) -> str:
         """Why `node` is a dead end ("" when it is feasible): closure LP, then Drake IK."""
-        closure = self.closure.check(node.arclengths)
+        return self.not_in_closure(node.arclengths) or self.unreachable(node)
+
+    def not_in_closure(self, arclengths) -> str:
+        closure = self.closure.check(arclengths)
         if not closure.in_closure:
-            return f"not in frictional form closure (margin {closure.margin:.3g})"
+            return (f"not in frictional form closure at mu_plan {self.mu_plan:.3g} (margin {closure.margin:.3g}, "
+                    f"needs mu {self.closure.required_mu(arclengths):.3g})")
+        return ""
+
+    def unreachable(self, node: _Node) -> str:
         pose = self.poses[node.depth]
         for i, s in enumerate(node.arclengths):
             reach = self.reach.solve(pose, i, s)
@@ -180,6 +179,8 @@ class _Search:
     def neighbors(self, node: _Node):
         """(heuristic, child) for each candidate child that passes the cheap exact tests."""
         free = [i for i in range(NUM_FINGERS) if self.closure.is_free(node.arclengths, i)]
+        for i in set(range(NUM_FINGERS)) - set(free):
+            self.refused[f"finger {i} held: stance {STANCE_FINGERS[i]} not in closure at mu_plan"] += 1
         if not free:
             return []
         candidates = {node.arclengths: None}  # the zero displacement: no finger moves
@@ -192,87 +193,182 @@ class _Search:
         out, steps_left, depth = [], self.config.num_nodes - 2 - node.depth, node.depth + 1
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
-            if None in q2 or self.switches_needed(depth, arclengths) > steps_left:
-                continue  # a finger cannot reach (closed form), or no completion exists
+            if None in q2:  # a finger cannot reach (closed form) or a contact is at a corner
+                self.refused[f"finger {q2.index(None)} out of reach or at a corner"] += 1
+                continue
+            if self.switches_needed(depth, arclengths) > steps_left:  # no completion exists
+                self.refused["too many switches left (bound)"] += 1
+                continue
             if finger is not None and self.tips_overlap(arclengths, finger):
+                self.refused["fingertips overlap"] += 1
                 continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
             out.append((h, _Node(depth, arclengths, finger, node)))
         return out
 
     # -- Algorithm 1 ----------------------------------------------------------------------
-    def run(self, start: tuple[float, ...], t0: float) -> tuple[_Node | None, str]:
+    def precheck(self, start: tuple[float, ...]) -> str:
+        """Why the search from `start` cannot succeed, by cheap tests ("" when it may)."""
         reason = self.contacts_allowed(start)
         if reason:
-            return None, f"initial grasp not allowed: {reason}"
-        root = _Node(0, start, None, None)
-        dead_end = self.infeasibility(root)
-        if dead_end:
-            return None, f"initial grasp infeasible: {dead_end}"
-        self.plan_switch_bounds(start)
-        needed = self.switches_needed(0, start)
-        if not np.isfinite(needed):
-            return None, "some finger has no reachable, corner-free contact at every node of the object path"
-        if needed > self.config.num_nodes - 1:
-            return None, (f"the goal needs at least {int(needed)} contact switches (each finger must stay on reachable "
-                          f"contacts), more than the {self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes")
+            return f"initial grasp not allowed: {reason}"
+        reason = self.not_in_closure(start)
+        if reason:
+            return f"initial grasp infeasible: {reason}"
+        per_finger = [self.min_switches[i][0].get(s, np.inf) for i, s in enumerate(start)]
+        if not np.isfinite(sum(per_finger)):
+            stuck = [i for i, v in enumerate(per_finger) if not np.isfinite(v)]
+            return f"finger(s) {stuck} have no reachable, corner-free contacts at every node of the object path"
+        if sum(per_finger) > self.config.num_nodes - 1:
+            return (f"the goal needs at least {int(sum(per_finger))} contact switches (per finger "
+                    f"{[int(v) for v in per_finger]}, each finger staying on reachable contacts), more than the "
+                    f"{self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes")
+        # Each finger must switch by the first node where its initial contact is out of reach;
+        # one switch per node, so the k-th earliest such deadline must be at least node k.
+        deadlines = sorted((next((d for d in range(1, self.config.num_nodes) if s not in self.joint2[i][d]),
+                                 self.config.num_nodes), i) for i, s in enumerate(start))
+        for k, (deadline, finger) in enumerate(deadlines, start=1):
+            if deadline < k:
+                late = [i for d, i in deadlines[:k]]
+                return (f"fingers {late} all lose their initial contacts (out of reach) by node {deadline}, "
+                        f"but only one finger can switch per node")
+        dead_end = self.unreachable(_Node(0, start, None, None))
+        return f"initial grasp infeasible: {dead_end}" if dead_end else ""
+
+    def run(self, start: tuple[float, ...], t0: float, budget: int) -> tuple[_Node | None, str]:
+        """Algorithm 1 from the root `start` with at most `budget` expansions (precheck passed)."""
         counter = itertools.count()
+        root = _Node(0, start, None, None)
         open_set = [(0, 0.0, next(counter), root)]
         inserted = {(0, start)}
         goal_depth = self.config.num_nodes - 1
-        last_dead_end = ""
+        expanded0 = self.expanded
         while open_set:
-            if self.expanded >= self.config.max_expansions:
-                return None, f"node budget exhausted ({self.config.max_expansions} expansions)"
+            if self.expanded - expanded0 >= budget:
+                return None, f"node budget exhausted ({budget} expansions)"
             if time.perf_counter() - t0 > self.config.time_budget_s:
                 return None, f"time budget exhausted ({self.config.time_budget_s} s)"
             *_, node = heapq.heappop(open_set)  # SelectNode: deepest, then lowest heuristic
             self.expanded += 1
             dead_end = self.infeasibility(node)
             if dead_end:
-                last_dead_end = dead_end
+                self.refused[dead_end.split(":")[0]] += 1
                 continue
             if node.depth == goal_depth:
                 return node, ""
             for h, child in self.neighbors(node):
-                if (child.depth, child.arclengths) not in inserted:
-                    inserted.add((child.depth, child.arclengths))
+                state = (child.depth, child.arclengths)
+                if state not in inserted and state not in self.dead:
+                    inserted.add(state)
                     self.generated += 1
                     heapq.heappush(open_set, (-child.depth, h, next(counter), child))
-        return None, ("no contact sequence reaches the goal in "
-                      f"{self.config.num_nodes} nodes (tree exhausted; last dead end: {last_dead_end or 'none'})")
+        self.dead |= inserted  # the whole tree was searched: none of its states leads to the goal
+        return None, f"tree exhausted after {self.expanded - expanded0} expansions"
 
-    def contact_node(self, node: _Node) -> ContactNode:
+    def refusals(self) -> str:
+        """The most frequent reasons moves were refused, e.g. which stance or reach failed."""
+        return "; ".join(f"{why} x{n}" for why, n in self.refused.most_common(4)) or "none"
+
+    def contact_nodes(self, path: list[_Node]) -> tuple[ContactNode, ...]:
+        """The plan's nodes, with the required friction of each grasp and switching stance
+        (both computed in one vectorized pass each)."""
+        stances = [[s for i, s in enumerate(n.arclengths) if i != n.switching_finger]
+                   for n in path if n.switching_finger is not None]
+        grasp_mu = self.closure.required_mus([n.arclengths for n in path])
+        stance_mu = iter(self.closure.required_mus(stances))
+        return tuple(self.contact_node(n, mu, None if n.switching_finger is None else next(stance_mu))
+                     for n, mu in zip(path, grasp_mu))
+
+    def contact_node(self, node: _Node, required_mu: float, stance_required_mu: float | None) -> ContactNode:
         pose = self.poses[node.depth]
         points = [self.reach.contact(s) for s in node.arclengths]
         q = np.concatenate([self.reach.solve(pose, i, s).q for i, s in enumerate(node.arclengths)])
         return ContactNode(object_pose=pose.copy(), q=q, arclengths=np.array(node.arclengths),
                            p_BC=np.array([p for p, _ in points]), n_B=np.array([n for _, n in points]),
                            switching_finger=node.switching_finger,
-                           closure_margin=self.closure.check(node.arclengths).margin)
+                           closure_margin=self.closure.check(node.arclengths).margin,
+                           required_mu=required_mu, stance_required_mu=stance_required_mu)
 
-    def stats(self, t0: float) -> SearchStats:
+    def stats(self, t0: float, roots: int = 0, candidates: int = 0) -> SearchStats:
         return SearchStats(expanded=self.expanded, generated=self.generated, lp_calls=self.closure.lp_calls,
-                           ik_calls=self.reach.ik_calls, time_s=time.perf_counter() - t0)
+                           ik_calls=self.reach.ik_calls, time_s=time.perf_counter() - t0,
+                           initial_grasps_searched=roots, initial_grasp_candidates=candidates)
+
+
+def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tuple[float, ...]], str]:
+    """The initial grasps to try, best first: the user's, or the ranked candidates."""
+    if config.initial_arclengths is not None:
+        return [tuple(search.wrap(s) for s in config.initial_arclengths)], ""
+    table = initial_grasp_candidates(scene, config, search.reach)
+    return [tuple(search.wrap(s) for s in c.arclengths) for c in table.candidates], table.reason
+
+
+def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
+    """The chooser's first choice for `goal` without a tree search: config.initial_arclengths
+    if given, else the best-ranked candidate that passes the cheap checks the search applies
+    before rooting a tree at it (the per-finger switch bound for this goal, closure at mu_plan,
+    Drake IK). The search may still end up rooted at a later candidate if this one's tree has
+    no plan. (None, reason) when no candidate passes."""
+    if not np.isfinite(goal):
+        raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
+    search = _Search(scene, float(goal), config)
+    roots, reason = _roots(scene, config, search)
+    if not roots:
+        return None, reason
+    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    first = ""
+    for root in roots:
+        why = search.precheck(root)
+        if not why:
+            return root, ""
+        first = first or why
+    return None, f"no initial grasp passes the checks for this goal (of {len(roots)}; first: {first})"
 
 
 def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> ContactPlan:
     """Algorithm 1 for the rotation `goal` (rad) of scene's box: N nodes from the initial
-    grasp (node 0) to the goal pose, each in frictional form closure and reachable, with
-    at most one finger changing contact between consecutive nodes. A search that finds no
-    plan within the budgets returns success=False with the reason."""
+    grasp (node 0) to the goal pose, each in frictional form closure at mu_plan and
+    reachable, with at most one finger changing contact between consecutive nodes while the
+    other three are in closure at mu_plan. A search that finds no plan within the budgets
+    returns success=False with the reason (which stance or reach failed)."""
     if not np.isfinite(goal):
         raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
     t0 = time.perf_counter()
     search = _Search(scene, float(goal), config)
-    initial = config.initial_arclengths if config.initial_arclengths is not None else default_initial_arclengths(scene)
-    start = tuple(search.wrap(s) for s in initial)
-    leaf, reason = search.run(start, t0)
+    roots, reason = _roots(scene, config, search)
+    if not roots:
+        return ContactPlan(goal=float(goal), success=False, reason=reason, stats=search.stats(t0),
+                           mu_plan=search.mu_plan)
+    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    leaf, searched, skipped, first_skip, last = None, 0, 0, "", ""
+    for root in roots:
+        if searched >= config.max_initial_grasps or search.expanded >= config.max_expansions \
+                or time.perf_counter() - t0 > config.time_budget_s:
+            break
+        why = search.precheck(root)
+        if why:
+            skipped += 1
+            first_skip = first_skip or f"{root}: {why}"
+            continue
+        searched += 1
+        leaf, why = search.run(root, t0, min(config.root_expansions, config.max_expansions - search.expanded))
+        if leaf is not None:
+            break
+        last = f"{root}: {why}"
+    stats = search.stats(t0, searched, len(roots))
     if leaf is None:
-        return ContactPlan(goal=float(goal), success=False, reason=reason, stats=search.stats(t0))
+        if len(roots) == 1 and not searched:
+            reason = first_skip.split(": ", 1)[1]
+        else:
+            reason = (f"no plan from {searched} searched initial grasp(s) of {len(roots)} "
+                      f"({skipped} skipped by cheap checks, first: {first_skip or 'none'}); "
+                      f"last searched {last or 'none'}; moves refused (mu_plan {search.mu_plan:.3g}): "
+                      f"{search.refusals()}")
+        return ContactPlan(goal=float(goal), success=False, reason=reason, stats=stats, mu_plan=search.mu_plan)
     path = []
     while leaf is not None:
         path.append(leaf)
         leaf = leaf.parent
-    nodes = tuple(search.contact_node(n) for n in reversed(path))
-    return ContactPlan(goal=float(goal), success=True, reason="", nodes=nodes, stats=search.stats(t0))
+    nodes = search.contact_nodes(path[::-1])
+    return ContactPlan(goal=float(goal), success=True, reason="", nodes=nodes, stats=search.stats(t0, searched, len(roots)),
+                       mu_plan=search.mu_plan)

@@ -77,12 +77,18 @@ def run(args) -> int:
     print(f"goal {goal:+.4f} rad, N = {config.search.num_nodes}: "
           f"{'plan found' if plan.success else 'no plan: ' + plan.reason}")
     print(f"search {s.time_s:.3f} s, {s.expanded} nodes expanded, {s.generated} generated, "
-          f"{s.lp_calls} LP and {s.ik_calls} IK solves")
+          f"{s.lp_calls} LP and {s.ik_calls} IK solves; {s.initial_grasps_searched} of "
+          f"{s.initial_grasp_candidates} candidate initial grasps searched")
+    print(f"friction: scene mu {config.scene.mu:g}, planned with mu_plan {plan.mu_plan:.3g} "
+          f"(search.friction_safety {config.search.friction_safety:g}); required mu = the least friction at "
+          f"which the grasp / the three fingers holding during the switch are in form closure")
     for n, node in enumerate(plan.nodes):
         moved = "-" if node.switching_finger is None else str(node.switching_finger)
         contacts = " ".join(f"{v:.3f}" for v in node.arclengths)
+        stance = "" if node.stance_required_mu is None else f"  stance required mu {node.stance_required_mu:.3f}"
         print(f"  node {n}: theta {node.object_pose[2]:+.3f}  switching finger {moved}  "
-              f"arclengths [{contacts}] m  closure margin {node.closure_margin:.3f}")
+              f"arclengths [{contacts}] m  closure margin {node.closure_margin:.3f}  "
+              f"required mu {node.required_mu:.3f}{stance}")
     if args.figure:
         print(f"figure: {args.figure}" if plan.success else "figure: not drawn (no plan)")
     return 0
