@@ -89,7 +89,12 @@ class SearchConfig:
     # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
-    max_expansions: int = 20000         # node budget of the search
+    # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
+    # (trajectotree.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
+    initial_grid_step: float = 0.02
+    max_initial_grasps: int = 20        # candidate initial grasps the search is rooted at, best first
+    root_expansions: int = 2000         # node budget of the search from one initial grasp
+    max_expansions: int = 20000         # node budget of the search (all initial grasps together)
     time_budget_s: float = 30.0         # s, wall-clock budget of the search
 
     def __post_init__(self):
@@ -107,6 +112,9 @@ class SearchConfig:
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
+        check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
+        check_integer("search.max_initial_grasps", self.max_initial_grasps, 1)
+        check_integer("search.root_expansions", self.root_expansions, 1)
         check_integer("search.max_expansions", self.max_expansions, 1)
         check_range("search.time_budget_s", self.time_budget_s, 0.0, None, low_open=True)
 
