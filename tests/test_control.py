@@ -1,5 +1,7 @@
-"""The impedance controller (eq. 20): closed-form checks of its torques, and the
-simulated static hold it must achieve (and that fails without it)."""
+"""The two controllers. Eq. 20 (ImpedanceController): closed-form checks of its torques
+and the simulated static hold it must achieve (and that fails without it). The grasp
+controller: its QP and schedule against closed forms, a three-finger static hold, a
+push it recovers from, and a slow in-grasp rotation that both controllers track."""
 
 import dataclasses
 
@@ -67,7 +69,7 @@ def hold_config():
 
 
 def test_controller_holds_the_box_for_two_seconds(hold_reference, hold_config):
-    result = simulate_reference(hold_reference, hold_config)
+    result = simulate_reference(hold_reference, hold_config, controller="paper")
     assert result.t[-1] == pytest.approx(2.0)
     position_error = np.linalg.norm(result.x[:, :2] - hold_reference.x[0, :2], axis=1)
     assert position_error.max() < 5e-3
@@ -96,9 +98,109 @@ def in_grasp_rotation(scene, angle: float, duration: float, knots: int = 21):
                      p_WF=p_WF, v_WF=np.gradient(p_WF, times, axis=0), f_W=np.stack([h.f_W[0] for h in holds]))
 
 
-def test_controller_tracks_a_slow_in_grasp_rotation(scene, hold_config):
+@pytest.mark.parametrize("controller", ["paper", "grasp"])
+def test_controller_tracks_a_slow_in_grasp_rotation(scene, hold_config, controller):
     reference = in_grasp_rotation(scene, 0.25, 2.0)
-    result = simulate_reference(reference, hold_config)
-    assert not result.dropped
+    result = simulate_reference(reference, hold_config, controller=controller)
+    assert not result.dropped and result.controller == controller
     assert result.x[-1, 2] == pytest.approx(0.25, abs=0.03)
     assert result.mae_theta < 0.03 and result.mae_x < 3e-3 and result.mae_y < 3e-3
+
+
+# --- the object-level grasp controller ----------------------------------------------------------
+
+def grasp_config(settle_time: float = 0.0) -> Config:
+    config = Config()
+    return dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=settle_time))
+
+
+@pytest.fixture(scope="module")
+def three_finger_hold(scene):
+    """Fingers 1-3 hold the box; finger 0 waits 1 cm below the bottom face."""
+    reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=2.0, lifted=0)
+    assert reference is not None
+    np.testing.assert_allclose(reference.f_W[:, 0], 0.0, atol=1e-9)
+    return reference
+
+
+def test_grasp_controller_ports_are_named(scene, three_finger_hold):
+    from trajectotree.control import GraspController
+    from trajectotree.reference import grasp_schedule
+    gains = ControllerGains()
+    schedule = grasp_schedule(three_finger_hold, width=0.2, height=0.1, tip_radius=scene.tip_radius, period=0.002,
+                              duration=2.0, ramp_time=0.1, swing_lift=0.008, contact_distance=1e-3)
+    controller = GraspController(scene, schedule, gains, mu=0.49)
+    names = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]
+    assert names == ["box_state", "hand_state"]
+    assert controller.get_output_port().get_name() == "actuation" and controller.get_output_port().size() == 8
+    # the lifted finger is out of contact for the whole hold: no planned force, no force budget
+    np.testing.assert_array_equal(schedule.force_scale[:, 0], 0.0)
+    np.testing.assert_array_equal(schedule.force_scale[:, 1:], 1.0)
+    assert len(schedule.X) == 1001
+
+
+def test_grasp_controller_holds_a_three_finger_grasp_for_two_seconds(three_finger_hold):
+    result = simulate_reference(three_finger_hold, grasp_config(), controller="grasp")
+    assert result.controller == "grasp" and result.t[-1] == pytest.approx(2.0)
+    position_error = np.linalg.norm(result.x[:, :2] - three_finger_hold.x[0, :2], axis=1)
+    assert position_error.max() < 1e-3
+    assert np.abs(result.x[:, 2] - three_finger_hold.x[0, 2]).max() < 0.01
+    assert not result.dropped
+    np.testing.assert_array_equal(result.f_W[:, 0], 0.0)   # the lifted finger never touches the box
+
+
+def test_grasp_controller_recovers_from_a_push(three_finger_hold):
+    """0.2 N sideways (40 % of the box's weight) for 0.2 s: the box is knocked away and comes back."""
+    from trajectotree.simulate import Conditions, Push
+    push = Push(force=(0.2, 0.0), time_s=0.5, duration_s=0.2)
+    result = simulate_reference(three_finger_hold, grasp_config(), controller="grasp", conditions=Conditions(push=push))
+    error = np.linalg.norm(result.x[:, :2] - three_finger_hold.x[0, :2], axis=1)
+    during = (result.t > 0.5) & (result.t < 0.8)
+    assert error[during].max() > 1e-3                # the push moved the box
+    assert error[result.t > 1.5].max() < 5e-4         # and the controller brought it back
+    assert np.abs(result.x[result.t > 1.5, 2]).max() < 0.01
+    assert not result.dropped
+    assert result.conditions["push"] == {"force": [0.2, 0.0], "time_s": 0.5, "duration_s": 0.2}
+    # without the push the same run stays put (so the excursion above is the push's)
+    still = simulate_reference(three_finger_hold, grasp_config(), controller="grasp")
+    assert np.linalg.norm(still.x[:, :2] - three_finger_hold.x[0, :2], axis=1).max() < 1e-3
+
+
+def test_grasp_force_qp_meets_a_feasible_wrench_within_the_cones():
+    """Four fingers on the faces of an axis-aligned box; finger 0 has no force budget."""
+    from trajectotree.control import GraspForceQp
+    mu = 0.5
+    qp = GraspForceQp(mu, torque_length=0.1, wrench_weight=1e4)
+    n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])
+    r_W = np.array([[0.06, -0.05], [0.06, 0.05], [-0.06, 0.05], [-0.06, -0.05]])
+    t_W = np.stack([-n_W[:, 1], n_W[:, 0]], axis=1)
+    G = np.zeros((3, 8))
+    G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
+    G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
+    G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
+    wrench = np.array([0.05, 0.5, 0.002])
+    lo, hi = np.array([0.0, 0.1, 0.1, 0.1]), np.array([0.0, 5.0, 5.0, 5.0])
+    lam = qp.solve(G, wrench, np.zeros((4, 2)), lo, hi)
+    np.testing.assert_allclose(lam[0], 0.0, atol=1e-6)
+    assert np.all(lam[1:, 0] >= 0.1 - 1e-6) and np.all(lam[:, 0] <= hi + 1e-6)
+    assert np.all(np.abs(lam[:, 1]) <= mu * lam[:, 0] + 1e-6)
+    np.testing.assert_allclose(G @ lam.ravel(), wrench, atol=1e-3)
+
+
+def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
+    from trajectotree.reference import hermite, swing_intervals, swing_profile
+    t = np.linspace(0.0, 1.0, 11)
+    in_contact = np.array([1, 1, 1, 0, 0, 0, 1, 1, 1, 1, 1], dtype=bool)
+    intervals = swing_intervals(t, in_contact)
+    assert intervals == [(pytest.approx(0.2), pytest.approx(0.6))]
+    times = np.array([0.0, 0.15, 0.2, 0.4, 0.6, 0.65, 0.8])
+    scale, phase = swing_profile(times, intervals, ramp_time=0.1)
+    np.testing.assert_allclose(scale, [1.0, 0.5, 0.0, 0.0, 0.0, 0.5, 1.0], atol=1e-12)
+    np.testing.assert_allclose(phase[3], 0.5)
+    assert np.isnan(phase[0]) and np.isnan(phase[-1])
+    # a cubic is reproduced exactly (value, rate, acceleration) from its knot values and rates
+    f = lambda s: 2 * s**3 - s**2 + 0.5 * s
+    value, rate, accel = hermite(t, f(t)[:, None], (6 * t**2 - 2 * t + 0.5)[:, None], times)
+    np.testing.assert_allclose(value[:, 0], f(times), atol=1e-12)
+    np.testing.assert_allclose(rate[:, 0], 6 * times**2 - 2 * times + 0.5, atol=1e-10)
+    np.testing.assert_allclose(accel[:, 0], 12 * times - 2, atol=1e-8)

@@ -198,6 +198,58 @@ def test_simulate_command_rejects_a_different_scene(scene, short_config, tmp_pat
 
 
 
+def test_simulate_command_records_controller_and_conditions(scene, short_config, tmp_path, capsys):
+    plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), short_config)
+    assert main(["simulate", str(plan_dir), "--json", "--controller", "paper", "--sim-mu", "0.9",
+                 "--sim-mass", "0.06", "--push", "0.1,-0.05@0.2"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["controller"] == "paper"
+    assert printed["conditions"] == {"sim_mu": 0.9, "sim_mass": 0.06, "plan_mu": 0.7, "plan_mass": 0.05,
+                                     "push": {"force": [0.1, -0.05], "time_s": 0.2, "duration_s": 0.2}}
+    assert json.loads((plan_dir / "sim.json").read_text())["conditions"] == printed["conditions"]
+    assert main(["simulate", str(plan_dir), "--json"]) == 0     # the default: grasp control, the plan's world
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["controller"] == "grasp" and printed["dropped"] is False
+    assert printed["conditions"] == {"sim_mu": 0.7, "sim_mass": 0.05, "plan_mu": 0.7, "plan_mass": 0.05, "push": None}
+
+
+@pytest.mark.parametrize("options, named", [
+    (["--sim-mu", "0"], "sim_mu = 0.0"), (["--sim-mu", "-0.3"], "sim_mu = -0.3"),
+    (["--sim-mass", "0"], "sim_mass = 0.0"), (["--sim-mass", "-1"], "sim_mass = -1.0"),
+    (["--push", "0.2,0"], "'0.2,0'"), (["--push", "0.2@1"], "'0.2@1'"), (["--push", "a,b@1"], "'a,b@1'"),
+    (["--push", "0.2,0@-1"], "'0.2,0@-1'"), (["--push", "0.2,0@nan"], "'0.2,0@nan'"),
+    (["--controller", "pid"], "'pid'"), (["--rate", "0"], "controller.rate_hz"),
+])
+def test_simulate_command_rejects_bad_conditions(scene, short_config, tmp_path, capsys, options, named):
+    plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), short_config)
+    html = tmp_path / "run.html"
+    assert main(["simulate", str(plan_dir), "--html", str(html), *options]) == 2
+    err = capsys.readouterr().err
+    assert named in err, err
+    assert not (plan_dir / "sim.json").exists() and not (plan_dir / "sim.npz").exists() and not html.exists()
+
+
+def test_run_simulation_conditions_change_the_world_not_the_controller(scene, short_config):
+    """A heavier simulated box (model mismatch) sags more than the planned one under the
+    same controller; a downward push for 0.2 s moves it down while it acts."""
+    from trajectotree.config import ConfigError
+    reference = reference_from_arrays(hold_plan_arrays(scene, 0.5), scene)
+    nominal = run_simulation(plan=reference, config=short_config)
+    heavy = run_simulation(plan=reference, config=short_config, sim_mass=0.1)
+    pushed = run_simulation(plan=reference, config=short_config, push="0,-0.3@0.2")
+    assert heavy.conditions["sim_mass"] == 0.1 and heavy.conditions["plan_mass"] == 0.05
+    late = nominal.t > 0.5
+    sag = lambda r: np.mean(r.x_plan[late, 1] - r.x[late, 1])
+    assert sag(heavy) > sag(nominal) + 1e-5
+    during = (pushed.t > 0.25) & (pushed.t < 0.4)
+    assert np.all(pushed.x[during, 1] < nominal.x[during, 1])
+    assert not (nominal.dropped or heavy.dropped or pushed.dropped)
+    with pytest.raises(ConfigError, match="sim_mu = 0"):
+        run_simulation(plan=reference, config=short_config, sim_mu=0.0)
+    with pytest.raises(ConfigError, match="'x@1'"):
+        run_simulation(plan=reference, config=short_config, push="x@1")
+
+
 @pytest.mark.slow
 def test_a_trajectotree_plan_executes_end_to_end(tmp_path):
     """Plan a 0.3 rad turn in 2 segments with TrajectoTree, execute it, save and reload."""

@@ -183,16 +183,42 @@ class CitoConfig:
 
 @dataclass(frozen=True)
 class ControllerGains:
-    """Fingertip impedance controller, paper eq. 20 (same gains for every method)."""
+    """Both executors (same gains for every method): the fingertip impedance controller
+    of paper eq. 20 (`kp`, `kv`) and the object-level GraspController (the rest)."""
 
-    # Tuned on TrajectoTree plans (seed-0 goals): kp 400 halved the median theta error of
+    # Eq. 20, tuned on TrajectoTree plans (seed-0 goals): kp 400 halved the median theta error of
     # kp 200; kp >= 800 made plans drop more; kv must stay below ~2 m_tip / sim.time_step.
     kp: float = 400.0   # N/m, fingertip position stiffness
     kv: float = 5.0     # N s/m, fingertip velocity damping
+    # GraspController. Strong object gains with soft fingertip springs: weak object gains (100 s^-2)
+    # with stiff springs anchored to the measured box (200 N/m) lost even a static grasp.
+    rate_hz: float = 500.0          # Hz, control rate (torques are held between updates)
+    object_kp: float = 2000.0       # s^-2, box pose error -> desired acceleration (x, y and theta alike)
+    object_kd: float = 80.0         # s^-1, box velocity error -> desired acceleration
+    tip_kp: float = 50.0            # N/m, fingertip spring to its target on the measured box
+    tip_kd: float = 3.0             # N s/m, fingertip damping to its target's velocity
+    min_normal_force: float = 0.1   # N, least push of a finger in contact (grasp-force QP)
+    max_normal_force: float = 5.0   # N, most push of a finger in contact (grasp-force QP)
+    # 1, weight of the box-wrench residual (N; torques divided by the box half-diagonal) in the QP,
+    # relative to the deviation of the finger forces from the plan's (N)
+    wrench_weight: float = 100.0
+    ramp_time: float = 0.1          # s, a switching finger's force ramps to 0 before lift-off (back after landing)
+    swing_lift: float = 0.008       # m, least fingertip gap mid-swing (its planned path, lifted where lower)
+    contact_distance: float = 1e-3  # m, a planned fingertip this close to the planned box is in contact
 
     def __post_init__(self):
         check_range("controller.kp", self.kp, 0.0, None)
         check_range("controller.kv", self.kv, 0.0, None)
+        check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
+        for name in ("object_kp", "object_kd", "tip_kp", "tip_kd", "min_normal_force", "wrench_weight"):
+            check_range(f"controller.{name}", getattr(self, name), 0.0, None)
+        check_range("controller.max_normal_force", self.max_normal_force, self.min_normal_force, None, low_open=True)
+        check_range("controller.ramp_time", self.ramp_time, 0.0, 2.0)
+        check_range("controller.swing_lift", self.swing_lift, 0.0, 0.05)
+        check_range("controller.contact_distance", self.contact_distance, 0.0, 0.02, low_open=True)
+
+
+CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
 
 
 @dataclass(frozen=True)
@@ -203,12 +229,17 @@ class SimConfig:
     settle_time: float = 0.5      # s, simulated after the plan ends (the last reference is held)
     drop_distance: float = 0.05   # m, the box is dropped once its position is this far from the plan
     log_period: float = 0.01      # s, sampling period of the logged box pose and hand state (metrics use it)
+    controller: str = "grasp"     # executor: "grasp" (GraspController) or "paper" (eq. 20, ImpedanceController)
+    push_duration: float = 0.2    # s, how long a push (simulate --push) acts on the box
 
     def __post_init__(self):
         check_range("sim.time_step", self.time_step, 0.0, 0.01, low_open=True)
         check_range("sim.settle_time", self.settle_time, 0.0, 10.0)
         check_range("sim.drop_distance", self.drop_distance, 0.0, 1.0, low_open=True)
         check_range("sim.log_period", self.log_period, self.time_step, 1.0)
+        if self.controller not in CONTROLLERS:
+            raise ConfigError(f"sim.controller = {self.controller!r} is not a controller; valid: {', '.join(CONTROLLERS)}")
+        check_range("sim.push_duration", self.push_duration, 0.0, 10.0, low_open=True)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,7 @@
-"""Fingertip impedance controller with gravity compensation (paper eq. 20):
+"""The two executors of a plan: the paper's fingertip impedance controller
+(`ImpedanceController`, eq. 20) and the object-level `GraspController` (the default).
+
+Fingertip impedance controller with gravity compensation (paper eq. 20):
 
     tau = sum_i J_WF_i^T (kp (p_ref_i - p_i) + kv (v_ref_i - v_i) + f_ref_i) + g_hand
 
@@ -8,6 +11,20 @@ box in W (the box pushes back with -f_ref_i, so the motors must supply J^T f_ref
 and g_hand the torques that cancel gravity on the links. The gains are the same
 for every planner (paper Sec. IV-D). Torque limits are the plant's effort limits,
 which Drake's discrete plant enforces on the actuation input.
+
+GraspController, periodic at ControllerGains.rate_hz, reads the measured state of
+the box and the hand (the plant's; there is no estimator) and
+  1. asks for the box wrench w = M (a_ref + Kp (X_ref - X) + Kd (V_ref - V)) + gravity
+     (M the planned mass and inertia, X_ref a cubic Hermite through the plan);
+  2. splits it into forces of the fingers in contact with a QP (OSQP, built once):
+     min wrench_weight |G lambda - w|^2 + |lambda - lambda_plan|^2 with
+     lambda_n in s [min, max] N and |lambda_t| <= mu lambda_n, where s ramps a switching
+     finger's force to 0 before lift-off and back after landing;
+  3. commands tau = J^T (f + K_t (p_target - p) + D (v_target - v)) + g_hand, with
+     fingertip targets the planned box-frame fingertip positions mapped through the
+     MEASURED box pose (a switching finger follows its box-frame path, lifted).
+Soft fingertip springs with strong object gains: stiff springs anchored to the
+measured box inject tangential force as the spheres roll and lose the grasp.
 """
 
 from __future__ import annotations
@@ -15,10 +32,13 @@ from __future__ import annotations
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.solvers import MathematicalProgram, OsqpSolver, SolverOptions
+from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains, SceneConfig
-from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, add_hand_and_box
+from trajectotree.geometry import rotation_2d
+from trajectotree.reference import GraspSchedule
+from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene, add_hand_and_box
 
 FINGERTIP_VECTOR_SIZE = 2 * NUM_FINGERS  # (x, y) of each finger, finger-major
 
@@ -72,3 +92,146 @@ class ImpedanceController(LeafSystem):
         output.SetFromVector(self.compute_actuation(
             self.hand_state_port.Eval(context), self.p_ref_port.Eval(context),
             self.v_ref_port.Eval(context), self.f_ref_port.Eval(context)))
+
+
+def finger_gravity_torques(finger: FingerGeometry, q, gravity: float) -> np.ndarray:
+    """dV/dq of one two-link finger in gravity -y: the joint torques that hold it still."""
+    a1, a12 = finger.psi + q[0], finger.psi + q[0] + q[1]
+    (m1, m2), (c1, c2) = finger.masses, finger.coms
+    return gravity * np.array([m1 * c1 * np.cos(a1) + m2 * (finger.l1 * np.cos(a1) + c2 * np.cos(a12)),
+                               m2 * c2 * np.cos(a12)])
+
+
+def perp(v) -> np.ndarray:
+    """z x v for planar vectors (..., 2)."""
+    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+
+
+class GraspForceQp:
+    """min wrench_weight |G lambda - w|^2_W + |lambda - lambda_plan|^2 over lambda = (lambda_n,
+    lambda_t) of the 4 fingers, lambda_n in [lo, hi], |lambda_t| <= mu lambda_n. Built once;
+    each solve updates the cost and the bounds (OSQP)."""
+
+    def __init__(self, mu: float, torque_length: float, wrench_weight: float):
+        self._prog = MathematicalProgram()
+        self._z = self._prog.NewContinuousVariables(2 * NUM_FINGERS, "lambda")   # finger-major (n, t)
+        self._cost = self._prog.AddQuadraticCost(np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z,
+                                                 is_convex=True)
+        self._bounds = self._prog.AddBoundingBoxConstraint(np.zeros(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS),
+                                                           self._z)
+        cone = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
+        for i in range(NUM_FINGERS):   # lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0
+            cone[2 * i, 2 * i:2 * i + 2] = (-mu, 1.0)
+            cone[2 * i + 1, 2 * i:2 * i + 2] = (-mu, -1.0)
+        self._prog.AddLinearConstraint(cone, np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z)
+        self._mu = mu
+        self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length ** 2])
+        self._solver = OsqpSolver()
+        self._options = SolverOptions()
+        for name, value in (("eps_abs", 1e-6), ("eps_rel", 1e-6), ("polishing", 0), ("verbose", 0)):
+            self._options.SetOption(OsqpSolver.id(), name, value)
+
+    def solve(self, G, wrench, lambda_plan, lo, hi) -> np.ndarray:
+        """lambda (4, 2) for the grasp matrix G (3, 8), the wrench w (3,), the plan's
+        lambda (4, 2) and the normal-force bounds lo, hi (4,). Falls back to the plan's
+        forces, clipped to the bounds, if OSQP fails."""
+        z_plan = lambda_plan.ravel()
+        GtW = G.T @ self._W
+        self._cost.evaluator().UpdateCoefficients(2.0 * (GtW @ G + np.eye(2 * NUM_FINGERS)),
+                                                  -2.0 * (GtW @ wrench + z_plan), 0.0, True)
+        t_max = self._mu * hi
+        self._bounds.evaluator().set_bounds(np.column_stack([lo, -t_max]).ravel(), np.column_stack([hi, t_max]).ravel())
+        result = self._solver.Solve(self._prog, None, self._options)
+        if not result.is_success():
+            n = np.clip(lambda_plan[:, 0], lo, hi)
+            return np.column_stack([n, np.clip(lambda_plan[:, 1], -self._mu * n, self._mu * n)])
+        return result.GetSolution(self._z).reshape(NUM_FINGERS, 2)
+
+
+class GraspController(LeafSystem):
+    """Object-level grasp control of a planned box motion (see the module doc).
+    Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
+    joint) and `hand_state` (16: the hand's [q; v]). Output port: `actuation` (8, the
+    plant's actuation order), updated every 1 / gains.rate_hz s and held in between.
+    `mass` and `mu` are what the plan assumed (not the simulated plant's)."""
+
+    def __init__(self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float):
+        super().__init__()
+        c = scene.config
+        self.gains, self.schedule = gains, schedule
+        self._fingers, self._gravity, self._tip_radius = scene.fingers, c.gravity, scene.tip_radius
+        self._mass = c.box_mass
+        self._inertia = c.box_mass * (c.box_width ** 2 + c.box_height ** 2) / 12.0
+        half_diagonal = 0.5 * np.hypot(c.box_width, c.box_height)
+        self._qp = GraspForceQp(mu, half_diagonal, gains.wrench_weight)
+        B = scene.plant.MakeActuationMatrix()                       # (nv, nu), a selection
+        self._u_from_tau = B[scene.hand_v_indices].T                 # hand-joint torques -> actuation
+        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
+        state = self.DeclareDiscreteState(B.shape[1])
+        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
+        self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
+        self.actuation_port = self.DeclareStateOutputPort("actuation", state)
+
+    def UpdateActuation(self, context, discrete_state):
+        discrete_state.set_value(self.compute_actuation(
+            context.get_time(), self.box_state_port.Eval(context), self.hand_state_port.Eval(context)))
+        return EventStatus.Succeeded()
+
+    def desired_wrench(self, n: int, box_state) -> np.ndarray:
+        """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n."""
+        s, g = self.schedule, self.gains
+        error = s.X[n] - box_state[:3]
+        error[2] = (error[2] + np.pi) % (2 * np.pi) - np.pi
+        a = s.A[n] + g.object_kp * error + g.object_kd * (s.V[n] - box_state[3:])
+        return np.array([self._mass * a[0], self._mass * (a[1] + self._gravity), self._inertia * a[2]])
+
+    def finger_forces(self, n: int, box_state, p_WF) -> tuple[np.ndarray, np.ndarray]:
+        """f_W (4, 2), the force each finger should apply to the box at sample n (QP),
+        and n_W (4, 2), the outward normals of the faces it pushes on. The forces act
+        where the measured fingertips p_WF (4, 2) touch the faces: a sphere rolls along
+        the face as the box turns, and with the planned points instead, 2 mm of rolling
+        under 1 N grips left a slow in-grasp turn 0.03 rad behind."""
+        s, g = self.schedule, self.gains
+        n_W = s.n_B[n] @ rotation_2d(box_state[2]).T
+        t_W = perp(n_W)
+        r_W = p_WF - self._tip_radius * n_W - box_state[:2]     # contact points, from the box origin
+        G = np.empty((3, 2 * NUM_FINGERS))
+        G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
+        G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
+        G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
+        scale = s.force_scale[n]
+        lam = self._qp.solve(G, self.desired_wrench(n, box_state), s.lambda_plan[n],
+                             scale * g.min_normal_force, scale * g.max_normal_force)
+        return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
+
+    def compute_actuation(self, t: float, box_state, hand_state) -> np.ndarray:
+        s, g = self.schedule, self.gains
+        n = s.index(t)
+        q, v = hand_state[:NUM_HAND_JOINTS], hand_state[NUM_HAND_JOINTS:]
+        fingers = list(enumerate(self._fingers))
+        p_WF = np.array([finger.fingertip(q[2 * i:2 * i + 2]) for i, finger in fingers])
+        J_WF = [finger.jacobian(q[2 * i:2 * i + 2]) for i, finger in fingers]
+        f_W, n_W = self.finger_forces(n, box_state, p_WF)
+        # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
+        # contact point's Jacobian, a tangential force also turns the second link (without it a
+        # static hold settled 0.035 rad off).
+        r_FC = -self._tip_radius * n_W
+        # A holding finger is force-controlled along the face: its sphere rolls as the box turns,
+        # and a tangential spring to a box-fixed target would fight the QP's friction force
+        # (a slow in-grasp turn ran 0.05 rad ahead with it). Its spring acts along the normal only.
+        t_W = perp(n_W)
+        along_face = s.force_scale[n][:, None] * t_W
+        R = rotation_2d(box_state[2])
+        r_W = s.p_BF[n] @ R.T
+        p_target = box_state[:2] + r_W
+        v_target = box_state[3:5] + box_state[5] * perp(r_W) + s.v_BF[n] @ R.T
+        tau = np.empty(NUM_HAND_JOINTS)
+        for i, finger in fingers:
+            q_i, v_i, J = q[2 * i:2 * i + 2], v[2 * i:2 * i + 2], J_WF[i]
+            error = p_target[i] - p_WF[i]
+            error = error - (error @ t_W[i]) * along_face[i]
+            spring = g.tip_kp * error + g.tip_kd * (v_target[i] - J @ v_i)
+            J_C = J + np.outer(perp(r_FC[i]), (1.0, 1.0))   # link 2 turns at q1dot + q2dot
+            tau[2 * i:2 * i + 2] = J.T @ spring + J_C.T @ f_W[i] + finger_gravity_torques(finger, q_i, self._gravity)
+        return self._u_from_tau @ tau

@@ -54,7 +54,9 @@ def load_sim(plan_dir: str | Path):
                          mae_theta=float(summary["mae_theta"]),
                          final_error=tuple(float(v) for v in summary["final_error"]),
                          dropped=bool(summary["dropped"]), drop_time_s=summary["drop_time_s"],
-                         sim_time_s=float(summary["sim_time_s"]))
+                         sim_time_s=float(summary["sim_time_s"]),
+                         controller=summary.get("controller", "paper"),   # runs before the grasp controller
+                         conditions=summary.get("conditions", {}))
     except (KeyError, TypeError, json.JSONDecodeError, OSError, ValueError) as e:
         if isinstance(e, FileNotFoundError):
             raise

@@ -4,10 +4,15 @@ The execution Diagram: a discrete MultibodyPlant with the hand and box from
 models/ (point contact between fingertip spheres, links and the box, friction
 from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
-SimConfig.settle_time after the plan ends), the ImpedanceController (eq. 20),
+SimConfig.settle_time after the plan ends), a controller (the object-level
+GraspController, default, or eq. 20's ImpedanceController, `controller="paper"`),
 loggers of the plant state and of each finger's simulated force on the box
 (`FingertipForces`, compared with the planned forces in `SimResult`) and,
 optionally, a Meshcat visualizer.
+
+`Conditions` change the simulated world only, never what the controller assumes:
+the friction coefficient (sim_mu), the box mass (sim_mass: model mismatch) and a
+push, a force on the box in W for SimConfig.push_duration seconds.
 
 The run starts in the plan's initial state (x_0, q_0, at rest). Finger-finger
 collisions are filtered out: the planners do not model them, and the fingers
@@ -17,22 +22,25 @@ only meet when the plan itself is infeasible for the hand.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import CollisionFilterDeclaration, Meshcat
-from pydrake.multibody.plant import AddMultibodyPlant, ContactResults, MultibodyPlantConfig
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import (AddMultibodyPlant, ContactResults, ExternallyAppliedSpatialForce,
+                                     MultibodyPlantConfig)
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from trajectotree import metrics, playback
-from trajectotree.config import Config
-from trajectotree.control import FINGERTIP_VECTOR_SIZE, ImpedanceController
-from trajectotree.reference import Reference, reference_from_plan
+from trajectotree.config import CONTROLLERS, Config, ConfigError, check_range
+from trajectotree.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
+from trajectotree.reference import Reference, grasp_schedule, reference_from_plan
 from trajectotree.scene import NUM_FINGERS, add_hand_and_box, build_scene
 
 
@@ -52,12 +60,94 @@ class SimResult:
     dropped: bool            # the drop rule fired (trajectotree.metrics.detect_drop)
     drop_time_s: float | None  # s, when it fired
     sim_time_s: float        # s, wall-clock time of the simulation
+    controller: str = "grasp"                          # which executor ran (config.CONTROLLERS)
+    conditions: dict = field(default_factory=dict)     # Conditions.to_json() of the simulated world
 
     def to_json(self) -> dict:
-        """The DESIGN.md sim.json keys, plus the run's length and sample count."""
+        """The DESIGN.md sim.json keys, plus the run's length and sample count,
+        the controller and the simulated conditions."""
         return {"mae_x": self.mae_x, "mae_y": self.mae_y, "mae_theta": self.mae_theta,
                 "final_error": list(self.final_error), "dropped": self.dropped, "drop_time_s": self.drop_time_s,
-                "sim_time_s": self.sim_time_s, "duration_s": float(self.t[-1]), "num_samples": int(len(self.t))}
+                "sim_time_s": self.sim_time_s, "duration_s": float(self.t[-1]), "num_samples": int(len(self.t)),
+                "controller": self.controller, "conditions": self.conditions}
+
+
+@dataclass(frozen=True)
+class Push:
+    """A force on the box's centre, in W, from time_s for duration_s."""
+
+    force: tuple[float, float]   # N, (f_x, f_y) in W
+    time_s: float                # s, when it starts
+    duration_s: float = 0.2      # s, how long it acts
+
+    def __post_init__(self):
+        if len(self.force) != 2:
+            raise ConfigError(f"push force = {self.force!r} must have 2 entries (f_x N, f_y N)")
+        for i, f in enumerate(self.force):
+            check_range(f"push force[{i}]", f, -100.0, 100.0)
+        check_range("push time", self.time_s, 0.0, None)
+        check_range("push duration", self.duration_s, 0.0, 10.0, low_open=True)
+
+
+def parse_push(text: str, duration_s: float = 0.2) -> Push:
+    """A Push from "FX,FY@T" (N, N, s), e.g. "0.2,0@3.5"; ConfigError naming the text."""
+    try:
+        force, at = str(text).split("@")
+        fx, fy = (float(v) for v in force.split(","))
+        return Push(force=(fx, fy), time_s=float(at), duration_s=duration_s)
+    except (ValueError, ConfigError) as e:
+        raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, "
+                          f"e.g. 0.2,0@3.5): {e}") from None
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """The simulated world where it differs from the plan's; the controller keeps the plan's values."""
+
+    mu: float | None = None      # friction coefficient of the simulated plant (None: the scene's)
+    mass: float | None = None    # kg, box mass of the simulated plant (None: the scene's)
+    push: Push | None = None     # a push on the box, or none
+
+    def __post_init__(self):
+        if self.mu is not None:
+            check_range("sim_mu", self.mu, 0.0, 5.0, low_open=True)
+        if self.mass is not None:
+            check_range("sim_mass", self.mass, 0.0, 100.0, low_open=True)
+
+    def scene(self, scene_config):
+        """The simulated plant's SceneConfig."""
+        changes = {k: v for k, v in (("mu", self.mu), ("box_mass", self.mass)) if v is not None}
+        return dataclasses.replace(scene_config, **changes)
+
+    def to_json(self, scene_config) -> dict:
+        sim = self.scene(scene_config)
+        push = None if self.push is None else {"force": list(self.push.force), "time_s": self.push.time_s,
+                                               "duration_s": self.push.duration_s}
+        return {"sim_mu": sim.mu, "sim_mass": sim.box_mass, "plan_mu": scene_config.mu,
+                "plan_mass": scene_config.box_mass, "push": push}
+
+
+class PushSource(LeafSystem):
+    """Output port `spatial_forces` (list of ExternallyAppliedSpatialForce, for the
+    plant's applied-spatial-force input): the push on the box while it acts, else none."""
+
+    def __init__(self, plant, box, push: Push):
+        super().__init__()
+        self._body = plant.GetBodyByName("box", box).index()
+        self._push = push
+        self.spatial_forces_port = self.DeclareAbstractOutputPort(
+            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self.CalcForces)
+
+    def CalcForces(self, context, output):
+        push, t = self._push, context.get_time()
+        forces = []
+        if push.time_s <= t < push.time_s + push.duration_s:
+            applied = ExternallyAppliedSpatialForce()
+            applied.body_index = self._body
+            applied.p_BoBq_B = np.zeros(3)     # at the box origin, its centre of mass
+            applied.F_Bq_W = SpatialForce(np.zeros(3), np.array([push.force[0], push.force[1], 0.0]))
+            forces.append(applied)
+        output.set_value(forces)
 
 
 class FingertipForces(LeafSystem):
@@ -96,6 +186,7 @@ class ExecutionDiagram:
     force_logger: object       # VectorLogSink of FingertipForces (8)
     visualizer: object | None  # MeshcatVisualizer or None
     duration: float            # s, plan length + settle time
+    controller: str            # "grasp", "paper" or "none" (uncontrolled)
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -126,27 +217,63 @@ def exclude_finger_finger_collisions(plant, scene_graph, hand) -> None:
             manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
 
 
+def add_paper_controller(builder, plant, hand, reference: Reference, config: Config) -> ImpedanceController:
+    """Eq. 20 fed by reference sources (fingertip positions, velocities, forces)."""
+    controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
+    flat = lambda a: a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
+    hold = config.sim.settle_time
+    for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
+        source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))
+        builder.Connect(source.get_output_port(), controller.GetInputPort(name))
+    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
+    return controller
+
+
+def add_grasp_controller(builder, plant, hand, box, reference: Reference, config: Config) -> GraspController:
+    """The GraspController with the plan's scene (mass, size) and friction mu_plan =
+    search.friction_safety x scene.mu, reading the box and hand state."""
+    scene, gains = build_scene(config.scene), config.controller
+    schedule = grasp_schedule(reference, width=config.scene.box_width, height=config.scene.box_height,
+                              tip_radius=scene.tip_radius, period=1.0 / gains.rate_hz,
+                              duration=reference.duration + config.sim.settle_time, ramp_time=gains.ramp_time,
+                              swing_lift=gains.swing_lift, contact_distance=gains.contact_distance)
+    mu_plan = config.search.friction_safety * config.scene.mu
+    controller = builder.AddNamedSystem("grasp_controller", GraspController(scene, schedule, gains, mu=mu_plan))
+    builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
+    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
+    return controller
+
+
+def check_controller(name: str) -> str:
+    if name not in CONTROLLERS:
+        raise ConfigError(f"controller {name!r} is not one of {', '.join(CONTROLLERS)}")
+    return name
+
+
 def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
-                            controlled: bool = True) -> ExecutionDiagram:
-    """The Diagram that executes `reference`; controlled=False applies zero torque
-    (the open-loop hand, for checking that the controller is what holds the box)."""
+                            controlled: bool = True, controller: str | None = None,
+                            conditions: Conditions = Conditions()) -> ExecutionDiagram:
+    """The Diagram that executes `reference` with `controller` (default
+    config.sim.controller) in the world `conditions` describe; controlled=False applies
+    zero torque (the open-loop hand, for checking that the controller holds the box)."""
+    kind = check_controller(controller or config.sim.controller)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
-    hand, box = add_hand_and_box(plant, config.scene)
+    hand, box = add_hand_and_box(plant, conditions.scene(config.scene))
     plant.Finalize()
     exclude_finger_finger_collisions(plant, scene_graph, hand)
     hold = config.sim.settle_time
-    if controlled:
-        controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
-        flat = lambda a: a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
-        for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
-            source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))
-            builder.Connect(source.get_output_port(), controller.GetInputPort(name))
-        builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
-        builder.Connect(controller.actuation_port, plant.get_actuation_input_port())
+    if not controlled:
+        system = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
+        actuation = system.get_output_port()
+    elif kind == "paper":
+        actuation = add_paper_controller(builder, plant, hand, reference, config).actuation_port
     else:
-        zero = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
-        builder.Connect(zero.get_output_port(), plant.get_actuation_input_port())
+        actuation = add_grasp_controller(builder, plant, hand, box, reference, config).actuation_port
+    builder.Connect(actuation, plant.get_actuation_input_port())
+    if conditions.push is not None:
+        push = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
+        builder.Connect(push.spatial_forces_port, plant.get_applied_spatial_force_input_port())
     triggers = {TriggerType.kPeriodic, TriggerType.kForced}
     state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
     forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box))
@@ -154,7 +281,8 @@ def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Me
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
     return ExecutionDiagram(diagram=builder.Build(), plant=plant, hand=hand, box=box, state_logger=state_logger,
-                            force_logger=force_logger, visualizer=visualizer, duration=reference.duration + hold)
+                            force_logger=force_logger, visualizer=visualizer, duration=reference.duration + hold,
+                            controller=kind if controlled else "none")
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -181,11 +309,13 @@ def evaluate(reference: Reference, config: Config, t, x, q, f_W, sim_time_s: flo
 
 def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
                        html_path: str | Path | None = None, controlled: bool = True,
-                       realtime_rate: float = 0.0) -> SimResult:
+                       realtime_rate: float = 0.0, controller: str | None = None,
+                       conditions: Conditions = Conditions()) -> SimResult:
     """Runs the execution Diagram for the plan's length plus the settle time."""
     if html_path is not None and meshcat is None:
         meshcat = playback.start_meshcat()
-    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled)
+    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled,
+                                        controller=controller, conditions=conditions)
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:
@@ -204,7 +334,8 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
         logs.append(log)
     t, x, q = split_state_log(execution, logs[0])
     f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
-    result = evaluate(reference, config, t, x, q, f_W, sim_time_s)
+    result = dataclasses.replace(evaluate(reference, config, t, x, q, f_W, sim_time_s),
+                                 controller=execution.controller, conditions=conditions.to_json(config.scene))
     if meshcat is not None:
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
         playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))
@@ -217,14 +348,22 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
 
 
 def run_simulation(*, plan, config: Config, meshcat: Meshcat | None = None, html_path: str | Path | None = None,
-                   gif_path: str | Path | None = None) -> SimResult:
-    """Executes `plan` (a PlanResult, or a Reference) with the impedance controller.
-    A live `meshcat` runs in real time; `html_path` writes the recorded playback,
-    `gif_path` a matplotlib GIF of the run."""
+                   gif_path: str | Path | None = None, controller: str | None = None, sim_mu: float | None = None,
+                   sim_mass: float | None = None, push: Push | str | None = None) -> SimResult:
+    """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
+    "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
+    `sim_mass` (None: the plan's) and an optional `push` (a Push or "FX,FY@T"); the
+    controller keeps the plan's values. ConfigError on bad values. A live `meshcat` runs
+    in real time; `html_path` writes the recorded playback, `gif_path` a GIF of the run."""
+    if isinstance(push, str):
+        push = parse_push(push, config.sim.push_duration)
+    conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
+    check_controller(controller or config.sim.controller)
     scene = build_scene(config.scene)
     reference = reference_from_plan(plan, scene)
     result = simulate_reference(reference, config, meshcat=meshcat, html_path=html_path,
-                                realtime_rate=1.0 if meshcat is not None else 0.0)
+                                realtime_rate=1.0 if meshcat is not None else 0.0, controller=controller,
+                                conditions=conditions)
     if gif_path is not None:
         playback.write_gif(scene, result.t, result.x, result.q, gif_path, planned_poses=result.x_plan)
     return result

@@ -1,5 +1,7 @@
 """`trajectotree simulate PLAN_DIR`: execute a saved plan in a full-dynamics Drake
-simulation with the impedance controller; writes PLAN_DIR/sim.json and sim.npz."""
+simulation with the object-level grasp controller (--controller paper: eq. 20), optionally
+in a world that differs from the plan's (--sim-mu, --sim-mass, --push); writes
+PLAN_DIR/sim.json and sim.npz."""
 
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ from trajectotree.config import Config, config_from_dict, load_config
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("simulate", help="execute a saved plan with the impedance controller",
+    p = subparsers.add_parser("simulate", help="execute a saved plan with a controller in a Drake simulation",
                               description=__doc__)
     p.add_argument("plan_dir", metavar="PLAN_DIR", help="folder with plan.npz and plan.json (from `trajectotree plan`)")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the run")
@@ -31,8 +33,20 @@ def register(subparsers) -> None:
     group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"), help="box width and height, m")
     group.add_argument("--mass", type=float, metavar="KG", help="box mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
-    group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of the impedance controller")
-    group.add_argument("--kv", type=float, metavar="NS/M", help="fingertip damping of the impedance controller")
+    group.add_argument("--controller", metavar="NAME",
+                       help="grasp (object-level grasp control, the default) or paper (eq. 20)")
+    group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of eq. 20 (--controller paper)")
+    group.add_argument("--kv", type=float, metavar="NS/M", help="fingertip damping of eq. 20 (--controller paper)")
+    group.add_argument("--object-kp", type=float, metavar="1/S2", help="grasp controller: box pose gain, s^-2")
+    group.add_argument("--object-kd", type=float, metavar="1/S", help="grasp controller: box velocity gain, s^-1")
+    group.add_argument("--tip-kp", type=float, metavar="N/M", help="grasp controller: fingertip spring, N/m")
+    group.add_argument("--tip-kd", type=float, metavar="NS/M", help="grasp controller: fingertip damping, N s/m")
+    group.add_argument("--rate", type=float, metavar="HZ", help="grasp controller: control rate, Hz")
+    world = p.add_argument_group("simulated world (differs from the plan's; the controller keeps the plan's values)")
+    world.add_argument("--sim-mu", type=float, metavar="MU", help="friction coefficient of the simulated plant")
+    world.add_argument("--sim-mass", type=float, metavar="KG", help="box mass of the simulated plant, kg")
+    world.add_argument("--push", metavar="FX,FY@T",
+                       help="push the box with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s")
     p.set_defaults(run=run)
 
 
@@ -80,8 +94,15 @@ def execution_config(args, plan_config: Config) -> Config:
         gains["kp"] = args.kp
     if args.kv is not None:
         gains["kv"] = args.kv
+    for name in ("object_kp", "object_kd", "tip_kp", "tip_kd"):
+        if getattr(args, name) is not None:
+            gains[name] = getattr(args, name)
+    if args.rate is not None:
+        gains["rate_hz"] = args.rate
+    sim = {} if args.controller is None else {"controller": args.controller}
     config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
-                                 controller=dataclasses.replace(config.controller, **gains))
+                                 controller=dataclasses.replace(config.controller, **gains),
+                                 sim=dataclasses.replace(config.sim, **sim))
     differ = [f"scene.{f.name} = {getattr(config.scene, f.name)!r} (the plan's: {getattr(plan_config.scene, f.name)!r})"
               for f in dataclasses.fields(config.scene)
               if getattr(config.scene, f.name) != getattr(plan_config.scene, f.name)]
@@ -105,6 +126,15 @@ def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) ->
     return summary
 
 
+def world_conditions(args, config: Config) -> dict:
+    """run_simulation's keyword arguments for --sim-mu, --sim-mass and --push, checked
+    here so that bad values stop the command before anything is written."""
+    from trajectotree.simulate import Conditions, parse_push
+    push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
+    Conditions(mu=args.sim_mu, mass=args.sim_mass, push=push)   # raises ConfigError naming a bad value
+    return {"sim_mu": args.sim_mu, "sim_mass": args.sim_mass, "push": push}
+
+
 def run(args) -> int:
     from trajectotree.io import save_sim
     from trajectotree.playback import start_meshcat
@@ -119,6 +149,7 @@ def run(args) -> int:
             check_output_file(option, path, suffixes)
     arrays, plan_config = read_plan_dir(args.plan_dir)
     config = execution_config(args, plan_config)
+    conditions = world_conditions(args, config)
     plan_status = plan_success_and_status(args.plan_dir)
     if not plan_status[0]:
         print(f"trajectotree simulate: warning: the plan in {args.plan_dir} did not converge (IPOPT status "
@@ -128,7 +159,8 @@ def run(args) -> int:
         meshcat = start_meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
     reference = reference_from_arrays(arrays, build_scene(config.scene))
-    result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif)
+    result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif,
+                            **conditions)
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_status[0])
     if args.forces:
