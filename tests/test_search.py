@@ -142,7 +142,7 @@ def test_search_refuses_a_stance_below_the_margin(scene):
     assert paper.success and paper.nodes[1].switching_finger == 0
     assert paper.nodes[1].stance_required_mu == pytest.approx(0.6698, abs=1e-4)
     refused = find_contact_plan(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP))
-    assert not refused.success and "finger 0 held: stance (1, 2, 3)" in refused.reason
+    assert not refused.success and "finger 0 must move (out of reach) but is held: stance of fingers (1, 2, 3)" in refused.reason
     # the chooser's grasps find the goal with the margin
     check_plan(scene, find_contact_plan(scene, -1.0, SearchConfig()), SearchConfig())
 

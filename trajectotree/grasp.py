@@ -76,27 +76,28 @@ def in_closure_many(A: np.ndarray, B: np.ndarray, mu, spans: np.ndarray | None =
     `spans` (spans_wrench_space) may be passed to skip the rank test."""
     mu = np.broadcast_to(np.asarray(mu, dtype=float), A.shape[:1])[:, None, None]
     edges = np.concatenate([A + mu * B, A - mu * B], axis=1)  # (M, 2k, 3)
+    edges /= np.sqrt(np.einsum("mec,mec->me", edges, edges))[..., None]  # unit edges: tolerances are relative
     j, l = np.triu_indices(edges.shape[1], 1)
     planes = np.cross(edges[:, j], edges[:, l])  # (M, P, 3) normals of the planes through edge pairs
     side = np.einsum("mpc,mec->mpe", planes, edges)
-    scale = SIDE_TOLERANCE * np.linalg.norm(planes, axis=2)[..., None] * np.linalg.norm(edges, axis=2)[:, None, :]
-    split = np.any(side > scale, axis=2) & np.any(side < -scale, axis=2)
-    degenerate = np.linalg.norm(planes, axis=2) <= SIDE_TOLERANCE * np.max(np.linalg.norm(edges, axis=2), axis=1)[:, None] ** 2
+    size = np.sqrt(np.einsum("mpc,mpc->mp", planes, planes))
+    split = (side.max(axis=2) > SIDE_TOLERANCE * size) & (side.min(axis=2) < -SIDE_TOLERANCE * size)
+    degenerate = size <= SIDE_TOLERANCE  # two parallel edges: no plane
     spans = spans_wrench_space(A, B) if spans is None else spans
     return spans & np.all(split | degenerate, axis=1)
 
 
-def required_mu_many(p_BC, n_B) -> np.ndarray:
+def required_mu_many(p_BC, n_B, bisections: int = MU_BISECTIONS) -> np.ndarray:
     """(M,) the smallest friction coefficient at which each stack of contacts (M, k, 2) is in
     frictional form closure (an infimum: ~0 for, e.g., an antipodal pair), inf if not even at
-    MU_CAP. Accurate to MU_CAP / 2^MU_BISECTIONS."""
+    MU_CAP. Accurate to MU_CAP / 2^bisections."""
     A, B = closure_edges_parts(p_BC, n_B)
     spans = spans_wrench_space(A, B)
     out = np.where(in_closure_many(A, B, MU_CAP, spans), np.nan, np.inf)
     todo = np.flatnonzero(np.isnan(out))
     A, B, spans = A[todo], B[todo], spans[todo]
     lo, hi = np.zeros(len(todo)), np.full(len(todo), MU_CAP)
-    for _ in range(MU_BISECTIONS):
+    for _ in range(bisections):
         mid = 0.5 * (lo + hi)
         ok = in_closure_many(A, B, mid, spans)
         hi, lo = np.where(ok, mid, hi), np.where(ok, lo, mid)

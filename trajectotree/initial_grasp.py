@@ -32,6 +32,7 @@ from trajectotree.grasp import required_mu_many
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
 
+RANKING_BISECTIONS = 20  # required_mu to MU_CAP / 2^20 ~ 1e-5 for ranking (ranked to 1e-4)
 STANCE_FINGERS = tuple(tuple(j for j in range(NUM_FINGERS) if j != i) for i in range(NUM_FINGERS))
 
 
@@ -108,7 +109,8 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     for i, others in enumerate(STANCE_FINGERS):  # one required_mu per distinct stance
         stances, index = np.unique(grasps[:, others], axis=0, return_inverse=True)
         first = np.array([np.flatnonzero(index.ravel() == k)[0] for k in range(len(stances))], dtype=int)
-        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others])[index.ravel()]
+        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others],
+                                           bisections=RANKING_BISECTIONS)[index.ravel()]
     free = stance_mu < mu
     worst = np.where(free, stance_mu, -np.inf).max(axis=1)
     keep = np.flatnonzero(free.any(axis=1))

@@ -178,23 +178,32 @@ class _Search:
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
         """(heuristic, child) for each candidate child that passes the cheap exact tests."""
-        free = [i for i in range(NUM_FINGERS) if self.closure.is_free(node.arclengths, i)]
-        for i in set(range(NUM_FINGERS)) - set(free):
-            self.refused[f"finger {i} held: stance {STANCE_FINGERS[i]} not in closure at mu_plan"] += 1
+        depth = node.depth + 1
+        # fingers whose contact is out of reach at the next pose must move now (same children,
+        # fewer tests: with two of them there is no child at all)
+        stuck = [i for i, s in enumerate(node.arclengths) if s not in self.joint2[i][depth]]
+        if len(stuck) > 1:
+            self.refused[f"fingers {stuck} lose their contacts (out of reach) at the same node"] += 1
+            return []
+        movers = stuck or list(range(NUM_FINGERS))
+        free = [i for i in movers if self.closure.is_free(node.arclengths, i)]
+        for i in sorted(set(movers) - set(free)):
+            self.refused[f"finger {i} {'must move (out of reach) but is ' if stuck else ''}held: stance of fingers "
+                         f"{STANCE_FINGERS[i]} not in closure at mu_plan"] += 1
         if not free:
             return []
-        candidates = {node.arclengths: None}  # the zero displacement: no finger moves
+        candidates = {} if stuck else {node.arclengths: None}  # the zero displacement: no finger moves
         for i in free:
             for s in self.moves(node.arclengths[i]):
                 if s != node.arclengths[i]:
                     moved = list(node.arclengths)
                     moved[i] = s
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left, depth = [], self.config.num_nodes - 2 - node.depth, node.depth + 1
+        out, steps_left = [], self.config.num_nodes - 2 - node.depth
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
-            if None in q2:  # a finger cannot reach (closed form) or a contact is at a corner
-                self.refused[f"finger {q2.index(None)} out of reach or at a corner"] += 1
+            if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
+                self.refused[f"finger {finger} new contact out of reach or at a corner"] += 1
                 continue
             if self.switches_needed(depth, arclengths) > steps_left:  # no completion exists
                 self.refused["too many switches left (bound)"] += 1
@@ -226,7 +235,7 @@ class _Search:
         # Each finger must switch by the first node where its initial contact is out of reach;
         # one switch per node, so the k-th earliest such deadline must be at least node k.
         deadlines = sorted((next((d for d in range(1, self.config.num_nodes) if s not in self.joint2[i][d]),
-                                 self.config.num_nodes), i) for i, s in enumerate(start))
+                                 np.inf), i) for i, s in enumerate(start))  # inf: never needs to move
         for k, (deadline, finger) in enumerate(deadlines, start=1):
             if deadline < k:
                 late = [i for d, i in deadlines[:k]]
