@@ -120,7 +120,7 @@ def test_initial_grasp_candidates(scene):
             assert boundary.corner_distance(s) >= scene.config.corner_margin
             assert reach.solve(scene.config.initial_pose, i, s).reachable  # Drake IK, no link in the box
             others = [v for j, v in enumerate(c.arclengths) if j != i]
-            assert c.stance_required_mu[i] == pytest.approx(closure.required_mu(others), abs=1e-6)
+            assert c.stance_required_mu[i] == pytest.approx(closure.required_mu(others), abs=2e-5)  # ranked to ~1e-5
             assert closure.is_free(c.arclengths, i) == (c.stance_required_mu[i] < mu_plan)
         assert closure.check(c.arclengths).in_closure
         tips = [reach.contact(s)[0] + reach.tip_radius * reach.contact(s)[1] for s in c.arclengths]
