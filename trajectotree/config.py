@@ -147,9 +147,11 @@ class CitoConfig:
     # at least switch_clearance sin(pi j / M_hat) between fingertip and box at its segment's j-th
     # knot, and while lifted its normal force is bounded to 0 (it cannot push across the gap).
     # 0 leaves it to complementarity, and the optimum then skims the box (gaps 0-3 mm, touching
-    # down mid-move) and pushes it from 0.1-0.2 mm away, which the physics check refuses.
-    # With 0.01 on goals 0-7 of seed 0 (scripts/bench_planning.py, mu 0.7): 78.6 instead of 113
-    # IPOPT iterations, 11.6 s instead of 16.6 s, cost +15 %.
+    # down mid-move) and may push it from a distance, which the physics check refuses.
+    # Goals 0-7 of seed 0 at mu_plan 0.49 (scripts/bench_planning.py --goals 8 --methods
+    # trajectotree): 0: 98.0 IPOPT iterations, cost 282, 1 plan failed the check (0.11 N from
+    # 0.29 mm); 0.005: 79.0, cost +6 %; 0.01: 75.9, cost +15 %; 0.02: 91.1, cost +45 %, 1 failed
+    # (a fixed finger 0.11 mm off its contact). 0.01 is the fewest iterations.
     switch_clearance: float = 0.01
     # IPOPT tol, on the scaled optimality error; constraints are held to constr_viol_tol regardless.
     # 1e-3 instead of 1e-6: 67 instead of 88 iterations on a 3-segment plan, objective 0.007 % higher.

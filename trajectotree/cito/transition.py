@@ -7,7 +7,8 @@ K = (N-1) M_hat + 1 (the paper's M = (N-1) M_hat time steps). In segment s:
   - the switching finger of node s+1 is pinned at its old contact at the first
     knot and at its new one at the last (eqs. 12-13), and free with the
     complementarity rows in between (eq. 14), lifted off the box by at least
-    switch_clearance sin(pi j / M_hat) at its j-th knot (not in the paper; 0 by default);
+    switch_clearance sin(pi j / M_hat) at its j-th knot, with no normal force while
+    lifted (not in the paper, whose setting configs/paper.yaml restores with 0);
   - the object and joints are at rest at the segment's first and last knot
     (eqs. 18-19); x_0 and q_0 are fixed (eqs. 16-17);
   - the running pose cost targets x*_{s+1} (eq. 11).
