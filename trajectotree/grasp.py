@@ -101,7 +101,7 @@ def required_mu_many(p_BC, n_B, bisections: int = MU_BISECTIONS) -> np.ndarray:
         mid = 0.5 * (lo + hi)
         ok = in_closure_many(A, B, mid, spans)
         hi, lo = np.where(ok, mid, hi), np.where(ok, lo, mid)
-    out[todo] = hi
+    out[todo] = np.where(hi <= MU_CAP / 2 ** bisections, 0.0, hi)  # the last bracket holds 0: an infimum of 0
     return out
 
 
