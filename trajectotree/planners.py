@@ -85,8 +85,10 @@ class PlanResult:
 
 
 def planning_mu(config: Config) -> float:
-    """mu_plan = search.friction_safety * scene.mu, the friction every plan may use."""
-    return config.search.friction_safety * config.scene.mu
+    """mu_plan = search.friction_safety * scene.mu, the friction every plan may use (the
+    search's grasps and stances and the CITO friction cones: one definition for both)."""
+    from trajectotree.initial_grasp import mu_plan
+    return mu_plan(config.scene, config.search)
 
 
 def check_method(method: str) -> str:
