@@ -88,6 +88,8 @@ def test_plan_is_physical(plans, scene, key):
     mu_plan = planning_mu(CONFIG)
     assert mu_plan == pytest.approx(0.7 * c.mu)                                      # the default safety
     assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= mu_plan * ln + 1e-7)        # cones at mu_plan
+    pressing = ln > 0.05
+    assert (np.abs(lt[pressing]) / ln[pressing]).max() > 0.9 * mu_plan              # ... and they bind
     dist = tip_distances(a, c, r)
     assert dist.min() > -1e-3                                                         # no tip 1 mm inside
     away = dist > 1e-4                                                                # no force at a distance
