@@ -20,6 +20,7 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--ena
                  "--disable-background-networking", "--disable-component-update", "--disable-default-apps",
                  "--disable-sync", "--disable-extensions", "--no-first-run", "--mute-audio"]
 VIEWPORT = {"width": 640, "height": 640}
+WIDE = {"width": 1200, "height": 600}   # a browser window wider than tall
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +34,11 @@ def drop_html(tmp_path_factory):
     path = tmp_path_factory.mktemp("playback") / "drop.html"
     result = simulate_reference(reference, config, controlled=False, html_path=path)
     assert result.dropped and result.x[-1, 1] < -0.05   # the box moved well within the view
+    drop_times[path] = result.drop_time_s
     return path
+
+
+drop_times: dict[Path, float] = {}   # drop_html -> the run's drop time, s
 
 
 @pytest.fixture(scope="module")
@@ -52,9 +57,9 @@ def plan_html(tmp_path_factory):
 class Page:
     """A Chromium page on a local HTML file that records every request and page error."""
 
-    def __init__(self, browser, html: Path):
+    def __init__(self, browser, html: Path, viewport=VIEWPORT):
         self.requests, self.errors = [], []
-        self.page = browser.new_page(viewport=VIEWPORT)
+        self.page = browser.new_page(viewport=viewport)
         self.page.on("request", lambda r: self.requests.append(r.url))
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
         self.page.goto(html.resolve().as_uri())
@@ -118,3 +123,43 @@ def test_plan_playback_shows_the_planned_motion(browser, plan_html):
     rows1, _ = np.nonzero(end)
     pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
     assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)   # lifted 4 cm (+y up)
+
+
+def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(browser, drop_html):
+    """On a wide window: the tab title, the time readout (with the drop marked), the legend,
+    read from the page and found in its screenshot, and the hand centred (not in the left half)."""
+    page = Page(browser, drop_html, viewport=WIDE)
+    assert page.page.title() == "TrajectoTree: simulated run"
+    duration = page.page.evaluate("() => viewer.animator.duration")
+    drop = drop_times[drop_html]
+    halfway = round(drop / 2, 2)
+    before = page.frame_at(halfway)
+    assert page.page.inner_text("#tt-time") == f"t = {halfway:.2f} s of {duration:.2f} s"
+    assert page.page.inner_text("#tt-drop-note") == f"box drops at {drop:.2f} s"
+    after = page.frame_at(0.25)
+    assert page.page.inner_text("#tt-time") == f"t = 0.25 s of {duration:.2f} s"
+    assert page.page.inner_text("#tt-drop-note") == f"box dropped at {drop:.2f} s"
+    legend = page.page.inner_text("#tt-legend").splitlines()
+    assert legend == ["box", "planned box pose (outline)", "fingers 0-3: links (grey), fingertips (orange)"]
+    # in the screenshot: the overlay and legend are drawn inside the window, the swatches in their colours
+    for selector in ("#tt-overlay", "#tt-legend"):
+        b = page.page.locator(selector).bounding_box()
+        assert b["x"] >= 0 and b["y"] >= 0 and b["x"] + b["width"] <= WIDE["width"] \
+            and b["y"] + b["height"] <= WIDE["height"], selector
+    swatch = page.page.locator(".tt-swatch").first.bounding_box()
+    np.testing.assert_allclose(after[int(swatch["y"] + swatch["height"] / 2), int(swatch["x"] + swatch["width"] / 2)],
+                               [51, 115, 204], atol=12)
+    drop_mark = page.page.locator("#tt-drop").bounding_box()
+    assert after[int(drop_mark["y"] + drop_mark["height"] / 2), int(drop_mark["x"] + 1)][0] > 180   # red
+    # the hand is centred: the box starts in the middle of the wide window
+    rows, cols = np.nonzero(box_pixels(before))
+    assert abs(cols.mean() - WIDE["width"] / 2) < 25 and abs(rows.mean() - WIDE["height"] / 2) < 25
+
+
+def test_plan_page_is_titled_and_has_no_drop_marker(browser, plan_html):
+    page = Page(browser, plan_html)
+    assert page.page.title() == "TrajectoTree: planned trajectory"
+    page.frame_at(0.5)
+    assert page.page.inner_text("#tt-time") == "t = 0.50 s of 1.00 s"
+    assert page.page.locator("#tt-drop").count() == 0
+    assert page.page.inner_text("#tt-legend").splitlines()[0] == "box (planned pose)"

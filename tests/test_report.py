@@ -58,3 +58,87 @@ def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, t
     assert "| TrajectoTree |" in markdown and "| CITO, warm-start |" in markdown and "5.4x" in markdown
     assert main(["report", str(resumed_sweep.out), "--out", str(tmp_path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["table"][0]["method"] == "trajectotree"
+
+
+# ---- the pictures (issue 15 item 11) ---------------------------------------------------------------
+
+def test_time_and_cost_figure_says_no_data_instead_of_empty_axes():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from trajectotree.report import figure_time_and_cost
+    rows = [{"method": "trajectotree", "success": True, "total_time_s": 12.0, "cost": 250.0, "goal_index": 0},
+            {"method": "cito", "success": None, "total_time_s": None, "cost": None, "goal_index": 0,
+             "error": "timeout"}]
+    fig = figure_time_and_cost(rows, ["trajectotree", "cito"])
+    ax_time, ax_cost = fig.axes
+    assert [t.get_text() for t in ax_time.texts] == ["no data"]   # CITO's slot
+    assert ax_time.texts[0].get_position()[0] == 2 and len(ax_time.get_yticks()) > 0
+    plt.close(fig)
+    fig = figure_time_and_cost(rows[1:], ["cito"])   # nothing at all: no meaningless ticks
+    assert all([t.get_text() for t in ax.texts] == ["no data"] and len(ax.get_yticks()) == 0 for ax in fig.axes)
+    assert fig.axes[0].get_legend() is None
+    plt.close(fig)
+
+
+def test_forces_figure_shares_one_scale_set_before_the_drop_and_marks_segments():
+    import dataclasses
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from trajectotree.config import Config
+    from trajectotree.reference import static_hold_reference
+    from trajectotree.report import figure_finger_forces, segment_spans
+    from trajectotree.scene import build_scene
+    from trajectotree.simulate import simulate_reference
+    config = Config()
+    config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=0.0))
+    reference = static_hold_reference(build_scene(config.scene), (0.56, 0.14, 0.26, 0.44), min_normal_force=1.0,
+                                      duration=0.5)
+    result = simulate_reference(reference, config, controlled=False)   # the hand lets go: the box falls
+    assert result.dropped
+    spans = segment_spans([None, 0, 2], knots_per_segment=2, dt=0.1)
+    assert spans == [(0.0, 0.2, 0), (0.2, 0.4, 2)]
+    fig = figure_finger_forces(result, spans)
+    axes = fig.axes
+    held = result.t <= result.drop_time_s
+    top = max(np.linalg.norm(result.f_W_plan, axis=-1).max(), np.linalg.norm(result.f_W[held], axis=-1).max())
+    assert len({ax.get_ylim() for ax in axes}) == 1 and axes[0].get_ylim()[1] == pytest.approx(1.1 * top)
+    assert np.linalg.norm(result.f_W, axis=-1).max() > axes[0].get_ylim()[1]   # the fallen box's squeeze: clipped
+    assert all("|f| [N]" in ax.get_ylabel() for ax in axes) and "|f|" in fig._suptitle.get_text()
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert labels == ["simulated |f|", "planned |f|", "after the drop (may be clipped)",
+                      "segment in which this finger switches", "segment boundary"]
+    for i, ax in enumerate(axes):   # finger 0 switches in segment 1, finger 2 in segment 2
+        shaded = [p for p in ax.patches if p.get_label() == "segment in which this finger switches"]
+        assert len(shaded) == {0: 1, 2: 1}.get(i, 0)
+    plt.close(fig)
+
+
+def test_keyframes_number_the_fingers_and_have_a_legend(tmp_path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from trajectotree.config import SearchConfig
+    from trajectotree.plotting import contact_node_legend_handles, plot_contact_node
+    from trajectotree.scene import build_scene
+    from trajectotree.search import find_contact_plan
+    scene = build_scene()
+    plan = find_contact_plan(scene, 0.3, SearchConfig(num_nodes=3))
+    assert plan.success
+    fig, ax = plt.subplots()
+    plot_contact_node(ax, scene, plan.nodes[1], mu=0.7, previous=plan.nodes[0])
+    assert sorted(t.get_text() for t in ax.texts) == ["0", "1", "2", "3"]
+    plt.close(fig)
+    labels = [h.get_label() for h in contact_node_legend_handles(0.7)]
+    assert labels == ["contact (finger's colour; arrow: normal)", "friction cone (mu = 0.7)",
+                      "switching finger's previous contact", "switching finger",
+                      "holding fingers (numbered at their bases)"]
+    out = tmp_path / "keyframes.svg"   # drawn by the CLI, in the format the suffix names
+    assert main(["search", "--goal", "0.3", "--segments", "2", "--figure", str(out)]) == 0
+    svg = out.read_text()
+    assert svg.startswith("<?xml") and "switching finger" in svg and "friction cone" in svg

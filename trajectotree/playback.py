@@ -71,11 +71,94 @@ def animate_plan_ghost(animation, times, poses) -> None:
         animation.SetTransform(animation.frame(float(t)), PLAN_GHOST_PATH, pose_transform(pose))
 
 
-def save_recording_html(meshcat: Meshcat, visualizer: MeshcatVisualizer, path: str | Path) -> None:
-    """Stops the visualizer's recording, publishes it and writes the static HTML."""
+# Legend entries (CSS swatch, text); the colours are the SDF's diffuse colours and the ghost's.
+LEGEND_BOX = ("background: rgb(51, 115, 204)", "box")
+LEGEND_PLANNED = ("border: 2px solid rgb(26, 178, 51)", "planned box pose (outline)")
+LEGEND_FINGERS = ("background: linear-gradient(90deg, rgb(89, 89, 102) 60%, rgb(217, 89, 51) 60%)",
+                  "fingers 0-3: links (grey), fingertips (orange)")
+SIMULATED_LEGEND = (LEGEND_BOX, LEGEND_PLANNED, LEGEND_FINGERS)
+PAGE_SCRIPT = """
+(function () {
+  const HALF = %(half)s, DROP = %(drop)s;  // m, half-width of the view; s, drop time or null
+  function ready() { return window.viewer && viewer.animator && viewer.camera; }
+  function now() { return viewer.animator.actions.reduce((t, a) => Math.max(t, a.time), 0); }
+  function centre() {  // Meshcat widens its orthographic view to the right only: keep the hand centred
+    const c = viewer.camera, w = viewer.dom_element.offsetWidth, h = viewer.dom_element.offsetHeight;
+    if (c.type !== "OrthographicCamera" || !w || !h) return;
+    const sx = Math.max(w / h, 1), sy = Math.max(h / w, 1);
+    c.left = -HALF * sx; c.right = HALF * sx; c.top = HALF * sy; c.bottom = -HALF * sy;
+    c.updateProjectionMatrix(); viewer.set_dirty();
+  }
+  function tick() {
+    const t = now(), d = viewer.animator.duration || 0;
+    document.getElementById("tt-time").textContent = "t = " + t.toFixed(2) + " s of " + d.toFixed(2) + " s";
+    document.getElementById("tt-bar-fill").style.width = (d ? 100 * Math.min(t / d, 1) : 0) + "%%";
+    if (DROP !== null) {
+      const mark = document.getElementById("tt-drop");
+      mark.style.left = (d ? 100 * Math.min(DROP / d, 1) : 0) + "%%";
+      const note = document.getElementById("tt-drop-note");
+      note.textContent = t >= DROP ? "box dropped at " + DROP.toFixed(2) + " s" : "box drops at " + DROP.toFixed(2) + " s";
+      note.style.fontWeight = t >= DROP ? "bold" : "normal";
+    }
+    requestAnimationFrame(tick);
+  }
+  function start() {
+    if (!ready()) { setTimeout(start, 100); return; }
+    const resize = viewer.set_3d_pane_size.bind(viewer);
+    viewer.set_3d_pane_size = function (w, h) { resize(w, h); centre(); };
+    const setCamera = viewer.set_camera.bind(viewer);
+    viewer.set_camera = function (c) { setCamera(c); centre(); };
+    centre();
+    tick();
+  }
+  start();
+})();
+"""
+PAGE_CSS = """
+#tt-overlay { position: fixed; left: 12px; top: 10px; font: 14px sans-serif; color: #222;
+  background: rgba(255, 255, 255, 0.85); padding: 6px 10px; border-radius: 4px; z-index: 10; }
+#tt-title { font-weight: bold; margin-bottom: 2px; }
+#tt-bar { position: relative; width: 220px; height: 6px; background: #ddd; margin: 4px 0; }
+#tt-bar-fill { position: absolute; left: 0; top: 0; height: 100%; background: #555; }
+#tt-drop { position: absolute; top: -4px; width: 3px; height: 14px; margin-left: -1px; background: #d00; }
+#tt-drop-note { color: #d00; }
+#tt-legend { position: fixed; left: 12px; bottom: 10px; font: 13px sans-serif; color: #222;
+  background: rgba(255, 255, 255, 0.85); padding: 6px 10px; border-radius: 4px; z-index: 10; }
+.tt-swatch { display: inline-block; width: 22px; height: 10px; margin-right: 6px; vertical-align: middle;
+  box-sizing: border-box; }
+"""
+
+
+def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = None) -> str:
+    """Meshcat's static page with `title` (tab and overlay), a time readout and bar (the
+    drop, if any, marked in red), a legend of (CSS swatch, text) entries, and the
+    planar view kept centred in any window shape."""
+    from html import escape
+    drop = "null" if drop_time_s is None else f"{float(drop_time_s):.6f}"
+    marker = "" if drop_time_s is None else '<div id="tt-drop"></div>'
+    note = "" if drop_time_s is None else '<div id="tt-drop-note"></div>'
+    items = "".join(f'<div><span class="tt-swatch" style="{escape(style)}"></span>{escape(text)}</div>'
+                    for style, text in legend)
+    overlay = (f'<style>{PAGE_CSS}</style><div id="tt-overlay"><div id="tt-title">{escape(title)}</div>'
+               f'<div id="tt-time"></div><div id="tt-bar"><div id="tt-bar-fill"></div>{marker}</div>{note}</div>'
+               f'<div id="tt-legend">{items}</div>'
+               f'<script>{PAGE_SCRIPT % {"half": VIEW_HALF_WIDTH, "drop": drop}}</script>')
+    start, end = html.find("<title>"), html.find("</title>")
+    if start >= 0 and end > start:
+        html = html[:start] + f"<title>{escape(title)}</title>" + html[end + len("</title>"):]
+    body_end = html.rfind("</body>")
+    return html[:body_end] + overlay + html[body_end:] if body_end >= 0 else html + overlay
+
+
+def save_recording_html(meshcat: Meshcat, visualizer: MeshcatVisualizer, path: str | Path, *,
+                        title: str = "TrajectoTree: simulated run", legend=SIMULATED_LEGEND,
+                        drop_time_s: float | None = None) -> None:
+    """Stops the visualizer's recording, publishes it and writes the static HTML, with a
+    title, a time readout (marking the drop at drop_time_s) and a legend (decorate_page)."""
     visualizer.StopRecording()
     visualizer.PublishRecording()
-    write_bytes_atomic(path, meshcat.StaticHtml().encode())
+    page = decorate_page(meshcat.StaticHtml(), title=title, legend=legend, drop_time_s=drop_time_s)
+    write_bytes_atomic(path, page.encode())
 
 
 def write_pose_html(config: Config, times, object_poses, joint_angles, path: str | Path,
@@ -98,7 +181,8 @@ def write_pose_html(config: Config, times, object_poses, joint_angles, path: str
         plant.SetPositions(plant_context, box, pose)
         plant.SetPositions(plant_context, hand, q)
         diagram.ForcedPublish(context)
-    save_recording_html(meshcat, visualizer, path)
+    save_recording_html(meshcat, visualizer, path, title="TrajectoTree: planned trajectory",
+                        legend=(LEGEND_BOX[:1] + ("box (planned pose)",), LEGEND_FINGERS))
 
 
 def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | None = None) -> None:

@@ -46,7 +46,7 @@ def plot_workspace(ax, finger, *, color="0.6"):
 def plot_boxes_with_means(ax, samples, labels, *, colors=None, mean_marker="x"):
     """Standard box plots (median, quartiles, 1.5 IQR whiskers, outliers) of each 1-D
     sample, with the sample means marked by crosses (the paper's Fig. 2). An empty
-    sample leaves its slot blank."""
+    sample's slot says "no data"; with no data at all the value axis has no ticks."""
     samples = [np.asarray(s, dtype=float) for s in samples]
     positions = np.arange(1, len(samples) + 1)
     parts = ax.boxplot(samples, positions=positions, tick_labels=labels, patch_artist=True, widths=0.5,
@@ -57,7 +57,11 @@ def plot_boxes_with_means(ax, samples, labels, *, colors=None, mean_marker="x"):
     filled = [(p, s.mean()) for p, s in zip(positions, samples) if s.size]
     means = ax.plot([p for p, _ in filled], [m for _, m in filled], mean_marker, color="k", ms=8, mew=2,
                     ls="none", label="mean", zorder=5)
-    return [artist for group in parts.values() for artist in group] + means
+    empty = [ax.text(p, 0.5, "no data", transform=ax.get_xaxis_transform(), ha="center", va="center",
+                     color="0.45", fontsize=9) for p, s in zip(positions, samples) if not s.size]
+    if not filled:
+        ax.set_yticks([])  # matplotlib's default -0.05..0.05 would read as values
+    return [artist for group in parts.values() for artist in group] + means + empty
 
 
 def plot_mean_band(ax, t, mean, lower, upper, *, color=None, label=None, alpha=0.25):
@@ -69,13 +73,25 @@ def plot_mean_band(ax, t, mean, lower, upper, *, color=None, label=None, alpha=0
 
 
 def plot_finger_force(ax, t, f_sim, f_plan, *, color=None, drop_time=None):
-    """Magnitudes of one finger's simulated (solid) and planned (dashed) force on the
-    box over time; f_sim, f_plan (T, 2). A dotted line marks the drop, if any."""
-    (sim,) = ax.plot(t, np.linalg.norm(f_sim, axis=1), color=color, lw=1.2, label="simulated")
-    (plan,) = ax.plot(t, np.linalg.norm(f_plan, axis=1), color=sim.get_color(), lw=1.2, ls="--", label="planned")
+    """Magnitudes |f| of one finger's simulated (solid) and planned (dashed) force on the
+    box over time; f_sim, f_plan (T, 2). After a drop, if any, the time is shaded grey."""
+    (sim,) = ax.plot(t, np.linalg.norm(f_sim, axis=1), color=color, lw=1.2, label="simulated |f|")
+    (plan,) = ax.plot(t, np.linalg.norm(f_plan, axis=1), color=sim.get_color(), lw=1.2, ls="--", label="planned |f|")
     artists = [sim, plan]
     if drop_time is not None:
-        artists.append(ax.axvline(drop_time, color="k", ls=":", lw=1.0, label="drop"))
+        artists.append(ax.axvspan(drop_time, t[-1], color="0.85", zorder=0, lw=0,
+                                  label="after the drop (may be clipped)"))
+    return artists
+
+
+def plot_segments(ax, spans, finger: int | None = None, *, color="gold"):
+    """Segment boundaries (dotted) of spans [(t_start, t_end, switching finger or None)];
+    the segments in which `finger` switches are shaded."""
+    artists = [ax.axvline(t0, color="0.5", ls=":", lw=0.8, zorder=0) for t0, _, _ in spans[1:]]
+    for t0, t1, switching in spans:
+        if finger is not None and switching == finger:
+            artists.append(ax.axvspan(t0, t1, color=color, alpha=0.25, lw=0, zorder=0,
+                                      label="segment in which this finger switches"))
     return artists
 
 
@@ -114,9 +130,26 @@ def plot_contact_node(ax, scene, node, *, mu: float, previous=None):
         artists += plot_finger(ax, finger, node.q[2 * i:2 * i + 2], scene.tip_radius,
                                color="k" if switching else "0.55", lw=4.0 if switching else 2.0,
                                tip_color=FINGER_COLORS[i])
+        artists.append(ax.annotate(str(i), finger.p_W_base, xytext=(0, -10 if finger.p_W_base[1] < 0 else 4),
+                                   textcoords="offset points", ha="center", fontsize=7, color=FINGER_COLORS[i],
+                                   fontweight="bold"))
     artists += plot_friction_cones(ax, node.object_pose, node.p_BC, node.n_B, mu)
     artists += plot_contacts(ax, node.object_pose, node.p_BC, node.n_B)
     if previous is not None and node.switching_finger is not None:
         p_W = box_to_world(node.object_pose, previous.p_BC[node.switching_finger])
         artists += ax.plot(*p_W, "o", mfc="none", mec=FINGER_COLORS[node.switching_finger], ms=7, mew=1.5, zorder=7)
     return artists
+
+
+def contact_node_legend_handles(mu: float):
+    """Legend entries of plot_contact_node's marks (proxy artists)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+    return [
+        Line2D([], [], marker="o", ls="none", mfc="0.6", mec="k", ms=6, label="contact (finger's colour; arrow: normal)"),
+        Patch(facecolor="tab:cyan", alpha=0.4, label=f"friction cone (mu = {mu:.2g})"),
+        Line2D([], [], marker="o", ls="none", mfc="none", mec="0.3", ms=7, mew=1.5,
+               label="switching finger's previous contact"),
+        Line2D([], [], color="k", lw=4.0, label="switching finger"),
+        Line2D([], [], color="0.55", lw=2.0, label="holding fingers (numbered at their bases)"),
+    ]

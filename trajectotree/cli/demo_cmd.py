@@ -76,7 +76,7 @@ def run(args) -> int:
     from trajectotree.io import save_plan, save_sim, write_bytes_atomic
     from trajectotree.planners import plan
     from trajectotree.playback import start_meshcat
-    from trajectotree.report import figure_finger_forces, save_figure
+    from trajectotree.report import figure_finger_forces, save_figure, segment_spans
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
@@ -106,7 +106,9 @@ def run(args) -> int:
         sim = run_simulation(plan=result, config=config, meshcat=meshcat, html_path=out / PLAYBACK)
         save_sim(sim, out)
         sim_json = save_sim_json_with_plan_status(sim, str(out), result.success)
-        save_figure(figure_finger_forces(sim), out / FORCES)
+        spans = segment_spans([n.switching_finger for n in result.contact_plan.nodes], config.cito.knots_per_segment,
+                              config.cito.dt)
+        save_figure(figure_finger_forces(sim, spans), out / FORCES)
         files += ["sim.json", "sim.npz", PLAYBACK, FORCES]
     summary = {"plan": plan_summary(result), "simulation": None if sim is None else sim_json,
                "files": files + [SUMMARY]}

@@ -33,10 +33,10 @@ def draw_plan(scene, plan, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.plotting import plot_contact_node
+    from trajectotree.plotting import contact_node_legend_handles, plot_contact_node
     cols = min(5, len(plan.nodes))
     rows = math.ceil(len(plan.nodes) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.6 * cols, 2.6 * rows + 0.4), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(max(2.6 * cols, 7.0), 2.6 * rows + 0.9), squeeze=False)
     for n, ax in enumerate(axes.flat):
         ax.set_axis_off()
         if n >= len(plan.nodes):
@@ -50,7 +50,11 @@ def draw_plan(scene, plan, path: str) -> None:
                                                  else f"finger {node.switching_finger} moves")
         ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
     fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
-    fig.tight_layout()
+    handles = contact_node_legend_handles(scene.config.mu)
+    ncol = 3 if cols >= 4 else 2
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    height = fig.get_figheight()  # inches: the legend's rows below, the title above
+    fig.tight_layout(rect=(0, (0.2 * math.ceil(len(handles) / ncol) + 0.1) / height, 1, 1 - 0.3 / height))
     buffer = io.BytesIO()
     try:
         fig.savefig(buffer, format=Path(path).suffix.lstrip(".").lower() or "png", dpi=110)

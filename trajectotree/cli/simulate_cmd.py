@@ -117,6 +117,17 @@ def plan_success_and_status(plan_dir: str) -> tuple[bool, str]:
     return bool(data.get("success")), str(data.get("status"))
 
 
+def plan_segments(plan_dir: str, config: Config) -> list:
+    """The segments of a TrajectoTree plan (report.segment_spans) for the forces figure;
+    none for the baselines, whose contacts follow no contact sequence."""
+    from trajectotree.report import segment_spans
+    data = json.loads((Path(plan_dir) / "plan.json").read_text())
+    if data.get("method") != "trajectotree":
+        return []
+    fingers = [node.get("switching_finger") for node in data.get("contact_sequence") or ()]
+    return segment_spans(fingers, config.cito.knots_per_segment, config.cito.dt)
+
+
 def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) -> dict:
     """Rewrites sim.json (save_sim writes the SimResult's keys) with `plan_success`, so a
     run of an unconverged plan cannot pass for the run of a converged one; returns it."""
@@ -164,7 +175,7 @@ def run(args) -> int:
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_status[0])
     if args.forces:
-        save_figure(figure_finger_forces(result), args.forces)
+        save_figure(figure_finger_forces(result, plan_segments(args.plan_dir, plan_config)), args.forces)
     if args.json:
         print_json(summary)
     else:
