@@ -193,12 +193,14 @@ def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
     in_contact = np.array([1, 1, 1, 0, 0, 0, 1, 1, 1, 1, 1], dtype=bool)
     intervals = swing_intervals(t, in_contact)
     assert intervals == [(pytest.approx(0.2), pytest.approx(0.6))]
-    times = np.array([0.0, 0.15, 0.2, 0.4, 0.6, 0.65, 0.8])
+    times = np.array([0.0, 0.2, 0.25, 0.3, 0.4, 0.5, 0.55, 0.6, 0.8])
     scale, phase = swing_profile(times, intervals, ramp_time=0.1)
-    np.testing.assert_allclose(scale, [1.0, 0.5, 0.0, 0.0, 0.0, 0.5, 1.0], atol=1e-12)
-    np.testing.assert_allclose(phase[3], 0.5)
+    # 1 up to lift-off, 0 from one ramp after it to one ramp before landing, 1 from landing on
+    np.testing.assert_allclose(scale, [1.0, 1.0, 0.5, 0.0, 0.0, 0.0, 0.5, 1.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(phase[4], 0.5)
     assert np.isnan(phase[0]) and np.isnan(phase[-1])
     # a cubic is reproduced exactly (value, rate, acceleration) from its knot values and rates
+    assert swing_profile(np.array([0.4]), [(0.35, 0.45)], ramp_time=0.1)[0] == pytest.approx(0.0)  # short swing
     f = lambda s: 2 * s**3 - s**2 + 0.5 * s
     value, rate, accel = hermite(t, f(t)[:, None], (6 * t**2 - 2 * t + 0.5)[:, None], times)
     np.testing.assert_allclose(value[:, 0], f(times), atol=1e-12)

@@ -204,7 +204,7 @@ class ControllerGains:
     # 1, weight of the box-wrench residual (N; torques divided by the box half-diagonal) in the QP,
     # relative to the deviation of the finger forces from the plan's (N)
     wrench_weight: float = 100.0
-    ramp_time: float = 0.1          # s, a switching finger's force ramps to 0 before lift-off (back after landing)
+    ramp_time: float = 0.1          # s, a switching finger's force budget ramps to 0 after lift-off (back before landing)
     swing_lift: float = 0.008       # m, least fingertip gap mid-swing (its planned path, lifted where lower)
     contact_distance: float = 1e-3  # m, a planned fingertip this close to the planned box is in contact
 

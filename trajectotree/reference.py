@@ -262,13 +262,20 @@ def swing_intervals(t_knots, in_contact) -> list[tuple[float, float]]:
 
 
 def swing_profile(times, intervals, ramp_time: float) -> tuple[np.ndarray, np.ndarray]:
-    """(force scale (T,), swing phase (T,)) of one finger: the scale is 0 inside a swing
-    interval and rises linearly to 1 over ramp_time outside it; the phase runs 0 -> 1
-    across the interval (0.5 for an open-ended one) and is nan outside."""
-    distance = np.full(len(times), np.inf)
+    """(force scale (T,), swing phase (T,)) of one finger. The scale is 1 outside the swing
+    intervals and 0 in their cores, falling linearly over ramp_time after lift-off and
+    rising over ramp_time before landing (halfway where an interval is shorter than
+    2 ramp_time): the plan hands the load over between the knots next to a switch, and
+    ramping before lift-off instead left two fingers holding where the plan has three
+    (a box dropped on such a handover). The phase runs 0 -> 1 across an interval (0.5 for
+    an open-ended one) and is nan outside."""
+    distance = np.full(len(times), np.inf)      # to the nearest zero-force core
     phase = np.full(len(times), np.nan)
     for lo, hi in intervals:
-        distance = np.minimum(distance, np.maximum(lo - times, 0.0) + np.maximum(times - hi, 0.0))
+        core_lo, core_hi = lo + ramp_time, hi - ramp_time
+        if core_lo > core_hi:
+            core_lo = core_hi = 0.5 * (lo + hi)
+        distance = np.minimum(distance, np.maximum(core_lo - times, 0.0) + np.maximum(times - core_hi, 0.0))
         inside = (times > lo) & (times < hi)
         phase[inside] = (times[inside] - lo) / (hi - lo) if np.isfinite(hi - lo) else 0.5
     scale = np.clip(distance / ramp_time, 0.0, 1.0) if ramp_time > 0 else (distance > 0).astype(float)
