@@ -258,3 +258,28 @@ def test_recording_a_playback_prints_no_meshcat_server_line(tmp_path, capsys):
     captured = capsys.readouterr()
     assert (tmp_path / "plan.html").stat().st_size > 0
     assert "listening" not in captured.out + captured.err and "IPOPT iteration" not in captured.err
+
+
+# ---- item 12: small things -----------------------------------------------------------------------------
+
+def test_help_cites_no_design_document_and_defines_segments_once(capsys):
+    from trajectotree.cli import COMMANDS
+    from trajectotree.cli.common import SEGMENTS_HELP
+    for command in COMMANDS:
+        with pytest.raises(SystemExit):
+            main([command, "--help"])
+        text = " ".join(capsys.readouterr().out.split())   # argparse wraps lines
+        assert "DESIGN" not in text, command
+        if "--segments" in text:
+            assert f"--segments S {SEGMENTS_HELP}" in text, command
+    package = Path(__file__).resolve().parents[1] / "trajectotree"
+    assert [p.name for p in package.rglob("*.py") if "DESIGN.md" in p.read_text()] == []
+
+
+def test_default_outputs_are_ignored_by_git():
+    root = Path(__file__).resolve().parents[1]
+    ignored = subprocess.run(["git", "check-ignore", "demo/plan.json", "plan_trajectotree_+0.300/plan.json",
+                              "sweep/manifest.json", "paper-sweep/manifest.json"], cwd=root, capture_output=True,
+                             text=True)
+    assert ignored.stdout.split() == ["demo/plan.json", "plan_trajectotree_+0.300/plan.json", "sweep/manifest.json",
+                                      "paper-sweep/manifest.json"]

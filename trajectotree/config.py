@@ -136,7 +136,7 @@ class CitoConfig:
     # Large enough that they hold: with 100, a fixed finger sank 1.2 mm into the box (goal -0.3).
     weight_contact_slack: float = 1.0e4
     # Regularization (not in the paper): sum of squared accelerations; needed for
-    # IPOPT's L-BFGS to converge (DESIGN.md sec. 7). Set to 0 to disable.
+    # IPOPT's L-BFGS to converge (with the paper's cost alone it stalled at 1,000 iterations). 0 disables it.
     # IPOPT iterations on a 9-segment plan (goal 0.86 rad): 184 with 1e-3, 95 with 1e-2, 62 with 3e-2;
     # with 1e-1 (45) the contact-point slacks grew to 9 mm.
     weight_acceleration: float = 3e-2

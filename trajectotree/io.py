@@ -68,7 +68,7 @@ PLAN_NPZ = "plan.npz"
 
 
 def plan_to_json(result) -> dict:
-    """plan.json (DESIGN.md sec. 5): the solve report, the contact sequence and the config."""
+    """plan.json (keys: README, "Trajectory optimization"): the solve report, contact sequence and config."""
     from trajectotree.config import config_to_dict
     finite = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731 (JSON has no NaN)
     return {

@@ -1,6 +1,6 @@
 """The physics of a plan checked from its plan.npz arrays alone (pure numpy).
 
-Anyone holding plan.npz can recompute these numbers (DESIGN.md sec. 5):
+Anyone holding plan.npz can recompute these numbers (its arrays: README, "Trajectory optimization"):
   - newton_euler: the box's Newton-Euler residual under the trapezoidal rule the plan
     was made with, m (v_{k+1} - v_k) / dt - (F_k + F_{k+1}) / 2 with F = sum f_W + m g
     (translation, N), and the same for the rotation with the moments of f_W applied at

@@ -1,7 +1,7 @@
 """Watching runs: Meshcat (live, or recorded into a self-contained HTML file) and
 a matplotlib GIF for places without WebGL.
 
-Facts this module relies on (DESIGN.md sec. 7): Meshcat serves on all interfaces
+Facts this module relies on (measured with drake 1.51): Meshcat serves on all interfaces
 unless told `host="localhost"`; a recording reaches the HTML only after
 `PublishRecording()`; `Set2dRenderMode` with the camera above the plane gives a
 stable view with +y up; `StaticHtml()` inlines every script (no network).

@@ -1,7 +1,7 @@
 """What the execution tracks: fingertip and object references over time.
 
-A `Reference` is built from a plan's arrays (the `plan.npz` names, see DESIGN.md
-sec. 5) or, for controller tests, from a static grasp (`static_hold_reference`),
+A `Reference` is built from a plan's arrays (the `plan.npz` names that
+`trajectotree.io.save_plan` writes) or, for controller tests, from a static grasp (`static_hold_reference`),
 so the simulation depends on the plan's data, not on the planner's code.
 
 Fingertip positions are the centres of the fingertip spheres (the plant's

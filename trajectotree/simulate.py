@@ -64,7 +64,7 @@ class SimResult:
     conditions: dict = field(default_factory=dict)     # Conditions.to_json() of the simulated world
 
     def to_json(self) -> dict:
-        """The DESIGN.md sim.json keys, plus the run's length and sample count,
+        """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
         the controller and the simulated conditions."""
         return {"mae_x": self.mae_x, "mae_y": self.mae_y, "mae_theta": self.mae_theta,
                 "final_error": list(self.final_error), "dropped": self.dropped, "drop_time_s": self.drop_time_s,

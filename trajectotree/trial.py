@@ -76,7 +76,7 @@ def empty_row(task: TrialTask) -> dict:
 
 def row_from_files(task: TrialTask, out_dir: Path) -> dict:
     """The trial's row, read back from the files the planner and simulator wrote
-    (their documented JSON keys, DESIGN.md sec. 5)."""
+    (their documented JSON keys: plan.json and sim.json in the README)."""
     row = empty_row(task)
     plan_json = json.loads((out_dir / "plan.json").read_text())
     row.update({k: plan_json.get(k) for k in PLAN_FIELDS})

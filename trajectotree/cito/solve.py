@@ -1,6 +1,6 @@
 """IPOPT on a CitoProgram: options, the solve, and the per-group violation report.
 
-Options follow DESIGN.md sec. 7: SPRAL with metis ordering, no scaling and
+Options, as measured on these programs: SPRAL with metis ordering, no scaling and
 nemin 4 (SPRAL's defaults redo the analysis every iteration), L-BFGS (Drake
 passes no Hessian), and every tolerance set explicitly (Drake's default is 1e-10).
 IPOPT writes its summary to a temporary file, from which the iteration count and

@@ -27,7 +27,8 @@ def register(subparsers) -> None:
     p.add_argument("--methods", nargs="+", default=list(METHODS), metavar="METHOD",
                    help=f"planners to run (default: all; valid: {', '.join(METHODS)})")
     p.add_argument("--simulate", action="store_true", help="execute every plan in simulation (tracking errors, drops)")
-    p.add_argument("--out", default="sweep", metavar="DIR", help="sweep directory (default: ./sweep)")
+    p.add_argument("--out", default="sweep", metavar="DIR",
+                   help="sweep directory (default: ./sweep); one sweep at a time (it holds DIR/.lock)")
     p.add_argument("--workers", type=int, metavar="K",
                    help="local worker processes, one trial each at a time (default: the number of CPUs)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the trials on this Dask scheduler instead")
@@ -35,9 +36,10 @@ def register(subparsers) -> None:
                    help="seconds to wait for the Dask scheduler (default: 30)")
     p.add_argument("--time-limit", type=float, default=1800.0, metavar="S",
                    help="wall-clock limit per trial, plan + simulation (default: 1800); "
-                        "a trial past it is killed and recorded as a timeout")
+                        "a trial past it is killed and recorded as a timeout; may change between runs of a sweep")
     p.add_argument("--retry-errors", action="store_true",
-                   help="rerun trials recorded with an error (crash, timeout) instead of skipping them")
+                   help="rerun trials recorded with an error (crash, timeout) instead of skipping them, "
+                        "with the --time-limit given now")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     add_config_options(p)
