@@ -170,16 +170,17 @@ class FormClosure:
         return self.required_mus([arclengths])[0]
 
     def required_mus(self, contact_sets) -> list[float]:
-        """required_mu of several contact sets, one vectorized bisection per contact count."""
+        """required_mu of several contact sets in one vectorized bisection (shorter sets are
+        padded with a copy of their first contact, which changes neither cone nor rank)."""
         keys = [self.key(arclengths) for arclengths in contact_sets]
-        for k in {len(key) for key in keys}:
-            todo = sorted({key for key in keys if len(key) == k and key not in self._required_mu})
-            if todo:
-                points = [[self.boundary.point(s) for s in key] for key in todo]
-                values = required_mu_many(np.array([[p for p, _ in row] for row in points]),
-                                          np.array([[n for _, n in row] for row in points]))
-                self._required_mu.update(zip(todo, values.tolist()))
-        return [self._required_mu[key] for key in keys]
+        todo = sorted({key for key in keys if key not in self._required_mu and key})
+        if todo:
+            k = max(map(len, todo))
+            points = [[self.boundary.point(s) for s in key + (key[0],) * (k - len(key))] for key in todo]
+            values = required_mu_many(np.array([[p for p, _ in row] for row in points]),
+                                      np.array([[n for _, n in row] for row in points]))
+            self._required_mu.update(zip(todo, values.tolist()))
+        return [self._required_mu.get(key, np.inf) for key in keys]  # no contact at all: never
 
     def is_free(self, arclengths, finger: int) -> bool:
         """Finger `finger` may let go: the other contacts alone are in form closure."""

@@ -38,7 +38,7 @@ STANCE_FINGERS = tuple(tuple(j for j in range(NUM_FINGERS) if j != i) for i in r
 
 @dataclass(frozen=True)
 class GraspCandidate:
-    arclengths: tuple[float, float, float, float]  # m, each finger's contact along the boundary
+    arclengths: tuple[float, float, float, float]  # m, each finger's contact along the boundary, in [0, perimeter)
     stance_required_mu: tuple[float, ...]          # (4,) required mu of the other three when finger i lets go
     worst_stance_mu: float                         # the largest of those at most mu_plan (the ranking key)
     free_fingers: int                              # fingers that may let go at mu_plan

@@ -216,14 +216,14 @@ class _Search:
         return out
 
     # -- Algorithm 1 ----------------------------------------------------------------------
-    def precheck(self, start: tuple[float, ...]) -> str:
-        """Why the search from `start` cannot succeed, by cheap tests ("" when it may)."""
-        reason = self.contacts_allowed(start)
-        if reason:
-            return f"initial grasp not allowed: {reason}"
-        reason = self.not_in_closure(start)
-        if reason:
-            return f"initial grasp infeasible: {reason}"
+    def precheck(self, start: tuple[float, ...], candidate: bool = False) -> str:
+        """Why the search from `start` cannot succeed, by cheap tests ("" when it may). A
+        `candidate` of trajectotree.initial_grasp already passed the contact tests (corners,
+        overlap, closure), so the goal's table look-ups come first and its LP last."""
+        if not candidate:
+            reason = self.contacts_allowed(start) or self.not_in_closure(start)
+            if reason:
+                return f"initial grasp {'not allowed' if 'closure' not in reason else 'infeasible'}: {reason}"
         per_finger = [self.min_switches[i][0].get(s, np.inf) for i, s in enumerate(start)]
         if not np.isfinite(sum(per_finger)):
             stuck = [i for i, v in enumerate(per_finger) if not np.isfinite(v)]
@@ -241,7 +241,7 @@ class _Search:
                 late = [i for d, i in deadlines[:k]]
                 return (f"fingers {late} all lose their initial contacts (out of reach) by node {deadline}, "
                         f"but only one finger can switch per node")
-        dead_end = self.unreachable(_Node(0, start, None, None))
+        dead_end = (self.not_in_closure(start) if candidate else "") or self.unreachable(_Node(0, start, None, None))
         return f"initial grasp infeasible: {dead_end}" if dead_end else ""
 
     def run(self, start: tuple[float, ...], t0: float, budget: int) -> tuple[_Node | None, str]:
@@ -309,7 +309,7 @@ def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tu
     if config.initial_arclengths is not None:
         return [tuple(search.wrap(s) for s in config.initial_arclengths)], ""
     table = initial_grasp_candidates(scene, config, search.reach)
-    return [tuple(search.wrap(s) for s in c.arclengths) for c in table.candidates], table.reason
+    return [c.arclengths for c in table.candidates], table.reason  # grid values: already canonical keys
 
 
 def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
@@ -327,7 +327,7 @@ def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tup
     search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
     first = ""
     for root in roots:
-        why = search.precheck(root)
+        why = search.precheck(root, candidate=config.initial_arclengths is None)
         if not why:
             return root, ""
         first = first or why
@@ -354,7 +354,7 @@ def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> Contac
         if searched >= config.max_initial_grasps or search.expanded >= config.max_expansions \
                 or time.perf_counter() - t0 > config.time_budget_s:
             break
-        why = search.precheck(root)
+        why = search.precheck(root, candidate=config.initial_arclengths is None)
         if why:
             skipped += 1
             first_skip = first_skip or f"{root}: {why}"
