@@ -86,6 +86,21 @@ def test_plan_into_a_used_folder_removes_the_older_simulation(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt", "plan.json", "plan.npz"]
 
 
+def test_demo_into_a_used_folder_leaves_none_of_the_older_run(tmp_path, capsys):
+    config = tmp_path / "no_search.yaml"
+    config.write_text("search:\n  max_expansions: 1\n")   # the search gives up: no trajectory, no run
+    out = tmp_path / "demo"
+    out.mkdir()
+    older = ("sim.json", "sim.npz", "keyframes.png", "playback.html", "forces.png", "summary.json")
+    for name in older:
+        (out / name).write_text("older run")
+    assert main(["demo", "--out", str(out), "--config", str(config), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["plan"]["success"] is False and summary["simulation"] is None
+    assert sorted(p.name for p in out.iterdir()) == ["plan.json", "plan.npz", "summary.json"]
+    assert json.loads((out / "summary.json").read_text()) == summary
+
+
 def test_simulating_an_unconverged_plan_warns_and_records_it(tmp_path, capsys):
     config = tmp_path / "three_iterations.yaml"
     config.write_text("cito:\n  max_iter: 3\n")
@@ -121,6 +136,22 @@ def test_corrupt_trial_is_named_moved_aside_and_recomputed(tmp_path, capsys):
     assert len(moved) == 1 and moved[0].name.startswith("0001_trajectotree-")
     assert (moved[0] / "trial.json").read_text() == '{"key": "0001_traj'
     assert [r["key"] for r in read_rows(sweep)] == ["0000_trajectotree", "0001_trajectotree"]
+
+
+def test_report_names_an_unreadable_manifest_or_sim_npz(tmp_path, capsys):
+    sweep = tmp_path / "sweep"
+    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+    trial = sweep / TRIALS_DIR / "0000_trajectotree"
+    row = json.loads((trial / "trial.json").read_text())
+    (trial / "trial.json").write_text(json.dumps(dict(row, simulated=True)))   # as if executed ...
+    (trial / "sim.npz").write_bytes(b"PK\x03\x04 torn")                     # ... and its file torn
+    capsys.readouterr()
+    assert main(["report", str(sweep)]) == 2
+    err = capsys.readouterr().err
+    assert f"{str(trial / 'sim.npz')!r} is unreadable" in err and "Traceback" not in err
+    (sweep / "manifest.json").write_text("{")
+    assert main(["report", str(sweep)]) == 2
+    assert f"{str(sweep / 'manifest.json')!r} is unreadable (JSONDecodeError" in capsys.readouterr().err
 
 
 def test_retry_errors_may_raise_the_time_limit(tmp_path, capsys):

@@ -15,6 +15,7 @@ import csv
 import io
 import json
 import math
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,9 +51,11 @@ def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
                           "make one with `trajectotree sweep --out DIR`")
     try:
         manifest = json.loads(path.read_text())
-        rows = read_rows(sweep_dir)
-    except (OSError, json.JSONDecodeError) as e:
-        raise ConfigError(f"{str(sweep_dir)!r} holds an unreadable file: {e}") from None
+        if not isinstance(manifest, dict) or not isinstance(manifest.get("methods"), list):
+            raise ValueError("not a sweep manifest (no list of methods)")
+    except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError
+        raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
+    rows = read_rows(sweep_dir)  # CorruptTrialError names an unreadable trial.json
     if not rows:
         raise ConfigError(f"{str(sweep_dir)!r} has no finished trials yet")
     return manifest, rows
@@ -60,6 +63,10 @@ def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
 
 def _values(rows, field):
     return np.array([r[field] for r in rows if r.get(field) is not None], dtype=float)
+
+
+def _mean_or_none(values: np.ndarray) -> float | None:
+    return float(values.mean()) if values.size else None
 
 
 def paired_speedup(rows: list[dict], method: str) -> tuple[float | None, int]:
@@ -92,8 +99,7 @@ def method_summary(rows: list[dict], method: str) -> dict:
         "mean_cost": float(costs.mean()) if costs.size else None,
         "simulated": len(simulated),
         "drop_rate": sum(bool(r.get("dropped")) for r in simulated) / len(simulated) if simulated else None,
-        **{f"mae_{c}": (float(_values(simulated, f"mae_{c}").mean()) if simulated else None)
-           for c in ("x", "y", "theta")},
+        **{f"mae_{c}": _mean_or_none(_values(simulated, f"mae_{c}")) for c in ("x", "y", "theta")},
     }
 
 
@@ -165,12 +171,17 @@ def figure_time_and_cost(rows: list[dict], methods: list[str]):
 
 
 def load_tracking(sweep_dir: Path, rows: list[dict]) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
-    """method -> [(t (T,), abs_error (T, 3))] of the simulated trials."""
+    """method -> [(t (T,), abs_error (T, 3))] of the simulated trials; ConfigError
+    naming a sim.npz that cannot be read."""
     tracks: dict[str, list] = {}
     for r in rows:
         if r.get("simulated"):
-            with np.load(sweep_dir / TRIALS_DIR / r["key"] / "sim.npz") as data:
-                tracks.setdefault(r["method"], []).append((data["t"], data["abs_error"]))
+            path = sweep_dir / TRIALS_DIR / r["key"] / "sim.npz"
+            try:
+                with np.load(path) as data:
+                    tracks.setdefault(r["method"], []).append((data["t"], data["abs_error"]))
+            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+                raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
     return tracks
 
 
