@@ -1,7 +1,7 @@
 """The initial grasp, chosen for the configured box instead of fixed face fractions.
 
 Why: with a friction margin (mu_plan = search.friction_safety x scene.mu) no single grasp
-admits plans for every goal. Measured at mu_plan 0.49 on the 0.20 x 0.10 m box: the old
+admits plans for every goal. Measured (issue 13) at mu_plan 0.49 on the 0.20 x 0.10 m box: the old
 default (0.54, 0.12, 0.36, 0.48) admits every positive goal and no negative one (its stance
 of fingers 1, 2, 3 needs mu 0.67, so finger 0 can never let go); (0.06, 0.18, 0.32, 0.50)
 admits -3.0..+1.5 but not +2.0..+3.0; the two together cover the 12 goals tried. So the
@@ -14,9 +14,12 @@ the link collision test, trajectotree.reach), no two fingertip spheres overlap, 
 one finger may let go (the other three are in frictional form closure at mu_plan, which
 also puts the grasp itself in closure). Ranked by their worst three-finger stance among the
 fingers that may let go (largest required_mu, smallest first), then by more free fingers,
-then by the paper's joint-2 heuristic at the initial pose.
-For the default scene: 2916 grid assignments, 1620 distinct stances; the table is built
-once per scene and search settings (about 0.3 s) and cached.
+then by the paper's joint-2 heuristic at the initial pose. Many stances need no friction at
+all (an antipodal pair plus a third contact), hence the tie-breaks.
+For the default scene: 2916 grid assignments, 2583 candidates; the table is built once per
+scene and search settings (0.25 s) and cached. As in the search, fingertips may touch
+(centres 2 r apart) and links of different fingers are not tested against each other (the
+simulation filters finger-finger contact, trajectotree.simulate).
 """
 
 from __future__ import annotations
