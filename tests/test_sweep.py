@@ -165,3 +165,11 @@ def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
     assert outcome.row["error"].endswith("ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad")
     assert outcome.row["success"] is None
     assert "Traceback" in outcome.files["log.txt"].decode()
+
+
+def test_library_sweep_into_a_file_is_an_input_error(tmp_path):
+    a_file = tmp_path / "sweep"
+    a_file.write_text("not a sweep")
+    with pytest.raises(ConfigError, match="is an existing file, not a folder"):
+        run_sweep(small_spec(), a_file, progress=False)
+    assert a_file.read_text() == "not a sweep"

@@ -58,6 +58,8 @@ def _manifest_differences(old: dict, new: dict) -> list[str]:
 def check_manifest(out_dir: Path, spec) -> bool:
     """True when out_dir already holds this sweep, False when it holds none;
     raises ConfigError when it holds a different one (nothing is touched)."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"--out {str(out_dir)!r} is an existing file, not a folder; give a sweep directory")
     path = out_dir / MANIFEST_FILE
     if not path.exists():
         if out_dir.is_dir() and any(p.name != LOCK_FILE for p in out_dir.iterdir()):
