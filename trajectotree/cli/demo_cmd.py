@@ -2,7 +2,8 @@
 
 Plans a pi/2 rotation of the 0.20 x 0.10 m, 50 g box with TrajectoTree (contact-sequence
 search, then the plan-constrained CITO solved with IPOPT), executes the plan in a
-full-dynamics Drake simulation with the impedance controller, and writes into --out:
+full-dynamics Drake simulation with the configured controller (sim.controller: the
+object-level grasp controller by default, or the paper's eq. 20), and writes into --out:
 plan.json + plan.npz (the plan), sim.json + sim.npz (the run and its tracking errors),
 keyframes.png (the contact sequence), playback.html (Meshcat playback of the run, opens
 offline in any browser), forces.png (each finger's simulated vs planned force on the box)
@@ -102,7 +103,7 @@ def run(args) -> int:
         files.append(KEYFRAMES)
     sim = None
     if result.trajectory is not None:
-        print("simulating the plan with the impedance controller ...", file=log, flush=True)
+        print(f"simulating the plan with the {config.sim.controller} controller ...", file=log, flush=True)
         sim = run_simulation(plan=result, config=config, meshcat=meshcat, html_path=out / PLAYBACK)
         save_sim(sim, out)
         sim_json = save_sim_json_with_plan_status(sim, str(out), result.success)
