@@ -82,7 +82,8 @@ class SearchConfig:
     # a +-pi goal needs >= 13 contact switches from the default grasp (9 allowed) on this hand.
     displacement_step: float = 0.02
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
-    # from the corner (+w/2, -h/2). None picks the default grasp (see trajectotree.search).
+    # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
+    # roots the search at the best ones in turn (trajectotree.initial_grasp).
     initial_arclengths: tuple[float, float, float, float] | None = None
     nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
     min_closure_margin: float = 1e-3    # N, form-closure LP margin d* must exceed this
