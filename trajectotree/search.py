@@ -15,7 +15,7 @@ trajectotree.grasp) and reachability by Drake IK without the links entering the 
 run only for nodes the search actually visits. States reached twice at the same depth are
 inserted once (their subtrees are identical).
 
-Two additions to the paper, neither of which changes which plans exist:
+Three additions to the paper, none of which changes which plans exist:
 - Before the search, one vectorized closed-form pass per finger tabulates every contact
   the finger can ever hold (its initial arclength plus sums of displacements) at every
   depth: reachable or not, and q2 for the heuristic.
@@ -24,6 +24,8 @@ Two additions to the paper, neither of which changes which plans exist:
   than steps remain is a dead end and is not inserted. Without this bound the DFS spends
   seconds in subtrees that cannot reach the goal (this hand reaches only ~0.15-0.2 m of
   the boundary from each base, so large rotations need most of the nine steps).
+- A finger whose contact leaves reach at the next pose must be the one that moves (two
+  such fingers: no child); at a root, the k-th earliest such deadline must be node k or later.
 
 Friction margin (issue 13; not in the paper, whose setting is search.friction_safety = 1):
 every LP uses mu_plan = friction_safety x scene.mu, so every node's grasp and every
