@@ -206,3 +206,18 @@ def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
     np.testing.assert_allclose(value[:, 0], f(times), atol=1e-12)
     np.testing.assert_allclose(rate[:, 0], 6 * times**2 - 2 * times + 0.5, atol=1e-10)
     np.testing.assert_allclose(accel[:, 0], 12 * times - 2, atol=1e-8)
+
+
+def test_vectorized_hand_kinematics_match_each_finger(scene):
+    from trajectotree.control import HandKinematics
+    kinematics = HandKinematics(scene.fingers, scene.config.gravity)
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        q = rng.uniform(-1.0, 1.5, 8)
+        p, J, g = kinematics(q)
+        for i, finger in enumerate(scene.fingers):
+            q_i = q[2 * i:2 * i + 2]
+            np.testing.assert_allclose(p[i], finger.fingertip(q_i), atol=1e-12)
+            np.testing.assert_allclose(J[i], finger.jacobian(q_i), atol=1e-12)
+            np.testing.assert_allclose(g[i], closed_form_gravity_compensation(finger, q_i, scene.config.gravity),
+                                       atol=1e-12)

@@ -94,17 +94,40 @@ class ImpedanceController(LeafSystem):
             self.v_ref_port.Eval(context), self.f_ref_port.Eval(context)))
 
 
-def finger_gravity_torques(finger: FingerGeometry, q, gravity: float) -> np.ndarray:
-    """dV/dq of one two-link finger in gravity -y: the joint torques that hold it still."""
-    a1, a12 = finger.psi + q[0], finger.psi + q[0] + q[1]
-    (m1, m2), (c1, c2) = finger.masses, finger.coms
-    return gravity * np.array([m1 * c1 * np.cos(a1) + m2 * (finger.l1 * np.cos(a1) + c2 * np.cos(a12)),
-                               m2 * c2 * np.cos(a12)])
+class HandKinematics:
+    """Closed-form kinematics and gravity torques of the four two-link fingers at once
+    (the per-finger formulas of FingerGeometry, vectorized: the controller's hot path)."""
+
+    def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
+        self.base = np.array([f.p_W_base for f in fingers])        # (4, 2) m
+        self.psi = np.array([f.psi for f in fingers])              # (4,) rad
+        self.l1 = np.array([f.l1 for f in fingers])                # (4,) m
+        self.l2 = np.array([f.l2 for f in fingers])
+        m, c = np.array([f.masses for f in fingers]), np.array([f.coms for f in fingers])
+        # dV/dq = [k1 cos a1 + k2 cos a12, k2 cos a12]
+        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * self.l1)
+        self._k2 = gravity * m[:, 1] * c[:, 1]
+
+    def __call__(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At joint angles q (8, finger-major): fingertip centres p_WF (4, 2), Jacobians
+        J_WF (4, 2, 2) and the joint torques that hold the fingers up, g (4, 2)."""
+        q = np.reshape(q, (-1, 2))
+        a1 = self.psi + q[:, 0]
+        a12 = a1 + q[:, 1]
+        c1, s1, c12, s12 = np.cos(a1), np.sin(a1), np.cos(a12), np.sin(a12)
+        p = self.base + np.column_stack([self.l1 * c1 + self.l2 * c12, self.l1 * s1 + self.l2 * s12])
+        J = np.empty((len(q), 2, 2))
+        J[:, 0, 0], J[:, 0, 1] = -self.l1 * s1 - self.l2 * s12, -self.l2 * s12
+        J[:, 1, 0], J[:, 1, 1] = self.l1 * c1 + self.l2 * c12, self.l2 * c12
+        g = np.column_stack([self._k1 * c1 + self._k2 * c12, self._k2 * c12])
+        return p, J, g
 
 
 def perp(v) -> np.ndarray:
     """z x v for planar vectors (..., 2)."""
-    return np.stack([-v[..., 1], v[..., 0]], axis=-1)
+    out = np.empty_like(v)
+    out[..., 0], out[..., 1] = -v[..., 1], v[..., 0]
+    return out
 
 
 class GraspForceQp:
@@ -125,6 +148,7 @@ class GraspForceQp:
             cone[2 * i + 1, 2 * i:2 * i + 2] = (-mu, -1.0)
         self._prog.AddLinearConstraint(cone, np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z)
         self._mu = mu
+        self._identity = np.eye(2 * NUM_FINGERS)
         self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length ** 2])
         self._solver = OsqpSolver()
         self._options = SolverOptions()
@@ -137,7 +161,7 @@ class GraspForceQp:
         forces, clipped to the bounds, if OSQP fails."""
         z_plan = lambda_plan.ravel()
         GtW = G.T @ self._W
-        self._cost.evaluator().UpdateCoefficients(2.0 * (GtW @ G + np.eye(2 * NUM_FINGERS)),
+        self._cost.evaluator().UpdateCoefficients(2.0 * (GtW @ G + self._identity),
                                                   -2.0 * (GtW @ wrench + z_plan), 0.0, True)
         t_max = self._mu * hi
         self._bounds.evaluator().set_bounds(np.column_stack([lo, -t_max]).ravel(), np.column_stack([hi, t_max]).ravel())
@@ -145,7 +169,7 @@ class GraspForceQp:
         if not result.is_success():
             n = np.clip(lambda_plan[:, 0], lo, hi)
             return np.column_stack([n, np.clip(lambda_plan[:, 1], -self._mu * n, self._mu * n)])
-        return result.GetSolution(self._z).reshape(NUM_FINGERS, 2)
+        return result.get_x_val().reshape(NUM_FINGERS, 2)   # z is the program's only variable
 
 
 class GraspController(LeafSystem):
@@ -159,7 +183,8 @@ class GraspController(LeafSystem):
         super().__init__()
         c = scene.config
         self.gains, self.schedule = gains, schedule
-        self._fingers, self._gravity, self._tip_radius = scene.fingers, c.gravity, scene.tip_radius
+        self._kinematics, self._tip_radius = HandKinematics(scene.fingers, c.gravity), scene.tip_radius
+        self._gravity = c.gravity
         self._mass = c.box_mass
         self._inertia = c.box_mass * (c.box_width ** 2 + c.box_height ** 2) / 12.0
         half_diagonal = 0.5 * np.hypot(c.box_width, c.box_height)
@@ -209,29 +234,23 @@ class GraspController(LeafSystem):
         s, g = self.schedule, self.gains
         n = s.index(t)
         q, v = hand_state[:NUM_HAND_JOINTS], hand_state[NUM_HAND_JOINTS:]
-        fingers = list(enumerate(self._fingers))
-        p_WF = np.array([finger.fingertip(q[2 * i:2 * i + 2]) for i, finger in fingers])
-        J_WF = [finger.jacobian(q[2 * i:2 * i + 2]) for i, finger in fingers]
+        p_WF, J_WF, g_hand = self._kinematics(q)
+        v_WF = np.einsum("fij,fj->fi", J_WF, v.reshape(NUM_FINGERS, 2))
         f_W, n_W = self.finger_forces(n, box_state, p_WF)
-        # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
-        # contact point's Jacobian, a tangential force also turns the second link (without it a
-        # static hold settled 0.035 rad off).
-        r_FC = -self._tip_radius * n_W
-        # A holding finger is force-controlled along the face: its sphere rolls as the box turns,
-        # and a tangential spring to a box-fixed target would fight the QP's friction force
-        # (a slow in-grasp turn ran 0.05 rad ahead with it). Its spring acts along the normal only.
-        t_W = perp(n_W)
-        along_face = s.force_scale[n][:, None] * t_W
         R = rotation_2d(box_state[2])
         r_W = s.p_BF[n] @ R.T
         p_target = box_state[:2] + r_W
         v_target = box_state[3:5] + box_state[5] * perp(r_W) + s.v_BF[n] @ R.T
-        tau = np.empty(NUM_HAND_JOINTS)
-        for i, finger in fingers:
-            q_i, v_i, J = q[2 * i:2 * i + 2], v[2 * i:2 * i + 2], J_WF[i]
-            error = p_target[i] - p_WF[i]
-            error = error - (error @ t_W[i]) * along_face[i]
-            spring = g.tip_kp * error + g.tip_kd * (v_target[i] - J @ v_i)
-            J_C = J + np.outer(perp(r_FC[i]), (1.0, 1.0))   # link 2 turns at q1dot + q2dot
-            tau[2 * i:2 * i + 2] = J.T @ spring + J_C.T @ f_W[i] + finger_gravity_torques(finger, q_i, self._gravity)
-        return self._u_from_tau @ tau
+        # A holding finger is force-controlled along the face: its sphere rolls as the box turns,
+        # and a tangential spring to a box-fixed target would fight the QP's friction force
+        # (a slow in-grasp turn ran 0.05 rad ahead with it). Its spring acts along the normal only.
+        t_W = perp(n_W)
+        error = p_target - p_WF
+        error -= (s.force_scale[n] * np.sum(error * t_W, axis=1))[:, None] * t_W
+        spring = g.tip_kp * error + g.tip_kd * (v_target - v_WF)
+        # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
+        # contact point's Jacobian J_C = J + perp(r_FC) [1 1] (link 2 turns at q1dot + q2dot), a
+        # tangential force also turns the second link (without it a static hold settled 0.035 rad off).
+        lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)       # perp(r_FC) . f
+        tau = np.einsum("fij,fi->fj", J_WF, spring + f_W) + lever[:, None] + g_hand
+        return self._u_from_tau @ tau.ravel()
