@@ -2,11 +2,13 @@
 exact box distance and nearest boundary points against geometry.BoxBoundary, and a
 box held at rest by four forces that balance gravity, then broken one way at a time."""
 
+import json
+
 import numpy as np
 import pytest
 
 from trajectotree.geometry import BoxBoundary, rotation_2d
-from trajectotree.physics import (FORCE_TOL, GAP_TOL, BoxModel, check_physics, closest_boundary_points,
+from trajectotree.physics import (FORCE_TOL, GAP_TOL, BoxModel, PhysicsCheck, check_physics, closest_boundary_points,
                                   contact_points, signed_distance)
 
 W, H, R = 0.20, 0.10, 0.01
@@ -85,3 +87,16 @@ def test_contact_points_are_planned_where_pinned_else_nearest():
     expected = np.array([[0.1, 0.0], [0.0, 0.05], [-0.1, 0.05], [0.0, -0.05]])
     np.testing.assert_allclose(p_W_C[0], x[0, :2] + expected @ R_WB.T, atol=1e-15)
     np.testing.assert_allclose(p_W_C[1, :2], x[0, :2] + np.array([[0.1, 0.01], [0.01, 0.05]]) @ R_WB.T, atol=1e-15)
+
+
+def test_non_finite_plans_fail_and_the_check_round_trips_through_json():
+    a = hold()
+    a["xdot"][2, 1] = np.nan
+    check = check_physics(a, BOX, mu=0.7)
+    assert not check.passed and "non-finite" in check.reason
+    data = json.loads(json.dumps(check.to_json(), allow_nan=False))
+    assert data["newton_euler_force_N"] is None and data["force_tol_N"] == FORCE_TOL
+    back = PhysicsCheck.from_json(data)
+    assert np.isnan(back.newton_euler_force_N) and back.reason == check.reason
+    ok = check_physics(hold(), BOX, mu=0.7)
+    assert PhysicsCheck.from_json(json.loads(json.dumps(ok.to_json()))) == ok

@@ -126,8 +126,7 @@ def load_plan(out_dir: str | Path):
                       violations={k: nan(v) for k, v in data["violations"].items()},
                       config=config_from_dict(data["config"]), solver_timing=data.get("solver_timing", {}))
         check = data.get("physics_check")
-        names = PhysicsCheck.__dataclass_fields__
-        fields["physics_check"] = None if check is None else PhysicsCheck(**{k: check[k] for k in names})
+        fields["physics_check"] = None if check is None else PhysicsCheck.from_json(check)
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         if isinstance(e, ConfigError):
             raise InputError(f"{str(json_path)!r} holds an invalid config: {e}") from None

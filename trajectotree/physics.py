@@ -16,7 +16,8 @@ FORCE_TOL, the cones hold to CONE_TOL and Newton-Euler to NEWTON_EULER_TOL.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -67,8 +68,14 @@ class PhysicsCheck:
     reason: str                        # why it failed ("" if passed)
 
     def to_json(self) -> dict:
-        return {**asdict(self), "gap_tol_m": GAP_TOL, "force_tol_N": FORCE_TOL, "cone_tol_N": CONE_TOL,
+        """The fields (non-finite numbers as None: JSON has no NaN) and the tolerances."""
+        values = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in asdict(self).items()}
+        return {**values, "gap_tol_m": GAP_TOL, "force_tol_N": FORCE_TOL, "cone_tol_N": CONE_TOL,
                 "newton_euler_tol": NEWTON_EULER_TOL}
+
+    @staticmethod
+    def from_json(data: dict) -> "PhysicsCheck":
+        return PhysicsCheck(**{f.name: float("nan") if data[f.name] is None else data[f.name] for f in fields(PhysicsCheck)})
 
 
 def _rot(theta: np.ndarray) -> np.ndarray:
@@ -135,7 +142,7 @@ def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
     k, i = np.unravel_index(int(np.argmax(away)), away.shape)
     worst = float(away[k, i])
     off_surface = float(np.abs(signed_distance(to_box(x, a["p_W_C"]), box.width, box.height)).max())
-    reasons = []
+    reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
     if worst > FORCE_TOL:
         reasons.append(f"finger {i} pushes the box with {worst:.3g} N from {1e3 * gap[k, i]:.2f} mm away at knot {k} "
                        f"(limit {FORCE_TOL} N beyond {1e3 * GAP_TOL:g} mm)")
