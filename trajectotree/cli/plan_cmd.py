@@ -56,7 +56,7 @@ def run(args) -> int:
         print_json(plan_to_json(result))
         return 0
     v = ", ".join(f"{k} {val:.1e}" for k, val in result.violations.items())
-    print(f"{method}: goal {goal:+.3f} rad, {'converged' if result.success else 'NOT converged'} ({result.status}), "
+    print(f"{method}: goal {goal:+.3f} rad, {'succeeded' if result.success else 'FAILED'} ({result.status}), "
           f"{result.iterations} iterations, cost {result.cost:.4g}")
     print(f"time: search {result.search_time_s:.2f} s, build {result.build_time_s:.2f} s, "
           f"solve {result.solve_time_s:.2f} s, total {result.total_time_s:.2f} s")
