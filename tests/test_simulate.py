@@ -214,11 +214,11 @@ def test_simulate_command_records_controller_and_conditions(scene, short_config,
 
 
 @pytest.mark.parametrize("options, named", [
-    (["--sim-mu", "0"], "sim_mu = 0.0"), (["--sim-mu", "-0.3"], "sim_mu = -0.3"),
-    (["--sim-mass", "0"], "sim_mass = 0.0"), (["--sim-mass", "-1"], "sim_mass = -1.0"),
+    (["--sim-mu", "0"], "--sim-mu = 0.0"), (["--sim-mu", "-0.3"], "--sim-mu = -0.3"),
+    (["--sim-mass", "0"], "--sim-mass = 0.0"), (["--sim-mass", "-1"], "--sim-mass = -1.0"),
     (["--push", "0.2,0"], "'0.2,0'"), (["--push", "0.2@1"], "'0.2@1'"), (["--push", "a,b@1"], "'a,b@1'"),
     (["--push", "0.2,0@-1"], "'0.2,0@-1'"), (["--push", "0.2,0@nan"], "'0.2,0@nan'"),
-    (["--controller", "pid"], "'pid'"), (["--rate", "0"], "controller.rate_hz"),
+    (["--controller", "pid"], "--controller 'pid'"), (["--rate", "0"], "controller.rate_hz"),
 ])
 def test_simulate_command_rejects_bad_conditions(scene, short_config, tmp_path, capsys, options, named):
     plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), short_config)

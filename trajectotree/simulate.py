@@ -94,10 +94,14 @@ def parse_push(text: str, duration_s: float = 0.2) -> Push:
     try:
         force, at = str(text).split("@")
         fx, fy = (float(v) for v in force.split(","))
-        return Push(force=(fx, fy), time_s=float(at), duration_s=duration_s)
-    except (ValueError, ConfigError) as e:
+        start = float(at)
+    except ValueError:
         raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, "
-                          f"e.g. 0.2,0@3.5): {e}") from None
+                          "e.g. 0.2,0@3.5)") from None
+    try:
+        return Push(force=(fx, fy), time_s=start, duration_s=duration_s)
+    except ConfigError as e:
+        raise ConfigError(f"push {text!r}: {e}") from None
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ import numpy as np
 
 from trajectotree.cli import InputError
 from trajectotree.cli.common import FIGURE_SUFFIXES, HTML_SUFFIXES, check_output_file, print_json
-from trajectotree.config import Config, config_from_dict, load_config
+from trajectotree.config import CONTROLLERS, Config, config_from_dict, load_config
 
 
 def register(subparsers) -> None:
@@ -99,6 +99,8 @@ def execution_config(args, plan_config: Config) -> Config:
             gains[name] = getattr(args, name)
     if args.rate is not None:
         gains["rate_hz"] = args.rate
+    if args.controller is not None and args.controller not in CONTROLLERS:
+        raise InputError(f"--controller {args.controller!r} is not a controller; valid: {', '.join(CONTROLLERS)}")
     sim = {} if args.controller is None else {"controller": args.controller}
     config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
                                  controller=dataclasses.replace(config.controller, **gains),
@@ -140,7 +142,12 @@ def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) ->
 def world_conditions(args, config: Config) -> dict:
     """run_simulation's keyword arguments for --sim-mu, --sim-mass and --push, checked
     here so that bad values stop the command before anything is written."""
+    from trajectotree.config import check_range
     from trajectotree.simulate import Conditions, parse_push
+    if args.sim_mu is not None:
+        check_range("--sim-mu", args.sim_mu, 0.0, 5.0, low_open=True)
+    if args.sim_mass is not None:
+        check_range("--sim-mass", args.sim_mass, 0.0, 100.0, low_open=True)
     push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
     Conditions(mu=args.sim_mu, mass=args.sim_mass, push=push)   # raises ConfigError naming a bad value
     return {"sim_mu": args.sim_mu, "sim_mass": args.sim_mass, "push": push}
