@@ -198,7 +198,7 @@ class ControllerGains:
     rate_hz: float = 500.0          # Hz, control rate (torques are held between updates)
     object_kp: float = 2000.0       # s^-2, box pose error -> desired acceleration (x, y and theta alike)
     object_kd: float = 80.0         # s^-1, box velocity error -> desired acceleration
-    tip_kp: float = 50.0            # N/m, fingertip spring to its target on the measured box
+    tip_kp: float = 50.0            # N/m, fingertip spring to its target on the measured box (x (1 - force budget))
     tip_kd: float = 3.0             # N s/m, fingertip damping to its target's velocity
     min_normal_force: float = 0.1   # N, least push of a finger in contact (grasp-force QP)
     max_normal_force: float = 5.0   # N, most push of a finger in contact (grasp-force QP)

@@ -18,11 +18,12 @@ the box and the hand (the plant's; there is no estimator) and
      (M the planned mass and inertia, X_ref a cubic Hermite through the plan);
   2. splits it into forces of the fingers in contact with a QP (OSQP, built once):
      min wrench_weight |G lambda - w|^2 + |lambda - lambda_plan|^2 with
-     lambda_n in s [min, max] N and |lambda_t| <= mu lambda_n, where s ramps a switching
-     finger's force to 0 before lift-off and back after landing;
-  3. commands tau = J^T (f + K_t (p_target - p) + D (v_target - v)) + g_hand, with
-     fingertip targets the planned box-frame fingertip positions mapped through the
-     MEASURED box pose (a switching finger follows its box-frame path, lifted).
+     lambda_n in s [min, max] N and |lambda_t| <= mu lambda_n, where the force budget s
+     of a switching finger ramps to 0 after lift-off and back before landing;
+  3. commands tau = J^T ((1 - s) K_t (p_target - p) + D (v_target - v)) + J_C^T f + g_hand,
+     with fingertip targets the planned box-frame fingertip positions mapped through the
+     MEASURED box pose (a switching finger follows its box-frame path, lifted): a finger
+     in contact is force-controlled, a free one position-controlled.
 Soft fingertip springs with strong object gains: stiff springs anchored to the
 measured box inject tangential force as the spheres roll and lose the grasp.
 """
@@ -241,12 +242,11 @@ class GraspController(LeafSystem):
         r_W = s.p_BF[n] @ R.T
         p_target = box_state[:2] + r_W
         v_target = box_state[3:5] + box_state[5] * perp(r_W) + s.v_BF[n] @ R.T
-        # A holding finger is force-controlled along the face: its sphere rolls as the box turns,
-        # and a tangential spring to a box-fixed target would fight the QP's friction force
-        # (a slow in-grasp turn ran 0.05 rad ahead with it). Its spring acts along the normal only.
-        t_W = perp(n_W)
-        error = p_target - p_WF
-        error -= (s.force_scale[n] * np.sum(error * t_W, axis=1))[:, None] * t_W
+        # A finger the QP may use is force-controlled: its spring fades with its force budget, so
+        # that what it applies to the box is the QP's force. A tangential spring to a box-fixed
+        # target fights the friction force as the sphere rolls (a slow in-grasp turn ran 0.05 rad
+        # ahead); a lifting finger's normal spring pulled it off while the QP still counted on it.
+        error = (1.0 - s.force_scale[n])[:, None] * (p_target - p_WF)
         spring = g.tip_kp * error + g.tip_kd * (v_target - v_WF)
         # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
         # contact point's Jacobian J_C = J + perp(r_FC) [1 1] (link 2 turns at q1dot + q2dot), a
