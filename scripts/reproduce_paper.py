@@ -1,10 +1,13 @@
 """Reproduce the paper's experiment (Sec. IV, Figs. 2-3) in one command.
 
 60 goal rotations drawn uniformly in [-pi, pi] with seed 0; each planned with TrajectoTree,
-CITO and CITO warm-start and executed in simulation; then the figures (PNG + PDF) and the
-summary table (Markdown + CSV). The same as
+CITO and CITO warm-start and executed in simulation under both controllers (the grasp
+controller and the paper's eq. 20); TrajectoTree's plans also under model mismatch and a push
+(trajectotree.executions); then the figures (PNG + PDF) and the tables (Markdown + CSV).
+The same as
 
-    trajectotree sweep --goals 60 --seed 0 --simulate --out SWEEP_DIR
+    trajectotree sweep --goals 60 --seed 0 --simulate --controllers grasp paper --out SWEEP_DIR
+    (the TrajectoTree plans under grasp x mismatch, push: trajectotree.executions.run_executions)
     trajectotree report SWEEP_DIR --out REPORT_DIR
 
 Resumable: rerun the same command after an interruption and finished trials are kept.
@@ -16,8 +19,10 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
 
-from trajectotree.config import Config, ConfigError
+from trajectotree.config import CONTROLLERS, Config, ConfigError
+from trajectotree.executions import run_executions
 from trajectotree.report import make_report, table_markdown
 from trajectotree.sweep import METHODS, SweepSpec, run_sweep
 
@@ -39,6 +44,9 @@ def main() -> int:
                          time_limit_s=args.time_limit)
         start = time.perf_counter()
         summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler)
+        run_executions(args.out, controllers=CONTROLLERS, conditions=["nominal"], workers=args.workers)
+        run_executions(args.out, controllers=["grasp"], conditions=["mismatch", "push"], methods=["trajectotree"],
+                       workers=args.workers)
         files, table = make_report(args.out, args.report_dir)
     except ConfigError as e:
         print(f"reproduce_paper: error: {e}", file=sys.stderr)
@@ -46,6 +54,8 @@ def main() -> int:
     print(summary.line())
     print(table_markdown(table), end="")
     print(f"figures: {', '.join(files.figure_time_cost + (files.figure_tracking or ()))}")
+    if files.executions_md:
+        print(Path(files.executions_md).read_text(), end="")
     print(f"table: {files.table_md}, {files.table_csv}; wall time {time.perf_counter() - start:.0f} s")
     return 0
 

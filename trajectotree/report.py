@@ -16,7 +16,7 @@ import io
 import json
 import math
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +40,8 @@ class ReportFiles:
     figure_tracking: tuple[str, str] | None
     table_md: str
     table_csv: str
+    executions_md: str | None = None    # per method, controller and condition (trajectotree.executions)
+    figure_tracking_by_controller: dict = field(default_factory=dict)  # controller -> (PNG, PDF), nominal runs
 
 
 def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
@@ -185,6 +187,20 @@ def load_tracking(sweep_dir: Path, rows: list[dict]) -> dict[str, list[tuple[np.
     return tracks
 
 
+def load_execution_tracking(records: list[dict], controller: str) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    """method -> [(t, abs_error)] of the nominal executions under `controller`."""
+    tracks: dict[str, list] = {}
+    for r in records:
+        if r["controller"] == controller and r["condition"] == "nominal":
+            path = Path(r["folder"]) / "sim.npz"
+            try:
+                with np.load(path) as data:
+                    tracks.setdefault(r["method"], []).append((data["t"], data["abs_error"]))
+            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+                raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
+    return tracks
+
+
 def tracking_bands(tracks: list[tuple[np.ndarray, np.ndarray]], grid: np.ndarray):
     """Mean and 95% CI of the absolute errors on a common time grid. Each trial is
     interpolated inside its own time span; at a grid time, only the trials that
@@ -204,7 +220,7 @@ def tracking_bands(tracks: list[tuple[np.ndarray, np.ndarray]], grid: np.ndarray
     return mean, lower, upper
 
 
-def figure_tracking(tracks: dict[str, list], methods: list[str]):
+def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | None = None):
     """Fig. 3: mean absolute error of x, y, theta over time with 95% confidence bands."""
     import matplotlib.pyplot as plt
 
@@ -226,6 +242,8 @@ def figure_tracking(tracks: dict[str, list], methods: list[str]):
         ax.set_ylabel(f"mean absolute error, {label}")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
     missing = [METHOD_LABELS.get(m, m) for m in methods if not tracks.get(m)]
     if missing:  # named, rather than silently absent from the curves
         fig.text(0.01, 0.01, "no executed plans: " + ", ".join(missing), fontsize=8, color="0.45")
@@ -312,6 +330,36 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     fig2 = _save(figure_time_and_cost(rows, methods), out / "fig2_time_cost")
     tracks = load_tracking(sweep_dir, rows)
     fig3 = _save(figure_tracking(tracks, methods), out / "fig3_tracking") if tracks else None
+    executions_md, fig3_by_controller = _execution_report(sweep_dir, rows, methods, out)
     files = ReportFiles(figure_time_cost=fig2, figure_tracking=fig3, table_md=str(out / "summary.md"),
-                        table_csv=str(out / "summary.csv"))
+                        table_csv=str(out / "summary.csv"), executions_md=executions_md,
+                        figure_tracking_by_controller=fig3_by_controller)
     return files, table
+
+
+def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out: Path) -> tuple[str | None, dict]:
+    """executions.md / .csv (drops and errors per method, controller and condition) and one
+    Fig. 3 per controller from its nominal executions, when the sweep has executions."""
+    from trajectotree.executions import collect_executions, execution_markdown, execution_summary
+    records = collect_executions(sweep_dir, rows)
+    if not records:
+        return None, {}
+    table = execution_summary(records)
+    write_bytes_atomic(out / "executions.md", (execution_markdown(table, METHOD_LABELS) + EXECUTION_NOTES).encode())
+    write_bytes_atomic(out / "executions.csv", table_csv(table).encode())
+    figures = {}
+    for controller in sorted({r["controller"] for r in records}):
+        tracks = load_execution_tracking(records, controller)
+        if tracks:
+            figures[controller] = _save(figure_tracking(tracks, methods, title=f"controller: {controller}"),
+                                        out / f"fig3_tracking_{controller}")
+    return str(out / "executions.md"), figures
+
+
+EXECUTION_NOTES = """
+Each plan executed again per controller (`grasp`: object-level grasp controller, the default;
+`paper`: eq. 20) and condition (`nominal`: the plan's world; `mismatch`: friction 0.55 and box
+mass +20 % in the simulated plant only; `push`: 0.2 N along +x on the box for 0.2 s in the middle
+of the middle segment). MAE: time means of |simulated - planned| box pose (held at its drop-time
+value after a drop), then means over executions. Final theta: |error| at the end of the run.
+"""

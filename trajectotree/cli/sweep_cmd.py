@@ -14,6 +14,8 @@ import math
 import signal
 
 from trajectotree.cli.common import add_config_options, check_output_dir, config_from_args, print_json
+from trajectotree.config import CONTROLLERS
+from trajectotree.executions import CONDITIONS, check_condition, run_executions
 from trajectotree.sweep import METHODS, SweepSpec, run_sweep
 
 
@@ -27,6 +29,12 @@ def register(subparsers) -> None:
     p.add_argument("--methods", nargs="+", default=list(METHODS), metavar="METHOD",
                    help=f"planners to run (default: all; valid: {', '.join(METHODS)})")
     p.add_argument("--simulate", action="store_true", help="execute every plan in simulation (tracking errors, drops)")
+    p.add_argument("--controllers", nargs="+", metavar="CONTROLLER",
+                   help=f"then execute every plan with each of these controllers (valid: {', '.join(CONTROLLERS)}) "
+                        "under each of --conditions; resumable, and may be added to a finished sweep")
+    p.add_argument("--conditions", nargs="+", metavar="CONDITION",
+                   help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
+                        "default: nominal): see `trajectotree.executions`")
     p.add_argument("--out", default="sweep", metavar="DIR",
                    help="sweep directory (default: ./sweep); one sweep at a time (it holds DIR/.lock)")
     p.add_argument("--workers", type=int, metavar="K",
@@ -46,6 +54,11 @@ def register(subparsers) -> None:
     p.set_defaults(run=run)
 
 
+def check_controller(name: str) -> str:
+    from trajectotree.simulate import check_controller as check  # pydrake only when a sweep runs
+    return check(name)
+
+
 def _interrupt(signum, frame):
     raise KeyboardInterrupt  # SIGTERM stops the running trials like Ctrl-C does
 
@@ -55,12 +68,21 @@ def run(args) -> int:
     check_output_dir("--out", args.out)
     spec = SweepSpec(goals=args.goals, seed=args.seed, methods=tuple(args.methods), simulate=args.simulate,
                      config=config_from_args(args), max_goal=args.max_goal, time_limit_s=args.time_limit)
+    conditions = [check_condition(c) for c in args.conditions or ()]
+    controllers = [check_controller(c) for c in args.controllers or ()]
+    if conditions and not controllers:
+        controllers = [spec.config.sim.controller]
     summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler,
                         scheduler_timeout_s=args.scheduler_timeout, retry_errors=args.retry_errors,
                         progress=not args.no_progress)
+    ran = run_executions(args.out, controllers=controllers, conditions=conditions or ["nominal"],
+                         workers=args.workers, progress=not args.no_progress) if controllers else None
     if args.json:
-        print_json(summary.__dict__)
+        print_json({**summary.__dict__, "executions_run": ran})
     else:
         print(summary.line())
+        if ran is not None:
+            print(f"executions: {ran} run ({' '.join(controllers)} x {' '.join(conditions or ['nominal'])}); "
+                  "the report tabulates them in executions.md")
         print(f"next: trajectotree report {args.out}")
     return 0
