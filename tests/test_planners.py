@@ -160,7 +160,7 @@ def test_saved_plan_round_trips_and_matches_design(plans):
     assert data["physics_check"]["passed"] is True and data["physics_check"]["force_tol_N"] == 0.01
     loaded = load_plan(folder)
     assert loaded.config == result.config and loaded.status == result.status
-    assert loaded.physics_check == result.physics_check
+    assert loaded.physics_check == result.physics_check and loaded.converged is result.converged is True
     np.testing.assert_array_equal(loaded.trajectory.f_W, result.trajectory.f_W)
     assert loaded.contact_plan.nodes[1].switching_finger == result.contact_plan.nodes[1].switching_finger
 
@@ -177,7 +177,7 @@ def test_baselines_are_physical_or_say_why_not(plans, scene, method):
     check_newton_euler(a, c, moment_tol=1e-3)       # forces off the box act 1-2 mm from p_W_C
     assert np.all(np.abs(a["lambda_t"]) <= planning_mu(CONFIG) * a["lambda_n"] + 1e-7)
     pushing = (tip_distances(a, c, scene.tip_radius) > 1e-4) & (np.linalg.norm(a["f_W"], axis=2) > 0.01)
-    assert result.success == result.physics_check.passed == (not pushing.any())
+    assert result.converged and result.success == result.physics_check.passed == (not pushing.any())
     if pushing.any():
         assert "physics check failed" in result.status and "pushes the box" in result.status
 

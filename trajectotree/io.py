@@ -73,6 +73,7 @@ def plan_to_json(result) -> dict:
     finite = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731 (JSON has no NaN)
     return {
         "method": result.method, "goal": float(result.goal), "success": bool(result.success),
+        "converged": bool(result.converged),
         "status": result.status, "search_time_s": float(result.search_time_s),
         "build_time_s": float(result.build_time_s), "solve_time_s": float(result.solve_time_s),
         "total_time_s": float(result.total_time_s), "cost": finite(result.cost), "iterations": int(result.iterations),
@@ -127,6 +128,7 @@ def load_plan(out_dir: str | Path):
                       config=config_from_dict(data["config"]), solver_timing=data.get("solver_timing", {}))
         check = data.get("physics_check")
         fields["physics_check"] = None if check is None else PhysicsCheck.from_json(check)
+        fields["converged"] = bool(data.get("converged", data["success"]))   # older files: success meant converged
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         if isinstance(e, ConfigError):
             raise InputError(f"{str(json_path)!r} holds an invalid config: {e}") from None

@@ -82,6 +82,9 @@ class PlanResult:
     config: Config
     solver_timing: dict = field(default_factory=dict)  # IPOPT's timing statistics, s
     physics_check: PhysicsCheck | None = None          # the check of the plan's arrays (None: nothing solved)
+    # IPOPT converged (and the search found a plan, where used), whether or not the physics check
+    # passed: the general CITO baselines converge to plans that push from a distance.
+    converged: bool = False
 
 
 def planning_mu(config: Config) -> float:
@@ -145,7 +148,8 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
     status = outcome.status
     if outcome.success and not check.passed:
         status = f"{outcome.status}, physics check failed: {check.reason}"
-    return PlanResult(method=method, goal=goal, success=outcome.success and contact_plan.success and check.passed,
+    converged = outcome.success and contact_plan.success
+    return PlanResult(method=method, goal=goal, success=converged and check.passed, converged=converged,
                       status=status, search_time_s=search_time, build_time_s=build_time,
                       solve_time_s=outcome.solve_time_s, total_time_s=search_time + build_time + outcome.solve_time_s,
                       cost=outcome.cost, iterations=outcome.iterations, contact_plan=contact_plan,
