@@ -40,7 +40,7 @@ def run(goals, methods, config: Config) -> dict[str, list[dict]]:
                     "cost": r.cost, "function_evaluations_share": timing.get("nlp_function_evaluations_s", np.nan)
                     / timing.get("ipopt_total_s", np.nan),
                     # a solved plan whose arrays fail trajectotree.physics (counted in success = False)
-                    "physics_failed": check is not None and not check.passed,
+                    "converged": r.converged, "physics_failed": check is not None and not check.passed,
                     "force_at_distance_N": np.nan if check is None else check.force_at_distance_N,
                     "status": r.status})
                 bar.update()
@@ -49,8 +49,9 @@ def run(goals, methods, config: Config) -> dict[str, list[dict]]:
 
 def summary_line(method: str, rows: list[dict]) -> str:
     col = {key: np.array([r[key] for r in rows], dtype=float) for key in rows[0] if key != "status"}
-    return (f"{method:13s} success {int(col['success'].sum())}/{len(rows)} (physics check failed "
-            f"{int(col['physics_failed'].sum())}, max force at a distance {np.nanmax(col['force_at_distance_N']):.3g} N)  total mean {col['total_s'].mean():6.2f} s "
+    return (f"{method:13s} success {int(col['success'].sum())}/{len(rows)} (converged {int(col['converged'].sum())}, "
+            f"physics check failed {int(col['physics_failed'].sum())}, max force at a distance "
+            f"{np.nanmax(col['force_at_distance_N']):.3g} N)  total mean {col['total_s'].mean():6.2f} s "
             f"median {np.median(col['total_s']):6.2f} s  | search {col['search_s'].mean():.3f} s "
             f"(median {np.median(col['search_s']):.3f})  build {col['build_s'].mean():.2f} s  "
             f"solve {col['solve_s'].mean():6.2f} s  | iterations {col['iterations'].mean():5.1f}  "
