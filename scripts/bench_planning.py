@@ -56,7 +56,8 @@ def summary_line(method: str, rows: list[dict]) -> str:
             f"(median {np.median(col['search_s']):.3f})  build {col['build_s'].mean():.2f} s  "
             f"solve {col['solve_s'].mean():6.2f} s  | iterations {col['iterations'].mean():5.1f}  "
             f"function evals {100 * np.nanmean(col['function_evaluations_share']):4.1f} % of IPOPT time  "
-            f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  cost mean {np.nanmean(col['cost']):.1f}")
+            f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  "
+            f"cost mean {np.nanmean(col['cost']):.1f}")
 
 
 def main() -> None:

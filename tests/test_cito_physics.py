@@ -70,7 +70,8 @@ def test_friction_and_newton_euler_violations_are_found():
     b = hold()
     b["p_W_C"][:, 1] += np.array([0.003, 0.0])                       # 3 mm along W x: moment 3 mm * f_y
     check = check_physics(b, BOX, mu=0.7)
-    assert check.newton_euler_moment_Nm == pytest.approx(0.003 * 0.5 * np.cos(0.3), rel=1e-6) and "Newton-Euler" in check.reason
+    assert check.newton_euler_moment_Nm == pytest.approx(0.003 * 0.5 * np.cos(0.3), rel=1e-6)
+    assert "Newton-Euler" in check.reason
     c = hold()
     c["xdot"][-1, 0] = 0.01                                          # accelerates with no net force
     assert check_physics(c, BOX, mu=0.7).newton_euler_force_N == pytest.approx(BOX.mass * 0.01 / 0.25)

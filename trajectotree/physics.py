@@ -75,7 +75,8 @@ class PhysicsCheck:
 
     @staticmethod
     def from_json(data: dict) -> "PhysicsCheck":
-        return PhysicsCheck(**{f.name: float("nan") if data[f.name] is None else data[f.name] for f in fields(PhysicsCheck)})
+        nan = float("nan")
+        return PhysicsCheck(**{f.name: nan if data[f.name] is None else data[f.name] for f in fields(PhysicsCheck)})
 
 
 def _rot(theta: np.ndarray) -> np.ndarray:
@@ -129,8 +130,8 @@ def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
     dt = np.diff(a["t"])[:, None]
     weight = np.array([0.0, -box.mass * box.gravity])
     arm = a["p_W_C"] - x[:, None, :2]
-    wrench = np.concatenate([f.sum(1) + weight, np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0], axis=1)[:, None]],
-                            axis=1)
+    moment = np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0], axis=1)
+    wrench = np.concatenate([f.sum(1) + weight, moment[:, None]], axis=1)
     residual = np.array([box.mass, box.mass, box.inertia]) * np.diff(a["xdot"], axis=0) / dt \
         - 0.5 * (wrench[1:] + wrench[:-1])
     ne_force, ne_moment = float(np.abs(residual[:, :2]).max()), float(np.abs(residual[:, 2]).max())
@@ -150,7 +151,8 @@ def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
         reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
     if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
         reasons.append(f"Newton-Euler residual {ne_force:.3g} N, {ne_moment:.3g} N m (limit {NEWTON_EULER_TOL:g})")
-    return PhysicsCheck(newton_euler_force_N=ne_force, newton_euler_moment_Nm=ne_moment, friction_cone_N=cone, mu=float(mu),
+    return PhysicsCheck(newton_euler_force_N=ne_force, newton_euler_moment_Nm=ne_moment, friction_cone_N=cone,
+                        mu=float(mu),
                         force_at_distance_N=worst, force_at_distance_knot=int(k) if worst > 0 else -1,
                         force_at_distance_finger=int(i) if worst > 0 else -1,
                         force_at_distance_gap_m=float(gap[k, i]) if worst > 0 else 0.0,
