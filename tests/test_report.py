@@ -48,6 +48,7 @@ def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, t
     for t in table:  # the table's numbers are those of the trial rows
         mine = [r for r in rows if r["method"] == t["method"]]
         assert float(t["success_rate"]) == pytest.approx(np.mean([bool(r["success"]) for r in mine]))
+        assert float(t["converged_rate"]) == pytest.approx(np.mean([bool(r["converged"]) for r in mine]))
         assert float(t["mean_time_s"]) == pytest.approx(np.mean([r["total_time_s"] for r in mine]))
         executed = [r for r in mine if r["simulated"]]
         assert int(t["simulated"]) == len(executed)

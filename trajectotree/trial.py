@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 # Row fields, in the order of trials.jsonl and the CSV table.
-PLAN_FIELDS = ("success", "status", "search_time_s", "build_time_s", "solve_time_s", "total_time_s",
+PLAN_FIELDS = ("success", "converged", "status", "search_time_s", "build_time_s", "solve_time_s", "total_time_s",
                "cost", "iterations")
 SIM_FIELDS = ("mae_x", "mae_y", "mae_theta", "final_error", "dropped", "drop_time_s", "sim_time_s")
 ROW_FIELDS = ("key", "goal_index", "goal", "method") + PLAN_FIELDS + ("switching_fingers", "simulated") \
@@ -80,6 +80,8 @@ def row_from_files(task: TrialTask, out_dir: Path) -> dict:
     row = empty_row(task)
     plan_json = json.loads((out_dir / "plan.json").read_text())
     row.update({k: plan_json.get(k) for k in PLAN_FIELDS})
+    if row["converged"] is None:  # plan.json from before the physics check: success meant converged
+        row["converged"] = row["success"]
     row["switching_fingers"] = [n.get("switching_finger") for n in plan_json.get("contact_sequence") or ()]
     sim_path = out_dir / "sim.json"
     if sim_path.is_file():
