@@ -188,29 +188,25 @@ def figure_time_and_cost(rows: list[dict], methods: list[str]):
 def load_tracking(sweep_dir: Path, rows: list[dict]) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     """method -> [(t (T,), abs_error (T, 3))] of the simulated trials; ConfigError
     naming a sim.npz that cannot be read."""
-    tracks: dict[str, list] = {}
-    for r in rows:
-        if r.get("simulated"):
-            path = sweep_dir / TRIALS_DIR / r["key"] / "sim.npz"
-            try:
-                with np.load(path) as data:
-                    tracks.setdefault(r["method"], []).append((data["t"], data["abs_error"]))
-            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-                raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
-    return tracks
+    return _tracks((r["method"], sweep_dir / TRIALS_DIR / r["key"]) for r in rows if r.get("simulated"))
 
 
 def load_execution_tracking(records: list[dict], controller: str) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     """method -> [(t, abs_error)] of the nominal executions under `controller`."""
+    return _tracks((r["method"], Path(r["folder"])) for r in records
+                   if r["controller"] == controller and r["condition"] == "nominal")
+
+
+def _tracks(method_folders) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    """method -> [(t, abs_error)] read from each (method, folder)'s sim.npz."""
     tracks: dict[str, list] = {}
-    for r in records:
-        if r["controller"] == controller and r["condition"] == "nominal":
-            path = Path(r["folder"]) / "sim.npz"
-            try:
-                with np.load(path) as data:
-                    tracks.setdefault(r["method"], []).append((data["t"], data["abs_error"]))
-            except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-                raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
+    for method, folder in method_folders:
+        path = folder / "sim.npz"
+        try:
+            with np.load(path) as data:
+                tracks.setdefault(method, []).append((data["t"], data["abs_error"]))
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
+            raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
     return tracks
 
 
