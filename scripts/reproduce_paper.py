@@ -44,9 +44,10 @@ def main() -> int:
                          time_limit_s=args.time_limit)
         start = time.perf_counter()
         summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler)
-        run_executions(args.out, controllers=CONTROLLERS, conditions=["nominal"], workers=args.workers)
+        settings = {"gains": spec.config.controller, "sim": spec.config.sim, "workers": args.workers}
+        run_executions(args.out, controllers=CONTROLLERS, conditions=["nominal"], **settings)
         run_executions(args.out, controllers=["grasp"], conditions=["mismatch", "push"], methods=["trajectotree"],
-                       workers=args.workers)
+                       **settings)
         files, table = make_report(args.out, args.report_dir)
     except ConfigError as e:
         print(f"reproduce_paper: error: {e}", file=sys.stderr)

@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.config import CONTROLLERS, Config, ConfigError, check_range
+from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_range,
+                                 config_from_dict)
 from trajectotree.io import SIM_JSON, SIM_NPZ, write_bytes_atomic
 from trajectotree.sweep_store import TRIALS_DIR, sweep_lock
 
@@ -84,6 +85,9 @@ class ExecutionTask:
     controller: str    # config.CONTROLLERS
     condition: str     # CONDITIONS
     spec: ConditionSpec
+    # The executor's gains and simulation settings; None: those saved with the plan.
+    gains: ControllerGains | None = None
+    sim: SimConfig | None = None
 
 
 def execute(task: ExecutionTask) -> dict:
@@ -92,7 +96,8 @@ def execute(task: ExecutionTask) -> dict:
     from trajectotree.io import load_plan, save_sim
     from trajectotree.simulate import run_simulation
     plan = load_plan(task.trial_dir)
-    config = replace(plan.config, sim=replace(plan.config.sim, controller=task.controller))
+    config = replace(plan.config, controller=task.gains or plan.config.controller,
+                     sim=replace(task.sim or plan.config.sim, controller=task.controller))
     duration = float(plan.trajectory.t[-1] - plan.trajectory.t[0])
     result = run_simulation(plan=plan, config=config, controller=task.controller,
                             **task.spec.simulation_kwargs(task.condition, config, duration))
@@ -105,8 +110,8 @@ def read_execution(folder: Path) -> dict:
     return json.loads((Path(folder) / SIM_JSON).read_text())
 
 
-def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: ConditionSpec,
-                       methods=None) -> list[ExecutionTask]:
+def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: ConditionSpec, methods=None,
+                       gains: ControllerGains | None = None, sim: SimConfig | None = None) -> list[ExecutionTask]:
     """Every (trial with a trajectory, of `methods` (None: all), controller, condition)
     without a finished execution.
     A nominal execution the sweep's own --simulate already ran (the trial's sim.json, same
@@ -122,12 +127,16 @@ def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: Con
             continue  # not a finished trial (the sweep names and recomputes a corrupt one)
         if not plan.get("iterations") or (methods is not None and plan.get("method") not in methods):
             continue  # nothing was solved (no trajectory to execute), or not asked for
+        planned = config_from_dict(plan["config"])
+        same_settings = ((gains is None or gains == planned.controller)
+                         and (sim is None or replace(sim, controller=planned.sim.controller) == planned.sim))
         for controller in controllers:
             for condition in conditions:
                 out = execution_dir(trial_dir, controller, condition)
-                if (out / SIM_JSON).is_file() or _reuse_sweep_simulation(trial_dir, controller, condition, out):
+                if (out / SIM_JSON).is_file() or (
+                        same_settings and _reuse_sweep_simulation(trial_dir, controller, condition, out)):
                     continue
-                tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec))
+                tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim))
     return tasks
 
 
@@ -148,9 +157,10 @@ def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, ou
 
 
 def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions=CONDITIONS,
-                   spec: ConditionSpec = ConditionSpec(), methods=None, workers: int | None = None,
-                   progress: bool = True) -> int:
-    """Runs the pending executions of a sweep's plans (of `methods`, None: all) on
+                   spec: ConditionSpec = ConditionSpec(), methods=None, gains: ControllerGains | None = None,
+                   sim: SimConfig | None = None, workers: int | None = None, progress: bool = True) -> int:
+    """Runs the pending executions of a sweep's plans (of `methods`, None: all) with the
+    controller `gains` and `sim` settings (None: those saved with each plan) on
     `workers` local processes, holding the
     sweep's lock; returns how many ran. A failed execution is reported on stderr and left
     pending (rerun to retry); the others go on."""
@@ -158,7 +168,7 @@ def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions
     if not (sweep_dir / TRIALS_DIR).is_dir():
         raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {TRIALS_DIR}/)")
     with sweep_lock(sweep_dir):
-        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods)
+        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim)
         if not tasks:
             return 0
         bar = None

@@ -76,7 +76,8 @@ def run(args) -> int:
                         scheduler_timeout_s=args.scheduler_timeout, retry_errors=args.retry_errors,
                         progress=not args.no_progress)
     ran = run_executions(args.out, controllers=controllers, conditions=conditions or ["nominal"],
-                         workers=args.workers, progress=not args.no_progress) if controllers else None
+                         gains=spec.config.controller, sim=spec.config.sim, workers=args.workers,
+                         progress=not args.no_progress) if controllers else None
     if args.json:
         print_json({**summary.__dict__, "executions_run": ran})
     else:
