@@ -22,6 +22,7 @@ import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -185,6 +186,8 @@ def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions
                 try:
                     future.result()
                     done += 1
+                except BrokenProcessPool:
+                    raise  # the workers themselves died: every other execution would fail the same way
                 except Exception as e:  # one broken plan must not stop the others
                     print(f"execution {Path(task.trial_dir).name} {task.controller}/{task.condition} failed: "
                           f"{type(e).__name__}: {e}", file=sys.stderr)
