@@ -229,6 +229,12 @@ class ControllerGains:
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
 
 
+def check_controller(name: str) -> str:
+    if name not in CONTROLLERS:
+        raise ConfigError(f"controller {name!r} is not one of {', '.join(CONTROLLERS)}")
+    return name
+
+
 @dataclass(frozen=True)
 class SimConfig:
     """Full-dynamics execution in a discrete MultibodyPlant."""

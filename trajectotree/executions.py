@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_range,
-                                 config_from_dict)
+from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_controller,
+                                 check_range, config_from_dict)
 from trajectotree.io import SIM_JSON, SIM_NPZ, write_bytes_atomic
 from trajectotree.sweep_store import TRIALS_DIR, sweep_lock
 
@@ -117,7 +117,6 @@ def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: Con
     without a finished execution.
     A nominal execution the sweep's own --simulate already ran (the trial's sim.json, same
     controller) is copied instead of rerun."""
-    from trajectotree.simulate import check_controller
     controllers = [check_controller(c) for c in controllers]
     conditions = [check_condition(c) for c in conditions]
     tasks = []

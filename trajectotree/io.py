@@ -103,7 +103,7 @@ def load_plan(out_dir: str | Path):
     file when the folder, plan.json or plan.npz is missing or malformed."""
     from trajectotree.cli import InputError
     from trajectotree.config import ConfigError, config_from_dict
-    from trajectotree.contact_plan import ContactPlan, SearchStats
+    from trajectotree.contact_plan import ContactPlan
     from trajectotree.physics import PhysicsCheck
     from trajectotree.planners import TRAJECTORY_ARRAYS, PlanResult, Trajectory
     out_dir = Path(out_dir)

@@ -38,7 +38,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Tr
 from pydrake.trajectories import PiecewisePolynomial
 
 from trajectotree import metrics, playback
-from trajectotree.config import CONTROLLERS, Config, ConfigError, check_range
+from trajectotree.config import Config, ConfigError, check_controller, check_range
 from trajectotree.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.reference import Reference, grasp_schedule, reference_from_plan
 from trajectotree.scene import NUM_FINGERS, add_hand_and_box, build_scene
@@ -246,12 +246,6 @@ def add_grasp_controller(builder, plant, hand, box, reference: Reference, config
     builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
     builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
     return controller
-
-
-def check_controller(name: str) -> str:
-    if name not in CONTROLLERS:
-        raise ConfigError(f"controller {name!r} is not one of {', '.join(CONTROLLERS)}")
-    return name
 
 
 def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,

@@ -14,7 +14,7 @@ import math
 import signal
 
 from trajectotree.cli.common import add_config_options, check_output_dir, config_from_args, print_json
-from trajectotree.config import CONTROLLERS
+from trajectotree.config import CONTROLLERS, check_controller
 from trajectotree.executions import CONDITIONS, check_condition, run_executions
 from trajectotree.sweep import METHODS, SweepSpec, run_sweep
 
@@ -52,11 +52,6 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     add_config_options(p)
     p.set_defaults(run=run)
-
-
-def check_controller(name: str) -> str:
-    from trajectotree.simulate import check_controller as check  # pydrake only when a sweep runs
-    return check(name)
 
 
 def _interrupt(signum, frame):
