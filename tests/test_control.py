@@ -187,6 +187,37 @@ def test_grasp_force_qp_meets_a_feasible_wrench_within_the_cones():
     np.testing.assert_allclose(G @ lam.ravel(), wrench, atol=1e-3)
 
 
+def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
+    """Goal 0.861's stance while finger 3 swings, at theta 0.63 with the contacts measured in
+    simulation: finger 2 rolled 6.6 mm along the top face, so the pinch line of fingers 0 and 2
+    leans 25 deg off the normal (needs mu 0.47; 0.40 at the planned points). With the plan's cone
+    (0.49) the QP squeezes hard and still misses the weight; with the controller's default cone
+    (max(search 0.7, controller 0.75) x 0.7 = 0.525) it holds the box with less than half of that."""
+    from trajectotree.control import GraspForceQp, perp
+    from trajectotree.geometry import rotation_2d
+    config = Config()
+    R = rotation_2d(0.63)
+    n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]]) @ R.T
+    r_W = np.array([[-0.0402, -0.05], [0.0395, 0.05], [0.0066, 0.05], [-0.0217, -0.05]]) @ R.T
+    t_W = perp(n_W)
+    G = np.zeros((3, 8))
+    G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
+    G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
+    G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
+    weight = np.array([0.0, config.scene.box_mass * config.scene.gravity, 0.0])
+    lo, hi = np.array([0.1, 0.1, 0.1, 0.0]), np.array([8.0, 8.0, 8.0, 0.0])   # finger 3 lifted
+
+    def solve(mu):
+        lam = GraspForceQp(mu, torque_length=0.112, wrench_weight=1e4).solve(G, weight, np.zeros((4, 2)), lo, hi)
+        return lam, np.linalg.norm((G @ lam.ravel() - weight)[:2])
+
+    mu_control = max(config.search.friction_safety, config.controller.friction_safety) * config.scene.mu
+    assert mu_control == pytest.approx(0.525)
+    (lam_plan, miss_plan), (lam, miss) = solve(config.search.friction_safety * config.scene.mu), solve(mu_control)
+    assert lam_plan[0, 0] > 3.5 and miss_plan > 0.015
+    assert lam[0, 0] < 0.65 * lam_plan[0, 0] and miss < 0.3 * miss_plan
+
+
 def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
     from trajectotree.reference import hermite, swing_intervals, swing_profile
     t = np.linspace(0.0, 1.0, 11)

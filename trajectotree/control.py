@@ -178,7 +178,8 @@ class GraspController(LeafSystem):
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
     joint) and `hand_state` (16: the hand's [q; v]). Output port: `actuation` (8, the
     plant's actuation order), updated every 1 / gains.rate_hz s and held in between.
-    `mass` and `mu` are what the plan assumed (not the simulated plant's)."""
+    `mass` is the plan's and `mu` the friction its QP's cones allow (simulate passes
+    max(search, controller friction_safety) x scene.mu), not the simulated plant's."""
 
     def __init__(self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float):
         super().__init__()

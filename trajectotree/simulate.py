@@ -234,15 +234,16 @@ def add_paper_controller(builder, plant, hand, reference: Reference, config: Con
 
 
 def add_grasp_controller(builder, plant, hand, box, reference: Reference, config: Config) -> GraspController:
-    """The GraspController with the plan's scene (mass, size) and friction mu_plan =
-    search.friction_safety x scene.mu, reading the box and hand state."""
+    """The GraspController with the plan's scene (mass, size) and friction cones at
+    max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
+    the plan assumed), reading the box and hand state."""
     scene, gains = build_scene(config.scene), config.controller
     schedule = grasp_schedule(reference, width=config.scene.box_width, height=config.scene.box_height,
                               tip_radius=scene.tip_radius, period=1.0 / gains.rate_hz,
                               duration=reference.duration + config.sim.settle_time, ramp_time=gains.ramp_time,
                               swing_lift=gains.swing_lift, contact_distance=gains.contact_distance)
-    mu_plan = config.search.friction_safety * config.scene.mu
-    controller = builder.AddNamedSystem("grasp_controller", GraspController(scene, schedule, gains, mu=mu_plan))
+    mu_control = max(config.search.friction_safety, gains.friction_safety) * config.scene.mu
+    controller = builder.AddNamedSystem("grasp_controller", GraspController(scene, schedule, gains, mu=mu_control))
     builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
     builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
     return controller
