@@ -23,13 +23,13 @@ import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_controller,
-                                 check_range, config_from_dict)
+                                 check_range)
 from trajectotree.io import SIM_JSON, SIM_NPZ, write_bytes_atomic
 from trajectotree.sweep_store import TRIALS_DIR, sweep_lock
 
@@ -127,9 +127,12 @@ def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: Con
             continue  # not a finished trial (the sweep names and recomputes a corrupt one)
         if not plan.get("iterations") or (methods is not None and plan.get("method") not in methods):
             continue  # nothing was solved (no trajectory to execute), or not asked for
-        planned = config_from_dict(plan["config"])
-        same_settings = ((gains is None or gains == planned.controller)
-                         and (sim is None or replace(sim, controller=planned.sim.controller) == planned.sim))
+        # Compared as saved: a key the plan's file lacks (saved before the field existed) loads as
+        # today's default, but the sweep's simulation did not run with it.
+        saved = plan["config"]
+        same_settings = ((gains is None or _as_saved(gains) == saved.get("controller"))
+                         and (sim is None or {**_as_saved(sim), "controller": None}
+                              == {**saved.get("sim", {}), "controller": None}))
         for controller in controllers:
             for condition in conditions:
                 out = execution_dir(trial_dir, controller, condition)
@@ -138,6 +141,11 @@ def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: Con
                     continue
                 tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim))
     return tasks
+
+
+def _as_saved(settings) -> dict:
+    """A config dataclass as plan.json holds it (JSON types: lists for tuples)."""
+    return json.loads(json.dumps(asdict(settings)))
 
 
 def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, out: Path) -> bool:
