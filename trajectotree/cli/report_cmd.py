@@ -26,7 +26,11 @@ def run(args) -> int:
     print(f"Fig. 2 (planning time, cost): {', '.join(files.figure_time_cost)}")
     if files.figure_tracking:
         print(f"Fig. 3 (tracking errors):     {', '.join(files.figure_tracking)}")
-    else:
-        print("Fig. 3 (tracking errors):     none, the sweep ran without --simulate")
+    for controller, paths in files.figure_tracking_by_controller.items():
+        print(f"Fig. 3, {controller + ' controller:':<19} {', '.join(paths)}")
+    if not files.figure_tracking and not files.figure_tracking_by_controller:
+        print("Fig. 3 (tracking errors):     none, the sweep ran without --simulate or --controllers")
     print(f"table: {files.table_md}, {files.table_csv}")
+    if files.executions_md:
+        print(f"executions: {files.executions_md} (per method, controller and condition)")
     return 0
