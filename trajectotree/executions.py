@@ -225,12 +225,13 @@ def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
 FINAL_THETA_TOLERANCE = np.deg2rad(3.0)  # rad, "final orientation held" in the execution table
 
 
-def execution_summary(records: list[dict]) -> list[dict]:
-    """One row per (method, controller, condition): executions, drops, mean absolute errors
-    and how many ended within 3 deg of the planned final orientation."""
+def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
+    """One row per (method, controller, condition), in the order of `methods`, CONTROLLERS
+    and CONDITIONS: executions, drops, mean absolute errors and how many ended within 3 deg
+    of the planned final orientation."""
+    order = lambda names, name: names.index(name) if name in names else len(names)  # noqa: E731
     keys = sorted({(r["method"], r["controller"], r["condition"]) for r in records},
-                  key=lambda k: (k[0], CONTROLLERS.index(k[1]) if k[1] in CONTROLLERS else 9,
-                                 CONDITIONS.index(k[2]) if k[2] in CONDITIONS else 9))
+                  key=lambda k: (order(methods, k[0]), order(CONTROLLERS, k[1]), order(CONDITIONS, k[2])))
     table = []
     for method, controller, condition in keys:
         mine = [r for r in records if (r["method"], r["controller"], r["condition"]) == (method, controller, condition)]

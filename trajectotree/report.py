@@ -353,7 +353,7 @@ def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out
     records = collect_executions(sweep_dir, rows)
     if not records:
         return None, {}
-    table = execution_summary(records)
+    table = execution_summary(records, methods)
     write_bytes_atomic(out / "executions.md", (execution_markdown(table, METHOD_LABELS) + EXECUTION_NOTES).encode())
     write_bytes_atomic(out / "executions.csv", table_csv(table).encode())
     figures = {}
