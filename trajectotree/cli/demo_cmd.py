@@ -43,7 +43,7 @@ def register(subparsers) -> None:
 
 
 def plan_summary(result) -> dict:
-    keys = ("method", "goal", "success", "status", "search_time_s", "build_time_s", "solve_time_s",
+    keys = ("method", "goal", "success", "converged", "status", "search_time_s", "build_time_s", "solve_time_s",
             "total_time_s", "iterations")
     summary = {k: getattr(result, k) for k in keys}
     summary["cost"] = result.cost if math.isfinite(result.cost) else None
@@ -59,8 +59,9 @@ def print_summary(summary: dict, out: Path) -> None:
     print(f"  CITO (IPOPT)    {p['build_time_s'] + p['solve_time_s']:6.2f} s   build {p['build_time_s']:.2f} s, "
           f"solve {p['solve_time_s']:.2f} s, {p['iterations']} iterations: {p['status']}")
     cost = "n/a" if p["cost"] is None else f"{p['cost']:.4g}"
-    print(f"  total planning  {p['total_time_s']:6.2f} s   {'converged' if p['success'] else 'NOT converged'}, "
-          f"cost {cost}")
+    verdict = ("converged, physics check passed" if p["success"] else
+               "converged, but the physics check FAILED (see the status)" if p["converged"] else "NOT converged")
+    print(f"  total planning  {p['total_time_s']:6.2f} s   {verdict}, cost {cost}")
     if s is not None:
         held = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held throughout"
         print(f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, box {held}; "
