@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from trajectotree.geometry import BoxBoundary, rotation_2d
-from trajectotree.physics import (FORCE_TOL, GAP_TOL, BoxModel, PhysicsCheck, check_physics, closest_boundary_points,
-                                  contact_points, signed_distance)
+from trajectotree.geometry import box_signed_distance, nearest_box_points
+from trajectotree.physics import FORCE_TOL, GAP_TOL, BoxModel, PhysicsCheck, check_physics, contact_points
 
 W, H, R = 0.20, 0.10, 0.01
 BOX = BoxModel(mass=0.05, width=W, height=H, gravity=9.81, tip_radius=R)
@@ -18,8 +18,8 @@ BOX = BoxModel(mass=0.05, width=W, height=H, gravity=9.81, tip_radius=R)
 def test_distance_and_nearest_points_match_the_boundary_class():
     box = BoxBoundary(W, H)
     p = np.random.default_rng(0).uniform(-0.15, 0.15, (400, 2))
-    np.testing.assert_allclose(signed_distance(p, W, H), [box.signed_distance(q) for q in p], atol=1e-15)
-    np.testing.assert_allclose(closest_boundary_points(p, W, H), [box.project(q) for q in p], atol=1e-15)
+    np.testing.assert_allclose(box_signed_distance(p, W, H), [box.signed_distance(q) for q in p], atol=1e-15)
+    np.testing.assert_allclose(nearest_box_points(p, W, H), [box.project(q) for q in p], atol=1e-15)
 
 
 def hold(K=5, pose=(0.01, -0.02, 0.3)):

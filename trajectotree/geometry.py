@@ -109,3 +109,39 @@ def box_to_world(pose, p_B) -> np.ndarray:
 def world_to_box(pose, p_W) -> np.ndarray:
     """p_B of a point p_W given the object pose (x, y, theta)."""
     return rotation_2d(pose[2]).T @ (np.asarray(p_W, dtype=float) - np.asarray(pose[:2], dtype=float))
+
+
+# ---- vectorized, for whole trajectories (physics check, execution schedule) ----------------
+
+def rotations_2d(theta: np.ndarray) -> np.ndarray:
+    """R_WB (K, 2, 2) for rotations by theta (K,) about z."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+def poses_world_to_box(x: np.ndarray, p_W: np.ndarray) -> np.ndarray:
+    """p_B (K, P, 2) of world points p_W (K, P, 2) at object poses x (K, 3)."""
+    return np.einsum("kba,kpb->kpa", rotations_2d(x[:, 2]), p_W - x[:, None, :2])
+
+
+def poses_box_to_world(x: np.ndarray, p_B: np.ndarray) -> np.ndarray:
+    """p_W (K, P, 2) of box points p_B (K, P, 2) at object poses x (K, 3)."""
+    return x[:, None, :2] + np.einsum("kab,kpb->kpa", rotations_2d(x[:, 2]), p_B)
+
+
+def box_signed_distance(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
+    """Exact signed distance (...,) of points p_B (..., 2) to the box (negative inside)."""
+    q = np.abs(p_B) - np.array([width / 2, height / 2])
+    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
+
+
+def nearest_box_points(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
+    """The box-boundary point (..., 2) nearest to each p_B (..., 2), in B."""
+    half = np.array([width / 2, height / 2])
+    clipped = np.clip(p_B, -half, half)
+    inside = np.all(np.abs(p_B) < half, axis=-1)
+    # Inside: out through the nearest face, along the axis with the smallest gap to its face.
+    axis = np.argmin(half - np.abs(p_B), axis=-1)
+    sign = np.where(p_B >= 0, 1.0, -1.0)
+    pushed = np.where(np.arange(2) == axis[..., None], sign * half, p_B)
+    return np.where(inside[..., None], pushed, clipped)

@@ -21,6 +21,8 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
+from trajectotree.geometry import box_signed_distance, nearest_box_points, poses_box_to_world, poses_world_to_box
+
 # m, a fingertip sphere farther than this from the box is off it (issue 13's rule).
 GAP_TOL = 1e-4
 # N, the most force a fingertip off the box may carry (issue 13's rule).
@@ -79,46 +81,14 @@ class PhysicsCheck:
         return PhysicsCheck(**{f.name: nan if data[f.name] is None else data[f.name] for f in fields(PhysicsCheck)})
 
 
-def _rot(theta: np.ndarray) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)   # (K, 2, 2) R_WB
-
-
-def to_box(x: np.ndarray, p_W: np.ndarray) -> np.ndarray:
-    """p_B (K, P, 2) of world points p_W (K, P, 2) at object poses x (K, 3)."""
-    return np.einsum("kba,kpb->kpa", _rot(x[:, 2]), p_W - x[:, None, :2])
-
-
-def to_world(x: np.ndarray, p_B: np.ndarray) -> np.ndarray:
-    return x[:, None, :2] + np.einsum("kab,kpb->kpa", _rot(x[:, 2]), p_B)
-
-
-def signed_distance(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
-    """Exact signed distance (..., ) of points p_B (..., 2) to the box (negative inside)."""
-    q = np.abs(p_B) - np.array([width / 2, height / 2])
-    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
-
-
-def closest_boundary_points(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
-    """The box-boundary point (..., 2) nearest to each p_B (..., 2), in B."""
-    half = np.array([width / 2, height / 2])
-    clipped = np.clip(p_B, -half, half)
-    inside = np.all(np.abs(p_B) < half, axis=-1)
-    # Inside: out through the nearest face, along the axis with the smallest gap to its face.
-    axis = np.argmin(half - np.abs(p_B), axis=-1)
-    sign = np.where(p_B >= 0, 1.0, -1.0)
-    pushed = np.where(np.arange(2) == axis[..., None], sign * half, p_B)
-    return np.where(inside[..., None], pushed, clipped)
-
-
 def contact_points(x, p_W_tip, pinned, p_BC_planned, width: float, height: float) -> np.ndarray:
     """p_W_C (K, 4, 2), where each finger's force acts on the box: the planned contact
     point p_BC_planned (K, 4, 2, in B) where pinned (K, 4), else the box-boundary point
     closest to the fingertip centre."""
     x = np.asarray(x, dtype=float)
-    nearest = closest_boundary_points(to_box(x, np.asarray(p_W_tip, dtype=float)), width, height)
+    nearest = nearest_box_points(poses_world_to_box(x, np.asarray(p_W_tip, dtype=float)), width, height)
     p_BC = np.where(np.asarray(pinned, dtype=bool)[..., None], p_BC_planned, nearest)
-    return to_world(x, p_BC)
+    return poses_box_to_world(x, p_BC)
 
 
 def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
@@ -137,12 +107,12 @@ def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
     ne_force, ne_moment = float(np.abs(residual[:, :2]).max()), float(np.abs(residual[:, 2]).max())
     ln, lt = a["lambda_n"], a["lambda_t"]
     cone = float(np.maximum(np.abs(lt) - mu * ln, -ln).max())
-    gap = signed_distance(to_box(x, a["p_W_tip"]), box.width, box.height) - box.tip_radius   # (K, 4)
+    gap = box_signed_distance(poses_world_to_box(x, a["p_W_tip"]), box.width, box.height) - box.tip_radius   # (K, 4)
     force = np.linalg.norm(f, axis=-1)
     away = np.where(gap > GAP_TOL, force, 0.0)
     k, i = np.unravel_index(int(np.argmax(away)), away.shape)
     worst = float(away[k, i])
-    off_surface = float(np.abs(signed_distance(to_box(x, a["p_W_C"]), box.width, box.height)).max())
+    off_surface = float(np.abs(box_signed_distance(poses_world_to_box(x, a["p_W_C"]), box.width, box.height)).max())
     reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
     if worst > FORCE_TOL:
         reasons.append(f"finger {i} pushes the box with {worst:.3g} N from {1e3 * gap[k, i]:.2f} mm away at knot {k} "

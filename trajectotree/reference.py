@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.solvers import MathematicalProgram, Solve
 
-from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
+from trajectotree.geometry import (BoxBoundary, box_signed_distance, box_to_world, nearest_box_points,
+                                   poses_world_to_box, rotation_2d, rotations_2d)
 from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene
 
 PLAN_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
@@ -199,26 +200,6 @@ class GraspSchedule:
         return min(int(round(t / self.period)), len(self.X) - 1)
 
 
-def box_signed_distance(p_B, width: float, height: float) -> np.ndarray:
-    """Signed distance (...,) of points p_B (..., 2) to the box (negative inside)."""
-    q = np.abs(p_B) - np.array([width / 2, height / 2])
-    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
-
-
-def nearest_box_points(p_B, width: float, height: float) -> np.ndarray:
-    """The boundary points (..., 2) nearest to points p_B (..., 2) (inside: through the nearest face)."""
-    p = np.asarray(p_B, dtype=float)
-    half = np.array([width / 2, height / 2])
-    out = np.clip(p, -half, half)
-    inside = np.all(np.abs(p) < half, axis=-1)
-    slack = half - np.abs(p)                     # distance to the x faces, the y faces
-    axis = np.argmin(slack, axis=-1)
-    for a in (0, 1):
-        sel = inside & (axis == a)
-        out[sel, a] = np.where(p[sel, a] >= 0, half[a], -half[a])
-    return out
-
-
 def face_normals(p_BC, width: float, height: float) -> np.ndarray:
     """Outward unit normals (..., 2) of the faces nearest to boundary points p_BC (..., 2)."""
     p = np.asarray(p_BC, dtype=float)
@@ -289,15 +270,13 @@ def grasp_schedule(reference: Reference, *, width: float, height: float, tip_rad
     times = np.arange(int(np.floor(duration / period + 1e-9)) + 1) * period
     xdot = reference.xdot if reference.xdot is not None else np.gradient(x, t, axis=0)
     X, V, A = hermite(t, x, xdot, times)
-    R_BW = np.transpose(np.array([rotation_2d(th) for th in x[:, 2]]), (0, 2, 1))        # (K, 2, 2)
-    to_B = lambda p_W: np.einsum("kij,kfj->kfi", R_BW, p_W - x[:, None, :2])
-    p_BF_knots = to_B(reference.p_WF)
+    p_BF_knots = poses_world_to_box(x, reference.p_WF)
     gap_knots = box_signed_distance(p_BF_knots, width, height) - tip_radius                # (K, 4)
     if reference.p_WC is not None:
-        p_BC_knots = to_B(reference.p_WC)
+        p_BC_knots = poses_world_to_box(x, reference.p_WC)
     else:   # the nearest box point: the fingertip centre minus its radius along the outward direction
         p_BC_knots = nearest_box_points(p_BF_knots, width, height)
-    f_B_knots = np.einsum("kij,kfj->kfi", R_BW, reference.f_W)
+    f_B_knots = np.einsum("kba,kpb->kpa", rotations_2d(x[:, 2]), reference.f_W)              # R_BW f_W
     at = lambda values: reference._at(values, times)
     p_BF, p_BC, f_B, gap = at(p_BF_knots), at(p_BC_knots), at(f_B_knots), at(gap_knots)
     n_B = face_normals(p_BC, width, height)
