@@ -242,10 +242,11 @@ class ControllerGains:
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
 
 
-def check_controller(name: str) -> str:
-    if name not in CONTROLLERS:
-        raise ConfigError(f"controller {name!r} is not one of {', '.join(CONTROLLERS)}")
-    return name
+def check_controller(value: str, name: str = "controller") -> str:
+    """`value` if it names an executor; ConfigError naming `name` (the field or option) otherwise."""
+    if value not in CONTROLLERS:
+        raise ConfigError(f"{name} {value!r} is not a controller; valid: {', '.join(CONTROLLERS)}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -264,8 +265,7 @@ class SimConfig:
         check_range("sim.settle_time", self.settle_time, 0.0, 10.0)
         check_range("sim.drop_distance", self.drop_distance, 0.0, 1.0, low_open=True)
         check_range("sim.log_period", self.log_period, self.time_step, 1.0)
-        if self.controller not in CONTROLLERS:
-            raise ConfigError(f"sim.controller = {self.controller!r} is not a controller; valid: {', '.join(CONTROLLERS)}")
+        check_controller(self.controller, "sim.controller")
         check_range("sim.push_duration", self.push_duration, 0.0, 10.0, low_open=True)
 
 

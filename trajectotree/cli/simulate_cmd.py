@@ -15,7 +15,7 @@ import numpy as np
 
 from trajectotree.cli import InputError
 from trajectotree.cli.common import FIGURE_SUFFIXES, HTML_SUFFIXES, check_output_file, print_json
-from trajectotree.config import CONTROLLERS, Config, config_from_dict, load_config
+from trajectotree.config import Config, check_controller, config_from_dict, load_config
 
 
 def register(subparsers) -> None:
@@ -99,8 +99,8 @@ def execution_config(args, plan_config: Config) -> Config:
             gains[name] = getattr(args, name)
     if args.rate is not None:
         gains["rate_hz"] = args.rate
-    if args.controller is not None and args.controller not in CONTROLLERS:
-        raise InputError(f"--controller {args.controller!r} is not a controller; valid: {', '.join(CONTROLLERS)}")
+    if args.controller is not None:
+        check_controller(args.controller, "--controller")
     sim = {} if args.controller is None else {"controller": args.controller}
     config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
                                  controller=dataclasses.replace(config.controller, **gains),
