@@ -6,9 +6,12 @@ controller and the paper's eq. 20); TrajectoTree's plans also under model mismat
 (trajectotree.executions); then the figures (PNG + PDF) and the tables (Markdown + CSV).
 The same as
 
-    trajectotree sweep --goals 60 --seed 0 --simulate --controllers grasp paper --out SWEEP_DIR
+    trajectotree sweep --goals 60 --seed 0 --controllers grasp paper --out SWEEP_DIR
     (the TrajectoTree plans under grasp x mismatch, push: trajectotree.executions.run_executions)
     trajectotree report SWEEP_DIR --out REPORT_DIR
+
+The plans are made first (the sweep), the executions after them (a post-pass over the saved
+plans), so the planning sweep does not depend on the controller's settings.
 
 Resumable: rerun the same command after an interruption and finished trials are kept.
 Trials run on local processes (--workers) or on a Dask cluster (--scheduler).
@@ -40,7 +43,7 @@ def main() -> int:
     parser.add_argument("--time-limit", type=float, default=1800.0, metavar="S", help="per-trial limit, s")
     args = parser.parse_args()
     try:
-        spec = SweepSpec(goals=args.goals, seed=args.seed, methods=METHODS, simulate=True, config=Config(),
+        spec = SweepSpec(goals=args.goals, seed=args.seed, methods=METHODS, simulate=False, config=Config(),
                          time_limit_s=args.time_limit)
         start = time.perf_counter()
         summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler)

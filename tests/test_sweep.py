@@ -67,6 +67,20 @@ def test_rerun_with_different_arguments_is_an_error(tmp_path, capsys):
         run_sweep(small_spec(), tmp_path, progress=False)  # a directory that is not a sweep
 
 
+def test_controller_settings_are_part_of_a_simulating_sweep_only(tmp_path):
+    """A planning-only sweep's trials never read the controller or sim sections, so changing
+    their defaults must not block resuming it; a sweep that simulates depends on them."""
+    def with_gain(spec, kp):
+        return dataclasses.replace(spec, config=dataclasses.replace(
+            spec.config, controller=dataclasses.replace(spec.config.controller, kp=kp)))
+    planning, simulating = tmp_path / "plan", tmp_path / "sim"
+    prepare_dir(planning, small_spec())
+    prepare_dir(simulating, small_spec(simulate=True))
+    assert prepare_dir(planning, with_gain(small_spec(), 123.0)) == []
+    with pytest.raises(ConfigError, match="config.controller.kp: 400.0 there, 123.0 now"):
+        prepare_dir(simulating, with_gain(small_spec(simulate=True), 123.0))
+
+
 def test_killed_sweep_reruns_only_unfinished_trials(resumed_sweep):
     out, before = resumed_sweep.out, resumed_sweep.before
     assert resumed_sweep.rerun.returncode == 0, resumed_sweep.rerun.stderr

@@ -48,9 +48,22 @@ def _flatten(data: dict, prefix: str = "") -> dict:
     return flat
 
 
+# Config sections that only executions read: a planning-only sweep's trials do not depend on
+# them (its executions are run later, with the controller settings given then).
+EXECUTION_SECTIONS = ("controller", "sim")
+
+
+def _identity(manifest: dict) -> dict:
+    """The manifest's fields that decide its trials, flattened ('config.cito.dt': 0.1)."""
+    identity = {k: v for k, v in manifest.items() if k not in RUN_SETTINGS}
+    if not manifest.get("simulate"):
+        identity["config"] = {k: v for k, v in manifest.get("config", {}).items() if k not in EXECUTION_SECTIONS}
+    return _flatten(identity)
+
+
 def _manifest_differences(old: dict, new: dict) -> list[str]:
     """'name: old there, new now' for each differing argument or config field."""
-    old, new = (_flatten({k: v for k, v in d.items() if k not in RUN_SETTINGS}) for d in (old, new))
+    old, new = _identity(old), _identity(new)
     return [f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
             for key in sorted(set(old) | set(new)) if old.get(key) != new.get(key)]
 
