@@ -30,7 +30,7 @@ from trajectotree.config import SceneConfig
 NUM_FINGERS = 4
 JOINTS_PER_FINGER = 2
 NUM_HAND_JOINTS = NUM_FINGERS * JOINTS_PER_FINGER
-MODELS_DIR = resources.files("trajectotree") / "models"
+MODELS_DIR = resources.files("trajectotree.models")  # models/, installed as trajectotree/models (pyproject.toml)
 
 
 def _sub(text: str, pattern: str, value: str) -> str:
