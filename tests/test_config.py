@@ -1,12 +1,14 @@
 """Config validation, YAML round trip, and CLI exit codes for bad input."""
 
+import json
 import math
 import subprocess
 import sys
 
 import pytest
 
-from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig, load_config, save_config
+from trajectotree.config import (CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, config_from_dict,
+                                 config_to_dict, load_config, save_config)
 
 
 @pytest.mark.parametrize("field, value, message", [
@@ -49,6 +51,47 @@ def test_bad_yaml_is_a_named_error(tmp_path, text, message):
     path.write_text(text)
     with pytest.raises(ConfigError, match=message):
         load_config(path)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("search:\n  num_nodes: 3.5\n", "'num_nodes'"),           # an int field
+    ("sim:\n  controller: 3\n", "'controller'"),              # a str field
+    ("scene:\n  box_mass: [1]\n", "'box_mass'"),              # a sequence for a number
+    ("scene: 3\n", "section scene must be a mapping, got 3"),
+])
+def test_yaml_values_must_have_the_fields_type(tmp_path, text, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def test_yaml_sequences_optionals_and_numbers_load_as_the_fields_types(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("search:\n  initial_arclengths: [0.54, 0.12, 0.36, 0.48]\n  max_iter_unused: 1\n")
+    with pytest.raises(ConfigError, match="max_iter_unused"):
+        load_config(path)
+    path.write_text("search:\n  initial_arclengths: [0.54, 0.12, 0.36, 0.48]\ncito:\n  weight_pose: [1, 2, 3]\n"
+                    "  max_iter: 40.0\nscene:\n")
+    config = load_config(path)
+    assert config.search.initial_arclengths == (0.54, 0.12, 0.36, 0.48)
+    assert config.cito.weight_pose == (1.0, 2.0, 3.0) and all(type(w) is float for w in config.cito.weight_pose)
+    assert type(config.cito.max_iter) is int and config.cito.max_iter == 40
+    assert config.scene == SceneConfig()   # an empty section keeps its defaults
+    save_config(config, path)
+    assert load_config(path) == config
+    path.write_text("search:\n  initial_arclengths: null\n")
+    assert load_config(path).search.initial_arclengths is None
+
+
+def test_plan_json_config_round_trip_and_unknown_keys():
+    config = Config(search=SearchConfig(initial_arclengths=(0.06, 0.18, 0.32, 0.5)), cito=CitoConfig(max_iter=7))
+    data = json.loads(json.dumps(config_to_dict(config)))   # as stored in plan.json
+    assert config_from_dict(data) == config
+    assert config_to_dict(config_from_dict(data)) == data
+    data["cito"]["weight_typo"] = 1.0
+    with pytest.raises(ConfigError, match="weight_typo"):
+        config_from_dict(data)
 
 
 def run_cli(*args):

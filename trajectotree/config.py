@@ -3,17 +3,23 @@
 Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each
 dataclass validates itself on construction and raises `ConfigError` naming the
 field, its value and the valid range. `load_config` / `save_config` read and
-write the whole `Config` as YAML with Drake's typed YAML loader.
+write the whole `Config` as YAML with Drake's typed YAML functions (yaml_load_typed,
+yaml_dump_typed), which check each value's type; `config_from_dict` reads the same
+sections from plan.json and sweep manifests.
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 import math
+import types
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
+import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions raise
+from pydrake.common.yaml import yaml_dump, yaml_dump_typed, yaml_load_data, yaml_load_typed
 
 
 class ConfigError(ValueError):
@@ -280,46 +286,87 @@ class Config:
     sim: SimConfig = field(default_factory=SimConfig)
 
 
-def _from_dict(cls, data, where: str):
-    """Builds dataclass `cls` from a plain dict, rejecting unknown keys by name."""
+# Drake's typed YAML loader (yaml_load_typed, as in Drake's hardware_sim Scenario) checks each
+# value's type against the field's, rejects unknown keys and keeps the defaults of missing ones.
+# It fills a default-constructed dataclass field by field (setattr) and reads sequences as lists
+# (it has no tuples), so it cannot fill these frozen dataclasses themselves: it fills a mutable
+# twin of each (same fields and defaults, tuple[...] as list[...]), which `_freeze` turns into the
+# config class, whose __post_init__ then checks the ranges.
+
+def _yaml_type(kind):
+    """The type Drake's loader reads for a config field of type `kind`."""
+    if dc.is_dataclass(kind):
+        return _yaml_schema(kind)
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin is tuple:
+        return list[args[0]]
+    if origin in (typing.Union, types.UnionType):  # X | None, the only union in the config
+        return _yaml_type(args[0]) | None
+    return kind
+
+
+@functools.cache
+def _yaml_schema(cls):
+    """The mutable twin of config dataclass `cls` that Drake's typed loader fills."""
+    hints, defaults = typing.get_type_hints(cls), cls()
+    return dc.make_dataclass(cls.__name__, [
+        (f.name, _yaml_type(hints[f.name]), field(default_factory=functools.partial(_thaw, getattr(defaults, f.name))))
+        for f in dc.fields(cls)])
+
+
+def _thaw(value):
+    """`value` as Drake's loader and dumper take it: config dataclasses as their twins, tuples as lists."""
+    if dc.is_dataclass(value):
+        return _yaml_schema(type(value))(**{f.name: _thaw(getattr(value, f.name)) for f in dc.fields(value)})
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _freeze(cls, loaded):
+    """Config dataclass `cls` from its filled twin `loaded` (its __post_init__ checks the values)."""
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for f in dc.fields(cls):
+        value = getattr(loaded, f.name)
+        kwargs[f.name] = (_freeze(hints[f.name], value) if dc.is_dataclass(value)
+                          else tuple(value) if isinstance(value, list) else value)
+    return cls(**kwargs)
+
+
+def _load_section(cls, data, where: str):
+    """Section dataclass `cls` from its mapping `data` (None: the defaults), typed by Drake's loader."""
     if data is None:
         return cls()
     if not isinstance(data, dict):
-        raise ConfigError(f"{where or 'config'} must be a mapping, got {data!r}")
-    fields = {f.name: f for f in dc.fields(cls)}
-    unknown = sorted(set(data) - set(fields))
+        raise ConfigError(f"{where} must be a mapping, got {data!r}")
+    try:  # yaml_load_typed reads YAML text only, so the mapping goes back to text (floats exactly, as repr)
+        loaded = yaml_load_typed(schema=_yaml_schema(cls), data=yaml_dump(data))
+    except (RuntimeError, ValueError, TypeError) as e:  # Drake's messages name the key or the value
+        raise ConfigError(f"invalid {where}: {e}; valid keys: {[f.name for f in dc.fields(cls)]}") from None
+    return _freeze(cls, loaded)
+
+
+def _config_from_document(data, where: str) -> Config:
+    """A Config from its sections' mappings (each loaded alone, so an error names its section)."""
+    if data is None:
+        return Config()
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where} must be a mapping, got {data!r}")
+    sections = {f.name: f.default_factory for f in dc.fields(Config)}
+    unknown = sorted(set(data) - set(sections))
     if unknown:
-        raise ConfigError(f"unknown key(s) {unknown} in {where or 'config'}; valid keys: {sorted(fields)}")
-    kwargs = {}
-    for name, value in data.items():
-        sub = f"{where}.{name}" if where else name
-        f = fields[name]
-        if dc.is_dataclass(f.default_factory if f.default_factory is not dc.MISSING else None):
-            kwargs[name] = _from_dict(f.default_factory, value, sub)
-        elif isinstance(value, list):
-            kwargs[name] = tuple(value)
-        else:
-            kwargs[name] = value
-    try:
-        return cls(**kwargs)
-    except TypeError as e:  # e.g. a nested mapping where a number belongs
-        raise ConfigError(f"invalid value in {where or 'config'}: {e}") from None
+        raise ConfigError(f"unknown key(s) {unknown} in {where}; valid keys: {sorted(sections)}")
+    return Config(**{name: _load_section(sections[name], value, f"{where} section {name}")
+                     for name, value in data.items()})
 
 
 def config_from_dict(data: dict) -> Config:
-    """Builds a Config from nested dicts (as read from YAML or plan.json)."""
-    return _from_dict(Config, data, "")
+    """Builds a Config from nested dicts (as read from plan.json or a sweep manifest)."""
+    return _config_from_document(data, "config")
 
 
 def config_to_dict(config: Config) -> dict:
     """Plain nested dicts (tuples as lists), suitable for JSON and YAML."""
-    def plain(v):
-        if isinstance(v, dict):
-            return {k: plain(x) for k, x in v.items()}
-        if isinstance(v, (list, tuple)):
-            return [plain(x) for x in v]
-        return v
-    return plain(dc.asdict(config))
+    return dc.asdict(_thaw(config))
 
 
 def load_config(path: str | Path) -> Config:
@@ -330,11 +377,12 @@ def load_config(path: str | Path) -> Config:
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml_load_data(path.read_text())
     except yaml.YAMLError as e:
         raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
-    return config_from_dict(data or {})
+    return _config_from_document(data, f"config file {str(path)!r}")
 
 
 def save_config(config: Config, path: str | Path) -> None:
-    Path(path).write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False))
+    """Writes every field as YAML (Drake's yaml_dump_typed); `load_config` reads it back equal."""
+    yaml_dump_typed(_thaw(config), filename=str(path))
