@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions raise
-from pydrake.common.yaml import yaml_dump, yaml_dump_typed, yaml_load_data, yaml_load_typed
 
 
 class ConfigError(ValueError):
@@ -286,6 +285,13 @@ class Config:
     sim: SimConfig = field(default_factory=SimConfig)
 
 
+def _drake_yaml():
+    """pydrake.common.yaml, imported when first used, so that importing this module loads no Drake
+    (the sweep's parent process imports it through sweep.py and results.py and never needs Drake)."""
+    from pydrake.common import yaml as drake_yaml
+    return drake_yaml
+
+
 # Drake's typed YAML loader (yaml_load_typed, as in Drake's hardware_sim Scenario) checks each
 # value's type against the field's, rejects unknown keys and keeps the defaults of missing ones.
 # It fills a default-constructed dataclass field by field (setattr) and reads sequences as lists
@@ -339,7 +345,8 @@ def _load_section(cls, data, where: str):
     if not isinstance(data, dict):
         raise ConfigError(f"{where} must be a mapping, got {data!r}")
     try:  # yaml_load_typed reads YAML text only, so the mapping goes back to text (floats exactly, as repr)
-        loaded = yaml_load_typed(schema=_yaml_schema(cls), data=yaml_dump(data))
+        drake_yaml = _drake_yaml()
+        loaded = drake_yaml.yaml_load_typed(schema=_yaml_schema(cls), data=drake_yaml.yaml_dump(data))
     except (RuntimeError, ValueError, TypeError) as e:  # Drake's messages name the key or the value
         raise ConfigError(f"invalid {where}: {e}; valid keys: {[f.name for f in dc.fields(cls)]}") from None
     return _freeze(cls, loaded)
@@ -377,7 +384,7 @@ def load_config(path: str | Path) -> Config:
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
     try:
-        data = yaml_load_data(path.read_text())
+        data = _drake_yaml().yaml_load_data(path.read_text())
     except yaml.YAMLError as e:
         raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
     return _config_from_document(data, f"config file {str(path)!r}")
@@ -385,4 +392,4 @@ def load_config(path: str | Path) -> Config:
 
 def save_config(config: Config, path: str | Path) -> None:
     """Writes every field as YAML (Drake's yaml_dump_typed); `load_config` reads it back equal."""
-    yaml_dump_typed(_thaw(config), filename=str(path))
+    _drake_yaml().yaml_dump_typed(_thaw(config), filename=str(path))
