@@ -81,12 +81,26 @@ def test_free_fingers_and_the_cache():
 
 def test_lp_is_built_once_and_updated():
     lp = FormClosureLp(2, mu=0.7)
+    prog, shape = lp.prog, (lp.prog.num_vars(), len(lp.prog.GetAllConstraints()), len(lp.prog.GetAllCosts()))
     p, n = zip(*(BOX.point(s) for s in (RIGHT_MID, LEFT_MID)))
     good = grasp_matrix(np.array(p), np.array(n))
     p, n = zip(*(BOX.point(s) for s in (TOP_X05, BOTTOM_XM05)))
     bad = grasp_matrix(np.array(p), np.array(n))
-    margins = [lp.solve(G)[0] for G in (good, bad, good)]
+    margins = []
+    for G in (good, bad, good):
+        margins.append(lp.solve(G)[0])
+        # the same program, nothing added: only the equilibrium rows now hold this G
+        assert lp.prog is prog
+        assert (prog.num_vars(), len(prog.GetAllConstraints()), len(prog.GetAllCosts())) == shape
+        np.testing.assert_array_equal(lp.equilibrium.evaluator().GetDenseA(), G)
     assert margins[0] == pytest.approx(0.7, abs=1e-6) and margins[1] <= 1e-9 and margins[2] == pytest.approx(margins[0])
+    # FormClosure builds one LP per number of contacts, on first use, and reuses it afterwards
+    closure = FormClosure(BOX, mu=0.7, min_margin=1e-3)
+    closure.check([RIGHT_MID, LEFT_MID, 0.5])
+    built = dict(closure.lps)
+    for grasp in ([0.05, 0.36, 0.52], [0.14, 0.49, 0.2], [0.55, 0.15, 0.25, 0.45], [0.56, 0.16, 0.26, 0.46]):
+        closure.check(grasp)
+    assert closure.lp_calls == 5 and sorted(closure.lps) == [3, 4] and closure.lps[3] is built[3]
 
 
 def test_required_mu_of_two_contacts_is_the_angle_of_their_line():

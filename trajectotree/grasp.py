@@ -114,14 +114,16 @@ class ClosureResult:
 
 
 class FormClosureLp:
-    """The LP for k contacts, built once; `solve` only updates G (UpdateCoefficients)."""
+    """The LP for k contacts, built once; `solve` only updates G (UpdateCoefficients).
+
+    `prog` is its one MathematicalProgram and `equilibrium` the binding whose A is G."""
 
     def __init__(self, num_contacts: int, mu: float):
         self.num_contacts = k = num_contacts
         prog = MathematicalProgram()
         x = prog.NewContinuousVariables(2 * k + 1, "x")  # (lambda_n0, lambda_t0, ..., d)
         lam, d = x[:2 * k], x[2 * k]
-        self._equilibrium = prog.AddLinearEqualityConstraint(np.zeros((WRENCH_DIM, 2 * k)), np.zeros(WRENCH_DIM), lam)
+        self.equilibrium = prog.AddLinearEqualityConstraint(np.zeros((WRENCH_DIM, 2 * k)), np.zeros(WRENCH_DIM), lam)
         # One constraint block (cone facets, lambda_n >= d, normalization): Clp sets up faster.
         A = np.zeros((3 * k + 1, 2 * k + 1))
         for i in range(k):
@@ -131,13 +133,13 @@ class FormClosureLp:
         A[3 * k, 0:2 * k:2] = 1.0
         prog.AddLinearConstraint(A, np.r_[np.zeros(3 * k), -np.inf], np.r_[np.full(3 * k, np.inf), k], x)
         prog.AddLinearCost(-d)
-        self._prog, self._lam, self._d = prog, lam, d
+        self.prog, self._lam, self._d = prog, lam, d
         self._solver, self._options = ClpSolver(), SolverOptions()
 
     def solve(self, G: np.ndarray) -> tuple[float, np.ndarray]:
         """(d*, lambda (k, 2)) for the grasp matrix G; d* = -inf if Clp reports failure."""
-        self._equilibrium.evaluator().UpdateCoefficients(G, np.zeros(WRENCH_DIM))
-        result = self._solver.Solve(self._prog, None, self._options)
+        self.equilibrium.evaluator().UpdateCoefficients(G, np.zeros(WRENCH_DIM))
+        result = self._solver.Solve(self.prog, None, self._options)
         if not result.is_success():
             return -np.inf, np.zeros((self.num_contacts, 2))
         return float(result.GetSolution(self._d)), result.GetSolution(self._lam).reshape(-1, 2)
@@ -148,7 +150,7 @@ class FormClosure:
 
     def __init__(self, boundary: BoxBoundary, mu: float, min_margin: float):
         self.boundary, self.mu, self.min_margin = boundary, mu, min_margin
-        self._lps: dict[int, FormClosureLp] = {}
+        self.lps: dict[int, FormClosureLp] = {}  # one LP per number of contacts, built on first use
         self._cache: dict[tuple[float, ...], ClosureResult] = {}
         self._required_mu: dict[tuple[float, ...], float] = {}
         self.lp_calls = 0  # LP solves so far (cache hits excluded)
@@ -193,10 +195,10 @@ class FormClosure:
         n_B = np.array([n for _, n in points])
         G = grasp_matrix(p_BC, n_B)
         k = len(arclengths)
-        if k not in self._lps:
-            self._lps[k] = FormClosureLp(k, self.mu)
+        if k not in self.lps:
+            self.lps[k] = FormClosureLp(k, self.mu)
         self.lp_calls += 1
-        margin, forces = self._lps[k].solve(G)
+        margin, forces = self.lps[k].solve(G)
         rank = int(np.linalg.matrix_rank(G, tol=1e-9))
         return ClosureResult(in_closure=rank == WRENCH_DIM and margin > self.min_margin,
                              margin=margin, rank=rank, forces=forces)
