@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from trajectotree.reach import Reachability, closed_form_ik
+from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, build_scene
 
 
@@ -23,7 +23,7 @@ def test_closed_form_ik_inverts_the_plant_kinematics(scene):
         q = np.concatenate([rng.uniform(f.q_lower, f.q_upper) for f in scene.fingers])
         p_WF = scene.fingertip_positions(q)
         for i, finger in enumerate(scene.fingers):
-            solutions = closed_form_ik(finger, p_WF[i])
+            solutions = finger.ik_solutions(p_WF[i])
             # joint 2 in [0.1, 2.6]: one elbow branch, so exactly one solution
             assert len(solutions) == 1
             np.testing.assert_allclose(solutions[0], q[2 * i:2 * i + 2], atol=1e-9)
@@ -55,7 +55,7 @@ def test_out_of_reach_contacts_fail_in_drake_ik_too(reach):
     # Finger 0 (bottom right) cannot reach the top-left corner region: the closed form finds
     # no solution, and Drake IK from several seeds agrees (the closed-form filter is exact).
     pose, s = (0.0, 0.0, 0.0), 0.28
-    assert closed_form_ik(reach.fingers[0], reach.tip_target(pose, s)) == []
+    assert reach.fingers[0].ik_solutions(reach.tip_target(pose, s)) == []
     assert not reach.solve(pose, 0, s).reachable
     for seed in ([0.0, 1.0], [-1.2, 2.0], [1.2, 0.5]):
         assert reach._drake_ik(0, reach.tip_target(pose, s), np.array(seed)) is None

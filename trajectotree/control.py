@@ -38,6 +38,7 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains, SceneConfig
 from trajectotree.geometry import rotation_2d
+from trajectotree.kinematics import TwoLinkFinger, jacobian_from_links
 from trajectotree.reference import GraspSchedule
 from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene, add_hand_and_box
 
@@ -96,32 +97,27 @@ class ImpedanceController(LeafSystem):
 
 
 class HandKinematics:
-    """Closed-form kinematics and gravity torques of the four two-link fingers at once
-    (the per-finger formulas of FingerGeometry, vectorized: the controller's hot path)."""
+    """Closed-form kinematics (kinematics.TwoLinkFinger) and gravity torques of the four
+    two-link fingers at once (the controller's hot path)."""
 
     def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
-        self.base = np.array([f.p_W_base for f in fingers])        # (4, 2) m
-        self.psi = np.array([f.psi for f in fingers])              # (4,) rad
-        self.l1 = np.array([f.l1 for f in fingers])                # (4,) m
-        self.l2 = np.array([f.l2 for f in fingers])
+        self.fingers = TwoLinkFinger.stack(fingers)
         m, c = np.array([f.masses for f in fingers]), np.array([f.coms for f in fingers])
         # dV/dq = [k1 cos a1 + k2 cos a12, k2 cos a12]
-        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * self.l1)
+        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * self.fingers.l1)
         self._k2 = gravity * m[:, 1] * c[:, 1]
 
     def __call__(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At joint angles q (8, finger-major): fingertip centres p_WF (4, 2), Jacobians
         J_WF (4, 2, 2) and the joint torques that hold the fingers up, g (4, 2)."""
         q = np.reshape(q, (-1, 2))
-        a1 = self.psi + q[:, 0]
-        a12 = a1 + q[:, 1]
-        c1, s1, c12, s12 = np.cos(a1), np.sin(a1), np.cos(a12), np.sin(a12)
-        p = self.base + np.column_stack([self.l1 * c1 + self.l2 * c12, self.l1 * s1 + self.l2 * s12])
-        J = np.empty((len(q), 2, 2))
-        J[:, 0, 0], J[:, 0, 1] = -self.l1 * s1 - self.l2 * s12, -self.l2 * s12
-        J[:, 1, 0], J[:, 1, 1] = self.l1 * c1 + self.l2 * c12, self.l2 * c12
+        r1, r2 = self.fingers.links(q)
+        # base + (r1 + r2): the controller's summation order since the start (the planners'
+        # tip_from_links adds r1 first), kept so that simulations stay bit-identical.
+        p = self.fingers.p_W_base + (r1 + r2)
+        c1, c12 = (np.cos(a) for a in self.fingers.angles(q))
         g = np.column_stack([self._k1 * c1 + self._k2 * c12, self._k2 * c12])
-        return p, J, g
+        return p, jacobian_from_links(r1, r2), g
 
 
 def perp(v) -> np.ndarray:

@@ -6,9 +6,10 @@ within the joint limits (Drake `InverseKinematics` on the scene's plant, SNOPT),
 neither link of the finger penetrates the box.
 
 Two stages keep the search cheap:
-- `closed_form` solves the 2-link IK analytically (both elbow branches, q1 wrapped into
-  its limits). A planar 2-link chain has no other solutions, so when none lies within the
-  limits the contact is unreachable and Drake IK would fail too: this is an exact filter.
+- `closed_form` solves the 2-link IK analytically (`kinematics.TwoLinkFinger.ik_solutions`,
+  both elbow branches, q1 wrapped into its limits). A planar 2-link chain has no other
+  solutions, so when none lies within the limits the contact is unreachable and Drake IK
+  would fail too: this is an exact filter.
 - `solve` runs Drake IK seeded with the closed-form answer and keeps its joint angles.
 
 Collision test (links vs box): an exact planar separating-axis test between the box and
@@ -28,6 +29,7 @@ from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.solvers import SnoptSolver
 
 from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
+from trajectotree.kinematics import first_solution
 from trajectotree.scene import NUM_FINGERS, FingerGeometry, Scene
 
 IK_TOLERANCE = 1e-6   # m, fingertip position tolerance of the IK constraint
@@ -39,26 +41,6 @@ class FingerReach:
     reachable: bool
     q: np.ndarray      # (2,) rad, the finger's joint angles (nan when unreachable)
     reason: str        # why not, "" when reachable
-
-
-def closed_form_ik(finger: FingerGeometry, p_WF) -> list[np.ndarray]:
-    """All joint solutions (2,) within the joint limits that put the fingertip centre at p_WF."""
-    dx, dy = float(p_WF[0]) - finger.p_W_base[0], float(p_WF[1]) - finger.p_W_base[1]
-    l1, l2 = finger.l1, finger.l2
-    c2 = (dx * dx + dy * dy - l1 * l1 - l2 * l2) / (2 * l1 * l2)
-    if abs(c2) > 1.0:
-        return []
-    (lo1, lo2), (hi1, hi2) = finger.q_lower, finger.q_upper
-    solutions = []
-    for q2 in sorted({math.acos(c2), -math.acos(c2)}, reverse=True):
-        if not lo2 <= q2 <= hi2:
-            continue
-        q1 = math.atan2(dy, dx) - finger.psi - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2))
-        q1 = math.remainder(q1, 2 * math.pi)
-        for wrap in (-2 * math.pi, 0.0, 2 * math.pi):  # limits may exceed pi
-            if lo1 <= q1 + wrap <= hi1:
-                solutions.append(np.array([q1 + wrap, q2]))
-    return solutions
 
 
 @dataclass(frozen=True)
@@ -120,9 +102,8 @@ class Reachability:
     def _joint_frames(self, finger: int, q):
         """(p_WJ, angle_WJ) of the joint-1 and joint-2 frames at joint angles q."""
         f = self.fingers[finger]
-        a1, a12 = f.psi + q[0], f.psi + q[0] + q[1]
-        elbow = f.p_W_base + f.l1 * np.array([math.cos(a1), math.sin(a1)])
-        return (f.p_W_base, a1), (elbow, a12)
+        a1, a12 = f.angles(q)
+        return (f.p_W_base, a1), (f.elbow(q), a12)
 
     def link_polygons(self, finger: int, q) -> list[np.ndarray]:
         """Corners (4, 2) in W of the finger's link collision boxes at joint angles q."""
@@ -182,29 +163,17 @@ class Reachability:
         p_BF = p_BC + self.tip_radius * n_B
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         p_WF = poses[:, :2] + np.stack([c * p_BF[:, 0] - s * p_BF[:, 1], s * p_BF[:, 0] + c * p_BF[:, 1]], axis=1)
-        d = p_WF - f.p_W_base
-        c2 = (np.sum(d * d, axis=1) - f.l1 ** 2 - f.l2 ** 2) / (2 * f.l1 * f.l2)
-        acos = np.arccos(np.clip(c2, -1.0, 1.0))
-        candidates = []  # same order as closed_form_ik: positive branch first, then the wraps
-        for q2 in (acos, -acos):
-            q1 = np.arctan2(d[:, 1], d[:, 0]) - f.psi - np.arctan2(f.l2 * np.sin(q2), f.l1 + f.l2 * np.cos(q2))
-            q1 = np.remainder(q1 + np.pi, 2 * np.pi) - np.pi
-            candidates += [np.stack([q1 + wrap, q2], axis=1) for wrap in (-2 * np.pi, 0.0, 2 * np.pi)]
-        candidates = np.stack(candidates)  # (6, k, 2)
-        valid = (np.abs(c2) <= 1.0)[None, :] & np.all((candidates >= f.q_lower) & (candidates <= f.q_upper), axis=2)
-        rows = np.broadcast_to(poses, (6, *poses.shape))[valid]
+        candidates, valid = f.ik_candidates(p_WF)      # (6, k, 2), (6, k): the order of ik_solutions
+        rows = np.broadcast_to(poses, (len(candidates), *poses.shape))[valid]
         valid[valid] = ~self._links_penetrate_many(rows, finger, candidates[valid])
-        out = np.full((len(d), 2), np.nan)
-        found = valid.any(axis=0)
-        out[found] = candidates[np.argmax(valid, axis=0)[found], np.flatnonzero(found)]
-        return out
+        return first_solution(candidates, valid)
 
     def _links_penetrate_many(self, poses: np.ndarray, finger: int, q: np.ndarray) -> np.ndarray:
         """Vectorized links_penetrate: object poses (k, 3), joint angles (k, 2)."""
         f = self.fingers[finger]
         a, b = self.boundary.width / 2, self.boundary.height / 2
-        a1, a12 = f.psi + q[:, 0], f.psi + q[:, 0] + q[:, 1]
-        elbow = f.p_W_base + f.l1 * np.stack([np.cos(a1), np.sin(a1)], axis=1)
+        a1, a12 = f.angles(q)
+        elbow = f.elbow(q)
         ct, st = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         hit = np.zeros(len(q), dtype=bool)
         for rect, origin, angle in zip(self._rectangles[finger], (f.p_W_base, elbow), (a1, a12)):
@@ -260,7 +229,7 @@ class Reachability:
         return self._closed_form_cache[key]
 
     def _closed_form(self, pose, finger: int, arclength: float) -> FingerReach:
-        solutions = closed_form_ik(self.fingers[finger], self.tip_target(pose, arclength))
+        solutions = self.fingers[finger].ik_solutions(self.tip_target(pose, arclength))
         if not solutions:
             return FingerReach(False, np.full(2, np.nan), "out of reach within joint limits")
         free = [q for q in solutions if not self.links_penetrate(pose, finger, q)]

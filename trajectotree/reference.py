@@ -17,7 +17,7 @@ from pydrake.solvers import MathematicalProgram, Solve
 
 from trajectotree.geometry import (BoxBoundary, box_signed_distance, box_to_world, nearest_box_points,
                                    poses_world_to_box, rotation_2d, rotations_2d)
-from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene
+from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, Scene
 
 PLAN_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
 
@@ -98,21 +98,6 @@ def reference_from_plan(plan, scene: Scene) -> Reference:
     return reference_from_arrays(arrays, scene)
 
 
-def finger_ik(finger: FingerGeometry, p_WF) -> np.ndarray | None:
-    """Closed-form 2-link IK with the second joint positive (the model's elbow
-    side); None when p_WF is out of reach or outside the joint limits."""
-    d = np.asarray(p_WF, dtype=float) - finger.p_W_base
-    c2 = (d @ d - finger.l1 ** 2 - finger.l2 ** 2) / (2 * finger.l1 * finger.l2)
-    if abs(c2) > 1.0:
-        return None
-    q2 = np.arccos(c2)
-    q1 = np.arctan2(d[1], d[0]) - finger.psi - np.arctan2(finger.l2 * np.sin(q2), finger.l1 + finger.l2 * np.cos(q2))
-    q = np.array([(q1 + np.pi) % (2 * np.pi) - np.pi, q2])
-    if np.any(q < finger.q_lower) or np.any(q > finger.q_upper):
-        return None
-    return q
-
-
 def static_grasp_forces(p_BC, n_B, pose, *, mass: float, gravity: float, mu: float,
                         min_normal_force: float, friction_margin: float = 0.8,
                         lifted: int | None = None) -> np.ndarray | None:
@@ -165,7 +150,7 @@ def static_hold_reference(scene: Scene, arclengths, *, min_normal_force: float, 
     p_WF = np.array([box_to_world(pose, p + (scene.tip_radius + g) * n) for p, n, g in zip(p_BC, n_B, gaps)])
     q = np.zeros(NUM_HAND_JOINTS)
     for i, finger in enumerate(scene.fingers):
-        q_i = finger_ik(finger, p_WF[i])
+        q_i = finger.ik_one(p_WF[i], elbow=1, blas_dot=True)   # the model's elbow side; d @ d as always here
         if q_i is None:
             return None
         q[2 * i:2 * i + 2] = q_i

@@ -26,6 +26,7 @@ from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import SceneConfig
+from trajectotree.kinematics import TwoLinkFinger
 
 NUM_FINGERS = 4
 JOINTS_PER_FINGER = 2
@@ -77,31 +78,14 @@ def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig):
 
 
 @dataclass(frozen=True)
-class FingerGeometry:
-    """One finger as the closed-form kinematics and dynamics see it, read from the plant."""
+class FingerGeometry(TwoLinkFinger):
+    """One finger as the closed-form kinematics (`TwoLinkFinger`: p_W_base, psi, l1, l2,
+    q_lower, q_upper) and dynamics see it, read from the plant."""
 
-    p_W_base: np.ndarray   # (2,) m, joint-1 axis position in W
-    psi: float             # rad, direction of link 1 in W when q1 = 0
-    l1: float              # m, joint 1 to joint 2
-    l2: float              # m, joint 2 to fingertip centre
-    q_lower: np.ndarray    # (2,) rad, joint lower limits
-    q_upper: np.ndarray    # (2,) rad, joint upper limits
     tau_max: np.ndarray    # (2,) N m, torque limits
     masses: np.ndarray     # (2,) kg, link masses
     coms: np.ndarray       # (2,) m, link centre of mass along the link's x axis
     inertias: np.ndarray   # (2,) kg m^2, link rotational inertia about z at its COM
-
-    def fingertip(self, q) -> np.ndarray:
-        """p_WF, the fingertip centre in W (closed-form 2-link kinematics)."""
-        a1, a12 = self.psi + q[0], self.psi + q[0] + q[1]
-        return self.p_W_base + self.l1 * np.array([np.cos(a1), np.sin(a1)]) + self.l2 * np.array([np.cos(a12), np.sin(a12)])
-
-    def jacobian(self, q) -> np.ndarray:
-        """J_WF (2x2), d p_WF / d q."""
-        a1, a12 = self.psi + q[0], self.psi + q[0] + q[1]
-        s1, c1, s12, c12 = np.sin(a1), np.cos(a1), np.sin(a12), np.cos(a12)
-        return np.array([[-self.l1 * s1 - self.l2 * s12, -self.l2 * s12],
-                         [self.l1 * c1 + self.l2 * c12, self.l2 * c12]])
 
 
 @dataclass

@@ -12,10 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trajectotree.kinematics import TwoLinkFinger
 from trajectotree.scene import NUM_FINGERS, Scene
-
-# K @ v rotates a planar vector by +90 degrees: K v = z x v.
-K90 = np.array([[0.0, -1.0], [1.0, 0.0]])
 
 
 def _per_finger(q: np.ndarray) -> np.ndarray:
@@ -25,19 +23,15 @@ def _per_finger(q: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class HandModel:
-    """Per-finger parameters as arrays with a leading finger axis (4, ...)."""
+    """Per-finger parameters as arrays with a leading finger axis (4, ...); the
+    kinematics are the four fingers' `TwoLinkFinger` stack."""
 
-    base: np.ndarray      # (4, 2) m, p_W of joint 1
-    psi: np.ndarray       # (4,) rad, link-1 direction at q1 = 0
-    l1: np.ndarray        # (4,) m
-    l2: np.ndarray        # (4,) m
+    fingers: TwoLinkFinger  # (4, ...) p_W_base, psi, l1, l2, joint limits
     mass_a: np.ndarray    # (4,) kg m^2, M11 = a + 2 b cos q2
     mass_b: np.ndarray    # (4,) kg m^2, M12 = c + b cos q2
     mass_c: np.ndarray    # (4,) kg m^2, M22 = c
     grav_1: np.ndarray    # (4,) N m, g (m1 c1 + m2 l1): gravity moment of link 1 terms
     grav_2: np.ndarray    # (4,) N m, g m2 c2
-    q_lower: np.ndarray   # (8,) rad
-    q_upper: np.ndarray   # (8,) rad
     tau_max: np.ndarray   # (8,) N m
 
     @staticmethod
@@ -49,37 +43,36 @@ class HandModel:
         l1, l2 = np.array([fi.l1 for fi in f]), np.array([fi.l2 for fi in f])
         g = scene.config.gravity
         return HandModel(
-            base=np.array([fi.p_W_base for fi in f]), psi=np.array([fi.psi for fi in f]), l1=l1, l2=l2,
+            fingers=TwoLinkFinger.stack(f),
             mass_a=i1 + i2 + m1 * c1 ** 2 + m2 * (l1 ** 2 + c2 ** 2), mass_b=m2 * l1 * c2, mass_c=i2 + m2 * c2 ** 2,
             grav_1=g * (m1 * c1 + m2 * l1), grav_2=g * m2 * c2,
-            q_lower=np.concatenate([fi.q_lower for fi in f]), q_upper=np.concatenate([fi.q_upper for fi in f]),
             tau_max=np.concatenate([fi.tau_max for fi in f]))
+
+    @property
+    def q_lower(self) -> np.ndarray:
+        """(8,) rad, finger-major."""
+        return self.fingers.q_lower.ravel()
+
+    @property
+    def q_upper(self) -> np.ndarray:
+        """(8,) rad, finger-major."""
+        return self.fingers.q_upper.ravel()
 
     def angles(self, q: np.ndarray):
         """(a1, a12): absolute angles of link 1 and link 2, each (..., 4), from q (..., 8)."""
-        Q = _per_finger(q)
-        a1 = self.psi + Q[..., 0]
-        return a1, a1 + Q[..., 1]
+        return self.fingers.angles(_per_finger(q))
 
     def links(self, q: np.ndarray):
         """(r1, r2): link vectors l1 e(a1) and l2 e(a12), each (..., 4, 2)."""
-        a1, a12 = self.angles(q)
-        r1 = self.l1[:, None] * np.stack([np.cos(a1), np.sin(a1)], axis=-1)
-        r2 = self.l2[:, None] * np.stack([np.cos(a12), np.sin(a12)], axis=-1)
-        return r1, r2
+        return self.fingers.links(_per_finger(q))
 
     def fingertips(self, q: np.ndarray) -> np.ndarray:
         """p_WF (..., 4, 2), the fingertip sphere centres."""
-        r1, r2 = self.links(q)
-        return self.base + r1 + r2
-
-    @staticmethod
-    def jacobians_from_links(r1, r2) -> np.ndarray:
-        """J_WF (..., 4, 2, 2) = [K (r1 + r2), K r2]."""
-        return np.stack([(r1 + r2) @ K90.T, r2 @ K90.T], axis=-1)
+        return self.fingers.fingertip(_per_finger(q))
 
     def jacobians(self, q: np.ndarray) -> np.ndarray:
-        return self.jacobians_from_links(*self.links(q))
+        """J_WF (..., 4, 2, 2)."""
+        return self.fingers.jacobian(_per_finger(q))
 
     def mass_matrices(self, q: np.ndarray) -> np.ndarray:
         """M (..., 4, 2, 2), each finger's joint-space mass matrix."""
@@ -108,16 +101,7 @@ class HandModel:
                          np.stack([-self.mass_b * s2, np.zeros_like(s2)], -1)], -2)
 
     def ik(self, i: int, p_WF: np.ndarray) -> np.ndarray | None:
-        """Closed-form IK of finger i (elbow branch q2 > 0, the joint limits' side);
+        """Closed-form IK of finger i: the elbow branch q2 > 0 (the joint limits' side), the
+        limits widened by 1e-9 rad, |d|^2 as `d @ d` (as this guess has always computed it);
         None when the point is out of reach or the solution violates the limits."""
-        d = np.asarray(p_WF, dtype=float) - self.base[i]
-        l1, l2 = self.l1[i], self.l2[i]
-        c2 = (d @ d - l1 ** 2 - l2 ** 2) / (2 * l1 * l2)
-        if abs(c2) > 1.0:
-            return None
-        q2 = np.arccos(c2)
-        q1 = np.arctan2(d[1], d[0]) - self.psi[i] - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
-        q1 = (q1 + np.pi) % (2 * np.pi) - np.pi
-        q = np.array([q1, q2])
-        lo, hi = self.q_lower[2 * i:2 * i + 2], self.q_upper[2 * i:2 * i + 2]
-        return q if np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9) else None
+        return self.fingers.finger(i).ik_one(p_WF, elbow=1, tolerance=1e-9, blas_dot=True)

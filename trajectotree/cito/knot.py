@@ -8,7 +8,7 @@ contact frame is the planned one), or *free* (general CITO: the contact frame co
 from the smooth box distance at the fingertip, with non-penetration and the
 relaxed complementarity rows of eqs. 5-6).
 
-Rows of knot k (on its KNOT_SIZE variables, see variables.GROUPS):
+Rows of knot k (on its KNOT_SIZE variables, see variables.GROUPS; named in layout.py):
   object (3):  m p_dd - sum f_W - m g = 0;  I theta_dd - sum (p_WC - p_WB) x f_W = 0
   hand (8):    M(q) q_dd - tau - tau_g(q) + J_C^T f_W = 0, J_C the Jacobian of the
                contact point p_WC = p_WF - r n_W on link 2 (J_C^T f = J_F^T f - r lambda_t [1, 1])
@@ -24,21 +24,19 @@ tau is the physical torque); Coriolis terms are omitted as in the paper.
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
+from dataclasses import dataclass
 
 import numpy as np
 
 from trajectotree.cito.contact import face_offsets, smooth_distance, smooth_normal
-from trajectotree.cito.hand import K90, HandModel
+from trajectotree.cito.hand import HandModel
+from trajectotree.cito.knot_jacobian import knot_jacobian
+from trajectotree.cito.layout import (COL_P, COL_PD, COL_PDD, COL_TH, COL_THD, COL_THDD, FREE_COMP, FREE_PHI,
+                                      FREE_ROWS, FREE_SLIP, NUM_BODY_ROWS, PIN_MINUS, PIN_PLUS, PINNED_ROWS,
+                                      ROW_FORCE, ROW_HAND, ROW_MOMENT, TWO)
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
+from trajectotree.kinematics import K90, jacobian_from_links
 from trajectotree.scene import NUM_FINGERS
-
-_I2 = np.eye(2)
-_F = np.arange(NUM_FINGERS)
-_COL_Q, _COL_QD, _COL_QDD, _COL_TAU = (SLICES[n].start + 2 * _F[:, None] + np.arange(2) for n in ("q", "qd", "qdd", "tau"))
-_COL_LN, _COL_LT, _COL_G = (SLICES[n].start + _F for n in ("lambda_n", "lambda_t", "slack"))
-_ROW_HAND = 3 + 2 * _F[:, None] + np.arange(2)                        # (4, 2)
-NUM_BODY_ROWS, PINNED_ROWS, FREE_ROWS = 11, 4, 6
 
 
 class BodyParams:
@@ -61,6 +59,30 @@ class BodyParams:
 def _rot(th):
     c, s = np.cos(th), np.sin(th)
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)   # (K, 2, 2)
+
+
+@dataclass(frozen=True)
+class KnotKinematics:
+    """Per-finger quantities of a batch of K knots (shapes (K, 4, ...) unless noted)."""
+
+    R: np.ndarray        # (K, 2, 2) R_WB, the box's rotation
+    RT: np.ndarray       # (K, 2, 2) R_WB^T
+    r1: np.ndarray       # (K, 4, 2) m, link-1 vectors
+    r2: np.ndarray       # (K, 4, 2) m, link-2 vectors
+    J: np.ndarray        # (K, 4, 2, 2) m/rad, fingertip Jacobians J_WF
+    p_WF: np.ndarray     # (K, 4, 2) m, fingertip centres in W
+    rel: np.ndarray      # (K, 4, 2) m, p_WF - p_WB
+    p_BF: np.ndarray     # (K, 4, 2) m, fingertip centres in B
+    grad: np.ndarray     # (K, 4, 2) gradient of the smooth box distance at p_BF
+    dn_s: np.ndarray     # (K, 4, 2, 2) 1/m, d n_B / d p_BF of the smooth normal
+    n_W: np.ndarray      # (K, 4, 2) contact normal in W (the planned one for pinned fingers)
+    t_W: np.ndarray      # (K, 4, 2) contact tangent z x n_W
+    f_W: np.ndarray      # (K, 4, 2) N, force of the finger on the box in W
+    arm: np.ndarray      # (K, 4, 2) m, p_WC - p_WB
+    p_WC: np.ndarray     # (K, 4, 2) m, contact points p_WF - r n_W
+    phi_tip: np.ndarray  # (K, 4) m, smooth distance of the tip sphere from the box (phi - r)
+    e: np.ndarray        # (K, 4, 2) m, pinned-point error p_WF - p_WB - R c_B
+    v: np.ndarray        # (K, 4, 2) m/s, fingertip velocity relative to the box point under it
 
 
 class KnotRows:
@@ -87,23 +109,21 @@ class KnotRows:
         n = self.num_rows[k]
         lower = np.zeros(n)
         free = ~self.pinned[k]
-        lower[self.row_start[k, free]] = np.asarray(clearance, dtype=float)[free]
+        lower[self.row_start[k, free] + FREE_PHI] = np.asarray(clearance, dtype=float)[free]
         return lower, np.concatenate([np.zeros(NUM_BODY_ROWS), np.full(n - NUM_BODY_ROWS, np.inf)])
 
-    def kinematics(self, Z: np.ndarray) -> SimpleNamespace:
-        """The per-finger quantities of knots Z (K, KNOT_SIZE), each (K, 4, ...): fingertip
-        p_WF, contact point p_WC, normal/tangent/force in W, smooth distance of the tip
-        phi_tip, relative velocity v, pinned-point error e, and the internals evaluate needs."""
+    def kinematics(self, Z: np.ndarray) -> KnotKinematics:
+        """The per-finger quantities of knots Z (K, KNOT_SIZE)."""
         b, hand, r = self.body, self.body.hand, self.body.radius
         nK = Z.shape[0]
-        p, th, pd, thd = Z[:, 0:2], Z[:, 2], Z[:, 3:5], Z[:, 5]
+        p, th, pd, thd = Z[:, COL_P], Z[:, COL_TH], Z[:, COL_PD], Z[:, COL_THD]
         q, qd = Z[:, SLICES["q"]], Z[:, SLICES["qd"]].reshape(nK, NUM_FINGERS, 2)
         ln, lt = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]]
         R = _rot(th)
         RT = R.transpose(0, 2, 1)
         r1, r2 = hand.links(q)                                           # (K, 4, 2)
-        J = hand.jacobians_from_links(r1, r2)                            # (K, 4, 2, 2)
-        p_WF = hand.base + r1 + r2
+        J = jacobian_from_links(r1, r2)                                  # (K, 4, 2, 2)
+        p_WF = hand.fingers.tip_from_links(r1, r2)
         rel = p_WF - p[:, None]                                          # p_WF - p_WB
         p_BF = rel @ R                                                   # R^T rel
         phi, grad, hess = smooth_distance(p_BF.reshape(-1, 2), b.offsets, b.sharpness)
@@ -112,7 +132,7 @@ class KnotRows:
         n_W = n_B @ RT
         t_W = n_W @ K90.T
         f_W = -ln[..., None] * n_W + lt[..., None] * t_W
-        return SimpleNamespace(
+        return KnotKinematics(
             R=R, RT=RT, r1=r1, r2=r2, J=J, p_WF=p_WF, rel=rel, p_BF=p_BF, grad=grad.reshape(nK, NUM_FINGERS, 2),
             dn_s=dn_s.reshape(nK, NUM_FINGERS, 2, 2), n_W=n_W, t_W=t_W, f_W=f_W, arm=rel - r * n_W,
             p_WC=p_WF - r * n_W, phi_tip=phi.reshape(nK, NUM_FINGERS) - r, e=rel - self.c_B @ RT,
@@ -120,165 +140,62 @@ class KnotRows:
 
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
         """(values (K, R), Jacobians (K, R, KNOT_SIZE) or None), R = max rows; knot k
-        uses its first num_rows[k] rows."""
+        uses its first num_rows[k] rows. The Jacobian is analytic (knot_jacobian.py)."""
+        kin = self.kinematics(Z)
+        val = self._values(Z, kin)
+        return val, (knot_jacobian(self, Z, kin) if with_jacobian else None)
+
+    def _values(self, Z: np.ndarray, kin: KnotKinematics) -> np.ndarray:
         b, hand, r = self.body, self.body.hand, self.body.radius
         nK = Z.shape[0]
-        p, th, pd, thd = Z[:, 0:2], Z[:, 2], Z[:, 3:5], Z[:, 5]
-        xdd, q = Z[:, SLICES["xdd"]], Z[:, SLICES["q"]]
+        q = Z[:, SLICES["q"]]
         qdd, tau = (Z[:, SLICES[n]].reshape(nK, NUM_FINGERS, 2) for n in ("qdd", "tau"))
         ln, lt, gam = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]], Z[:, SLICES["slack"]]
-        kin = self.kinematics(Z)
-        R, RT, J, r1, r2, rel, p_BF = kin.R, kin.RT, kin.J, kin.r1, kin.r2, kin.rel, kin.p_BF
-        grad, n_W, t_W, f_W, arm, e, v, phi_tip = (kin.grad, kin.n_W, kin.t_W, kin.f_W, kin.arm, kin.e,
-                                                    kin.v, kin.phi_tip)
-        pin = self.pinned[..., None]
-        qd = Z[:, SLICES["qd"]].reshape(nK, NUM_FINGERS, 2)
-        M = hand.mass_matrices(q)
-
-        R_max = int(self.num_rows.max())
-        val = np.zeros((nK, R_max))
-        val[:, 0:2] = b.mass * xdd[:, :2] - f_W.sum(1) - b.mass * b.gravity
-        val[:, 2] = b.inertia * xdd[:, 2] - np.sum(arm[..., 0] * f_W[..., 1] - arm[..., 1] * f_W[..., 0], axis=1)
-        val[:, 3:11] = (np.einsum("kiab,kib->kia", M, qdd) - tau - hand.gravity_forces(q)
-                        + np.einsum("kiab,kia->kib", J, f_W) - r * lt[..., None]).reshape(nK, -1)
+        f_W, arm, e, v, phi_tip = kin.f_W, kin.arm, kin.e, kin.v, kin.phi_tip
+        val = np.zeros((nK, int(self.num_rows.max())))
+        val[:, ROW_FORCE] = b.mass * Z[:, COL_PDD] - f_W.sum(1) - b.mass * b.gravity
+        val[:, ROW_MOMENT] = b.inertia * Z[:, COL_THDD] - np.sum(arm[..., 0] * f_W[..., 1] - arm[..., 1] * f_W[..., 0], axis=1)
+        val[:, ROW_HAND] = (np.einsum("kiab,kib->kia", hand.mass_matrices(q), qdd) - tau - hand.gravity_forces(q)
+                            + np.einsum("kiab,kia->kib", kin.J, f_W) - r * lt[..., None]).reshape(nK, -1)
         kP, iP, kF, iF = self.kP, self.iP, self.kF, self.iF
         rp, rf = self.row_start[kP, iP], self.row_start[kF, iF]
-        two = np.arange(2)
-        val[kP[:, None], rp[:, None] + two] = gam[kP, iP, None] - e[kP, iP]
-        val[kP[:, None], rp[:, None] + 2 + two] = gam[kP, iP, None] + e[kP, iP]
+        val[kP[:, None], rp[:, None] + PIN_MINUS + TWO] = gam[kP, iP, None] - e[kP, iP]
+        val[kP[:, None], rp[:, None] + PIN_PLUS + TWO] = gam[kP, iP, None] + e[kP, iP]
         lnF = ln[kF, iF]
-        val[kF, rf] = phi_tip[kF, iF]
-        val[kF, rf + 1] = gam[kF, iF] - phi_tip[kF, iF] * lnF
+        val[kF, rf + FREE_PHI] = phi_tip[kF, iF]
+        val[kF, rf + FREE_COMP] = gam[kF, iF] - phi_tip[kF, iF] * lnF
         vl = v[kF, iF] * lnF[:, None]
-        val[kF[:, None], rf[:, None] + 2 + 2 * two] = gam[kF, iF, None] - vl
-        val[kF[:, None], rf[:, None] + 3 + 2 * two] = gam[kF, iF, None] + vl
-        if not with_jacobian:
-            return val, None
-
-        jac = np.zeros((nK, R_max, KNOT_SIZE))
-        kk = np.arange(nK)[:, None, None]
-        # Derivatives of p_BF = R^T (p_WF - p): wrt p (-R^T), theta (-K p_BF), q_i (R^T J_i).
-        dpB_dth = -(p_BF @ K90.T)
-        dpB_dq = RT[:, None] @ J
-        dn_s = np.where(pin[..., None], 0.0, kin.dn_s)
-        RdnB = R[:, None] @ dn_s                                         # R dn_B/dp_B
-        dnW_dp = -(RdnB @ RT[:, None])
-        dnW_dth = n_W @ K90.T + np.einsum("kiab,kib->kia", RdnB, dpB_dth)
-        dnW_dq = RdnB @ dpB_dq
-        A = -ln[..., None, None] * _I2 + lt[..., None, None] * K90       # f_W = A n_W
-        df_dp = A @ dnW_dp
-        df_dth = np.einsum("kiab,kib->kia", A, dnW_dth)
-        df_dq = A @ dnW_dq
-        darm_dp = -_I2 - r * dnW_dp
-        darm_dth = -r * dnW_dth
-        darm_dq = J - r * dnW_dq
-        # Object translation rows.
-        jac[:, 0:2, 0:2] = -df_dp.sum(1)
-        jac[:, 0:2, 2] = -df_dth.sum(1)
-        jac[:, 0:2, 6:8] = b.mass * _I2
-        jac[:, 0:2, SLICES["q"]] = -df_dq.transpose(0, 2, 1, 3).reshape(nK, 2, -1)
-        jac[:, 0:2, _COL_LN] = n_W.transpose(0, 2, 1)
-        jac[:, 0:2, _COL_LT] = -t_W.transpose(0, 2, 1)
-        # Object rotation row: d cross(arm, f) = -(K f).d arm + (K arm).d f.
-        Kf, Ka = f_W @ K90.T, arm @ K90.T
-        jac[:, 2, 0:2] = np.einsum("kia,kiab->kb", Kf, darm_dp) - np.einsum("kia,kiab->kb", Ka, df_dp)
-        jac[:, 2, 2] = np.sum(Kf * darm_dth, axis=(1, 2)) - np.sum(Ka * df_dth, axis=(1, 2))
-        jac[:, 2, 8] = b.inertia
-        jac[:, 2, SLICES["q"]] = (np.einsum("kia,kiab->kib", Kf, darm_dq)
-                                  - np.einsum("kia,kiab->kib", Ka, df_dq)).reshape(nK, -1)
-        jac[:, 2, _COL_LN] = np.sum(Ka * n_W, axis=2)
-        jac[:, 2, _COL_LT] = -np.sum(Ka * t_W, axis=2)
-        # Hand rows: d(J^T f)/dq = [[-(r1+r2).f, -r2.f], [-r2.f, -r2.f]] + J^T df/dq.
-        JT = J.swapaxes(-1, -2)
-        a12, a2 = np.sum((r1 + r2) * f_W, -1), np.sum(r2 * f_W, -1)
-        H_q = JT @ df_dq - hand.gravity_derivatives(q)
-        H_q[..., 0, 0] -= a12
-        H_q[..., 0, 1] -= a2
-        H_q[..., 1, :] -= a2[..., None]
-        H_q[..., :, 1] += np.einsum("kiab,kib->kia", hand.mass_derivatives(q), qdd)
-        rows_h, cols_q = _ROW_HAND[None, :, :, None], _COL_Q[None, :, None, :]
-        jac[kk[..., None], rows_h, cols_q] = H_q
-        jac[kk[..., None], rows_h, _COL_QDD[None, :, None, :]] = M
-        jac[kk[..., None], rows_h, _COL_TAU[None, :, None, :]] = -_I2
-        jac[:, 3:11, 0:2] = (JT @ df_dp).reshape(nK, 8, 2)
-        jac[:, 3:11, 2] = np.einsum("kiab,kib->kia", JT, df_dth).reshape(nK, -1)
-        jac[kk, _ROW_HAND[None], _COL_LN[None, :, None]] = -np.einsum("kiab,kib->kia", JT, n_W)
-        jac[kk, _ROW_HAND[None], _COL_LT[None, :, None]] = np.einsum("kiab,kib->kia", JT, t_W) - r
-        # Pinned rows: gamma -/+ e, e = p_WF - p - R c_B.
-        de_dth = -(self.c_B[kP, iP][:, None, :] @ RT[kP])[:, 0] @ K90.T
-        kP2, kP3 = kP[:, None], kP[:, None, None]
-        for sign, off in ((-1.0, 0), (1.0, 2)):
-            rows = rp[:, None] + off + two                                # (nP, 2)
-            jac[kP2, rows, _COL_G[iP, None]] = 1.0
-            jac[kP3, rows[:, :, None], _COL_Q[iP][:, None, :]] = sign * J[kP, iP]
-            jac[kP3, rows[:, :, None], two] = -sign * _I2
-            jac[kP2, rows, 2] = sign * de_dth
-        # Free rows.
-        gF = grad[kF, iF]
-        dphi_dp = -(gF[:, None, :] @ RT[kF])[:, 0]
-        dphi_dth = np.sum(gF * dpB_dth[kF, iF], 1)
-        dphi_dq = np.einsum("na,naj->nj", gF, dpB_dq[kF, iF])
-        kF2 = kF[:, None]
-        colqF = _COL_Q[iF]
-        jac[kF2, rf[:, None], two] = dphi_dp
-        jac[kF, rf, 2] = dphi_dth
-        jac[kF2, rf[:, None], colqF] = dphi_dq
-        r1c = rf + 1
-        jac[kF2, r1c[:, None], two] = -lnF[:, None] * dphi_dp
-        jac[kF, r1c, 2] = -lnF * dphi_dth
-        jac[kF2, r1c[:, None], colqF] = -lnF[:, None] * dphi_dq
-        jac[kF, r1c, _COL_LN[iF]] = -phi_tip[kF, iF]
-        jac[kF, r1c, _COL_G[iF]] = 1.0
-        qdF, r1F, r2F, JF = qd[kF, iF], r1[kF, iF], r2[kF, iF], J[kF, iF]
-        dv_dq = -np.stack([(r1F + r2F) * qdF[:, :1] + r2F * qdF[:, 1:], r2F * (qdF[:, :1] + qdF[:, 1:])], axis=2)
-        dv_dq -= thd[kF, None, None] * (K90 @ JF)                         # (nF, comp, joint)
-        dv_dthd = -(rel[kF, iF] @ K90.T)
-        thdK = thd[kF, None, None] * K90                                  # dv/dp
-        for a in range(2):
-            for sign, off in ((-1.0, 2 + 2 * a), (1.0, 3 + 2 * a)):
-                rows = rf + off
-                sl = sign * lnF
-                jac[kF, rows, _COL_G[iF]] = 1.0
-                jac[kF, rows, _COL_LN[iF]] = sign * v[kF, iF, a]
-                jac[kF2, rows[:, None], _COL_QD[iF]] = sl[:, None] * JF[:, a, :]
-                jac[kF, rows, 3 + a] = -sl
-                jac[kF, rows, 5] = sl * dv_dthd[:, a]
-                jac[kF2, rows[:, None], colqF] = sl[:, None] * dv_dq[:, a, :]
-                jac[kF2, rows[:, None], two] = sl[:, None] * thdK[:, a, :]
-        return val, jac
+        val[kF[:, None], rf[:, None] + FREE_SLIP + 2 * TWO] = gam[kF, iF, None] - vl
+        val[kF[:, None], rf[:, None] + FREE_SLIP + 1 + 2 * TWO] = gam[kF, iF, None] + vl
+        return val
 
     def values_one(self, z: np.ndarray) -> np.ndarray:
-        """The rows of a one-knot batch at z (KNOT_SIZE,), in plain Python scalars: the
-        same numbers as `evaluate`, several times faster for one knot (IPOPT asks for
-        the values at each trial point knot by knot)."""
+        """The rows of a one-knot batch at z (KNOT_SIZE,), several times faster than
+        `evaluate` for one knot (IPOPT asks for the values at each trial point knot by
+        knot). Scalar on purpose: numpy's exp, log, norm and matmul round differently
+        from math's in the last bit, and IPOPT has always seen these exact numbers
+        (values from `evaluate` instead change the s2cito plan: 118 IPOPT iterations, not
+        130). The finger kinematics, mass matrices and gravity torques are the shared
+        vectorized ones, which equal their scalar forms bit for bit."""
         b, hand, r = self.body, self.body.hand, self.body.radius
+        q = z[SLICES["q"]]
+        r1, r2 = hand.links(q)
+        p_WF, M, tau_g = hand.fingers.tip_from_links(r1, r2).tolist(), hand.mass_matrices(q).tolist(), hand.gravity_forces(q).tolist()
+        r1, r2 = r1.tolist(), r2.tolist()
         z = z.tolist()
-        px, py, th, pdx, pdy, thd = z[0:6]
+        (px, py), th, (pdx, pdy), thd = z[COL_P], z[COL_TH], z[COL_PD], z[COL_THD]
+        qd, qdd, tau = (z[SLICES[n]] for n in ("qd", "qdd", "tau"))
         c, s = math.cos(th), math.sin(th)
-        k = b.sharpness
-        wa, wb = b.offsets[0], b.offsets[1]
         fx_sum = fy_sum = torque = 0.0
         hand_rows, contact_rows = [], []
         for i in range(NUM_FINGERS):
-            q1, q2 = z[9 + 2 * i], z[10 + 2 * i]
-            a1 = hand.psi[i] + q1
-            a12 = a1 + q2
-            c1, s1, c12, s12 = math.cos(a1), math.sin(a1), math.cos(a12), math.sin(a12)
-            r1x, r1y, r2x, r2y = hand.l1[i] * c1, hand.l1[i] * s1, hand.l2[i] * c12, hand.l2[i] * s12
-            relx, rely = hand.base[i, 0] + r1x + r2x - px, hand.base[i, 1] + r1y + r2y - py
-            ln, lt, gam = z[41 + i], z[45 + i], z[49 + i]
+            (r1x, r1y), (r2x, r2y) = r1[i], r2[i]
+            relx, rely = p_WF[i][0] - px, p_WF[i][1] - py
+            ln, lt, gam = z[SLICES["lambda_n"]][i], z[SLICES["lambda_t"]][i], z[SLICES["slack"]][i]
             if self.pinned[0, i]:
                 nbx, nby = self.n_B[0, i]
             else:
-                bx, by = c * relx + s * rely, -s * relx + c * rely
-                d = (bx - wa, by - wb, -bx - wa, -by - wb)
-                dmax = max(d)
-                e = [math.exp(k * (dj - dmax)) for dj in d]
-                total = e[0] + e[1] + e[2] + e[3]
-                phi_tip = dmax + math.log(total) / k - r
-                gx, gy = (e[0] - e[2]) / total, (e[1] - e[3]) / total
-                norm = math.hypot(gx, gy)
-                nbx, nby = gx / norm, gy / norm
+                phi_tip, nbx, nby = self._smooth_contact(c * relx + s * rely, -s * relx + c * rely)
             nwx, nwy = c * nbx - s * nby, s * nbx + c * nby
             fx, fy = -ln * nwx - lt * nwy, -ln * nwy + lt * nwx
             fx_sum += fx
@@ -286,25 +203,35 @@ class KnotRows:
             torque += (relx - r * nwx) * fy - (rely - r * nwy) * fx
             u1 = -(r1y + r2y) * fx + (r1x + r2x) * fy
             u2 = -r2y * fx + r2x * fy
-            cq2 = math.cos(q2)
-            m11, m12, m22 = hand.mass_a[i] + 2 * hand.mass_b[i] * cq2, hand.mass_c[i] + hand.mass_b[i] * cq2, hand.mass_c[i]
-            t2 = -hand.grav_2[i] * c12
-            t1 = -hand.grav_1[i] * c1 + t2
-            qdd1, qdd2 = z[25 + 2 * i], z[26 + 2 * i]
-            hand_rows += [m11 * qdd1 + m12 * qdd2 - z[33 + 2 * i] - t1 + u1 - r * lt,
-                          m12 * qdd1 + m22 * qdd2 - z[34 + 2 * i] - t2 + u2 - r * lt]
+            (m11, m12), (_, m22) = M[i]
+            t1, t2 = tau_g[i]
+            qdd1, qdd2 = qdd[2 * i:2 * i + 2]
+            hand_rows += [m11 * qdd1 + m12 * qdd2 - tau[2 * i] - t1 + u1 - r * lt,
+                          m12 * qdd1 + m22 * qdd2 - tau[2 * i + 1] - t2 + u2 - r * lt]
             if self.pinned[0, i]:
                 cbx, cby = self.c_B[0, i]
                 ex, ey = relx - (c * cbx - s * cby), rely - (s * cbx + c * cby)
                 contact_rows += [gam - ex, gam - ey, gam + ex, gam + ey]
             else:
-                qd1, qd2 = z[17 + 2 * i], z[18 + 2 * i]
+                qd1, qd2 = qd[2 * i:2 * i + 2]
                 vx = -(r1y + r2y) * qd1 - r2y * qd2 - pdx + thd * rely
                 vy = (r1x + r2x) * qd1 + r2x * qd2 - pdy - thd * relx
                 contact_rows += [phi_tip, gam - phi_tip * ln, gam - vx * ln, gam + vx * ln, gam - vy * ln, gam + vy * ln]
         m = b.mass
-        return np.array([m * z[6] - fx_sum - m * b.gravity[0], m * z[7] - fy_sum - m * b.gravity[1],
-                         b.inertia * z[8] - torque] + hand_rows + contact_rows)
+        return np.array([m * z[COL_PDD][0] - fx_sum - m * b.gravity[0], m * z[COL_PDD][1] - fy_sum - m * b.gravity[1],
+                         b.inertia * z[COL_THDD] - torque] + hand_rows + contact_rows)
+
+    def _smooth_contact(self, bx: float, by: float) -> tuple[float, float, float]:
+        """(phi - r, n_B) of contact.smooth_distance at the tip centre (bx, by) in B, in math."""
+        b = self.body
+        k, (wa, wb) = b.sharpness, b.offsets[:2]
+        d = (bx - wa, by - wb, -bx - wa, -by - wb)
+        dmax = max(d)
+        e = [math.exp(k * (dj - dmax)) for dj in d]
+        total = e[0] + e[1] + e[2] + e[3]
+        gx, gy = (e[0] - e[2]) / total, (e[1] - e[3]) / total
+        norm = math.hypot(gx, gy)
+        return dmax + math.log(total) / k - b.radius, gx / norm, gy / norm
 
     def sparsity(self, k: int) -> list[tuple[int, int]]:
         """(row, col) entries of knot k's Jacobian that can be nonzero, from the

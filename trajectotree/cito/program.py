@@ -29,9 +29,9 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 from pydrake.solvers import MathematicalProgram
 
 from trajectotree.cito.knot import BodyParams, KnotRows
-from trajectotree.cito.variables import KNOT_SIZE, CitoVariables
+from trajectotree.cito.variables import KNOT_SIZE, CitoVariables, width
 from trajectotree.config import CitoConfig
-from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
+from trajectotree.scene import NUM_FINGERS
 
 
 @dataclass(frozen=True)
@@ -178,20 +178,20 @@ def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) ->
     (weight_contact_slack for pinned fingers' contact-point slacks, weight_slack for the
     complementarity slacks), plus the acceleration regularization (weight_acceleration)."""
     Q = np.diag(config.weight_pose)
-    eye8, eye11 = np.eye(NUM_HAND_JOINTS), np.eye(3 + NUM_HAND_JOINTS)
+    n_tau, n_force, n_acc = width("tau"), width("lambda_n", "lambda_t"), width("xdd", "qdd")
     for k in range(spec.num_knots):
         goals = np.asarray(spec.goal_poses[k], dtype=float).reshape(-1, 3)
         if len(goals):
             # sum_j (x - g_j)' Q (x - g_j) = x' (n Q) x - 2 (Q sum_j g_j)' x + sum_j g_j' Q g_j
             prog.AddQuadraticCost(2 * len(goals) * Q, -2 * Q @ goals.sum(0),
                                   float(np.einsum("ja,ab,jb->", goals, Q, goals)), v.x[k], is_convex=True)
-        prog.AddQuadraticCost(2 * config.weight_torque * eye8, np.zeros(8), v.tau[k], is_convex=True)
-        prog.AddQuadraticCost(2 * config.weight_force * eye8, np.zeros(8),
+        prog.AddQuadraticCost(2 * config.weight_torque * np.eye(n_tau), np.zeros(n_tau), v.tau[k], is_convex=True)
+        prog.AddQuadraticCost(2 * config.weight_force * np.eye(n_force), np.zeros(n_force),
                               np.concatenate([v.lambda_n[k], v.lambda_t[k]]), is_convex=True)
         slack_weights = np.where(spec.pinned[k], config.weight_contact_slack, config.weight_slack)
         prog.AddLinearCost(slack_weights, 0.0, v.slack[k])
         if config.weight_acceleration > 0:
-            prog.AddQuadraticCost(2 * config.weight_acceleration * eye11, np.zeros(11),
+            prog.AddQuadraticCost(2 * config.weight_acceleration * np.eye(n_acc), np.zeros(n_acc),
                                   np.concatenate([v.xdd[k], v.qdd[k]]), is_convex=True)
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.solvers import IpoptSolver, SolverOptions
 
+from trajectotree.cito.layout import NUM_BODY_ROWS
 from trajectotree.cito.program import CitoProgram
 from trajectotree.cito.variables import CitoVariables
 from trajectotree.geometry import BoxBoundary
@@ -127,7 +128,7 @@ def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
     boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
     exact = np.array([[boundary.signed_distance(p) for p in knot] for knot in kin.p_BF]) - rows.body.radius
     return {
-        "dynamics": float(max(np.abs(val[:, :11]).max(), *col)),
+        "dynamics": float(max(np.abs(val[:, :NUM_BODY_ROWS]).max(), *col)),
         "friction_cone": float(max(0.0, (np.abs(lt) - mu * ln).max(), (-ln).max())),
         "complementarity": float(comp[free].max()) if free.any() else 0.0,
         "contact_point": float(np.linalg.norm(kin.e, axis=-1)[rows.pinned].max()) if rows.pinned.any() else 0.0,

@@ -31,6 +31,11 @@ for _name, _width in GROUPS:
     _start += _width
 
 
+def width(*names: str) -> int:
+    """The number of variables in the named groups of a knot block."""
+    return sum(SLICES[name].stop - SLICES[name].start for name in names)
+
+
 @dataclass(frozen=True)
 class CitoVariables:
     x: np.ndarray         # (K, 3)

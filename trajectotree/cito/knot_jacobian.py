@@ -1,0 +1,163 @@
+"""The analytic Jacobian of the knot rows (knot.py), vectorized over knots and fingers,
+addressed through the named columns and rows of layout.py.
+
+Per finger, everything depends on the object's position p and angle theta and on the
+finger's joints q through p_BF = R^T (p_WF - p) and the contact normal n_W; `_partials`
+computes those chain-rule factors once, then each block of rows writes its entries.
+tests/test_cito_model.py checks the result against central differences of the values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.cito.layout import (COL_G, COL_LN, COL_LT, COL_P, COL_P_IDX, COL_PD_IDX, COL_PDD, COL_Q, COL_QD,
+                                      COL_QDD, COL_TAU, COL_TH, COL_THD, COL_THDD, FREE_COMP, FREE_PHI, FREE_SLIP,
+                                      PIN_MINUS, PIN_PLUS, ROW_FORCE, ROW_HAND, ROW_HAND_IDX,
+                                      ROW_MOMENT, TWO)
+from trajectotree.cito.variables import KNOT_SIZE, SLICES
+from trajectotree.kinematics import K90
+from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
+
+_I2 = np.eye(2)
+
+
+@dataclass(frozen=True)
+class _Partials:
+    """Derivatives of each finger's p_BF, n_W, f_W and arm (K, 4, 2[, 2]) with respect to
+    the object's p (2 columns), theta, and the finger's q (2 columns)."""
+
+    dpB_dth: np.ndarray
+    dpB_dq: np.ndarray
+    df_dp: np.ndarray
+    df_dth: np.ndarray
+    df_dq: np.ndarray
+    darm_dp: np.ndarray
+    darm_dth: np.ndarray
+    darm_dq: np.ndarray
+
+
+def _partials(rows, Z: np.ndarray, kin) -> _Partials:
+    r = rows.body.radius
+    ln, lt = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]]
+    R, RT, J, n_W = kin.R, kin.RT, kin.J, kin.n_W
+    # Derivatives of p_BF = R^T (p_WF - p): wrt p (-R^T), theta (-K p_BF), q_i (R^T J_i).
+    dpB_dth = -(kin.p_BF @ K90.T)
+    dpB_dq = RT[:, None] @ J
+    dn_s = np.where(rows.pinned[..., None][..., None], 0.0, kin.dn_s)   # pinned normals are fixed in B
+    RdnB = R[:, None] @ dn_s                                         # R dn_B/dp_B
+    dnW_dp = -(RdnB @ RT[:, None])
+    dnW_dth = n_W @ K90.T + np.einsum("kiab,kib->kia", RdnB, dpB_dth)
+    dnW_dq = RdnB @ dpB_dq
+    A = -ln[..., None, None] * _I2 + lt[..., None, None] * K90       # f_W = A n_W
+    return _Partials(dpB_dth=dpB_dth, dpB_dq=dpB_dq,
+                     df_dp=A @ dnW_dp, df_dth=np.einsum("kiab,kib->kia", A, dnW_dth), df_dq=A @ dnW_dq,
+                     darm_dp=-_I2 - r * dnW_dp, darm_dth=-r * dnW_dth, darm_dq=J - r * dnW_dq)
+
+
+def knot_jacobian(rows, Z: np.ndarray, kin) -> np.ndarray:
+    """(K, R, KNOT_SIZE): the Jacobian of `rows.evaluate`'s values at knots Z, with
+    kin = rows.kinematics(Z)."""
+    jac = np.zeros((Z.shape[0], int(rows.num_rows.max()), KNOT_SIZE))
+    d = _partials(rows, Z, kin)
+    _object_rows(jac, rows, kin, d)
+    _hand_rows(jac, rows, Z, kin, d)
+    _pinned_rows(jac, rows, kin)
+    _free_rows(jac, rows, Z, kin, d)
+    return jac
+
+
+def _object_rows(jac, rows, kin, d: _Partials) -> None:
+    b, nK = rows.body, jac.shape[0]
+    n_W, t_W, f_W, arm = kin.n_W, kin.t_W, kin.f_W, kin.arm
+    # Translation rows.
+    jac[:, ROW_FORCE, COL_P] = -d.df_dp.sum(1)
+    jac[:, ROW_FORCE, COL_TH] = -d.df_dth.sum(1)
+    jac[:, ROW_FORCE, COL_PDD] = b.mass * _I2
+    jac[:, ROW_FORCE, SLICES["q"]] = -d.df_dq.transpose(0, 2, 1, 3).reshape(nK, 2, -1)
+    jac[:, ROW_FORCE, COL_LN] = n_W.transpose(0, 2, 1)
+    jac[:, ROW_FORCE, COL_LT] = -t_W.transpose(0, 2, 1)
+    # Rotation row: d cross(arm, f) = -(K f).d arm + (K arm).d f.
+    Kf, Ka = f_W @ K90.T, arm @ K90.T
+    jac[:, ROW_MOMENT, COL_P] = np.einsum("kia,kiab->kb", Kf, d.darm_dp) - np.einsum("kia,kiab->kb", Ka, d.df_dp)
+    jac[:, ROW_MOMENT, COL_TH] = np.sum(Kf * d.darm_dth, axis=(1, 2)) - np.sum(Ka * d.df_dth, axis=(1, 2))
+    jac[:, ROW_MOMENT, COL_THDD] = b.inertia
+    jac[:, ROW_MOMENT, SLICES["q"]] = (np.einsum("kia,kiab->kib", Kf, d.darm_dq)
+                                       - np.einsum("kia,kiab->kib", Ka, d.df_dq)).reshape(nK, -1)
+    jac[:, ROW_MOMENT, COL_LN] = np.sum(Ka * n_W, axis=2)
+    jac[:, ROW_MOMENT, COL_LT] = -np.sum(Ka * t_W, axis=2)
+
+
+def _hand_rows(jac, rows, Z, kin, d: _Partials) -> None:
+    """d(J^T f)/dq = [[-(r1+r2).f, -r2.f], [-r2.f, -r2.f]] + J^T df/dq, plus M, tau, gravity."""
+    hand, r, nK = rows.body.hand, rows.body.radius, jac.shape[0]
+    q, qdd = Z[:, SLICES["q"]], Z[:, SLICES["qdd"]].reshape(nK, NUM_FINGERS, 2)
+    JT = kin.J.swapaxes(-1, -2)
+    a12, a2 = np.sum((kin.r1 + kin.r2) * kin.f_W, -1), np.sum(kin.r2 * kin.f_W, -1)
+    H_q = JT @ d.df_dq - hand.gravity_derivatives(q)
+    H_q[..., 0, 0] -= a12
+    H_q[..., 0, 1] -= a2
+    H_q[..., 1, :] -= a2[..., None]
+    H_q[..., :, 1] += np.einsum("kiab,kib->kia", hand.mass_derivatives(q), qdd)
+    kk = np.arange(nK)[:, None, None]
+    rows_h = ROW_HAND_IDX[None, :, :, None]
+    jac[kk[..., None], rows_h, COL_Q[None, :, None, :]] = H_q
+    jac[kk[..., None], rows_h, COL_QDD[None, :, None, :]] = hand.mass_matrices(q)
+    jac[kk[..., None], rows_h, COL_TAU[None, :, None, :]] = -_I2
+    jac[:, ROW_HAND, COL_P] = (JT @ d.df_dp).reshape(nK, NUM_HAND_JOINTS, 2)
+    jac[:, ROW_HAND, COL_TH] = np.einsum("kiab,kib->kia", JT, d.df_dth).reshape(nK, -1)
+    jac[kk, ROW_HAND_IDX[None], COL_LN[None, :, None]] = -np.einsum("kiab,kib->kia", JT, kin.n_W)
+    jac[kk, ROW_HAND_IDX[None], COL_LT[None, :, None]] = np.einsum("kiab,kib->kia", JT, kin.t_W) - r
+
+
+def _pinned_rows(jac, rows, kin) -> None:
+    """gamma -/+ e, e = p_WF - p - R c_B."""
+    kP, iP = rows.kP, rows.iP
+    rp = rows.row_start[kP, iP]
+    de_dth = -(rows.c_B[kP, iP][:, None, :] @ kin.RT[kP])[:, 0] @ K90.T
+    kP2, kP3 = kP[:, None], kP[:, None, None]
+    for sign, off in ((-1.0, PIN_MINUS), (1.0, PIN_PLUS)):
+        rws = rp[:, None] + off + TWO                                     # (nP, 2)
+        jac[kP2, rws, COL_G[iP, None]] = 1.0
+        jac[kP3, rws[:, :, None], COL_Q[iP][:, None, :]] = sign * kin.J[kP, iP]
+        jac[kP3, rws[:, :, None], COL_P_IDX] = -sign * _I2
+        jac[kP2, rws, COL_TH] = sign * de_dth
+
+
+def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
+    """phi - r, gamma - (phi - r) lambda_n, gamma -/+ v_a lambda_n."""
+    nK = Z.shape[0]
+    kF, iF = rows.kF, rows.iF
+    rf = rows.row_start[kF, iF]
+    lnF = Z[:, SLICES["lambda_n"]][kF, iF]
+    thd, qd = Z[:, COL_THD], Z[:, SLICES["qd"]].reshape(nK, NUM_FINGERS, 2)
+    gF = kin.grad[kF, iF]
+    dphi_dp = -(gF[:, None, :] @ kin.RT[kF])[:, 0]
+    dphi_dth = np.sum(gF * d.dpB_dth[kF, iF], 1)
+    dphi_dq = np.einsum("na,naj->nj", gF, d.dpB_dq[kF, iF])
+    kF2 = kF[:, None]
+    colqF = COL_Q[iF]
+    for row, scale in ((rf + FREE_PHI, None), (rf + FREE_COMP, -lnF)):
+        jac[kF2, row[:, None], COL_P_IDX] = dphi_dp if scale is None else scale[:, None] * dphi_dp
+        jac[kF, row, COL_TH] = dphi_dth if scale is None else scale * dphi_dth
+        jac[kF2, row[:, None], colqF] = dphi_dq if scale is None else scale[:, None] * dphi_dq
+    jac[kF, rf + FREE_COMP, COL_LN[iF]] = -kin.phi_tip[kF, iF]
+    jac[kF, rf + FREE_COMP, COL_G[iF]] = 1.0
+    qdF, r1F, r2F, JF = qd[kF, iF], kin.r1[kF, iF], kin.r2[kF, iF], kin.J[kF, iF]
+    dv_dq = -np.stack([(r1F + r2F) * qdF[:, :1] + r2F * qdF[:, 1:], r2F * (qdF[:, :1] + qdF[:, 1:])], axis=2)
+    dv_dq -= thd[kF, None, None] * (K90 @ JF)                         # (nF, comp, joint)
+    dv_dthd = -(kin.rel[kF, iF] @ K90.T)
+    thdK = thd[kF, None, None] * K90                                  # dv/dp
+    for a in range(2):
+        for sign, off in ((-1.0, FREE_SLIP + 2 * a), (1.0, FREE_SLIP + 2 * a + 1)):
+            rws = rf + off
+            sl = sign * lnF
+            jac[kF, rws, COL_G[iF]] = 1.0
+            jac[kF, rws, COL_LN[iF]] = sign * kin.v[kF, iF, a]
+            jac[kF2, rws[:, None], COL_QD[iF]] = sl[:, None] * JF[:, a, :]
+            jac[kF, rws, COL_PD_IDX[a]] = -sl
+            jac[kF, rws, COL_THD] = sl * dv_dthd[:, a]
+            jac[kF2, rws[:, None], colqF] = sl[:, None] * dv_dq[:, a, :]
+            jac[kF2, rws[:, None], COL_P_IDX] = sl[:, None] * thdK[:, a, :]
