@@ -3,7 +3,9 @@ the paper's 60, seed 0) with each method and prints, per method, the mean and me
 total planning time, the search / build / solve split, IPOPT iterations, the share of
 IPOPT's time spent in function evaluations, build time relative to solve time, the
 success rate (with how many solved plans failed the physics check of trajectotree.physics
-and the largest force on a fingertip off the box), and TrajectoTree's speedup over each baseline measured in this run.
+and the largest force on a fingertip off the box), the converged plans' final orientation error
+and largest constraint violation per group, and TrajectoTree's speedup over each baseline measured
+in this run. --json writes every per-goal row.
 
 Targets (issue 7): TrajectoTree mean total <= 3 s, >= 10x faster than CITO, search
 median <= 0.2 s, function evaluations <= 30 % of solve time, build <= 10 % of solve.
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 import numpy as np
@@ -42,13 +45,19 @@ def run(goals, methods, config: Config) -> dict[str, list[dict]]:
                     # a solved plan whose arrays fail trajectotree.physics (counted in success = False)
                     "converged": r.converged, "physics_failed": check is not None and not check.passed,
                     "force_at_distance_N": np.nan if check is None else check.force_at_distance_N,
-                    "status": r.status})
+                    # deg, the plan's last orientation vs the goal
+                    "final_error_deg": np.nan if r.trajectory is None else math.degrees(abs(r.trajectory.x[-1, 2] - r.goal)),
+                    "status": r.status, "violations": dict(r.violations)})
                 bar.update()
     return rows
 
 
 def summary_line(method: str, rows: list[dict]) -> str:
-    col = {key: np.array([r[key] for r in rows], dtype=float) for key in rows[0] if key != "status"}
+    col = {key: np.array([r[key] for r in rows], dtype=float) for key in rows[0] if key not in ("status", "violations")}
+    converged = [r for r in rows if r["converged"]]
+    error = col["final_error_deg"][col["converged"] > 0]
+    worst = {group: max(r["violations"][group] for r in converged) for group in converged[0]["violations"]} \
+        if converged else {}
     return (f"{method:13s} success {int(col['success'].sum())}/{len(rows)} (converged {int(col['converged'].sum())}, "
             f"physics check failed {int(col['physics_failed'].sum())}, max force at a distance "
             f"{np.nanmax(col['force_at_distance_N']):.3g} N)  total mean {col['total_s'].mean():6.2f} s "
@@ -57,7 +66,10 @@ def summary_line(method: str, rows: list[dict]) -> str:
             f"solve {col['solve_s'].mean():6.2f} s  | iterations {col['iterations'].mean():5.1f}  "
             f"function evals {100 * np.nanmean(col['function_evaluations_share']):4.1f} % of IPOPT time  "
             f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  "
-            f"cost mean {np.nanmean(col['cost']):.1f}")
+            f"cost mean {np.nanmean(col['cost']):.1f}\n"
+            f"{'':13s} converged plans: final orientation error max {error.max() if error.size else np.nan:.2f} deg, "
+            f"within 5 deg {int(np.sum(error <= 5.0))}/{len(error)}; largest violation "
+            + ", ".join(f"{group} {value:.1e}" for group, value in worst.items()))
 
 
 def main() -> None:
