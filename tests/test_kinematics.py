@@ -45,6 +45,8 @@ def test_forward_kinematics_and_jacobian_match_the_plant(scene):
             np.testing.assert_allclose(finger.fingertip(q[i]), p_plant[i], atol=1e-12)
             np.testing.assert_allclose(finger.jacobian(q[i]), J_plant[i], atol=1e-12)
             np.testing.assert_allclose(finger.elbow(q[i]) + finger.links(q[i])[1], p_plant[i], atol=1e-12)
+            _, _, r1, r2 = finger.links_one(*q[i].tolist())                # the scalar (math) form
+            np.testing.assert_allclose(finger.p_W_base + r1 + r2, p_plant[i], atol=1e-12)
 
 
 def test_ik_round_trips_scalar_and_vectorized(scene):

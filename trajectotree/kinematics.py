@@ -94,6 +94,14 @@ class TwoLinkFinger:
         """p_WF (..., 2), the fingertip centre in W at joint angles q (..., 2)."""
         return self.tip_from_links(*self.links(q))
 
+    def links_one(self, q1: float, q2: float):
+        """(a1, a12, r1, r2) of one finger at Python-float joint angles, r1 and r2 as (x, y)
+        pairs of floats, by `math` (the scalar hot paths: CITO's one-knot values, the
+        search's collision test); `links` in scalars."""
+        a1 = self.psi + q1
+        a12 = a1 + q2
+        return a1, a12, (self.l1 * math.cos(a1), self.l1 * math.sin(a1)), (self.l2 * math.cos(a12), self.l2 * math.sin(a12))
+
     def elbow(self, q) -> np.ndarray:
         """p_W of joint 2 (..., 2)."""
         return self.p_W_base + self.links(q)[0]

@@ -102,8 +102,8 @@ class Reachability:
     def _joint_frames(self, finger: int, q):
         """(p_WJ, angle_WJ) of the joint-1 and joint-2 frames at joint angles q."""
         f = self.fingers[finger]
-        a1, a12 = f.angles(q)
-        return (f.p_W_base, a1), (f.elbow(q), a12)
+        a1, a12, r1, _ = f.links_one(q[0], q[1])
+        return (f.p_W_base, a1), (f.p_W_base + np.array(r1), a12)
 
     def link_polygons(self, finger: int, q) -> list[np.ndarray]:
         """Corners (4, 2) in W of the finger's link collision boxes at joint angles q."""

@@ -47,6 +47,7 @@ class BodyParams:
     def __init__(self, scene, sharpness: float, *, mu: float):
         c = scene.config
         self.hand = HandModel.from_scene(scene)
+        self.fingers = scene.fingers        # the same fingers one by one, for scalar code
         self.mass = c.box_mass
         self.mu = float(mu)
         self.inertia = c.box_mass * (c.box_width ** 2 + c.box_height ** 2) / 12.0
@@ -172,26 +173,23 @@ class KnotRows:
     def values_one(self, z: np.ndarray) -> np.ndarray:
         """The rows of a one-knot batch at z (KNOT_SIZE,), several times faster than
         `evaluate` for one knot (IPOPT asks for the values at each trial point knot by
-        knot). Scalar on purpose: numpy's exp, log, norm and matmul round differently
-        from math's in the last bit, and IPOPT has always seen these exact numbers
-        (values from `evaluate` instead change the s2cito plan: 118 IPOPT iterations, not
-        130). The finger kinematics, mass matrices and gravity torques are the shared
-        vectorized ones, which equal their scalar forms bit for bit."""
+        knot). Scalar on purpose, the same rows as `_values` in the same order: numpy's
+        exp, log, norm and matmul round differently from math's in the last bit, and IPOPT
+        has always seen these exact numbers (values from `evaluate` instead change the
+        s2cito plan: 118 IPOPT iterations, not 130; the shared vectorized kinematics here
+        cost 2.5x the time of this function)."""
         b, hand, r = self.body, self.body.hand, self.body.radius
-        q = z[SLICES["q"]]
-        r1, r2 = hand.links(q)
-        p_WF, M, tau_g = hand.fingers.tip_from_links(r1, r2).tolist(), hand.mass_matrices(q).tolist(), hand.gravity_forces(q).tolist()
-        r1, r2 = r1.tolist(), r2.tolist()
         z = z.tolist()
         (px, py), th, (pdx, pdy), thd = z[COL_P], z[COL_TH], z[COL_PD], z[COL_THD]
-        qd, qdd, tau = (z[SLICES[n]] for n in ("qd", "qdd", "tau"))
+        q, qd, qdd, tau = (z[SLICES[n]] for n in ("q", "qd", "qdd", "tau"))
+        lns, lts, gams = (z[SLICES[n]] for n in ("lambda_n", "lambda_t", "slack"))
         c, s = math.cos(th), math.sin(th)
         fx_sum = fy_sum = torque = 0.0
         hand_rows, contact_rows = [], []
-        for i in range(NUM_FINGERS):
-            (r1x, r1y), (r2x, r2y) = r1[i], r2[i]
-            relx, rely = p_WF[i][0] - px, p_WF[i][1] - py
-            ln, lt, gam = z[SLICES["lambda_n"]][i], z[SLICES["lambda_t"]][i], z[SLICES["slack"]][i]
+        for i, finger in enumerate(b.fingers):
+            a1, a12, (r1x, r1y), (r2x, r2y) = finger.links_one(q[2 * i], q[2 * i + 1])
+            relx, rely = finger.p_W_base[0] + r1x + r2x - px, finger.p_W_base[1] + r1y + r2y - py
+            ln, lt, gam = lns[i], lts[i], gams[i]
             if self.pinned[0, i]:
                 nbx, nby = self.n_B[0, i]
             else:
@@ -203,8 +201,11 @@ class KnotRows:
             torque += (relx - r * nwx) * fy - (rely - r * nwy) * fx
             u1 = -(r1y + r2y) * fx + (r1x + r2x) * fy
             u2 = -r2y * fx + r2x * fy
-            (m11, m12), (_, m22) = M[i]
-            t1, t2 = tau_g[i]
+            # HandModel.mass_matrices and gravity_forces, in scalars
+            cq2 = math.cos(q[2 * i + 1])
+            m11, m12, m22 = hand.mass_a[i] + 2 * hand.mass_b[i] * cq2, hand.mass_c[i] + hand.mass_b[i] * cq2, hand.mass_c[i]
+            t2 = -hand.grav_2[i] * math.cos(a12)
+            t1 = -hand.grav_1[i] * math.cos(a1) + t2
             qdd1, qdd2 = qdd[2 * i:2 * i + 2]
             hand_rows += [m11 * qdd1 + m12 * qdd2 - tau[2 * i] - t1 + u1 - r * lt,
                           m12 * qdd1 + m22 * qdd2 - tau[2 * i + 1] - t2 + u2 - r * lt]
