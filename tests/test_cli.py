@@ -198,6 +198,7 @@ def test_second_sweep_on_one_folder_is_refused_and_a_dead_holders_lock_taken_ove
     assert (sweep / LOCK_FILE).read_text() == ""   # released
 
 
+@pytest.mark.slow
 def test_killed_sweep_leaves_no_scratch_in_the_system_temp_folder(tmp_path):
     """Kills a sweep and its trial (SIGKILL to the process group) while the trial's IPOPT
     runs; the system temp folder (TMPDIR) stays empty and the rerun removes the scratch."""
@@ -273,6 +274,7 @@ def run_on_a_terminal(args: list[str]) -> tuple[int, str, str]:
     return child.wait(), out, shown.decode(errors="replace")
 
 
+@pytest.mark.slow
 def test_ipopt_progress_shows_on_a_terminal_and_not_with_json(tmp_path):
     rc, out, shown = run_on_a_terminal(["plan", *TINY_PLAN, "--out", str(tmp_path / "a")])
     assert rc == 0 and "wrote" in out

@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from trajectotree.cli import main
 from trajectotree.config import (CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, config_from_dict,
                                  config_to_dict, load_config, save_config)
 
@@ -104,14 +105,23 @@ def run_cli(*args):
     (["scene", "--box-size", "0.2", "-0.1"], "scene.box_height"),
     (["scene", "--config", "/nonexistent.yaml"], "does not exist"),
 ])
-def test_cli_invalid_input_exits_2(args, message):
-    result = run_cli(*args)
-    assert result.returncode == 2
-    assert message in result.stderr
+def test_cli_invalid_input_exits_2(args, message, capsys):
+    assert main(args) == 2    # in-process; the slow test below runs the installed entry point
+    assert message in capsys.readouterr().err
 
 
+def test_cli_a_bad_config_file_exits_2_naming_the_key(tmp_path, capsys):
+    path = tmp_path / "bad.yaml"
+    path.write_text("cito:\n  max_iters: 3\n")
+    assert main(["scene", "--config", str(path)]) == 2
+    assert "max_iters" in capsys.readouterr().err
+
+
+@pytest.mark.slow
 def test_cli_version_and_scene_summary(tmp_path):
     assert run_cli("--version").stdout.strip().startswith("trajectotree ")
+    bad = run_cli("scene", "--mass", "0")
+    assert bad.returncode == 2 and "scene.box_mass" in bad.stderr
     result = run_cli("scene", "--mass", "0.08", "--json", "--figure", str(tmp_path / "m.png"))
     assert result.returncode == 0, result.stderr
     assert '"mass_kg": 0.08' in result.stdout

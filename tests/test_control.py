@@ -99,6 +99,7 @@ def in_grasp_rotation(scene, angle: float, duration: float, knots: int = 21):
 
 
 @pytest.mark.parametrize("controller", ["paper", "grasp"])
+@pytest.mark.slow
 def test_controller_tracks_a_slow_in_grasp_rotation(scene, hold_config, controller):
     reference = in_grasp_rotation(scene, 0.25, 2.0)
     result = simulate_reference(reference, hold_config, controller=controller)
@@ -149,6 +150,7 @@ def test_grasp_controller_holds_a_three_finger_grasp_for_two_seconds(three_finge
     np.testing.assert_array_equal(result.f_W[:, 0], 0.0)   # the lifted finger never touches the box
 
 
+@pytest.mark.slow
 def test_grasp_controller_recovers_from_a_push(three_finger_hold):
     """0.2 N sideways (40 % of the box's weight) for 0.2 s: the box is knocked away and comes back."""
     from trajectotree.simulate import Conditions, Push

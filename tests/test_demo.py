@@ -2,9 +2,12 @@
 
 import json
 
+import pytest
+
 from trajectotree.cli import main
 
 
+@pytest.mark.slow
 def test_demo_writes_the_plan_run_figure_playback_and_summary(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--goal", "0.3", "--segments", "2"]) == 0

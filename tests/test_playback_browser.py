@@ -15,6 +15,7 @@ from trajectotree.reference import Reference, static_hold_reference
 from trajectotree.scene import build_scene
 from trajectotree.simulate import simulate_reference
 
+pytestmark = pytest.mark.slow  # a headless browser per test (seconds each)
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
                  "--disable-background-networking", "--disable-component-update", "--disable-default-apps",

@@ -198,6 +198,7 @@ def run_cli(*args):
                           timeout=300)
 
 
+@pytest.mark.slow
 def test_cli_json_and_figure(tmp_path):
     figure = tmp_path / "plan.png"
     out = run_cli("--goal", "-1.2", "--json", "--figure", str(figure), "--box-size", "0.16", "0.08", "--mu", "0.5")

@@ -102,6 +102,7 @@ def test_the_hold_plan_forces_balance_gravity(scene):
     assert np.all(np.abs(arrays["lambda_t"]) <= c.mu * arrays["lambda_n"] + 1e-9)
 
 
+@pytest.mark.slow
 def test_run_simulation_result_files_and_gif(scene, short_config, tmp_path):
     arrays = hold_plan_arrays(scene, 0.5)
     reference = reference_from_arrays(arrays, scene)

@@ -86,6 +86,7 @@ def test_controller_settings_are_part_of_a_simulating_sweep_only(tmp_path):
         prepare_dir(simulating, with_gain(small_spec(simulate=True), 123.0))
 
 
+@pytest.mark.slow
 def test_killed_sweep_reruns_only_unfinished_trials(resumed_sweep):
     out, before = resumed_sweep.out, resumed_sweep.before
     assert resumed_sweep.rerun.returncode == 0, resumed_sweep.rerun.stderr
@@ -116,6 +117,7 @@ def test_killed_sweep_reruns_only_unfinished_trials(resumed_sweep):
             assert sim_json["mae_theta"] == row["mae_theta"]
 
 
+@pytest.mark.slow
 def test_trials_follow_the_seed(resumed_sweep):
     """The manifest's goals come from the seed, and each trial's contact sequence is the
     one the contact search finds for that goal (run here, in this process)."""
@@ -139,6 +141,7 @@ def test_trials_follow_the_seed(resumed_sweep):
             np.testing.assert_allclose(saved["q"], node.q, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_same_trials(tmp_path):
     from distributed import LocalCluster
 
@@ -165,6 +168,7 @@ def test_dask_cluster_gives_the_same_trials(tmp_path):
             np.testing.assert_array_equal(arrays[0][name], arrays[1][name], err_msg=name)
 
 
+@pytest.mark.slow
 def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
     from trajectotree.trial import execute_trial
 
