@@ -30,6 +30,7 @@ def test_report_of_a_missing_sweep_is_an_input_error(tmp_path, capsys):
     assert "not a sweep directory" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, tmp_path, capsys):
     import csv
     import json
