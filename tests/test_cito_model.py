@@ -25,7 +25,7 @@ def hand(scene):
 def test_hand_dynamics_match_the_plant(scene, hand):
     plant, ctx = scene.plant, scene.plant.CreateDefaultContext()
     rng = np.random.default_rng(0)
-    iq, iv = scene.hand_q_indices, scene.hand_v_indices
+    iv = scene.hand_v_indices
     for _ in range(5):
         q = rng.uniform(-1.2, 1.2, 8)
         plant.SetPositions(ctx, scene.positions((0.01, -0.02, 0.3), q))

@@ -30,7 +30,7 @@ from pydrake.solvers import SnoptSolver
 
 from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
 from trajectotree.kinematics import first_solution
-from trajectotree.scene import NUM_FINGERS, FingerGeometry, Scene
+from trajectotree.scene import NUM_FINGERS, Scene
 
 IK_TOLERANCE = 1e-6   # m, fingertip position tolerance of the IK constraint
 KEY_DIGITS = 9        # poses and arclengths equal to 1e-9 share a cache entry

@@ -3,7 +3,8 @@
 `add_hand_and_box` adds both models to any plant (continuous for planning
 queries, discrete for simulation). `build_scene` makes a finalized plant with a
 SceneGraph for kinematic and collision queries, and reads from it the finger
-geometry (`FingerGeometry`) that the planners' closed-form kinematics use, so
+geometry (`FingerGeometry`: a `kinematics.TwoLinkFinger` plus its links' masses,
+inertias and torque limits) that the closed-form kinematics and dynamics use, so
 the SDF stays the single source of truth for the hand.
 
 Frames: W world (x right, y up, gravity -y), B box, F_i fingertip i (the centre

@@ -40,7 +40,7 @@ class HandModel:
         m1, m2 = (np.array([fi.masses[j] for fi in f]) for j in (0, 1))
         c1, c2 = (np.array([fi.coms[j] for fi in f]) for j in (0, 1))
         i1, i2 = (np.array([fi.inertias[j] for fi in f]) for j in (0, 1))
-        l1, l2 = np.array([fi.l1 for fi in f]), np.array([fi.l2 for fi in f])
+        l1 = np.array([fi.l1 for fi in f])
         g = scene.config.gravity
         return HandModel(
             fingers=TwoLinkFinger.stack(f),
