@@ -245,8 +245,8 @@ def run_cli(*args, cwd):
                           capture_output=True, text=True, timeout=600)
 
 
-def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
 @pytest.mark.slow
+def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
     for args in (["--goal", "nan"], ["--goal", "0.3", "--method", "chomp"], ["--goal", "7"]):
         proc = run_cli(*args, "--out", str(tmp_path / "out"), cwd=tmp_path)
         assert proc.returncode == 2, proc.stderr
