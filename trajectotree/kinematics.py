@@ -9,14 +9,15 @@ centre F) at a12 = a1 + q2:
     p_WF = p_W_base + r1 + r2,  J_WF = d p_WF / d q = [K (r1 + r2), K r2]
 
 with K the +90 degree rotation. A `TwoLinkFinger` holds one finger (scalar psi, l1, l2)
-or several (arrays with a leading finger axis); every method broadcasts joint angles
-q (..., 2) against it.
+or several (arrays with a leading finger axis); the numpy methods broadcast joint angles
+q (..., 2) against it. `links_one` is FK for one finger in Python floats by `math`, for
+the scalar hot paths (CITO's one-knot values, the search's collision test).
 
 IK convention, shared by the scalar and the vectorized solver: the candidates are the
 elbow-positive branch q2 = +acos(c2) first, then q2 = -acos(c2), each with q1 wrapped
 into [-pi, pi] and then shifted by -2 pi, 0, +2 pi (joint limits may exceed pi); a
 candidate is a solution when it lies within [q_lower - tolerance, q_upper + tolerance]
-(tolerance 0 by default). An unreachable target (|c2| > 1, or no candidate within the
+(tolerance 0; the vectorized solver takes another). An unreachable target (|c2| > 1, or no candidate within the
 limits) gives no solution: [] from `ik_solutions`, a NaN row from `ik`, None from
 `ik_one`. The scalar solver uses `math` (the search's hot path, on Python floats), the
 vectorized one numpy; they agree to rounding, not bit for bit (libm's acos and atan2
