@@ -51,6 +51,7 @@ def test_yaml_round_trip_and_partial_files(tmp_path):
     ("sim:\n  controller: 3\n", "'controller'"),              # a str field
     ("scene:\n  box_mass: [1]\n", "'box_mass'"),              # a sequence for a number
     ("scene: 3\n", "section scene must be a mapping, got 3"),
+    ("scene:\n  box_mass: abc\n", "scene.box_mass = 'abc': .*; expected float"),   # Drake names only the value
 ])
 def test_bad_yaml_is_a_named_error(tmp_path, text, message):
     path = tmp_path / "bad.yaml"

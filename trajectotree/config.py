@@ -285,19 +285,19 @@ class Config:
     sim: SimConfig = field(default_factory=SimConfig)
 
 
+# Drake's typed YAML loader (yaml_load_typed, as in Drake's hardware_sim Scenario) checks each
+# value's type against the field's, rejects unknown keys and keeps the defaults of missing ones.
+# It sets the fields of a default-constructed dataclass one by one and has no tuples, so it fills
+# a mutable twin of each frozen section (same fields and defaults, tuple[...] as list[...]),
+# which `_freeze` turns into the section, whose __post_init__ then checks the ranges.
+_DRAKE_ERRORS = (RuntimeError, ValueError, TypeError)  # what Drake's loader raises on a wrong key or type
+
+
 def _drake_yaml():
-    """pydrake.common.yaml, imported when first used, so that importing this module loads no Drake
-    (the sweep's parent process imports it through sweep.py and results.py and never needs Drake)."""
+    """pydrake.common.yaml, imported on first use: importing config (sweep.py does) loads no Drake."""
     from pydrake.common import yaml as drake_yaml
     return drake_yaml
 
-
-# Drake's typed YAML loader (yaml_load_typed, as in Drake's hardware_sim Scenario) checks each
-# value's type against the field's, rejects unknown keys and keeps the defaults of missing ones.
-# It fills a default-constructed dataclass field by field (setattr) and reads sequences as lists
-# (it has no tuples), so it cannot fill these frozen dataclasses themselves: it fills a mutable
-# twin of each (same fields and defaults, tuple[...] as list[...]), which `_freeze` turns into the
-# config class, whose __post_init__ then checks the ranges.
 
 def _yaml_type(kind):
     """The type Drake's loader reads for a config field of type `kind`."""
@@ -328,32 +328,42 @@ def _thaw(value):
 
 
 def _freeze(cls, loaded):
-    """Config dataclass `cls` from its filled twin `loaded` (its __post_init__ checks the values)."""
-    hints = typing.get_type_hints(cls)
-    kwargs = {}
-    for f in dc.fields(cls):
-        value = getattr(loaded, f.name)
-        kwargs[f.name] = (_freeze(hints[f.name], value) if dc.is_dataclass(value)
-                          else tuple(value) if isinstance(value, list) else value)
-    return cls(**kwargs)
+    """Section dataclass `cls` from its filled twin (lists back to tuples; __post_init__ checks the ranges)."""
+    values = {f.name: getattr(loaded, f.name) for f in dc.fields(cls)}
+    return cls(**{name: tuple(v) if isinstance(v, list) else v for name, v in values.items()})
 
 
-def _load_section(cls, data, where: str):
-    """Section dataclass `cls` from its mapping `data` (None: the defaults), typed by Drake's loader."""
+def _typed(cls, data: dict):
+    """Drake's typed loader on one section's mapping, passed as YAML text (floats exactly, as repr)."""
+    drake_yaml = _drake_yaml()
+    return drake_yaml.yaml_load_typed(schema=_yaml_schema(cls), data=drake_yaml.yaml_dump(data))
+
+
+def _load_section(cls, data, name: str, where: str):
+    """Section `name` (dataclass `cls`) from its mapping `data` (None: the defaults)."""
     if data is None:
         return cls()
     if not isinstance(data, dict):
-        raise ConfigError(f"{where} must be a mapping, got {data!r}")
-    try:  # yaml_load_typed reads YAML text only, so the mapping goes back to text (floats exactly, as repr)
-        drake_yaml = _drake_yaml()
-        loaded = drake_yaml.yaml_load_typed(schema=_yaml_schema(cls), data=drake_yaml.yaml_dump(data))
-    except (RuntimeError, ValueError, TypeError) as e:  # Drake's messages name the key or the value
-        raise ConfigError(f"invalid {where}: {e}; valid keys: {[f.name for f in dc.fields(cls)]}") from None
+        raise ConfigError(f"{where} section {name} must be a mapping, got {data!r}")
+    try:
+        loaded = _typed(cls, data)
+    except _DRAKE_ERRORS:  # Drake's message may name only the value: load key by key to name the key
+        hints = typing.get_type_hints(cls)
+        for key, value in data.items():
+            try:
+                _typed(cls, {key: value})
+            except _DRAKE_ERRORS as e:
+                kind = hints.get(key)
+                kind = kind.__name__ if isinstance(kind, type) else kind   # float, tuple[float, float, float]
+                why = f"valid keys: {list(hints)}" if kind is None else f"expected {kind}"
+                raise ConfigError(f"{where}: {name}.{key} = {value!r}: {e}; {why}") from None
+        raise
     return _freeze(cls, loaded)
 
 
-def _config_from_document(data, where: str) -> Config:
-    """A Config from its sections' mappings (each loaded alone, so an error names its section)."""
+def config_from_dict(data: dict, where: str = "config") -> Config:
+    """A Config from nested dicts (from YAML, plan.json or a sweep manifest); each section is
+    loaded alone, so an error names its section. `where` names the source in messages."""
     if data is None:
         return Config()
     if not isinstance(data, dict):
@@ -362,13 +372,7 @@ def _config_from_document(data, where: str) -> Config:
     unknown = sorted(set(data) - set(sections))
     if unknown:
         raise ConfigError(f"unknown key(s) {unknown} in {where}; valid keys: {sorted(sections)}")
-    return Config(**{name: _load_section(sections[name], value, f"{where} section {name}")
-                     for name, value in data.items()})
-
-
-def config_from_dict(data: dict) -> Config:
-    """Builds a Config from nested dicts (as read from plan.json or a sweep manifest)."""
-    return _config_from_document(data, "config")
+    return Config(**{name: _load_section(sections[name], value, name, where) for name, value in data.items()})
 
 
 def config_to_dict(config: Config) -> dict:
@@ -387,7 +391,7 @@ def load_config(path: str | Path) -> Config:
         data = _drake_yaml().yaml_load_data(path.read_text())
     except yaml.YAMLError as e:
         raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
-    return _config_from_document(data, f"config file {str(path)!r}")
+    return config_from_dict(data, f"config file {str(path)!r}")
 
 
 def save_config(config: Config, path: str | Path) -> None:
