@@ -1,12 +1,14 @@
 """Tracking metrics against closed-form answers."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from trajectotree.metrics import (absolute_error, detect_drop, final_error, hold_after_drop, mean_absolute_error,
-                                  mean_confidence_interval)
+from trajectotree.metrics import (absolute_error, detect_drop, evaluate, final_error, hold_after_drop,
+                                  mean_absolute_error, mean_confidence_interval)
+from trajectotree.results import SimLog
 
 
 def test_errors_of_a_known_offset():
@@ -55,6 +57,27 @@ def test_error_is_held_after_the_drop():
     assert np.all(held[at_drop:, 1] == held[at_drop, 1]) and held[-1, 1] == pytest.approx(0.5 * 9.81 * when ** 2)
     # without a drop nothing changes
     np.testing.assert_array_equal(hold_after_drop(t, absolute_error(fall, ref), None), absolute_error(fall, ref))
+
+
+def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
+    t, ref, fall = free_fall()
+    forces = np.ones((t.size, 4, 2))
+    log = SimLog(t=t, x=fall, q=np.zeros((t.size, 8)), x_plan=ref, f_W=forces, f_W_plan=2 * forces, sim_time_s=0.5,
+                 controller="paper", conditions={"push": None})
+    result = evaluate(log, drop_distance=0.05)
+    assert result.dropped and result.drop_time_s == pytest.approx(0.11)
+    y_at_drop = 0.5 * 9.81 * 0.11 ** 2            # the error is held there after the drop
+    y = np.minimum(0.5 * 9.81 * t ** 2, y_at_drop)
+    assert result.mae_y == pytest.approx(y.mean(), rel=1e-12) and result.mae_x == 0.0 and result.mae_theta == 0.0
+    assert result.final_error == pytest.approx((0.0, y_at_drop, 0.0))
+    np.testing.assert_allclose(result.abs_error[:, 1], y, rtol=1e-12)
+    # the log passes through unchanged, and sim.json says what was run
+    assert result.f_W is log.f_W and result.x_plan is log.x_plan and result.sim_time_s == 0.5
+    summary = result.to_json()
+    assert summary["controller"] == "paper" and summary["conditions"] == {"push": None}
+    assert summary["num_samples"] == t.size and summary["duration_s"] == pytest.approx(0.99)
+    held = evaluate(dataclasses.replace(log, x=ref), drop_distance=0.05)
+    assert not held.dropped and held.drop_time_s is None and held.final_error == (0.0, 0.0, 0.0)
 
 
 def test_confidence_interval_matches_the_student_t_formula():

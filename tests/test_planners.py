@@ -11,7 +11,6 @@ import sys
 import numpy as np
 import pytest
 
-from trajectotree.cli import InputError
 from pathlib import Path
 
 from trajectotree.config import CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, load_config, save_config
@@ -195,7 +194,7 @@ def test_plan_files_without_p_W_C_are_refused_by_name(plans, tmp_path):
     _, folder = plans["trajectotree", 0.3]
     (tmp_path / "plan.json").write_text((folder / "plan.json").read_text())
     np.savez(tmp_path / "plan.npz", **{k: v for k, v in npz(folder).items() if k != "p_W_C"})
-    with pytest.raises(InputError, match="p_W_C"):
+    with pytest.raises(ConfigError, match="p_W_C"):
         load_plan(tmp_path)
 
 
@@ -210,11 +209,13 @@ def test_paper_config_loads_with_the_papers_formulation():
 
 
 def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):
-    with pytest.raises(InputError, match="missing"):
+    with pytest.raises(ConfigError, match="not a directory"):
         load_plan(tmp_path / "nothing")
+    with pytest.raises(ConfigError, match="plan.json' is missing"):
+        load_plan(tmp_path)
     (tmp_path / "plan.json").write_text("{not json")
     (tmp_path / "plan.npz").write_bytes(b"junk")
-    with pytest.raises(InputError, match="plan.json"):
+    with pytest.raises(ConfigError, match="plan.json"):
         load_plan(tmp_path)
 
 

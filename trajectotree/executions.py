@@ -30,7 +30,7 @@ import numpy as np
 
 from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_controller,
                                  check_range)
-from trajectotree.io import SIM_JSON, SIM_NPZ, write_bytes_atomic
+from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, write_bytes_atomic
 from trajectotree.sweep_store import TRIALS_DIR, sweep_lock
 
 CONDITIONS = ("nominal", "mismatch", "push")
@@ -122,7 +122,7 @@ def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: Con
     tasks = []
     for trial_dir in sorted(p for p in (Path(sweep_dir) / TRIALS_DIR).iterdir() if p.is_dir()):
         try:
-            plan = json.loads((trial_dir / "plan.json").read_text())
+            plan = json.loads((trial_dir / PLAN_JSON).read_text())
         except (json.JSONDecodeError, OSError):
             continue  # not a finished trial (the sweep names and recomputes a corrupt one)
         if not plan.get("iterations") or (methods is not None and plan.get("method") not in methods):

@@ -1,6 +1,11 @@
 """Saving and loading each stage's output (npz arrays + json), atomically:
 every file is written to a temporary name in its folder and moved into place
-with os.replace, so an interrupted run leaves no half-written file."""
+with os.replace, so an interrupted run leaves no half-written file.
+
+A leaf over plain values: it reads and writes the types of trajectotree.results
+(and the config and contact plan they hold) and imports no stage that makes them.
+Bad or missing files raise trajectotree.config.ConfigError naming the file.
+"""
 
 from __future__ import annotations
 
@@ -8,13 +13,21 @@ import io as _io
 import json
 import os
 import tempfile
+import zipfile
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from trajectotree.config import Config, ConfigError, config_from_dict, config_to_dict
+from trajectotree.contact_plan import ContactPlan
+from trajectotree.results import SIM_ARRAYS, TRAJECTORY_ARRAYS, PhysicsCheck, PlanResult, SimResult, Trajectory
+
 SIM_JSON = "sim.json"
 SIM_NPZ = "sim.npz"
-SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error", "f_W", "f_W_plan")
+PLAN_JSON = "plan.json"
+PLAN_NPZ = "plan.npz"
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:
@@ -31,20 +44,28 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
         raise
 
 
-def save_sim(result, plan_dir: str | Path) -> None:
+def write_json_atomic(path: str | Path, data: dict) -> None:
+    """`data` as indented JSON with a final newline (every json file of a run)."""
+    write_bytes_atomic(path, (json.dumps(data, indent=2) + "\n").encode())
+
+
+def _npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    buffer = _io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def save_sim(result: SimResult, plan_dir: str | Path) -> None:
     """plan_dir/sim.json (SimResult.to_json) and plan_dir/sim.npz (t (T,), abs_error
     (T, 3), the simulated pose x, joint angles q and planned pose x_plan, and the
     simulated and planned finger forces f_W, f_W_plan (T, 4, 2))."""
-    buffer = _io.BytesIO()
-    np.savez(buffer, **{name: getattr(result, name) for name in SIM_ARRAYS})
-    write_bytes_atomic(Path(plan_dir) / SIM_NPZ, buffer.getvalue())
-    write_bytes_atomic(Path(plan_dir) / SIM_JSON, (json.dumps(result.to_json(), indent=2) + "\n").encode())
+    write_bytes_atomic(Path(plan_dir) / SIM_NPZ, _npz_bytes({name: getattr(result, name) for name in SIM_ARRAYS}))
+    write_json_atomic(Path(plan_dir) / SIM_JSON, result.to_json())
 
 
-def load_sim(plan_dir: str | Path):
+def load_sim(plan_dir: str | Path) -> SimResult:
     """The SimResult saved by save_sim. Raises FileNotFoundError or ValueError
     (naming the file) when sim.json / sim.npz are missing or malformed."""
-    from trajectotree.simulate import SimResult
     plan_dir = Path(plan_dir)
     try:
         summary = json.loads((plan_dir / SIM_JSON).read_text())
@@ -63,13 +84,8 @@ def load_sim(plan_dir: str | Path):
         raise ValueError(f"{plan_dir}: malformed {SIM_JSON} / {SIM_NPZ}: {e}") from None
 
 
-PLAN_JSON = "plan.json"
-PLAN_NPZ = "plan.npz"
-
-
-def plan_to_json(result) -> dict:
+def plan_to_json(result: PlanResult) -> dict:
     """plan.json (keys: README, "Trajectory optimization"): the solve report, contact sequence and config."""
-    from trajectotree.config import config_to_dict
     finite = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731 (JSON has no NaN)
     return {
         "method": result.method, "goal": float(result.goal), "success": bool(result.success),
@@ -87,62 +103,88 @@ def plan_to_json(result) -> dict:
     }
 
 
-def save_plan(result, out_dir: str | Path) -> None:
+def save_plan(result: PlanResult, out_dir: str | Path) -> None:
     """out_dir/plan.npz (the Trajectory arrays at every knot; empty when nothing was
     solved) and out_dir/plan.json (plan_to_json), each written atomically."""
-    from trajectotree.planners import TRAJECTORY_ARRAYS
-    buffer = _io.BytesIO()
-    arrays = {} if result.trajectory is None else {n: getattr(result.trajectory, n) for n in TRAJECTORY_ARRAYS}
-    np.savez(buffer, **arrays)
-    write_bytes_atomic(Path(out_dir) / PLAN_NPZ, buffer.getvalue())
-    write_bytes_atomic(Path(out_dir) / PLAN_JSON, (json.dumps(plan_to_json(result), indent=2) + "\n").encode())
+    arrays = {} if result.trajectory is None else result.trajectory.arrays()
+    write_bytes_atomic(Path(out_dir) / PLAN_NPZ, _npz_bytes(arrays))
+    write_json_atomic(Path(out_dir) / PLAN_JSON, plan_to_json(result))
 
 
-def load_plan(out_dir: str | Path):
-    """The PlanResult saved by save_plan. Raises trajectotree.cli.InputError naming the
-    file when the folder, plan.json or plan.npz is missing or malformed."""
-    from trajectotree.cli import InputError
-    from trajectotree.config import ConfigError, config_from_dict
-    from trajectotree.contact_plan import ContactPlan
-    from trajectotree.physics import PhysicsCheck
-    from trajectotree.planners import TRAJECTORY_ARRAYS, PlanResult, Trajectory
-    out_dir = Path(out_dir)
-    json_path, npz_path = out_dir / PLAN_JSON, out_dir / PLAN_NPZ
+@dataclass(frozen=True)
+class PlanFiles:
+    """A plan folder as read: plan.json's data, its Config and the plan.npz arrays."""
+
+    folder: Path
+    data: dict                      # plan.json as parsed
+    config: Config                  # plan.json's config
+    arrays: dict[str, np.ndarray]   # every TRAJECTORY_ARRAYS name, or none when planning solved nothing
+
+    @property
+    def json_path(self) -> Path:
+        return self.folder / PLAN_JSON
+
+    @property
+    def npz_path(self) -> Path:
+        return self.folder / PLAN_NPZ
+
+
+@contextmanager
+def reading(path: Path):
+    """Turns an error met while parsing `path` into a ConfigError naming the file."""
+    try:
+        yield
+    except ConfigError as e:  # only config_from_dict raises it while a plan is read
+        raise ConfigError(f"{str(path)!r} holds an invalid config: {e}") from None
+    except (KeyError, TypeError, ValueError, AttributeError, OSError, EOFError, zipfile.BadZipFile) as e:
+        # JSONDecodeError and UnicodeDecodeError are ValueErrors; a truncated zip is a BadZipFile
+        raise ConfigError(f"{str(path)!r} is not a valid {path.name} ({type(e).__name__}: {e})") from None
+
+
+def read_plan_files(folder: str | Path, name: str = "plan folder") -> PlanFiles:
+    """The plan folder written by save_plan (`name` says what it is to the user, e.g. a
+    command's argument). ConfigError naming the folder or file when the folder or a file is
+    missing, a file is malformed, the config invalid or a trajectory array missing."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ConfigError(f"{name} {str(folder)!r} is not a directory")
+    json_path, npz_path = folder / PLAN_JSON, folder / PLAN_NPZ
     for path in (json_path, npz_path):
         if not path.is_file():
-            raise InputError(f"{str(path)!r} is missing; a plan folder holds {PLAN_JSON} and {PLAN_NPZ} "
-                             "(written by `trajectotree plan`)")
-    try:
+            raise ConfigError(f"{str(path)!r} is missing; a plan folder holds {PLAN_JSON} and {PLAN_NPZ} "
+                              "(written by `trajectotree plan`)")
+    with reading(json_path):
         data = json.loads(json_path.read_text())
+        config = config_from_dict(data["config"])
+    with reading(npz_path), np.load(npz_path) as npz:
+        arrays = {key: np.array(npz[key]) for key in npz.files}
+    missing = [n for n in TRAJECTORY_ARRAYS if n not in arrays]
+    if arrays and missing:
+        raise ConfigError(f"{str(npz_path)!r} lacks the arrays {missing}"
+                          + (" (written before plan.npz had p_W_C; plan it again)" if missing == ["p_W_C"] else ""))
+    return PlanFiles(folder=folder, data=data, config=config, arrays=arrays)
+
+
+def load_plan(out_dir: str | Path) -> PlanResult:
+    """The PlanResult saved by save_plan (trajectory None when nothing was solved).
+    Raises ConfigError naming the folder or file when missing or malformed (read_plan_files)."""
+    files = read_plan_files(out_dir)
+    with reading(files.json_path):
+        data = files.data
         search = data.get("search", {})
         contact_plan = ContactPlan.from_json({"goal": data["goal"], "success": search.get("success", True),
                                               "reason": search.get("reason", ""), "stats": search.get("stats", {}),
                                               "contact_sequence": data["contact_sequence"]})
         nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
-        fields = dict(method=data["method"], goal=float(data["goal"]), success=bool(data["success"]),
-                      status=str(data["status"]), search_time_s=float(data["search_time_s"]),
-                      build_time_s=float(data["build_time_s"]), solve_time_s=float(data["solve_time_s"]),
-                      total_time_s=float(data["total_time_s"]), cost=nan(data["cost"]),
-                      iterations=int(data["iterations"]), contact_plan=contact_plan,
-                      violations={k: nan(v) for k, v in data["violations"].items()},
-                      config=config_from_dict(data["config"]), solver_timing=data.get("solver_timing", {}))
         check = data.get("physics_check")
-        fields["physics_check"] = None if check is None else PhysicsCheck.from_json(check)
-        fields["converged"] = bool(data.get("converged", data["success"]))   # older files: success meant converged
-    except (KeyError, TypeError, ValueError, AttributeError) as e:
-        if isinstance(e, ConfigError):
-            raise InputError(f"{str(json_path)!r} holds an invalid config: {e}") from None
-        raise InputError(f"{str(json_path)!r} is not a valid plan.json ({type(e).__name__}: {e})") from None
-    try:
-        with np.load(npz_path) as npz:
-            arrays = {name: np.array(npz[name]) for name in npz.files}
-    except (OSError, ValueError, EOFError) as e:
-        raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
-    trajectory = None
-    if arrays:
-        missing = [n for n in TRAJECTORY_ARRAYS if n not in arrays]
-        if missing:
-            raise InputError(f"{str(npz_path)!r} lacks the arrays {missing}"
-                             + (" (written before plan.npz had p_W_C; plan it again)" if missing == ["p_W_C"] else ""))
-        trajectory = Trajectory(**{n: arrays[n] for n in TRAJECTORY_ARRAYS})
-    return PlanResult(**fields, trajectory=trajectory)
+        result = PlanResult(
+            method=data["method"], goal=float(data["goal"]), success=bool(data["success"]),
+            status=str(data["status"]), search_time_s=float(data["search_time_s"]),
+            build_time_s=float(data["build_time_s"]), solve_time_s=float(data["solve_time_s"]),
+            total_time_s=float(data["total_time_s"]), cost=nan(data["cost"]), iterations=int(data["iterations"]),
+            contact_plan=contact_plan, violations={k: nan(v) for k, v in data["violations"].items()},
+            config=files.config, solver_timing=data.get("solver_timing", {}),
+            physics_check=None if check is None else PhysicsCheck.from_json(check),
+            converged=bool(data.get("converged", data["success"])),   # older files: success meant converged
+            trajectory=Trajectory(**{n: files.arrays[n] for n in TRAJECTORY_ARRAYS}) if files.arrays else None)
+    return result

@@ -1,4 +1,5 @@
-"""Tracking metrics of an executed plan (pure numpy functions).
+"""Tracking metrics of an executed plan (pure numpy functions): `evaluate` turns the
+SimLog a simulation recorded into its SimResult (the log and the metrics below).
 
 Errors compare the simulated object pose (x, y, theta) with the planned one at
 the same times. theta is the planar joint's unwrapped angle, so a box that spins
@@ -16,10 +17,12 @@ it left the hand; otherwise metres of free fall would swamp every mean.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 from scipy import stats
+
+from trajectotree.results import SimLog, SimResult
 
 
 def absolute_error(pose, pose_ref) -> np.ndarray:
@@ -54,6 +57,18 @@ def hold_after_drop(t, abs_error, drop_time: float | None) -> np.ndarray:
         if after.any():
             held[after] = held[np.flatnonzero(~after)[-1]]
     return held
+
+
+def evaluate(log: SimLog, drop_distance: float) -> SimResult:
+    """The run's tracking metrics against the planned object trajectory, with the drop
+    rule at `drop_distance` (m, SimConfig.drop_distance)."""
+    dropped, drop_time = detect_drop(log.t, log.x, log.x_plan, drop_distance)
+    abs_error = hold_after_drop(log.t, absolute_error(log.x, log.x_plan), drop_time)
+    mae = mean_absolute_error(abs_error)
+    return SimResult(**{f.name: getattr(log, f.name) for f in fields(SimLog)}, abs_error=abs_error,
+                     mae_x=float(mae[0]), mae_y=float(mae[1]), mae_theta=float(mae[2]),
+                     final_error=tuple(float(v) for v in final_error(abs_error)),
+                     dropped=dropped, drop_time_s=drop_time)
 
 
 @dataclass(frozen=True)

@@ -16,21 +16,13 @@ FORCE_TOL, the cones hold to CONE_TOL and Newton-Euler to NEWTON_EULER_TOL.
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from trajectotree.geometry import box_signed_distance, nearest_box_points, poses_box_to_world, poses_world_to_box
-
-# m, a fingertip sphere farther than this from the box is off it (issue 13's rule).
-GAP_TOL = 1e-4
-# N, the most force a fingertip off the box may carry (issue 13's rule).
-FORCE_TOL = 0.01
-# N, friction-cone violation tolerated (IPOPT holds the linear cone rows to ~1e-8).
-CONE_TOL = 1e-6
-# N and N m, Newton-Euler residual tolerated: 1e-4 N is 0.02 % of the default box's weight.
-NEWTON_EULER_TOL = 1e-4
+# The check's value type and its tolerances live with the other saved values (plan.json records both).
+from trajectotree.results import CONE_TOL, FORCE_TOL, GAP_TOL, NEWTON_EULER_TOL, PhysicsCheck
 
 
 @dataclass(frozen=True)
@@ -53,32 +45,6 @@ class BoxModel:
         c = scene.config
         return BoxModel(mass=c.box_mass, width=c.box_width, height=c.box_height, gravity=c.gravity,
                         tip_radius=scene.tip_radius)
-
-
-@dataclass(frozen=True)
-class PhysicsCheck:
-    newton_euler_force_N: float        # max |translational residual| over knots, N
-    newton_euler_moment_Nm: float      # max |rotational residual| over knots, N m
-    friction_cone_N: float             # max cone violation (<= 0 inside), N
-    mu: float                          # the friction coefficient the cones were checked with
-    force_at_distance_N: float         # max |f_W| of a fingertip more than GAP_TOL off the box (0 if none), N
-    force_at_distance_knot: int        # where that force is (-1 if none)
-    force_at_distance_finger: int
-    force_at_distance_gap_m: float     # that fingertip's distance from the box, m
-    contact_point_off_surface_m: float  # max distance of p_W_C from the box boundary, m
-    passed: bool
-    reason: str                        # why it failed ("" if passed)
-
-    def to_json(self) -> dict:
-        """The fields (non-finite numbers as None: JSON has no NaN) and the tolerances."""
-        values = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in asdict(self).items()}
-        return {**values, "gap_tol_m": GAP_TOL, "force_tol_N": FORCE_TOL, "cone_tol_N": CONE_TOL,
-                "newton_euler_tol": NEWTON_EULER_TOL}
-
-    @staticmethod
-    def from_json(data: dict) -> "PhysicsCheck":
-        nan = float("nan")
-        return PhysicsCheck(**{f.name: nan if data[f.name] is None else data[f.name] for f in fields(PhysicsCheck)})
 
 
 def contact_points(x, p_W_tip, pinned, p_BC_planned, width: float, height: float) -> np.ndarray:

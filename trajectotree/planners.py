@@ -20,13 +20,12 @@ total_time_s = their sum.
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from trajectotree.cito.guess import plan_guess, static_guess
+from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import solve, violations
@@ -34,77 +33,18 @@ from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import Config, ConfigError
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import BoxBoundary, box_to_world
-from trajectotree.physics import BoxModel, PhysicsCheck, check_physics, contact_points
+from trajectotree.grasp import FormClosure
+from trajectotree.initial_grasp import mu_plan
+from trajectotree.physics import BoxModel, check_physics, contact_points
+from trajectotree.results import METHODS, PlanResult, Trajectory, check_goal, check_method  # noqa: F401 (planners.METHODS)
 from trajectotree.scene import NUM_FINGERS, Scene
-
-METHODS = ("trajectotree", "cito", "cito-warm")
-TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """The plan at every knot (the plan.npz arrays)."""
-
-    t: np.ndarray          # (K,) s
-    x: np.ndarray          # (K, 3) object pose (x m, y m, theta rad)
-    xdot: np.ndarray       # (K, 3)
-    q: np.ndarray          # (K, 8) rad, finger-major
-    qdot: np.ndarray       # (K, 8) rad/s
-    tau: np.ndarray        # (K, 8) N m
-    lambda_n: np.ndarray   # (K, 4) N, normal force of each finger on the box
-    lambda_t: np.ndarray   # (K, 4) N, tangential force (along t_B = z x n_B)
-    f_W: np.ndarray        # (K, 4, 2) N, force of each finger ON the box, in W
-    p_W_tip: np.ndarray    # (K, 4, 2) m, fingertip positions in W: the sphere centres
-    #                        (finger{i}_tip frames)
-    p_W_C: np.ndarray      # (K, 4, 2) m, where each finger's force acts on the box surface, in W: the
-    #                        planned contact of a pinned finger, else the box point nearest the tip
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """{plan.npz name: array}."""
-        return {name: getattr(self, name) for name in TRAJECTORY_ARRAYS}
-
-
-@dataclass(frozen=True)
-class PlanResult:
-    method: str
-    goal: float                      # rad
-    success: bool                    # IPOPT converged, the physics check passed (the search too, where used)
-    status: str                      # IPOPT status name (+ why the physics check failed), or why the search failed
-    search_time_s: float
-    build_time_s: float
-    solve_time_s: float
-    total_time_s: float
-    cost: float                      # final objective (nan when nothing was solved)
-    iterations: int                  # IPOPT iterations (0 when nothing was solved)
-    contact_plan: ContactPlan
-    trajectory: Trajectory | None    # None when nothing was solved
-    violations: dict                 # max abs violation per group (solve.VIOLATION_GROUPS)
-    config: Config
-    solver_timing: dict = field(default_factory=dict)  # IPOPT's timing statistics, s
-    physics_check: PhysicsCheck | None = None          # the check of the plan's arrays (None: nothing solved)
-    # IPOPT converged (and the search found a plan, where used), whether or not the physics check
-    # passed: the general CITO baselines converge to plans that push from a distance.
-    converged: bool = False
+from trajectotree.search import choose_initial_grasp, find_contact_plan, object_path
 
 
 def planning_mu(config: Config) -> float:
     """mu_plan = search.friction_safety * scene.mu, the friction every plan may use (the
     search's grasps and stances and the CITO friction cones: one definition for both)."""
-    from trajectotree.initial_grasp import mu_plan
     return mu_plan(config.scene, config.search)
-
-
-def check_method(method: str) -> str:
-    if method not in METHODS:
-        raise ConfigError(f"method = {method!r} is unknown; valid: {', '.join(METHODS)}")
-    return method
-
-
-def check_goal(goal) -> float:
-    if isinstance(goal, bool) or not isinstance(goal, (int, float, np.floating)) or not math.isfinite(goal) \
-            or abs(goal) > math.pi + 1e-9:
-        raise ConfigError(f"goal = {goal!r} is out of range; valid range: [-pi, pi] rad")
-    return float(goal)
 
 
 def plan(*, scene: Scene, goal: float, method: str, config: Config,
@@ -121,7 +61,6 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
         if not contact_plan.success:
             return _unsolved(method, goal, contact_plan.reason, 0.0, contact_plan, config)
     elif contact_plan is None:
-        from trajectotree.search import find_contact_plan
         t0 = time.perf_counter()
         contact_plan = find_contact_plan(scene, goal, config.search)
         search_time = time.perf_counter() - t0
@@ -135,7 +74,8 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
         spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
     else:
         node0 = contact_plan.nodes[0]
-        path = _object_path(scene, goal, config) if method == "cito" else contact_plan.object_path
+        path = (object_path(scene.config.initial_pose, goal, config.search.num_nodes) if method == "cito"
+                else contact_plan.object_path)
         spec = general_spec(x0=node0.object_pose, q0=node0.q, config=config.cito, object_path=path)
     program = build_program(config.cito, spec, body)
     guess = static_guess(program.rows, spec) if method == "cito" else plan_guess(program.rows, spec, contact_plan)
@@ -169,23 +109,12 @@ def _trajectory(program, sol, scene: Scene) -> Trajectory:
                       p_W_C=p_W_C)
 
 
-def _object_path(scene: Scene, goal: float, config: Config) -> np.ndarray:
-    """x*_0..x*_{N-1}: linear interpolation from the initial pose to the goal rotation
-    (the same path the contact search uses)."""
-    x0 = np.asarray(scene.config.initial_pose, dtype=float)
-    return x0 + np.outer(np.linspace(0.0, 1.0, config.search.num_nodes), [0.0, 0.0, goal])
-
-
 def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan:
     """A one-node ContactPlan with the initial grasp, for `cito` (which has no search):
     config.search.initial_arclengths, or else the search's initial-grasp chooser's first
     choice for this goal (trajectotree.search.choose_initial_grasp: the best-ranked candidate
     whose fingers pass the search's cheap checks for the goal; the search itself may root at a
     later one). success False with the reason when no grasp qualifies or a contact is out of reach."""
-    from trajectotree.grasp import FormClosure
-    from trajectotree.initial_grasp import mu_plan
-    from trajectotree.search import choose_initial_grasp
-    from trajectotree.cito.hand import HandModel
     c = scene.config
     boundary = BoxBoundary(c.box_width, c.box_height)
     chosen, reason = choose_initial_grasp(scene, goal, config.search)

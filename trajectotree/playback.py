@@ -204,7 +204,7 @@ def write_gif(scene, times, object_poses, joint_angles, path: str | Path, *, pla
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    from trajectotree.plotting import plot_box, plot_hand
+    from trajectotree.figures import plot_box, plot_hand
     times = np.asarray(times)
     frames = np.unique(np.searchsorted(times, np.arange(times[0], times[-1] + 1e-9, 1.0 / fps)).clip(0, len(times) - 1))
     c = scene.config

@@ -17,9 +17,8 @@ from pydrake.solvers import MathematicalProgram, Solve
 
 from trajectotree.geometry import (BoxBoundary, box_signed_distance, box_to_world, nearest_box_points,
                                    poses_world_to_box, rotation_2d, rotations_2d)
+from trajectotree.results import TRAJECTORY_ARRAYS as PLAN_ARRAYS
 from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, Scene
-
-PLAN_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
 
 
 @dataclass(frozen=True)

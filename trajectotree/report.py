@@ -14,7 +14,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import ConfigError
-from trajectotree.io import write_bytes_atomic
+from trajectotree.figures import save_figure
+from trajectotree.io import SIM_NPZ, write_bytes_atomic
 from trajectotree.metrics import mean_confidence_interval
 from trajectotree.sweep import MANIFEST_FILE, TRIALS_DIR, read_rows
 
@@ -201,7 +201,7 @@ def _tracks(method_folders) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     """method -> [(t, abs_error)] read from each (method, folder)'s sim.npz."""
     tracks: dict[str, list] = {}
     for method, folder in method_folders:
-        path = folder / "sim.npz"
+        path = folder / SIM_NPZ
         try:
             with np.load(path) as data:
                 tracks.setdefault(method, []).append((data["t"], data["abs_error"]))
@@ -258,59 +258,6 @@ def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | No
         fig.text(0.01, 0.01, "no executed plans: " + ", ".join(missing), fontsize=8, color="0.45")
     fig.tight_layout(rect=(0, 0.04 if missing else 0, 1, 1))
     return fig
-
-
-def segment_spans(switching_fingers, knots_per_segment: int, dt: float) -> list[tuple[float, float, int | None]]:
-    """(t_start, t_end, switching finger) of each transition segment of a plan whose nodes
-    have `switching_fingers` (node 0 has none); a segment spans knots_per_segment steps of dt."""
-    length = knots_per_segment * dt
-    return [((n - 1) * length, n * length, finger) for n, finger in enumerate(switching_fingers) if n > 0]
-
-
-def figure_finger_forces(result, segments=None):
-    """Each finger's simulated vs planned force magnitude |f| on the box over one executed
-    plan (a SimResult), on one shared scale: where the run leaves the plan's contact forces,
-    and when. `segments` (segment_spans) marks the segments and each finger's switches.
-    The scale covers the plan and the run up to the drop: a fallen box squeezed between
-    the fingers does not set it (clipped in the grey span)."""
-    import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
-
-    from trajectotree.plotting import FINGER_COLORS, plot_finger_force, plot_segments
-    fingers = result.f_W.shape[1]
-    fig, axes = plt.subplots(fingers, 1, figsize=(8, 1.6 * fingers + 0.9), sharex=True, sharey=True)
-    held = result.t <= (result.drop_time_s if result.drop_time_s is not None else np.inf)
-    top = max(np.linalg.norm(result.f_W_plan, axis=-1).max(), np.linalg.norm(result.f_W[held], axis=-1).max(), 0.1)
-    for i, ax in enumerate(axes):
-        plot_finger_force(ax, result.t, result.f_W[:, i], result.f_W_plan[:, i], color=FINGER_COLORS[i],
-                          drop_time=result.drop_time_s)
-        if segments:
-            plot_segments(ax, segments, i)
-        ax.set_ylabel(f"finger {i}\n|f| [N]")
-        ax.grid(alpha=0.3)
-        ax.set_ylim(-0.03 * top, 1.1 * top)
-    handles = {}
-    for ax in axes:  # one legend entry per label, from whichever panel has it
-        for handle, label in zip(*ax.get_legend_handles_labels()):
-            handles.setdefault(label, handle)
-    for label, style in (("simulated |f|", "-"), ("planned |f|", "--")):  # every finger's colour, one style
-        handles[label] = Line2D([], [], color="k", ls=style, lw=1.2)
-    if segments:
-        handles["segment boundary"] = Line2D([], [], color="0.5", ls=":", lw=0.8)
-    fig.legend(handles.values(), handles.keys(), fontsize=8, ncol=min(len(handles), 3), loc="upper center",
-               bbox_to_anchor=(0.5, 0.97), frameon=False)
-    fig.suptitle("force of each finger on the box, magnitude |f|", fontsize=10, y=0.995)
-    axes[-1].set_xlabel("time [s]")
-    fig.tight_layout(rect=(0, 0, 1, 0.985 - 0.03 * math.ceil(len(handles) / 3)))
-    return fig
-
-
-def save_figure(fig, path: str | Path) -> str:
-    """Writes fig to path atomically, in the format its suffix names."""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format=Path(path).suffix.lstrip("."), dpi=150)
-    write_bytes_atomic(path, buffer.getvalue())
-    return str(path)
 
 
 def _save(fig, stem: Path) -> tuple[str, str]:

@@ -7,8 +7,9 @@ positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), a controller (the object-level
 GraspController, default, or eq. 20's ImpedanceController, `controller="paper"`),
 loggers of the plant state and of each finger's simulated force on the box
-(`FingertipForces`, compared with the planned forces in `SimResult`) and,
-optionally, a Meshcat visualizer.
+(`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
+`SimLog` (the logs beside the plan at the same times), which
+`trajectotree.metrics.evaluate` turns into the `SimResult` the functions here return.
 
 `Conditions` change the simulated world only, never what the controller assumes:
 the friction coefficient (sim_mu), the box mass (sim_mass: model mismatch) and a
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 import time
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -41,35 +42,8 @@ from trajectotree import metrics, playback
 from trajectotree.config import Config, ConfigError, check_controller, check_range
 from trajectotree.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.reference import Reference, grasp_schedule, reference_from_plan
+from trajectotree.results import SimLog, SimResult
 from trajectotree.scene import NUM_FINGERS, add_hand_and_box, build_scene
-
-
-@dataclass(frozen=True)
-class SimResult:
-    t: np.ndarray            # (T,) s, sample times
-    x: np.ndarray            # (T, 3) simulated object pose (x m, y m, theta rad)
-    q: np.ndarray            # (T, 8) rad, simulated joint angles (finger-major)
-    x_plan: np.ndarray       # (T, 3) planned object pose at the same times
-    abs_error: np.ndarray    # (T, 3) |x - x_plan|, held at its drop-time value after a drop
-    f_W: np.ndarray          # (T, 4, 2) N, simulated force of each finger on the box, in W
-    f_W_plan: np.ndarray     # (T, 4, 2) N, planned force of each finger on the box at the same times
-    mae_x: float             # m, time mean of |x error|
-    mae_y: float             # m
-    mae_theta: float         # rad
-    final_error: tuple[float, float, float]  # (m, m, rad) absolute error at the last sample
-    dropped: bool            # the drop rule fired (trajectotree.metrics.detect_drop)
-    drop_time_s: float | None  # s, when it fired
-    sim_time_s: float        # s, wall-clock time of the simulation
-    controller: str = "grasp"                          # which executor ran (config.CONTROLLERS)
-    conditions: dict = field(default_factory=dict)     # Conditions.to_json() of the simulated world
-
-    def to_json(self) -> dict:
-        """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
-        the controller and the simulated conditions."""
-        return {"mae_x": self.mae_x, "mae_y": self.mae_y, "mae_theta": self.mae_theta,
-                "final_error": list(self.final_error), "dropped": self.dropped, "drop_time_s": self.drop_time_s,
-                "sim_time_s": self.sim_time_s, "duration_s": float(self.t[-1]), "num_samples": int(len(self.t)),
-                "controller": self.controller, "conditions": self.conditions}
 
 
 @dataclass(frozen=True)
@@ -294,34 +268,8 @@ def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.nd
     return log.sample_times().copy(), data[box_start:box_start + 3].T.copy(), data[hand_q].T.copy()
 
 
-def evaluate(reference: Reference, config: Config, t, x, q, f_W, sim_time_s: float) -> SimResult:
-    """Metrics of a simulated run against the planned object trajectory."""
-    x_plan = reference.object_pose_at(t)
-    dropped, drop_time = metrics.detect_drop(t, x, x_plan, config.sim.drop_distance)
-    abs_error = metrics.hold_after_drop(t, metrics.absolute_error(x, x_plan), drop_time)
-    mae = metrics.mean_absolute_error(abs_error)
-    return SimResult(t=t, x=x, q=q, x_plan=x_plan, abs_error=abs_error, f_W=f_W, f_W_plan=reference.forces_at(t),
-                     mae_x=float(mae[0]), mae_y=float(mae[1]),
-                     mae_theta=float(mae[2]), final_error=tuple(float(v) for v in metrics.final_error(abs_error)),
-                     dropped=dropped, drop_time_s=drop_time, sim_time_s=sim_time_s)
-
-
-def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
-                       html_path: str | Path | None = None, controlled: bool = True,
-                       realtime_rate: float = 0.0, controller: str | None = None,
-                       conditions: Conditions = Conditions()) -> SimResult:
-    """Runs the execution Diagram for the plan's length plus the settle time."""
-    if html_path is not None and meshcat is None:
-        meshcat = playback.start_meshcat()
-    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled,
-                                        controller=controller, conditions=conditions)
-    simulator = Simulator(execution.diagram, execution.initial_context(reference))
-    simulator.set_target_realtime_rate(realtime_rate)
-    if meshcat is not None:
-        playback.set_planar_view(meshcat)
-        playback.add_plan_ghost(meshcat, config.scene)
-        meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
-        animation = execution.visualizer.StartRecording()
+def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict) -> SimLog:
+    """Runs `simulator` to the execution's end; what it logged, beside the plan at the same times."""
     start = time.perf_counter()
     simulator.AdvanceTo(execution.duration)
     sim_time_s = time.perf_counter() - start
@@ -333,8 +281,29 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
         logs.append(log)
     t, x, q = split_state_log(execution, logs[0])
     f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
-    result = dataclasses.replace(evaluate(reference, config, t, x, q, f_W, sim_time_s),
-                                 controller=execution.controller, conditions=conditions.to_json(config.scene))
+    return SimLog(t=t, x=x, q=q, x_plan=reference.object_pose_at(t), f_W=f_W, f_W_plan=reference.forces_at(t),
+                  sim_time_s=sim_time_s, controller=execution.controller, conditions=conditions)
+
+
+def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
+                       html_path: str | Path | None = None, controlled: bool = True,
+                       realtime_rate: float = 0.0, controller: str | None = None,
+                       conditions: Conditions = Conditions()) -> SimResult:
+    """Runs the execution Diagram for the plan's length plus the settle time; the log it
+    records, evaluated by trajectotree.metrics."""
+    if html_path is not None and meshcat is None:
+        meshcat = playback.start_meshcat()
+    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled,
+                                        controller=controller, conditions=conditions)
+    simulator = Simulator(execution.diagram, execution.initial_context(reference))
+    simulator.set_target_realtime_rate(realtime_rate)
+    if meshcat is not None:
+        playback.set_planar_view(meshcat)
+        playback.add_plan_ghost(meshcat, config.scene)
+        meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
+        animation = execution.visualizer.StartRecording()
+    log = record_log(execution, simulator, reference, conditions.to_json(config.scene))
+    result = metrics.evaluate(log, config.sim.drop_distance)
     if meshcat is not None:
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
         playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))

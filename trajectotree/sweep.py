@@ -37,13 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import Config, ConfigError, check_integer, check_range, config_to_dict
+from trajectotree.results import METHODS  # results imports no Drake, like this module
 from trajectotree.sweep_store import (CORRUPT_DIR, LOCK_FILE, MANIFEST_FILE, ROWS_FILE, TRIALS_DIR,  # noqa: F401
                                       CorruptTrialError, check_manifest, prepare_dir, read_rows, store_trial,
                                       sweep_lock, write_rows_file)
 from trajectotree.trial import (ROW_FILE, TrialInterrupted, TrialOutcome, TrialTask, allow_trials, empty_row,
                                 execute_trial, kill_children)
 
-METHODS = ("trajectotree", "cito", "cito-warm")  # the paper's method and its two baselines
 MANIFEST_FORMAT = "trajectotree-sweep/1"
 
 

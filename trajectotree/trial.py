@@ -27,6 +27,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from trajectotree.io import PLAN_JSON, SIM_JSON
+
 # Row fields, in the order of trials.jsonl and the CSV table.
 PLAN_FIELDS = ("success", "converged", "status", "search_time_s", "build_time_s", "solve_time_s", "total_time_s",
                "cost", "iterations")
@@ -78,12 +80,12 @@ def row_from_files(task: TrialTask, out_dir: Path) -> dict:
     """The trial's row, read back from the files the planner and simulator wrote
     (their documented JSON keys: plan.json and sim.json in the README)."""
     row = empty_row(task)
-    plan_json = json.loads((out_dir / "plan.json").read_text())
+    plan_json = json.loads((out_dir / PLAN_JSON).read_text())
     row.update({k: plan_json.get(k) for k in PLAN_FIELDS})
     if row["converged"] is None:  # plan.json from before the physics check: success meant converged
         row["converged"] = row["success"]
     row["switching_fingers"] = [n.get("switching_finger") for n in plan_json.get("contact_sequence") or ()]
-    sim_path = out_dir / "sim.json"
+    sim_path = out_dir / SIM_JSON
     if sim_path.is_file():
         sim_json = json.loads(sim_path.read_text())
         row.update({k: sim_json.get(k) for k in SIM_FIELDS}, simulated=True)

@@ -18,10 +18,6 @@ from trajectotree.config import ConfigError
 COMMANDS = ("demo", "scene", "search", "plan", "simulate", "sweep", "report")
 
 
-class InputError(ConfigError):
-    """Invalid user input outside the config (paths, files, methods): exit code 2."""
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="trajectotree",

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import sys
 from pathlib import Path
@@ -19,12 +18,29 @@ FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and br
 HTML_SUFFIXES = (".html", ".htm")
 
 
-def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True) -> None:
-    group = parser.add_argument_group("scene and planner settings (override --config)")
-    group.add_argument("--config", metavar="FILE.yaml", help="YAML file with any Config fields")
+def add_scene_options(group, config_help: str = "YAML file with any Config fields") -> None:
+    """--config and the scene options on top of it (scene_overrides reads them)."""
+    group.add_argument("--config", metavar="FILE.yaml", help=config_help)
     group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"), help="box width and height, m")
     group.add_argument("--mass", type=float, metavar="KG", help="box mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+
+
+def scene_overrides(args: argparse.Namespace) -> dict:
+    """The SceneConfig fields set by --box-size, --mass and --mu."""
+    scene = {}
+    if getattr(args, "box_size", None) is not None:
+        scene["box_width"], scene["box_height"] = args.box_size
+    if getattr(args, "mass", None) is not None:
+        scene["box_mass"] = args.mass
+    if getattr(args, "mu", None) is not None:
+        scene["mu"] = args.mu
+    return scene
+
+
+def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True) -> None:
+    group = parser.add_argument_group("scene and planner settings (override --config)")
+    add_scene_options(group)
     if segments:
         group.add_argument("--segments", type=int, metavar="S",
                            help=SEGMENTS_HELP)
@@ -33,13 +49,7 @@ def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True
 def config_from_args(args: argparse.Namespace) -> Config:
     """The Config from --config, then the individual options on top."""
     config = load_config(args.config) if getattr(args, "config", None) else Config()
-    scene, search = {}, {}
-    if getattr(args, "box_size", None) is not None:
-        scene["box_width"], scene["box_height"] = args.box_size
-    if getattr(args, "mass", None) is not None:
-        scene["box_mass"] = args.mass
-    if getattr(args, "mu", None) is not None:
-        scene["mu"] = args.mu
+    scene, search = scene_overrides(args), {}
     if getattr(args, "segments", None) is not None:
         check_integer("--segments", args.segments, 1, 99)
         search["num_nodes"] = args.segments + 1
@@ -64,14 +74,6 @@ def in_option_terms(message: str, args: argparse.Namespace) -> str:
     return message
 
 
-def check_goal(goal: float) -> float:
-    """The goal rotation (rad); the paper samples goals in [-pi, pi]."""
-    if not math.isfinite(goal) or abs(goal) > math.pi + 1e-9:
-        raise ConfigError(f"--goal = {goal!r} is out of range; valid range: [-pi, pi] rad, "
-                          f"i.e. [-{math.pi:.6f}, {math.pi:.6f}]")
-    return goal
-
-
 def print_json(data) -> None:
     json.dump(data, sys.stdout, indent=2)
     sys.stdout.write("\n")
@@ -85,32 +87,30 @@ def _nearest_existing(path: Path) -> Path:
 
 def check_output_dir(option: str, path: str | Path) -> Path:
     """An output folder (created later if missing): never an existing file, and its nearest
-    existing ancestor a writable folder. Checked before any work starts (InputError: exit 2)."""
-    from trajectotree.cli import InputError
+    existing ancestor a writable folder. Checked before any work starts (ConfigError: exit 2)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise InputError(f"{option} {str(path)!r} is an existing file, not a folder; "
+        raise ConfigError(f"{option} {str(path)!r} is an existing file, not a folder; "
                          "give a folder (it is created if missing)")
     base = _nearest_existing(path.absolute())
     if not base.is_dir():
-        raise InputError(f"{option} {str(path)!r} cannot be created: {str(base)!r} is a file, not a folder")
+        raise ConfigError(f"{option} {str(path)!r} cannot be created: {str(base)!r} is a file, not a folder")
     if not os.access(base, os.W_OK | os.X_OK):
-        raise InputError(f"{option} {str(path)!r} cannot be written: no write permission in {str(base)!r}")
+        raise ConfigError(f"{option} {str(path)!r} cannot be written: no write permission in {str(base)!r}")
     return path
 
 
 def check_output_file(option: str, path: str | Path, suffixes: tuple[str, ...]) -> Path:
     """An output file: its name ends in one of `suffixes`, it is not a folder, and it goes
-    into an existing, writable folder. Checked before any work starts (InputError: exit 2)."""
-    from trajectotree.cli import InputError
+    into an existing, writable folder. Checked before any work starts (ConfigError: exit 2)."""
     path = Path(path)
     if path.suffix.lower() not in suffixes:
-        raise InputError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")
+        raise ConfigError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")
     if path.is_dir():
-        raise InputError(f"{option} {str(path)!r} is a folder; give a file name ending in {' or '.join(suffixes)}")
+        raise ConfigError(f"{option} {str(path)!r} is a folder; give a file name ending in {' or '.join(suffixes)}")
     folder = path.absolute().parent
     if not folder.is_dir():
-        raise InputError(f"{option} {str(path)!r}: the folder {str(path.parent)!r} does not exist")
+        raise ConfigError(f"{option} {str(path)!r}: the folder {str(path.parent)!r} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"{option} {str(path)!r} cannot be written: no write permission in {str(path.parent)!r}")
+        raise ConfigError(f"{option} {str(path)!r} cannot be written: no write permission in {str(path.parent)!r}")
     return path

@@ -12,14 +12,15 @@ and summary.json (the numbers printed at the end).
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import add_config_options, check_goal, check_output_dir, config_from_args, print_json
+from trajectotree.cli.common import add_config_options, check_output_dir, config_from_args, print_json
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
+from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
+from trajectotree.results import check_goal
 
 KEYFRAMES = "keyframes.png"
 PLAYBACK = "playback.html"
@@ -27,7 +28,7 @@ FORCES = "forces.png"
 SUMMARY = "summary.json"
 # Written only when planning gets that far: removed first, so a rerun into the same
 # folder never leaves an older run's files beside the new plan.
-DERIVED_FILES = ("sim.json", "sim.npz", KEYFRAMES, PLAYBACK, FORCES, SUMMARY)
+DERIVED_FILES = (SIM_JSON, SIM_NPZ, KEYFRAMES, PLAYBACK, FORCES, SUMMARY)
 
 
 def register(subparsers) -> None:
@@ -75,14 +76,14 @@ def print_summary(summary: dict, out: Path) -> None:
 def run(args) -> int:
     from trajectotree.cli.search_cmd import draw_plan
     from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
-    from trajectotree.io import save_plan, save_sim, write_bytes_atomic
+    from trajectotree.figures import figure_finger_forces, save_figure, segment_spans
+    from trajectotree.io import save_plan, save_sim, write_json_atomic
     from trajectotree.planners import plan
     from trajectotree.playback import start_meshcat
-    from trajectotree.report import figure_finger_forces, save_figure, segment_spans
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
-    goal = check_goal(args.goal)
+    goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
     out = check_output_dir("--out", args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -98,7 +99,7 @@ def run(args) -> int:
     for name in DERIVED_FILES:
         (out / name).unlink(missing_ok=True)
     save_plan(result, out)
-    files = ["plan.json", "plan.npz"]
+    files = [PLAN_JSON, PLAN_NPZ]
     if result.contact_plan.success:
         draw_plan(scene, result.contact_plan, str(out / KEYFRAMES))
         files.append(KEYFRAMES)
@@ -111,10 +112,10 @@ def run(args) -> int:
         spans = segment_spans([n.switching_finger for n in result.contact_plan.nodes], config.cito.knots_per_segment,
                               config.cito.dt)
         save_figure(figure_finger_forces(sim, spans), out / FORCES)
-        files += ["sim.json", "sim.npz", PLAYBACK, FORCES]
+        files += [SIM_JSON, SIM_NPZ, PLAYBACK, FORCES]
     summary = {"plan": plan_summary(result), "simulation": None if sim is None else sim_json,
                "files": files + [SUMMARY]}
-    write_bytes_atomic(out / SUMMARY, (json.dumps(summary, indent=2) + "\n").encode())
+    write_json_atomic(out / SUMMARY, summary)
     if args.json:
         print_json(summary)
     else:

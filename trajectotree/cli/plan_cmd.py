@@ -8,17 +8,18 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import (HTML_SUFFIXES, add_config_options, check_goal, check_output_dir,
+from trajectotree.cli.common import (HTML_SUFFIXES, add_config_options, check_output_dir,
                                       check_output_file, config_from_args, print_json)
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
+from trajectotree.io import SIM_JSON, SIM_NPZ
+from trajectotree.results import METHODS, check_goal, check_method
 
 # Files derived from a plan (by `simulate`): stale once a new plan replaces it.
-DERIVED_FILES = ("sim.json", "sim.npz")
+DERIVED_FILES = (SIM_JSON, SIM_NPZ)
 
 
 def register(subparsers) -> None:
-    from trajectotree.planners import METHODS
     p = subparsers.add_parser("plan", help="plan a box rotation (contact search + trajectory optimization)",
                               description=__doc__)
     p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, in [-pi, pi]")
@@ -34,9 +35,9 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.io import plan_to_json, save_plan
-    from trajectotree.planners import check_method, plan
+    from trajectotree.planners import plan
     from trajectotree.scene import build_scene
-    goal = check_goal(args.goal)
+    goal = check_goal(args.goal, "--goal")
     method = check_method(args.method)
     config = config_from_args(args)
     out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}")

@@ -37,7 +37,7 @@ def draw_model(scene, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.plotting import plot_box, plot_hand, plot_workspace
+    from trajectotree.figures import plot_box, plot_hand, plot_workspace
     fig, ax = plt.subplots(figsize=(5, 5))
     c = scene.config
     plot_box(ax, c.box_width, c.box_height, c.initial_pose)

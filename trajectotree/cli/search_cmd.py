@@ -6,13 +6,9 @@ not a plan was found (`"success": false` with a reason), 2 on invalid input.
 
 from __future__ import annotations
 
-import io
-import math
-from pathlib import Path
-
-from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_goal, check_output_file,
+from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file,
                                       config_from_args, print_json)
-from trajectotree.io import write_bytes_atomic
+from trajectotree.results import check_goal
 
 
 def register(subparsers) -> None:
@@ -28,45 +24,23 @@ def register(subparsers) -> None:
 
 
 def draw_plan(scene, plan, path: str) -> None:
-    """One panel per node; written to a temporary name first, then moved into place."""
+    """The keyframes of `plan` (figures.figure_keyframes), written atomically."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.plotting import contact_node_legend_handles, plot_contact_node
-    cols = min(5, len(plan.nodes))
-    rows = math.ceil(len(plan.nodes) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(max(2.6 * cols, 7.0), 2.6 * rows + 0.9), squeeze=False)
-    for n, ax in enumerate(axes.flat):
-        ax.set_axis_off()
-        if n >= len(plan.nodes):
-            continue
-        node = plan.nodes[n]
-        plot_contact_node(ax, scene, node, mu=scene.config.mu, previous=plan.nodes[n - 1] if n else None)
-        ax.set_aspect("equal")
-        ax.set_xlim(-0.26, 0.26)
-        ax.set_ylim(-0.26, 0.26)
-        moved = "initial grasp" if n == 0 else ("no switch" if node.switching_finger is None
-                                                 else f"finger {node.switching_finger} moves")
-        ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
-    fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
-    handles = contact_node_legend_handles(scene.config.mu)
-    ncol = 3 if cols >= 4 else 2
-    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
-    height = fig.get_figheight()  # inches: the legend's rows below, the title above
-    fig.tight_layout(rect=(0, (0.2 * math.ceil(len(handles) / ncol) + 0.1) / height, 1, 1 - 0.3 / height))
-    buffer = io.BytesIO()
+    from trajectotree.figures import figure_keyframes, save_figure
+    fig = figure_keyframes(scene, plan)
     try:
-        fig.savefig(buffer, format=Path(path).suffix.lstrip(".").lower() or "png", dpi=110)
+        save_figure(fig, path, dpi=110)
     finally:
         plt.close(fig)
-    write_bytes_atomic(path, buffer.getvalue())
 
 
 def run(args) -> int:
     from trajectotree.scene import build_scene
     from trajectotree.search import find_contact_plan
-    goal = check_goal(args.goal)
+    goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)

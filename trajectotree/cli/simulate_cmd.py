@@ -6,16 +6,15 @@ PLAN_DIR/sim.json and sim.npz."""
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from trajectotree.cli import InputError
-from trajectotree.cli.common import FIGURE_SUFFIXES, HTML_SUFFIXES, check_output_file, print_json
-from trajectotree.config import Config, check_controller, config_from_dict, load_config
+from trajectotree.cli.common import (FIGURE_SUFFIXES, HTML_SUFFIXES, add_scene_options, check_output_file,
+                                      print_json, scene_overrides)
+from trajectotree.config import Config, ConfigError, check_controller, load_config
+from trajectotree.io import SIM_JSON, PlanFiles, read_plan_files, reading, write_json_atomic
 
 
 def register(subparsers) -> None:
@@ -29,10 +28,7 @@ def register(subparsers) -> None:
     p.add_argument("--meshcat", action="store_true", help="watch live in Meshcat on localhost (runs in real time)")
     p.add_argument("--json", action="store_true", help="print sim.json to stdout")
     group = p.add_argument_group("execution settings (default: the plan's config; the scene must match the plan)")
-    group.add_argument("--config", metavar="FILE.yaml", help="YAML file with the Config to execute with")
-    group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"), help="box width and height, m")
-    group.add_argument("--mass", type=float, metavar="KG", help="box mass, kg")
-    group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+    add_scene_options(group, config_help="YAML file with the Config to execute with")
     group.add_argument("--controller", metavar="NAME",
                        help="grasp (object-level grasp control, the default) or paper (eq. 20)")
     group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of eq. 20 (--controller paper)")
@@ -50,46 +46,27 @@ def register(subparsers) -> None:
     p.set_defaults(run=run)
 
 
-def read_plan_dir(plan_dir: str) -> tuple[dict[str, np.ndarray], Config]:
-    """The plan.npz arrays and the Config in plan.json; InputError when missing or corrupt."""
+def trajectory_arrays(files: PlanFiles) -> dict[str, np.ndarray]:
+    """The plan.npz arrays of a plan folder as checked floats (reference.check_plan_arrays);
+    ConfigError naming plan.npz when it holds none (planning produced none) or bad ones."""
     from trajectotree.reference import check_plan_arrays
-    folder = Path(plan_dir)
-    if not folder.is_dir():
-        raise InputError(f"PLAN_DIR {plan_dir!r} is not a directory")
-    json_path, npz_path = folder / "plan.json", folder / "plan.npz"
-    for path in (json_path, npz_path):
-        if not path.is_file():
-            raise InputError(f"{str(path)!r} is missing; PLAN_DIR must hold plan.json and plan.npz "
-                             "from a successful `trajectotree plan`")
-    try:
-        data = json.loads(json_path.read_text())
-        config = config_from_dict(data["config"])
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
-        raise InputError(f"{str(json_path)!r} is not a valid plan.json ({type(e).__name__}: {e})") from None
-    try:
-        with np.load(npz_path) as npz:
-            arrays = {name: npz[name] for name in npz.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
-        raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
-    if not arrays:  # save_plan writes an empty plan.npz when planning produced nothing
-        raise InputError(f"{str(npz_path)!r} holds no trajectory: planning produced none "
-                         f"(plan.json status: {data.get('status')!r})")
-    try:
-        return check_plan_arrays(arrays), config
-    except ValueError as e:
-        raise InputError(f"{str(npz_path)!r} is not a valid plan.npz: {e}") from None
+    if not files.arrays:  # save_plan writes an empty plan.npz when planning produced nothing
+        raise ConfigError(f"{str(files.npz_path)!r} holds no trajectory: planning produced none "
+                          f"(plan.json status: {files.data.get('status')!r})")
+    with reading(files.npz_path):
+        return check_plan_arrays(files.arrays)
+
+
+def read_plan_dir(plan_dir: str) -> tuple[dict[str, np.ndarray], Config]:
+    """The plan.npz arrays and the Config in plan.json; ConfigError when missing or corrupt."""
+    files = read_plan_files(plan_dir, "PLAN_DIR")
+    return trajectory_arrays(files), files.config
 
 
 def execution_config(args, plan_config: Config) -> Config:
     """The plan's config (or --config) with the options on top; its scene must be the plan's."""
     config = load_config(args.config) if args.config else plan_config
-    scene, gains = {}, {}
-    if args.box_size is not None:
-        scene["box_width"], scene["box_height"] = args.box_size
-    if args.mass is not None:
-        scene["box_mass"] = args.mass
-    if args.mu is not None:
-        scene["mu"] = args.mu
+    scene, gains = scene_overrides(args), {}
     if args.kp is not None:
         gains["kp"] = args.kp
     if args.kv is not None:
@@ -109,33 +86,25 @@ def execution_config(args, plan_config: Config) -> Config:
               for f in dataclasses.fields(config.scene)
               if getattr(config.scene, f.name) != getattr(plan_config.scene, f.name)]
     if differ:
-        raise InputError("the given scene differs from the one the plan was made for: " + "; ".join(differ))
+        raise ConfigError("the given scene differs from the one the plan was made for: " + "; ".join(differ))
     return config
 
 
-def plan_success_and_status(plan_dir: str) -> tuple[bool, str]:
-    """plan.json's success and status (read_plan_dir has checked that it parses)."""
-    data = json.loads((Path(plan_dir) / "plan.json").read_text())
-    return bool(data.get("success")), str(data.get("status"))
-
-
-def plan_segments(plan_dir: str, config: Config) -> list:
-    """The segments of a TrajectoTree plan (report.segment_spans) for the forces figure;
+def plan_segments(files: PlanFiles) -> list:
+    """The segments of a TrajectoTree plan (figures.segment_spans) for the forces figure;
     none for the baselines, whose contacts follow no contact sequence."""
-    from trajectotree.report import segment_spans
-    data = json.loads((Path(plan_dir) / "plan.json").read_text())
-    if data.get("method") != "trajectotree":
+    from trajectotree.figures import segment_spans
+    if files.data.get("method") != "trajectotree":
         return []
-    fingers = [node.get("switching_finger") for node in data.get("contact_sequence") or ()]
-    return segment_spans(fingers, config.cito.knots_per_segment, config.cito.dt)
+    fingers = [node.get("switching_finger") for node in files.data.get("contact_sequence") or ()]
+    return segment_spans(fingers, files.config.cito.knots_per_segment, files.config.cito.dt)
 
 
 def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) -> dict:
     """Rewrites sim.json (save_sim writes the SimResult's keys) with `plan_success`, so a
     run of an unconverged plan cannot pass for the run of a converged one; returns it."""
-    from trajectotree.io import SIM_JSON, write_bytes_atomic
     summary = dict(result.to_json(), plan_success=plan_success)
-    write_bytes_atomic(Path(plan_dir) / SIM_JSON, (json.dumps(summary, indent=2) + "\n").encode())
+    write_json_atomic(Path(plan_dir) / SIM_JSON, summary)
     return summary
 
 
@@ -154,10 +123,10 @@ def world_conditions(args, config: Config) -> dict:
 
 
 def run(args) -> int:
+    from trajectotree.figures import figure_finger_forces, save_figure
     from trajectotree.io import save_sim
     from trajectotree.playback import start_meshcat
     from trajectotree.reference import reference_from_arrays
-    from trajectotree.report import figure_finger_forces, save_figure
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
 
@@ -165,13 +134,15 @@ def run(args) -> int:
                                    ("--forces", args.forces, FIGURE_SUFFIXES)):
         if path:
             check_output_file(option, path, suffixes)
-    arrays, plan_config = read_plan_dir(args.plan_dir)
-    config = execution_config(args, plan_config)
+    files = read_plan_files(args.plan_dir, "PLAN_DIR")
+    arrays = trajectory_arrays(files)
+    config = execution_config(args, files.config)
     conditions = world_conditions(args, config)
-    plan_status = plan_success_and_status(args.plan_dir)
-    if not plan_status[0]:
+    plan_success = bool(files.data.get("success"))
+    if not plan_success:
         print(f"trajectotree simulate: warning: the plan in {args.plan_dir} did not converge (IPOPT status "
-              f"{plan_status[1]!r}); executing it anyway, sim.json records plan_success: false", file=sys.stderr)
+              f"{str(files.data.get('status'))!r}); executing it anyway, sim.json records plan_success: false",
+              file=sys.stderr)
     meshcat = None
     if args.meshcat:
         meshcat = start_meshcat()
@@ -180,9 +151,9 @@ def run(args) -> int:
     result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif,
                             **conditions)
     save_sim(result, args.plan_dir)
-    summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_status[0])
+    summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_success)
     if args.forces:
-        save_figure(figure_finger_forces(result, plan_segments(args.plan_dir, plan_config)), args.forces)
+        save_figure(figure_finger_forces(result, plan_segments(files)), args.forces)
     if args.json:
         print_json(summary)
     else:
