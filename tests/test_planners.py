@@ -13,7 +13,8 @@ import pytest
 
 from pathlib import Path
 
-from trajectotree.config import CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, load_config, save_config
+from trajectotree.config import (CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, config_to_dict, load_config,
+                                 save_config)
 from trajectotree.geometry import BoxBoundary, box_to_world, world_to_box
 from trajectotree.io import load_plan, save_plan
 from trajectotree.planners import plan, planning_mu
@@ -216,6 +217,18 @@ def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):
     (tmp_path / "plan.json").write_text("{not json")
     (tmp_path / "plan.npz").write_bytes(b"junk")
     with pytest.raises(ConfigError, match="plan.json"):
+        load_plan(tmp_path)
+    config = config_to_dict(CONFIG)
+    config["scene"]["mu"] = -1.0
+    (tmp_path / "plan.json").write_text(json.dumps({"config": config}))
+    with pytest.raises(ConfigError, match=r"plan.json' holds an invalid config: scene.mu = -1.0 is out of range"):
+        load_plan(tmp_path)
+    (tmp_path / "plan.json").write_text(json.dumps({"config": config_to_dict(CONFIG)}))
+    (tmp_path / "plan.npz").write_bytes(b"PK\x03\x04 a truncated zip")
+    with pytest.raises(ConfigError, match=r"plan.npz' is not a valid plan.npz \(BadZipFile"):
+        load_plan(tmp_path)
+    np.savez(tmp_path / "plan.npz")   # nothing solved: plan.json must then hold the rest of the report
+    with pytest.raises(ConfigError, match=r"plan.json' is not a valid plan.json \(KeyError: 'goal'\)"):
         load_plan(tmp_path)
 
 
