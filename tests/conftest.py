@@ -11,6 +11,18 @@ from types import SimpleNamespace
 
 import pytest
 
+
+@pytest.fixture
+def ax():
+    """A matplotlib Axes (Agg backend) whose figure is closed after the test."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots()
+    yield ax
+    plt.close(fig)
+
+
 # 2 goals in [-0.3, 0.3] rad (seed 0), 2 transition segments, two methods, executed.
 SMALL_SWEEP = ["--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "2",
                "--methods", "trajectotree", "cito-warm", "--simulate", "--no-progress"]

@@ -31,13 +31,6 @@ def scene():
     return build_scene()
 
 
-@pytest.fixture
-def ax():
-    fig, ax = plt.subplots()
-    yield ax
-    plt.close(fig)
-
-
 def test_box_corners_are_the_rotated_half_extents(ax):
     x, y, theta, w, h = 0.03, -0.02, math.pi / 6, 0.2, 0.1
     (patch,) = plot_box(ax, w, h, (x, y, theta))

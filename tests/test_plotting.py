@@ -1,20 +1,10 @@
 """The sweep statistics' plots (trajectotree.plotting) checked against the numbers they were given."""
 
 import matplotlib
+import numpy as np
+import pytest
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-from trajectotree.plotting import plot_boxes_with_means, plot_mean_band  # noqa: E402
-
-
-@pytest.fixture
-def ax():
-    fig, ax = plt.subplots()
-    yield ax
-    plt.close(fig)
+from trajectotree.plotting import plot_boxes_with_means, plot_mean_band
 
 
 def test_box_plots_mark_each_samples_mean_and_quartiles(ax):
