@@ -14,7 +14,7 @@ import pytest  # noqa: E402
 from trajectotree.cli import main  # noqa: E402
 from trajectotree.contact_plan import ContactNode, ContactPlan  # noqa: E402
 from trajectotree.figures import (FINGER_COLORS, contact_node_legend_handles, figure_finger_forces,  # noqa: E402
-                                  figure_keyframes, plot_box, plot_contact_node, plot_contacts, plot_finger_force,
+                                  figure_keyframes, figure_model, plot_box, plot_contact_node, plot_contacts, plot_finger_force,
                                   plot_friction_cones, plot_hand, plot_segments, save_figure, segment_spans)
 from trajectotree.metrics import evaluate  # noqa: E402
 from trajectotree.results import SimLog  # noqa: E402
@@ -58,6 +58,22 @@ def test_hand_is_drawn_where_the_plant_puts_joints_and_fingertips(scene, ax):
         joints = [plant.GetJointByName(f"finger{i}_joint{j}", scene.hand).frame_on_child() for j in (1, 2)]
         expected = [frame.CalcPoseInWorld(context).translation()[:2] for frame in joints] + [p_WF[i]]
         np.testing.assert_allclose(np.column_stack(line.get_data()), expected, atol=1e-12)
+
+
+def test_model_figure_draws_each_fingers_full_reach_around_its_base(scene):
+    fig = figure_model(scene)
+    ax = fig.axes[0]
+    reach = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle) and not p.get_fill()]
+    stretched = scene.fingertip_positions(np.zeros(8))   # q = 0: both links in line, the farthest reach
+    assert len(reach) == NUM_FINGERS
+    for circle, finger, tip in zip(reach, scene.fingers, stretched):
+        np.testing.assert_allclose(circle.center, finger.p_W_base)
+        assert circle.radius == pytest.approx(np.linalg.norm(tip - finger.p_W_base), abs=1e-12)
+    c = scene.config
+    box = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon)][0]
+    np.testing.assert_allclose(box.get_xy()[:4].mean(axis=0), c.initial_pose[:2], atol=1e-15)
+    assert [t.get_text() for t in ax.texts if t.get_text().startswith("finger")] == [f"finger {i}" for i in range(4)]
+    plt.close(fig)
 
 
 def test_contacts_normals_and_cones_in_the_world(ax):

@@ -55,6 +55,30 @@ def plot_workspace(ax, finger, *, color="0.6"):
     return [ax.add_patch(Circle(finger.p_W_base, finger.l1 + finger.l2, fill=False, ls="--", color=color, lw=0.8))]
 
 
+def figure_model(scene):
+    """The hand (each finger's reach dashed) and the box at its initial pose, with gravity."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 5))
+    c = scene.config
+    plot_box(ax, c.box_width, c.box_height, c.initial_pose)
+    for f in scene.fingers:
+        plot_workspace(ax, f)
+    plot_hand(ax, scene, np.tile([0.25, 1.2], 4))
+    for i, f in enumerate(scene.fingers):
+        ax.annotate(f"finger {i}", f.p_W_base, textcoords="offset points", xytext=(0, 8), ha="center", fontsize=8)
+    ax.annotate("", xy=(0.0, -0.27), xytext=(0.0, -0.2), arrowprops={"arrowstyle": "->"})
+    ax.text(0.005, -0.24, "g", fontsize=9)
+    ax.set_aspect("equal")
+    ax.set_xlim(-0.3, 0.3)
+    ax.set_ylim(-0.3, 0.3)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title("Planar four-finger hand and 0.20 x 0.10 m box")
+    fig.tight_layout()
+    return fig
+
+
 def plot_finger_force(ax, t, f_sim, f_plan, *, color=None, drop_time=None):
     """Magnitudes |f| of one finger's simulated (solid) and planned (dashed) force on the
     box over time; f_sim, f_plan (T, 2). After a drop, if any, the time is shaded grey."""

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args,
                                       print_json)
 
@@ -33,30 +31,17 @@ def summarize(scene) -> dict:
 
 
 def draw_model(scene, path: str) -> None:
+    """The hand and box (figures.figure_model), written atomically."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.figures import plot_box, plot_hand, plot_workspace
-    fig, ax = plt.subplots(figsize=(5, 5))
-    c = scene.config
-    plot_box(ax, c.box_width, c.box_height, c.initial_pose)
-    for f in scene.fingers:
-        plot_workspace(ax, f)
-    plot_hand(ax, scene, np.tile([0.25, 1.2], 4))
-    for i, f in enumerate(scene.fingers):
-        ax.annotate(f"finger {i}", f.p_W_base, textcoords="offset points", xytext=(0, 8), ha="center", fontsize=8)
-    ax.annotate("", xy=(0.0, -0.27), xytext=(0.0, -0.2), arrowprops={"arrowstyle": "->"})
-    ax.text(0.005, -0.24, "g", fontsize=9)
-    ax.set_aspect("equal")
-    ax.set_xlim(-0.3, 0.3)
-    ax.set_ylim(-0.3, 0.3)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title("Planar four-finger hand and 0.20 x 0.10 m box")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    from trajectotree.figures import figure_model, save_figure
+    fig = figure_model(scene)
+    try:
+        save_figure(fig, path, dpi=120)
+    finally:
+        plt.close(fig)
 
 
 def run(args) -> int:
