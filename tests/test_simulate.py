@@ -127,6 +127,29 @@ def test_run_simulation_result_files_and_gif(scene, short_config, tmp_path):
         assert image.format == "GIF" and image.n_frames >= 7
 
 
+def test_sim_files_round_trip_exactly_and_bad_ones_are_named(tmp_path):
+    from trajectotree.config import ConfigError
+    from trajectotree.metrics import evaluate
+    from trajectotree.results import SIM_ARRAYS, SimLog
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 1.0, 11)
+    log = SimLog(t=t, x=rng.normal(size=(11, 3)), q=rng.normal(size=(11, 8)), x_plan=rng.normal(size=(11, 3)),
+                 f_W=rng.normal(size=(11, 4, 2)), f_W_plan=rng.normal(size=(11, 4, 2)), sim_time_s=0.25,
+                 controller="paper", conditions={"sim_mu": 0.5})
+    result = evaluate(log, drop_distance=10.0)
+    save_sim(result, tmp_path)
+    loaded = load_sim(tmp_path)
+    for name in SIM_ARRAYS:
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(result, name))
+    assert loaded.to_json() == result.to_json() and loaded.final_error == result.final_error
+    (tmp_path / "sim.json").write_text("{}")
+    with pytest.raises(ConfigError, match=r"sim.json' is not a valid sim.json \(KeyError: 'mae_x'\)"):
+        load_sim(tmp_path)
+    (tmp_path / "sim.npz").unlink()
+    with pytest.raises(ConfigError, match=r"sim.npz' is missing; a run's folder holds sim.json and sim.npz"):
+        load_sim(tmp_path)
+
+
 def test_simulated_finger_forces_hold_the_box_up_as_planned(scene, short_config):
     """Newton on the held box: the logged finger forces sum to its weight, and each
     finger presses with about the planned (static-grasp) force."""

@@ -64,24 +64,23 @@ def save_sim(result: SimResult, plan_dir: str | Path) -> None:
 
 
 def load_sim(plan_dir: str | Path) -> SimResult:
-    """The SimResult saved by save_sim. Raises FileNotFoundError or ValueError
-    (naming the file) when sim.json / sim.npz are missing or malformed."""
-    plan_dir = Path(plan_dir)
-    try:
-        summary = json.loads((plan_dir / SIM_JSON).read_text())
-        with np.load(plan_dir / SIM_NPZ) as data:
-            arrays = {name: data[name] for name in SIM_ARRAYS}
-        return SimResult(**arrays, mae_x=float(summary["mae_x"]), mae_y=float(summary["mae_y"]),
-                         mae_theta=float(summary["mae_theta"]),
-                         final_error=tuple(float(v) for v in summary["final_error"]),
-                         dropped=bool(summary["dropped"]), drop_time_s=summary["drop_time_s"],
-                         sim_time_s=float(summary["sim_time_s"]),
-                         controller=summary.get("controller", "paper"),   # runs before the grasp controller
-                         conditions=summary.get("conditions", {}))
-    except (KeyError, TypeError, json.JSONDecodeError, OSError, ValueError) as e:
-        if isinstance(e, FileNotFoundError):
-            raise
-        raise ValueError(f"{plan_dir}: malformed {SIM_JSON} / {SIM_NPZ}: {e}") from None
+    """The SimResult saved by save_sim. ConfigError naming the file when sim.json or
+    sim.npz is missing or malformed."""
+    json_path, npz_path = Path(plan_dir) / SIM_JSON, Path(plan_dir) / SIM_NPZ
+    require_files((json_path, npz_path), f"a run's folder holds {SIM_JSON} and {SIM_NPZ} "
+                                         "(written by `trajectotree simulate`)")
+    with reading(json_path):
+        summary = json.loads(json_path.read_text())
+        values = dict(mae_x=float(summary["mae_x"]), mae_y=float(summary["mae_y"]),
+                      mae_theta=float(summary["mae_theta"]),
+                      final_error=tuple(float(v) for v in summary["final_error"]),
+                      dropped=bool(summary["dropped"]), drop_time_s=summary["drop_time_s"],
+                      sim_time_s=float(summary["sim_time_s"]),
+                      controller=summary.get("controller", "paper"),   # runs before the grasp controller
+                      conditions=summary.get("conditions", {}))
+    with reading(npz_path), np.load(npz_path) as data:
+        arrays = {name: data[name] for name in SIM_ARRAYS}
+    return SimResult(**arrays, **values)
 
 
 def plan_to_json(result: PlanResult) -> dict:
@@ -141,6 +140,13 @@ def reading(path: Path):
         raise ConfigError(f"{str(path)!r} is not a valid {path.name} ({type(e).__name__}: {e})") from None
 
 
+def require_files(paths, holds: str) -> None:
+    """ConfigError naming the first of `paths` that is not a file; `holds` says what should be there."""
+    for path in paths:
+        if not Path(path).is_file():
+            raise ConfigError(f"{str(path)!r} is missing; {holds}")
+
+
 def read_plan_files(folder: str | Path, name: str = "plan folder") -> PlanFiles:
     """The plan folder written by save_plan (`name` says what it is to the user, e.g. a
     command's argument). ConfigError naming the folder or file when the folder or a file is
@@ -149,10 +155,8 @@ def read_plan_files(folder: str | Path, name: str = "plan folder") -> PlanFiles:
     if not folder.is_dir():
         raise ConfigError(f"{name} {str(folder)!r} is not a directory")
     json_path, npz_path = folder / PLAN_JSON, folder / PLAN_NPZ
-    for path in (json_path, npz_path):
-        if not path.is_file():
-            raise ConfigError(f"{str(path)!r} is missing; a plan folder holds {PLAN_JSON} and {PLAN_NPZ} "
-                              "(written by `trajectotree plan`)")
+    require_files((json_path, npz_path),
+                  f"a plan folder holds {PLAN_JSON} and {PLAN_NPZ} (written by `trajectotree plan`)")
     with reading(json_path):
         data = json.loads(json_path.read_text())
         config = config_from_dict(data["config"])
