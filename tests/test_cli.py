@@ -103,7 +103,7 @@ def test_demo_into_a_used_folder_leaves_none_of_the_older_run(tmp_path, capsys):
 
 def test_simulating_an_unconverged_plan_warns_and_records_it(tmp_path, capsys):
     config = tmp_path / "three_iterations.yaml"
-    config.write_text("cito:\n  max_iter: 3\n")
+    config.write_text("cito:\n  max_iter: 3\n  formulation: joint\n")   # one program: IPOPT's status as is
     out = tmp_path / "plan"
     assert main(["plan", *TINY_PLAN, "--config", str(config), "--out", str(out)]) == 0
     plan_json = json.loads((out / "plan.json").read_text())

@@ -270,7 +270,7 @@ def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
 
 @pytest.mark.slow
 def test_cli_non_converged_plan_is_written_with_status(tmp_path):
-    config = dataclasses.replace(CONFIG, cito=CitoConfig(max_iter=3))
+    config = dataclasses.replace(CONFIG, cito=CitoConfig(max_iter=3, formulation="joint"))   # one program
     save_config(config, tmp_path / "c.yaml")
     proc = run_cli("--goal", "0.2", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "p"), "--json",
                    cwd=tmp_path)

@@ -1,11 +1,10 @@
 """Typed configuration: every parameter a user may change, with its unit.
 
-Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each
-dataclass validates itself on construction and raises `ConfigError` naming the
-field, its value and the valid range. `load_config` / `save_config` read and
-write the whole `Config` as YAML with Drake's typed YAML functions (yaml_load_typed,
-yaml_dump_typed), which check each value's type; `config_from_dict` reads the same
-sections from plan.json and sweep manifests.
+Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each dataclass validates itself on
+construction and raises `ConfigError` naming the field, its value and the valid range. `load_config` /
+`save_config` read and write the whole `Config` as YAML with Drake's typed YAML functions (yaml_load_typed,
+yaml_dump_typed), which check each value's type; `config_from_dict` reads the same sections from plan.json and
+sweep manifests.
 """
 
 from __future__ import annotations
@@ -119,9 +118,8 @@ class SearchConfig:
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
-        check_integer("search.max_initial_grasps", self.max_initial_grasps, 1)
-        check_integer("search.root_expansions", self.root_expansions, 1)
-        check_integer("search.max_expansions", self.max_expansions, 1)
+        for name in ("max_initial_grasps", "root_expansions", "max_expansions"):
+            check_integer(f"search.{name}", getattr(self, name), 1)
         check_range("search.time_budget_s", self.time_budget_s, 0.0, None, low_open=True)
 
 
@@ -169,6 +167,7 @@ class CitoConfig:
     max_iter: int = 1000            # IPOPT max_iter
     lbfgs_history: int = 6          # IPOPT limited_memory_max_history (3: 157 iterations, 6: 89 on a 3-segment plan)
     print_level: int = 0            # IPOPT print_level (0 silent, 5 verbose)
+    formulation: str = "keyframes"  # TrajectoTree: a program per segment between the search's nodes, or "joint" (paper)
 
     def __post_init__(self):
         check_integer("cito.knots_per_segment", self.knots_per_segment, 2, 200)
@@ -187,6 +186,8 @@ class CitoConfig:
         check_integer("cito.max_iter", self.max_iter, 1)
         check_integer("cito.lbfgs_history", self.lbfgs_history, 1, 100)
         check_integer("cito.print_level", self.print_level, 0, 12)
+        if self.formulation not in FORMULATIONS:
+            raise ConfigError(f"cito.formulation = {self.formulation!r} is unknown; valid: {', '.join(FORMULATIONS)}")
 
 
 @dataclass(frozen=True)
@@ -232,10 +233,8 @@ class ControllerGains:
     contact_distance: float = 1e-3  # m, a planned fingertip this close to the planned box is in contact
 
     def __post_init__(self):
-        check_range("controller.kp", self.kp, 0.0, None)
-        check_range("controller.kv", self.kv, 0.0, None)
         check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
-        for name in ("object_kp", "object_kd", "tip_kp", "tip_kd", "min_normal_force", "wrench_weight"):
+        for name in ("kp", "kv", "object_kp", "object_kd", "tip_kp", "tip_kd", "min_normal_force", "wrench_weight"):
             check_range(f"controller.{name}", getattr(self, name), 0.0, None)
         check_range("controller.max_normal_force", self.max_normal_force, self.min_normal_force, None, low_open=True)
         check_range("controller.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
@@ -245,6 +244,7 @@ class ControllerGains:
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
+FORMULATIONS = ("keyframes", "joint")  # cito.formulation values: trajectotree.keyframes, the paper's one program
 
 
 def check_controller(value: str, name: str = "controller") -> str:

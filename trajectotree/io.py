@@ -98,6 +98,7 @@ def plan_to_json(result: PlanResult) -> dict:
                    "stats": result.contact_plan.stats.to_json()},
         "contact_sequence": [n.to_json() for n in result.contact_plan.nodes],
         "solver_timing": dict(result.solver_timing),
+        "formulation": result.formulation, "segments": list(result.segments),
         "config": config_to_dict(result.config),
     }
 
@@ -190,5 +191,6 @@ def load_plan(out_dir: str | Path) -> PlanResult:
             config=files.config, solver_timing=data.get("solver_timing", {}),
             physics_check=None if check is None else PhysicsCheck.from_json(check),
             converged=bool(data.get("converged", data["success"])),   # older files: success meant converged
+            formulation=str(data.get("formulation", "joint")), segments=tuple(data.get("segments", ())),
             trajectory=Trajectory(**{n: files.arrays[n] for n in TRAJECTORY_ARRAYS}) if files.arrays else None)
     return result

@@ -15,12 +15,15 @@ violation report and the physics check of the plan's arrays (trajectotree.physic
 a converged plan that fails it (e.g. a fingertip pushing the box from a distance) is
 reported with success False and the check's reason in its status. Times:
 search_time_s (0 for cito), build_time_s (program and guess), solve_time_s (IPOPT),
-total_time_s = their sum.
+total_time_s = their sum. TrajectoTree's default formulation, keyframes (cito.formulation),
+solves one program per segment (trajectotree.keyframes); its build and solve times are
+summed over the segments' solves, its total is the search plus their wall-clock time.
 """
 
 from __future__ import annotations
 
 import time
+from concurrent.futures import Executor
 
 import numpy as np
 
@@ -35,8 +38,10 @@ from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import BoxBoundary, box_to_world
 from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import mu_plan
-from trajectotree.physics import BoxModel, check_physics, contact_points
-from trajectotree.results import METHODS, PlanResult, Trajectory, check_goal, check_method  # noqa: F401 (planners.METHODS)
+from trajectotree.keyframes import check_workers, plan_keyframes
+from trajectotree.keyframes import trajectory as segment_trajectory
+from trajectotree.physics import BoxModel, check_physics
+from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
 from trajectotree.scene import NUM_FINGERS, Scene
 from trajectotree.search import choose_initial_grasp, find_contact_plan, object_path
 
@@ -48,11 +53,17 @@ def planning_mu(config: Config) -> float:
 
 
 def plan(*, scene: Scene, goal: float, method: str, config: Config,
-         contact_plan: ContactPlan | None = None) -> PlanResult:
+         contact_plan: ContactPlan | None = None, segment_executor: Executor | None = None,
+         segment_workers: int | None = None) -> PlanResult:
     """Plans the rotation `goal` (rad) with `method`. A `contact_plan` may be given
-    for the methods that use one (the search is then skipped; its time counts 0)."""
+    for the methods that use one (the search is then skipped; its time counts 0).
+    TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
+    persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
+    `segment_workers` local processes (1: serially in this process, as a sweep's trial
+    does; None: one per segment, at most one per core)."""
     check_method(method)
     goal = check_goal(goal)
+    check_workers(segment_workers)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
     search_time = 0.0
@@ -68,6 +79,9 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
             return _unsolved(method, goal, f"search failed: {contact_plan.reason}", search_time, contact_plan, config)
     check_plan(contact_plan, scene, min_nodes=1 if method == "cito" else 2)
 
+    if method == "trajectotree" and config.cito.formulation == "keyframes":
+        return plan_keyframes(scene, goal, contact_plan, config, planning_mu(config), search_time,
+                              segment_executor, segment_workers)
     t0 = time.perf_counter()
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=planning_mu(config))
     if method == "trajectotree":
@@ -83,7 +97,7 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
 
     outcome = solve(program, guess, config.cito)
     sol = outcome.solution
-    trajectory = _trajectory(program, sol, scene)
+    trajectory = segment_trajectory(program, sol, scene)
     check = check_physics(trajectory.arrays(), BoxModel.from_scene(scene), body.mu)
     status = outcome.status
     if outcome.success and not check.passed:
@@ -95,18 +109,6 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
                       cost=outcome.cost, iterations=outcome.iterations, contact_plan=contact_plan,
                       trajectory=trajectory, violations=violations(program, sol, scene), config=config,
                       solver_timing=outcome.timing, physics_check=check)
-
-
-def _trajectory(program, sol, scene: Scene) -> Trajectory:
-    """The plan.npz arrays of a solution; p_W_C from the planned contacts (pinned) and
-    the box points nearest the fingertips (free)."""
-    spec, kin = program.spec, program.rows.kinematics(sol.stacked())
-    p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B          # c_B is the fingertip centre's target
-    c = scene.config
-    p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.box_width, c.box_height)
-    return Trajectory(t=np.arange(spec.num_knots) * spec.dt, x=sol.x, xdot=sol.xd, q=sol.q, qdot=sol.qd,
-                      tau=sol.tau, lambda_n=sol.lambda_n, lambda_t=sol.lambda_t, f_W=kin.f_W, p_W_tip=kin.p_WF,
-                      p_W_C=p_W_C)
 
 
 def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan:

@@ -124,6 +124,10 @@ class PlanResult:
     # IPOPT converged (and the search found a plan, where used), whether or not the physics check
     # passed: the general CITO baselines converge to plans that push from a distance.
     converged: bool = False
+    formulation: str = "joint"       # cito.formulation that made it (the baselines: always one joint program)
+    # keyframes: per segment (plan.json "segments"): nodes, success, status, iterations, time_s,
+    # retries and every attempt (trajectotree.keyframes.segment_records); () for the joint program
+    segments: tuple = ()
 
 
 @dataclass(frozen=True)

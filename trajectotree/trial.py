@@ -103,7 +103,8 @@ def run_trial(task: TrialTask, out_dir: Path) -> dict:
 
     config = config_from_dict(task.config)
     scene = build_scene(config.scene)
-    result = plan(scene=scene, goal=task.goal, method=task.method, config=config)
+    # The sweep runs trials in parallel already: a trial solves its keyframes segments serially.
+    result = plan(scene=scene, goal=task.goal, method=task.method, config=config, segment_workers=1)
     save_plan(result, out_dir)
     if task.simulate and result.trajectory is not None:
         from trajectotree.simulate import run_simulation

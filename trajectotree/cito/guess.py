@@ -80,6 +80,8 @@ def _lifted(boundary: BoxBoundary, s_old: float, s_new: float, tau: float, radiu
 def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *, moving: bool) -> CitoVariables:
     K = spec.num_knots
     x[0], q[0] = spec.x0, spec.q0
+    if spec.x_end is not None:   # keyframes: the last knot is fixed too
+        x[-1], q[-1] = spec.x_end, spec.q_end
     zeros = {name: np.zeros((K, w)) for name, w in GROUPS}
     zeros.update(x=x, q=q, slack=np.full((K, NUM_FINGERS), SLACK_GUESS))
     if moving:
@@ -87,6 +89,7 @@ def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *
             zeros[vel] = np.gradient(zeros[pos], spec.dt, axis=0)
             zeros[vel][spec.rest_knots] = 0.0
             zeros[acc] = np.gradient(zeros[vel], spec.dt, axis=0)
+            zeros[acc][list(spec.static_knots)] = 0.0
     guess = CitoVariables(**zeros)
     ln, lt = _static_forces(rows, guess)
     guess = CitoVariables(**{**zeros, "lambda_n": ln, "lambda_t": lt})

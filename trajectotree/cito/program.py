@@ -48,6 +48,11 @@ class ProgramSpec:
     rest_knots: np.ndarray         # knots where object and joint velocities are zero
     goal_poses: tuple              # per knot, an (n_k, 3) array of incremental goals x*_n (eq. 11)
     segment_length: int = 0        # M_hat knots per segment (0: not segmented)
+    # keyframes formulation: the last knot's pose and joints fixed too (None: free), and the knots
+    # where the object and hand accelerations are zero (static at a search node; () : none)
+    x_end: np.ndarray | None = None    # (3,) fixed final object pose
+    q_end: np.ndarray | None = None    # (8,) fixed final joint angles
+    static_knots: tuple = ()
 
     @property
     def num_knots(self) -> int:
@@ -133,6 +138,15 @@ def _bounds(v: CitoVariables, spec: ProgramSpec, body: BodyParams):
     rest = np.asarray(spec.rest_knots, dtype=int)
     for name in ("xd", "qd"):
         lo[name][rest] = hi[name][rest] = 0.0
+    if spec.x_end is not None:
+        lo["x"][-1] = hi["x"][-1] = spec.x_end
+    if spec.q_end is not None:
+        lo["q"][-1] = hi["q"][-1] = spec.q_end
+    if len(spec.static_knots):   # only then bounds on the accelerations (the joint program has none)
+        for name in ("xdd", "qdd"):
+            lo[name] = np.full(getattr(v, name).shape, -inf)
+            hi[name] = np.full(getattr(v, name).shape, inf)
+            lo[name][list(spec.static_knots)] = hi[name][list(spec.static_knots)] = 0.0
     return lo, hi
 
 

@@ -9,11 +9,14 @@ import os
 import sys
 from pathlib import Path
 
-from trajectotree.config import Config, ConfigError, check_integer, load_config
+from trajectotree.config import FORMULATIONS, Config, ConfigError, check_integer, load_config
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
 SEGMENTS_HELP = ("transition segments S between the N = S + 1 poses of the contact sequence, each with one "
                  "contact switch at most (default 9, i.e. the paper's N = 10 nodes)")
+FORMULATION_HELP = (f"TrajectoTree's program (cito.formulation; valid: {', '.join(FORMULATIONS)}): keyframes solves "
+                    "each segment alone between the search's nodes, in parallel; joint is the paper's one program "
+                    "(default: keyframes)")
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
 HTML_SUFFIXES = (".html", ".htm")
 
@@ -38,24 +41,29 @@ def scene_overrides(args: argparse.Namespace) -> dict:
     return scene
 
 
-def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True) -> None:
+def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True, formulation: bool = False) -> None:
     group = parser.add_argument_group("scene and planner settings (override --config)")
     add_scene_options(group)
     if segments:
         group.add_argument("--segments", type=int, metavar="S",
                            help=SEGMENTS_HELP)
+    if formulation:
+        group.add_argument("--formulation", metavar="NAME", help=FORMULATION_HELP)
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
     """The Config from --config, then the individual options on top."""
     config = load_config(args.config) if getattr(args, "config", None) else Config()
-    scene, search = scene_overrides(args), {}
+    scene, search, cito = scene_overrides(args), {}, {}
     if getattr(args, "segments", None) is not None:
         check_integer("--segments", args.segments, 1, 99)
         search["num_nodes"] = args.segments + 1
+    if getattr(args, "formulation", None) is not None:
+        cito["formulation"] = args.formulation
     try:
         return dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
-                                   search=dataclasses.replace(config.search, **search))
+                                   search=dataclasses.replace(config.search, **search),
+                                   cito=dataclasses.replace(config.cito, **cito))
     except ConfigError as e:
         raise ConfigError(in_option_terms(str(e), args)) from None
 
@@ -63,7 +71,8 @@ def config_from_args(args: argparse.Namespace) -> Config:
 # Config fields set by command-line options, as the user wrote them (longest names first).
 OPTION_NAMES = (("scene.box_width x scene.box_height", "box_size", "--box-size W H"),
                 ("scene.box_width", "box_size", "--box-size W"), ("scene.box_height", "box_size", "--box-size H"),
-                ("scene.box_mass", "mass", "--mass"), ("scene.mu", "mu", "--mu"))
+                ("scene.box_mass", "mass", "--mass"), ("scene.mu", "mu", "--mu"),
+                ("cito.formulation", "formulation", "--formulation"))
 
 
 def in_option_terms(message: str, args: argparse.Namespace) -> str:

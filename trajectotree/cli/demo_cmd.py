@@ -39,7 +39,7 @@ def register(subparsers) -> None:
     p.add_argument("--goal", type=float, default=math.pi / 2, metavar="RAD",
                    help="goal rotation of the box, rad, in [-pi, pi] (default: pi/2)")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the text summary")
-    add_config_options(p)
+    add_config_options(p, formulation=True)
     p.set_defaults(run=run)
 
 

@@ -25,7 +25,9 @@ def register(subparsers) -> None:
     p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, in [-pi, pi]")
     p.add_argument("--method", default="trajectotree", metavar="METHOD",
                    help=f"planner (default: trajectotree; valid: {', '.join(METHODS)})")
-    add_config_options(p)
+    add_config_options(p, formulation=True)
+    p.add_argument("--segment-workers", type=int, metavar="W", help="local processes solving the keyframes "
+                   "formulation's segments (default: one per segment, at most one per core; 1: serially)")
     p.add_argument("--out", metavar="DIR", help="output folder (default: plan_<method>_<goal>); a previous "
                    "plan's sim.json and sim.npz there are removed")
     p.add_argument("--json", action="store_true", help="print plan.json to stdout")
@@ -35,16 +37,19 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.io import plan_to_json, save_plan
+    from trajectotree.keyframes import check_workers
     from trajectotree.planners import plan
     from trajectotree.scene import build_scene
     goal = check_goal(args.goal, "--goal")
     method = check_method(args.method)
     config = config_from_args(args)
+    workers = check_workers(args.segment_workers, "--segment-workers")
     out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}")
     if args.html:
         check_output_file("--html", args.html, HTML_SUFFIXES)
     with ipopt_progress(progress_wanted(args)):
-        result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config)
+        result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config,
+                      segment_workers=workers)
     removed = remove_derived_files(out)
     save_plan(result, out)
     if removed:

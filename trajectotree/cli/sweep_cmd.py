@@ -50,7 +50,7 @@ def register(subparsers) -> None:
                         "with the --time-limit given now")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    add_config_options(p)
+    add_config_options(p, formulation=True)
     p.set_defaults(run=run)
 
 
