@@ -86,6 +86,30 @@ class KnotKinematics:
     v: np.ndarray        # (K, 4, 2) m/s, fingertip velocity relative to the box point under it
 
 
+def _smooth_contact(bx: float, by: float, k: float, wa: float, wb: float, radius: float):
+    """(phi - r, n_B) of contact.smooth_distance at the tip centre (bx, by) in B, in math."""
+    d = (bx - wa, by - wb, -bx - wa, -by - wb)
+    dmax = max(d)
+    e = [math.exp(k * (dj - dmax)) for dj in d]
+    total = e[0] + e[1] + e[2] + e[3]
+    gx, gy = (e[0] - e[2]) / total, (e[1] - e[3]) / total
+    norm = math.hypot(gx, gy)
+    return dmax + math.log(total) / k - radius, gx / norm, gy / norm
+
+
+def _scalar_constants(rows: "KnotRows"):
+    """values_one's constants of a one-knot batch as Python floats: the body's
+    (m, g_x, g_y, I, r, sharpness, half width, half height) and per finger
+    (psi, l1, l2, p_W_base, mass_a, mass_b, mass_c, grav_1, grav_2, pinned, n_B, c_B)."""
+    b, hand = rows.body, rows.body.hand
+    body = tuple(float(v) for v in (b.mass, *b.gravity, b.inertia, b.radius, b.sharpness, *b.offsets[:2]))
+    fingers = tuple((float(f.psi), float(f.l1), float(f.l2), *map(float, f.p_W_base), float(hand.mass_a[i]),
+                     float(hand.mass_b[i]), float(hand.mass_c[i]), float(hand.grav_1[i]), float(hand.grav_2[i]),
+                     bool(rows.pinned[0, i]), *map(float, rows.n_B[0, i]), *map(float, rows.c_B[0, i]))
+                    for i, f in enumerate(b.fingers))
+    return body, fingers
+
+
 class KnotRows:
     """The rows of a batch of knots. pinned (K, 4) selects each finger's mode;
     c_B, n_B (K, 4, 2) are the pinned fingertip-centre targets and normals in B."""
@@ -100,6 +124,7 @@ class KnotRows:
         self.num_rows = NUM_BODY_ROWS + sizes.sum(axis=1)               # (K,)
         self.kP, self.iP = np.nonzero(self.pinned)
         self.kF, self.iF = np.nonzero(~self.pinned)
+        self._scalars = None            # values_one's constants, made on its first call
 
     def knot(self, k: int) -> "KnotRows":
         return KnotRows(self.body, self.pinned[k:k + 1], self.c_B[k:k + 1], self.n_B[k:k + 1])
@@ -177,8 +202,12 @@ class KnotRows:
         exp, log, norm and matmul round differently from math's in the last bit, and IPOPT
         has always seen these exact numbers (values from `evaluate` instead change the
         s2cito plan: 118 IPOPT iterations, not 130; the shared vectorized kinematics here
-        cost 2.5x the time of this function)."""
-        b, hand, r = self.body, self.body.hand, self.body.radius
+        cost 2.5x the time of this function). The constants are Python floats
+        (`_scalar_constants`): the same doubles, without numpy's per-scalar overhead; the
+        finger's FK is TwoLinkFinger.links_one's arithmetic, inlined."""
+        if self._scalars is None:
+            self._scalars = _scalar_constants(self)
+        (m, gx, gy, inertia, r, k, wa, wb), fingers = self._scalars
         z = z.tolist()
         (px, py), th, (pdx, pdy), thd = z[COL_P], z[COL_TH], z[COL_PD], z[COL_THD]
         q, qd, qdd, tau = (z[SLICES[n]] for n in ("q", "qd", "qdd", "tau"))
@@ -186,14 +215,14 @@ class KnotRows:
         c, s = math.cos(th), math.sin(th)
         fx_sum = fy_sum = torque = 0.0
         hand_rows, contact_rows = [], []
-        for i, finger in enumerate(b.fingers):
-            a1, a12, (r1x, r1y), (r2x, r2y) = finger.links_one(q[2 * i], q[2 * i + 1])
-            relx, rely = finger.p_W_base[0] + r1x + r2x - px, finger.p_W_base[1] + r1y + r2y - py
+        for i, (psi, l1, l2, basex, basey, ma, mb, mc, g1, g2, pinned, nbx, nby, cbx, cby) in enumerate(fingers):
+            a1 = psi + q[2 * i]
+            a12 = a1 + q[2 * i + 1]
+            r1x, r1y, r2x, r2y = l1 * math.cos(a1), l1 * math.sin(a1), l2 * math.cos(a12), l2 * math.sin(a12)
+            relx, rely = basex + r1x + r2x - px, basey + r1y + r2y - py
             ln, lt, gam = lns[i], lts[i], gams[i]
-            if self.pinned[0, i]:
-                nbx, nby = self.n_B[0, i]
-            else:
-                phi_tip, nbx, nby = self._smooth_contact(c * relx + s * rely, -s * relx + c * rely)
+            if not pinned:
+                phi_tip, nbx, nby = _smooth_contact(c * relx + s * rely, -s * relx + c * rely, k, wa, wb, r)
             nwx, nwy = c * nbx - s * nby, s * nbx + c * nby
             fx, fy = -ln * nwx - lt * nwy, -ln * nwy + lt * nwx
             fx_sum += fx
@@ -203,14 +232,13 @@ class KnotRows:
             u2 = -r2y * fx + r2x * fy
             # HandModel.mass_matrices and gravity_forces, in scalars
             cq2 = math.cos(q[2 * i + 1])
-            m11, m12, m22 = hand.mass_a[i] + 2 * hand.mass_b[i] * cq2, hand.mass_c[i] + hand.mass_b[i] * cq2, hand.mass_c[i]
-            t2 = -hand.grav_2[i] * math.cos(a12)
-            t1 = -hand.grav_1[i] * math.cos(a1) + t2
+            m11, m12, m22 = ma + 2 * mb * cq2, mc + mb * cq2, mc
+            t2 = -g2 * math.cos(a12)
+            t1 = -g1 * math.cos(a1) + t2
             qdd1, qdd2 = qdd[2 * i:2 * i + 2]
             hand_rows += [m11 * qdd1 + m12 * qdd2 - tau[2 * i] - t1 + u1 - r * lt,
                           m12 * qdd1 + m22 * qdd2 - tau[2 * i + 1] - t2 + u2 - r * lt]
-            if self.pinned[0, i]:
-                cbx, cby = self.c_B[0, i]
+            if pinned:
                 ex, ey = relx - (c * cbx - s * cby), rely - (s * cbx + c * cby)
                 contact_rows += [gam - ex, gam - ey, gam + ex, gam + ey]
             else:
@@ -218,28 +246,22 @@ class KnotRows:
                 vx = -(r1y + r2y) * qd1 - r2y * qd2 - pdx + thd * rely
                 vy = (r1x + r2x) * qd1 + r2x * qd2 - pdy - thd * relx
                 contact_rows += [phi_tip, gam - phi_tip * ln, gam - vx * ln, gam + vx * ln, gam - vy * ln, gam + vy * ln]
-        m = b.mass
-        return np.array([m * z[COL_PDD][0] - fx_sum - m * b.gravity[0], m * z[COL_PDD][1] - fy_sum - m * b.gravity[1],
-                         b.inertia * z[COL_THDD] - torque] + hand_rows + contact_rows)
-
-    def _smooth_contact(self, bx: float, by: float) -> tuple[float, float, float]:
-        """(phi - r, n_B) of contact.smooth_distance at the tip centre (bx, by) in B, in math."""
-        b = self.body
-        k, (wa, wb) = b.sharpness, b.offsets[:2]
-        d = (bx - wa, by - wb, -bx - wa, -by - wb)
-        dmax = max(d)
-        e = [math.exp(k * (dj - dmax)) for dj in d]
-        total = e[0] + e[1] + e[2] + e[3]
-        gx, gy = (e[0] - e[2]) / total, (e[1] - e[3]) / total
-        norm = math.hypot(gx, gy)
-        return dmax + math.log(total) / k - b.radius, gx / norm, gy / norm
+        return np.array([m * z[COL_PDD][0] - fx_sum - m * gx, m * z[COL_PDD][1] - fy_sum - m * gy,
+                         inertia * z[COL_THDD] - torque] + hand_rows + contact_rows)
 
     def sparsity(self, k: int) -> list[tuple[int, int]]:
-        """(row, col) entries of knot k's Jacobian that can be nonzero, from the
-        Jacobian at random points (structural zeros stay exactly zero)."""
-        rows = self.knot(k)
+        """(row, col) entries of knot k's Jacobian that can be nonzero (see `sparsities`)."""
+        return self.knot(k).sparsities()[0]
+
+    def sparsities(self) -> list[list[tuple[int, int]]]:
+        """Per knot, the (row, col) entries of its Jacobian that can be nonzero, from the
+        Jacobian at three random points (structural zeros stay exactly zero), every knot
+        at the same points, all knots in one batch per point (one evaluation per knot
+        and point cost ~35 ms per 13-knot program)."""
         rng = np.random.default_rng(0)
-        mask = np.zeros((rows.num_rows[0], KNOT_SIZE), dtype=bool)
+        nK = len(self.num_rows)
+        mask = np.zeros((nK, int(self.num_rows.max()), KNOT_SIZE), dtype=bool)
         for _ in range(3):
-            mask |= rows.evaluate(rng.uniform(-1, 1, (1, KNOT_SIZE)), True)[1][0] != 0.0
-        return [(int(i), int(j)) for i, j in zip(*np.nonzero(mask))]
+            z = rng.uniform(-1, 1, (1, KNOT_SIZE))
+            mask |= self.evaluate(np.repeat(z, nK, axis=0), True)[1] != 0.0
+        return [[(int(i), int(j)) for i, j in zip(*np.nonzero(mask[k, :self.num_rows[k]]))] for k in range(nK)]

@@ -113,10 +113,12 @@ class _KnotConstraint:
 def _collocation(prog, a: np.ndarray, b: np.ndarray, dt: float):
     """a_{k+1} - a_k - dt/2 (b_k + b_{k+1}) = 0 for all k, one sparse binding."""
     K, n = a.shape
-    D = sp.diags([-np.ones(K - 1), np.ones(K - 1)], [0, 1], shape=(K - 1, K))
-    S = sp.diags([np.ones(K - 1), np.ones(K - 1)], [0, 1], shape=(K - 1, K))
-    I = sp.identity(n)
-    A = sp.hstack([sp.kron(D, I), -0.5 * dt * sp.kron(S, I)]).tocsc()
+    # Row k n + j: a[k+1, j] - a[k, j] + h b[k, j] + h b[k+1, j], h = -dt/2 (scipy's kron and
+    # hstack built the same matrix ~5x slower).
+    r = np.arange((K - 1) * n)
+    h = -0.5 * dt
+    A = sp.csc_matrix((np.concatenate([np.full(r.size, -1.0), np.ones(r.size), np.full(2 * r.size, h)]),
+                       (np.tile(r, 4), np.concatenate([r, r + n, K * n + r, K * n + n + r]))), shape=(r.size, 2 * K * n))
     return prog.AddLinearEqualityConstraint(A, np.zeros(A.shape[0]), np.concatenate([a.ravel(), b.ravel()]))
 
 
@@ -165,8 +167,9 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     # Friction cone, linear: mu lambda_n - lambda_t >= 0 and mu lambda_n + lambda_t >= 0, with the
     # planning friction mu_plan (body.mu), below the scene's mu by search.friction_safety.
     mu, n = body.mu, K * NUM_FINGERS
-    I = sp.identity(n)
-    A = sp.vstack([sp.hstack([mu * I, -I]), sp.hstack([mu * I, I])]).tocsc()
+    i = np.arange(n)                    # [[mu I, -I], [mu I, I]], built directly (as for _collocation)
+    A = sp.csc_matrix((np.concatenate([np.full(2 * n, mu), -np.ones(n), np.ones(n)]),
+                       (np.concatenate([i, n + i, i, n + i]), np.concatenate([i, i, n + i, n + i]))), shape=(2 * n, 2 * n))
     prog.AddLinearConstraint(A, np.zeros(2 * n), np.full(2 * n, np.inf),
                              np.concatenate([v.lambda_n.ravel(), v.lambda_t.ravel()]))
     lo, hi = _bounds(v, spec, body)
@@ -176,11 +179,11 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     cache = _KnotCache(rows, K)
     prog.AddVisualizationCallback(cache.prime, v.stacked().ravel())
     bindings = []
-    for k in range(K):
+    for k, pattern in enumerate(rows.sparsities()):
         evaluator = _KnotConstraint(cache, k)
         lower, upper = rows.bounds(k, spec.clearance[k])
         binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
-        binding.evaluator().SetGradientSparsityPattern(rows.sparsity(k))
+        binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
     _add_costs(prog, v, spec, config)
     return CitoProgram(prog=prog, variables=v, rows=rows, spec=spec, knot_bindings=bindings,
