@@ -125,6 +125,7 @@ class KnotRows:
         self.kP, self.iP = np.nonzero(self.pinned)
         self.kF, self.iF = np.nonzero(~self.pinned)
         self._scalars = None            # values_one's constants, made on its first call
+        self.index_cache = {}           # knot_jacobian's flat scatter positions, made on first use
 
     def knot(self, k: int) -> "KnotRows":
         return KnotRows(self.body, self.pinned[k:k + 1], self.c_B[k:k + 1], self.n_B[k:k + 1])

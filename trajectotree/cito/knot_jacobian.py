@@ -24,6 +24,17 @@ from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
 _I2 = np.eye(2)
 
 
+def _put(jac: np.ndarray, rows, key: str, where, value) -> None:
+    """jac[where()] = value, as numpy's fancy assignment with the index arrays where() returns,
+    through flat positions computed on the first call per KnotRows, block and shape (the
+    index arithmetic and 3-index scatter cost more than the values at 13 knots)."""
+    cache = rows.index_cache
+    idx = cache.get((key, jac.shape))
+    if idx is None:
+        idx = cache[(key, jac.shape)] = np.ravel_multi_index(np.broadcast_arrays(*where()), jac.shape)
+    jac.reshape(-1)[idx] = value
+
+
 @dataclass(frozen=True)
 class _Partials:
     """Derivatives of each finger's p_BF, n_W, f_W and arm (K, 4, 2[, 2]) with respect to
@@ -103,13 +114,15 @@ def _hand_rows(jac, rows, Z, kin, d: _Partials) -> None:
     H_q[..., :, 1] += np.einsum("kiab,kib->kia", hand.mass_derivatives(q), qdd)
     kk = np.arange(nK)[:, None, None]
     rows_h = ROW_HAND_IDX[None, :, :, None]
-    jac[kk[..., None], rows_h, COL_Q[None, :, None, :]] = H_q
-    jac[kk[..., None], rows_h, COL_QDD[None, :, None, :]] = hand.mass_matrices(q)
-    jac[kk[..., None], rows_h, COL_TAU[None, :, None, :]] = -_I2
+    _put(jac, rows, "hand_q", lambda: (kk[..., None], rows_h, COL_Q[None, :, None, :]), H_q)
+    _put(jac, rows, "hand_qdd", lambda: (kk[..., None], rows_h, COL_QDD[None, :, None, :]), hand.mass_matrices(q))
+    _put(jac, rows, "hand_tau", lambda: (kk[..., None], rows_h, COL_TAU[None, :, None, :]), -_I2)
     jac[:, ROW_HAND, COL_P] = (JT @ d.df_dp).reshape(nK, NUM_HAND_JOINTS, 2)
     jac[:, ROW_HAND, COL_TH] = np.einsum("kiab,kib->kia", JT, d.df_dth).reshape(nK, -1)
-    jac[kk, ROW_HAND_IDX[None], COL_LN[None, :, None]] = -np.einsum("kiab,kib->kia", JT, kin.n_W)
-    jac[kk, ROW_HAND_IDX[None], COL_LT[None, :, None]] = np.einsum("kiab,kib->kia", JT, kin.t_W) - r
+    _put(jac, rows, "hand_ln", lambda: (kk, ROW_HAND_IDX[None], COL_LN[None, :, None]),
+         -np.einsum("kiab,kib->kia", JT, kin.n_W))
+    _put(jac, rows, "hand_lt", lambda: (kk, ROW_HAND_IDX[None], COL_LT[None, :, None]),
+         np.einsum("kiab,kib->kia", JT, kin.t_W) - r)
 
 
 def _pinned_rows(jac, rows, kin) -> None:
@@ -118,12 +131,13 @@ def _pinned_rows(jac, rows, kin) -> None:
     rp = rows.row_start[kP, iP]
     de_dth = -(rows.c_B[kP, iP][:, None, :] @ kin.RT[kP])[:, 0] @ K90.T
     kP2, kP3 = kP[:, None], kP[:, None, None]
+    J = kin.J[kP, iP]
     for sign, off in ((-1.0, PIN_MINUS), (1.0, PIN_PLUS)):
         rws = rp[:, None] + off + TWO                                     # (nP, 2)
-        jac[kP2, rws, COL_G[iP, None]] = 1.0
-        jac[kP3, rws[:, :, None], COL_Q[iP][:, None, :]] = sign * kin.J[kP, iP]
-        jac[kP3, rws[:, :, None], COL_P_IDX] = -sign * _I2
-        jac[kP2, rws, COL_TH] = sign * de_dth
+        _put(jac, rows, f"pin_g{off}", lambda: (kP2, rws, COL_G[iP, None]), 1.0)
+        _put(jac, rows, f"pin_q{off}", lambda: (kP3, rws[:, :, None], COL_Q[iP][:, None, :]), sign * J)
+        _put(jac, rows, f"pin_p{off}", lambda: (kP3, rws[:, :, None], COL_P_IDX), -sign * _I2)
+        _put(jac, rows, f"pin_th{off}", lambda: (kP2, rws, COL_TH), sign * de_dth)
 
 
 def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
@@ -139,25 +153,29 @@ def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
     dphi_dq = np.einsum("na,naj->nj", gF, d.dpB_dq[kF, iF])
     kF2 = kF[:, None]
     colqF = COL_Q[iF]
-    for row, scale in ((rf + FREE_PHI, None), (rf + FREE_COMP, -lnF)):
-        jac[kF2, row[:, None], COL_P_IDX] = dphi_dp if scale is None else scale[:, None] * dphi_dp
-        jac[kF, row, COL_TH] = dphi_dth if scale is None else scale * dphi_dth
-        jac[kF2, row[:, None], colqF] = dphi_dq if scale is None else scale[:, None] * dphi_dq
-    jac[kF, rf + FREE_COMP, COL_LN[iF]] = -kin.phi_tip[kF, iF]
-    jac[kF, rf + FREE_COMP, COL_G[iF]] = 1.0
+    for off, scale in ((FREE_PHI, None), (FREE_COMP, -lnF)):
+        row = rf + off
+        _put(jac, rows, f"free_p{off}", lambda: (kF2, row[:, None], COL_P_IDX),
+             dphi_dp if scale is None else scale[:, None] * dphi_dp)
+        _put(jac, rows, f"free_th{off}", lambda: (kF, row, COL_TH), dphi_dth if scale is None else scale * dphi_dth)
+        _put(jac, rows, f"free_q{off}", lambda: (kF2, row[:, None], colqF),
+             dphi_dq if scale is None else scale[:, None] * dphi_dq)
+    _put(jac, rows, "free_comp_ln", lambda: (kF, rf + FREE_COMP, COL_LN[iF]), -kin.phi_tip[kF, iF])
+    _put(jac, rows, "free_comp_g", lambda: (kF, rf + FREE_COMP, COL_G[iF]), 1.0)
     qdF, r1F, r2F, JF = qd[kF, iF], kin.r1[kF, iF], kin.r2[kF, iF], kin.J[kF, iF]
     dv_dq = -np.stack([(r1F + r2F) * qdF[:, :1] + r2F * qdF[:, 1:], r2F * (qdF[:, :1] + qdF[:, 1:])], axis=2)
     dv_dq -= thd[kF, None, None] * (K90 @ JF)                         # (nF, comp, joint)
     dv_dthd = -(kin.rel[kF, iF] @ K90.T)
     thdK = thd[kF, None, None] * K90                                  # dv/dp
+    vF = kin.v[kF, iF]
     for a in range(2):
         for sign, off in ((-1.0, FREE_SLIP + 2 * a), (1.0, FREE_SLIP + 2 * a + 1)):
             rws = rf + off
             sl = sign * lnF
-            jac[kF, rws, COL_G[iF]] = 1.0
-            jac[kF, rws, COL_LN[iF]] = sign * kin.v[kF, iF, a]
-            jac[kF2, rws[:, None], COL_QD[iF]] = sl[:, None] * JF[:, a, :]
-            jac[kF, rws, COL_PD_IDX[a]] = -sl
-            jac[kF, rws, COL_THD] = sl * dv_dthd[:, a]
-            jac[kF2, rws[:, None], colqF] = sl[:, None] * dv_dq[:, a, :]
-            jac[kF2, rws[:, None], COL_P_IDX] = sl[:, None] * thdK[:, a, :]
+            _put(jac, rows, f"slip_g{off}", lambda: (kF, rws, COL_G[iF]), 1.0)
+            _put(jac, rows, f"slip_ln{off}", lambda: (kF, rws, COL_LN[iF]), sign * vF[:, a])
+            _put(jac, rows, f"slip_qd{off}", lambda: (kF2, rws[:, None], COL_QD[iF]), sl[:, None] * JF[:, a, :])
+            _put(jac, rows, f"slip_pd{off}", lambda: (kF, rws, COL_PD_IDX[a]), -sl)
+            _put(jac, rows, f"slip_thd{off}", lambda: (kF, rws, COL_THD), sl * dv_dthd[:, a])
+            _put(jac, rows, f"slip_q{off}", lambda: (kF2, rws[:, None], colqF), sl[:, None] * dv_dq[:, a, :])
+            _put(jac, rows, f"slip_p{off}", lambda: (kF2, rws[:, None], COL_P_IDX), sl[:, None] * thdK[:, a, :])
