@@ -202,11 +202,13 @@ def test_plan_files_without_p_W_C_are_refused_by_name(plans, tmp_path):
 def test_paper_config_loads_with_the_papers_formulation():
     config = load_config(Path(__file__).parents[1] / "configs" / "paper.yaml")
     assert config.search.friction_safety == 1.0 and config.cito.switch_clearance == 0.0
+    assert config.cito.formulation == "joint"
     assert planning_mu(config) == config.scene.mu
     default = Config()
     assert dataclasses.replace(config, search=default.search, cito=default.cito) == default   # nothing else differs
     assert dataclasses.replace(config.search, friction_safety=default.search.friction_safety) == default.search
-    assert dataclasses.replace(config.cito, switch_clearance=default.cito.switch_clearance) == default.cito
+    assert dataclasses.replace(config.cito, switch_clearance=default.cito.switch_clearance,
+                               formulation=default.cito.formulation) == default.cito
 
 
 def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):

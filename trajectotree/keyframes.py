@@ -132,6 +132,12 @@ def solve_piece(task: PieceTask) -> PieceResult:
                        max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, pid=os.getpid())
 
 
+def prepare_worker(config: SceneConfig) -> int:
+    """Builds (or finds) the scene in this process; its pid (to warm up a pool, or time its start)."""
+    _scene(config)
+    return os.getpid()
+
+
 def _worker_init() -> None:
     cito_solve.log_observer = None   # a terminal's progress line is the parent's, not each worker's
 
