@@ -156,6 +156,19 @@ def test_a_failing_segment_is_retried_and_recorded(scene, contact_plan, tmp_path
     assert result.trajectory.x.shape == (2 * CONFIG.cito.knots_per_segment + 1, 3)   # still saved, as joint's
 
 
+def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
+    # max_iter 12 stops both segments short (they need 16 and 14 iterations here); the restart from
+    # the last iterate converges within 12 more, so the plan succeeds with one retry per segment.
+    config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, max_iter=12))
+    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan,
+                  segment_workers=1)
+    assert result.success and result.physics_check.passed, result.status
+    for record in result.segments:
+        assert record["success"] and record["retries"] == 1
+        assert [(r["kind"], r["success"]) for r in record["attempts"]] == [("keyframes", False), ("restart", True)]
+        assert record["attempts"][0]["status"] == "Max iteration exceeded"
+
+
 def test_bad_input_is_refused(scene, tmp_path, capsys):
     with pytest.raises(ConfigError, match=r"cito.formulation = 'fast' is unknown; valid: keyframes, joint"):
         CitoConfig(formulation="fast")
