@@ -135,6 +135,21 @@ def test_parallel_and_serial_solves_give_identical_arrays(scene, contact_plan, s
         assert other.iterations == serial.iterations and other.cost == serial.cost
 
 
+@pytest.mark.slow
+def test_segments_on_a_dask_cluster_equal_the_serial_solve(scene, contact_plan, serial):
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp", host="127.0.0.1",
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        result = plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan,
+                      segment_executor=client.get_executor())
+        worker_pids = set(client.run(lambda: __import__("os").getpid()).values())
+    for name in TRAJECTORY_ARRAYS:
+        np.testing.assert_array_equal(getattr(result.trajectory, name), getattr(serial.trajectory, name))
+    # each segment was solved in a worker process of the cluster, not here
+    assert {a["pid"] for s in result.segments for a in s["attempts"]} <= worker_pids
+
+
 def test_a_failing_segment_is_retried_and_recorded(scene, contact_plan, tmp_path):
     # max_iter 3: no attempt converges; every segment is tried 3 times (its own program, a restart
     # from its last iterate, the joint program with its neighbours: here both segments at once).

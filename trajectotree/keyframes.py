@@ -90,7 +90,7 @@ class PieceResult:
     def record(self) -> dict:
         return {"kind": self.kind, "nodes": [self.first, self.last], "success": self.success,
                 "status": self.status, "iterations": self.iterations,
-                "time_s": self.build_time_s + self.solve_time_s, "max_rss_mb": self.max_rss_mb}
+                "time_s": self.build_time_s + self.solve_time_s, "max_rss_mb": self.max_rss_mb, "pid": self.pid}
 
 
 def trajectory(program, sol, scene: Scene) -> Trajectory:
