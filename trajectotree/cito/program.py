@@ -9,11 +9,13 @@ The nonlinear rows of a knot (knot.KnotRows) form one Python constraint per knot
 with an analytic Jacobian and its sparsity pattern.
 
 Speed: IPOPT evaluates a Python constraint per knot; each call crosses into Python.
-All knots are evaluated at once (vectorized) by a visualization callback, which
-Drake runs with the full decision vector whenever IPOPT evaluates the cost: the
-Jacobians IPOPT asks for next are then cache hits. A knot whose variables differ
-from the cached ones (IPOPT evaluates trial-point constraint values before the
-cost) is evaluated on its own, so results never depend on the call order.
+All knots are evaluated at once (vectorized) when the first knot asks for its
+Jacobian at a full decision vector the cache knows: the one Drake passes to a
+visualization callback whenever IPOPT evaluates the cost, or the one the knots'
+value calls just assembled (_KnotCache); the other knots' Jacobians are then cache
+hits. A knot whose variables match neither is evaluated on its own, so results
+never depend on the call order. Trial-point values (asked before the cost) come
+from the scalar values_one.
 Costs are many small native quadratic costs: Drake differentiates every cost
 binding with AutoDiff over its own variables, which is cubic in their number.
 """
@@ -70,44 +72,73 @@ class CitoProgram:
 
 
 class _KnotCache:
-    """All knots' values and Jacobians at the last full decision vector seen."""
+    """All knots' values and Jacobians at one full decision vector (Z, val, jac), evaluated
+    in one batch when a knot first asks for it there. The vectors it may evaluate: the one
+    Drake passes to the visualization callback at every cost evaluation (`primed`), and
+    the knots' latest float-path inputs (`seen`: IPOPT asks for every knot's values at a
+    point before its Jacobians there, at the start and after a restoration). Batch rows
+    equal one-knot evaluations bit for bit, so which vector served a knot never matters."""
 
     def __init__(self, rows: KnotRows, num_knots: int):
         self.rows, self.num_knots = rows, num_knots
-        self.Z = None
-        self.val = self.jac = None
+        self.Z = self.val = self.jac = None
+        self.primed = None
+        self.seen = np.full((num_knots, KNOT_SIZE), np.nan)
 
     def prime(self, values: np.ndarray) -> None:
-        Z = np.asarray(values).reshape(self.num_knots, KNOT_SIZE)
-        if self.Z is not None and np.array_equal(Z, self.Z):
-            return
+        """Visualization callback: remember the vector; rejected trial points are never evaluated."""
+        self.primed = np.array(values, dtype=float).reshape(self.num_knots, KNOT_SIZE)
+
+    def _evaluate(self, Z: np.ndarray) -> None:
         self.val, self.jac = self.rows.evaluate(Z, True)
-        self.Z = Z.copy()
+        self.Z = Z
+
+    def primed_rows(self, k: int, z: np.ndarray):
+        """Knot k's batch (values, Jacobian) when z is its part of the primed vector, else None."""
+        if self.primed is None or not np.array_equal(self.primed[k], z):
+            return None
+        if self.Z is not self.primed:
+            self._evaluate(self.primed)
+        return self.val[k], self.jac[k]
+
+    def any_rows(self, k: int, z: np.ndarray):
+        """Knot k's batch (values, Jacobian) at z from the evaluated, primed or seen vector, else None."""
+        if self.Z is not None and np.array_equal(self.Z[k], z):
+            return self.val[k], self.jac[k]
+        found = self.primed_rows(k, z)
+        if found is None and np.array_equal(self.seen[k], z):
+            self._evaluate(self.seen.copy())
+            found = self.val[k], self.jac[k]
+        return found
 
 
 class _KnotConstraint:
     """Drake's evaluator for knot k: float input gives values, AutoDiffXd input gives
-    values and gradients (analytic Jacobian times the input's gradient)."""
+    values and gradients (analytic Jacobian times the input's gradient). Float values
+    are the batch's at the primed vector, else values_one's (the numbers IPOPT has always
+    seen: the two differ in the last bit)."""
 
     def __init__(self, cache: _KnotCache, k: int):
         self.cache, self.k = cache, k
         self.single = cache.rows.knot(k)
         self.n = int(self.single.num_rows[0])
 
-    def _rows(self, z: np.ndarray, with_jacobian: bool):
-        c = self.cache
-        if c.Z is not None and np.array_equal(c.Z[self.k], z):
-            return c.val[self.k, :self.n], c.jac[self.k, :self.n]
-        if not with_jacobian:
-            return self.single.values_one(z), None
-        val, jac = self.single.evaluate(z[None], True)
-        return val[0, :self.n], jac[0, :self.n]
+    def _values(self, z: np.ndarray) -> np.ndarray:
+        self.cache.seen[self.k] = z
+        found = self.cache.primed_rows(self.k, z)
+        return found[0][:self.n] if found is not None else self.single.values_one(z)
+
+    def _rows(self, z: np.ndarray):
+        found = self.cache.any_rows(self.k, z)
+        if found is None:
+            found = tuple(a[0] for a in self.single.evaluate(z[None], True))
+        return found[0][:self.n], found[1][:self.n]
 
     def __call__(self, z):
         if z.dtype == object:
-            val, jac = self._rows(ExtractValue(z)[:, 0], True)
+            val, jac = self._rows(ExtractValue(z)[:, 0])
             return InitializeAutoDiff(val, jac @ ExtractGradient(z))[:, 0]
-        return self._rows(np.asarray(z, dtype=float), False)[0]
+        return self._values(np.asarray(z, dtype=float))
 
 
 def _collocation(prog, a: np.ndarray, b: np.ndarray, dt: float):

@@ -98,10 +98,13 @@ def _iterations(summary: str) -> int:
 
 
 def _timing(summary: str) -> dict:
-    """Seconds from IPOPT's timing statistics: total, in function evaluations, own."""
+    """Seconds from IPOPT's timing statistics: total, in function evaluations, own, and of
+    its own the linear solver's factorizations and back-solves."""
     out = {}
     for key, pattern in (("ipopt_total_s", r"OverallAlgorithm\.*:\s*([\d.]+)"),
                          ("function_evaluations_s", r"Function Evaluations\.*:\s*([\d.]+)"),
+                         ("linear_system_factorization_s", r"LinearSystemFactorization\.*:\s*([\d.]+)"),
+                         ("linear_system_back_solve_s", r"LinearSystemBackSolve\.*:\s*([\d.]+)"),
                          ("ipopt_without_function_evaluations_s", r"Total seconds in IPOPT \(w/o function evaluations\)\s*=\s*([\d.]+)"),
                          ("nlp_function_evaluations_s", r"Total seconds in NLP function evaluations\s*=\s*([\d.]+)")):
         m = re.search(pattern, summary)
