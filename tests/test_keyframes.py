@@ -15,7 +15,7 @@ from trajectotree.cito.transition import piece_spec
 from trajectotree.cli import main
 from trajectotree.config import CitoConfig, Config, ConfigError, SearchConfig
 from trajectotree.io import load_plan, save_plan
-from trajectotree.keyframes import local_pool, stitch
+from trajectotree.keyframes import _neighbour_ranges, local_pool, stitch
 from trajectotree.physics import BoxModel, check_physics
 from trajectotree.planners import plan, planning_mu
 from trajectotree.results import TRAJECTORY_ARRAYS
@@ -182,6 +182,14 @@ def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
         assert record["success"] and record["retries"] == 1
         assert [(r["kind"], r["success"]) for r in record["attempts"]] == [("keyframes", False), ("restart", True)]
         assert record["attempts"][0]["status"] == "Max iteration exceeded"
+
+
+def test_joint_retries_take_the_neighbours_and_merge_overlaps():
+    assert _neighbour_ranges([4], 9) == [(3, 6)]                # nodes 3..6: segments 3, 4, 5
+    assert _neighbour_ranges([0], 9) == [(0, 2)] and _neighbour_ranges([8], 9) == [(7, 9)]
+    assert _neighbour_ranges([2, 4], 9) == [(1, 6)]             # overlapping: one program
+    assert _neighbour_ranges([1, 5], 9) == [(0, 3), (4, 7)]     # apart: two
+    assert _neighbour_ranges([0], 1) == []                      # one segment: nothing to free
 
 
 def test_bad_input_is_refused(scene, tmp_path, capsys):

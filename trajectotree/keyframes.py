@@ -165,8 +165,8 @@ def run_pieces(tasks: list[PieceTask], executor: Executor | None, workers: int |
     workers = min(len(tasks), os.cpu_count() or 1) if workers is None else min(workers, len(tasks))
     if workers <= 1:
         return [solve_piece(t) for t in tasks]
-    for t in tasks:   # a forked worker inherits the scene already built here
-        _SCENES.setdefault(t.scene, _scene(t.scene))
+    for t in tasks:   # a forked worker inherits the scene built here
+        _scene(t.scene)
     with local_pool(workers) as pool:
         return list(pool.map(solve_piece, tasks))
 
@@ -177,7 +177,7 @@ def _neighbour_ranges(failed: list[int], n: int) -> list[tuple[int, int]]:
     merged = []
     for s in sorted(failed):
         a, b = max(s - 1, 0), min(s + 2, n)
-        if merged and a <= merged[-1][1]:
+        if merged and a < merged[-1][1]:   # ranges that only meet at a node stay apart
             merged[-1] = (merged[-1][0], max(b, merged[-1][1]))
         else:
             merged.append((a, b))
@@ -188,8 +188,10 @@ def solve_segments(plan: ContactPlan, config: Config, mu: float, executor: Execu
                    workers: int | None = None) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
     """(the pieces to stitch, in order; every attempt per segment), with the retries."""
     n = len(plan.nodes) - 1
-    task = lambda first, last, kind, guess=None: PieceTask(config.scene, config.cito, mu, plan, first, last,  # noqa: E731
-                                                          kind, guess)
+
+    def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
+        return PieceTask(config.scene, config.cito, mu, plan, first, last, kind, guess)
+
     best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers)
     attempts = {s: [best[s]] for s in range(n)}
     failed = [s for s in range(n) if not best[s].success]
