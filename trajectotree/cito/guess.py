@@ -48,15 +48,16 @@ def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVari
     q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
     for s in range(len(plan.nodes) - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]
-        for j, u in enumerate(progress):
-            k = s * M + j
-            for i in range(NUM_FINGERS):
-                if i == new.switching_finger:
-                    c_B = _lifted(boundary, old.arclengths[i], new.arclengths[i], u, r)
-                else:
-                    c_B = old.p_BC[i] + r * old.n_B[i]
-                qi = hand.ik(i, x[k, :2] + rotation_2d(x[k, 2]) @ c_B)
-                q[k, 2 * i:2 * i + 2] = qi if qi is not None else (1 - u) * old.q[2 * i:2 * i + 2] + u * new.q[2 * i:2 * i + 2]
+        ks = s * M + np.arange(M + 1)
+        for i in range(NUM_FINGERS):
+            if i == new.switching_finger:
+                c_B = [_lifted(boundary, old.arclengths[i], new.arclengths[i], u, r) for u in progress]
+            else:
+                c_B = [old.p_BC[i] + r * old.n_B[i]] * len(progress)
+            # The segment's knots at once (one vectorized IK per finger, bit for bit the one-target IK).
+            qi = hand.ik_many(i, np.array([x[k, :2] + rotation_2d(x[k, 2]) @ c for k, c in zip(ks, c_B)]))
+            between = (1 - progress)[:, None] * old.q[2 * i:2 * i + 2] + progress[:, None] * new.q[2 * i:2 * i + 2]
+            q[ks, 2 * i:2 * i + 2] = np.where(np.isnan(qi[:, :1]), between, qi)
     return _complete(rows, spec, x, q, moving=True)
 
 

@@ -105,3 +105,7 @@ class HandModel:
         limits widened by 1e-9 rad, |d|^2 as `d @ d` (as this guess has always computed it);
         None when the point is out of reach or the solution violates the limits."""
         return self.fingers.finger(i).ik_one(p_WF, elbow=1, tolerance=1e-9, blas_dot=True)
+
+    def ik_many(self, i: int, p_WF: np.ndarray) -> np.ndarray:
+        """`ik` of finger i for targets (..., 2) at once: (..., 2), NaN rows where `ik` gives None."""
+        return self.fingers.finger(i).ik(p_WF, elbow=1, tolerance=1e-9, blas_dot=True)
