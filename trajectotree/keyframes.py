@@ -13,10 +13,11 @@ contact rows, the friction cones) is linear in them at the fixed state, and the 
 rule on either side sees the same zero acceleration, so the stitched arrays satisfy the
 joint program's constraints wherever both segments do. The final pose is the goal node's.
 
-A segment that fails (IPOPT not converged, or its arrays fail the physics check) is retried:
-first from its last iterate ("restart": IPOPT's barrier and L-BFGS memory start afresh), then
-with the joint formulation over it and its neighbours ("joint": nodes s-1..s+2, ends still
-fixed at those nodes), which frees the two keyframes next to it. Every attempt is recorded.
+A segment that fails is retried: one IPOPT did not converge first from its last iterate
+("restart": IPOPT's barrier and L-BFGS memory start afresh; a converged one would only converge
+there again), then, still failing or converged with arrays that fail the physics check, with the
+joint formulation over it and its neighbours ("joint": nodes s-1..s+2, ends still fixed at those
+nodes), which frees the two keyframes next to it. Every attempt is recorded.
 """
 
 from __future__ import annotations
@@ -194,13 +195,13 @@ def solve_segments(plan: ContactPlan, config: Config, mu: float, executor: Execu
 
     best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers)
     attempts = {s: [best[s]] for s in range(n)}
-    failed = [s for s in range(n) if not best[s].success]
-    if failed:
-        for s, r in zip(failed, run_pieces([task(s, s + 1, "restart", best[s].solution) for s in failed],
-                                           executor, workers)):
+    unconverged = [s for s in range(n) if not best[s].converged]
+    if unconverged:
+        for s, r in zip(unconverged, run_pieces([task(s, s + 1, "restart", best[s].solution) for s in unconverged],
+                                                executor, workers)):
             attempts[s].append(r)
             best[s] = r
-    failed = [s for s in failed if not best[s].success]
+    failed = [s for s in range(n) if not best[s].success]
     pieces = {s: best[s] for s in range(n)}   # keyed by each piece's first node
     ranges = _neighbour_ranges(failed, n)
     for (a, b), r in zip(ranges, run_pieces([task(a, b, "joint") for a, b in ranges], executor, workers)):
