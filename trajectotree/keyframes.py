@@ -247,7 +247,9 @@ def plan_keyframes(scene: Scene, goal: float, contact_plan: ContactPlan, config:
                    search_time: float, executor: Executor | None = None, workers: int | None = None) -> PlanResult:
     """The trajectotree PlanResult of the keyframes formulation for a successful contact plan.
     Times: build_time_s and solve_time_s summed over every attempt (process time in the
-    workers); total_time_s = search_time + the wall-clock time of all segment solves."""
+    workers); total_time_s = search_time + the wall-clock time of all segment solves. cost: the
+    stitched pieces' costs summed (a shared knot's effort terms count in both); iterations: every
+    attempt's; violations: each group's largest over the pieces."""
     t0 = time.perf_counter()
     pieces, attempts = solve_segments(contact_plan, config, mu, executor, workers)
     wall = time.perf_counter() - t0
