@@ -257,12 +257,20 @@ class KnotRows:
     def sparsities(self) -> list[list[tuple[int, int]]]:
         """Per knot, the (row, col) entries of its Jacobian that can be nonzero, from the
         Jacobian at three random points (structural zeros stay exactly zero), every knot
-        at the same points, all knots in one batch per point (one evaluation per knot
-        and point cost ~35 ms per 13-knot program)."""
+        at the same points, in one batch per point (one evaluation per knot and point cost
+        ~35 ms per 13-knot program) of the distinct knots only: a knot's rows depend on
+        nothing but its pinned, c_B and n_B (a segment's inner knots share theirs)."""
+        keys = [self.pinned[k].tobytes() + self.c_B[k].tobytes() + self.n_B[k].tobytes() for k in range(len(self.num_rows))]
+        first = {}                                  # each distinct key's first knot, in order
+        for k, key in enumerate(keys):
+            first.setdefault(key, k)
+        distinct = np.array(list(first.values()))
+        rows = KnotRows(self.body, self.pinned[distinct], self.c_B[distinct], self.n_B[distinct])
         rng = np.random.default_rng(0)
-        nK = len(self.num_rows)
-        mask = np.zeros((nK, int(self.num_rows.max()), KNOT_SIZE), dtype=bool)
+        mask = np.zeros((len(distinct), int(rows.num_rows.max()), KNOT_SIZE), dtype=bool)
         for _ in range(3):
             z = rng.uniform(-1, 1, (1, KNOT_SIZE))
-            mask |= self.evaluate(np.repeat(z, nK, axis=0), True)[1] != 0.0
-        return [[(int(i), int(j)) for i, j in zip(*np.nonzero(mask[k, :self.num_rows[k]]))] for k in range(nK)]
+            mask |= rows.evaluate(np.repeat(z, len(distinct), axis=0), True)[1] != 0.0
+        patterns = [[(int(i), int(j)) for i, j in zip(*np.nonzero(mask[u, :rows.num_rows[u]]))] for u in range(len(distinct))]
+        slot = {key: u for u, key in enumerate(first)}
+        return [patterns[slot[key]] for key in keys]
