@@ -184,6 +184,26 @@ def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
         assert record["attempts"][0]["status"] == "Max iteration exceeded"
 
 
+def test_a_segment_failing_the_physics_check_is_retried_with_its_neighbours(scene, contact_plan):
+    # Node 1's finger 2 turned 0.1 rad off its grasp (a keyframe the search would not make): segment
+    # 1-2 converges but its fingertip pushes from a distance, so (no restart: it converged) the joint
+    # program over nodes 0-2, which frees node 1, replaces both segments.
+    node = contact_plan.nodes[1]
+    q = node.q.copy()
+    q[4] += 0.1
+    bad = dataclasses.replace(contact_plan, nodes=(contact_plan.nodes[0], dataclasses.replace(node, q=q),
+                                                   contact_plan.nodes[2]))
+    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=bad,
+                  segment_workers=1)
+    assert result.success and result.physics_check.passed, result.status
+    first, second = result.segments
+    assert [(r["kind"], r["success"]) for r in second["attempts"]] == [("keyframes", False), ("joint", True)]
+    assert second["attempts"][0]["status"] in ("Success", "Stop at acceptable point")   # converged
+    assert [(r["kind"], r["nodes"]) for r in first["attempts"]] == [("keyframes", [0, 1]), ("joint", [0, 2])]
+    assert first["success"] and second["success"] and first["retries"] == second["retries"] == 1
+    np.testing.assert_array_equal(result.trajectory.x[-1], contact_plan.nodes[-1].object_pose)
+
+
 def test_joint_retries_take_the_neighbours_and_merge_overlaps():
     assert _neighbour_ranges([4], 9) == [(3, 6)]                # nodes 3..6: segments 3, 4, 5
     assert _neighbour_ranges([0], 9) == [(0, 2)] and _neighbour_ranges([8], 9) == [(7, 9)]
