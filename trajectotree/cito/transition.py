@@ -14,6 +14,8 @@ K = (N-1) M_hat + 1 (the paper's M = (N-1) M_hat time steps). In segment s:
   - the running pose cost targets x*_{s+1} (eq. 11).
 Pinning means the fingertip centre sits at p*_BC + r n*_B in the box frame, relaxed
 by the finger's penalized slack, with the planned contact frame.
+`piece_spec` is the same program over some of the nodes with both ends fixed at them (the
+keyframes formulation, trajectotree.keyframes).
 """
 
 from __future__ import annotations
