@@ -22,6 +22,8 @@ from trajectotree.kinematics import K90
 from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
 
 _I2 = np.eye(2)
+# Free-finger slip rows FREE_SLIP + s, s = 0..3: gamma + SLIP_SIGN[s] v_a lambda_n, a = SLIP_A[s].
+SLIP_A, SLIP_SIGN = np.array([0, 0, 1, 1]), np.array([-1.0, 1.0, -1.0, 1.0])
 
 
 def _put(jac: np.ndarray, rows, key: str, where, value) -> None:
@@ -167,15 +169,14 @@ def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
     dv_dq -= thd[kF, None, None] * (K90 @ JF)                         # (nF, comp, joint)
     dv_dthd = -(kin.rel[kF, iF] @ K90.T)
     thdK = thd[kF, None, None] * K90                                  # dv/dp
+    # The four slip rows at once, s = 0..3: row FREE_SLIP + s, component a = SLIP_A[s], sign SLIP_SIGN[s].
     vF = kin.v[kF, iF]
-    for a in range(2):
-        for sign, off in ((-1.0, FREE_SLIP + 2 * a), (1.0, FREE_SLIP + 2 * a + 1)):
-            rws = rf + off
-            sl = sign * lnF
-            _put(jac, rows, f"slip_g{off}", lambda: (kF, rws, COL_G[iF]), 1.0)
-            _put(jac, rows, f"slip_ln{off}", lambda: (kF, rws, COL_LN[iF]), sign * vF[:, a])
-            _put(jac, rows, f"slip_qd{off}", lambda: (kF2, rws[:, None], COL_QD[iF]), sl[:, None] * JF[:, a, :])
-            _put(jac, rows, f"slip_pd{off}", lambda: (kF, rws, COL_PD_IDX[a]), -sl)
-            _put(jac, rows, f"slip_thd{off}", lambda: (kF, rws, COL_THD), sl * dv_dthd[:, a])
-            _put(jac, rows, f"slip_q{off}", lambda: (kF2, rws[:, None], colqF), sl[:, None] * dv_dq[:, a, :])
-            _put(jac, rows, f"slip_p{off}", lambda: (kF2, rws[:, None], COL_P_IDX), sl[:, None] * thdK[:, a, :])
+    sl = SLIP_SIGN[:, None] * lnF                                    # (4, nF)
+    rws = rf + (FREE_SLIP + np.arange(4))[:, None]
+    _put(jac, rows, "slip_g", lambda: (kF, rws, COL_G[iF]), 1.0)
+    _put(jac, rows, "slip_ln", lambda: (kF, rws, COL_LN[iF]), SLIP_SIGN[:, None] * vF.T[SLIP_A])
+    _put(jac, rows, "slip_qd", lambda: (kF2, rws[..., None], COL_QD[iF]), sl[..., None] * JF[:, SLIP_A].swapaxes(0, 1))
+    _put(jac, rows, "slip_pd", lambda: (kF, rws, COL_PD_IDX[SLIP_A][:, None]), -sl)
+    _put(jac, rows, "slip_thd", lambda: (kF, rws, COL_THD), sl * dv_dthd.T[SLIP_A])
+    _put(jac, rows, "slip_q", lambda: (kF2, rws[..., None], colqF), sl[..., None] * dv_dq[:, SLIP_A].swapaxes(0, 1))
+    _put(jac, rows, "slip_p", lambda: (kF2, rws[..., None], COL_P_IDX), sl[..., None] * thdK[:, SLIP_A].swapaxes(0, 1))
