@@ -48,6 +48,13 @@ def test_hand_ik_inverts_the_kinematics(hand):
     for i in range(NUM_FINGERS):
         np.testing.assert_allclose(hand.ik(i, tips[i]), q[2 * i:2 * i + 2], atol=1e-9)
     assert hand.ik(0, hand.fingers.p_W_base[0] + [0.5, 0.0]) is None  # out of reach
+    # Many targets at once (the guess's path): each row bit for bit the one-target IK, NaN for None.
+    targets = np.array([tips[0], tips[0] + [0.01, -0.02], hand.fingers.p_W_base[0] + [0.5, 0.0], tips[0] - 0.01])
+    many = hand.ik_many(0, targets)
+    for p, row in zip(targets, many):
+        one = hand.ik(0, p)
+        assert np.all(np.isnan(row)) if one is None else row.tobytes() == one.tobytes()
+    assert np.isnan(many[2]).all()
 
 
 def test_smooth_distance_matches_the_exact_distance_away_from_corners():
@@ -143,6 +150,15 @@ def test_declared_sparsity_is_the_support_of_an_independent_derivative(rows):
                 fd = (one.values_one(z + dz) - one.values_one(z - dz)) / (2 * h)
                 support |= {(int(i), j) for i in np.flatnonzero(np.abs(fd) > 1e-6)}
         assert support == set(one.sparsity(0)) == set(batch[k]), f"knot {k}"
+
+
+def test_knots_with_the_same_definition_share_a_pattern(rows):
+    """sparsities() evaluates each distinct (pinned, c_B, n_B) once: with repeated knots every
+    knot still gets its own knot's pattern."""
+    order = [2, 0, 2, 1, 0, 3, 2]
+    repeated = KnotRows(rows.body, rows.pinned[order], rows.c_B[order], rows.n_B[order])
+    assert repeated.sparsities() == [rows.sparsity(k) for k in order]
+    assert rows.sparsity(0) != rows.sparsity(1)                     # the knots differ: the test can fail
 
 
 def test_static_object_rows_balance_gravity(scene, rows):
