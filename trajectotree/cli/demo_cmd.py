@@ -57,8 +57,11 @@ def print_summary(summary: dict, out: Path) -> None:
     switches = " ".join("-" if f is None else str(f) for f in p["switching_fingers"][1:])
     print(f"TrajectoTree demo: rotate the box by {p['goal']:+.3f} rad ({math.degrees(p['goal']):+.1f} deg)")
     print(f"  contact search  {p['search_time_s']:6.2f} s   switching fingers per segment: {switches or 'none'}")
+    segments = p.get("segments") or ()
+    summed = (f" (summed over {len(segments)} segment programs; "
+              "the total below is wall time)") if segments else ""
     print(f"  CITO (IPOPT)    {p['build_time_s'] + p['solve_time_s']:6.2f} s   build {p['build_time_s']:.2f} s, "
-          f"solve {p['solve_time_s']:.2f} s, {p['iterations']} iterations: {p['status']}")
+          f"solve {p['solve_time_s']:.2f} s, {p['iterations']} iterations{summed}: {p['status']}")
     cost = "n/a" if p["cost"] is None else f"{p['cost']:.4g}"
     verdict = ("converged, physics check passed" if p["success"] else
                "converged, but the physics check FAILED (see the status)" if p["converged"] else "NOT converged")
