@@ -57,7 +57,9 @@ def main() -> int:
         return 2
     print(summary.line())
     print(table_markdown(table), end="")
-    print(f"figures: {', '.join(files.figure_time_cost + (files.figure_tracking or ()))}")
+    figures = files.figure_time_cost + (files.figure_tracking or ()) + tuple(
+        path for pair in files.figure_tracking_by_controller.values() for path in pair)
+    print(f"figures: {', '.join(figures)}")
     if files.executions_md:
         print(Path(files.executions_md).read_text(), end="")
     print(f"table: {files.table_md}, {files.table_csv}; wall time {time.perf_counter() - start:.0f} s")
