@@ -82,17 +82,15 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
                        goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
 
 
-
-def piece_spec(plan: ContactPlan, first: int, last: int, *, radius: float, config: CitoConfig,
-               static_ends: bool = True) -> ProgramSpec:
+def piece_spec(plan: ContactPlan, first: int, last: int, *, radius: float, config: CitoConfig) -> ProgramSpec:
     """The keyframes formulation's program for nodes first..last of the plan (one segment when
     last = first + 1; more when a failed segment is retried with its neighbours): the
     transition program of those nodes with both end knots fixed at the nodes' poses and joint
     angles (each node's grasp is a static stance the search verified), at rest as in the joint
-    program, and with zero object and hand accelerations there (`static_ends`), so that the
+    program, and with zero object and hand accelerations there, so that the
     pieces' end knots are one state and their forces at the shared knot can be averaged."""
     sub = dataclasses.replace(plan, nodes=plan.nodes[first:last + 1])
     spec = transition_spec(sub, radius=radius, config=config)
     end = sub.nodes[-1]
     return dataclasses.replace(spec, x_end=np.asarray(end.object_pose, float), q_end=np.asarray(end.q, float),
-                               static_knots=(0, spec.num_knots - 1) if static_ends else ())
+                               static_knots=(0, spec.num_knots - 1))
