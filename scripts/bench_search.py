@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from trajectotree.config import SearchConfig
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.grasp import FormClosureLp, grasp_matrix
 from trajectotree.initial_grasp import initial_grasp_candidates
 from trajectotree.reach import Reachability
@@ -20,7 +20,7 @@ from trajectotree.search import find_contact_plan
 from trajectotree.sweep import sample_goals
 
 
-def lp_times(boundary: BoxBoundary, mu: float, count: int, rng) -> np.ndarray:
+def lp_times(boundary: ConvexPolygon, mu: float, count: int, rng) -> np.ndarray:
     """Seconds per UpdateCoefficients + Solve of the 4-contact LP on random contacts."""
     lp = FormClosureLp(4, mu)
     out = []
@@ -55,7 +55,7 @@ def main() -> None:
     args = parser.parse_args()
     scene, config = build_scene(), SearchConfig()
     rng = np.random.default_rng(args.seed)
-    lp = lp_times(BoxBoundary(scene.config.box_width, scene.config.box_height), scene.config.mu, args.calls, rng)
+    lp = lp_times(scene.config.shape, scene.config.mu, args.calls, rng)
     ik = ik_times(Reachability(scene), args.calls, rng)
     t0 = time.perf_counter()
     table = initial_grasp_candidates(scene, config)  # cold: built once per process and settings

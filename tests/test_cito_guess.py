@@ -9,7 +9,7 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.transition import transition_spec
 from trajectotree.config import Config
-from trajectotree.geometry import BoxBoundary, world_to_box
+from trajectotree.geometry import ConvexPolygon, world_to_box
 from trajectotree.planners import planning_mu
 from trajectotree.scene import build_scene
 from trajectotree.search import find_contact_plan
@@ -28,7 +28,7 @@ def setup():
 def distances(scene, guess):
     """(K, 4) exact distance of each fingertip sphere from the box, m."""
     tips = BodyParams(scene, 1000.0, mu=scene.config.mu).hand.fingertips(guess.q)
-    box = BoxBoundary(scene.config.box_width, scene.config.box_height)
+    box = scene.config.shape
     return np.array([[box.signed_distance(world_to_box(x, p)) for p in p_WF] for x, p_WF in zip(guess.x, tips)]) \
         - scene.tip_radius
 

@@ -8,7 +8,7 @@ from trajectotree.cito.contact import FACE_NORMALS, face_offsets, smooth_distanc
 from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams, KnotRows
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.scene import NUM_FINGERS, build_scene
 
 
@@ -58,7 +58,7 @@ def test_hand_ik_inverts_the_kinematics(hand):
 
 
 def test_smooth_distance_matches_the_exact_distance_away_from_corners():
-    box = BoxBoundary(0.20, 0.10)
+    box = ConvexPolygon.box(0.20, 0.10)
     offsets = face_offsets(0.20, 0.10)
     rng = np.random.default_rng(1)
     s = rng.uniform(0, box.perimeter, 400)
@@ -180,6 +180,6 @@ def test_default_sharpness_is_tight_where_fingertips_round_corners():
     from trajectotree.config import CitoConfig
     offsets = face_offsets(0.20, 0.10)
     p = np.array([[-0.10907, 0.05112]])
-    exact = BoxBoundary(0.20, 0.10).signed_distance(p[0])
+    exact = ConvexPolygon.box(0.20, 0.10).signed_distance(p[0])
     assert smooth_distance(p, offsets, CitoConfig().sdf_sharpness)[0][0] <= exact + 1e-4
     assert smooth_distance(p, offsets, 200.0)[0][0] > exact + 5e-4

@@ -1,5 +1,5 @@
 """The physics check of plan arrays (trajectotree.physics) against closed forms: the
-exact box distance and nearest boundary points against geometry.BoxBoundary, and a
+exact box distance and nearest boundary points against geometry.ConvexPolygon, and a
 box held at rest by four forces that balance gravity, then broken one way at a time."""
 
 import json
@@ -7,19 +7,18 @@ import json
 import numpy as np
 import pytest
 
-from trajectotree.geometry import BoxBoundary, rotation_2d
-from trajectotree.geometry import box_signed_distance, nearest_box_points
-from trajectotree.physics import FORCE_TOL, GAP_TOL, BoxModel, PhysicsCheck, check_physics, contact_points
+from trajectotree.geometry import ConvexPolygon, rotation_2d
+from trajectotree.physics import FORCE_TOL, GAP_TOL, ObjectModel, PhysicsCheck, check_physics, contact_points
 
 W, H, R = 0.20, 0.10, 0.01
-BOX = BoxModel(mass=0.05, width=W, height=H, gravity=9.81, tip_radius=R)
+BOX = ObjectModel(mass=0.05, shape=ConvexPolygon.box(W, H), gravity=9.81, tip_radius=R)
 
 
-def test_distance_and_nearest_points_match_the_boundary_class():
-    box = BoxBoundary(W, H)
+def test_distance_and_nearest_points_match_the_scalar_ones():
+    box = ConvexPolygon.box(W, H)
     p = np.random.default_rng(0).uniform(-0.15, 0.15, (400, 2))
-    np.testing.assert_allclose(box_signed_distance(p, W, H), [box.signed_distance(q) for q in p], atol=1e-15)
-    np.testing.assert_allclose(nearest_box_points(p, W, H), [box.project(q) for q in p], atol=1e-15)
+    np.testing.assert_allclose(box.signed_distances(p), [box.signed_distance(q) for q in p], atol=1e-15)
+    np.testing.assert_allclose(box.nearest_points(p), [box.project(q) for q in p], atol=1e-15)
 
 
 def hold(K=5, pose=(0.01, -0.02, 0.3)):
@@ -84,7 +83,7 @@ def test_contact_points_are_planned_where_pinned_else_nearest():
     tips_B = np.array([[0.12, 0.01], [0.01, 0.07], [-0.13, 0.08], [0.0, -0.061]])   # finger 2 beyond a corner
     p_W_tip = np.tile(x[0, :2] + tips_B @ R_WB.T, (2, 1, 1))
     pinned = np.array([[True, True, False, False], [False, False, False, False]])
-    p_W_C = contact_points(x, p_W_tip, pinned, p_BC_planned, W, H)
+    p_W_C = contact_points(x, p_W_tip, pinned, p_BC_planned, BOX.shape)
     expected = np.array([[0.1, 0.0], [0.0, 0.05], [-0.1, 0.05], [0.0, -0.05]])
     np.testing.assert_allclose(p_W_C[0], x[0, :2] + expected @ R_WB.T, atol=1e-15)
     np.testing.assert_allclose(p_W_C[1, :2], x[0, :2] + np.array([[0.1, 0.01], [0.01, 0.05]]) @ R_WB.T, atol=1e-15)

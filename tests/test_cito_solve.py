@@ -16,7 +16,7 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
 from trajectotree.cito.transition import transition_spec
 from trajectotree.config import CitoConfig, SearchConfig
-from trajectotree.geometry import BoxBoundary, world_to_box
+from trajectotree.geometry import ConvexPolygon, world_to_box
 from trajectotree.scene import build_scene
 from trajectotree.search import find_contact_plan
 
@@ -81,7 +81,7 @@ def test_iterations_and_timing_are_read_from_ipopts_log(setup):
 
 def plant_penetration(scene, sol) -> float:
     """Deepest fingertip sphere in the box over all knots, with fingertips from the Drake plant."""
-    box = BoxBoundary(scene.config.box_width, scene.config.box_height)
+    box = scene.config.shape
     phi = [[box.signed_distance(world_to_box(x, p)) for p in scene.fingertip_positions(q)]
            for x, q in zip(sol.x, sol.q)]
     return max(0.0, scene.tip_radius - float(np.min(phi)))
@@ -117,7 +117,7 @@ def test_each_group_reports_a_breach_of_known_size(setup):
 
     lambda_n = sol.lambda_n.copy()
     lambda_n[k, free] = 0.5                                 # the lifted switching finger pushes
-    phi = BoxBoundary(scene.config.box_width, scene.config.box_height).signed_distance(
+    phi = scene.config.shape.signed_distance(
         world_to_box(sol.x[k], scene.fingertip_positions(sol.q[k])[free])) - scene.tip_radius
     assert phi > 1e-3
     pushed = cito_solve.violations(program, dataclasses.replace(sol, lambda_n=lambda_n), scene)

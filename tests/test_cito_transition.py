@@ -10,7 +10,7 @@ from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import CitoConfig, ConfigError, SceneConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.scene import build_scene
 
 CONFIG = CitoConfig(knots_per_segment=4)
@@ -26,7 +26,7 @@ def body(scene, config: CitoConfig, mu: float = 0.5) -> BodyParams:
 
 
 def node(theta, arclengths, switching):
-    box = BoxBoundary(0.20, 0.10)
+    box = ConvexPolygon.box(0.20, 0.10)
     points = [box.point(s) for s in arclengths]
     return ContactNode(object_pose=np.array([0.0, 0.0, theta]), q=np.zeros(8), arclengths=np.array(arclengths),
                        p_BC=np.array([p for p, _ in points]), n_B=np.array([n for _, n in points]),

@@ -10,6 +10,7 @@ import pytest
 
 from trajectotree.config import Config, ControllerGains
 from trajectotree.control import ImpedanceController
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.reference import static_hold_reference
 from trajectotree.scene import NUM_FINGERS, build_scene
 from trajectotree.simulate import simulate_reference
@@ -128,7 +129,7 @@ def test_grasp_controller_ports_are_named(scene, three_finger_hold):
     from trajectotree.control import GraspController
     from trajectotree.reference import grasp_schedule
     gains = ControllerGains()
-    schedule = grasp_schedule(three_finger_hold, width=0.2, height=0.1, tip_radius=scene.tip_radius, period=0.002,
+    schedule = grasp_schedule(three_finger_hold, shape=ConvexPolygon.box(0.2, 0.1), tip_radius=scene.tip_radius, period=0.002,
                               duration=2.0, ramp_time=0.1, swing_lift=0.008, contact_distance=1e-3)
     controller = GraspController(scene, schedule, gains, mu=0.49)
     names = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]

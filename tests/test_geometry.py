@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from trajectotree.geometry import BoxBoundary, box_to_world, world_to_box
+from trajectotree.geometry import ConvexPolygon, box_to_world, world_to_box
 
-BOX = BoxBoundary(0.20, 0.10)
+BOX = ConvexPolygon.box(0.20, 0.10)
 
 
 def test_perimeter_and_corners():

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.grasp import FormClosure, FormClosureLp, grasp_matrix
 
-BOX = BoxBoundary(0.20, 0.10)  # corners at arclength 0, 0.1, 0.3, 0.4; perimeter 0.6
+BOX = ConvexPolygon.box(0.20, 0.10)  # corners at arclength 0, 0.1, 0.3, 0.4; perimeter 0.6
 RIGHT_MID, LEFT_MID = 0.05, 0.35      # (0.1, 0) and (-0.1, 0): an antipodal pair
 TOP_X05, BOTTOM_XM05 = 0.15, 0.45     # (0.05, 0.05) and (-0.05, -0.05): a pair along a 45 degree line
 

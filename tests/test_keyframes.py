@@ -16,7 +16,7 @@ from trajectotree.cli import main
 from trajectotree.config import CitoConfig, Config, ConfigError, SearchConfig
 from trajectotree.io import load_plan, save_plan
 from trajectotree.keyframes import _neighbour_ranges, local_pool, stitch
-from trajectotree.physics import BoxModel, check_physics
+from trajectotree.physics import ObjectModel, check_physics
 from trajectotree.planners import plan, planning_mu
 from trajectotree.results import TRAJECTORY_ARRAYS
 from trajectotree.scene import build_scene
@@ -84,7 +84,7 @@ def test_keyframes_plan_is_continuous_at_the_nodes_and_physical(scene, contact_p
         assert not a.xdot[k].any() and not a.qdot[k].any()
     assert a.x[-1, 2] == contact_plan.nodes[-1].object_pose[2]    # the final pose is the goal node's
     # The plan's own check of the stitched arrays, recomputed here from them alone.
-    check = check_physics(a.arrays(), BoxModel.from_scene(scene), planning_mu(CONFIG))
+    check = check_physics(a.arrays(), ObjectModel.from_scene(scene), planning_mu(CONFIG))
     assert check.passed and check == serial.physics_check, check.reason
     assert check.newton_euler_force_N < 1e-6
     for record in serial.segments:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from trajectotree.config import (CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, config_to_dict, load_config,
                                  save_config)
-from trajectotree.geometry import BoxBoundary, box_to_world, world_to_box
+from trajectotree.geometry import ConvexPolygon, box_to_world, world_to_box
 from trajectotree.io import load_plan, save_plan
 from trajectotree.planners import plan, planning_mu
 from trajectotree.scene import build_scene
@@ -56,7 +56,7 @@ def check_newton_euler(a, scene_config: SceneConfig, tol=1e-5, moment_tol=1e-4):
     t, x, xd, f = a["t"], a["x"], a["xdot"], a["f_W"]
     dt = np.diff(t)[:, None]
     np.testing.assert_allclose(np.diff(x, axis=0), dt / 2 * (xd[1:] + xd[:-1]), atol=1e-7)
-    box = BoxBoundary(w, h)
+    box = ConvexPolygon.box(w, h)
     assert max(abs(box.signed_distance(world_to_box(xk, p))) for xk, ps in zip(x, a["p_W_C"]) for p in ps) < 1e-12
     arm = a["p_W_C"] - x[:, None, :2]
     moment = np.sum(arm[..., 0] * f[..., 1] - arm[..., 1] * f[..., 0], axis=1)
@@ -71,7 +71,7 @@ def check_newton_euler(a, scene_config: SceneConfig, tol=1e-5, moment_tol=1e-4):
 
 def tip_distances(a, scene_config, radius):
     """(K, 4) exact distance of each fingertip sphere to the box (negative: penetration)."""
-    box = BoxBoundary(scene_config.box_width, scene_config.box_height)
+    box = scene_config.shape
     return np.array([[box.signed_distance(world_to_box(x, p)) - radius for p in tips]
                      for x, tips in zip(a["x"], a["p_W_tip"])])
 

@@ -11,7 +11,7 @@ import pytest
 
 from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
+from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import initial_grasp_candidates
 from trajectotree.planners import initial_grasp_plan
@@ -36,7 +36,7 @@ def small_slippery_scene():
 
 def check_plan(scene, plan, config: SearchConfig):
     c = scene.config
-    boundary = BoxBoundary(c.box_width, c.box_height)
+    boundary = c.shape
     mu_plan = config.friction_safety * c.mu
     closure = FormClosure(boundary, mu_plan, config.min_closure_margin)
     assert plan.success, plan.reason
@@ -109,7 +109,7 @@ def test_initial_grasp_candidates(scene):
     config = SearchConfig()
     table = initial_grasp_candidates(scene, config)
     mu_plan = config.friction_safety * scene.config.mu
-    boundary, reach = BoxBoundary(0.20, 0.10), Reachability(scene)
+    boundary, reach = ConvexPolygon.box(0.20, 0.10), Reachability(scene)
     closure = FormClosure(boundary, mu_plan, 1e-9)
     assert table.mu_plan == pytest.approx(mu_plan) and table.reason == ""
     assert 100 < len(table.candidates) <= table.assignments

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions raise
 
+from trajectotree.geometry import ConvexPolygon, polygon_problem
+
 
 class ConfigError(ValueError):
     """An invalid configuration or command-line value (CLI exit code 2)."""
@@ -45,17 +47,46 @@ def check_integer(name: str, value, low: int, high: int | None = None) -> None:
 
 
 @dataclass(frozen=True)
+class ObjectConfig:
+    """The object's outline when it is not the box (SceneConfig.shape)."""
+
+    # m, (x, y) vertices of a convex polygon in the object frame, in either orientation; it is made
+    # counter-clockwise and re-centred at its area centroid. None: the box_width x box_height box.
+    vertices: tuple[tuple[float, float], ...] | None = None
+
+    def __post_init__(self):
+        if self.vertices is None:
+            return
+        for i, v in enumerate(self.vertices):
+            if len(v) != 2:
+                raise ConfigError(f"scene.object.vertices[{i}] = {list(v)!r} must be an (x, y) pair in m")
+            for j, c in enumerate(v):
+                check_range(f"scene.object.vertices[{i}][{j}]", c, -0.3, 0.3)
+        problem = polygon_problem(self.vertices)
+        if problem:
+            raise ConfigError(f"scene.object.vertices = {[list(v) for v in self.vertices]}: {problem}")
+
+
+@dataclass(frozen=True)
 class SceneConfig:
     """The hand, the object and the world."""
 
     box_width: float = 0.20        # m, object extent along its x axis
     box_height: float = 0.10       # m, object extent along its y axis
     box_depth: float = 0.05        # m, extent along z (only for 3D geometry; the task is planar)
-    box_mass: float = 0.05         # kg
+    box_mass: float = 0.05         # kg, the object's mass (box or polygon)
     mu: float = 0.7                # friction coefficient between fingertips and object
     gravity: float = 9.81          # m/s^2, magnitude; gravity points along -y in W
     initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m, m, rad) object pose x_0 in W
     corner_margin: float = 0.015   # m, contacts closer than this (arclength) to a corner are not allowed
+    object: ObjectConfig = field(default_factory=ObjectConfig)  # a convex polygon instead of the box
+
+    @functools.cached_property
+    def shape(self) -> ConvexPolygon:
+        """The object's outline in its frame B: the polygon of `object.vertices`, else the box."""
+        if self.object.vertices is None:
+            return ConvexPolygon.box(self.box_width, self.box_height)
+        return ConvexPolygon.from_points(self.object.vertices)
 
     def __post_init__(self):
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
@@ -69,7 +100,16 @@ class SceneConfig:
             check_range(f"scene.initial_pose[{i}]", v, -1.0, 1.0)
         check_range("scene.corner_margin", self.corner_margin, 0.0, None)
         shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
-        if min(self.box_width, self.box_height) <= shortest:
+        if self.object.vertices is not None:
+            lengths = self.shape.edge_lengths
+            if lengths.min() <= shortest:
+                raise ConfigError(f"scene.object.vertices: edge {int(lengths.argmin())} is {lengths.min():.4g} m "
+                                  f"long; contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
+                                  f"corner, so every edge must be longer than {shortest:g} m")
+            if self.shape.circumradius > 0.3:
+                raise ConfigError(f"scene.object.vertices: a vertex is {self.shape.circumradius:.3g} m from the "
+                                  "centroid; valid range: at most 0.3 m")
+        elif min(self.box_width, self.box_height) <= shortest:
             raise ConfigError(f"scene.box_width x scene.box_height = {self.box_width:g} x {self.box_height:g} m is "
                               f"too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
                               f"corner, so each side must be longer than {shortest:g} m; valid range of each side: "
@@ -305,7 +345,7 @@ def _yaml_type(kind):
         return _yaml_schema(kind)
     origin, args = typing.get_origin(kind), typing.get_args(kind)
     if origin is tuple:
-        return list[args[0]]
+        return list[_yaml_type(args[0])]
     if origin in (typing.Union, types.UnionType):  # X | None, the only union in the config
         return _yaml_type(args[0]) | None
     return kind
@@ -324,13 +364,20 @@ def _thaw(value):
     """`value` as Drake's loader and dumper take it: config dataclasses as their twins, tuples as lists."""
     if dc.is_dataclass(value):
         return _yaml_schema(type(value))(**{f.name: _thaw(getattr(value, f.name)) for f in dc.fields(value)})
-    return list(value) if isinstance(value, tuple) else value
+    return [_thaw(v) for v in value] if isinstance(value, tuple) else value
+
+
+def _tuples(value):
+    """`value` with its lists, at any depth, as tuples."""
+    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
 
 
 def _freeze(cls, loaded):
-    """Section dataclass `cls` from its filled twin (lists back to tuples; __post_init__ checks the ranges)."""
-    values = {f.name: getattr(loaded, f.name) for f in dc.fields(cls)}
-    return cls(**{name: tuple(v) if isinstance(v, list) else v for name, v in values.items()})
+    """Section dataclass `cls` from its filled twin (lists back to tuples, nested sections frozen
+    too; __post_init__ checks the ranges)."""
+    hints = typing.get_type_hints(cls)
+    return cls(**{f.name: _freeze(hints[f.name], getattr(loaded, f.name)) if dc.is_dataclass(hints[f.name])
+                  else _tuples(getattr(loaded, f.name)) for f in dc.fields(cls)})
 
 
 def _typed(cls, data: dict):

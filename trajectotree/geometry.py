@@ -1,54 +1,161 @@
-"""The box boundary in its own frame B (numpy only).
+"""The object's boundary in its own frame B: a convex polygon (numpy only).
 
-Arclength s runs counter-clockwise along the boundary, starting at the corner
-(+w/2, -h/2): first up the right face (length h), then left along the top (w),
-down the left face (h) and right along the bottom (w). The perimeter is
-2 (w + h); every function takes s modulo the perimeter.
+The object is any convex polygon; the paper's box is the default (`ConvexPolygon.box`).
+Vertices run counter-clockwise about the area centroid, the origin of B. Arclength s runs
+counter-clockwise along the boundary from vertex 0, the start of the "right" face (the
+edge whose outward normal points closest to +x; for the box the corner (+w/2, -h/2): up
+the right face (length h), left along the top (w), down the left face (h), right along the
+bottom (w)). Every function takes s modulo the perimeter.
 
 A contact frame at s is (n_B, t_B): the outward unit normal of the face and the
 counter-clockwise unit tangent t_B = z x n_B.
+
+The box keeps its closed forms (distance, nearest point, inertia): the generic polygon
+formulas agree with them to rounding (tests check it), and the closed forms keep the
+box's plans identical to the last bit across this generalization.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 
 import numpy as np
 
 
-@dataclass(frozen=True)
-class BoxBoundary:
-    width: float   # m, extent along B's x axis
-    height: float  # m, extent along B's y axis
+def _cross(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def _segments_cross(p1, p2, q1, q2) -> bool:
+    """True when the closed segments p1-p2 and q1-q2 share a point."""
+    d1, d2 = _cross(p2 - p1, q1 - p1), _cross(p2 - p1, q2 - p1)
+    d3, d4 = _cross(q2 - q1, p1 - q1), _cross(q2 - q1, p2 - q1)
+    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
+        return True
+    on = lambda a, b, c, d: d == 0 and min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) \
+        and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])  # noqa: E731 (c on segment a-b)
+    return on(p1, p2, q1, d1) or on(p1, p2, q2, d2) or on(q1, q2, p1, d3) or on(q1, q2, p2, d4)
+
+
+def polygon_problem(points) -> str | None:
+    """Why `points` (V, 2), a vertex sequence in either orientation, is not a convex polygon
+    (None when it is one)."""
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 2:
+        return f"vertices must be (x, y) pairs, got an array of shape {p.shape}"
+    if len(p) < 3:
+        return f"a polygon needs at least 3 vertices, got {len(p)}"
+    if not np.all(np.isfinite(p)):
+        return "vertices must be finite numbers"
+    for i in range(len(p)):
+        for j in range(i + 1, len(p)):
+            if np.array_equal(p[i], p[j]):
+                return f"vertices {i} and {j} repeat the point ({p[i][0]:g}, {p[i][1]:g})"
+    n = len(p)
+    edges = [(p[i], p[(i + 1) % n]) for i in range(n)]
+    for i in range(n):
+        for j in range(i + 2, n):
+            if i == 0 and j == n - 1:
+                continue  # neighbours through vertex 0
+            if _segments_cross(*edges[i], *edges[j]):
+                return f"edges {i} and {j} intersect: the polygon is self-intersecting"
+    turns = _cross(np.roll(p, -1, axis=0) - p, np.roll(p, -2, axis=0) - np.roll(p, -1, axis=0))
+    scale = np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)) ** 2
+    flat = np.abs(turns) <= 1e-12 * scale
+    if np.any(flat):
+        k = (int(np.flatnonzero(flat)[0]) + 1) % n
+        return f"vertex {k} ({p[k][0]:g}, {p[k][1]:g}) is collinear with its neighbours; leave it out"
+    if not (np.all(turns > 0) or np.all(turns < 0)):
+        k = (int(np.flatnonzero(np.sign(turns) != np.sign(turns.sum()))[0]) + 1) % n
+        return f"the polygon is not convex (it turns the other way at vertex {k}, ({p[k][0]:g}, {p[k][1]:g}))"
+    return None
+
+
+class ConvexPolygon:
+    """A convex polygon in B: vertices (V, 2) counter-clockwise about the origin, vertex 0 the
+    start of the right face. Build it with `box` or `from_points`."""
+
+    def __init__(self, vertices, box_half: tuple[float, float] | None = None):
+        v = np.array(vertices, dtype=float)
+        self.vertices = v                                           # (V, 2) m
+        self._box_half = box_half                                   # (w/2, h/2) for the box's closed forms
+        d = np.roll(v, -1, axis=0) - v
+        self.edge_lengths = np.linalg.norm(d, axis=1)               # (V,) m
+        self.directions = d / self.edge_lengths[:, None]            # (V, 2) counter-clockwise unit tangents
+        self.normals = np.stack([self.directions[:, 1], -self.directions[:, 0]], axis=1) + 0.0  # outward (no -0.0)
+        self.offsets = np.einsum("fa,fa->f", self.normals, v)       # (V,) m, face f: n_f . p = offset_f
+        self._corners = np.concatenate([[0.0], np.cumsum(self.edge_lengths)[:-1]])
+        self.perimeter = float(np.sum(self.edge_lengths))
+        if box_half:  # the box's sums in their own order
+            w, h = 2 * box_half[0], 2 * box_half[1]
+            self._corners, self.perimeter = np.array([0.0, h, h + w, 2 * h + w]), 2.0 * (w + h)
+        cross = _cross(v, np.roll(v, -1, axis=0))
+        self.area = float(cross.sum() / 2)                          # m^2
+        nxt = np.roll(v, -1, axis=0)
+        polar = float(np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * nxt[:, 0] + nxt[:, 0] ** 2
+                                      + v[:, 1] ** 2 + v[:, 1] * nxt[:, 1] + nxt[:, 1] ** 2)) / 12)
+        # 12 x the polar second moment per unit area (m^2): inertia = mass * this / 12.
+        self._inertia_sum = (box_half[0] * 2) ** 2 + (box_half[1] * 2) ** 2 if box_half else 12 * polar / self.area
+
+    @classmethod
+    def box(cls, width: float, height: float) -> ConvexPolygon:
+        a, b = width / 2, height / 2
+        return cls([[a, -b], [a, b], [-a, b], [-a, -b]], box_half=(a, b))
+
+    @classmethod
+    def from_points(cls, points) -> ConvexPolygon:
+        """The polygon through `points` (V, 2) m, a vertex sequence in either orientation:
+        made counter-clockwise, moved so that its area centroid is the origin, and started at
+        its right face. Raises ValueError naming the problem (polygon_problem)."""
+        problem = polygon_problem(points)
+        if problem:
+            raise ValueError(problem)
+        p = np.array(points, dtype=float)
+        if np.sum(_cross(p, np.roll(p, -1, axis=0))) < 0:
+            p = p[::-1]
+        cross = _cross(p, np.roll(p, -1, axis=0))
+        centroid = np.sum((p + np.roll(p, -1, axis=0)) * cross[:, None], axis=0) / (3 * cross.sum())
+        p = p - centroid + 0.0
+        d = np.roll(p, -1, axis=0) - p
+        angles = np.arctan2(-d[:, 0], d[:, 1])                       # outward normal angle of each face
+        start = min(range(len(p)), key=lambda f: (round(abs(angles[f]), 12), angles[f]))
+        p = np.roll(p, -start, axis=0)
+        half = np.abs(p[0])
+        corners = np.array([[1, -1], [1, 1], [-1, 1], [-1, -1]]) * half
+        return cls(p, box_half=(float(half[0]), float(half[1]))) if np.array_equal(p, corners) else cls(p)
 
     @property
-    def perimeter(self) -> float:
-        return 2.0 * (self.width + self.height)
+    def is_box(self) -> bool:
+        return self._box_half is not None
 
-    def _faces(self):
-        """(start corner, unit direction, length, outward normal) of each face, in s order."""
-        a, b = self.width / 2, self.height / 2
-        return (
-            (np.array([a, -b]), np.array([0.0, 1.0]), self.height, np.array([1.0, 0.0])),
-            (np.array([a, b]), np.array([-1.0, 0.0]), self.width, np.array([0.0, 1.0])),
-            (np.array([-a, b]), np.array([0.0, -1.0]), self.height, np.array([-1.0, 0.0])),
-            (np.array([-a, -b]), np.array([1.0, 0.0]), self.width, np.array([0.0, -1.0])),
-        )
+    @property
+    def circumradius(self) -> float:
+        """m, the largest distance from the centroid to a vertex."""
+        return float(np.max(np.linalg.norm(self.vertices, axis=1)))
+
+    def inertia(self, mass: float) -> float:
+        """kg m^2, the moment of inertia about z through the centroid of a uniform plate of `mass` kg."""
+        return mass * self._inertia_sum / 12.0
 
     def corner_arclengths(self) -> np.ndarray:
-        """Arclengths of the four corners: 0, h, h + w, 2h + w."""
-        h, w = self.height, self.width
-        return np.array([0.0, h, h + w, 2 * h + w])
+        """Arclengths (V,) of the vertices (for the box 0, h, h + w, 2h + w)."""
+        return self._corners.copy()
 
     def point(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Contact point p_BC and outward unit normal n_B at arclength s."""
         s = float(s) % self.perimeter
-        for start, direction, length, normal in self._faces():
-            if s <= length:
-                return start + s * direction, normal.copy()
-            s -= length
-        start, direction, length, normal = self._faces()[-1]
-        return start + length * direction, normal.copy()  # s == perimeter up to rounding
+        for f in range(len(self.vertices)):
+            if s <= self.edge_lengths[f]:
+                return self.vertices[f] + s * self.directions[f], self.normals[f].copy()
+            s -= self.edge_lengths[f]
+        f = len(self.vertices) - 1
+        return self.vertices[f] + self.edge_lengths[f] * self.directions[f], self.normals[f].copy()  # s == perimeter
+
+    def points(self, arclengths) -> tuple[np.ndarray, np.ndarray]:
+        """(p_BC (k, 2), n_B (k, 2)) for an array of arclengths (vectorized `point`)."""
+        s = np.mod(np.asarray(arclengths, dtype=float), self.perimeter)
+        face = np.clip(np.searchsorted(self._corners, s, side="left") - 1, 0, len(self._corners) - 1)
+        return self.vertices[face] + (s - self._corners[face])[:, None] * self.directions[face], self.normals[face]
 
     def tangent(self, s: float) -> np.ndarray:
         """Counter-clockwise unit tangent t_B = z x n_B at arclength s."""
@@ -58,20 +165,21 @@ class BoxBoundary:
     def arclength(self, p_B) -> float:
         """Arclength of the boundary point nearest to p_B."""
         p = self.project(p_B)
-        s0 = 0.0
-        best, best_s = np.inf, 0.0
-        for start, direction, length, _ in self._faces():
+        s0, best, best_s = 0.0, np.inf, 0.0
+        for start, direction, length in zip(self.vertices, self.directions, self.edge_lengths):
             t = np.clip(np.dot(p - start, direction), 0.0, length)
             d = np.linalg.norm(start + t * direction - p)
             if d < best - 1e-15:
                 best, best_s = d, s0 + t
             s0 += length
-        return best_s % self.perimeter
+        return float(best_s % self.perimeter)
 
     def project(self, p_B) -> np.ndarray:
         """The boundary point nearest to p_B."""
         p = np.asarray(p_B, dtype=float)
-        a, b = self.width / 2, self.height / 2
+        if not self._box_half:
+            return self.nearest_points(p)
+        a, b = self._box_half
         if abs(p[0]) <= a and abs(p[1]) <= b:  # inside: push out through the nearest face
             gaps = np.array([a - p[0], b - p[1], a + p[0], b + p[1]])
             k = int(np.argmin(gaps))
@@ -83,16 +191,67 @@ class BoxBoundary:
     def corner_distance(self, s: float) -> float:
         """Arclength distance from s to the nearest corner."""
         s = float(s) % self.perimeter
-        d = np.abs(self.corner_arclengths() - s)
+        d = np.abs(self._corners - s)
         return float(np.min(np.minimum(d, self.perimeter - d)))
 
     def signed_distance(self, p_B) -> float:
-        """Exact signed distance from p_B to the box (negative inside)."""
+        """Exact signed distance from p_B to the polygon (negative inside)."""
         p = np.asarray(p_B, dtype=float)
-        q = np.abs(p) - np.array([self.width / 2, self.height / 2])
-        outside = np.linalg.norm(np.maximum(q, 0.0))
-        inside = min(max(q[0], q[1]), 0.0)
-        return float(outside + inside)
+        if not self._box_half:
+            return float(self.signed_distances(p))
+        q = np.abs(p) - np.array(self._box_half)
+        return float(np.linalg.norm(np.maximum(q, 0.0)) + min(max(q[0], q[1]), 0.0))
+
+    # ---- vectorized over points (..., 2) ---------------------------------------------------
+
+    def _segment_parameters(self, p_B: np.ndarray) -> np.ndarray:
+        """(..., V): each point's position along each face, clipped to the face."""
+        rel = p_B[..., None, :] - self.vertices
+        return np.clip(np.einsum("...fa,fa->...f", rel, self.directions), 0.0, self.edge_lengths)
+
+    def signed_distances(self, p_B: np.ndarray) -> np.ndarray:
+        """Exact signed distance (...,) of points p_B (..., 2) to the polygon (negative inside)."""
+        p_B = np.asarray(p_B, dtype=float)
+        if self._box_half:
+            q = np.abs(p_B) - np.array(self._box_half)
+            return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
+        faces = p_B @ self.normals.T - self.offsets                               # (..., V)
+        t = self._segment_parameters(p_B)
+        nearest = self.vertices + t[..., None] * self.directions                  # (..., V, 2)
+        outside = np.linalg.norm(p_B[..., None, :] - nearest, axis=-1).min(axis=-1)
+        inside = faces.max(axis=-1)
+        return np.where(inside > 0, outside, inside)
+
+    def nearest_points(self, p_B: np.ndarray) -> np.ndarray:
+        """The boundary point (..., 2) nearest to each p_B (..., 2), in B."""
+        p_B = np.asarray(p_B, dtype=float)
+        if self._box_half:
+            half = np.array(self._box_half)
+            clipped = np.clip(p_B, -half, half)
+            inside = np.all(np.abs(p_B) < half, axis=-1)
+            # Inside: out through the nearest face, along the axis with the smallest gap to its face.
+            axis = np.argmin(half - np.abs(p_B), axis=-1)
+            sign = np.where(p_B >= 0, 1.0, -1.0)
+            pushed = np.where(np.arange(2) == axis[..., None], sign * half, p_B)
+            return np.where(inside[..., None], pushed, clipped)
+        t = self._segment_parameters(p_B)
+        candidates = self.vertices + t[..., None] * self.directions                # (..., V, 2)
+        k = np.argmin(np.linalg.norm(p_B[..., None, :] - candidates, axis=-1), axis=-1)
+        return np.take_along_axis(candidates, k[..., None, None], axis=-2)[..., 0, :]
+
+    def face_normals(self, p_BC: np.ndarray) -> np.ndarray:
+        """Outward unit normals (..., 2) of the faces nearest to boundary points p_BC (..., 2)."""
+        p = np.asarray(p_BC, dtype=float)
+        if self._box_half:
+            on_side = np.abs(np.abs(p[..., 0]) - self._box_half[0]) <= np.abs(np.abs(p[..., 1]) - self._box_half[1])
+            n = np.zeros_like(p)
+            n[..., 0] = np.where(on_side, np.sign(p[..., 0]), 0.0)
+            n[..., 1] = np.where(on_side, 0.0, np.sign(p[..., 1]))
+            return n
+        return self.normals[np.argmax(p @ self.normals.T - self.offsets, axis=-1)]
+
+    def __repr__(self) -> str:
+        return f"ConvexPolygon({np.round(self.vertices, 6).tolist()})"
 
 
 def rotation_2d(theta: float) -> np.ndarray:
@@ -127,21 +286,3 @@ def poses_world_to_box(x: np.ndarray, p_W: np.ndarray) -> np.ndarray:
 def poses_box_to_world(x: np.ndarray, p_B: np.ndarray) -> np.ndarray:
     """p_W (K, P, 2) of box points p_B (K, P, 2) at object poses x (K, 3)."""
     return x[:, None, :2] + np.einsum("kab,kpb->kpa", rotations_2d(x[:, 2]), p_B)
-
-
-def box_signed_distance(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
-    """Exact signed distance (...,) of points p_B (..., 2) to the box (negative inside)."""
-    q = np.abs(p_B) - np.array([width / 2, height / 2])
-    return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
-
-
-def nearest_box_points(p_B: np.ndarray, width: float, height: float) -> np.ndarray:
-    """The box-boundary point (..., 2) nearest to each p_B (..., 2), in B."""
-    half = np.array([width / 2, height / 2])
-    clipped = np.clip(p_B, -half, half)
-    inside = np.all(np.abs(p_B) < half, axis=-1)
-    # Inside: out through the nearest face, along the axis with the smallest gap to its face.
-    axis = np.argmin(half - np.abs(p_B), axis=-1)
-    sign = np.where(p_B >= 0, 1.0, -1.0)
-    pushed = np.where(np.arange(2) == axis[..., None], sign * half, p_B)
-    return np.where(inside[..., None], pushed, clipped)

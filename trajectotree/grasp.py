@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 
 WRENCH_DIM = 3      # planar wrench (f_x, f_y, tau_z)
 ARCLENGTH_KEY_DIGITS = 9  # arclengths equal to 1 nm share a cache entry
@@ -148,7 +148,7 @@ class FormClosureLp:
 class FormClosure:
     """Frictional form closure of contacts given by arclength on one box, with a cache."""
 
-    def __init__(self, boundary: BoxBoundary, mu: float, min_margin: float):
+    def __init__(self, boundary: ConvexPolygon, mu: float, min_margin: float):
         self.boundary, self.mu, self.min_margin = boundary, mu, min_margin
         self.lps: dict[int, FormClosureLp] = {}  # one LP per number of contacts, built on first use
         self._cache: dict[tuple[float, ...], ClosureResult] = {}

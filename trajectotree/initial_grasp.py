@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.config import SceneConfig, SearchConfig
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.grasp import required_mu_many
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
@@ -75,7 +75,7 @@ def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachabi
 def _grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.ndarray]:
     """Per finger, the grid arclengths that are corner-free and reachable at the initial pose."""
     c = scene.config
-    boundary = BoxBoundary(c.box_width, c.box_height)
+    boundary = c.shape
     grid = np.round(np.arange(0.0, boundary.perimeter - 1e-9, step), 9)
     grid = grid[[boundary.corner_distance(s) >= c.corner_margin for s in grid]]
     out = []

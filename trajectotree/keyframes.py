@@ -47,7 +47,7 @@ from trajectotree.cito.transition import piece_spec
 from trajectotree.cito.variables import CitoVariables
 from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.physics import BoxModel, check_physics, contact_points
+from trajectotree.physics import ObjectModel, check_physics, contact_points
 from trajectotree.results import PhysicsCheck, PlanResult, Trajectory
 from trajectotree.scene import Scene, build_scene
 
@@ -108,7 +108,7 @@ def trajectory(program, sol, scene: Scene) -> Trajectory:
     spec, kin = program.spec, program.rows.kinematics(sol.stacked())
     p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B          # c_B is the fingertip centre's target
     c = scene.config
-    p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.box_width, c.box_height)
+    p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.shape)
     return Trajectory(t=np.arange(spec.num_knots) * spec.dt, x=sol.x, xdot=sol.xd, q=sol.q, qdot=sol.qd,
                       tau=sol.tau, lambda_n=sol.lambda_n, lambda_t=sol.lambda_t, f_W=kin.f_W, p_W_tip=kin.p_WF,
                       p_W_C=p_W_C)
@@ -132,7 +132,7 @@ def solve_piece(task: PieceTask) -> PieceResult:
     build_time = time.perf_counter() - t0
     outcome = solve(program, guess, task.cito)
     arrays = trajectory(program, outcome.solution, scene)
-    check = check_physics(arrays.arrays(), BoxModel.from_scene(scene), body.mu)
+    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
     return PieceResult(first=task.first, last=task.last, kind=task.kind, success=outcome.success and check.passed,
                        converged=outcome.success, status=outcome.status, iterations=outcome.iterations,
                        cost=outcome.cost, build_time_s=build_time, solve_time_s=outcome.solve_time_s,
@@ -268,7 +268,7 @@ def plan_keyframes(scene: Scene, goal: float, contact_plan: ContactPlan, config:
     wall = time.perf_counter() - t0
     distinct = list({id(r): r for tried in attempts.values() for r in tried}.values())
     arrays = stitch(pieces)
-    check = check_physics(arrays.arrays(), BoxModel.from_scene(scene), mu)
+    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), mu)
     converged = all(p.converged for p in pieces)
     failed = [p for p in pieces if not p.success]
     status = ", ".join(sorted({p.status for p in pieces}))

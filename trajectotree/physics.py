@@ -20,44 +20,42 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.geometry import box_signed_distance, nearest_box_points, poses_box_to_world, poses_world_to_box
+from trajectotree.geometry import ConvexPolygon, poses_box_to_world, poses_world_to_box
 # The check's value type and its tolerances live with the other saved values (plan.json records both).
 from trajectotree.results import CONE_TOL, FORCE_TOL, GAP_TOL, NEWTON_EULER_TOL, PhysicsCheck
 
 
 @dataclass(frozen=True)
-class BoxModel:
-    """What the check needs to know about the box and the fingertips."""
+class ObjectModel:
+    """What the check needs to know about the object and the fingertips."""
 
-    mass: float        # kg
-    width: float       # m, extent along the box's x axis
-    height: float      # m, extent along the box's y axis
-    gravity: float     # m/s^2, magnitude, along -y in W
-    tip_radius: float  # m, fingertip sphere radius
+    mass: float            # kg
+    shape: ConvexPolygon   # the outline in B
+    gravity: float         # m/s^2, magnitude, along -y in W
+    tip_radius: float      # m, fingertip sphere radius
 
     @property
     def inertia(self) -> float:
-        """kg m^2, about the box centre (a uniform rectangle)."""
-        return self.mass * (self.width ** 2 + self.height ** 2) / 12.0
+        """kg m^2, about the centroid (a uniform plate)."""
+        return self.shape.inertia(self.mass)
 
     @staticmethod
-    def from_scene(scene) -> "BoxModel":
+    def from_scene(scene) -> "ObjectModel":
         c = scene.config
-        return BoxModel(mass=c.box_mass, width=c.box_width, height=c.box_height, gravity=c.gravity,
-                        tip_radius=scene.tip_radius)
+        return ObjectModel(mass=c.box_mass, shape=c.shape, gravity=c.gravity, tip_radius=scene.tip_radius)
 
 
-def contact_points(x, p_W_tip, pinned, p_BC_planned, width: float, height: float) -> np.ndarray:
-    """p_W_C (K, 4, 2), where each finger's force acts on the box: the planned contact
-    point p_BC_planned (K, 4, 2, in B) where pinned (K, 4), else the box-boundary point
+def contact_points(x, p_W_tip, pinned, p_BC_planned, shape: ConvexPolygon) -> np.ndarray:
+    """p_W_C (K, 4, 2), where each finger's force acts on the object: the planned contact
+    point p_BC_planned (K, 4, 2, in B) where pinned (K, 4), else the boundary point
     closest to the fingertip centre."""
     x = np.asarray(x, dtype=float)
-    nearest = nearest_box_points(poses_world_to_box(x, np.asarray(p_W_tip, dtype=float)), width, height)
+    nearest = shape.nearest_points(poses_world_to_box(x, np.asarray(p_W_tip, dtype=float)))
     p_BC = np.where(np.asarray(pinned, dtype=bool)[..., None], p_BC_planned, nearest)
     return poses_box_to_world(x, p_BC)
 
 
-def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
+def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     """The check of a plan's arrays (a mapping with the plan.npz names t, x, xdot,
     lambda_n, lambda_t, f_W, p_W_tip, p_W_C) against `box` and friction `mu`."""
     a = {name: np.asarray(arrays[name], dtype=float)
@@ -73,12 +71,12 @@ def check_physics(arrays, box: BoxModel, mu: float) -> PhysicsCheck:
     ne_force, ne_moment = float(np.abs(residual[:, :2]).max()), float(np.abs(residual[:, 2]).max())
     ln, lt = a["lambda_n"], a["lambda_t"]
     cone = float(np.maximum(np.abs(lt) - mu * ln, -ln).max())
-    gap = box_signed_distance(poses_world_to_box(x, a["p_W_tip"]), box.width, box.height) - box.tip_radius   # (K, 4)
+    gap = box.shape.signed_distances(poses_world_to_box(x, a["p_W_tip"])) - box.tip_radius   # (K, 4)
     force = np.linalg.norm(f, axis=-1)
     away = np.where(gap > GAP_TOL, force, 0.0)
     k, i = np.unravel_index(int(np.argmax(away)), away.shape)
     worst = float(away[k, i])
-    off_surface = float(np.abs(box_signed_distance(poses_world_to_box(x, a["p_W_C"]), box.width, box.height)).max())
+    off_surface = float(np.abs(box.shape.signed_distances(poses_world_to_box(x, a["p_W_C"]))).max())
     reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
     if worst > FORCE_TOL:
         reasons.append(f"finger {i} pushes the box with {worst:.3g} N from {1e3 * gap[k, i]:.2f} mm away at knot {k} "

@@ -35,12 +35,12 @@ from trajectotree.cito.solve import solve, violations
 from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import Config, ConfigError
 from trajectotree.contact_plan import ContactNode, ContactPlan
-from trajectotree.geometry import BoxBoundary, box_to_world
+from trajectotree.geometry import ConvexPolygon, box_to_world
 from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import mu_plan
 from trajectotree.keyframes import check_workers, plan_keyframes
 from trajectotree.keyframes import trajectory as segment_trajectory
-from trajectotree.physics import BoxModel, check_physics
+from trajectotree.physics import ObjectModel, check_physics
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
 from trajectotree.scene import NUM_FINGERS, Scene
 from trajectotree.search import choose_initial_grasp, find_contact_plan, object_path
@@ -98,7 +98,7 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
     outcome = solve(program, guess, config.cito)
     sol = outcome.solution
     trajectory = segment_trajectory(program, sol, scene)
-    check = check_physics(trajectory.arrays(), BoxModel.from_scene(scene), body.mu)
+    check = check_physics(trajectory.arrays(), ObjectModel.from_scene(scene), body.mu)
     status = outcome.status
     if outcome.success and not check.passed:
         status = f"{outcome.status}, physics check failed: {check.reason}"
@@ -118,7 +118,7 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan
     whose fingers pass the search's cheap checks for the goal; the search itself may root at a
     later one). success False with the reason when no grasp qualifies or a contact is out of reach."""
     c = scene.config
-    boundary = BoxBoundary(c.box_width, c.box_height)
+    boundary = c.shape
     chosen, reason = choose_initial_grasp(scene, goal, config.search)
     if chosen is None:
         return ContactPlan(goal=goal, success=False, reason=reason, mu_plan=mu_plan(c, config.search))

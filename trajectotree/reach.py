@@ -28,7 +28,7 @@ import numpy as np
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.solvers import SnoptSolver
 
-from trajectotree.geometry import BoxBoundary, box_to_world, rotation_2d
+from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.kinematics import first_solution
 from trajectotree.scene import NUM_FINGERS, Scene
 
@@ -75,7 +75,7 @@ class Reachability:
 
     def __init__(self, scene: Scene):
         self.scene = scene
-        self.boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+        self.boundary = scene.config.shape
         self.tip_radius = scene.tip_radius
         self.fingers = scene.fingers
         self._rectangles = [self._read_link_rectangles(i) for i in range(NUM_FINGERS)]
@@ -112,7 +112,7 @@ class Reachability:
 
     def links_penetrate(self, pose, finger: int, q) -> bool:
         """True when a link collision box of `finger` at q overlaps the box at `pose`."""
-        a, b = self.boundary.width / 2, self.boundary.height / 2
+        a, b = self.boundary._box_half  # TODO(polygon): SAT against any convex polygon
         R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
         for rect, (p_WJ, angle_WJ) in zip(self._rectangles[finger], self._joint_frames(finger, q)):
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
@@ -143,15 +143,8 @@ class Reachability:
 
     # -- vectorized closed form (many arclengths at one pose) ---------------------------------
     def contacts(self, arclengths) -> tuple[np.ndarray, np.ndarray]:
-        """(p_BC (k, 2), n_B (k, 2)) for an array of arclengths (vectorized BoxBoundary.point)."""
-        s = np.mod(np.asarray(arclengths, dtype=float), self.boundary.perimeter)
-        a, b = self.boundary.width / 2, self.boundary.height / 2
-        corners = self.boundary.corner_arclengths()
-        face = np.clip(np.searchsorted(corners, s, side="left") - 1, 0, 3)
-        starts = np.array([[a, -b], [a, b], [-a, b], [-a, -b]])
-        directions = np.array([[0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 0.0]])
-        normals = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
-        return starts[face] + (s - corners[face])[:, None] * directions[face], normals[face]
+        """(p_BC (k, 2), n_B (k, 2)) for an array of arclengths (vectorized ConvexPolygon.point)."""
+        return self.boundary.points(arclengths)
 
     def closed_form_many(self, poses, finger: int, arclengths) -> np.ndarray:
         """`closed_form` for many contacts at once: `poses` (3,) or one per contact (k, 3).
@@ -171,7 +164,7 @@ class Reachability:
     def _links_penetrate_many(self, poses: np.ndarray, finger: int, q: np.ndarray) -> np.ndarray:
         """Vectorized links_penetrate: object poses (k, 3), joint angles (k, 2)."""
         f = self.fingers[finger]
-        a, b = self.boundary.width / 2, self.boundary.height / 2
+        a, b = self.boundary._box_half  # TODO(polygon): SAT against any convex polygon
         a1, a12 = f.angles(q)
         elbow = f.elbow(q)
         ct, st = np.cos(poses[:, 2]), np.sin(poses[:, 2])

@@ -15,8 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.solvers import MathematicalProgram, Solve
 
-from trajectotree.geometry import (BoxBoundary, box_signed_distance, box_to_world, nearest_box_points,
-                                   poses_world_to_box, rotation_2d, rotations_2d)
+from trajectotree.geometry import ConvexPolygon, box_to_world, poses_world_to_box, rotation_2d, rotations_2d
 from trajectotree.results import TRAJECTORY_ARRAYS as PLAN_ARRAYS
 from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS, Scene
 
@@ -141,7 +140,7 @@ def static_hold_reference(scene: Scene, arclengths, *, min_normal_force: float, 
     None if unreachable or not holdable."""
     c = scene.config
     pose = np.asarray(c.initial_pose if pose is None else pose, dtype=float)
-    boundary = BoxBoundary(c.box_width, c.box_height)
+    boundary = c.shape
     points = [boundary.point(s) for s in arclengths]
     p_BC = np.array([p for p, _ in points])
     n_B = np.array([n for _, n in points])
@@ -182,16 +181,6 @@ class GraspSchedule:
 
     def index(self, t: float) -> int:
         return min(int(round(t / self.period)), len(self.X) - 1)
-
-
-def face_normals(p_BC, width: float, height: float) -> np.ndarray:
-    """Outward unit normals (..., 2) of the faces nearest to boundary points p_BC (..., 2)."""
-    p = np.asarray(p_BC, dtype=float)
-    on_side = np.abs(np.abs(p[..., 0]) - width / 2) <= np.abs(np.abs(p[..., 1]) - height / 2)
-    n = np.zeros_like(p)
-    n[..., 0] = np.where(on_side, np.sign(p[..., 0]), 0.0)
-    n[..., 1] = np.where(on_side, 0.0, np.sign(p[..., 1]))
-    return n
 
 
 def hermite(t_knots, values, rates, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -247,7 +236,7 @@ def swing_profile(times, intervals, ramp_time: float) -> tuple[np.ndarray, np.nd
     return scale, phase
 
 
-def grasp_schedule(reference: Reference, *, width: float, height: float, tip_radius: float, period: float,
+def grasp_schedule(reference: Reference, *, shape: ConvexPolygon, tip_radius: float, period: float,
                    duration: float, ramp_time: float, swing_lift: float, contact_distance: float) -> GraspSchedule:
     """The GraspSchedule of `reference` on the control grid 0, period, ... <= duration."""
     t, x = reference.t, reference.x
@@ -255,22 +244,22 @@ def grasp_schedule(reference: Reference, *, width: float, height: float, tip_rad
     xdot = reference.xdot if reference.xdot is not None else np.gradient(x, t, axis=0)
     X, V, A = hermite(t, x, xdot, times)
     p_BF_knots = poses_world_to_box(x, reference.p_WF)
-    gap_knots = box_signed_distance(p_BF_knots, width, height) - tip_radius                # (K, 4)
+    gap_knots = shape.signed_distances(p_BF_knots) - tip_radius                # (K, 4)
     if reference.p_WC is not None:
         p_BC_knots = poses_world_to_box(x, reference.p_WC)
     else:   # the nearest box point: the fingertip centre minus its radius along the outward direction
-        p_BC_knots = nearest_box_points(p_BF_knots, width, height)
+        p_BC_knots = shape.nearest_points(p_BF_knots)
     f_B_knots = np.einsum("kba,kpb->kpa", rotations_2d(x[:, 2]), reference.f_W)              # R_BW f_W
     at = lambda values: reference._at(values, times)
     p_BF, p_BC, f_B, gap = at(p_BF_knots), at(p_BC_knots), at(f_B_knots), at(gap_knots)
-    n_B = face_normals(p_BC, width, height)
+    n_B = shape.face_normals(p_BC)
     t_B = np.stack([-n_B[..., 1], n_B[..., 0]], axis=-1)
     scale, phase = np.ones((len(times), NUM_FINGERS)), np.full((len(times), NUM_FINGERS), np.nan)
     for i in range(NUM_FINGERS):
         intervals = swing_intervals(t, gap_knots[:, i] <= contact_distance)
         scale[:, i], phase[:, i] = swing_profile(times, intervals, ramp_time)
     # Lift a swinging fingertip to at least swing_lift sin(pi phase), away from the nearest box point.
-    away = p_BF - nearest_box_points(p_BF, width, height)
+    away = p_BF - shape.nearest_points(p_BF)
     away /= np.maximum(np.linalg.norm(away, axis=-1, keepdims=True), 1e-9)
     extra = np.nan_to_num(np.maximum(swing_lift * np.sin(np.pi * phase) - gap, 0.0))
     p_BF = p_BF + extra[..., None] * away

@@ -52,7 +52,7 @@ import numpy as np
 
 from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
 from trajectotree.reach import Reachability
@@ -77,7 +77,7 @@ class _Search:
 
     def __init__(self, scene: Scene, goal: float, config: SearchConfig):
         self.scene, self.config = scene, config
-        self.boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+        self.boundary = scene.config.shape
         self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
         self.mu_plan = mu_plan(scene.config, config)
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)

@@ -212,7 +212,7 @@ def add_grasp_controller(builder, plant, hand, box, reference: Reference, config
     max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
     the plan assumed), reading the box and hand state."""
     scene, gains = build_scene(config.scene), config.controller
-    schedule = grasp_schedule(reference, width=config.scene.box_width, height=config.scene.box_height,
+    schedule = grasp_schedule(reference, shape=config.scene.shape,
                               tip_radius=scene.tip_radius, period=1.0 / gains.rate_hz,
                               duration=reference.duration + config.sim.settle_time, ramp_time=gains.ramp_time,
                               swing_lift=gains.swing_lift, contact_distance=gains.contact_distance)

@@ -1,6 +1,6 @@
 """A smooth signed distance to the box and its contact frame, for IPOPT.
 
-The exact distance (`geometry.BoxBoundary.signed_distance`) has a kink on the
+The exact distance (`geometry.ConvexPolygon.signed_distance`) has a kink on the
 box's diagonals and a non-smooth normal, which IPOPT cannot use. We use the
 log-sum-exp of the four face distances d_j = n_j . p - h_j,
 

@@ -17,7 +17,7 @@ from trajectotree.cito.knot import KnotRows
 from trajectotree.cito.program import ProgramSpec
 from trajectotree.cito.variables import GROUPS, CitoVariables
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.geometry import BoxBoundary, rotation_2d
+from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.scene import NUM_FINGERS
 
 # Height (m) the switching finger is lifted off the surface halfway through its
@@ -44,7 +44,7 @@ def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVari
     x = np.vstack([node.object_pose + np.outer(progress[:-1], nxt.object_pose - node.object_pose)
                    for node, nxt in zip(plan.nodes[:-1], plan.nodes[1:])] + [plan.nodes[-1].object_pose[None]])
     hand, r = rows.body.hand, rows.body.radius
-    boundary = BoxBoundary(*(2 * rows.body.offsets[:2]))   # face offsets start with w/2, h/2
+    boundary = ConvexPolygon.box(*(2 * rows.body.offsets[:2]))   # face offsets start with w/2, h/2
     q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
     for s in range(len(plan.nodes) - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]
@@ -69,7 +69,7 @@ def rest_to_rest_progress(M: int) -> np.ndarray:
     return u / u[-1]
 
 
-def _lifted(boundary: BoxBoundary, s_old: float, s_new: float, tau: float, radius: float) -> np.ndarray:
+def _lifted(boundary: ConvexPolygon, s_old: float, s_new: float, tau: float, radius: float) -> np.ndarray:
     """Fingertip centre in B for the switching finger at phase tau of its move: along
     the boundary the short way round, LIFT_HEIGHT off it at mid-move."""
     P = boundary.perimeter

@@ -22,7 +22,7 @@ from pydrake.solvers import IpoptSolver, SolverOptions
 from trajectotree.cito.layout import NUM_BODY_ROWS
 from trajectotree.cito.program import CitoProgram
 from trajectotree.cito.variables import CitoVariables
-from trajectotree.geometry import BoxBoundary
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.config import CitoConfig
 
 VIOLATION_GROUPS = ("dynamics", "friction_cone", "complementarity", "contact_point", "penetration")
@@ -128,7 +128,7 @@ def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
     ln, lt = sol.lambda_n, sol.lambda_t
     free = ~rows.pinned
     comp = np.maximum(np.abs(kin.phi_tip) * ln, np.linalg.norm(kin.v, axis=-1) * ln)
-    boundary = BoxBoundary(scene.config.box_width, scene.config.box_height)
+    boundary = scene.config.shape
     exact = np.array([[boundary.signed_distance(p) for p in knot] for knot in kin.p_BF]) - rows.body.radius
     return {
         "dynamics": float(max(np.abs(val[:, :NUM_BODY_ROWS]).max(), *col)),
