@@ -17,7 +17,7 @@ and the start-up of a pool by fork and by spawn.
 
 Targets (issue 7): TrajectoTree mean total <= 3 s, >= 10x faster than CITO, search
 median <= 0.2 s, function evaluations <= 30 % of solve time, build <= 10 % of solve.
-The baselines take minutes per goal: shorten with --goals.
+The baselines take minutes per goal: shorten with --goals, or give --rows to resume an interrupted run.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from trajectotree.config import FORMULATIONS, Config, load_config
+from trajectotree.config import FORMULATIONS, Config, config_to_dict, load_config
 from trajectotree.keyframes import local_pool, prepare_worker
 from trajectotree.planners import METHODS, plan
 from trajectotree.scene import build_scene
@@ -72,14 +72,21 @@ def segment_row(r, serial, fresh) -> dict:
 
 
 def run(goals, methods, config: Config, formulations=("keyframes",), pool=None,
-        workers: int = 2) -> dict[str, list[dict]]:
-    """{method (trajectotree: "trajectotree/<formulation>"): one row of times and counts per goal}."""
+        workers: int = 2, done: dict | None = None, on_goal=None) -> dict[str, list[dict]]:
+    """{method (trajectotree: "trajectotree/<formulation>"): one row of times and counts per goal}.
+    done: {goal index: {label: row}} measured before (--rows), not planned again; on_goal(index,
+    {label: row}) is called after each goal planned here."""
     scene = build_scene(config.scene)
     labels = [m for m in methods if m != "trajectotree"] + \
         [f"trajectotree/{f}" for f in formulations if "trajectotree" in methods]
-    rows = {label: [] for label in labels}
+    rows, done = {label: [] for label in labels}, done or {}
     with tqdm(total=len(goals) * len(labels), file=sys.stderr, desc="planning") as bar:
-        for goal in goals:
+        for index, goal in enumerate(goals):
+            if index in done:
+                for label in labels:
+                    rows[label].append(done[index][label])
+                bar.update(len(labels))
+                continue
             for method in methods:
                 if method != "trajectotree":
                     rows[method].append(plan_row(plan(scene=scene, goal=float(goal), method=method, config=config)))
@@ -98,7 +105,31 @@ def run(goals, methods, config: Config, formulations=("keyframes",), pool=None,
                         row.update(segment_row(r, run_plan(segment_workers=1), run_plan(segment_workers=workers)))
                     rows[f"trajectotree/{formulation}"].append(row)
                     bar.update()
+            if on_goal:
+                on_goal(index, {label: rows[label][-1] for label in labels})
     return rows
+
+
+def resume_rows(path: str, header: dict) -> tuple[dict, callable]:
+    """--rows: the goals already measured in the JSON-lines file `path` (its first line is the
+    run's header: goals, seed, methods, formulations, workers, config; another header is refused),
+    and the function that appends one goal's rows, so an interrupted run goes on where it stopped."""
+    done = {}
+    if os.path.exists(path):
+        with open(path) as f:
+            lines = [json.loads(line) for line in f if line.strip()]
+        if lines and lines[0] != header:
+            other = sorted(k for k in header if lines[0].get(k) != header[k])
+            sys.exit(f"--rows {path!r} holds a run with other settings ({', '.join(other)} differ); give another file")
+        done = {line["index"]: line["rows"] for line in lines[1:]}
+    else:
+        with open(path, "w") as f:
+            f.write(json.dumps(header) + "\n")
+
+    def append(index: int, rows: dict) -> None:
+        with open(path, "a") as f:
+            f.write(json.dumps({"index": index, "rows": rows}, default=float) + "\n")
+    return done, append
 
 
 def summary_line(method: str, rows: list[dict]) -> str:
@@ -172,6 +203,9 @@ def main() -> None:
                         help=f"TrajectoTree's formulations, comma-separated, from {', '.join(FORMULATIONS)}")
     parser.add_argument("--workers", type=int, default=os.cpu_count(),
                         help="local processes solving the keyframes segments (default: one per core)")
+    parser.add_argument("--rows", metavar="FILE.jsonl",
+                        help="append each goal's rows to this file and skip the goals it already holds (a run "
+                             "of hours can stop and go on; the summary covers every goal in the file)")
     args = parser.parse_args()
     methods = [m.strip() for m in args.methods.split(",")]
     unknown = [m for m in methods if m not in METHODS]
@@ -182,10 +216,14 @@ def main() -> None:
                      f"(unknown: {unknown}); formulations from {', '.join(FORMULATIONS)} (unknown: {bad}); "
                      f"--workers must be >= 1 (got {args.workers})")
     config = load_config(args.config) if args.config else Config()
+    header = {"goals": args.goals, "seed": args.seed, "methods": methods, "formulations": formulations,
+              "workers": args.workers, "config": config_to_dict(config)}
+    done, on_goal = resume_rows(args.rows, header) if args.rows else ({}, None)
     startup = pool_startup(config, args.workers) if "keyframes" in formulations else ""
     with local_pool(args.workers) as pool:
         pool.map(prepare_worker, [config.scene] * args.workers)   # started once, reused by every plan
-        rows = run(sample_goals(args.goals, args.seed), methods, config, formulations, pool, args.workers)
+        rows = run(sample_goals(args.goals, args.seed), methods, config, formulations, pool, args.workers,
+                   done, on_goal)
     print(f"{args.goals} goals, seed {args.seed}, N = {config.search.num_nodes}, "
           f"M_hat = {config.cito.knots_per_segment}, {args.workers} segment workers; {startup}")
     for label, label_rows in rows.items():
