@@ -1,9 +1,9 @@
-"""Box boundary parameterization and signed distance."""
+"""The object boundary (the box and convex polygons): parameterization, signed distance, inertia."""
 
 import numpy as np
 import pytest
 
-from trajectotree.geometry import ConvexPolygon, box_to_world, world_to_box
+from trajectotree.geometry import ConvexPolygon, box_to_world, polygon_problem, world_to_box
 
 BOX = ConvexPolygon.box(0.20, 0.10)
 
@@ -56,3 +56,96 @@ def test_pose_transforms_round_trip():
     p_B = np.array([0.05, 0.03])
     np.testing.assert_allclose(world_to_box(pose, box_to_world(pose, p_B)), p_B)
     np.testing.assert_allclose(box_to_world((0, 0, np.pi / 2), [1.0, 0.0]), [0.0, 1.0], atol=1e-12)
+
+
+# ---- convex polygons ----------------------------------------------------------------------
+
+def regular(n: int, radius: float, phase: float = 0.0) -> np.ndarray:
+    angles = phase + 2 * np.pi * np.arange(n) / n
+    return radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+
+
+TRIANGLE = ConvexPolygon.from_points([[0.0, 0.0], [0.14, 0.0], [0.07, 0.07 * np.sqrt(3)]])
+HEXAGON = ConvexPolygon.from_points(regular(6, 0.07))
+
+
+def test_polygon_closed_forms():
+    side = 0.14
+    assert TRIANGLE.perimeter == pytest.approx(3 * side)
+    assert TRIANGLE.area == pytest.approx(np.sqrt(3) / 4 * side ** 2)
+    np.testing.assert_allclose(TRIANGLE.vertices.mean(axis=0), 0.0, atol=1e-15)       # re-centred
+    assert TRIANGLE.inertia(2.0) == pytest.approx(2.0 * side ** 2 / 12)                # uniform triangle
+    assert HEXAGON.perimeter == pytest.approx(6 * 0.07)
+    assert HEXAGON.inertia(1.0) == pytest.approx(5 / 12 * 0.07 ** 2)                   # regular hexagon
+    for shape in (TRIANGLE, HEXAGON):
+        np.testing.assert_allclose(np.linalg.norm(shape.normals, axis=1), 1.0)
+        np.testing.assert_allclose(np.einsum("fa,fa->f", shape.normals, shape.directions), 0.0, atol=1e-15)
+        # outward: the centroid is on the inner side of every face, by the inradius for regular shapes
+        np.testing.assert_allclose(shape.offsets, shape.offsets[0])
+        assert shape.signed_distance([0.0, 0.0]) == pytest.approx(-shape.offsets[0])
+
+
+def test_square_plate_is_the_box():
+    square = ConvexPolygon(ConvexPolygon.box(0.1, 0.1).vertices)   # the generic formulas, no closed forms
+    assert not square.is_box
+    assert square.inertia(0.05) == pytest.approx(ConvexPolygon.box(0.1, 0.1).inertia(0.05), rel=1e-14)
+    assert square.inertia(0.05) == pytest.approx(0.05 * 0.02 / 12, rel=1e-14)
+    p = np.random.default_rng(1).uniform(-0.15, 0.15, (500, 2))
+    box = ConvexPolygon.box(0.1, 0.1)
+    np.testing.assert_allclose(square.signed_distances(p), box.signed_distances(p), atol=1e-15)
+    np.testing.assert_allclose(square.nearest_points(p), box.nearest_points(p), atol=1e-15)
+
+
+def test_polygon_signed_distance_cases():
+    r = 0.07 * np.sqrt(3) / 2                                                            # hexagon inradius
+    assert HEXAGON.signed_distance([0.0, 0.0]) == pytest.approx(-r)
+    n = HEXAGON.normals[0]
+    assert HEXAGON.signed_distance((r + 0.01) * n) == pytest.approx(0.01)               # off a face
+    v = HEXAGON.vertices[2]
+    assert HEXAGON.signed_distance(1.5 * v) == pytest.approx(0.5 * 0.07)                # off a vertex
+    for s in np.linspace(0.0, HEXAGON.perimeter, 50, endpoint=False):
+        p, _ = HEXAGON.point(s)
+        assert HEXAGON.signed_distance(p) == pytest.approx(0.0, abs=1e-15)
+        assert HEXAGON.arclength(p) == pytest.approx(s, abs=1e-12)
+        if HEXAGON.corner_distance(s) > 0.004:   # pushed out along the face normal, projected back
+            np.testing.assert_allclose(HEXAGON.project(p + 0.003 * HEXAGON.face_normals(p[None])[0]), p, atol=1e-12)
+
+
+def test_points_follow_the_boundary_counter_clockwise():
+    for shape in (TRIANGLE, HEXAGON):
+        s = np.linspace(0.0, shape.perimeter, 200, endpoint=False)
+        p, n = shape.points(s)
+        for k in range(0, 200, 17):
+            q, m = shape.point(s[k])
+            np.testing.assert_allclose(p[k], q, atol=1e-15)
+            np.testing.assert_allclose(n[k], m)
+        # counter-clockwise: the outward normal is the tangent turned clockwise
+        t = np.array([shape.tangent(x) for x in s[::23]])
+        np.testing.assert_allclose(np.stack([t[:, 1], -t[:, 0]], axis=1), n[::23], atol=1e-15)
+
+
+def test_vertex_order_and_start():
+    """Either orientation and any first vertex: the same polygon, started at its right face."""
+    box = ConvexPolygon.box(0.2, 0.1)
+    clockwise = [[-0.1, 0.05], [0.1, 0.05], [0.1, -0.05], [-0.1, -0.05]]
+    again = ConvexPolygon.from_points(clockwise)
+    assert again.is_box
+    np.testing.assert_array_equal(again.vertices, box.vertices)
+    shifted = ConvexPolygon.from_points(np.array(clockwise) + [0.3, -0.2])            # re-centred
+    np.testing.assert_allclose(shifted.vertices, box.vertices, atol=1e-15)
+    np.testing.assert_allclose(ConvexPolygon.from_points(TRIANGLE.vertices[::-1]).vertices, TRIANGLE.vertices,
+                               atol=1e-15)
+
+
+@pytest.mark.parametrize("points, problem", [
+    ([[0, 0], [1, 0]], "at least 3 vertices"),
+    ([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.2]], "not convex"),
+    ([[0, 0], [1, 1], [1, 0], [0, 1]], "self-intersecting"),
+    ([[0, 0], [1, 0], [1, 0], [0, 1]], "repeat"),
+    ([[0, 0], [1, 0], [2, 0], [1, 1]], "collinear"),
+    (regular(5, 0.07)[[0, 2, 4, 1, 3]], "self-intersecting"),                           # a pentagram
+])
+def test_bad_polygons_are_named(points, problem):
+    assert problem in polygon_problem(points)
+    with pytest.raises(ValueError, match=problem):
+        ConvexPolygon.from_points(points)
