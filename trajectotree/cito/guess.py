@@ -21,7 +21,7 @@ from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.scene import NUM_FINGERS
 
 # Height (m) the switching finger is lifted off the surface halfway through its
-# move in the plan-based guess, so the guessed path does not cut through the box.
+# move in the plan-based guess, so the guessed path does not cut through the object.
 LIFT_HEIGHT = 0.015
 # Initial slack value; IPOPT moves it into the interior of slack >= 0 anyway.
 SLACK_GUESS = 1e-3
@@ -37,14 +37,14 @@ def static_guess(rows: KnotRows, spec: ProgramSpec) -> CitoVariables:
 def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVariables:
     """Object poses along the plan's path with a rest-to-rest time scaling per segment,
     joint angles by closed-form IK to the planned contacts (the switching finger
-    following the box boundary between its old and new contact, lifted off it), and
+    following the object's boundary between its old and new contact, lifted off it), and
     static-equilibrium forces."""
     M = spec.segment_length
     progress = rest_to_rest_progress(M)
     x = np.vstack([node.object_pose + np.outer(progress[:-1], nxt.object_pose - node.object_pose)
                    for node, nxt in zip(plan.nodes[:-1], plan.nodes[1:])] + [plan.nodes[-1].object_pose[None]])
     hand, r = rows.body.hand, rows.body.radius
-    boundary = ConvexPolygon.box(*(2 * rows.body.offsets[:2]))   # face offsets start with w/2, h/2
+    boundary = rows.body.shape
     q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
     for s in range(len(plan.nodes) - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]

@@ -5,7 +5,7 @@ Each finger at each knot is either *pinned* (TrajectoTree's fixed fingers, and a
 switching finger at its segment's ends: the fingertip centre must be at a planned
 point c_B = p*_BC + r n*_B of the box, relaxed by the finger's slack, and the
 contact frame is the planned one), or *free* (general CITO: the contact frame comes
-from the smooth box distance at the fingertip, with non-penetration and the
+from the smooth distance to the object (any convex polygon) at the fingertip, with non-penetration and the
 relaxed complementarity rows of eqs. 5-6).
 
 Rows of knot k (on its KNOT_SIZE variables, see variables.GROUPS; named in layout.py):
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.cito.contact import face_offsets, smooth_distance, smooth_normal
+from trajectotree.cito.contact import smooth_distance, smooth_normal
 from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot_jacobian import knot_jacobian
 from trajectotree.cito.layout import (COL_P, COL_PD, COL_PDD, COL_TH, COL_THD, COL_THDD, FREE_COMP, FREE_PHI,
@@ -50,10 +50,12 @@ class BodyParams:
         self.fingers = scene.fingers        # the same fingers one by one, for scalar code
         self.mass = c.box_mass
         self.mu = float(mu)
-        self.inertia = c.box_mass * (c.box_width ** 2 + c.box_height ** 2) / 12.0
+        self.shape = c.shape                # the object's outline (geometry.ConvexPolygon)
+        self.inertia = self.shape.inertia(c.box_mass)   # for the box bit for bit m (w^2 + h^2) / 12
         self.gravity = np.array([0.0, -c.gravity])
         self.radius = scene.tip_radius
-        self.offsets = face_offsets(c.box_width, c.box_height)
+        self.normals = self.shape.normals   # (V, 2) outward face normals in B
+        self.offsets = self.shape.offsets   # (V,) m, face j: normals[j] . p_B = offsets[j]
         self.sharpness = sharpness
 
 
@@ -74,35 +76,43 @@ class KnotKinematics:
     p_WF: np.ndarray     # (K, 4, 2) m, fingertip centres in W
     rel: np.ndarray      # (K, 4, 2) m, p_WF - p_WB
     p_BF: np.ndarray     # (K, 4, 2) m, fingertip centres in B
-    grad: np.ndarray     # (K, 4, 2) gradient of the smooth box distance at p_BF
+    grad: np.ndarray     # (K, 4, 2) gradient of the smooth object distance at p_BF
     dn_s: np.ndarray     # (K, 4, 2, 2) 1/m, d n_B / d p_BF of the smooth normal
     n_W: np.ndarray      # (K, 4, 2) contact normal in W (the planned one for pinned fingers)
     t_W: np.ndarray      # (K, 4, 2) contact tangent z x n_W
     f_W: np.ndarray      # (K, 4, 2) N, force of the finger on the box in W
     arm: np.ndarray      # (K, 4, 2) m, p_WC - p_WB
     p_WC: np.ndarray     # (K, 4, 2) m, contact points p_WF - r n_W
-    phi_tip: np.ndarray  # (K, 4) m, smooth distance of the tip sphere from the box (phi - r)
+    phi_tip: np.ndarray  # (K, 4) m, smooth distance of the tip sphere from the object (phi - r)
     e: np.ndarray        # (K, 4, 2) m, pinned-point error p_WF - p_WB - R c_B
     v: np.ndarray        # (K, 4, 2) m/s, fingertip velocity relative to the box point under it
 
 
-def _smooth_contact(bx: float, by: float, k: float, wa: float, wb: float, radius: float):
-    """(phi - r, n_B) of contact.smooth_distance at the tip centre (bx, by) in B, in math."""
-    d = (bx - wa, by - wb, -bx - wa, -by - wb)
+def _smooth_contact(bx: float, by: float, k: float, faces: tuple, radius: float):
+    """(phi - r, n_B) of contact.smooth_distance at the tip centre (bx, by) in B, in math;
+    faces: per face (n_x, n_y, offset). Sums run left to right (no sum(): Python 3.12's is
+    compensated): for the box, 1.0 bx + 0.0 by - w/2 is bx - w/2 and e_0 1.0 + e_1 0.0 +
+    e_2 (-1.0) + e_3 0.0 is e_0 - e_2 exactly, the numbers the box's plans were made with."""
+    d = [nx * bx + ny * by - h for nx, ny, h in faces]
     dmax = max(d)
-    e = [math.exp(k * (dj - dmax)) for dj in d]
-    total = e[0] + e[1] + e[2] + e[3]
-    gx, gy = (e[0] - e[2]) / total, (e[1] - e[3]) / total
+    total = gx = gy = 0.0
+    for dj, (nx, ny, _) in zip(d, faces):
+        e = math.exp(k * (dj - dmax))
+        total += e
+        gx += e * nx
+        gy += e * ny
+    gx, gy = gx / total, gy / total
     norm = math.hypot(gx, gy)
     return dmax + math.log(total) / k - radius, gx / norm, gy / norm
 
 
 def _scalar_constants(rows: "KnotRows"):
     """values_one's constants of a one-knot batch as Python floats: the body's
-    (m, g_x, g_y, I, r, sharpness, half width, half height) and per finger
+    (m, g_x, g_y, I, r, sharpness, faces: per face (n_x, n_y, offset)) and per finger
     (psi, l1, l2, p_W_base, mass_a, mass_b, mass_c, grav_1, grav_2, pinned, n_B, c_B)."""
     b, hand = rows.body, rows.body.hand
-    body = tuple(float(v) for v in (b.mass, *b.gravity, b.inertia, b.radius, b.sharpness, *b.offsets[:2]))
+    faces = tuple((float(n[0]), float(n[1]), float(h)) for n, h in zip(b.normals, b.offsets))
+    body = tuple(float(v) for v in (b.mass, *b.gravity, b.inertia, b.radius, b.sharpness)) + (faces,)
     fingers = tuple((float(f.psi), float(f.l1), float(f.l2), *map(float, f.p_W_base), float(hand.mass_a[i]),
                      float(hand.mass_b[i]), float(hand.mass_c[i]), float(hand.grav_1[i]), float(hand.grav_2[i]),
                      bool(rows.pinned[0, i]), *map(float, rows.n_B[0, i]), *map(float, rows.c_B[0, i]))
@@ -153,7 +163,7 @@ class KnotRows:
         p_WF = hand.fingers.tip_from_links(r1, r2)
         rel = p_WF - p[:, None]                                          # p_WF - p_WB
         p_BF = rel @ R                                                   # R^T rel
-        phi, grad, hess = smooth_distance(p_BF.reshape(-1, 2), b.offsets, b.sharpness)
+        phi, grad, hess = smooth_distance(p_BF.reshape(-1, 2), b.normals, b.offsets, b.sharpness)
         n_s, dn_s = smooth_normal(grad, hess)
         n_B = np.where(self.pinned[..., None], self.n_B, n_s.reshape(nK, NUM_FINGERS, 2))
         n_W = n_B @ RT
@@ -208,7 +218,7 @@ class KnotRows:
         finger's FK is TwoLinkFinger.links_one's arithmetic, inlined."""
         if self._scalars is None:
             self._scalars = _scalar_constants(self)
-        (m, gx, gy, inertia, r, k, wa, wb), fingers = self._scalars
+        (m, gx, gy, inertia, r, k, faces), fingers = self._scalars
         z = z.tolist()
         (px, py), th, (pdx, pdy), thd = z[COL_P], z[COL_TH], z[COL_PD], z[COL_THD]
         q, qd, qdd, tau = (z[SLICES[n]] for n in ("q", "qd", "qdd", "tau"))
@@ -223,7 +233,7 @@ class KnotRows:
             relx, rely = basex + r1x + r2x - px, basey + r1y + r2y - py
             ln, lt, gam = lns[i], lts[i], gams[i]
             if not pinned:
-                phi_tip, nbx, nby = _smooth_contact(c * relx + s * rely, -s * relx + c * rely, k, wa, wb, r)
+                phi_tip, nbx, nby = _smooth_contact(c * relx + s * rely, -s * relx + c * rely, k, faces, r)
             nwx, nwy = c * nbx - s * nby, s * nbx + c * nby
             fx, fy = -ln * nwx - lt * nwy, -ln * nwy + lt * nwx
             fx_sum += fx

@@ -42,14 +42,18 @@ def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
         if np.shape(node.q) != (2 * NUM_FINGERS,) or np.shape(node.p_BC) != (NUM_FINGERS, 2):
             raise ConfigError(f"contact plan node {n} has q shape {np.shape(node.q)} and p_BC shape "
                               f"{np.shape(node.p_BC)}; expected (8,) and (4, 2)")
-        # Every contact must lie on this scene's box boundary.
-        gap = np.abs(np.abs(node.p_BC) - [c.box_width / 2, c.box_height / 2]).min(axis=1)
-        outside = np.any(np.abs(node.p_BC) > [c.box_width / 2 + 1e-6, c.box_height / 2 + 1e-6], axis=1)
-        if np.any(gap > 1e-6) or np.any(outside):
+        # Every contact must lie on this scene's object boundary (the box's or the polygon's).
+        if np.any(np.abs(c.shape.signed_distances(node.p_BC)) > 1e-6):
             raise ConfigError(f"contact plan node {n} has contacts {node.p_BC.tolist()} off the boundary of the "
-                              f"{c.box_width} x {c.box_height} m box of the scene")
+                              f"scene's object {_describe(c)}")
         if node.switching_finger is not None and node.switching_finger not in range(NUM_FINGERS):
             raise ConfigError(f"contact plan node {n} has switching_finger {node.switching_finger}; valid: 0-3 or null")
+
+
+def _describe(c) -> str:
+    if c.object.vertices is None:
+        return f"(the {c.box_width} x {c.box_height} m box)"
+    return f"(the polygon {np.round(c.shape.vertices, 6).tolist()} m)"
 
 
 def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> ProgramSpec:
