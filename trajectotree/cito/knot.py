@@ -3,7 +3,7 @@ contact rows, with an analytic Jacobian, vectorized over knots and fingers.
 
 Each finger at each knot is either *pinned* (TrajectoTree's fixed fingers, and a
 switching finger at its segment's ends: the fingertip centre must be at a planned
-point c_B = p*_BC + r n*_B of the box, relaxed by the finger's slack, and the
+point c_B = p*_BC + r n*_B of the object, relaxed by the finger's slack, and the
 contact frame is the planned one), or *free* (general CITO: the contact frame comes
 from the smooth distance to the object (any convex polygon) at the fingertip, with non-penetration and the
 relaxed complementarity rows of eqs. 5-6).
