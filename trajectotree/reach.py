@@ -12,8 +12,9 @@ Two stages keep the search cheap:
   would fail too: this is an exact filter.
 - `solve` runs Drake IK seeded with the closed-form answer and keeps its joint angles.
 
-Collision test (links vs box): an exact planar separating-axis test between the box and
-each link's collision box from the SDF (read from SceneGraph's inspector, expressed in the
+Collision test (links vs object): an exact planar separating-axis test between the object's
+convex polygon (trajectotree.geometry; the box keeps its closed form) and each link's
+collision box from the SDF (read from SceneGraph's inspector, expressed in the
 frame of the joint that moves it). All collision geometry is centred on the z = 0 plane,
 so planar overlap is 3D overlap; tests/test_reach.py checks it against SceneGraph's
 signed-distance queries. The fingertip sphere is not tested: it touches by construction.
@@ -70,6 +71,39 @@ def rectangle_overlaps_box(center, angle: float, half_length: float, half_width:
             and abs(-cx * uy + cy * ux) < half_width + a * abs(uy) + b * abs(ux))
 
 
+def rectangles_overlap_polygon(polygon: ConvexPolygon, center, angle, half_length: float,
+                               half_width: float) -> np.ndarray:
+    """Separating-axis test of rectangles against a convex polygon, all in the polygon's frame:
+    centres (k, 2), angles (k,) of their x axes, half sizes. (k,) bool, touching counts as not
+    overlapping. Two convex polygons are disjoint iff one of their edge normals separates them,
+    so the candidate axes are the polygon's face normals and the rectangle's two axes. The box
+    keeps its closed form (rectangle_overlaps_box's expressions), so its results are unchanged."""
+    c = np.atleast_2d(np.asarray(center, dtype=float))
+    g = np.broadcast_to(np.asarray(angle, dtype=float), c.shape[:1])
+    ux_s, uy_s = np.cos(g), np.sin(g)
+    hl, hw = half_length, half_width
+    if polygon.is_box:
+        a, b = polygon._box_half
+        cx, cy = c[:, 0], c[:, 1]
+        ux, uy = np.abs(ux_s), np.abs(uy_s)
+        return ((np.abs(cx) < a + hl * ux + hw * uy) & (np.abs(cy) < b + hl * uy + hw * ux)
+                & (np.abs(cx * ux_s + cy * uy_s) < hl + a * ux + b * uy)
+                & (np.abs(-cx * uy_s + cy * ux_s) < hw + a * uy + b * ux))
+    n, v = polygon.normals, polygon.vertices
+    # polygon normals: the polygon spans [min_j n_f . v_j, offset_f] along n_f
+    low = np.min(v @ n.T, axis=0)                                              # (V,)
+    centre = c @ n.T                                                           # (k, V)
+    radius = hl * np.abs(ux_s[:, None] * n[:, 0] + uy_s[:, None] * n[:, 1]) \
+        + hw * np.abs(-uy_s[:, None] * n[:, 0] + ux_s[:, None] * n[:, 1])      # (k, V)
+    overlap = np.all((centre - radius < polygon.offsets) & (centre + radius > low), axis=1)
+    # the rectangle's axes u (half size hl) and v (hw)
+    for axis, half in ((np.stack([ux_s, uy_s], 1), hl), (np.stack([-uy_s, ux_s], 1), hw)):
+        proj = axis @ v.T                                                      # (k, V)
+        mid = np.einsum("ka,ka->k", c, axis)
+        overlap &= (mid - half < proj.max(axis=1)) & (mid + half > proj.min(axis=1))
+    return overlap
+
+
 class Reachability:
     """Reachability queries for one scene, cached by (object pose, finger, arclength)."""
 
@@ -112,12 +146,15 @@ class Reachability:
 
     def links_penetrate(self, pose, finger: int, q) -> bool:
         """True when a link collision box of `finger` at q overlaps the box at `pose`."""
-        a, b = self.boundary._box_half  # TODO(polygon): SAT against any convex polygon
         R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
         for rect, (p_WJ, angle_WJ) in zip(self._rectangles[finger], self._joint_frames(finger, q)):
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
-            if rectangle_overlaps_box(R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
-                                      rect.half_length, rect.half_width, a, b):
+            if self.boundary.is_box:
+                if rectangle_overlaps_box(R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
+                                          rect.half_length, rect.half_width, *self.boundary._box_half):
+                    return True
+            elif rectangles_overlap_polygon(self.boundary, R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
+                                            rect.half_length, rect.half_width)[0]:
                 return True
         return False
 
@@ -164,7 +201,6 @@ class Reachability:
     def _links_penetrate_many(self, poses: np.ndarray, finger: int, q: np.ndarray) -> np.ndarray:
         """Vectorized links_penetrate: object poses (k, 3), joint angles (k, 2)."""
         f = self.fingers[finger]
-        a, b = self.boundary._box_half  # TODO(polygon): SAT against any convex polygon
         a1, a12 = f.angles(q)
         elbow = f.elbow(q)
         ct, st = np.cos(poses[:, 2]), np.sin(poses[:, 2])
@@ -172,14 +208,9 @@ class Reachability:
         for rect, origin, angle in zip(self._rectangles[finger], (f.p_W_base, elbow), (a1, a12)):
             c, s = np.cos(angle), np.sin(angle)
             rel = origin + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1) - poses[:, :2]
-            cx, cy = ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]  # box centre in B
-            g = angle + rect.angle_JG - poses[:, 2]
-            ux_s, uy_s = np.cos(g), np.sin(g)
-            ux, uy = np.abs(ux_s), np.abs(uy_s)
-            hl, hw = rect.half_length, rect.half_width
-            hit |= ((np.abs(cx) < a + hl * ux + hw * uy) & (np.abs(cy) < b + hl * uy + hw * ux)
-                    & (np.abs(cx * ux_s + cy * uy_s) < hl + a * ux + b * uy)
-                    & (np.abs(-cx * uy_s + cy * ux_s) < hw + a * uy + b * ux))
+            centre = np.stack([ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]], axis=1)  # in B
+            hit |= rectangles_overlap_polygon(self.boundary, centre, angle + rect.angle_JG - poses[:, 2],
+                                              rect.half_length, rect.half_width)
         return hit
 
     # -- IK -------------------------------------------------------------------------------
