@@ -17,17 +17,34 @@ from pathlib import Path
 import numpy as np
 from matplotlib.patches import Circle, Polygon
 
-from trajectotree.geometry import box_to_world
+from trajectotree.geometry import ConvexPolygon, box_to_world
 from trajectotree.io import write_bytes_atomic
 
 FINGER_COLORS = ("tab:red", "tab:green", "tab:purple", "tab:orange")
 
 
-def plot_box(ax, width: float, height: float, pose, *, color="tab:blue", alpha=0.35, **kwargs):
-    """The box at object pose (x, y, theta)."""
-    a, b = width / 2, height / 2
-    corners = np.array([box_to_world(pose, c) for c in ((a, -b), (a, b), (-a, b), (-a, -b))])
+def plot_object(ax, shape: ConvexPolygon, pose, *, color="tab:blue", alpha=0.35, **kwargs):
+    """The object's outline `shape` (a ConvexPolygon in B) at object pose (x, y, theta)."""
+    corners = np.array([box_to_world(pose, c) for c in shape.vertices])
     return [ax.add_patch(Polygon(corners, closed=True, facecolor=color, edgecolor="k", alpha=alpha, **kwargs))]
+
+
+def plot_box(ax, width: float, height: float, pose, **kwargs):
+    """The width x height box at object pose (x, y, theta) (plot_object)."""
+    return plot_object(ax, ConvexPolygon.box(width, height), pose, **kwargs)
+
+
+def plot_reachable_contacts(ax, shape: ConvexPolygon, pose, arclengths, *, colors=FINGER_COLORS, step=0.004):
+    """Each finger's reachable contacts (arclengths, one array per finger) as dots in its colour,
+    finger i's row 0.004 (i + 1) m outside the boundary so that the four rows stay apart."""
+    artists = []
+    for i, s in enumerate(arclengths):
+        if len(s) == 0:
+            continue
+        p_B, n_B = shape.points(np.asarray(s, dtype=float))
+        p_W = np.array([box_to_world(pose, p) for p in p_B + step * (i + 1) * n_B])
+        artists.append(ax.scatter(p_W[:, 0], p_W[:, 1], s=5, color=colors[i], zorder=6))
+    return artists
 
 
 def plot_finger(ax, finger, q, tip_radius: float, *, color="0.3", tip_color="tab:red", lw=3.0):
@@ -55,16 +72,21 @@ def plot_workspace(ax, finger, *, color="0.6"):
     return [ax.add_patch(Circle(finger.p_W_base, finger.l1 + finger.l2, fill=False, ls="--", color=color, lw=0.8))]
 
 
-def figure_model(scene):
-    """The hand (each finger's reach dashed) and the box at its initial pose, with gravity."""
+def figure_model(scene, q=None, reachable=None, note: str | None = None):
+    """The hand at joint angles q (default: a fixed open pose) with each finger's reach dashed,
+    the object at its initial pose, gravity, and optionally each finger's reachable contacts
+    (`reachable`: arclengths per finger, plot_reachable_contacts) and a `note` below the title."""
     import matplotlib.pyplot as plt
+    from trajectotree.scene import describe_object
 
     fig, ax = plt.subplots(figsize=(5, 5))
     c = scene.config
-    plot_box(ax, c.box_width, c.box_height, c.initial_pose)
+    plot_object(ax, c.shape, c.initial_pose)
     for f in scene.fingers:
         plot_workspace(ax, f)
-    plot_hand(ax, scene, np.tile([0.25, 1.2], 4))
+    if reachable is not None:
+        plot_reachable_contacts(ax, c.shape, c.initial_pose, reachable)
+    plot_hand(ax, scene, np.tile([0.25, 1.2], 4) if q is None else q)
     for i, f in enumerate(scene.fingers):
         ax.annotate(f"finger {i}", f.p_W_base, textcoords="offset points", xytext=(0, 8), ha="center", fontsize=8)
     ax.annotate("", xy=(0.0, -0.27), xytext=(0.0, -0.2), arrowprops={"arrowstyle": "->"})
@@ -74,7 +96,7 @@ def figure_model(scene):
     ax.set_ylim(-0.3, 0.3)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title("Planar four-finger hand and 0.20 x 0.10 m box")
+    ax.set_title(f"Planar four-finger hand and {describe_object(c)}" + (f"\n{note}" if note else ""), fontsize=10)
     fig.tight_layout()
     return fig
 
@@ -131,7 +153,7 @@ def plot_contact_node(ax, scene, node, *, mu: float, previous=None):
     hand at the node's joint angles, contacts with friction cones; the switching finger is
     drawn thick, with its previous contact (from `previous`, a ContactNode) as a hollow marker."""
     c = scene.config
-    artists = plot_box(ax, c.box_width, c.box_height, node.object_pose)
+    artists = plot_object(ax, c.shape, node.object_pose)
     for i, finger in enumerate(scene.fingers):
         switching = i == node.switching_finger
         artists += plot_finger(ax, finger, node.q[2 * i:2 * i + 2], scene.tip_radius,

@@ -54,9 +54,10 @@ def add_visualizer(builder: DiagramBuilder, scene_graph, meshcat: Meshcat) -> Me
 
 
 def add_plan_ghost(meshcat: Meshcat, config: SceneConfig) -> None:
-    """A green outline of the box (drawn above it) that shows the planned pose."""
-    a, b, z = config.box_width / 2, config.box_height / 2, config.box_depth / 2 + 1e-3
-    outline = np.array([[a, -b, z], [a, b, z], [-a, b, z], [-a, -b, z], [a, -b, z]]).T
+    """A green outline of the object (drawn above it) that shows the planned pose."""
+    v = config.shape.vertices
+    closed = np.vstack([v, v[:1]])
+    outline = np.hstack([closed, np.full((len(closed), 1), config.box_depth / 2 + 1e-3)]).T
     meshcat.SetLine(PLAN_GHOST_PATH, outline, line_width=2.0, rgba=Rgba(0.1, 0.7, 0.2, 1.0))
 
 
@@ -77,9 +78,20 @@ LEGEND_PLANNED = ("border: 2px solid rgb(26, 178, 51)", "planned box pose (outli
 LEGEND_FINGERS = ("background: linear-gradient(90deg, rgb(89, 89, 102) 60%, rgb(217, 89, 51) 60%)",
                   "fingers 0-3: links (grey), fingertips (orange)")
 SIMULATED_LEGEND = (LEGEND_BOX, LEGEND_PLANNED, LEGEND_FINGERS)
+
+
+def object_noun(config: SceneConfig) -> str:
+    """What the pages and figures call the object: "box", or "object" for any other polygon."""
+    return "box" if config.shape.is_box else "object"
+
+
+def simulated_legend(config: SceneConfig):
+    """SIMULATED_LEGEND, naming the object by object_noun."""
+    noun = object_noun(config)
+    return ((LEGEND_BOX[0], noun), (LEGEND_PLANNED[0], f"planned {noun} pose (outline)"), LEGEND_FINGERS)
 PAGE_SCRIPT = """
 (function () {
-  const HALF = %(half)s, DROP = %(drop)s;  // m, half-width of the view; s, drop time or null
+  const HALF = %(half)s, DROP = %(drop)s, NOUN = %(noun)s;  // m, half-width of the view; s, drop time or null
   function ready() { return window.viewer && viewer.animator && viewer.camera; }
   function now() { return viewer.animator.actions.reduce((t, a) => Math.max(t, a.time), 0); }
   function centre() {  // Meshcat widens its orthographic view to the right only: keep the hand centred
@@ -97,7 +109,7 @@ PAGE_SCRIPT = """
       const mark = document.getElementById("tt-drop");
       mark.style.left = (d ? 100 * Math.min(DROP / d, 1) : 0) + "%%";
       const note = document.getElementById("tt-drop-note");
-      note.textContent = t >= DROP ? "box dropped at " + DROP.toFixed(2) + " s" : "box drops at " + DROP.toFixed(2) + " s";
+      note.textContent = NOUN + (t >= DROP ? " dropped at " : " drops at ") + DROP.toFixed(2) + " s";
       note.style.fontWeight = t >= DROP ? "bold" : "normal";
     }
     requestAnimationFrame(tick);
@@ -129,11 +141,12 @@ PAGE_CSS = """
 """
 
 
-def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = None) -> str:
+def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = None, noun: str = "box") -> str:
     """Meshcat's static page with `title` (tab and overlay), a time readout and bar (the
     drop, if any, marked in red), a legend of (CSS swatch, text) entries, and the
     planar view kept centred in any window shape."""
     from html import escape
+    import json
     drop = "null" if drop_time_s is None else f"{float(drop_time_s):.6f}"
     marker = "" if drop_time_s is None else '<div id="tt-drop"></div>'
     note = "" if drop_time_s is None else '<div id="tt-drop-note"></div>'
@@ -142,7 +155,7 @@ def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = 
     overlay = (f'<style>{PAGE_CSS}</style><div id="tt-overlay"><div id="tt-title">{escape(title)}</div>'
                f'<div id="tt-time"></div><div id="tt-bar"><div id="tt-bar-fill"></div>{marker}</div>{note}</div>'
                f'<div id="tt-legend">{items}</div>'
-               f'<script>{PAGE_SCRIPT % {"half": VIEW_HALF_WIDTH, "drop": drop}}</script>')
+               f'<script>{PAGE_SCRIPT % {"half": VIEW_HALF_WIDTH, "drop": drop, "noun": json.dumps(noun)}}</script>')
     start, end = html.find("<title>"), html.find("</title>")
     if start >= 0 and end > start:
         html = html[:start] + f"<title>{escape(title)}</title>" + html[end + len("</title>"):]
@@ -152,12 +165,12 @@ def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = 
 
 def save_recording_html(meshcat: Meshcat, visualizer: MeshcatVisualizer, path: str | Path, *,
                         title: str = "TrajectoTree: simulated run", legend=SIMULATED_LEGEND,
-                        drop_time_s: float | None = None) -> None:
+                        drop_time_s: float | None = None, noun: str = "box") -> None:
     """Stops the visualizer's recording, publishes it and writes the static HTML, with a
     title, a time readout (marking the drop at drop_time_s) and a legend (decorate_page)."""
     visualizer.StopRecording()
     visualizer.PublishRecording()
-    page = decorate_page(meshcat.StaticHtml(), title=title, legend=legend, drop_time_s=drop_time_s)
+    page = decorate_page(meshcat.StaticHtml(), title=title, legend=legend, drop_time_s=drop_time_s, noun=noun)
     write_bytes_atomic(path, page.encode())
 
 
@@ -181,8 +194,9 @@ def write_pose_html(config: Config, times, object_poses, joint_angles, path: str
         plant.SetPositions(plant_context, box, pose)
         plant.SetPositions(plant_context, hand, q)
         diagram.ForcedPublish(context)
+    noun = object_noun(config.scene)
     save_recording_html(meshcat, visualizer, path, title="TrajectoTree: planned trajectory",
-                        legend=(LEGEND_BOX[:1] + ("box (planned pose)",), LEGEND_FINGERS))
+                        legend=(LEGEND_BOX[:1] + (f"{noun} (planned pose)",), LEGEND_FINGERS), noun=noun)
 
 
 def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | None = None) -> None:
@@ -198,16 +212,16 @@ def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | N
 
 def write_gif(scene, times, object_poses, joint_angles, path: str | Path, *, planned_poses=None,
               fps: float = 10.0) -> None:
-    """A matplotlib GIF (PillowWriter, no ffmpeg) of the box and hand, the planned box as an outline."""
+    """A matplotlib GIF (PillowWriter, no ffmpeg) of the object and hand, the planned pose as an outline."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    from trajectotree.figures import plot_box, plot_hand
+    from trajectotree.figures import plot_hand, plot_object
     times = np.asarray(times)
     frames = np.unique(np.searchsorted(times, np.arange(times[0], times[-1] + 1e-9, 1.0 / fps)).clip(0, len(times) - 1))
-    c = scene.config
+    shape = scene.config.shape
     fig, ax = plt.subplots(figsize=(4, 4))
 
     def draw(k):
@@ -216,8 +230,8 @@ def write_gif(scene, times, object_poses, joint_angles, path: str | Path, *, pla
         ax.set_xlim(-VIEW_HALF_WIDTH, VIEW_HALF_WIDTH)
         ax.set_ylim(-VIEW_HALF_WIDTH, VIEW_HALF_WIDTH)
         if planned_poses is not None:
-            plot_box(ax, c.box_width, c.box_height, planned_poses[k], color="none", alpha=1.0, ls="--")
-        plot_box(ax, c.box_width, c.box_height, object_poses[k])
+            plot_object(ax, shape, planned_poses[k], color="none", alpha=1.0, ls="--")
+        plot_object(ax, shape, object_poses[k])
         plot_hand(ax, scene, joint_angles[k])
         ax.set_title(f"t = {times[k]:.2f} s")
 

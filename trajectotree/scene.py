@@ -1,9 +1,10 @@
 """The hand and the box in a Drake MultibodyPlant, built from models/ and SceneConfig.
 
 `add_hand_and_box` adds both models to any plant (continuous for planning
-queries, discrete for simulation). `build_scene` makes a finalized plant with a
-SceneGraph for kinematic and collision queries, and reads from it the finger
-geometry (`FingerGeometry`: a `kinematics.TwoLinkFinger` plus its links' masses,
+queries, discrete for simulation; the object is models/box.sdf for the box, a
+convex prism generated from the vertices for any other polygon). `build_scene`
+makes a finalized plant with a SceneGraph for kinematic and collision queries,
+and reads from it the finger geometry (`FingerGeometry`: a `kinematics.TwoLinkFinger` plus its links' masses,
 inertias and torque limits) that the closed-form kinematics and dynamics use, so
 the SDF stays the single source of truth for the hand.
 
@@ -20,13 +21,15 @@ from functools import cached_property
 from importlib import resources
 
 import numpy as np
-from pydrake.geometry import SceneGraph
+from pydrake.geometry import AddContactMaterial, Convex, ProximityProperties, SceneGraph
+from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint, RotationalInertia, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import SceneConfig
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.kinematics import TwoLinkFinger
 
 NUM_FINGERS = 4
@@ -48,8 +51,11 @@ def _set_friction(text: str, mu: float) -> str:
 
 
 def box_sdf(config: SceneConfig) -> str:
-    """box.sdf with the size, mass, inertia and friction of `config`."""
+    """box.sdf with the size, mass, inertia and friction of `config` (the size of its
+    `object.vertices` when they are an axis-aligned rectangle)."""
     w, h, d, m = config.box_width, config.box_height, config.box_depth, config.box_mass
+    if config.object.vertices is not None:  # a rectangle given as a polygon: vertex 1 is (w/2, h/2)
+        w, h = 2 * float(config.shape.vertices[1][0]), 2 * float(config.shape.vertices[1][1])
     ixx, iyy, izz = m * (h * h + d * d) / 12, m * (w * w + d * d) / 12, m * (w * w + h * h) / 12
     text = (MODELS_DIR / "box.sdf").read_text()
     text = _sub(text, r"<size>[^<]*</size>", f"<size>{w!r} {h!r} {d!r}</size>")
@@ -66,13 +72,62 @@ def hand_sdf(config: SceneConfig) -> str:
     return _set_friction((MODELS_DIR / "planar_hand.sdf").read_text(), config.mu)
 
 
+# The object's colour and opacity (box.sdf's diffuse), for the polygon model too.
+OBJECT_RGBA = np.array([0.20, 0.45, 0.80, 0.9])
+
+
+def prism_inertia(shape: ConvexPolygon, mass: float, depth: float) -> SpatialInertia:
+    """M_BBo_B of a uniform prism: `shape` (about its area centroid Bo) extruded `depth` m
+    along z, symmetric about z = 0. I_zz is the plate's (shape.inertia, as the planners and
+    the controller use); I_xx, I_yy and I_xy from the polygon's second moments of area."""
+    v = shape.vertices
+    x0, y0 = v[:, 0], v[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    cross = x0 * y1 - x1 * y0
+    area = cross.sum() / 2
+    Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area             # m^2, (1/A) int x^2 dA
+    Syy = np.sum(cross * (y0 * y0 + y0 * y1 + y1 * y1)) / 12 / area
+    Sxy = np.sum(cross * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)) / 24 / area
+    dz = depth * depth / 12
+    I = RotationalInertia(mass * (Syy + dz), mass * (Sxx + dz), shape.inertia(mass), -mass * Sxy, 0.0, 0.0)
+    return SpatialInertia.MakeFromCentralInertia(mass, np.zeros(3), I)
+
+
+def prism_points(shape: ConvexPolygon, depth: float) -> np.ndarray:
+    """(3, 2V) the prism's corners in B: the vertices at z = -depth/2 and at +depth/2."""
+    v = shape.vertices
+    return np.vstack([np.hstack([v, np.full((len(v), 1), z)]) for z in (-depth / 2, depth / 2)]).T
+
+
+def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: ConvexPolygon | None = None):
+    """Adds the object `shape` (default config.shape) as model instance and body "box" (the
+    names every caller looks up): a convex prism of depth scene.box_depth (drake Convex from
+    the corners, in memory: its visual mesh travels in Meshcat's messages), mass
+    scene.box_mass, uniform density (prism_inertia), friction scene.mu on its collision
+    geometry (box.sdf's proximity properties). Returns its ModelInstanceIndex."""
+    shape = shape or config.shape
+    instance = plant.AddModelInstance("box")
+    body = plant.AddRigidBody("box", instance, prism_inertia(shape, config.box_mass, config.box_depth))
+    prism = Convex(prism_points(shape, config.box_depth), "object polygon")
+    proximity = ProximityProperties()
+    AddContactMaterial(friction=CoulombFriction(config.mu, config.mu), properties=proximity)
+    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "box::collision", proximity)
+    plant.RegisterVisualGeometry(body, RigidTransform(), prism, "box::visual", OBJECT_RGBA)
+    return instance
+
+
 def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig):
-    """Adds the hand (joints to W) and the box (planar joint in the x-y plane)
-    to an unfinalized plant, sets gravity. Returns (hand, box) model instances."""
+    """Adds the hand (joints to W) and the object (planar joint in the x-y plane)
+    to an unfinalized plant, sets gravity. Returns (hand, box) model instances. The box
+    (or a polygon that is an axis-aligned rectangle) comes from box.sdf, any other polygon
+    from add_polygon_object."""
     parser = Parser(plant)
     parser.package_map().Add("trajectotree", str(MODELS_DIR))
     (hand,) = parser.AddModelsFromString(hand_sdf(config), "sdf")
-    (box,) = parser.AddModelsFromString(box_sdf(config), "sdf")
+    if config.shape.is_box:
+        (box,) = parser.AddModelsFromString(box_sdf(config), "sdf")
+    else:
+        box = add_polygon_object(plant, config)
     plant.AddJoint(PlanarJoint("box_planar", plant.world_frame(), plant.GetFrameByName("box", box)))
     plant.mutable_gravity_field().set_gravity_vector([0.0, -config.gravity, 0.0])
     return hand, box
@@ -201,3 +256,16 @@ def build_scene(config: SceneConfig | None = None) -> Scene:
     plant.Finalize()
     diagram = builder.Build()
     return Scene(config=config, diagram=diagram, plant=plant, scene_graph=scene_graph, hand=hand, box=box)
+
+
+POLYGON_NAMES = {3: "triangle", 4: "quadrilateral", 5: "pentagon", 6: "hexagon"}
+
+
+def describe_object(config: SceneConfig) -> str:
+    """A short name of the object for titles: "0.20 x 0.10 m box", "triangle (85 cm^2)"."""
+    shape = config.shape
+    if shape.is_box:
+        a, b = shape.vertices[1]
+        return f"{2 * a:.2f} x {2 * b:.2f} m box"
+    n = len(shape.vertices)
+    return f"{POLYGON_NAMES.get(n, f'{n}-gon')} ({shape.area * 1e4:.0f} cm^2)"

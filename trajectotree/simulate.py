@@ -308,7 +308,9 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
         playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))
         if html_path is not None:
-            playback.save_recording_html(meshcat, execution.visualizer, html_path, drop_time_s=result.drop_time_s)
+            playback.save_recording_html(meshcat, execution.visualizer, html_path, drop_time_s=result.drop_time_s,
+                                         legend=playback.simulated_legend(config.scene),
+                                         noun=playback.object_noun(config.scene))
         else:
             execution.visualizer.StopRecording()
             execution.visualizer.PublishRecording()

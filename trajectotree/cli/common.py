@@ -6,10 +6,11 @@ import argparse
 import dataclasses
 import json
 import os
+import re
 import sys
 from pathlib import Path
 
-from trajectotree.config import FORMULATIONS, Config, ConfigError, check_integer, load_config
+from trajectotree.config import FORMULATIONS, Config, ConfigError, ObjectConfig, check_integer, load_config
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
 SEGMENTS_HELP = ("transition segments S between the N = S + 1 poses of the contact sequence, each with one "
@@ -24,16 +25,49 @@ HTML_SUFFIXES = (".html", ".htm")
 def add_scene_options(group, config_help: str = "YAML file with any Config fields") -> None:
     """--config and the scene options on top of it (scene_overrides reads them)."""
     group.add_argument("--config", metavar="FILE.yaml", help=config_help)
-    group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"), help="box width and height, m")
-    group.add_argument("--mass", type=float, metavar="KG", help="box mass, kg")
+    group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"),
+                       help="the object is a box of this width and height, m")
+    group.add_argument("--polygon", metavar='"X,Y X,Y ..."',
+                       help="the object is this convex polygon instead of the box: its vertices (x, y) in m in the "
+                            "object frame, in either orientation (re-centred at its centroid), e.g. "
+                            '"-0.07,-0.04 0.07,-0.04 0,0.08"')
+    group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
 
 
+def parse_polygon(text: str) -> tuple[tuple[float, float], ...]:
+    """The vertices of --polygon "x1,y1 x2,y2 ..." (m); ConfigError naming a malformed vertex.
+    Whether they make a convex polygon is ObjectConfig's check."""
+    vertices = []
+    for i, pair in enumerate(str(text).split()):
+        parts = pair.split(",")
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            vertices.append((float(parts[0]), float(parts[1])))
+        except ValueError:
+            raise ConfigError(f"--polygon vertex {i} {pair!r} is not x,y (two numbers in m, comma-separated, no "
+                              'space; vertices separated by spaces, e.g. "-0.07,-0.04 0.07,-0.04 0,0.08")') from None
+    if not vertices:
+        raise ConfigError(f"--polygon {text!r} has no vertices: give at least 3 as x,y pairs separated by spaces")
+    return tuple(vertices)
+
+
 def scene_overrides(args: argparse.Namespace) -> dict:
-    """The SceneConfig fields set by --box-size, --mass and --mu."""
+    """The SceneConfig fields set by --box-size, --polygon, --mass and --mu. --box-size makes
+    the object a box (object.vertices None), --polygon a polygon; both together: ConfigError."""
     scene = {}
+    polygon = getattr(args, "polygon", None)
+    if polygon is not None and getattr(args, "box_size", None) is not None:
+        raise ConfigError("--polygon and --box-size both describe the object: give one of them")
+    if polygon is not None:
+        try:
+            scene["object"] = ObjectConfig(vertices=parse_polygon(polygon))
+        except ConfigError as e:
+            raise ConfigError(in_option_terms(str(e), args)) from None
     if getattr(args, "box_size", None) is not None:
         scene["box_width"], scene["box_height"] = args.box_size
+        scene["object"] = ObjectConfig()
     if getattr(args, "mass", None) is not None:
         scene["box_mass"] = args.mass
     if getattr(args, "mu", None) is not None:
@@ -68,18 +102,38 @@ def config_from_args(args: argparse.Namespace) -> Config:
         raise ConfigError(in_option_terms(str(e), args)) from None
 
 
+def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
+    """ConfigError (exit 2, before any planning) when the hand has no initial grasp of the object
+    at scene.initial_pose (trajectotree.initial_grasp: a finger reaches no corner-free contact,
+    or no three-finger stance holds at mu_plan), unless search.initial_arclengths sets the grasp.
+    The candidates are memoized, so the planner reuses them."""
+    from trajectotree.initial_grasp import initial_grasp_candidates
+    from trajectotree.scene import describe_object
+    if config.search.initial_arclengths is not None:
+        return
+    grasps = initial_grasp_candidates(scene, config.search)
+    if grasps.reason:
+        option = ("--polygon (scene.object.vertices)" if getattr(args, "polygon", None) is not None else
+                  "scene.object.vertices" if config.scene.object.vertices is not None else "the box")
+        raise ConfigError(f"{option}: the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
+                          f"{list(config.scene.initial_pose)}: {grasps.reason}; corner-free contacts each finger "
+                          f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)")
+
+
 # Config fields set by command-line options, as the user wrote them (longest names first).
 OPTION_NAMES = (("scene.box_width x scene.box_height", "box_size", "--box-size W H"),
                 ("scene.box_width", "box_size", "--box-size W"), ("scene.box_height", "box_size", "--box-size H"),
                 ("scene.box_mass", "mass", "--mass"), ("scene.mu", "mu", "--mu"),
-                ("cito.formulation", "formulation", "--formulation"))
+                ("scene.object.vertices", "polygon", "--polygon"), ("cito.formulation", "formulation", "--formulation"))
 
 
 def in_option_terms(message: str, args: argparse.Namespace) -> str:
-    """A config error about a field the user set with an option, named by that option."""
+    """A config error about a field the user set with an option, named by that option
+    ("scene.object.vertices[2][0] = ..." -> "--polygon (scene.object.vertices[2][0]) = ...")."""
     for field, attribute, option in OPTION_NAMES:
-        if getattr(args, attribute, None) is not None and message.startswith(field + " "):
-            return f"{option} ({field}){message[len(field):]}"
+        named = re.match(re.escape(field) + r"((?:\[\d+\])*)([ :].*)", message, re.DOTALL)  # field[i][j] ...
+        if getattr(args, attribute, None) is not None and named:
+            return f"{option} ({field}{named.group(1)}){named.group(2)}"
     return message
 
 

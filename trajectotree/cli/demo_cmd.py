@@ -16,7 +16,8 @@ import math
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import add_config_options, check_output_dir, config_from_args, print_json
+from trajectotree.cli.common import (add_config_options, check_graspable, check_output_dir, config_from_args,
+                                      print_json)
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
@@ -89,6 +90,8 @@ def run(args) -> int:
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
     out = check_output_dir("--out", args.out)
+    scene = build_scene(config.scene)
+    check_graspable(scene, config, args)
     out.mkdir(parents=True, exist_ok=True)
     meshcat = start_meshcat() if args.meshcat else None
     log = sys.stderr if args.json else sys.stdout
@@ -96,7 +99,6 @@ def run(args) -> int:
         print(f"Meshcat: {meshcat.web_url()} (open it now; the run plays once the plan is ready)", file=log, flush=True)
 
     print(f"planning a {goal:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
-    scene = build_scene(config.scene)
     with ipopt_progress(progress_wanted(args)):
         result = plan(scene=scene, goal=goal, method="trajectotree", config=config)
     for name in DERIVED_FILES:

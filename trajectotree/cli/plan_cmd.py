@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import (HTML_SUFFIXES, add_config_options, check_output_dir,
+from trajectotree.cli.common import (HTML_SUFFIXES, add_config_options, check_graspable, check_output_dir,
                                       check_output_file, config_from_args, print_json)
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
@@ -47,9 +47,10 @@ def run(args) -> int:
     out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}")
     if args.html:
         check_output_file("--html", args.html, HTML_SUFFIXES)
+    scene = build_scene(config.scene)
+    check_graspable(scene, config, args)
     with ipopt_progress(progress_wanted(args)):
-        result = plan(scene=build_scene(config.scene), goal=goal, method=method, config=config,
-                      segment_workers=workers)
+        result = plan(scene=scene, goal=goal, method=method, config=config, segment_workers=workers)
     removed = remove_derived_files(out)
     save_plan(result, out)
     if removed:

@@ -2,24 +2,44 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import numpy as np
+
 from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args,
                                       print_json)
+from trajectotree.scene import NUM_FINGERS, describe_object
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("scene", help="build the hand and box plant and summarize it",
-                              description=__doc__)
+    p = subparsers.add_parser("scene", help="build the hand and object plant, summarize it, tell whether the hand "
+                              "can grasp the object", description=__doc__)
     add_config_options(p, segments=False)
-    p.add_argument("--figure", metavar="FILE.png", help="draw the model (hand, box, reach circles); .png, .pdf or .svg")
+    p.add_argument("--figure", metavar="FILE.png", help="draw the model (hand at the best initial grasp, object, "
+                   "reach circles, each finger's reachable contacts); .png, .pdf or .svg")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(run=run)
 
 
-def summarize(scene) -> dict:
-    c = scene.config
+def describe(scene) -> dict:
+    """The object as the plant has it: outline, area, mass and inertia about z (from the body)."""
+    c, shape = scene.config, scene.config.shape
     body = scene.plant.GetBodyByName("box", scene.box)
-    return {
-        "box": {"size_m": [c.box_width, c.box_height], "mass_kg": body.default_mass(), "mu": c.mu},
+    inertia = body.default_spatial_inertia().CalcRotationalInertia().CopyToFullMatrix3()
+    out = {"kind": "box" if shape.is_box else "polygon", "name": describe_object(c),
+           "vertices_m": shape.vertices.round(6).tolist(), "area_m2": shape.area, "perimeter_m": shape.perimeter,
+           "depth_m": c.box_depth, "mass_kg": body.default_mass(), "inertia_zz_kg_m2": float(inertia[2, 2]),
+           "mu": c.mu}
+    if shape.is_box:
+        out["size_m"] = [2 * float(shape.vertices[1][0]), 2 * float(shape.vertices[1][1])]
+    return out
+
+
+def summarize(scene, reach: dict | None = None) -> dict:
+    out = {"object": describe(scene)}
+    if reach is not None:
+        out["reach"] = reach
+    return out | {
         "gravity_W": scene.plant.gravity_field().gravity_vector().tolist(),
         "num_positions": scene.plant.num_positions(),
         "num_actuators": scene.plant.num_actuators(),
@@ -30,14 +50,73 @@ def summarize(scene) -> dict:
     }
 
 
-def draw_model(scene, path: str) -> None:
-    """The hand and box (figures.figure_model), written atomically."""
+def reachable_contacts(scene, search, reach) -> list[np.ndarray]:
+    """Per finger, the arclengths of the grid contacts (every search.initial_grid_step m, at least
+    scene.corner_margin from a corner) its fingertip reaches at the initial pose without its links
+    entering the object: the contacts trajectotree.initial_grasp builds its candidates from."""
+    c, shape = scene.config, scene.config.shape
+    grid = np.round(np.arange(0.0, shape.perimeter - 1e-9, search.initial_grid_step), 9)
+    grid = grid[[shape.corner_distance(s) >= c.corner_margin for s in grid]]
+    pose = np.asarray(c.initial_pose, dtype=float)
+    return [grid[np.isfinite(reach.closed_form_many(pose, i, grid)[:, 0])] for i in range(NUM_FINGERS)]
+
+
+@dataclass(frozen=True)
+class ObjectReach:
+    """Whether the hand can grasp the object at its initial pose."""
+
+    contacts: list            # per finger, arclengths (m) of its reachable corner-free grid contacts
+    grasps: object            # initial_grasp.GraspCandidates
+    q_best: np.ndarray | None  # (8,) rad, joint angles at the best initial grasp (None without one)
+
+    def to_json(self, search) -> dict:
+        g = self.grasps
+        best = g.candidates[0] if g.candidates else None
+        return {"graspable": best is not None, "grid_step_m": search.initial_grid_step,
+                "contacts_per_finger": [len(s) for s in self.contacts], "mu_plan": g.mu_plan,
+                "initial_grasps": len(g.candidates),
+                "best_grasp_arclengths_m": None if best is None else list(best.arclengths),
+                "best_grasp_worst_stance_mu": None if best is None else best.worst_stance_mu,
+                "reason": g.reason}
+
+
+def object_reach(scene, search) -> ObjectReach:
+    from trajectotree.initial_grasp import initial_grasp_candidates
+    from trajectotree.reach import Reachability
+    reach = Reachability(scene)
+    grasps = initial_grasp_candidates(scene, search, reach)
+    q = None
+    if grasps.candidates:
+        pose = np.asarray(scene.config.initial_pose, dtype=float)
+        q = np.concatenate([reach.closed_form_many(pose, i, [s])[0]
+                            for i, s in enumerate(grasps.candidates[0].arclengths)])
+    return ObjectReach(contacts=reachable_contacts(scene, search, reach), grasps=grasps, q_best=q)
+
+
+def reach_line(reach: dict) -> str:
+    counts = reach["contacts_per_finger"]
+    line = (f"reach at the initial pose: {counts} corner-free contacts (every {reach['grid_step_m']:g} m) per finger; ")
+    if reach["graspable"]:
+        return line + (f"{reach['initial_grasps']} initial grasps, the best needs mu "
+                       f"{reach['best_grasp_worst_stance_mu']:.3g} of mu_plan {reach['mu_plan']:.3g}")
+    return line + f"the hand CANNOT grasp the object: {reach['reason']}"
+
+
+def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
+    """The hand (at the best initial grasp, if any) and the object, each finger's reachable
+    contacts (figures.figure_model), written atomically."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from trajectotree.figures import figure_model, save_figure
-    fig = figure_model(scene)
+    if reach is None:
+        fig = figure_model(scene)
+    else:
+        counts = [len(s) for s in reach.contacts]
+        note = (f"dots: reachable contacts {tuple(counts)}; "
+                + ("hand: best initial grasp" if reach.q_best is not None else "NO initial grasp"))
+        fig = figure_model(scene, q=reach.q_best, reachable=reach.contacts, note=note)
     try:
         save_figure(fig, path, dpi=120)
     finally:
@@ -48,20 +127,27 @@ def run(args) -> int:
     from trajectotree.scene import build_scene
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
-    scene = build_scene(config_from_args(args).scene)
-    summary = summarize(scene)
+    config = config_from_args(args)
+    scene = build_scene(config.scene)
+    reach = object_reach(scene, config.search)
+    summary = summarize(scene, reach.to_json(config.search))
     if args.figure:
-        draw_model(scene, args.figure)
+        draw_model(scene, args.figure, reach)
         summary["figure"] = args.figure
     if args.json:
         print_json(summary)
     else:
-        b = summary["box"]
-        print(f"box {b['size_m'][0]:.3f} x {b['size_m'][1]:.3f} m, {b['mass_kg']:.3f} kg, mu {b['mu']}; "
+        o = summary["object"]
+        size = f"{o['size_m'][0]:.3f} x {o['size_m'][1]:.3f} m box" if "size_m" in o else o["name"]
+        print(f"object: {size}, {o['mass_kg']:.3f} kg, I_zz {o['inertia_zz_kg_m2']:.3g} kg m^2, mu {o['mu']}; "
               f"gravity {summary['gravity_W']}")
+        if o["kind"] == "polygon":
+            print(f"  vertices (m, counter-clockwise about the centroid): {o['vertices_m']}; "
+                  f"area {o['area_m2']:.4g} m^2, perimeter {o['perimeter_m']:.4g} m")
         for i, f in enumerate(summary["fingers"]):
             print(f"finger {i}: base {f['base_W']} m, links {f['link_lengths_m']} m, "
                   f"q in [{f['q_lower']}, {f['q_upper']}] rad, |tau| <= {f['tau_max']} N m")
+        print(reach_line(summary["reach"]))
         if args.figure:
             print(f"figure: {args.figure}")
     return 0

@@ -125,7 +125,7 @@ def world_conditions(args, config: Config) -> dict:
 def run(args) -> int:
     from trajectotree.figures import figure_finger_forces, save_figure
     from trajectotree.io import save_sim
-    from trajectotree.playback import start_meshcat
+    from trajectotree.playback import object_noun, start_meshcat
     from trajectotree.reference import reference_from_arrays
     from trajectotree.scene import build_scene
     from trajectotree.simulate import run_simulation
@@ -158,7 +158,8 @@ def run(args) -> int:
         print_json(summary)
     else:
         drop = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
-        print(f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: box {drop}; "
+        print(f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: "
+              f"{object_noun(config.scene)} {drop}; "
               f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad")
         print(f"wrote {Path(args.plan_dir) / 'sim.json'}" + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p))
     if meshcat is not None and sys.stdin.isatty():
