@@ -164,3 +164,42 @@ def test_plan_page_is_titled_and_has_no_drop_marker(browser, plan_html):
     assert page.page.inner_text("#tt-time") == "t = 0.50 s of 1.00 s"
     assert page.page.locator("#tt-drop").count() == 0
     assert page.page.inner_text("#tt-legend").splitlines()[0] == "box (planned pose)"
+
+
+@pytest.fixture(scope="module")
+def triangle_html(tmp_path_factory):
+    """Playback of a run with an equilateral triangle (side 0.14 m, apex up) that the hand lets go."""
+    from trajectotree.config import ObjectConfig
+    from trajectotree.initial_grasp import initial_grasp_candidates
+    side = 0.14
+    r = side / np.sqrt(3)
+    vertices = tuple((r * np.cos(np.pi / 2 + 2 * np.pi * k / 3), r * np.sin(np.pi / 2 + 2 * np.pi * k / 3))
+                     for k in range(3))
+    config = Config(scene=SceneConfig(object=ObjectConfig(vertices=vertices)))
+    config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=0.0))
+    scene = build_scene(config.scene)
+    grasp = initial_grasp_candidates(scene, config.search).candidates[0]
+    reference = static_hold_reference(scene, grasp.arclengths, min_normal_force=1.0, duration=0.3)
+    path = tmp_path_factory.mktemp("playback") / "triangle.html"
+    result = simulate_reference(reference, config, controlled=False, html_path=path)
+    assert result.dropped
+    return path, side, result.drop_time_s
+
+
+def test_polygon_playback_draws_the_polygon(browser, triangle_html):
+    """The triangle's prism is drawn as a triangle: its area in pixels, centred, apex up (more of
+    it below its centroid than above: 5/9), and the page calls it the object."""
+    path, side, drop = triangle_html
+    page = Page(browser, path)
+    mask = box_pixels(page.frame_at(0.0))
+    assert page.requests == [path.resolve().as_uri()] and page.errors == []
+    pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
+    area = np.sqrt(3) / 4 * side ** 2 * pixels_per_m ** 2
+    assert mask.sum() == pytest.approx(area, rel=0.12)   # fingertips cover a little of it
+    rows, cols = np.nonzero(mask)
+    assert abs(cols.mean() - VIEWPORT["width"] / 2) < 10
+    centroid_row = VIEWPORT["height"] / 2
+    assert np.sum(rows > centroid_row) / len(rows) == pytest.approx(5 / 9, abs=0.05)
+    assert page.page.inner_text("#tt-legend").splitlines()[:2] == ["object", "planned object pose (outline)"]
+    page.frame_at(0.25)
+    assert page.page.inner_text("#tt-drop-note") == f"object dropped at {drop:.2f} s"
