@@ -141,3 +141,17 @@ def test_plan_playback_of_a_polygon_embeds_its_mesh(tmp_path):
             assert np.array([x, y, z], dtype=np.float32).tobytes() in data, (x, y, z)
     assert not re.search(r"<(script|link|img)[^>]*(src|href)=", html)   # every script inlined
     assert "object (planned pose)" in html
+
+
+@pytest.mark.slow
+def test_demo_plans_simulates_and_plays_back_a_triangle(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--polygon", TRIANGLE, "--goal", "0.3", "--segments", "2", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["object"] == "triangle (85 cm^2)" and "rotate the triangle (85 cm^2) by +0.300 rad" in printed
+    assert summary["plan"]["success"] and not summary["simulation"]["dropped"]
+    assert "object held throughout" in printed
+    data = float32_triples((out / "playback.html").read_text())
+    shape = SceneConfig(object=ObjectConfig(vertices=parse_polygon(TRIANGLE))).shape
+    assert all(np.array([x, y, 0.025], dtype=np.float32).tobytes() in data for x, y in shape.vertices)

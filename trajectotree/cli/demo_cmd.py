@@ -56,7 +56,8 @@ def plan_summary(result) -> dict:
 def print_summary(summary: dict, out: Path) -> None:
     p, s = summary["plan"], summary["simulation"]
     switches = " ".join("-" if f is None else str(f) for f in p["switching_fingers"][1:])
-    print(f"TrajectoTree demo: rotate the box by {p['goal']:+.3f} rad ({math.degrees(p['goal']):+.1f} deg)")
+    name = summary.get("object", "box")
+    print(f"TrajectoTree demo: rotate the {name} by {p['goal']:+.3f} rad ({math.degrees(p['goal']):+.1f} deg)")
     print(f"  contact search  {p['search_time_s']:6.2f} s   switching fingers per segment: {switches or 'none'}")
     segments = p.get("segments") or ()
     summed = (f" (summed over {len(segments)} segment programs; "
@@ -68,8 +69,9 @@ def print_summary(summary: dict, out: Path) -> None:
                "converged, but the physics check FAILED (see the status)" if p["converged"] else "NOT converged")
     print(f"  total planning  {p['total_time_s']:6.2f} s   {verdict}, cost {cost}")
     if s is not None:
+        noun = "box" if name.endswith("box") else "object"
         held = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held throughout"
-        print(f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, box {held}; "
+        print(f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, {noun} {held}; "
               f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
               f"theta {s['mae_theta']:.3f} rad; final theta error {s['final_error'][2]:.3f} rad")
     else:
@@ -84,7 +86,7 @@ def run(args) -> int:
     from trajectotree.io import save_plan, save_sim, write_json_atomic
     from trajectotree.planners import plan
     from trajectotree.playback import start_meshcat
-    from trajectotree.scene import build_scene
+    from trajectotree.scene import build_scene, describe_object
     from trajectotree.simulate import run_simulation
 
     goal = check_goal(args.goal, "--goal")
@@ -118,7 +120,8 @@ def run(args) -> int:
                               config.cito.dt)
         save_figure(figure_finger_forces(sim, spans), out / FORCES)
         files += [SIM_JSON, SIM_NPZ, PLAYBACK, FORCES]
-    summary = {"plan": plan_summary(result), "simulation": None if sim is None else sim_json,
+    summary = {"object": describe_object(config.scene), "plan": plan_summary(result),
+               "simulation": None if sim is None else sim_json,
                "files": files + [SUMMARY]}
     write_json_atomic(out / SUMMARY, summary)
     if args.json:
