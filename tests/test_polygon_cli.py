@@ -106,7 +106,8 @@ def test_scene_reports_an_object_the_hand_cannot_grasp_and_plan_refuses_it(tmp_p
             "CANNOT grasp the object: finger(s) [0, 3] reach no corner-free contact at the initial pose") in out
     assert (tmp_path / "tiny.png").is_file()
     for args in (["plan", "--goal", "0.3", "--polygon", TINY, "--out", str(tmp_path / "p")],
-                 ["demo", "--polygon", TINY, "--out", str(tmp_path / "d")]):
+                 ["demo", "--polygon", TINY, "--out", str(tmp_path / "d")],
+                 ["sweep", "--goals", "2", "--polygon", TINY, "--out", str(tmp_path / "s"), "--no-progress"]):
         assert main(args) == 2
         err = capsys.readouterr().err
         assert "--polygon (scene.object.vertices): the hand cannot grasp the triangle (8 cm^2) at " \

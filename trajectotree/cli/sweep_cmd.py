@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 import signal
 
-from trajectotree.cli.common import add_config_options, check_output_dir, config_from_args, print_json
+from trajectotree.cli.common import (add_config_options, check_graspable, check_output_dir, config_from_args,
+                                      print_json)
 from trajectotree.config import CONTROLLERS, check_controller
 from trajectotree.executions import CONDITIONS, check_condition, run_executions
 from trajectotree.sweep import METHODS, SweepSpec, run_sweep
@@ -63,6 +64,9 @@ def run(args) -> int:
     check_output_dir("--out", args.out)
     spec = SweepSpec(goals=args.goals, seed=args.seed, methods=tuple(args.methods), simulate=args.simulate,
                      config=config_from_args(args), max_goal=args.max_goal, time_limit_s=args.time_limit)
+    if spec.config.scene.object.vertices is not None:  # a polygon: refused here if the hand cannot grasp it
+        from trajectotree.scene import build_scene
+        check_graspable(build_scene(spec.config.scene), spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
     if conditions and not controllers:
