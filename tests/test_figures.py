@@ -191,3 +191,45 @@ def test_search_command_draws_the_keyframes_in_the_format_its_suffix_names(tmp_p
     assert main(["search", "--goal", "0.3", "--segments", "2", "--figure", str(out)]) == 0
     svg = out.read_text()
     assert svg.startswith("<?xml") and "switching finger" in svg and "friction cone" in svg
+
+
+# ---- a convex polygon instead of the box (issue 17) ------------------------------------------
+
+QUAD = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
+
+
+def test_polygon_outline_is_its_vertices_at_the_pose(ax):
+    from trajectotree.figures import plot_object
+    from trajectotree.geometry import ConvexPolygon
+    shape = ConvexPolygon.from_points(QUAD)
+    pose = (0.02, -0.01, 2.0)
+    (patch,) = plot_object(ax, shape, pose)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    expected = [(pose[0] + c * u - s * v, pose[1] + s * u + c * v) for u, v in shape.vertices]
+    np.testing.assert_allclose(patch.get_xy()[:4], expected, atol=1e-15)
+    np.testing.assert_allclose(patch.get_xy()[4], expected[0], atol=1e-15)
+
+
+def test_model_figure_of_a_polygon_draws_it_the_hand_and_each_fingers_reachable_contacts():
+    from trajectotree.config import ObjectConfig, SceneConfig
+    config = SceneConfig(object=ObjectConfig(vertices=QUAD), initial_pose=(0.01, 0.02, 0.3))
+    scene = build_scene(config)
+    reachable = [np.array([0.02, 0.06]), np.array([]), np.array([0.3]), np.array([0.1, 0.12, 0.5])]
+    q = np.array([0.3, 1.1, -0.2, 0.9, 0.5, 0.4, 0.1, 1.4])
+    fig = figure_model(scene, q=q, reachable=reachable, note="a note")
+    ax = fig.axes[0]
+    outline = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon)][0]
+    from trajectotree.geometry import box_to_world
+    np.testing.assert_allclose(outline.get_xy()[:4], [box_to_world(config.initial_pose, v) for v in config.shape.vertices],
+                               atol=1e-15)
+    dots = ax.collections
+    assert len(dots) == 3   # finger 1 reaches nothing: no dots
+    for dot, i in zip(dots, (0, 2, 3)):
+        p_B, n_B = config.shape.points(reachable[i])
+        expected = [box_to_world(config.initial_pose, p) for p in p_B + 0.004 * (i + 1) * n_B]
+        np.testing.assert_allclose(dot.get_offsets(), expected, atol=1e-15)
+        assert matplotlib.colors.same_color(dot.get_facecolor()[0], FINGER_COLORS[i])
+    tips = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle) and p.get_fill()]
+    np.testing.assert_allclose([t.center for t in tips], scene.fingertip_positions(q), atol=1e-12)
+    assert ax.get_title() == "Planar four-finger hand and quadrilateral (146 cm^2)\na note"
+    plt.close(fig)
