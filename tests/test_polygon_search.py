@@ -3,6 +3,7 @@ check, the box given as a polygon plans the same contacts as the box, and plans 
 triangle (a grasp needs all three faces) hold every node and stance in form closure."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -55,7 +56,7 @@ def random_polygon(rng) -> ConvexPolygon:
 def test_separating_axis_test_matches_brute_force():
     rng = np.random.default_rng(3)
     hits = 0
-    for _ in range(150):
+    for _ in range(60):
         polygon = random_polygon(rng)
         centers = rng.uniform(-0.2, 0.2, (20, 2))
         angles = rng.uniform(-np.pi, np.pi, 20)
@@ -64,7 +65,7 @@ def test_separating_axis_test_matches_brute_force():
         brute = [brute_force_overlap(rectangle_corners(c, g, hl, hw), polygon.vertices) for c, g in zip(centers, angles)]
         np.testing.assert_array_equal(sat, brute)
         hits += int(np.sum(sat))
-    assert 300 < hits < 2700  # both outcomes are well represented
+    assert 120 < hits < 1080  # both outcomes are well represented
 
 
 def test_box_keeps_its_closed_form_and_the_generic_test_agrees():
@@ -82,3 +83,62 @@ def test_box_keeps_its_closed_form_and_the_generic_test_agrees():
     for polygon in (square, triangle):
         assert not rectangles_overlap_polygon(polygon, [[0.1875, 0.0]], [0.0], 0.0625, 0.03125)[0]
         assert rectangles_overlap_polygon(polygon, [[0.1870, 0.0]], [0.0], 0.0625, 0.03125)[0]
+
+
+@pytest.fixture(scope="module")
+def triangle_scene():
+    return build_scene(SceneConfig(object=ObjectConfig(vertices=TRIANGLE)))
+
+
+def test_the_box_given_as_a_polygon_plans_the_same_contacts():
+    # clockwise, starting at the top-left corner: re-ordered into the box (vertex 0 at (w/2, -h/2))
+    clockwise = ((-0.1, 0.05), (0.1, 0.05), (0.1, -0.05), (-0.1, -0.05))
+    polygon_scene = build_scene(SceneConfig(object=ObjectConfig(vertices=clockwise)))
+    assert polygon_scene.config.shape.is_box
+    np.testing.assert_array_equal(polygon_scene.config.shape.vertices, ConvexPolygon.box(0.2, 0.1).vertices)
+    a, b = (find_contact_plan(s, -1.2, SearchConfig()) for s in (build_scene(), polygon_scene))
+    assert a.success and b.success
+    for m, n in zip(a.nodes, b.nodes, strict=True):
+        np.testing.assert_array_equal(m.arclengths, n.arclengths)
+        np.testing.assert_array_equal(m.q, n.q)
+        assert m.switching_finger == n.switching_finger
+
+
+def check_polygon_plan(scene, plan, config: SearchConfig):
+    """Every node and every three-finger stance of `plan` checked independently of the search:
+    a fresh LP at mu_plan, the plant's kinematics, and a brute-force link-vs-object overlap test."""
+    shape, mu = scene.config.shape, config.friction_safety * scene.config.mu
+    closure, reach = FormClosure(shape, mu, config.min_closure_margin), Reachability(scene)
+    assert plan.success, plan.reason
+    assert len(plan.nodes) == config.num_nodes
+    np.testing.assert_allclose(plan.object_path[-1], np.add(scene.config.initial_pose, (0, 0, plan.goal)))
+    for n, node in enumerate(plan.nodes):
+        assert closure.check(node.arclengths).in_closure
+        p_WF = scene.fingertip_positions(node.q)
+        for i in range(NUM_FINGERS):
+            assert shape.corner_distance(node.arclengths[i]) >= scene.config.corner_margin - 1e-12
+            assert shape.signed_distance(node.p_BC[i]) == pytest.approx(0.0, abs=1e-12)
+            target = box_to_world(node.object_pose, node.p_BC[i]) + scene.tip_radius * rotation_2d(node.object_pose[2]) @ node.n_B[i]
+            np.testing.assert_allclose(p_WF[i], target, atol=1e-5)
+            q, f = node.q[2 * i:2 * i + 2], scene.fingers[i]
+            assert np.all(q >= f.q_lower - 1e-7) and np.all(q <= f.q_upper + 1e-7)
+            outline = np.array([box_to_world(node.object_pose, v) for v in shape.vertices])
+            assert not any(brute_force_overlap(link, outline) for link in reach.link_polygons(i, q))
+        if n:
+            moved = [i for i in range(NUM_FINGERS) if node.arclengths[i] != plan.nodes[n - 1].arclengths[i]]
+            assert moved == ([] if node.switching_finger is None else [node.switching_finger])
+            if moved:  # the other three held the object while the finger moved
+                assert closure.check(np.delete(plan.nodes[n - 1].arclengths, moved)).in_closure
+
+
+def test_triangle_plans_hold_every_stance_in_closure(triangle_scene):
+    # A grasp of the triangle needs all three faces; at mu_plan 0.49 the large turn 2.734 has no plan on the
+    # 0.02 m contact grid (no grid point at a face's middle) and one on the refined 0.01 m grid.
+    config = SearchConfig()
+    for goal in (0.86, 2.734):
+        plan = find_contact_plan(triangle_scene, goal, config)
+        check_polygon_plan(triangle_scene, plan, config)
+    coarse = find_contact_plan(triangle_scene, 2.734, replace(config, grid_refinements=0))
+    assert not coarse.success and "no plan from" in coarse.reason
+    s = np.array([n.arclengths for n in plan.nodes])
+    assert np.any(np.abs(s - 0.02 * np.round(s / 0.02)) > 1e-6)  # contacts off the coarse grid

@@ -3,7 +3,7 @@
 Contact force lambda_i = (lambda_n, lambda_t) of finger i lives in its local contact
 frame (normal, tangent). The force the finger applies ON the object, in B, is
 f_i = -lambda_n n_B + lambda_t t_B with the outward normal n_B and t_B = z x n_B
-(trajectotree.geometry), so lambda_n >= 0 pushes. Its wrench about the box origin is
+(trajectotree.geometry), so lambda_n >= 0 pushes. Its wrench about the object's origin is
 (f_x, f_y, p_BC x f). The grasp matrix G (3 x 2k) maps lambda to the net wrench.
 
 Frictional form closure is tested with the LP of the Springer Handbook of Robotics
@@ -14,7 +14,7 @@ Frictional form closure is tested with the LP of the Springer Handbook of Roboti
                       lambda_n >= d,
                       sum lambda_n <= k,
 and the grasp is in frictional form closure iff rank G = 3 and d* > 0 (here d* must exceed
-SearchConfig.min_closure_margin). The LP depends only on the contacts in the box frame,
+SearchConfig.min_closure_margin). The LP depends only on the contacts in the object frame,
 never on the object pose, so results are cached by contact arclengths.
 
 `required_mu` is the smallest friction coefficient at which contacts are in frictional form
@@ -43,7 +43,7 @@ SIDE_TOLERANCE = 1e-12  # relative; an edge this close to a plane counts as on i
 
 
 def grasp_matrix(p_BC, n_B) -> np.ndarray:
-    """G (3, 2k): column pair i maps (lambda_n, lambda_t) of contact i to its wrench on the box."""
+    """G (3, 2k): column pair i maps (lambda_n, lambda_t) of contact i to its wrench on the object."""
     p_BC, n_B = np.atleast_2d(p_BC).astype(float), np.atleast_2d(n_B).astype(float)
     t_B = np.stack([-n_B[:, 1], n_B[:, 0]], axis=1)
     G = np.zeros((WRENCH_DIM, 2 * len(p_BC)))
@@ -146,7 +146,7 @@ class FormClosureLp:
 
 
 class FormClosure:
-    """Frictional form closure of contacts given by arclength on one box, with a cache."""
+    """Frictional form closure of contacts given by arclength on one object outline, with a cache."""
 
     def __init__(self, boundary: ConvexPolygon, mu: float, min_margin: float):
         self.boundary, self.mu, self.min_margin = boundary, mu, min_margin

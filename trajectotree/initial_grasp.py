@@ -1,4 +1,4 @@
-"""The initial grasp, chosen for the configured box instead of fixed face fractions.
+"""The initial grasp, chosen for the configured object (box or convex polygon), not fixed fractions.
 
 Why: with a friction margin (mu_plan = search.friction_safety x scene.mu) no single grasp
 admits plans for every goal. Measured (issue 13) at mu_plan 0.49 on the 0.20 x 0.10 m box: the old
@@ -65,7 +65,7 @@ def mu_plan(scene_config: SceneConfig, search: SearchConfig) -> float:
 
 
 def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachability | None = None) -> GraspCandidates:
-    """The ranked candidate initial grasps for scene's box; memoized per scene and settings."""
+    """The ranked candidate initial grasps for scene's object; memoized per scene and settings."""
     key = (scene.config, search.friction_safety, search.initial_grid_step, search.nominal_joint2)
     if key not in _CACHE:
         _CACHE[key] = _build(scene, search, reach or Reachability(scene))

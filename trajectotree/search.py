@@ -2,14 +2,15 @@
 
 A depth-first tree search over contact configurations along a fixed object path of N
 poses (linear interpolation from the initial pose to the goal rotation). A node at depth
-n holds the object pose x*_n, the four contacts (arclengths along the box boundary) and
+n holds the object pose x*_n, the four contacts (arclengths along the object's boundary, any
+convex polygon, trajectotree.geometry) and
 the joint angles. Expanding a node (GetNeighbors) moves one free finger (the other three
 alone are in frictional form closure) by a displacement from D_cp, or keeps every finger
 (zero displacement), at pose x*_{n+1}. SelectNode takes the deepest open node, ties
 broken by the paper's heuristic sum_i |q2_i - nominal_joint2|.
 
 IsFeasible runs when a node is selected, as in Algorithm 1: frictional form closure (LP,
-trajectotree.grasp) and reachability by Drake IK without the links entering the box
+trajectotree.grasp) and reachability by Drake IK without the links entering the object
 (trajectotree.reach). GetNeighbors already drops candidates that fail cheap exact tests
 (corner margin, overlapping fingertips, closed-form reachability), so the LP and the IK
 run only for nodes the search actually visits. States reached twice at the same depth are
@@ -38,6 +39,13 @@ ranked candidates of trajectotree.initial_grasp, best first; a candidate whose f
 cannot reach the goal with one switch per step (the bound above) is skipped without a
 search, and each searched candidate gets at most search.root_expansions expansions, up to
 search.max_initial_grasps candidates. States found dead from one root stay dead for the next.
+
+Contact grid (not in the paper): contacts lie on a grid of arclengths, the initial grid plus
+multiples of the displacement step. When it yields no plan, the search is rerun on a grid
+halved search.grid_refinements times (grid_levels), within the same budgets. Short faces need
+it: the 0.14 m triangle's faces hold six 0.02 m grid points (none at a face's middle, where the
+three normals meet), and at mu_plan 0.49 its half turns (4 of the 12 seed-0 goals) have no
+plan on that grid, all 12 on the 0.01 m one. A plan found on the coarse grid is unchanged.
 """
 
 from __future__ import annotations
@@ -46,7 +54,7 @@ import heapq
 import itertools
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -314,15 +322,40 @@ def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tu
     return [c.arclengths for c in table.candidates], table.reason  # grid values: already canonical keys
 
 
+def grid_levels(config: SearchConfig) -> list[SearchConfig]:
+    """The search settings of each contact grid, coarsest (the configured one) first, then
+    search.grid_refinements times halved: initial_grid_step and displacement_step / 2,
+    num_displacements 2 n - 1 (the same longest move). Objects with faces short against the
+    grid (a 0.14 m triangle's usable faces hold six 0.02 m grid points, none at a face's middle)
+    may need the finer grid for grasps whose stances stay in closure as the object turns."""
+    levels = [config]
+    for _ in range(config.grid_refinements):
+        c = levels[-1]
+        levels.append(replace(c, initial_grid_step=c.initial_grid_step / 2, displacement_step=c.displacement_step / 2,
+                              num_displacements=2 * c.num_displacements - 1))
+    return levels
+
+
 def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
     """The chooser's first choice for `goal` without a tree search: config.initial_arclengths
     if given, else the best-ranked candidate that passes the cheap checks the search applies
     before rooting a tree at it (the per-finger switch bound for this goal, closure at mu_plan,
-    Drake IK). The search may still end up rooted at a later candidate if this one's tree has
-    no plan. (None, reason) when no candidate passes."""
+    Drake IK), on the coarsest grid (grid_levels) where one passes. The search may still end up
+    rooted at a later candidate if this one's tree has no plan. (None, reason) when no
+    candidate passes."""
     if not np.isfinite(goal):
         raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
-    search = _Search(scene, float(goal), config)
+    reasons = []
+    for level in grid_levels(config):
+        chosen, why = _choose_on_grid(scene, float(goal), level)
+        if chosen is not None:
+            return chosen, ""
+        reasons.append(f"at the {level.displacement_step:g} m grid: {why}")
+    return None, "; ".join(reasons) if len(reasons) > 1 else why
+
+
+def _choose_on_grid(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
+    search = _Search(scene, goal, config)
     roots, reason = _roots(scene, config, search)
     if not roots:
         return None, reason
@@ -337,23 +370,49 @@ def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tup
 
 
 def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> ContactPlan:
-    """Algorithm 1 for the rotation `goal` (rad) of scene's box: N nodes from the initial
+    """Algorithm 1 for the rotation `goal` (rad) of scene's object: N nodes from the initial
     grasp (node 0) to the goal pose, each in frictional form closure at mu_plan and
     reachable, with at most one finger changing contact between consecutive nodes while the
-    other three are in closure at mu_plan. A search that finds no plan within the budgets
-    returns success=False with the reason (which stance or reach failed)."""
+    other three are in closure at mu_plan. Searched on the configured contact grid, then on
+    the finer ones of grid_levels until a plan is found; the budgets (time, expansions) hold
+    for all grids together. A search that finds no plan returns success=False with the
+    reason of each grid (which stance or reach failed)."""
     if not np.isfinite(goal):
         raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
     t0 = time.perf_counter()
-    search = _Search(scene, float(goal), config)
+    total, reasons = SearchStats(), []
+    for level in grid_levels(config):
+        plan = _find_on_grid(scene, float(goal), level, t0, config.max_expansions - total.expanded)
+        total = _add_stats(total, plan.stats, t0)
+        if plan.success:
+            return replace(plan, stats=total)
+        reasons.append(f"at the {level.displacement_step:g} m contact grid: {plan.reason}")
+        if total.expanded >= config.max_expansions or time.perf_counter() - t0 > config.time_budget_s:
+            break
+    reason = "; ".join(reasons) if len(reasons) > 1 else plan.reason
+    return replace(plan, reason=reason, stats=total)
+
+
+def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
+    """The statistics of two grids' searches together (candidates: the last grid's count)."""
+    return SearchStats(expanded=a.expanded + b.expanded, generated=a.generated + b.generated,
+                       lp_calls=a.lp_calls + b.lp_calls, ik_calls=a.ik_calls + b.ik_calls,
+                       time_s=time.perf_counter() - t0,
+                       initial_grasps_searched=a.initial_grasps_searched + b.initial_grasps_searched,
+                       initial_grasp_candidates=b.initial_grasp_candidates)
+
+
+def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int) -> ContactPlan:
+    """find_contact_plan on config's contact grid with at most `budget` expansions."""
+    search = _Search(scene, goal, config)
     roots, reason = _roots(scene, config, search)
     if not roots:
-        return ContactPlan(goal=float(goal), success=False, reason=reason, stats=search.stats(t0),
+        return ContactPlan(goal=goal, success=False, reason=reason, stats=search.stats(t0),
                            mu_plan=search.mu_plan)
     search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
     leaf, searched, skipped, first_skip, last = None, 0, 0, "", ""
     for root in roots:
-        if searched >= config.max_initial_grasps or search.expanded >= config.max_expansions \
+        if searched >= config.max_initial_grasps or search.expanded >= budget \
                 or time.perf_counter() - t0 > config.time_budget_s:
             break
         why = search.precheck(root, candidate=config.initial_arclengths is None)
@@ -362,7 +421,7 @@ def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> Contac
             first_skip = first_skip or f"{root}: {why}"
             continue
         searched += 1
-        leaf, why = search.run(root, t0, min(config.root_expansions, config.max_expansions - search.expanded))
+        leaf, why = search.run(root, t0, min(config.root_expansions, budget - search.expanded))
         if leaf is not None:
             break
         last = f"{root}: {why}"
@@ -375,11 +434,11 @@ def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> Contac
                       f"({skipped} skipped by cheap checks, first: {first_skip or 'none'}); "
                       f"last searched {last or 'none'}; moves refused (mu_plan {search.mu_plan:.3g}): "
                       f"{search.refusals()}")
-        return ContactPlan(goal=float(goal), success=False, reason=reason, stats=stats, mu_plan=search.mu_plan)
+        return ContactPlan(goal=goal, success=False, reason=reason, stats=stats, mu_plan=search.mu_plan)
     path = []
     while leaf is not None:
         path.append(leaf)
         leaf = leaf.parent
     nodes = search.contact_nodes(path[::-1])
-    return ContactPlan(goal=float(goal), success=True, reason="", nodes=nodes, stats=search.stats(t0, searched, len(roots)),
+    return ContactPlan(goal=goal, success=True, reason="", nodes=nodes, stats=search.stats(t0, searched, len(roots)),
                        mu_plan=search.mu_plan)
