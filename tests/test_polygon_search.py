@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from trajectotree.config import ObjectConfig, SceneConfig, SearchConfig
+from trajectotree.config import ConfigError, ObjectConfig, SceneConfig, SearchConfig
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.grasp import FormClosure
 from trajectotree.reach import Reachability, rectangle_overlaps_box, rectangles_overlap_polygon
 from trajectotree.scene import NUM_FINGERS, build_scene
-from trajectotree.search import find_contact_plan
+from trajectotree.search import find_contact_plan, grid_levels
 
 TRIANGLE = tuple((0.14 / math.sqrt(3) * math.cos(a), 0.14 / math.sqrt(3) * math.sin(a))
                  for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3))
@@ -142,3 +142,14 @@ def test_triangle_plans_hold_every_stance_in_closure(triangle_scene):
     assert not coarse.success and "no plan from" in coarse.reason
     s = np.array([n.arclengths for n in plan.nodes])
     assert np.any(np.abs(s - 0.02 * np.round(s / 0.02)) > 1e-6)  # contacts off the coarse grid
+
+
+def test_grid_levels_and_their_bad_input():
+    coarse, fine = grid_levels(SearchConfig())
+    assert (coarse.displacement_step, coarse.num_displacements, coarse.initial_grid_step) == (0.02, 17, 0.02)
+    assert (fine.displacement_step, fine.num_displacements, fine.initial_grid_step) == (0.01, 33, 0.01)
+    assert grid_levels(SearchConfig(grid_refinements=0)) == [SearchConfig(grid_refinements=0)]
+    for bad in (dict(grid_refinements=4), dict(grid_refinements=-1), dict(grid_refinements=1.0),
+                dict(num_displacements=101, grid_refinements=2), dict(initial_grid_step=0.003, grid_refinements=2)):
+        with pytest.raises(ConfigError, match="search.grid_refinements"):
+            SearchConfig(**bad)
