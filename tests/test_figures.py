@@ -220,8 +220,8 @@ def test_model_figure_of_a_polygon_draws_it_the_hand_and_each_fingers_reachable_
     ax = fig.axes[0]
     outline = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon)][0]
     from trajectotree.geometry import box_to_world
-    np.testing.assert_allclose(outline.get_xy()[:4], [box_to_world(config.initial_pose, v) for v in config.shape.vertices],
-                               atol=1e-15)
+    corners = [box_to_world(config.initial_pose, v) for v in config.shape.vertices]
+    np.testing.assert_allclose(outline.get_xy()[:4], corners, atol=1e-15)
     dots = ax.collections
     assert len(dots) == 3   # finger 1 reaches nothing: no dots
     for dot, i in zip(dots, (0, 2, 3)):
