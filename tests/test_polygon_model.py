@@ -136,3 +136,26 @@ def test_fingertips_hold_the_triangle_in_simulation():
     assert np.all(np.linalg.norm(held.f_W[late], axis=2).min(axis=0) > 0.1)              # every finger touches
     dropped = simulate_reference(reference, config, controlled=False)
     assert dropped.dropped
+
+
+def test_scene_graph_distances_from_the_fingertips_are_the_polygons():
+    """SceneGraph's signed distance between each fingertip sphere and the prism equals the exact
+    planar signed distance of the polygon (trajectotree.geometry) less the tip radius, at a pose
+    with the object turned and moved: the Drake geometry is the outline the planners use."""
+    config = polygon_config(QUAD, initial_pose=(0.01, -0.02, 0.4))
+    scene = build_scene(config)
+    context = scene.diagram.CreateDefaultContext()
+    q = np.array([0.1, 1.3, -0.3, 1.0, 0.35, 1.1, 0.0, 1.5])
+    scene.plant.SetPositions(scene.plant.GetMyMutableContextFromRoot(context), scene.positions(config.initial_pose, q))
+    query = scene.scene_graph.get_query_output_port().Eval(scene.scene_graph.GetMyContextFromRoot(context))
+    inspector = query.inspector()
+    (object_id,) = scene.plant.GetCollisionGeometriesForBody(object_body(scene))
+    assert inspector.GetName(object_id) == "box::collision"   # named as box.sdf's
+    tips = {scene.plant.GetBodyFromFrameId(inspector.GetFrameId(g)).name(): g
+            for g in inspector.GetAllGeometryIds() if inspector.GetName(g).endswith("tip_collision")}
+    p_WF = scene.fingertip_positions(q)
+    from trajectotree.geometry import world_to_box
+    for i in range(4):
+        pair = query.ComputeSignedDistancePairClosestPoints(tips[f"finger{i}_link2"], object_id)
+        expected = config.shape.signed_distance(world_to_box(config.initial_pose, p_WF[i])) - scene.tip_radius
+        assert pair.distance == pytest.approx(expected, abs=1e-6), i

@@ -111,8 +111,8 @@ def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: Convex
     prism = Convex(prism_points(shape, config.box_depth), "object polygon")
     proximity = ProximityProperties()
     AddContactMaterial(friction=CoulombFriction(config.mu, config.mu), properties=proximity)
-    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "box::collision", proximity)
-    plant.RegisterVisualGeometry(body, RigidTransform(), prism, "box::visual", OBJECT_RGBA)
+    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", proximity)  # box::collision
+    plant.RegisterVisualGeometry(body, RigidTransform(), prism, "visual", OBJECT_RGBA)
     return instance
 
 
