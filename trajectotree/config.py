@@ -134,6 +134,9 @@ class SearchConfig:
     # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
+    # bool: every three-finger stance must also be in closure at mu_plan (and off the corners) at
+    # the contacts its sticking fingertip spheres roll to (trajectotree.search). False: the paper.
+    rolled_stances: bool = True
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
     # (trajectotree.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
     initial_grid_step: float = 0.02
@@ -162,6 +165,8 @@ class SearchConfig:
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
+        if not isinstance(self.rolled_stances, bool):
+            raise ConfigError(f"search.rolled_stances = {self.rolled_stances!r} must be true or false")
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
         for name in ("max_initial_grasps", "root_expansions", "max_expansions"):
             check_integer(f"search.{name}", getattr(self, name), 1)

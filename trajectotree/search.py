@@ -34,6 +34,19 @@ three-finger stance held while a finger switches (is_free) is in frictional form
 with friction to spare. Each plan node reports `required_mu` (its grasp) and
 `stance_required_mu` (the three fingers that held the box while it was reached).
 
+Rolling contacts (search.rolled_stances; not in the paper): the plan keeps a holding
+finger's contact point fixed on the object, but a fingertip sphere of radius r that sticks
+to a face rolls along it as the finger's second link turns relative to the object, so
+s - r (a12 - theta) stays constant while it holds (a12 the link's absolute angle, theta the
+object's). Executed, the contacts therefore drift by r times the link's turn since the finger
+landed (goal 1.804 of seed 0: 8 mm and 4 mm after 4 s, as predicted to 0.3 mm), and a stance
+in closure at its planned contacts may not be at the contacts it really has (there: needs mu
+0.40 planned, 0.57 rolled). So each three-finger stance must also be in closure at mu_plan,
+and off the corners, at its rolled contacts at both ends of its transition (rolled_stance).
+The rolling depends on when each finger landed (the node's path); states are still merged
+by their contacts, so a state first reached by a worse history can hide a plan another would
+allow (incomplete, never unsafe).
+
 Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
 ranked candidates of trajectotree.initial_grasp, best first; a candidate whose fingers
 cannot reach the goal with one switch per step (the bound above) is skipped without a
@@ -61,7 +74,7 @@ import numpy as np
 from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.geometry import ConvexPolygon
-from trajectotree.grasp import FormClosure
+from trajectotree.grasp import FormClosure, closure_edges_parts, in_closure_many
 from trajectotree.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
@@ -221,9 +234,53 @@ class _Search:
             if finger is not None and self.tips_overlap(arclengths, finger):
                 self.refused["fingertips overlap"] += 1
                 continue
+            if finger is not None and self.config.rolled_stances:
+                why = self.rolled_stance(node, depth, finger)
+                if why:
+                    self.refused[why] += 1
+                    continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
             out.append((h, _Node(depth, arclengths, finger, node)))
         return out
+
+    # -- rolling contacts (see the module doc) -----------------------------------------------
+    def rolled_stance(self, node: _Node, depth: int, finger: int) -> str:
+        """Why the stance holding the object while `finger` moves from `node` to the child at
+        `depth` fails at its rolled contacts ("" when it holds): at node.depth and at `depth`,
+        every contact still on its face (the rolling law holds along one face) and the three in
+        frictional form closure at mu_plan (grasp.in_closure_many, the exact test behind
+        required_mu; the LP's 1e-3 N margin is not applied here)."""
+        stance = STANCE_FINGERS[finger]
+        rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
+        corners = self.boundary.corner_arclengths()
+        face = lambda s: int(np.searchsorted(corners, s, side="right"))  # noqa: E731
+        if any(face(s) != face(node.arclengths[j]) for row in rolled for j, s in zip(stance, row)):
+            return f"stance of fingers {stance} rolls off a face"
+        p_BC, n_B = self.boundary.points(np.ravel(rolled))
+        A, B = closure_edges_parts(p_BC.reshape(2, 3, 2), n_B.reshape(2, 3, 2))
+        if not np.all(in_closure_many(A, B, self.mu_plan)):
+            return f"stance of fingers {stance} not in closure at mu_plan at its rolled contacts"
+        return ""
+
+    def rolled_arclengths(self, node: _Node, depth: int, fingers) -> list[float]:
+        """The contacts of `fingers` (node's arclengths) at node `depth` >= node.depth, each
+        rolled by r times its second link's turn relative to the object since it landed."""
+        r = self.reach.tip_radius
+        out = []
+        for j in fingers:
+            s, step = node.arclengths[j], node
+            while step is not None and step.switching_finger != j:   # back to where finger j landed
+                step = step.parent
+            landed = 0 if step is None else step.depth
+            out.append(self.wrap(s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s))))
+        return out
+
+    def link_turn(self, depth: int, finger: int, s: float) -> float:
+        """Angle of `finger`'s second link relative to the object at node `depth` with its
+        contact at arclength s (closed-form IK, memoized; the node's Drake IK agrees)."""
+        pose = self.poses[depth]
+        q = self.reach.closed_form(pose, finger, s).q
+        return float(self.scene.fingers[finger].psi + q[0] + q[1] - pose[2])
 
     # -- Algorithm 1 ----------------------------------------------------------------------
     def precheck(self, start: tuple[float, ...], candidate: bool = False) -> str:
