@@ -105,13 +105,13 @@ def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: Convex
     the corners, in memory: its visual mesh travels in Meshcat's messages), mass
     scene.box_mass, uniform density (prism_inertia), friction scene.mu on its collision
     geometry (box.sdf's proximity properties). Returns its ModelInstanceIndex."""
-    shape = shape or config.shape
+    shape = config.shape if shape is None else shape
     instance = plant.AddModelInstance("box")
     body = plant.AddRigidBody("box", instance, prism_inertia(shape, config.box_mass, config.box_depth))
     prism = Convex(prism_points(shape, config.box_depth), "object polygon")
     proximity = ProximityProperties()
     AddContactMaterial(friction=CoulombFriction(config.mu, config.mu), properties=proximity)
-    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", proximity)  # box::collision
+    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", proximity)  # box::collision, as box.sdf's
     plant.RegisterVisualGeometry(body, RigidTransform(), prism, "visual", OBJECT_RGBA)
     return instance
 
