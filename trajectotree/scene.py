@@ -111,7 +111,7 @@ def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: Convex
     prism = Convex(prism_points(shape, config.box_depth), "object polygon")
     proximity = ProximityProperties()
     AddContactMaterial(friction=CoulombFriction(config.mu, config.mu), properties=proximity)
-    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", proximity)  # box::collision, as box.sdf's
+    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", proximity)  # box::collision
     plant.RegisterVisualGeometry(body, RigidTransform(), prism, "visual", OBJECT_RGBA)
     return instance
 
