@@ -146,7 +146,7 @@ class SearchConfig:
     time_budget_s: float = 30.0         # s, wall-clock budget of the search
     # When no plan is found, the search is rerun up to this many times on a finer contact grid
     # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
-    # move), within the same budgets. Objects with short faces need it (the 0.14 m triangle: 8/12
+    # move), within the same budgets. Objects with short faces need it (the 0.14 m triangle: 5/12
     # of the seed-0 goals at 0.02 m, 12/12 with one refinement). 0: the paper's single grid.
     grid_refinements: int = 1
 
