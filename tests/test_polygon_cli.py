@@ -156,3 +156,12 @@ def test_demo_plans_simulates_and_plays_back_a_triangle(tmp_path, capsys):
     data = float32_triples((out / "playback.html").read_text())
     shape = SceneConfig(object=ObjectConfig(vertices=parse_polygon(TRIANGLE))).shape
     assert all(np.array([x, y, 0.025], dtype=np.float32).tobytes() in data for x, y in shape.vertices)
+
+
+def test_a_rectangle_given_as_a_polygon_is_described_as_the_box_it_is(capsys):
+    """The 0.24 x 0.06 m bar, given by its corners (clockwise): box.sdf at the bar's size, not
+    at scene.box_width x box_height."""
+    assert main(["scene", "--polygon", "-0.12,-0.03 -0.12,0.03 0.12,0.03 0.12,-0.03", "--json"]) == 0
+    o = json.loads(capsys.readouterr().out)["object"]
+    assert o["kind"] == "box" and o["size_m"] == [0.24, 0.06] and o["name"] == "0.24 x 0.06 m box"
+    assert o["inertia_zz_kg_m2"] == pytest.approx(0.05 * (0.24 ** 2 + 0.06 ** 2) / 12, rel=1e-12)
