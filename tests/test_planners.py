@@ -206,7 +206,9 @@ def test_paper_config_loads_with_the_papers_formulation():
     assert planning_mu(config) == config.scene.mu
     default = Config()
     assert dataclasses.replace(config, search=default.search, cito=default.cito) == default   # nothing else differs
-    assert dataclasses.replace(config.search, friction_safety=default.search.friction_safety) == default.search
+    assert not config.search.rolled_stances and config.search.grid_refinements == 0
+    assert dataclasses.replace(config.search, friction_safety=default.search.friction_safety, rolled_stances=default.search.rolled_stances,
+                               grid_refinements=default.search.grid_refinements) == default.search
     assert dataclasses.replace(config.cito, switch_clearance=default.cito.switch_clearance,
                                formulation=default.cito.formulation) == default.cito
 
