@@ -452,12 +452,12 @@ def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> Contac
 
 
 def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
-    """The statistics of two grids' searches together (candidates: the last grid's count)."""
+    """The statistics of two grids' searches together (each grid ranks its own candidates)."""
     return SearchStats(expanded=a.expanded + b.expanded, generated=a.generated + b.generated,
                        lp_calls=a.lp_calls + b.lp_calls, ik_calls=a.ik_calls + b.ik_calls,
                        time_s=time.perf_counter() - t0,
                        initial_grasps_searched=a.initial_grasps_searched + b.initial_grasps_searched,
-                       initial_grasp_candidates=b.initial_grasp_candidates)
+                       initial_grasp_candidates=a.initial_grasp_candidates + b.initial_grasp_candidates)
 
 
 def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int) -> ContactPlan:
