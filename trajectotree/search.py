@@ -223,7 +223,7 @@ class _Search:
                     moved = list(node.arclengths)
                     moved[i] = s
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left = [], self.config.num_nodes - 2 - node.depth
+        out, steps_left, rolled = [], self.config.num_nodes - 2 - node.depth, {}
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
@@ -236,9 +236,10 @@ class _Search:
                 self.refused["fingertips overlap"] += 1
                 continue
             if finger is not None and self.config.rolled_stances:
-                why = self.rolled_stance(node, depth, finger)
-                if why:
-                    self.refused[why] += 1
+                if finger not in rolled:   # the stance depends on the finger, not on where it moves
+                    rolled[finger] = self.rolled_stance(node, depth, finger)
+                if rolled[finger]:
+                    self.refused[rolled[finger]] += 1
                     continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
             out.append((h, _Node(depth, arclengths, finger, node)))
