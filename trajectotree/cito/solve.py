@@ -22,7 +22,6 @@ from pydrake.solvers import IpoptSolver, SolverOptions
 from trajectotree.cito.layout import NUM_BODY_ROWS
 from trajectotree.cito.program import CitoProgram
 from trajectotree.cito.variables import CitoVariables
-from trajectotree.geometry import ConvexPolygon
 from trajectotree.config import CitoConfig
 
 VIOLATION_GROUPS = ("dynamics", "friction_cone", "complementarity", "contact_point", "penetration")
