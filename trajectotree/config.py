@@ -140,13 +140,16 @@ class SearchConfig:
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
     # (trajectotree.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
     initial_grid_step: float = 0.02
-    max_initial_grasps: int = 20        # candidate initial grasps the search is rooted at, best first
+    # candidate initial grasps the search is rooted at, best first (per contact grid). The box's plans
+    # all come from its first candidate; a small polygon's trees die within a few expansions, so more
+    # roots are cheap: 20 left 3 of the 0.14 m triangle's 60 seed-0 goals without a plan, 200 none.
+    max_initial_grasps: int = 200
     root_expansions: int = 2000         # node budget of the search from one initial grasp
     max_expansions: int = 20000         # node budget of the search (all initial grasps together)
     time_budget_s: float = 30.0         # s, wall-clock budget of the search
     # When no plan is found, the search is rerun up to this many times on a finer contact grid
     # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
-    # move), within the same budgets. Objects with short faces need it (the 0.14 m triangle: 5/12
+    # move), within the same budgets. Objects with short faces need it (the 0.14 m triangle: 9/12
     # of the seed-0 goals at 0.02 m, 12/12 with one refinement). 0: the paper's single grid.
     grid_refinements: int = 1
 

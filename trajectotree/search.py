@@ -57,9 +57,9 @@ Contact grid (not in the paper): contacts lie on a grid of arclengths, the initi
 multiples of the displacement step. When it yields no plan, the search is rerun on a grid
 halved search.grid_refinements times (grid_levels), within the same budgets. Short faces need
 it: the 0.14 m triangle's faces hold six 0.02 m grid points (none at a face's middle, where the
-three normals meet): at mu_plan 0.49 the search finds no plan on that grid for 7 of its 12
-seed-0 goals (4 without rolled_stances), and one for all 12 on the 0.01 m grid. A plan found
-on the coarse grid is unchanged.
+three normals meet): at mu_plan 0.49 the search finds no plan on that grid for 3 of its 12
+seed-0 goals, and one for all 12 on the 0.01 m grid. A plan found on the coarse grid is
+unchanged.
 """
 
 from __future__ import annotations
