@@ -78,7 +78,7 @@ class ConvexPolygon:
     def __init__(self, vertices, box_half: tuple[float, float] | None = None):
         v = np.array(vertices, dtype=float)
         self.vertices = v                                           # (V, 2) m
-        self._box_half = box_half                                   # (w/2, h/2) for the box's closed forms
+        self.box_half = box_half                                    # (w/2, h/2) m of the box (its closed forms), else None
         d = np.roll(v, -1, axis=0) - v
         self.edge_lengths = np.linalg.norm(d, axis=1)               # (V,) m
         self.directions = d / self.edge_lengths[:, None]            # (V, 2) counter-clockwise unit tangents
@@ -126,7 +126,7 @@ class ConvexPolygon:
 
     @property
     def is_box(self) -> bool:
-        return self._box_half is not None
+        return self.box_half is not None
 
     @property
     def circumradius(self) -> float:
@@ -177,9 +177,9 @@ class ConvexPolygon:
     def project(self, p_B) -> np.ndarray:
         """The boundary point nearest to p_B."""
         p = np.asarray(p_B, dtype=float)
-        if not self._box_half:
+        if not self.box_half:
             return self.nearest_points(p)
-        a, b = self._box_half
+        a, b = self.box_half
         if abs(p[0]) <= a and abs(p[1]) <= b:  # inside: push out through the nearest face
             gaps = np.array([a - p[0], b - p[1], a + p[0], b + p[1]])
             k = int(np.argmin(gaps))
@@ -197,9 +197,9 @@ class ConvexPolygon:
     def signed_distance(self, p_B) -> float:
         """Exact signed distance from p_B to the polygon (negative inside)."""
         p = np.asarray(p_B, dtype=float)
-        if not self._box_half:
+        if not self.box_half:
             return float(self.signed_distances(p))
-        q = np.abs(p) - np.array(self._box_half)
+        q = np.abs(p) - np.array(self.box_half)
         return float(np.linalg.norm(np.maximum(q, 0.0)) + min(max(q[0], q[1]), 0.0))
 
     # ---- vectorized over points (..., 2) ---------------------------------------------------
@@ -212,8 +212,8 @@ class ConvexPolygon:
     def signed_distances(self, p_B: np.ndarray) -> np.ndarray:
         """Exact signed distance (...,) of points p_B (..., 2) to the polygon (negative inside)."""
         p_B = np.asarray(p_B, dtype=float)
-        if self._box_half:
-            q = np.abs(p_B) - np.array(self._box_half)
+        if self.box_half:
+            q = np.abs(p_B) - np.array(self.box_half)
             return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
         faces = p_B @ self.normals.T - self.offsets                               # (..., V)
         t = self._segment_parameters(p_B)
@@ -225,8 +225,8 @@ class ConvexPolygon:
     def nearest_points(self, p_B: np.ndarray) -> np.ndarray:
         """The boundary point (..., 2) nearest to each p_B (..., 2), in B."""
         p_B = np.asarray(p_B, dtype=float)
-        if self._box_half:
-            half = np.array(self._box_half)
+        if self.box_half:
+            half = np.array(self.box_half)
             clipped = np.clip(p_B, -half, half)
             inside = np.all(np.abs(p_B) < half, axis=-1)
             # Inside: out through the nearest face, along the axis with the smallest gap to its face.
@@ -242,8 +242,8 @@ class ConvexPolygon:
     def face_normals(self, p_BC: np.ndarray) -> np.ndarray:
         """Outward unit normals (..., 2) of the faces nearest to boundary points p_BC (..., 2)."""
         p = np.asarray(p_BC, dtype=float)
-        if self._box_half:
-            on_side = np.abs(np.abs(p[..., 0]) - self._box_half[0]) <= np.abs(np.abs(p[..., 1]) - self._box_half[1])
+        if self.box_half:
+            on_side = np.abs(np.abs(p[..., 0]) - self.box_half[0]) <= np.abs(np.abs(p[..., 1]) - self.box_half[1])
             n = np.zeros_like(p)
             n[..., 0] = np.where(on_side, np.sign(p[..., 0]), 0.0)
             n[..., 1] = np.where(on_side, 0.0, np.sign(p[..., 1]))

@@ -83,7 +83,7 @@ def rectangles_overlap_polygon(polygon: ConvexPolygon, center, angle, half_lengt
     ux_s, uy_s = np.cos(g), np.sin(g)
     hl, hw = half_length, half_width
     if polygon.is_box:
-        a, b = polygon._box_half
+        a, b = polygon.box_half
         cx, cy = c[:, 0], c[:, 1]
         ux, uy = np.abs(ux_s), np.abs(uy_s)
         return ((np.abs(cx) < a + hl * ux + hw * uy) & (np.abs(cy) < b + hl * uy + hw * ux)
@@ -151,7 +151,7 @@ class Reachability:
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
             if self.boundary.is_box:
                 if rectangle_overlaps_box(R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
-                                          rect.half_length, rect.half_width, *self.boundary._box_half):
+                                          rect.half_length, rect.half_width, *self.boundary.box_half):
                     return True
             elif rectangles_overlap_polygon(self.boundary, R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
                                             rect.half_length, rect.half_width)[0]:
