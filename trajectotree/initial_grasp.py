@@ -64,8 +64,12 @@ def mu_plan(scene_config: SceneConfig, search: SearchConfig) -> float:
     return search.friction_safety * scene_config.mu
 
 
-def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachability | None = None) -> GraspCandidates:
-    """The ranked candidate initial grasps for scene's object; memoized per scene and settings."""
+def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachability | None = None, *,
+                             memoize: bool = True) -> GraspCandidates:
+    """The ranked candidate initial grasps for scene's object; memoized per scene and settings
+    (memoize=False: built afresh and not kept, for a check outside the timed search)."""
+    if not memoize:
+        return _build(scene, search, reach or Reachability(scene))
     key = (scene.config, search.friction_safety, search.initial_grid_step, search.nominal_joint2)
     if key not in _CACHE:
         _CACHE[key] = _build(scene, search, reach or Reachability(scene))

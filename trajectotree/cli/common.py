@@ -110,10 +110,9 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     from trajectotree.scene import describe_object
     if config.search.initial_arclengths is not None:
         return
-    grasps = initial_grasp.initial_grasp_candidates(scene, config.search)
-    # Not kept memoized: the planner builds the table again inside its timed search, so
+    # Not memoized: the planner builds the table again inside its timed search, so
     # search_time_s keeps its meaning (this check costs 0.1-0.4 s more wall time per command).
-    initial_grasp._CACHE.clear()
+    grasps = initial_grasp.initial_grasp_candidates(scene, config.search, memoize=False)
     if grasps.reason:
         option = ("--polygon (scene.object.vertices)" if getattr(args, "polygon", None) is not None else
                   "scene.object.vertices" if config.scene.object.vertices is not None else "the box")
