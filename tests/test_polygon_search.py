@@ -158,20 +158,8 @@ def test_grid_levels_and_their_bad_input():
 
 def test_link_collision_test_matches_scene_graph_on_a_polygon(triangle_scene):
     # the plant's object is the triangle's prism: SceneGraph's signed distances are the reference
-    from test_reach import signed_distances
-    reach, rng = Reachability(triangle_scene), np.random.default_rng(7)
-    counts = {True: 0, False: 0}
-    for _ in range(150):
-        pose = (rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), rng.uniform(-np.pi, np.pi))
-        q = np.concatenate([rng.uniform(f.q_lower, f.q_upper) for f in triangle_scene.fingers])
-        distances = signed_distances(triangle_scene, pose, q)
-        for i in range(NUM_FINGERS):
-            if np.min(np.abs(distances[i])) < 1e-4:
-                continue  # grazing contact: either answer is acceptable
-            expected = bool(np.min(distances[i]) < 0)
-            assert reach.links_penetrate(pose, i, q[2 * i:2 * i + 2]) == expected
-            counts[expected] += 1
-    assert counts[True] > 10 and counts[False] > 10  # both outcomes were exercised
+    from test_reach import check_link_collisions_against_scene_graph
+    check_link_collisions_against_scene_graph(triangle_scene, Reachability(triangle_scene), seed=7, min_each=10)
 
 
 def test_vectorized_closed_form_matches_the_scalar_one_on_a_polygon(triangle_scene):
