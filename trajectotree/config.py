@@ -135,8 +135,14 @@ class SearchConfig:
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
     # bool: every three-finger stance must also be in closure at mu_plan (and off the corners) at
-    # the contacts its sticking fingertip spheres roll to (trajectotree.search). False: the paper.
+    # the contacts its sticking fingertip spheres roll to (trajectotree.stance). False: the paper.
     rolled_stances: bool = True
+    # N, a switch is refused when its three holding fingers need more than this total normal force
+    # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
+    # transition (trajectotree.stance). On polygons the CITO segments that failed needed 12-83 N,
+    # those that converged first time <= 7.3 N (weight 0.49 N; the joints give at most 1 N m).
+    # 0: no cap (the paper).
+    max_stance_force: float = 10.0
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
     # (trajectotree.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
     initial_grid_step: float = 0.02
@@ -170,6 +176,7 @@ class SearchConfig:
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         if not isinstance(self.rolled_stances, bool):
             raise ConfigError(f"search.rolled_stances = {self.rolled_stances!r} must be true or false")
+        check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
         for name in ("max_initial_grasps", "root_expansions", "max_expansions"):
             check_integer(f"search.{name}", getattr(self, name), 1)

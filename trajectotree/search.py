@@ -34,18 +34,10 @@ three-finger stance held while a finger switches (is_free) is in frictional form
 with friction to spare. Each plan node reports `required_mu` (its grasp) and
 `stance_required_mu` (the three fingers that held the box while it was reached).
 
-Rolling contacts (search.rolled_stances; not in the paper): the plan keeps a holding
-finger's contact point fixed on the object, but a fingertip sphere of radius r that sticks
-to a face rolls along it as the finger's second link turns relative to the object, so
-s - r (a12 - theta) stays constant while it holds (a12 the link's absolute angle, theta the
-object's). Executed, the contacts therefore drift by r times the link's turn since the finger
-landed (goal 1.804 of seed 0: 8 mm and 4 mm after 4 s, as predicted to 0.3 mm), and a stance
-in closure at its planned contacts may not be at the contacts it really has (there: needs mu
-0.40 planned, 0.57 rolled). So each three-finger stance must also be in closure at mu_plan,
-and off the corners, at its rolled contacts at both ends of its transition (rolled_stance).
-The rolling depends on when each finger landed (the node's path); states are still merged
-by their contacts, so a state first reached by a worse history can hide a plan another would
-allow (incomplete, never unsafe).
+Stance checks (trajectotree.stance; not in the paper): each three-finger stance that holds the
+object while a finger switches must also be in closure at mu_plan where its sticking fingertips
+roll to (search.rolled_stances), and must carry the object's weight with at most
+search.max_stance_force newtons of total normal force at its planned contacts.
 
 Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
 ranked candidates of trajectotree.initial_grasp, best first; a candidate whose fingers
@@ -75,10 +67,11 @@ import numpy as np
 from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.geometry import ConvexPolygon
-from trajectotree.grasp import FormClosure, closure_edges_parts, in_closure_many
+from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
+from trajectotree.stance import StanceChecks, arclength_key
 
 def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
     """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
@@ -104,6 +97,7 @@ class _Search:
         self.mu_plan = mu_plan(scene.config, config)
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
+        self.stance = StanceChecks(scene, self.reach, self.poses, self.mu_plan, config.max_stance_force)
         self.refused: Counter = Counter()  # why moves were not generated, for the failure reason
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         half = (config.num_displacements - 1) // 2
@@ -115,7 +109,7 @@ class _Search:
 
     def wrap(self, s: float) -> float:
         """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
-        return round(float(s) % self.boundary.perimeter, 9)
+        return arclength_key(self.boundary.perimeter, s)
 
     # -- per-finger grid and admissible pruning ------------------------------------------------
     def plan_switch_bounds(self, starts) -> None:
@@ -223,7 +217,7 @@ class _Search:
                     moved = list(node.arclengths)
                     moved[i] = s
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left, rolled = [], self.config.num_nodes - 2 - node.depth, {}
+        out, steps_left, stances = [], self.config.num_nodes - 2 - node.depth, {}
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
@@ -235,54 +229,22 @@ class _Search:
             if finger is not None and self.tips_overlap(arclengths, finger):
                 self.refused["fingertips overlap"] += 1
                 continue
-            if finger is not None and self.config.rolled_stances:
-                if finger not in rolled:   # the stance depends on the finger, not on where it moves
-                    rolled[finger] = self.rolled_stance(node, depth, finger)
-                if rolled[finger]:
-                    self.refused[rolled[finger]] += 1
+            if finger is not None:
+                if finger not in stances:   # the stance depends on the finger, not on where it moves
+                    stances[finger] = self.stance_refused(node, depth, finger)
+                if stances[finger]:
+                    self.refused[stances[finger]] += 1
                     continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
             out.append((h, _Node(depth, arclengths, finger, node)))
         return out
 
-    # -- rolling contacts (see the module doc) -----------------------------------------------
-    def rolled_stance(self, node: _Node, depth: int, finger: int) -> str:
+    def stance_refused(self, node: _Node, depth: int, finger: int) -> str:
         """Why the stance holding the object while `finger` moves from `node` to the child at
-        `depth` fails at its rolled contacts ("" when it holds): at node.depth and at `depth`,
-        every contact still on its face (the rolling law holds along one face) and the three in
-        frictional form closure at mu_plan (grasp.in_closure_many, the exact test behind
-        required_mu; the LP's 1e-3 N margin is not applied here)."""
-        stance = STANCE_FINGERS[finger]
-        rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
-        corners = self.boundary.corner_arclengths()
-        face = lambda s: int(np.searchsorted(corners, s, side="right"))  # noqa: E731
-        if any(face(s) != face(node.arclengths[j]) for row in rolled for j, s in zip(stance, row)):
-            return f"stance of fingers {stance} rolls off a face"
-        p_BC, n_B = self.boundary.points(np.ravel(rolled))
-        A, B = closure_edges_parts(p_BC.reshape(2, 3, 2), n_B.reshape(2, 3, 2))
-        if not np.all(in_closure_many(A, B, self.mu_plan)):
-            return f"stance of fingers {stance} not in closure at mu_plan at its rolled contacts"
-        return ""
-
-    def rolled_arclengths(self, node: _Node, depth: int, fingers) -> list[float]:
-        """The contacts of `fingers` (node's arclengths) at node `depth` >= node.depth, each
-        rolled by r times its second link's turn relative to the object since it landed."""
-        r = self.reach.tip_radius
-        out = []
-        for j in fingers:
-            s, step = node.arclengths[j], node
-            while step is not None and step.switching_finger != j:   # back to where finger j landed
-                step = step.parent
-            landed = 0 if step is None else step.depth
-            out.append(self.wrap(s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s))))
-        return out
-
-    def link_turn(self, depth: int, finger: int, s: float) -> float:
-        """Angle of `finger`'s second link relative to the object at node `depth` with its
-        contact at arclength s (closed-form IK, memoized; the node's Drake IK agrees)."""
-        pose = self.poses[depth]
-        q = self.reach.closed_form(pose, finger, s).q
-        return float(self.scene.fingers[finger].psi + q[0] + q[1] - pose[2])
+        `depth` is refused ("" when it is not): its rolled contacts (search.rolled_stances),
+        then the force it needs to hold the object (search.max_stance_force; trajectotree.stance)."""
+        return ((self.stance.rolled(node, depth, finger) if self.config.rolled_stances else "")
+                or self.stance.too_heavy(node, depth, finger))
 
     # -- Algorithm 1 ----------------------------------------------------------------------
     def precheck(self, start: tuple[float, ...], candidate: bool = False) -> str:
