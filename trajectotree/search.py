@@ -16,15 +16,11 @@ trajectotree.grasp) and reachability by Drake IK without the links entering the 
 run only for nodes the search actually visits. States reached twice at the same depth are
 inserted once (their subtrees are identical).
 
-Three additions to the paper, none of which changes which plans exist:
-- Before the search, one vectorized closed-form pass per finger tabulates every contact
-  the finger can ever hold (its initial arclength plus sums of displacements) at every
-  depth: reachable or not, and q2 for the heuristic.
-- From that table, the fewest contact switches each finger alone needs to the last node.
-  Only one finger switches per step, so a node whose fingers together need more switches
-  than steps remain is a dead end and is not inserted. Without this bound the DFS spends
-  seconds in subtrees that cannot reach the goal (this hand reaches only ~0.15-0.2 m of
-  the boundary from each base, so large rotations need most of the nine steps).
+Two additions to the paper, neither of which changes which plans exist:
+- Before the search, a table per finger of every contact it can ever hold at every depth
+  (reachable, q2 for the heuristic) and, from it, the fewest contact switches it alone needs
+  to the last node; a node whose fingers together need more switches than steps remain is
+  not inserted (trajectotree.switch_bound).
 - A finger whose contact leaves reach at the next pose must be the one that moves (two
   such fingers: no child); at a root, the k-th earliest such deadline must be node k or later.
 
@@ -66,12 +62,12 @@ import numpy as np
 
 from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
-from trajectotree.geometry import ConvexPolygon
 from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
 from trajectotree.stance import StanceChecks, arclength_key
+from trajectotree.switch_bound import SwitchBound
 
 def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
     """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
@@ -100,62 +96,19 @@ class _Search:
         self.stance = StanceChecks(scene, self.reach, self.poses, self.mu_plan, config.max_stance_force)
         self.refused: Counter = Counter()  # why moves were not generated, for the failure reason
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
-        half = (config.num_displacements - 1) // 2
-        self.displacements = config.displacement_step * np.arange(-half, half + 1)
         self.expanded = self.generated = 0
-        self.min_switches: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> switches
-        self.joint2: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> q2 (reachable only)
-        self._moves: dict[float, list[float]] = {}
+        self.bound = SwitchBound(scene, self.reach, self.poses, config)
+        # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
+        self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
     def wrap(self, s: float) -> float:
         """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
         return arclength_key(self.boundary.perimeter, s)
 
-    # -- per-finger grid and admissible pruning ------------------------------------------------
     def plan_switch_bounds(self, starts) -> None:
-        """Per finger, over the arclengths it can ever hold (its initial contacts, one per
-        candidate root, plus sums of displacements), which are corner-free and reachable
-        (closed form, vectorized) at each depth, with their joint-2 angle for the heuristic;
-        then the fewest contact switches that keep that finger alone on such contacts from
-        each (depth, arclength) to the last node. A node whose fingers together need more
-        switches than steps remain has no completion (one switch per step), so pruning it
-        never removes a plan; it only spares the DFS hopeless subtrees."""
-        last = self.config.num_nodes - 1
-        corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
-        for finger, s0s in enumerate(starts):
-            grid, frontier = set(s0s), set(s0s)  # every arclength the finger can ever hold
-            for _ in range(last):
-                frontier = {m for s in frontier for m in self.moves(s)} - grid
-                grid |= frontier
-            grid = np.array(sorted(grid))
-            gap = np.abs(grid[:, None] - corners[None, :])
-            corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
-            # reachability of the whole grid at every depth in one vectorized call
-            q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger,
-                                             np.tile(grid, last))[:, 1].reshape(last, len(grid))
-            allowed = [dict(zip(grid[ok].tolist(), row[ok].tolist()))
-                       for row in q2 for ok in [corner_free & np.isfinite(row)]]
-            layers = [dict.fromkeys(s0s, np.nan)]
-            for depth in range(1, last + 1):  # forward: contacts reachable from s0 by displacements
-                candidates = {m for s in layers[-1] for m in self.moves(s)}
-                layers.append({s: allowed[depth - 1][s] for s in candidates if s in allowed[depth - 1]})
-            cost = [dict.fromkeys(layers[last], 0)]
-            for depth in range(last - 1, -1, -1):  # backward: fewest switches to the end
-                after, here = cost[0], {}
-                for s in layers[depth]:
-                    here[s] = min(after.get(s, np.inf), 1 + min(after.get(m, np.inf) for m in self.moves(s)))
-                cost.insert(0, here)
-            self.joint2.append(layers)
-            self.min_switches.append(cost)
-
-    def moves(self, s: float) -> list[float]:
-        """The arclengths s + d for every d in D_cp (wrapped keys), memoized."""
-        if s not in self._moves:
-            self._moves[s] = [self.wrap(s + d) for d in self.displacements]
-        return self._moves[s]
-
-    def switches_needed(self, depth: int, arclengths) -> float:
-        return sum(self.min_switches[i][depth].get(s, np.inf) for i, s in enumerate(arclengths))
+        """Tabulates each finger's contacts and fewest switches from `starts` (its initial
+        arclengths, one set per finger; trajectotree.switch_bound)."""
+        self.bound.plan(starts)
 
     # -- IsFeasible -----------------------------------------------------------------------
     def contacts_allowed(self, arclengths) -> str:
@@ -223,7 +176,7 @@ class _Search:
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
                 self.refused[f"finger {finger} new contact out of reach or at a corner"] += 1
                 continue
-            if self.switches_needed(depth, arclengths) > steps_left:  # no completion exists
+            if self.bound.switches_needed(depth, arclengths) > steps_left:  # no completion exists
                 self.refused["too many switches left (bound)"] += 1
                 continue
             if finger is not None and self.tips_overlap(arclengths, finger):
@@ -346,9 +299,7 @@ def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tu
 def grid_levels(config: SearchConfig) -> list[SearchConfig]:
     """The search settings of each contact grid, coarsest (the configured one) first, then
     search.grid_refinements times halved: initial_grid_step and displacement_step / 2,
-    num_displacements 2 n - 1 (the same longest move). Objects with faces short against the
-    grid (a 0.14 m triangle's usable faces hold six 0.02 m grid points, none at a face's middle)
-    may need the finer grid for grasps whose stances stay in closure as the object turns."""
+    num_displacements 2 n - 1 (the same longest move); see the module doc for why."""
     levels = [config]
     for _ in range(config.grid_refinements):
         c = levels[-1]
