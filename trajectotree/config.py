@@ -3,8 +3,8 @@
 Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each dataclass validates itself on
 construction and raises `ConfigError` naming the field, its value and the valid range. `load_config` /
 `save_config` read and write the whole `Config` as YAML with Drake's typed YAML functions (yaml_load_typed,
-yaml_dump_typed), which check each value's type; `config_from_dict` reads the same sections from plan.json and
-sweep manifests.
+yaml_dump_typed, through trajectotree.typed_yaml), which check each value's type; `config_from_dict` reads the
+same sections from plan.json and sweep manifests.
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses as dc
 import functools
 import math
-import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,7 @@ from pathlib import Path
 import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions raise
 
 from trajectotree.geometry import ConvexPolygon, polygon_problem
+from trajectotree.typed_yaml import DRAKE_ERRORS, drake_yaml, freeze, load_typed, thaw
 
 
 class ConfigError(ValueError):
@@ -352,67 +352,6 @@ class Config:
     sim: SimConfig = field(default_factory=SimConfig)
 
 
-# Drake's typed YAML loader (yaml_load_typed, as in Drake's hardware_sim Scenario) checks each
-# value's type against the field's, rejects unknown keys and keeps the defaults of missing ones.
-# It sets the fields of a default-constructed dataclass one by one and has no tuples, so it fills
-# a mutable twin of each frozen section (same fields and defaults, tuple[...] as list[...]),
-# which `_freeze` turns into the section, whose __post_init__ then checks the ranges.
-_DRAKE_ERRORS = (RuntimeError, ValueError, TypeError)  # what Drake's loader raises on a wrong key or type
-
-
-def _drake_yaml():
-    """pydrake.common.yaml, imported on first use: importing config (sweep.py does) loads no Drake."""
-    from pydrake.common import yaml as drake_yaml
-    return drake_yaml
-
-
-def _yaml_type(kind):
-    """The type Drake's loader reads for a config field of type `kind`."""
-    if dc.is_dataclass(kind):
-        return _yaml_schema(kind)
-    origin, args = typing.get_origin(kind), typing.get_args(kind)
-    if origin is tuple:
-        return list[_yaml_type(args[0])]
-    if origin in (typing.Union, types.UnionType):  # X | None, the only union in the config
-        return _yaml_type(args[0]) | None
-    return kind
-
-
-@functools.cache
-def _yaml_schema(cls):
-    """The mutable twin of config dataclass `cls` that Drake's typed loader fills."""
-    hints, defaults = typing.get_type_hints(cls), cls()
-    return dc.make_dataclass(cls.__name__, [
-        (f.name, _yaml_type(hints[f.name]), field(default_factory=functools.partial(_thaw, getattr(defaults, f.name))))
-        for f in dc.fields(cls)])
-
-
-def _thaw(value):
-    """`value` as Drake's loader and dumper take it: config dataclasses as their twins, tuples as lists."""
-    if dc.is_dataclass(value):
-        return _yaml_schema(type(value))(**{f.name: _thaw(getattr(value, f.name)) for f in dc.fields(value)})
-    return [_thaw(v) for v in value] if isinstance(value, tuple) else value
-
-
-def _tuples(value):
-    """`value` with its lists, at any depth, as tuples."""
-    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
-
-
-def _freeze(cls, loaded):
-    """Section dataclass `cls` from its filled twin (lists back to tuples, nested sections frozen
-    too; __post_init__ checks the ranges)."""
-    hints = typing.get_type_hints(cls)
-    return cls(**{f.name: _freeze(hints[f.name], getattr(loaded, f.name)) if dc.is_dataclass(hints[f.name])
-                  else _tuples(getattr(loaded, f.name)) for f in dc.fields(cls)})
-
-
-def _typed(cls, data: dict):
-    """Drake's typed loader on one section's mapping, passed as YAML text (floats exactly, as repr)."""
-    drake_yaml = _drake_yaml()
-    return drake_yaml.yaml_load_typed(schema=_yaml_schema(cls), data=drake_yaml.yaml_dump(data))
-
-
 def _load_section(cls, data, name: str, where: str):
     """Section `name` (dataclass `cls`) from its mapping `data` (None: the defaults)."""
     if data is None:
@@ -420,19 +359,19 @@ def _load_section(cls, data, name: str, where: str):
     if not isinstance(data, dict):
         raise ConfigError(f"{where} section {name} must be a mapping, got {data!r}")
     try:
-        loaded = _typed(cls, data)
-    except _DRAKE_ERRORS:  # Drake's message may name only the value: load key by key to name the key
+        loaded = load_typed(cls, data)
+    except DRAKE_ERRORS:  # Drake's message may name only the value: load key by key to name the key
         hints = typing.get_type_hints(cls)
         for key, value in data.items():
             try:
-                _typed(cls, {key: value})
-            except _DRAKE_ERRORS as e:
+                load_typed(cls, {key: value})
+            except DRAKE_ERRORS as e:
                 kind = hints.get(key)
                 kind = kind.__name__ if isinstance(kind, type) else kind   # float, tuple[float, float, float]
                 why = f"valid keys: {list(hints)}" if kind is None else f"expected {kind}"
                 raise ConfigError(f"{where}: {name}.{key} = {value!r}: {e}; {why}") from None
         raise
-    return _freeze(cls, loaded)
+    return freeze(cls, loaded)
 
 
 def config_from_dict(data: dict, where: str = "config") -> Config:
@@ -451,7 +390,7 @@ def config_from_dict(data: dict, where: str = "config") -> Config:
 
 def config_to_dict(config: Config) -> dict:
     """Plain nested dicts (tuples as lists), suitable for JSON and YAML."""
-    return dc.asdict(_thaw(config))
+    return dc.asdict(thaw(config))
 
 
 def load_config(path: str | Path) -> Config:
@@ -462,7 +401,7 @@ def load_config(path: str | Path) -> Config:
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
     try:
-        data = _drake_yaml().yaml_load_data(path.read_text())
+        data = drake_yaml().yaml_load_data(path.read_text())
     except yaml.YAMLError as e:
         raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
     return config_from_dict(data, f"config file {str(path)!r}")
@@ -470,4 +409,4 @@ def load_config(path: str | Path) -> Config:
 
 def save_config(config: Config, path: str | Path) -> None:
     """Writes every field as YAML (Drake's yaml_dump_typed); `load_config` reads it back equal."""
-    _drake_yaml().yaml_dump_typed(_thaw(config), filename=str(path))
+    drake_yaml().yaml_dump_typed(thaw(config), filename=str(path))
