@@ -54,9 +54,14 @@ def shape_row(name: str, vertices, rows: list[dict]) -> dict:
             "mean_time_s": mean("total_time_s", [r for r in rows if r.get("total_time_s") is not None]),
             "mae_x_mm": 1e3 * mean("mae_x", simulated), "mae_y_mm": 1e3 * mean("mae_y", simulated),
             "mae_theta_rad": mean("mae_theta", simulated),
-            "failures": "; ".join(f"goal {r['goal']:+.3f}: {r.get('error') or r.get('status')}"
+            "failures": "; ".join(f"goal {r['goal']:+.3f}: {short(r.get('error') or r.get('status'))}"
                                   + (" (dropped)" if r.get("dropped") else "")
                                   for r in rows if r.get("error") or not r.get("success") or r.get("dropped"))}
+
+
+def short(reason: str, limit: int = 240) -> str:
+    """A trial's reason, cut to `limit` characters for the table's notes (trial.json has it all)."""
+    return reason if len(reason) <= limit else reason[:limit].rsplit(" ", 1)[0] + " ..."
 
 
 def table_markdown(table: list[dict]) -> str:
