@@ -173,6 +173,14 @@ def test_keyframes_one_panel_per_node_with_the_switching_finger(scene, tmp_path)
     assert out.endswith("keyframes.svg") and svg.startswith("<?xml") and "friction cone" in svg
 
 
+def test_keyframes_draw_the_cones_the_plan_was_searched_with(scene):
+    nodes = (node(0.0, None), node(0.1, 2))
+    for mu_plan, shown in ((0.49, "mu = 0.49"), (float("nan"), f"mu = {scene.config.mu:.2g}")):
+        fig = figure_keyframes(scene, ContactPlan(goal=0.1, success=True, reason="", nodes=nodes, mu_plan=mu_plan))
+        assert any(shown in t.get_text() for t in fig.legends[0].get_texts())
+        plt.close(fig)
+
+
 def test_contact_node_numbers_the_fingers_and_marks_the_previous_contact(scene, ax):
     previous, current = node(0.0, None), node(0.1, 1)
     plot_contact_node(ax, scene, current, mu=0.7, previous=previous)

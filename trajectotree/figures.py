@@ -186,9 +186,11 @@ def contact_node_legend_handles(mu: float):
 
 def figure_keyframes(scene, plan):
     """A contact plan (ContactPlan) as keyframes like the paper's Fig. 1: one panel per node
-    (plot_contact_node), the legend below."""
+    (plot_contact_node), the legend below. The cones are the plan's (mu_plan, the friction the
+    search planned with; scene.mu for a plan that does not record it)."""
     import matplotlib.pyplot as plt
 
+    mu = plan.mu_plan if math.isfinite(plan.mu_plan) else scene.config.mu
     cols = min(5, len(plan.nodes))
     rows = math.ceil(len(plan.nodes) / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(max(2.6 * cols, 7.0), 2.6 * rows + 0.9), squeeze=False)
@@ -197,7 +199,7 @@ def figure_keyframes(scene, plan):
         if n >= len(plan.nodes):
             continue
         node = plan.nodes[n]
-        plot_contact_node(ax, scene, node, mu=scene.config.mu, previous=plan.nodes[n - 1] if n else None)
+        plot_contact_node(ax, scene, node, mu=mu, previous=plan.nodes[n - 1] if n else None)
         ax.set_aspect("equal")
         ax.set_xlim(-0.26, 0.26)
         ax.set_ylim(-0.26, 0.26)
@@ -205,7 +207,7 @@ def figure_keyframes(scene, plan):
                                                  else f"finger {node.switching_finger} moves")
         ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
     fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
-    handles = contact_node_legend_handles(scene.config.mu)
+    handles = contact_node_legend_handles(mu)
     ncol = 3 if cols >= 4 else 2
     fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
     height = fig.get_figheight()  # inches: the legend's rows below, the title above
