@@ -163,6 +163,7 @@ def test_saved_plan_round_trips_and_matches_design(plans):
     assert loaded.physics_check == result.physics_check and loaded.converged is result.converged is True
     np.testing.assert_array_equal(loaded.trajectory.f_W, result.trajectory.f_W)
     assert loaded.contact_plan.nodes[1].switching_finger == result.contact_plan.nodes[1].switching_finger
+    assert loaded.contact_plan.mu_plan == result.contact_plan.mu_plan == pytest.approx(0.49)
 
 
 @pytest.mark.slow

@@ -95,7 +95,7 @@ def plan_to_json(result: PlanResult) -> dict:
         "violations": {k: finite(v) for k, v in result.violations.items()},
         "physics_check": None if result.physics_check is None else result.physics_check.to_json(),
         "search": {"success": result.contact_plan.success, "reason": result.contact_plan.reason,
-                   "stats": result.contact_plan.stats.to_json()},
+                   "stats": result.contact_plan.stats.to_json(), "mu_plan": finite(result.contact_plan.mu_plan)},
         "contact_sequence": [n.to_json() for n in result.contact_plan.nodes],
         "solver_timing": dict(result.solver_timing),
         "formulation": result.formulation, "segments": list(result.segments),
@@ -179,6 +179,7 @@ def load_plan(out_dir: str | Path) -> PlanResult:
         search = data.get("search", {})
         contact_plan = ContactPlan.from_json({"goal": data["goal"], "success": search.get("success", True),
                                               "reason": search.get("reason", ""), "stats": search.get("stats", {}),
+                                              "mu_plan": search.get("mu_plan"),   # older files lack it
                                               "contact_sequence": data["contact_sequence"]})
         nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
         check = data.get("physics_check")
