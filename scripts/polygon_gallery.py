@@ -13,6 +13,7 @@ Resumable (rerun the same command: finished trials are kept).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
@@ -81,13 +82,16 @@ def keyframe_figure(sweep_dir: Path, rows: list[dict], config: Config, path: Pat
     import matplotlib.pyplot as plt
 
     from trajectotree.figures import figure_keyframes, save_figure
+    from trajectotree.initial_grasp import mu_plan
     from trajectotree.io import load_plan
     from trajectotree.scene import build_scene
     planned = sorted((r for r in rows if r.get("success")), key=lambda r: r["goal_index"])
     if not planned:
         return None
-    result = load_plan(sweep_dir / "trials" / planned[0]["key"])
-    fig = figure_keyframes(build_scene(config.scene), result.contact_plan)
+    contact_plan = load_plan(sweep_dir / "trials" / planned[0]["key"]).contact_plan
+    if not math.isfinite(contact_plan.mu_plan):   # plan.json from before it recorded mu_plan
+        contact_plan = dataclasses.replace(contact_plan, mu_plan=mu_plan(config.scene, config.search))
+    fig = figure_keyframes(build_scene(config.scene), contact_plan)
     try:
         return save_figure(fig, path, dpi=110)
     finally:
