@@ -29,7 +29,9 @@ BAD_POLYGONS = [
     ("0,0 0.1 0,0.1", "--polygon vertex 1 '0.1' is not x,y"),
     ("0,0 0.1,0,0 0,0.1", "--polygon vertex 1 '0.1,0,0' is not x,y"),
     ("", "--polygon '' has no vertices"),
-    ("0,0 0.5,0 0,0.1", "--polygon (scene.object.vertices[1][0]) = 0.5 is out of range; valid range: [-0.3, 0.3]"),
+    ("0,0 1.5,0 0,0.1", "--polygon (scene.object.vertices[1][0]) = 1.5 is out of range; valid range: [-1, 1]"),
+    ("0,0 0.5,0 0,0.1", "--polygon (scene.object.vertices): a vertex is 0.335 m from the centroid; valid range: at "
+                        "most 0.3 m"),
     ("0,0 nan,0 0,0.1", "--polygon (scene.object.vertices[1][0]) = nan is not a finite number"),
     ("0,0 0.02,0 0,0.02", "--polygon (scene.object.vertices): edge 1 is 0.02 m long; contacts keep "
                           "scene.corner_margin = 0.015 m from each corner, so every edge must be longer than 0.03 m"),

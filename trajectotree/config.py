@@ -61,7 +61,7 @@ class ObjectConfig:
             if len(v) != 2:
                 raise ConfigError(f"scene.object.vertices[{i}] = {list(v)!r} must be an (x, y) pair in m")
             for j, c in enumerate(v):
-                check_range(f"scene.object.vertices[{i}][{j}]", c, -0.3, 0.3)
+                check_range(f"scene.object.vertices[{i}][{j}]", c, -1.0, 1.0)   # m, before re-centring
         problem = polygon_problem(self.vertices)
         if problem:
             raise ConfigError(f"scene.object.vertices = {[list(v) for v in self.vertices]}: {problem}")
