@@ -9,9 +9,11 @@ stable view with +y up; `StaticHtml()` inlines every script (no network).
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
+from html import escape
 from pathlib import Path
 
 import numpy as np
@@ -89,6 +91,8 @@ def simulated_legend(config: SceneConfig):
     """SIMULATED_LEGEND, naming the object by object_noun."""
     noun = object_noun(config)
     return ((LEGEND_BOX[0], noun), (LEGEND_PLANNED[0], f"planned {noun} pose (outline)"), LEGEND_FINGERS)
+
+
 PAGE_SCRIPT = """
 (function () {
   const HALF = %(half)s, DROP = %(drop)s, NOUN = %(noun)s;  // m, half-width of the view; s, drop time or null
@@ -145,8 +149,6 @@ def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = 
     """Meshcat's static page with `title` (tab and overlay), a time readout and bar (the
     drop, if any, marked in red), a legend of (CSS swatch, text) entries, and the
     planar view kept centred in any window shape."""
-    from html import escape
-    import json
     drop = "null" if drop_time_s is None else f"{float(drop_time_s):.6f}"
     marker = "" if drop_time_s is None else '<div id="tt-drop"></div>'
     note = "" if drop_time_s is None else '<div id="tt-drop-note"></div>'
