@@ -60,24 +60,13 @@ class LinkRectangle:
         return np.asarray(p_WJ) + local @ rotation_2d(angle_WJ).T
 
 
-def rectangle_overlaps_box(center, angle: float, half_length: float, half_width: float, a: float, b: float) -> bool:
-    """Separating-axis test: does the rectangle (centre, angle, half sizes), expressed in the
-    box frame, overlap the box [-a, a] x [-b, b]? Touching counts as not overlapping."""
-    cx, cy = center
-    ux, uy = math.cos(angle), math.sin(angle)
-    return (abs(cx) < a + half_length * abs(ux) + half_width * abs(uy)
-            and abs(cy) < b + half_length * abs(uy) + half_width * abs(ux)
-            and abs(cx * ux + cy * uy) < half_length + a * abs(ux) + b * abs(uy)
-            and abs(-cx * uy + cy * ux) < half_width + a * abs(uy) + b * abs(ux))
-
-
 def rectangles_overlap_polygon(polygon: ConvexPolygon, center, angle, half_length: float,
                                half_width: float) -> np.ndarray:
     """Separating-axis test of rectangles against a convex polygon, all in the polygon's frame:
     centres (k, 2), angles (k,) of their x axes, half sizes. (k,) bool, touching counts as not
     overlapping. Two convex polygons are disjoint iff one of their edge normals separates them,
-    so the candidate axes are the polygon's face normals and the rectangle's two axes. The box
-    keeps its closed form (rectangle_overlaps_box's expressions), so its results are unchanged."""
+    so the candidate axes are the polygon's face normals and the rectangle's two axes; for the
+    box (two of each) they reduce to the closed form below."""
     c = np.atleast_2d(np.asarray(center, dtype=float))
     g = np.broadcast_to(np.asarray(angle, dtype=float), c.shape[:1])
     ux_s, uy_s = np.cos(g), np.sin(g)
@@ -145,16 +134,12 @@ class Reachability:
                 in zip(self._rectangles[finger], self._joint_frames(finger, q))]
 
     def links_penetrate(self, pose, finger: int, q) -> bool:
-        """True when a link collision box of `finger` at q overlaps the box at `pose`."""
+        """True when a link collision box of `finger` at q overlaps the object at `pose`."""
         R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
         for rect, (p_WJ, angle_WJ) in zip(self._rectangles[finger], self._joint_frames(finger, q)):
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
-            if self.boundary.is_box:
-                if rectangle_overlaps_box(R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
-                                          rect.half_length, rect.half_width, *self.boundary.box_half):
-                    return True
-            elif rectangles_overlap_polygon(self.boundary, R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
-                                            rect.half_length, rect.half_width)[0]:
+            if rectangles_overlap_polygon(self.boundary, R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
+                                          rect.half_length, rect.half_width)[0]:
                 return True
         return False
 
