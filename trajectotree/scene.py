@@ -53,9 +53,8 @@ def _set_friction(text: str, mu: float) -> str:
 def box_sdf(config: SceneConfig) -> str:
     """box.sdf with the size, mass, inertia and friction of `config` (the size of its
     `object.vertices` when they are an axis-aligned rectangle)."""
-    w, h, d, m = config.box_width, config.box_height, config.box_depth, config.box_mass
-    if config.object.vertices is not None:  # a rectangle given as a polygon: vertex 1 is (w/2, h/2)
-        w, h = 2 * float(config.shape.vertices[1][0]), 2 * float(config.shape.vertices[1][1])
+    a, b = config.shape.box_half   # (w/2, h/2): of box_width x box_height, or of the rectangle given as a polygon
+    w, h, d, m = 2 * a, 2 * b, config.box_depth, config.box_mass
     ixx, iyy, izz = m * (h * h + d * d) / 12, m * (w * w + d * d) / 12, m * (w * w + h * h) / 12
     text = (MODELS_DIR / "box.sdf").read_text()
     text = _sub(text, r"<size>[^<]*</size>", f"<size>{w!r} {h!r} {d!r}</size>")
@@ -265,7 +264,7 @@ def describe_object(config: SceneConfig) -> str:
     """A short name of the object for titles: "0.20 x 0.10 m box", "triangle (85 cm^2)"."""
     shape = config.shape
     if shape.is_box:
-        a, b = shape.vertices[1]
+        a, b = shape.box_half
         return f"{2 * a:.2f} x {2 * b:.2f} m box"
     n = len(shape.vertices)
     return f"{POLYGON_NAMES.get(n, f'{n}-gon')} ({shape.area * 1e4:.0f} cm^2)"
