@@ -9,7 +9,7 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.transition import transition_spec
 from trajectotree.config import Config
-from trajectotree.geometry import ConvexPolygon, world_to_box
+from trajectotree.geometry import world_to_box
 from trajectotree.planners import planning_mu
 from trajectotree.scene import build_scene
 from trajectotree.search import find_contact_plan

@@ -16,7 +16,7 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
 from trajectotree.cito.transition import transition_spec
 from trajectotree.config import CitoConfig, SearchConfig
-from trajectotree.geometry import ConvexPolygon, world_to_box
+from trajectotree.geometry import world_to_box
 from trajectotree.scene import build_scene
 from trajectotree.search import find_contact_plan
 

@@ -17,8 +17,6 @@ box's plans identical to the last bit across this generalization.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 

@@ -30,7 +30,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.config import SceneConfig, SearchConfig
-from trajectotree.geometry import ConvexPolygon
 from trajectotree.grasp import required_mu_many
 from trajectotree.reach import Reachability
 from trajectotree.scene import NUM_FINGERS, Scene
@@ -76,7 +75,7 @@ def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachabi
     return _CACHE[key]
 
 
-def _grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.ndarray]:
+def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.ndarray]:
     """Per finger, the grid arclengths that are corner-free and reachable at the initial pose."""
     c = scene.config
     boundary = c.shape
@@ -98,7 +97,7 @@ def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps
 
 def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCandidates:
     mu = mu_plan(scene.config, search)
-    per_finger = _grid_contacts(scene, search.initial_grid_step, reach)
+    per_finger = grid_contacts(scene, search.initial_grid_step, reach)
     counts = tuple(len(s) for s in per_finger)
     grasps = np.array(list(itertools.product(*per_finger))).reshape(-1, NUM_FINGERS)
     assignments = len(grasps)

@@ -35,7 +35,7 @@ from trajectotree.cito.solve import solve, violations
 from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import Config, ConfigError
 from trajectotree.contact_plan import ContactNode, ContactPlan
-from trajectotree.geometry import ConvexPolygon, box_to_world
+from trajectotree.geometry import box_to_world
 from trajectotree.grasp import FormClosure
 from trajectotree.initial_grasp import mu_plan
 from trajectotree.keyframes import check_workers, plan_keyframes

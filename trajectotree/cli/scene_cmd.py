@@ -8,7 +8,7 @@ import numpy as np
 
 from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args,
                                       print_json)
-from trajectotree.scene import NUM_FINGERS, describe_object
+from trajectotree.scene import describe_object
 
 
 def register(subparsers) -> None:
@@ -31,7 +31,7 @@ def describe(scene) -> dict:
            "depth_m": c.box_depth, "mass_kg": body.default_mass(), "inertia_zz_kg_m2": float(inertia[2, 2]),
            "mu": c.mu}
     if shape.is_box:
-        out["size_m"] = [2 * float(shape.vertices[1][0]), 2 * float(shape.vertices[1][1])]
+        out["size_m"] = [2 * shape.box_half[0], 2 * shape.box_half[1]]
     return out
 
 
@@ -50,22 +50,12 @@ def summarize(scene, reach: dict | None = None) -> dict:
     }
 
 
-def reachable_contacts(scene, search, reach) -> list[np.ndarray]:
-    """Per finger, the arclengths of the grid contacts (every search.initial_grid_step m, at least
-    scene.corner_margin from a corner) its fingertip reaches at the initial pose without its links
-    entering the object: the contacts trajectotree.initial_grasp builds its candidates from."""
-    c, shape = scene.config, scene.config.shape
-    grid = np.round(np.arange(0.0, shape.perimeter - 1e-9, search.initial_grid_step), 9)
-    grid = grid[[shape.corner_distance(s) >= c.corner_margin for s in grid]]
-    pose = np.asarray(c.initial_pose, dtype=float)
-    return [grid[np.isfinite(reach.closed_form_many(pose, i, grid)[:, 0])] for i in range(NUM_FINGERS)]
-
-
 @dataclass(frozen=True)
 class ObjectReach:
     """Whether the hand can grasp the object at its initial pose."""
 
     contacts: list            # per finger, arclengths (m) of its reachable corner-free grid contacts
+    #                           (initial_grasp.grid_contacts: what the initial grasps are built from)
     grasps: object            # initial_grasp.GraspCandidates
     q_best: np.ndarray | None  # (8,) rad, joint angles at the best initial grasp (None without one)
 
@@ -81,7 +71,7 @@ class ObjectReach:
 
 
 def object_reach(scene, search) -> ObjectReach:
-    from trajectotree.initial_grasp import initial_grasp_candidates
+    from trajectotree.initial_grasp import grid_contacts, initial_grasp_candidates
     from trajectotree.reach import Reachability
     reach = Reachability(scene)
     grasps = initial_grasp_candidates(scene, search, reach)
@@ -90,7 +80,8 @@ def object_reach(scene, search) -> ObjectReach:
         pose = np.asarray(scene.config.initial_pose, dtype=float)
         q = np.concatenate([reach.closed_form_many(pose, i, [s])[0]
                             for i, s in enumerate(grasps.candidates[0].arclengths)])
-    return ObjectReach(contacts=reachable_contacts(scene, search, reach), grasps=grasps, q_best=q)
+    contacts = grid_contacts(scene, search.initial_grid_step, reach)
+    return ObjectReach(contacts=contacts, grasps=grasps, q_best=q)
 
 
 def reach_line(reach: dict) -> str:
