@@ -185,9 +185,8 @@ class GraspController(LeafSystem):
         self._gravity = c.gravity
         self._mass = c.box_mass
         self._inertia = c.shape.inertia(c.box_mass)   # a uniform plate (the box: m (w^2 + h^2) / 12)
-        # m, the torque length of the wrench QP: the box's half diagonal, a polygon's circumradius
-        half_diagonal = 0.5 * np.hypot(c.box_width, c.box_height) if c.object.vertices is None else c.shape.circumradius
-        self._qp = GraspForceQp(mu, half_diagonal, gains.wrench_weight)
+        # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
+        self._qp = GraspForceQp(mu, c.shape.circumradius, gains.wrench_weight)
         B = scene.plant.MakeActuationMatrix()                       # (nv, nu), a selection
         self._u_from_tau = B[scene.hand_v_indices].T                 # hand-joint torques -> actuation
         self.box_state_port = self.DeclareVectorInputPort("box_state", 6)

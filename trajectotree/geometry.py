@@ -128,7 +128,9 @@ class ConvexPolygon:
 
     @property
     def circumradius(self) -> float:
-        """m, the largest distance from the centroid to a vertex."""
+        """m, the largest distance from the centroid to a vertex (the box: its half diagonal)."""
+        if self.box_half:
+            return float(np.hypot(*self.box_half))
         return float(np.max(np.linalg.norm(self.vertices, axis=1)))
 
     def inertia(self, mass: float) -> float:
