@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from trajectotree.geometry import ConvexPolygon, rotation_2d
-from trajectotree.physics import FORCE_TOL, GAP_TOL, ObjectModel, PhysicsCheck, check_physics, contact_points
+from trajectotree.physics import (FORCE_TOL, GAP_TOL, PENETRATION_TOL, ObjectModel, PhysicsCheck, check_physics,
+                                  contact_points)
 
 W, H, R = 0.20, 0.10, 0.01
 BOX = ObjectModel(mass=0.05, shape=ConvexPolygon.box(W, H), gravity=9.81, tip_radius=R)
@@ -46,6 +47,7 @@ def test_a_held_box_passes():
     assert check.passed, check.reason
     assert check.newton_euler_force_N < 1e-12 and check.newton_euler_moment_Nm < 1e-12
     assert check.force_at_distance_N == 0.0 and check.contact_point_off_surface_m < 1e-15
+    assert check.penetration_m < 1e-15
 
 
 def test_a_fingertip_off_the_box_may_not_push():
@@ -58,6 +60,18 @@ def test_a_fingertip_off_the_box_may_not_push():
     assert "finger 2" in check.reason and "0.20 mm" in check.reason
     a["f_W"][:, 2] *= 0.5 * FORCE_TOL / 0.5                           # a force below the limit is allowed there
     assert check_physics(a, BOX, mu=0.7).force_at_distance_N <= FORCE_TOL
+
+
+def test_a_fingertip_may_not_sink_into_the_box():
+    a = hold()
+    inward = (a["p_W_C"][:, 3] - a["p_W_tip"][:, 3]) / R
+    a["p_W_tip"][:, 3] += 0.5 * PENETRATION_TOL * inward            # 0.5 mm deep: within the limit
+    check = check_physics(a, BOX, mu=0.7)
+    assert check.passed and check.penetration_m == pytest.approx(0.5 * PENETRATION_TOL)
+    a["p_W_tip"][2:, 3] += 1.5 * PENETRATION_TOL * inward[2:]      # 2 mm deep from knot 2
+    check = check_physics(a, BOX, mu=0.7)
+    assert not check.passed and check.penetration_m == pytest.approx(2 * PENETRATION_TOL)
+    assert "finger 3 sinks 2.00 mm into the box at knot 2" in check.reason
 
 
 def test_friction_and_newton_euler_violations_are_found():
@@ -100,3 +114,5 @@ def test_non_finite_plans_fail_and_the_check_round_trips_through_json():
     assert np.isnan(back.newton_euler_force_N) and back.reason == check.reason
     ok = check_physics(hold(), BOX, mu=0.7)
     assert PhysicsCheck.from_json(json.loads(json.dumps(ok.to_json()))) == ok
+    older = {k: v for k, v in ok.to_json().items() if k != "penetration_m"}   # a plan.json from before the rule
+    assert np.isnan(PhysicsCheck.from_json(older).penetration_m)

@@ -9,9 +9,11 @@ Anyone holding plan.npz can recompute these numbers (its arrays: README, "Trajec
     the plan was made with (mu_plan = search.friction_safety * scene.mu);
   - force at a distance: the largest force |f_W| of a fingertip whose sphere is more than
     GAP_TOL from the box (N), where it is and how far off;
-  - contact_point_off_surface: how far any p_W_C lies from the box boundary (m).
+  - contact_point_off_surface: how far any p_W_C lies from the box boundary (m);
+  - penetration: how deep any fingertip sphere sinks into the box (m).
 A plan passes when no fingertip more than GAP_TOL off the box carries more than
-FORCE_TOL, the cones hold to CONE_TOL and Newton-Euler to NEWTON_EULER_TOL.
+FORCE_TOL, none sinks deeper than PENETRATION_TOL, the cones hold to CONE_TOL and
+Newton-Euler to NEWTON_EULER_TOL.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 
 from trajectotree.geometry import ConvexPolygon, poses_box_to_world, poses_world_to_box
 # The check's value type and its tolerances live with the other saved values (plan.json records both).
-from trajectotree.results import CONE_TOL, FORCE_TOL, GAP_TOL, NEWTON_EULER_TOL, PhysicsCheck
+from trajectotree.results import CONE_TOL, FORCE_TOL, GAP_TOL, NEWTON_EULER_TOL, PENETRATION_TOL, PhysicsCheck
 
 
 @dataclass(frozen=True)
@@ -76,11 +78,16 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     away = np.where(gap > GAP_TOL, force, 0.0)
     k, i = np.unravel_index(int(np.argmax(away)), away.shape)
     worst = float(away[k, i])
+    k_deep, i_deep = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    penetration = max(0.0, -float(gap[k_deep, i_deep]))
     off_surface = float(np.abs(box.shape.signed_distances(poses_world_to_box(x, a["p_W_C"]))).max())
     reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
     if worst > FORCE_TOL:
         reasons.append(f"finger {i} pushes the box with {worst:.3g} N from {1e3 * gap[k, i]:.2f} mm away at knot {k} "
                        f"(limit {FORCE_TOL} N beyond {1e3 * GAP_TOL:g} mm)")
+    if penetration > PENETRATION_TOL:
+        reasons.append(f"finger {i_deep} sinks {1e3 * penetration:.2f} mm into the box at knot {k_deep} "
+                       f"(limit {1e3 * PENETRATION_TOL:g} mm)")
     if cone > CONE_TOL:
         reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
     if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
@@ -90,4 +97,5 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
                         force_at_distance_N=worst, force_at_distance_knot=int(k) if worst > 0 else -1,
                         force_at_distance_finger=int(i) if worst > 0 else -1,
                         force_at_distance_gap_m=float(gap[k, i]) if worst > 0 else 0.0,
-                        contact_point_off_surface_m=off_surface, passed=not reasons, reason="; ".join(reasons))
+                        contact_point_off_surface_m=off_surface, penetration_m=penetration,
+                        passed=not reasons, reason="; ".join(reasons))

@@ -53,7 +53,8 @@ def plan_summary(result) -> dict:
     return summary
 
 
-def print_summary(summary: dict, out: Path) -> None:
+def print_summary(summary: dict, out: Path, noun: str) -> None:
+    """The text summary; `noun` names the object in the simulation line (playback.object_noun)."""
     p, s = summary["plan"], summary["simulation"]
     switches = " ".join("-" if f is None else str(f) for f in p["switching_fingers"][1:])
     name = summary.get("object", "box")
@@ -69,7 +70,6 @@ def print_summary(summary: dict, out: Path) -> None:
                "converged, but the physics check FAILED (see the status)" if p["converged"] else "NOT converged")
     print(f"  total planning  {p['total_time_s']:6.2f} s   {verdict}, cost {cost}")
     if s is not None:
-        noun = "box" if name.endswith("box") else "object"
         held = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held throughout"
         print(f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, {noun} {held}; "
               f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
@@ -85,7 +85,7 @@ def run(args) -> int:
     from trajectotree.figures import figure_finger_forces, save_figure, segment_spans
     from trajectotree.io import save_plan, save_sim, write_json_atomic
     from trajectotree.planners import plan
-    from trajectotree.playback import start_meshcat
+    from trajectotree.playback import object_noun, start_meshcat
     from trajectotree.scene import build_scene, describe_object
     from trajectotree.simulate import run_simulation
 
@@ -127,7 +127,7 @@ def run(args) -> int:
     if args.json:
         print_json(summary)
     else:
-        print_summary(summary, out)
+        print_summary(summary, out, object_noun(config.scene))
     if meshcat is not None and sys.stdin.isatty():
         input("Meshcat shows the recording; press Enter to exit. ")
     return 0
