@@ -149,3 +149,26 @@ def test_bad_polygons_are_named(points, problem):
     assert problem in polygon_problem(points)
     with pytest.raises(ValueError, match=problem):
         ConvexPolygon.from_points(points)
+
+
+def test_penetration_depth_closed_forms_and_the_search_overlap_test():
+    from trajectotree.reach import rectangles_overlap_polygon
+
+    def square(cx, cy, h):
+        return np.array([[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h]])
+    box = ConvexPolygon.box(0.2, 0.1)
+    depths = box.penetration_depths(np.stack([square(0.104, 0.0, 0.01), square(0.2, 0.0, 0.01), square(0.0, 0.0, 0.01)]))
+    np.testing.assert_allclose(depths, [0.006, 0.0, 0.06], atol=1e-15)     # centred: out through the long face
+    triangle = ConvexPolygon.from_points([[0, -0.08], [0.07, 0.04], [-0.07, 0.04]])
+    assert triangle.penetration_depths(square(0.0, 0.045, 0.01)) == pytest.approx(0.005)
+    # overlap iff depth > 0, as the search's separating-axis test says, on random rectangles
+    rng = np.random.default_rng(1)
+    centres, angles = rng.uniform(-0.15, 0.15, (500, 2)), rng.uniform(-np.pi, np.pi, 500)
+    hl, hw = 0.04, 0.005
+    local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]])
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    corners = centres[:, None] + np.stack([c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]], -1)
+    for shape in (box, triangle):
+        overlap = rectangles_overlap_polygon(shape, centres, angles, hl, hw)
+        depth = shape.penetration_depths(corners)
+        assert 50 < overlap.sum() < 450 and np.array_equal(depth > 1e-12, overlap)

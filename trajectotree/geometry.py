@@ -250,6 +250,21 @@ class ConvexPolygon:
             return n
         return self.normals[np.argmax(p @ self.normals.T - self.offsets, axis=-1)]
 
+    def penetration_depths(self, corners: np.ndarray) -> np.ndarray:
+        """How deep convex polygons (..., m, 2: their corners in B, in order) overlap this one:
+        the least translation that separates them, by separating axes (the faces' normals of
+        both), 0 where they do not overlap. (...,) m."""
+        c = np.asarray(corners, dtype=float)
+        edges = np.roll(c, -1, axis=-2) - c
+        their_normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)
+        their_normals /= np.linalg.norm(their_normals, axis=-1, keepdims=True)
+        axes = np.concatenate([np.broadcast_to(self.normals, (*c.shape[:-2], *self.normals.shape)), their_normals],
+                              axis=-2)                                           # (..., V + m, 2)
+        mine = np.einsum("...ad,vd->...av", axes, self.vertices)                 # (..., axes, V)
+        theirs = np.einsum("...ad,...md->...am", axes, c)                        # (..., axes, m)
+        overlap = np.minimum(mine.max(-1) - theirs.min(-1), theirs.max(-1) - mine.min(-1))
+        return np.maximum(overlap.min(-1), 0.0)
+
     def __repr__(self) -> str:
         return f"ConvexPolygon({np.round(self.vertices, 6).tolist()})"
 
