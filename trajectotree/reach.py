@@ -14,15 +14,14 @@ Two stages keep the search cheap:
 
 Collision test (links vs object): an exact planar separating-axis test between the object's
 convex polygon (trajectotree.geometry; the box keeps its closed form) and each link's
-collision box from the SDF (read from SceneGraph's inspector, expressed in the
-frame of the joint that moves it). All collision geometry is centred on the z = 0 plane,
+collision box from the SDF (scene.FingerGeometry.link_boxes: read from SceneGraph's inspector,
+expressed in the frame of the joint that moves it). All collision geometry is centred on the z = 0 plane,
 so planar overlap is 3D overlap; tests/test_reach.py checks it against SceneGraph's
 signed-distance queries. The fingertip sphere is not tested: it touches by construction.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,22 +41,6 @@ class FingerReach:
     reachable: bool
     q: np.ndarray      # (2,) rad, the finger's joint angles (nan when unreachable)
     reason: str        # why not, "" when reachable
-
-
-@dataclass(frozen=True)
-class LinkRectangle:
-    """A link's collision box in the plane, in the frame J of the joint that moves the link."""
-
-    p_JG: np.ndarray    # (2,) m, box centre
-    angle_JG: float     # rad, box x axis relative to J's x axis
-    half_length: float  # m, half extent along the box x axis
-    half_width: float   # m, half extent along the box y axis (in the plane)
-
-    def corners(self, p_WJ, angle_WJ: float) -> np.ndarray:
-        """(4, 2) corners in W when frame J is at p_WJ with angle angle_WJ."""
-        hl, hw = self.half_length, self.half_width
-        local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]]) @ rotation_2d(self.angle_JG).T + self.p_JG
-        return np.asarray(p_WJ) + local @ rotation_2d(angle_WJ).T
 
 
 def rectangles_overlap_polygon(polygon: ConvexPolygon, center, angle, half_length: float,
@@ -101,7 +84,6 @@ class Reachability:
         self.boundary = scene.config.shape
         self.tip_radius = scene.tip_radius
         self.fingers = scene.fingers
-        self._rectangles = [self._read_link_rectangles(i) for i in range(NUM_FINGERS)]
         self._iks = [self._make_ik(i) for i in range(NUM_FINGERS)]
         self._solver = SnoptSolver()
         self._cache: dict[tuple, FingerReach] = {}
@@ -131,37 +113,17 @@ class Reachability:
     def link_polygons(self, finger: int, q) -> list[np.ndarray]:
         """Corners (4, 2) in W of the finger's link collision boxes at joint angles q."""
         return [rect.corners(p_WJ, angle) for rect, (p_WJ, angle)
-                in zip(self._rectangles[finger], self._joint_frames(finger, q))]
+                in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q))]
 
     def links_penetrate(self, pose, finger: int, q) -> bool:
         """True when a link collision box of `finger` at q overlaps the object at `pose`."""
         R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
-        for rect, (p_WJ, angle_WJ) in zip(self._rectangles[finger], self._joint_frames(finger, q)):
+        for rect, (p_WJ, angle_WJ) in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q)):
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
             if rectangles_overlap_polygon(self.boundary, R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
                                           rect.half_length, rect.half_width)[0]:
                 return True
         return False
-
-    def _read_link_rectangles(self, i: int) -> list[LinkRectangle]:
-        """Each link's box collision geometry from SceneGraph, in its joint frame (joint 1 for
-        link 1, joint 2 for link 2), read from the plant at q = 0."""
-        plant, inspector = self.scene.plant, self.scene.scene_graph.model_inspector()
-        context = plant.CreateDefaultContext()
-        rectangles = []
-        for j in (1, 2):
-            joint = plant.GetJointByName(f"finger{i}_joint{j}", self.scene.hand)
-            body = plant.GetBodyByName(f"finger{i}_link{j}", self.scene.hand)
-            boxes = [g for g in plant.GetCollisionGeometriesForBody(body) if type(inspector.GetShape(g)).__name__ == "Box"]
-            if len(boxes) != 1:
-                raise RuntimeError(f"finger{i}_link{j} must have exactly one box collision geometry, has {len(boxes)}")
-            shape = inspector.GetShape(boxes[0])
-            X_WG = body.EvalPoseInWorld(context) @ inspector.GetPoseInFrame(boxes[0])
-            X_JG = joint.frame_on_child().CalcPoseInWorld(context).inverse() @ X_WG
-            R_JG = X_JG.rotation().matrix()
-            rectangles.append(LinkRectangle(p_JG=X_JG.translation()[:2].copy(), angle_JG=math.atan2(R_JG[1, 0], R_JG[0, 0]),
-                                            half_length=shape.width() / 2, half_width=shape.depth() / 2))
-        return rectangles
 
     # -- vectorized closed form (many arclengths at one pose) ---------------------------------
     def contacts(self, arclengths) -> tuple[np.ndarray, np.ndarray]:
@@ -190,7 +152,7 @@ class Reachability:
         elbow = f.elbow(q)
         ct, st = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         hit = np.zeros(len(q), dtype=bool)
-        for rect, origin, angle in zip(self._rectangles[finger], (f.p_W_base, elbow), (a1, a12)):
+        for rect, origin, angle in zip(self.fingers[finger].link_boxes, (f.p_W_base, elbow), (a1, a12)):
             c, s = np.cos(angle), np.sin(angle)
             rel = origin + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1) - poses[:, :2]
             centre = np.stack([ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]], axis=1)  # in B

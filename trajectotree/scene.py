@@ -15,6 +15,7 @@ q_2i, q_2i+1 are the two joints of finger i (see `Scene.hand_q_indices`).
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 from functools import cached_property
@@ -29,7 +30,7 @@ from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint, RotationalI
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import SceneConfig
-from trajectotree.geometry import ConvexPolygon
+from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.kinematics import TwoLinkFinger
 
 NUM_FINGERS = 4
@@ -133,6 +134,26 @@ def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig):
 
 
 @dataclass(frozen=True)
+class LinkRectangle:
+    """A link's collision box in the plane, in the frame J of the joint that moves the link
+    (all collision geometry is centred on z = 0, so planar overlap is 3D overlap)."""
+
+    p_JG: np.ndarray    # (2,) m, box centre
+    angle_JG: float     # rad, box x axis relative to J's x axis
+    half_length: float  # m, half extent along the box x axis
+    half_width: float   # m, half extent along the box y axis (in the plane)
+
+    def corners(self, p_WJ, angle_WJ) -> np.ndarray:
+        """(..., 4, 2) corners in W, counter-clockwise, when frame J is at p_WJ (..., 2) with
+        angle angle_WJ (...)."""
+        hl, hw = self.half_length, self.half_width
+        local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]]) @ rotation_2d(self.angle_JG).T + self.p_JG
+        c, s = np.cos(angle_WJ)[..., None], np.sin(angle_WJ)[..., None]
+        return np.asarray(p_WJ)[..., None, :] + np.stack([c * local[:, 0] - s * local[:, 1],
+                                                          s * local[:, 0] + c * local[:, 1]], axis=-1)
+
+
+@dataclass(frozen=True)
 class FingerGeometry(TwoLinkFinger):
     """One finger as the closed-form kinematics (`TwoLinkFinger`: p_W_base, psi, l1, l2,
     q_lower, q_upper) and dynamics see it, read from the plant."""
@@ -141,6 +162,7 @@ class FingerGeometry(TwoLinkFinger):
     masses: np.ndarray     # (2,) kg, link masses
     coms: np.ndarray       # (2,) m, link centre of mass along the link's x axis
     inertias: np.ndarray   # (2,) kg m^2, link rotational inertia about z at its COM
+    link_boxes: tuple      # (LinkRectangle, LinkRectangle): link 1's collision box in joint 1's frame, link 2's in joint 2's
 
 
 @dataclass
@@ -208,7 +230,21 @@ class Scene:
             masses=np.array([s.get_mass() for s in inertia]),
             coms=np.array([s.get_com()[0] for s in inertia]),
             inertias=np.array([s.Shift(s.get_com()).CalcRotationalInertia()[2, 2] for s in inertia]),
+            link_boxes=tuple(self._read_link_rectangle(ctx, joint, body) for joint, body in zip(joints, links)),
         )
+
+    def _read_link_rectangle(self, ctx, joint, body) -> LinkRectangle:
+        """The link's box collision geometry from SceneGraph, in the frame of `joint` (which moves it)."""
+        inspector = self.scene_graph.model_inspector()
+        boxes = [g for g in self.plant.GetCollisionGeometriesForBody(body) if type(inspector.GetShape(g)).__name__ == "Box"]
+        if len(boxes) != 1:
+            raise RuntimeError(f"{body.name()} must have exactly one box collision geometry, has {len(boxes)}")
+        shape = inspector.GetShape(boxes[0])
+        X_WG = body.EvalPoseInWorld(ctx) @ inspector.GetPoseInFrame(boxes[0])
+        X_JG = joint.frame_on_child().CalcPoseInWorld(ctx).inverse() @ X_WG
+        R_JG = X_JG.rotation().matrix()
+        return LinkRectangle(p_JG=X_JG.translation()[:2].copy(), angle_JG=math.atan2(R_JG[1, 0], R_JG[0, 0]),
+                             half_length=shape.width() / 2, half_width=shape.depth() / 2)
 
     def _actuators(self, i: int):
         names = {f"finger{i}_joint1": 0, f"finger{i}_joint2": 1}
