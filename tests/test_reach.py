@@ -138,3 +138,20 @@ def test_vectorized_closed_form_matches_the_scalar_one(box):
                 reachable += 1
             np.testing.assert_allclose(np.array([p, n]), np.array(reach.boundary.point(s)), atol=1e-12)
     assert reachable > 100
+
+
+def test_link_penetration_depths_match_scene_graph(scene):
+    """physics.link_penetrations (planar separating axes) vs SceneGraph's signed distances between
+    the link boxes and the box; deeper than the box's half depth, 3D separation is along z."""
+    from trajectotree.physics import link_penetrations
+    rng = np.random.default_rng(5)
+    depths, expected = [], []
+    for _ in range(100):
+        pose = np.array([rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), rng.uniform(-np.pi, np.pi)])
+        q = np.concatenate([rng.uniform(f.q_lower, f.q_upper) for f in scene.fingers])
+        depths.append(link_penetrations(pose[None], q[None], scene.fingers, scene.config.shape)[0])
+        expected.append(np.maximum(-signed_distances(scene, pose, q), 0.0))
+    depths, expected = np.array(depths), np.array(expected)
+    planar = expected < 0.02
+    assert 20 < np.sum(planar & (expected > 0)) and 20 < np.sum(expected == 0)
+    np.testing.assert_allclose(depths[planar], expected[planar], atol=1e-6)

@@ -10,7 +10,9 @@ Anyone holding plan.npz can recompute these numbers (its arrays: README, "Trajec
   - force at a distance: the largest force |f_W| of a fingertip whose sphere is more than
     GAP_TOL from the box (N), where it is and how far off;
   - contact_point_off_surface: how far any p_W_C lies from the box boundary (m);
-  - penetration: how deep any fingertip sphere sinks into the box (m).
+  - penetration: how deep any fingertip sphere sinks into the box (m);
+  - link_penetration: how deep any finger link's collision box overlaps the box (m; the least
+    translation that separates them), given the hand's links (ObjectModel.fingers).
 A plan passes when no fingertip more than GAP_TOL off the box carries more than
 FORCE_TOL, none sinks deeper than PENETRATION_TOL, the cones hold to CONE_TOL and
 Newton-Euler to NEWTON_EULER_TOL.
@@ -19,11 +21,14 @@ Newton-Euler to NEWTON_EULER_TOL.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from trajectotree.geometry import ConvexPolygon, poses_box_to_world, poses_world_to_box
 # The check's value type and its tolerances live with the other saved values (plan.json records both).
+if TYPE_CHECKING:  # annotations only: the check itself needs numpy alone
+    from trajectotree.scene import FingerGeometry
 from trajectotree.results import CONE_TOL, FORCE_TOL, GAP_TOL, NEWTON_EULER_TOL, PENETRATION_TOL, PhysicsCheck
 
 
@@ -35,6 +40,7 @@ class ObjectModel:
     shape: ConvexPolygon   # the outline in B
     gravity: float         # m/s^2, magnitude, along -y in W
     tip_radius: float      # m, fingertip sphere radius
+    fingers: "tuple[FingerGeometry, ...] | None" = None   # the hand's kinematics and link boxes (None: links unchecked)
 
     @property
     def inertia(self) -> float:
@@ -44,7 +50,21 @@ class ObjectModel:
     @staticmethod
     def from_scene(scene) -> "ObjectModel":
         c = scene.config
-        return ObjectModel(mass=c.box_mass, shape=c.shape, gravity=c.gravity, tip_radius=scene.tip_radius)
+        return ObjectModel(mass=c.box_mass, shape=c.shape, gravity=c.gravity, tip_radius=scene.tip_radius,
+                           fingers=scene.fingers)
+
+
+def link_penetrations(x, q, fingers, shape: ConvexPolygon) -> np.ndarray:
+    """(K, 4, 2) m: how deep each finger's link 1 and link 2 collision boxes overlap the object
+    at object poses x (K, 3) and joint angles q (K, 8, finger-major)."""
+    depths = []
+    for i, finger in enumerate(fingers):
+        q_i = np.asarray(q, dtype=float)[:, 2 * i:2 * i + 2]
+        a1, a12 = finger.angles(q_i)
+        frames = ((np.broadcast_to(finger.p_W_base, (len(q_i), 2)), a1), (finger.elbow(q_i), a12))
+        depths.append([shape.penetration_depths(poses_world_to_box(x, box.corners(p_WJ, angle_WJ)))
+                       for box, (p_WJ, angle_WJ) in zip(finger.link_boxes, frames)])
+    return np.moveaxis(np.array(depths), -1, 0)
 
 
 def contact_points(x, p_W_tip, pinned, p_BC_planned, shape: ConvexPolygon) -> np.ndarray:
@@ -59,7 +79,8 @@ def contact_points(x, p_W_tip, pinned, p_BC_planned, shape: ConvexPolygon) -> np
 
 def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     """The check of a plan's arrays (a mapping with the plan.npz names t, x, xdot,
-    lambda_n, lambda_t, f_W, p_W_tip, p_W_C) against `box` and friction `mu`."""
+    lambda_n, lambda_t, f_W, p_W_tip, p_W_C, and q where box.fingers is given) against `box`
+    and friction `mu`."""
     a = {name: np.asarray(arrays[name], dtype=float)
          for name in ("t", "x", "xdot", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")}
     x, f = a["x"], a["f_W"]
@@ -80,6 +101,13 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     worst = float(away[k, i])
     k_deep, i_deep = np.unravel_index(int(np.argmin(gap)), gap.shape)
     penetration = max(0.0, -float(gap[k_deep, i_deep]))
+    if box.fingers is None:
+        link_depth, k_link, i_link = float("nan"), -1, -1
+    else:
+        links = link_penetrations(x, arrays["q"], box.fingers, box.shape).max(axis=2)        # (K, 4)
+        k_link, i_link = np.unravel_index(int(np.argmax(links)), links.shape)
+        link_depth = float(links[k_link, i_link])
+        k_link, i_link = (int(k_link), int(i_link)) if link_depth > 0 else (-1, -1)
     off_surface = float(np.abs(box.shape.signed_distances(poses_world_to_box(x, a["p_W_C"]))).max())
     reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
     if worst > FORCE_TOL:
@@ -98,4 +126,5 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
                         force_at_distance_finger=int(i) if worst > 0 else -1,
                         force_at_distance_gap_m=float(gap[k, i]) if worst > 0 else 0.0,
                         contact_point_off_surface_m=off_surface, penetration_m=penetration,
+                        link_penetration_m=link_depth, link_penetration_knot=k_link, link_penetration_finger=i_link,
                         passed=not reasons, reason="; ".join(reasons))

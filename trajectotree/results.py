@@ -93,6 +93,9 @@ class PhysicsCheck:
     force_at_distance_gap_m: float     # that fingertip's distance from the box, m
     contact_point_off_surface_m: float  # max distance of p_W_C from the box boundary, m
     penetration_m: float               # deepest any fingertip sphere sinks into the box (0 if none), m
+    link_penetration_m: float          # deepest overlap of a finger link's collision box with the box, m (NaN: unchecked)
+    link_penetration_knot: int         # where that is (-1 if nowhere)
+    link_penetration_finger: int
     passed: bool
     reason: str                        # why it failed ("" if passed)
 
