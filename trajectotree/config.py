@@ -224,6 +224,15 @@ class CitoConfig:
     # 0.29 mm); 0.005: 79.0, cost +6 %; 0.01: 75.9, cost +15 %; 0.02: 91.1, cost +45 %, 1 failed
     # (a fixed finger 0.11 mm off its contact). 0.01 is the fewest iterations.
     switch_clearance: float = 0.01
+    # Link rows (cito/links.py, not in the paper; configs/paper.yaml turns them off): at every knot
+    # whose pose or joints are free, sampled points of each finger's link collision boxes keep
+    # their box's half width plus link_clearance off the object (smooth distance; never more than
+    # the program's fixed end knots, the search's nodes, have). Without them 43 of the 60 seed-0
+    # keyframes plans had a link inside the box mid-segment, up to 24 mm.
+    link_rows: bool = True          # false: only the fingertip spheres see the object (the paper)
+    # m. Goal -0.089 rad, segment 5: with 0 link 2 still cut 0.05 mm into the box beside an active
+    # point (exact test); with 0.5 mm or 1 mm it stayed clear.
+    link_clearance: float = 0.001
     # IPOPT tol, on the scaled optimality error; constraints are held to constr_viol_tol regardless.
     # 1e-3 instead of 1e-6: 67 instead of 88 iterations on a 3-segment plan, objective 0.007 % higher.
     tol: float = 1e-3
@@ -247,6 +256,9 @@ class CitoConfig:
             check_range(f"cito.{name}", getattr(self, name), 0.0, None)
         check_range("cito.sdf_sharpness", self.sdf_sharpness, 10.0, 1e5)
         check_range("cito.switch_clearance", self.switch_clearance, 0.0, 0.05)
+        if not isinstance(self.link_rows, bool):
+            raise ConfigError(f"cito.link_rows = {self.link_rows!r} must be true or false")
+        check_range("cito.link_clearance", self.link_clearance, 0.0, 0.02)
         for name in ("tol", "constr_viol_tol", "acceptable_tol", "acceptable_constr_viol_tol"):
             check_range(f"cito.{name}", getattr(self, name), 0.0, 1.0, low_open=True)
         check_integer("cito.acceptable_iter", self.acceptable_iter, 0)

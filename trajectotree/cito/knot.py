@@ -57,6 +57,7 @@ class BodyParams:
         self.normals = self.shape.normals   # (V, 2) outward face normals in B
         self.offsets = self.shape.offsets   # (V,) m, face j: normals[j] . p_B = offsets[j]
         self.sharpness = sharpness
+        self.link_boxes = tuple(f.link_boxes for f in self.fingers)   # per finger, its links' collision boxes (links.py)
 
 
 def _rot(th):

@@ -6,7 +6,8 @@ constraints and bounds: trapezoidal collocation (x_{k+1} = x_k + dt/2 (xd_k + xd
 the same for xd/xdd, q/qd, qd/qdd), the friction cone mu_plan lambda_n >= |lambda_t|,
 lambda_n >= 0, slack >= 0, joint and torque limits, fixed x_0 and q_0, rest knots.
 The nonlinear rows of a knot (knot.KnotRows) form one Python constraint per knot
-with an analytic Jacobian and its sparsity pattern.
+with an analytic Jacobian and its sparsity pattern; the link rows (links.LinkRows, unless
+`cito.link_rows` is off) another per knot whose pose or joints are free, with a cache of their own.
 
 Speed: IPOPT evaluates a Python constraint per knot; each call crosses into Python.
 All knots are evaluated at once (vectorized) when the first knot asks for its
@@ -31,6 +32,7 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 from pydrake.solvers import MathematicalProgram
 
 from trajectotree.cito.knot import BodyParams, KnotRows
+from trajectotree.cito.links import LinkRows
 from trajectotree.cito.variables import KNOT_SIZE, CitoVariables, width
 from trajectotree.config import CitoConfig
 from trajectotree.scene import NUM_FINGERS
@@ -68,6 +70,7 @@ class CitoProgram:
     rows: KnotRows
     spec: ProgramSpec
     knot_bindings: list = field(default_factory=list)
+    link_bindings: list = field(default_factory=list)   # links.py's rows per free knot ([] when off)
     build_time_s: float = 0.0
 
 
@@ -208,7 +211,9 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         prog.AddBoundingBoxConstraint(lo[name].ravel(), hi[name].ravel(), getattr(v, name).ravel())
 
     cache = _KnotCache(rows, K)
-    prog.AddVisualizationCallback(cache.prime, v.stacked().ravel())
+    link_cache = _KnotCache(LinkRows(body, K), K) if config.link_rows else None
+    caches = [c for c in (cache, link_cache) if c is not None]
+    prog.AddVisualizationCallback(lambda values: [c.prime(values) for c in caches], v.stacked().ravel())
     bindings = []
     for k, pattern in enumerate(rows.sparsities()):
         evaluator = _KnotConstraint(cache, k)
@@ -216,9 +221,31 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
         binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
+    link_bindings = _add_link_rows(prog, v, spec, link_cache, config.link_clearance) if link_cache else []
     _add_costs(prog, v, spec, config)
     return CitoProgram(prog=prog, variables=v, rows=rows, spec=spec, knot_bindings=bindings,
-                       build_time_s=time.perf_counter() - t0)
+                       link_bindings=link_bindings, build_time_s=time.perf_counter() - t0)
+
+
+def link_knots(spec: ProgramSpec) -> list[int]:
+    """The knots whose object pose or joint angles are free: all but the first (x_0, q_0 fixed)
+    and, when both are fixed there (keyframes), the last. The search's nodes keep the links
+    clear of the object by its own exact test."""
+    last_fixed = spec.x_end is not None and spec.q_end is not None
+    return list(range(1, spec.num_knots - 1 if last_fixed else spec.num_knots))
+
+
+def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, cache: _KnotCache, clearance: float) -> list:
+    """links.py's rows, one binding per knot of `link_knots`, served by their own cache."""
+    fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.x_end is not None and spec.q_end is not None else [])
+    lower, upper = cache.rows.bounds(clearance, fixed)
+    pattern = cache.rows.sparsity()
+    bindings = []
+    for k in link_knots(spec):
+        binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, v.knot(k), description=f"links{k}")
+        binding.evaluator().SetGradientSparsityPattern(pattern)
+        bindings.append(binding)
+    return bindings
 
 
 def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) -> None:
