@@ -18,20 +18,20 @@ sphere's centre, which keeps r = 10 mm (> w = 4.8 mm) off the object already. Be
 points an object corner can still reach into a link's side (the rows see the side only at
 the points); the measured depths are in README's "Trajectory optimization".
 
-Each row depends on the knot's object pose and the finger's two joints only:
-d p_WL / d q_j = K (p_WL - p_WJ_j) for the joints j at or before the link (K: +90 degrees).
-The arithmetic is elementwise (no matmul) so a batch of knots and one knot give the same
-bits, as program._KnotCache requires of the rows it serves.
+Each row depends on the knot's object pose and the finger's two joints only, so each knot's
+binding holds just those (x, q: LINK_SIZE variables; IPOPT's AutoDiff inputs are 11 wide, not
+the knot's 53): d p_WL / d q_j = K (p_WL - p_WJ_j) for the joints j at or before the link
+(K: +90 degrees). `evaluate` is elementwise (no matmul), so a batch of knots and one knot
+give the same bits, as program._KnotCache expects of the rows it serves.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.cito.layout import COL_P, COL_Q, COL_TH
-from trajectotree.cito.variables import KNOT_SIZE, SLICES
 from trajectotree.scene import NUM_FINGERS
 
 # Per link (1, 2), the sampled fractions of its collision box's length from the joint end.
@@ -67,9 +67,16 @@ class LinkPoints:
         return len(self.link)
 
 
+# A link block's variables (its binding's, per knot): the object's pose x (3), then the joints q (8).
+LINK_SIZE = 3 + 2 * NUM_FINGERS
+COL_P, COL_TH = (0, 1), 2
+COL_Q = 3 + 2 * np.arange(NUM_FINGERS)[:, None] + np.arange(2)     # (4, 2)
+
+
 class LinkRows:
-    """The link rows of K knots (values phi(p_BL) - w, one per finger and point), with the
-    interface program._KnotCache and _KnotConstraint use: evaluate, knot, values_one, num_rows."""
+    """The link rows of K knots (values phi(p_BL) - w, finger-major, P per finger) on their
+    (x, q) blocks, with the interface program._KnotCache and _KnotConstraint use: evaluate,
+    knot, values_one, num_rows."""
 
     def __init__(self, body, num_knots: int):
         self.body = body
@@ -79,9 +86,20 @@ class LinkRows:
         self._p_W_base, self._psi, self._l1 = f.p_W_base, f.psi, f.l1      # (4, 2), (4,), (4,)
         # per face (n_x, n_y, offset) as floats: the sums over faces run elementwise, left to right
         self._faces = [(float(n[0]), float(n[1]), float(h)) for n, h in zip(body.normals, body.offsets)]
+        pts = self.points
+        self._scalars = tuple(                  # values_one's constants as Python floats
+            (float(f.psi[i]), float(f.l1[i]), float(f.p_W_base[i, 0]), float(f.p_W_base[i, 1]),
+             tuple((bool(link), float(p[0]), float(p[1]), float(w))
+                   for link, p, w in zip(pts.link, pts.p_JL[i], pts.half_width[i])))
+            for i in range(NUM_FINGERS))
 
     def knot(self, k: int) -> "LinkRows":
         return LinkRows(self.body, 1)
+
+    @staticmethod
+    def block(x, q) -> np.ndarray:
+        """A knot's (x, q) block (LINK_SIZE,) from its pose and joint angles."""
+        return np.concatenate([np.asarray(x, dtype=float), np.asarray(q, dtype=float)])
 
     def bounds(self, clearance: float, fixed_states=()):
         """(lower, upper) of one knot's rows: each point's gap >= clearance (m), but no more than
@@ -91,9 +109,7 @@ class LinkRows:
         below the exact one) below 0: the knots next to the node could not get out in time."""
         lower = np.full(int(self.num_rows[0]), float(clearance))
         for x, q in fixed_states:
-            z = np.zeros(KNOT_SIZE)
-            z[SLICES["x"]], z[SLICES["q"]] = x, q
-            lower = np.minimum(lower, self.values_one(z))
+            lower = np.minimum(lower, self.values_one(self.block(x, q)))
         return lower, np.full(lower.size, np.inf)
 
     def sparsity(self) -> list[tuple[int, int]]:
@@ -102,9 +118,8 @@ class LinkRows:
         out = []
         for i in range(NUM_FINGERS):
             for j, link in enumerate(self.points.link):
-                row = i * self.points.per_finger + j
-                cols = [COL_P.start, COL_P.start + 1, COL_TH, int(COL_Q[i, 0])] + ([int(COL_Q[i, 1])] if link else [])
-                out += [(row, c) for c in sorted(cols)]
+                cols = [*COL_P, COL_TH, int(COL_Q[i, 0])] + ([int(COL_Q[i, 1])] if link else [])
+                out += [(i * self.points.per_finger + j, c) for c in cols]
         return out
 
     def _smooth_distance(self, bx: np.ndarray, by: np.ndarray):
@@ -123,44 +138,67 @@ class LinkRows:
         return dmax + np.log(total) / k, gx / total, gy / total
 
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
-        """(values (K, R), Jacobians (K, R, KNOT_SIZE) or None) at knots Z (K, KNOT_SIZE)."""
+        """(values (K, R), Jacobians (K, R, LINK_SIZE) or None) at the (x, q) blocks Z (K, LINK_SIZE)."""
         pts = self.points
         nK, P = Z.shape[0], pts.per_finger
-        th = Z[:, COL_TH][:, None, None]
-        q = Z[:, SLICES["q"]].reshape(nK, NUM_FINGERS, 2)
-        a1 = self._psi + q[..., 0]                                         # (K, 4)
+        q = Z[:, COL_Q]                                                     # (K, 4, 2)
+        a1 = self._psi + q[..., 0]                                          # (K, 4)
         a12 = a1 + q[..., 1]
         c1, s1, c12, s12 = np.cos(a1), np.sin(a1), np.cos(a12), np.sin(a12)
-        elbow_x = self._p_W_base[:, 0] + self._l1 * c1                     # (K, 4)
+        elbow_x = self._p_W_base[:, 0] + self._l1 * c1
         elbow_y = self._p_W_base[:, 1] + self._l1 * s1
-        on2 = pts.link.astype(bool)                                        # (P,)
-        # joint frame J of each point's link: origin and angle
-        ox = np.where(on2, elbow_x[..., None], self._p_W_base[:, 0, None])   # (K, 4, P)
+        on2 = pts.link.astype(bool)                                         # (P,)
+        # the frame J of each point's link: origin and angle (K, 4, P)
+        ox = np.where(on2, elbow_x[..., None], self._p_W_base[:, 0, None])
         oy = np.where(on2, elbow_y[..., None], self._p_W_base[:, 1, None])
         c = np.where(on2, c12[..., None], c1[..., None])
         s = np.where(on2, s12[..., None], s1[..., None])
-        lx, ly = pts.p_JL[..., 0], pts.p_JL[..., 1]                        # (4, P)
-        wx, wy = ox + (c * lx - s * ly), oy + (s * lx + c * ly)            # p_WL
-        rx, ry = wx - Z[:, COL_P.start, None, None], wy - Z[:, COL_P.start + 1, None, None]
+        lx, ly = pts.p_JL[..., 0], pts.p_JL[..., 1]                         # (4, P)
+        wx, wy = ox + (c * lx - s * ly), oy + (s * lx + c * ly)             # p_WL
+        rx, ry = wx - Z[:, 0, None, None], wy - Z[:, 1, None, None]
+        th = Z[:, COL_TH, None, None]
         ct, st = np.cos(th), np.sin(th)
-        bx, by = ct * rx + st * ry, -st * rx + ct * ry                     # p_BL = R^T (p_WL - p)
+        bx, by = ct * rx + st * ry, -st * rx + ct * ry                      # p_BL = R^T (p_WL - p)
         phi, gx, gy = self._smooth_distance(bx, by)
         val = (phi - pts.half_width).reshape(nK, -1)
         if not with_jacobian:
             return val, None
-        gwx, gwy = ct * gx - st * gy, st * gx + ct * gy                    # R g: d phi / d p_WL
-        jac = np.zeros((nK, NUM_FINGERS, P, KNOT_SIZE))
-        jac[..., COL_P.start] = -gwx
-        jac[..., COL_P.start + 1] = -gwy
-        jac[..., COL_TH] = gwx * ry - gwy * rx                             # d p_BL / d theta = -R^T K (p_WL - p)
+        gwx, gwy = ct * gx - st * gy, st * gx + ct * gy                     # R g = d phi / d p_WL
+        jac = np.zeros((nK, NUM_FINGERS, P, LINK_SIZE))
+        jac[..., COL_P[0]], jac[..., COL_P[1]] = -gwx, -gwy
+        jac[..., COL_TH] = gwx * ry - gwy * rx                              # d p_BL / d theta = -R^T K (p_WL - p)
+        # joint 1 turns every point about the base, joint 2 the link-2 points about the elbow
+        d_q1 = gwy * (wx - self._p_W_base[:, 0, None]) - gwx * (wy - self._p_W_base[:, 1, None])
+        d_q2 = np.where(on2, gwy * (wx - elbow_x[..., None]) - gwx * (wy - elbow_y[..., None]), 0.0)
         fingers = np.arange(NUM_FINGERS)
-        # joint 1 turns every point about the base; joint 2 turns link-2 points about the elbow
-        d_q1 = -gwx * (wy - self._p_W_base[:, 1, None]) + gwy * (wx - self._p_W_base[:, 0, None])
-        d_q2 = np.where(on2, -gwx * (wy - elbow_y[..., None]) + gwy * (wx - elbow_x[..., None]), 0.0)
         jac[:, fingers, :, COL_Q[:, 0]] = d_q1.transpose(1, 0, 2)
         jac[:, fingers, :, COL_Q[:, 1]] = d_q2.transpose(1, 0, 2)
-        return val, jac.reshape(nK, NUM_FINGERS * P, KNOT_SIZE)
+        return val, jac.reshape(nK, NUM_FINGERS * P, LINK_SIZE)
 
     def values_one(self, z: np.ndarray) -> np.ndarray:
-        """The rows of one knot at z (KNOT_SIZE,): the batch's numbers."""
-        return self.evaluate(z[None], False)[0][0]
+        """The rows at one block z (LINK_SIZE,): `evaluate`'s arithmetic in Python floats, 2.5x
+        faster for one knot (IPOPT asks for values at each trial point knot by knot); math's
+        exp and log may differ from numpy's in the last bit (tests compare them to 1e-12)."""
+        px, py, th, *q = z.tolist()
+        ct, st = math.cos(th), math.sin(th)
+        k, faces = self.body.sharpness, self._faces
+        out = []
+        for i, (psi, l1, base_x, base_y, points) in enumerate(self._scalars):
+            a1 = psi + q[2 * i]
+            a12 = a1 + q[2 * i + 1]
+            c1, s1, c12, s12 = math.cos(a1), math.sin(a1), math.cos(a12), math.sin(a12)
+            elbow_x, elbow_y = base_x + l1 * c1, base_y + l1 * s1
+            for on2, lx, ly, w in points:
+                if on2:
+                    wx, wy = elbow_x + (c12 * lx - s12 * ly), elbow_y + (s12 * lx + c12 * ly)
+                else:
+                    wx, wy = base_x + (c1 * lx - s1 * ly), base_y + (s1 * lx + c1 * ly)
+                rx, ry = wx - px, wy - py
+                bx, by = ct * rx + st * ry, -st * rx + ct * ry
+                d = [nx * bx + ny * by - h for nx, ny, h in faces]
+                dmax = max(d)
+                total = 0.0
+                for dj in d:
+                    total += math.exp(k * (dj - dmax))
+                out.append(dmax + math.log(total) / k - w)
+        return np.array(out)

@@ -32,7 +32,7 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 from pydrake.solvers import MathematicalProgram
 
 from trajectotree.cito.knot import BodyParams, KnotRows
-from trajectotree.cito.links import LinkRows
+from trajectotree.cito.links import LINK_SIZE, LinkRows
 from trajectotree.cito.variables import KNOT_SIZE, CitoVariables, width
 from trajectotree.config import CitoConfig
 from trajectotree.scene import NUM_FINGERS
@@ -82,15 +82,15 @@ class _KnotCache:
     point before its Jacobians there, at the start and after a restoration). Batch rows
     equal one-knot evaluations bit for bit, so which vector served a knot never matters."""
 
-    def __init__(self, rows: KnotRows, num_knots: int):
-        self.rows, self.num_knots = rows, num_knots
+    def __init__(self, rows, num_knots: int, width: int = KNOT_SIZE):
+        self.rows, self.num_knots, self.width = rows, num_knots, width   # rows: KnotRows, or LinkRows (width LINK_SIZE)
         self.Z = self.val = self.jac = None
         self.primed = None
-        self.seen = np.full((num_knots, KNOT_SIZE), np.nan)
+        self.seen = np.full((num_knots, width), np.nan)
 
     def prime(self, values: np.ndarray) -> None:
         """Visualization callback: remember the vector; rejected trial points are never evaluated."""
-        self.primed = np.array(values, dtype=float).reshape(self.num_knots, KNOT_SIZE)
+        self.primed = np.array(values, dtype=float).reshape(self.num_knots, self.width)
 
     def _evaluate(self, Z: np.ndarray) -> None:
         self.val, self.jac = self.rows.evaluate(Z, True)
@@ -211,9 +211,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         prog.AddBoundingBoxConstraint(lo[name].ravel(), hi[name].ravel(), getattr(v, name).ravel())
 
     cache = _KnotCache(rows, K)
-    link_cache = _KnotCache(LinkRows(body, K), K) if config.link_rows else None
-    caches = [c for c in (cache, link_cache) if c is not None]
-    prog.AddVisualizationCallback(lambda values: [c.prime(values) for c in caches], v.stacked().ravel())
+    prog.AddVisualizationCallback(cache.prime, v.stacked().ravel())
     bindings = []
     for k, pattern in enumerate(rows.sparsities()):
         evaluator = _KnotConstraint(cache, k)
@@ -221,7 +219,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
         binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
-    link_bindings = _add_link_rows(prog, v, spec, link_cache, config.link_clearance) if link_cache else []
+    link_bindings = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else []
     _add_costs(prog, v, spec, config)
     return CitoProgram(prog=prog, variables=v, rows=rows, spec=spec, knot_bindings=bindings,
                        link_bindings=link_bindings, build_time_s=time.perf_counter() - t0)
@@ -235,14 +233,18 @@ def link_knots(spec: ProgramSpec) -> list[int]:
     return list(range(1, spec.num_knots - 1 if last_fixed else spec.num_knots))
 
 
-def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, cache: _KnotCache, clearance: float) -> list:
-    """links.py's rows, one binding per knot of `link_knots`, served by their own cache."""
+def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, clearance: float) -> list:
+    """links.py's rows, one binding per knot of `link_knots` on its pose and joints, served by
+    a cache of their own (primed by a second visualization callback over every knot's x, q)."""
+    blocks = np.concatenate([v.x, v.q], axis=1)                       # (K, LINK_SIZE)
+    cache = _KnotCache(rows, spec.num_knots, LINK_SIZE)
+    prog.AddVisualizationCallback(cache.prime, blocks.ravel())
     fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.x_end is not None and spec.q_end is not None else [])
-    lower, upper = cache.rows.bounds(clearance, fixed)
-    pattern = cache.rows.sparsity()
+    lower, upper = rows.bounds(clearance, fixed)
+    pattern = rows.sparsity()
     bindings = []
     for k in link_knots(spec):
-        binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, v.knot(k), description=f"links{k}")
+        binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, blocks[k], description=f"links{k}")
         binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
     return bindings
