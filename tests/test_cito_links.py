@@ -51,7 +51,7 @@ def random_knots(n, seed):
 def test_link_jacobian_matches_finite_differences(rows):
     Z = random_knots(4, seed=3)
     val, jac = rows.evaluate(Z, True)
-    assert val.min() < 0 < val.max()               # some points inside the object, some outside
+    assert val.min() < 0 < val.max()               # some rows violated, some not
     h = 1e-6
     for k in range(4):
         fd = np.zeros_like(jac[k])
@@ -86,22 +86,36 @@ def test_one_knot_paths_agree_with_the_batch(rows):
         np.testing.assert_array_equal(j1[0], jac[k])
 
 
-def test_points_lie_on_the_searchs_link_boxes(scene):
-    """The sampled points against the corners of the search's link boxes (Reachability), and
-    the rows against the object's face distances: max_j d_j <= phi <= max_j d_j + log(V)/k."""
+def test_rows_against_the_searchs_link_boxes(scene):
+    """The rows against face distances computed from the corners of the search's link boxes
+    (Reachability.link_polygons): a point row (gap + w) lies within [max_j d_j, max_j d_j + log(V)/k]
+    of the object's face distances d_j at that point of the centreline, a vertex row likewise
+    for the link-2 box's four face distances at that object vertex."""
     rows, reach, shape = LinkRows(BodyParams(scene, 1000.0, mu=0.5), 1), Reachability(scene), scene.config.shape
+    P, V = rows.points.per_finger, len(shape.vertices)
     for z in random_knots(5, seed=5):
-        pose, q, val = z[:3], z[3:], rows.values_one(z).reshape(NUM_FINGERS, -1)
+        pose, q, val = z[:3], z[3:], rows.values_one(z)
+        point_rows, vertex_rows = val[:NUM_FINGERS * P].reshape(NUM_FINGERS, P), val[NUM_FINGERS * P:].reshape(NUM_FINGERS, V)
+        p_WV = pose[:2] + shape.vertices @ rotation_2d(pose[2]).T
         for i in range(NUM_FINGERS):
+            boxes = reach.link_polygons(i, q[2 * i:2 * i + 2])
             points = []
-            for corners, fractions in zip(reach.link_polygons(i, q[2 * i:2 * i + 2]), LINK_FRACTIONS):
+            for corners, fractions in zip(boxes, LINK_FRACTIONS):
                 near, far = 0.5 * (corners[2] + corners[3]), 0.5 * (corners[0] + corners[1])   # ends of the centreline
                 points += [near + f * (far - near) for f in fractions]
             p_BL = (np.array(points) - pose[:2]) @ rotation_2d(pose[2])
             face_max = np.max(p_BL @ shape.normals.T - shape.offsets, axis=1)
             w = scene.fingers[i].link_boxes[0].half_width
-            assert np.all(val[i] + w >= face_max - 1e-12)
-            assert np.all(val[i] + w <= face_max + np.log(len(shape.offsets)) / 1000.0 + 1e-12)
+            assert np.all(point_rows[i] + w >= face_max - 1e-12)
+            assert np.all(point_rows[i] + w <= face_max + np.log(V) / 1000.0 + 1e-12)
+            c = boxes[1]                                    # link 2's corners, counter-clockwise from (+l, -w)
+            u = (c[0] - c[3]) / np.linalg.norm(c[0] - c[3])
+            rel = p_WV - c.mean(axis=0)
+            dx, dy = rel @ u, rel @ np.array([-u[1], u[0]])
+            hl, hw = 0.5 * np.linalg.norm(c[0] - c[3]), 0.5 * np.linalg.norm(c[1] - c[0])
+            box_max = np.max([dx - hl, -dx - hl, dy - hw, -dy - hw], axis=0)
+            assert np.all(vertex_rows[i] >= box_max - 1e-12)
+            assert np.all(vertex_rows[i] <= box_max + np.log(4) / 1000.0 + 1e-12)
 
 
 def test_rows_at_the_free_knots_and_none_when_off(scene):

@@ -67,6 +67,45 @@ class LinkPoints:
         return len(self.link)
 
 
+@dataclass(frozen=True)
+class _Box2:
+    """Each finger's link-2 collision box (LinkRectangle) as arrays (4, ...), in joint 2's frame."""
+
+    p_JG: np.ndarray          # (4, 2) m, box centre
+    angle_JG: np.ndarray      # (4,) rad
+    half_length: np.ndarray   # (4,) m
+    half_width: np.ndarray    # (4,) m
+
+    @staticmethod
+    def from_boxes(link_boxes) -> "_Box2":
+        b = [boxes[1] for boxes in link_boxes]
+        return _Box2(p_JG=np.array([x.p_JG for x in b]), angle_JG=np.array([x.angle_JG for x in b]),
+                     half_length=np.array([x.half_length for x in b]), half_width=np.array([x.half_width for x in b]))
+
+
+@dataclass(frozen=True)
+class _Kinematics:
+    """A batch's angles and elbows: cos and sin of a1, a12 (K, 4) and theta (K, 1, 1), elbows in W (K, 4)."""
+
+    c1: np.ndarray
+    s1: np.ndarray
+    c12: np.ndarray
+    s12: np.ndarray
+    ct: np.ndarray
+    st: np.ndarray
+    elbow_x: np.ndarray
+    elbow_y: np.ndarray
+
+
+def _weighted(weights: list, normals: list):
+    """sum_j weights_j n_j, left to right: the log-sum-exp's gradient (x, y)."""
+    gx = gy = 0.0
+    for wj, (nx, ny) in zip(weights, normals):
+        gx = gx + wj * nx
+        gy = gy + wj * ny
+    return gx, gy
+
+
 # A link block's variables (its binding's, per knot): the object's pose x (3), then the joints q (8).
 LINK_SIZE = 3 + 2 * NUM_FINGERS
 COL_P, COL_TH = (0, 1), 2
@@ -81,7 +120,9 @@ class LinkRows:
     def __init__(self, body, num_knots: int):
         self.body = body
         self.points = LinkPoints.from_boxes(body.link_boxes)
-        self.num_rows = np.full(num_knots, NUM_FINGERS * self.points.per_finger)
+        self._box2 = _Box2.from_boxes(body.link_boxes)
+        self._vertices = np.asarray(body.shape.vertices, dtype=float)     # (V, 2) m, in B
+        self.num_rows = np.full(num_knots, NUM_FINGERS * (self.points.per_finger + len(self._vertices)))
         f = body.hand.fingers
         self._p_W_base, self._psi, self._l1 = f.p_W_base, f.psi, f.l1      # (4, 2), (4,), (4,)
         # per face (n_x, n_y, offset) as floats: the sums over faces run elementwise, left to right
@@ -90,7 +131,9 @@ class LinkRows:
         self._scalars = tuple(                  # values_one's constants as Python floats
             (float(f.psi[i]), float(f.l1[i]), float(f.p_W_base[i, 0]), float(f.p_W_base[i, 1]),
              tuple((bool(link), float(p[0]), float(p[1]), float(w))
-                   for link, p, w in zip(pts.link, pts.p_JL[i], pts.half_width[i])))
+                   for link, p, w in zip(pts.link, pts.p_JL[i], pts.half_width[i])),
+             (*map(float, self._box2.p_JG[i]), float(self._box2.angle_JG[i]), float(self._box2.half_length[i]),
+              float(self._box2.half_width[i])))
             for i in range(NUM_FINGERS))
 
     def knot(self, k: int) -> "LinkRows":
@@ -115,75 +158,115 @@ class LinkRows:
     def sparsity(self) -> list[tuple[int, int]]:
         """(row, col) entries of one knot's Jacobian that can be nonzero: the object's pose,
         the finger's joint 1, and its joint 2 for points on link 2."""
-        out = []
+        out, P, V = [], self.points.per_finger, len(self._vertices)
         for i in range(NUM_FINGERS):
             for j, link in enumerate(self.points.link):
                 cols = [*COL_P, COL_TH, int(COL_Q[i, 0])] + ([int(COL_Q[i, 1])] if link else [])
-                out += [(i * self.points.per_finger + j, c) for c in cols]
+                out += [(i * P + j, c) for c in cols]
+        for i in range(NUM_FINGERS):
+            out += [(NUM_FINGERS * P + i * V + j, c) for j in range(V) for c in (*COL_P, COL_TH, *map(int, COL_Q[i]))]
         return out
 
-    def _smooth_distance(self, bx: np.ndarray, by: np.ndarray):
-        """(phi, g_x, g_y) of contact.smooth_distance at points (bx, by) in B, elementwise."""
+    def _lse(self, d: list):
+        """(phi, weights) of the log-sum-exp of the face distances d (arrays), elementwise and
+        left to right: contact.smooth_distance's phi; its gradient is sum_j weights_j n_j."""
         k = self.body.sharpness
-        d = [nx * bx + ny * by - h for nx, ny, h in self._faces]
         dmax = d[0]
         for dj in d[1:]:
             dmax = np.maximum(dmax, dj)
-        total = gx = gy = 0.0
-        for dj, (nx, ny, _) in zip(d, self._faces):
-            e = np.exp(k * (dj - dmax))
-            total = total + e
-            gx = gx + e * nx
-            gy = gy + e * ny
-        return dmax + np.log(total) / k, gx / total, gy / total
+        e = [np.exp(k * (dj - dmax)) for dj in d]
+        total = 0.0
+        for ej in e:
+            total = total + ej
+        return dmax + np.log(total) / k, [ej / total for ej in e]
 
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
-        """(values (K, R), Jacobians (K, R, LINK_SIZE) or None) at the (x, q) blocks Z (K, LINK_SIZE)."""
-        pts = self.points
-        nK, P = Z.shape[0], pts.per_finger
+        """(values (K, R), Jacobians (K, R, LINK_SIZE) or None) at the (x, q) blocks Z (K, LINK_SIZE):
+        the point rows (finger-major), then the vertex rows (finger-major)."""
         q = Z[:, COL_Q]                                                     # (K, 4, 2)
         a1 = self._psi + q[..., 0]                                          # (K, 4)
         a12 = a1 + q[..., 1]
-        c1, s1, c12, s12 = np.cos(a1), np.sin(a1), np.cos(a12), np.sin(a12)
-        elbow_x = self._p_W_base[:, 0] + self._l1 * c1
-        elbow_y = self._p_W_base[:, 1] + self._l1 * s1
+        th = Z[:, COL_TH, None, None]
+        c1, s1 = np.cos(a1), np.sin(a1)
+        kin = _Kinematics(c1=c1, s1=s1, c12=np.cos(a12), s12=np.sin(a12), ct=np.cos(th), st=np.sin(th),
+                          elbow_x=self._p_W_base[:, 0] + self._l1 * c1, elbow_y=self._p_W_base[:, 1] + self._l1 * s1)
+        parts = [self._point_rows(Z, kin, with_jacobian), self._vertex_rows(Z, kin, a12, with_jacobian)]
+        val = np.concatenate([v for v, _ in parts], axis=1)
+        return val, (np.concatenate([j for _, j in parts], axis=1) if with_jacobian else None)
+
+    def _joint_columns(self, jac, d_q1, d_q2) -> None:
+        """jac (K, 4, n, LINK_SIZE)[..., COL_Q[i]] = d_q1, d_q2 (K, 4, n) of each finger i."""
+        fingers = np.arange(NUM_FINGERS)
+        jac[:, fingers, :, COL_Q[:, 0]] = d_q1.transpose(1, 0, 2)
+        jac[:, fingers, :, COL_Q[:, 1]] = d_q2.transpose(1, 0, 2)
+
+    def _point_rows(self, Z, kin, with_jacobian: bool):
+        pts, nK = self.points, Z.shape[0]
         on2 = pts.link.astype(bool)                                         # (P,)
         # the frame J of each point's link: origin and angle (K, 4, P)
-        ox = np.where(on2, elbow_x[..., None], self._p_W_base[:, 0, None])
-        oy = np.where(on2, elbow_y[..., None], self._p_W_base[:, 1, None])
-        c = np.where(on2, c12[..., None], c1[..., None])
-        s = np.where(on2, s12[..., None], s1[..., None])
+        ox = np.where(on2, kin.elbow_x[..., None], self._p_W_base[:, 0, None])
+        oy = np.where(on2, kin.elbow_y[..., None], self._p_W_base[:, 1, None])
+        c = np.where(on2, kin.c12[..., None], kin.c1[..., None])
+        s = np.where(on2, kin.s12[..., None], kin.s1[..., None])
         lx, ly = pts.p_JL[..., 0], pts.p_JL[..., 1]                         # (4, P)
         wx, wy = ox + (c * lx - s * ly), oy + (s * lx + c * ly)             # p_WL
         rx, ry = wx - Z[:, 0, None, None], wy - Z[:, 1, None, None]
-        th = Z[:, COL_TH, None, None]
-        ct, st = np.cos(th), np.sin(th)
+        ct, st = kin.ct, kin.st
         bx, by = ct * rx + st * ry, -st * rx + ct * ry                      # p_BL = R^T (p_WL - p)
-        phi, gx, gy = self._smooth_distance(bx, by)
+        phi, w = self._lse([nx * bx + ny * by - h for nx, ny, h in self._faces])
         val = (phi - pts.half_width).reshape(nK, -1)
         if not with_jacobian:
             return val, None
+        gx, gy = _weighted(w, [(nx, ny) for nx, ny, _ in self._faces])
         gwx, gwy = ct * gx - st * gy, st * gx + ct * gy                     # R g = d phi / d p_WL
-        jac = np.zeros((nK, NUM_FINGERS, P, LINK_SIZE))
+        jac = np.zeros((nK, NUM_FINGERS, pts.per_finger, LINK_SIZE))
         jac[..., COL_P[0]], jac[..., COL_P[1]] = -gwx, -gwy
         jac[..., COL_TH] = gwx * ry - gwy * rx                              # d p_BL / d theta = -R^T K (p_WL - p)
         # joint 1 turns every point about the base, joint 2 the link-2 points about the elbow
         d_q1 = gwy * (wx - self._p_W_base[:, 0, None]) - gwx * (wy - self._p_W_base[:, 1, None])
-        d_q2 = np.where(on2, gwy * (wx - elbow_x[..., None]) - gwx * (wy - elbow_y[..., None]), 0.0)
-        fingers = np.arange(NUM_FINGERS)
-        jac[:, fingers, :, COL_Q[:, 0]] = d_q1.transpose(1, 0, 2)
-        jac[:, fingers, :, COL_Q[:, 1]] = d_q2.transpose(1, 0, 2)
-        return val, jac.reshape(nK, NUM_FINGERS * P, LINK_SIZE)
+        d_q2 = np.where(on2, gwy * (wx - kin.elbow_x[..., None]) - gwx * (wy - kin.elbow_y[..., None]), 0.0)
+        self._joint_columns(jac, d_q1, d_q2)
+        return val, jac.reshape(nK, -1, LINK_SIZE)
+
+    def _vertex_rows(self, Z, kin, a12, with_jacobian: bool):
+        """Each object vertex's smooth distance to each finger's link-2 box, in the box's frame G."""
+        box, nK = self._box2, Z.shape[0]
+        vx, vy = self._vertices[:, 0], self._vertices[:, 1]                 # (V,)
+        ct, st = kin.ct, kin.st                                             # (K, 1, 1)
+        wx = Z[:, 0, None, None] + (ct * vx - st * vy)                      # p_WV (K, 1, V)
+        wy = Z[:, 1, None, None] + (st * vx + ct * vy)
+        ox = kin.elbow_x + (kin.c12 * box.p_JG[:, 0] - kin.s12 * box.p_JG[:, 1])     # G's origin (K, 4)
+        oy = kin.elbow_y + (kin.s12 * box.p_JG[:, 0] + kin.c12 * box.p_JG[:, 1])
+        A = a12 + box.angle_JG
+        cA, sA = np.cos(A)[..., None], np.sin(A)[..., None]                 # (K, 4, 1)
+        rx, ry = wx - ox[..., None], wy - oy[..., None]                     # (K, 4, V)
+        gx_, gy_ = cA * rx + sA * ry, -sA * rx + cA * ry                    # p_GV
+        hl, hw = box.half_length[:, None], box.half_width[:, None]
+        phi, w = self._lse([gx_ - hl, -gx_ - hl, gy_ - hw, -gy_ - hw])
+        val = phi.reshape(nK, -1)
+        if not with_jacobian:
+            return val, None
+        gx, gy = w[0] - w[1], w[2] - w[3]                                   # gradient in G
+        gwx, gwy = cA * gx - sA * gy, sA * gx + cA * gy                     # in W
+        jac = np.zeros((nK, NUM_FINGERS, len(vx), LINK_SIZE))
+        jac[..., COL_P[0]], jac[..., COL_P[1]] = gwx, gwy
+        jac[..., COL_TH] = gwy * (wx - Z[:, 0, None, None]) - gwx * (wy - Z[:, 1, None, None])
+        # the box turns about the base (joint 1) and the elbow (joint 2): p_GV moves the other way
+        d_q1 = gwx * (wy - self._p_W_base[:, 1, None]) - gwy * (wx - self._p_W_base[:, 0, None])
+        d_q2 = gwx * (wy - kin.elbow_y[..., None]) - gwy * (wx - kin.elbow_x[..., None])
+        self._joint_columns(jac, d_q1, d_q2)
+        return val, jac.reshape(nK, -1, LINK_SIZE)
 
     def values_one(self, z: np.ndarray) -> np.ndarray:
         """The rows at one block z (LINK_SIZE,): `evaluate`'s arithmetic in Python floats, 2.5x
         faster for one knot (IPOPT asks for values at each trial point knot by knot); math's
-        exp and log may differ from numpy's in the last bit (tests compare them to 1e-12)."""
+        exp and log may differ from numpy's in the last bit (tests compare them to 1e-15)."""
         px, py, th, *q = z.tolist()
         ct, st = math.cos(th), math.sin(th)
         k, faces = self.body.sharpness, self._faces
-        out = []
-        for i, (psi, l1, base_x, base_y, points) in enumerate(self._scalars):
+        vertices = [(px + (ct * vx - st * vy), py + (st * vx + ct * vy)) for vx, vy in self._vertices.tolist()]
+        point_rows, vertex_rows = [], []
+        for i, (psi, l1, base_x, base_y, points, box) in enumerate(self._scalars):
             a1 = psi + q[2 * i]
             a12 = a1 + q[2 * i + 1]
             c1, s1, c12, s12 = math.cos(a1), math.sin(a1), math.cos(a12), math.sin(a12)
@@ -195,10 +278,21 @@ class LinkRows:
                     wx, wy = base_x + (c1 * lx - s1 * ly), base_y + (s1 * lx + c1 * ly)
                 rx, ry = wx - px, wy - py
                 bx, by = ct * rx + st * ry, -st * rx + ct * ry
-                d = [nx * bx + ny * by - h for nx, ny, h in faces]
-                dmax = max(d)
-                total = 0.0
-                for dj in d:
-                    total += math.exp(k * (dj - dmax))
-                out.append(dmax + math.log(total) / k - w)
-        return np.array(out)
+                point_rows.append(_lse_one([nx * bx + ny * by - h for nx, ny, h in faces], k) - w)
+            gjx, gjy, angle, hl, hw = box
+            ox, oy = elbow_x + (c12 * gjx - s12 * gjy), elbow_y + (s12 * gjx + c12 * gjy)
+            cA, sA = math.cos(a12 + angle), math.sin(a12 + angle)
+            for wx, wy in vertices:
+                rx, ry = wx - ox, wy - oy
+                gx, gy = cA * rx + sA * ry, -sA * rx + cA * ry
+                vertex_rows.append(_lse_one([gx - hl, -gx - hl, gy - hw, -gy - hw], k))
+        return np.array(point_rows + vertex_rows)
+
+
+def _lse_one(d: list, k: float) -> float:
+    """LinkRows._lse's phi for one point, in Python floats."""
+    dmax = max(d)
+    total = 0.0
+    for dj in d:
+        total += math.exp(k * (dj - dmax))
+    return dmax + math.log(total) / k
