@@ -225,13 +225,14 @@ class CitoConfig:
     # (a fixed finger 0.11 mm off its contact). 0.01 is the fewest iterations.
     switch_clearance: float = 0.01
     # Link rows (cito/links.py, not in the paper; configs/paper.yaml turns them off): at every knot
-    # whose pose or joints are free, sampled points of each finger's link collision boxes keep
-    # their box's half width plus link_clearance off the object (smooth distance; never more than
-    # the program's fixed end knots, the search's nodes, have). Without them 43 of the 60 seed-0
-    # keyframes plans had a link inside the box mid-segment, up to 24 mm.
+    # whose pose or joints are free, points on each finger's link collision boxes keep the box's
+    # half width plus link_clearance off the object, and the object's vertices keep link_clearance
+    # off each link-2 box (smooth distances; never more than the program's fixed end knots, the
+    # search's nodes, have). Without them 44 of the 60 seed-0 keyframes plans had a link inside
+    # the box mid-segment, up to 32 mm; with them none, at 1.5x the IPOPT iterations.
     link_rows: bool = True          # false: only the fingertip spheres see the object (the paper)
-    # m. Goal -0.089 rad, segment 5: with 0 link 2 still cut 0.05 mm into the box beside an active
-    # point (exact test); with 0.5 mm or 1 mm it stayed clear.
+    # m. Goal -0.089 rad, segment 5 (points only): with 0 link 2 still cut 0.05 mm into the box
+    # beside an active point (exact test); with 0.5 mm or 1 mm it stayed clear.
     link_clearance: float = 0.001
     # IPOPT tol, on the scaled optimality error; constraints are held to constr_viol_tol regardless.
     # 1e-3 instead of 1e-6: 67 instead of 88 iterations on a 3-segment plan, objective 0.007 % higher.

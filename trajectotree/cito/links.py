@@ -1,28 +1,35 @@
-"""Link non-penetration rows: points on each finger's link collision boxes keep out of the object.
+"""Link non-penetration rows: each finger's link collision boxes keep out of the object.
 
 The knot rows (knot.py) let only the fingertip spheres see the object, so a finger's links
-could pass through it between the search's nodes (43 of 60 keyframes plans of the seed-0
-goals did, up to 24 mm deep). Here, at every knot whose pose or joints are free, points
-p_L on the centreline of each link's collision box (SceneGraph's, `FingerGeometry.link_boxes`)
-must satisfy
+could pass through it between the search's nodes (44 of the 60 seed-0 keyframes plans did,
+43 of them over 5 mm, up to 32 mm). Here, at every knot whose pose or joints are free, two
+kinds of rows on the link boxes (SceneGraph's, `FingerGeometry.link_boxes`), each >= the
+clearance c (CitoConfig.link_clearance):
 
-    phi(p_BL) - w >= link_clearance,   p_BL = R^T (p_WL - p),
+  points:   phi(p_BL) - w >= c,   p_BL = R^T (p_WL - p), p_L on a box's centreline,
+            phi the log-sum-exp object distance of the fingertip rows (contact.py), w the box's
+            half width: a disc of radius w + c around each point stays out of the object;
+  vertices: psi_i(p_GV) >= c for each object vertex V and finger i's link-2 box G, psi_i the
+            same log-sum-exp over the box's four faces in its own frame: each object corner
+            stays out of the box (exact at a face, up to log(2)/k = 0.7 mm deeper at the box's
+            corners, conservative beyond them).
 
-phi the same log-sum-exp object distance as the fingertip rows (contact.py) and w the box's
-half width: a disc of radius w + clearance around each point stays out of the object.
 The points (LINK_FRACTIONS, of each box's length from its joint end): link 1 at its middle
 and its far end (the elbow, also link 2's joint end), link 2 at 1/4, 1/2 and 3/4. In the 60
-plans every inside point of link 1 lay within its last 17 % (elbow side), those of link 2
-anywhere along it; link 2's far end (85 mm from the elbow) is within 15 mm of the fingertip
-sphere's centre, which keeps r = 10 mm (> w = 4.8 mm) off the object already. Between the
-points an object corner can still reach into a link's side (the rows see the side only at
-the points); the measured depths are in README's "Trajectory optimization".
+plans without these rows every inside point of link 1 lay within its last 17 % (elbow side),
+those of link 2 anywhere along it; link 2's far end (85 mm from the elbow) is within 15 mm of
+the fingertip sphere's centre, which keeps r = 10 mm (> w = 4.8 mm) off the object already.
+With the points alone an object corner still reached between two points into link 2 (the
+switching finger rounding a corner: 20 of the 60 plans, up to 5.5 mm): hence the vertex rows,
+after which none of the 60 had a link inside the object. Link 1 has no vertex rows: its
+inside points were all at the elbow, which the elbow point keeps out.
 
 Each row depends on the knot's object pose and the finger's two joints only, so each knot's
 binding holds just those (x, q: LINK_SIZE variables; IPOPT's AutoDiff inputs are 11 wide, not
 the knot's 53): d p_WL / d q_j = K (p_WL - p_WJ_j) for the joints j at or before the link
-(K: +90 degrees). `evaluate` is elementwise (no matmul), so a batch of knots and one knot
-give the same bits, as program._KnotCache expects of the rows it serves.
+(K: +90 degrees); a vertex moves by the opposite in the box's frame. `evaluate` is elementwise
+(no matmul), so a batch of knots and one knot give the same bits, as program._KnotCache
+expects of the rows it serves.
 """
 
 from __future__ import annotations
@@ -113,9 +120,9 @@ COL_Q = 3 + 2 * np.arange(NUM_FINGERS)[:, None] + np.arange(2)     # (4, 2)
 
 
 class LinkRows:
-    """The link rows of K knots (values phi(p_BL) - w, finger-major, P per finger) on their
-    (x, q) blocks, with the interface program._KnotCache and _KnotConstraint use: evaluate,
-    knot, values_one, num_rows."""
+    """The link rows of K knots on their (x, q) blocks: P point rows per finger (phi(p_BL) - w),
+    then V vertex rows per finger (psi_i(p_GV)), both finger-major, with the interface
+    program._KnotCache and _KnotConstraint use: evaluate, knot, values_one, num_rows."""
 
     def __init__(self, body, num_knots: int):
         self.body = body
@@ -145,11 +152,11 @@ class LinkRows:
         return np.concatenate([np.asarray(x, dtype=float), np.asarray(q, dtype=float)])
 
     def bounds(self, clearance: float, fixed_states=()):
-        """(lower, upper) of one knot's rows: each point's gap >= clearance (m), but no more than
-        the point has at any of `fixed_states` ((x, q) pairs: the program's fixed end knots, the
-        search's nodes). The search clears the link boxes by its exact test, which may leave a
-        point within the clearance, or (beyond an object corner, where the smooth distance is
-        below the exact one) below 0: the knots next to the node could not get out in time."""
+        """(lower, upper) of one knot's rows: each row >= clearance (m), but no more than it has
+        at any of `fixed_states` ((x, q) pairs: the program's fixed end knots, the search's
+        nodes). The search clears the link boxes by its exact test, which may leave a row within
+        the clearance, or (where a smooth distance is conservative, beyond a corner) below 0:
+        the knots next to the node could not get out in time."""
         lower = np.full(int(self.num_rows[0]), float(clearance))
         for x, q in fixed_states:
             lower = np.minimum(lower, self.values_one(self.block(x, q)))
