@@ -212,8 +212,9 @@ def test_paper_config_loads_with_the_papers_formulation():
     assert dataclasses.replace(config.search, friction_safety=default.search.friction_safety, rolled_stances=default.search.rolled_stances,
                                grid_refinements=default.search.grid_refinements,
                                max_stance_force=default.search.max_stance_force) == default.search
+    assert not config.cito.link_rows                                # the paper models no links
     assert dataclasses.replace(config.cito, switch_clearance=default.cito.switch_clearance,
-                               formulation=default.cito.formulation) == default.cito
+                               formulation=default.cito.formulation, link_rows=default.cito.link_rows) == default.cito
 
 
 def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):
