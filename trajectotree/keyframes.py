@@ -13,6 +13,10 @@ contact rows, the friction cones) is linear in them at the fixed state, and the 
 rule on either side sees the same zero acceleration, so the stitched arrays satisfy the
 joint program's constraints wherever both segments do. The final pose is the goal node's.
 
+The link rows (cito.link_rows) are added on demand (cito.link_rows_on_demand): a segment is
+first solved without them and, when one of its links then overlaps the object (the physics
+check's exact test), again with them from the plan's guess ("links").
+
 A segment that fails is retried: one IPOPT did not converge first from its last iterate
 ("restart": IPOPT's barrier and L-BFGS memory start afresh; a converged one would only converge
 there again), then, still failing or converged with arrays that fail the physics check, with the
@@ -48,7 +52,7 @@ from trajectotree.cito.variables import CitoVariables
 from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.physics import ObjectModel, check_physics, contact_points
-from trajectotree.results import PhysicsCheck, PlanResult, Trajectory
+from trajectotree.results import LINK_PENETRATION_TOL, PhysicsCheck, PlanResult, Trajectory
 from trajectotree.scene import Scene, build_scene
 
 # Local worker processes start by fork where the platform has it: a child inherits the loaded
@@ -71,7 +75,8 @@ class PieceTask:
     plan: ContactPlan
     first: int
     last: int
-    kind: str                         # "keyframes", "restart" (from `guess`), "joint" (with the neighbours)
+    kind: str                         # "keyframes", "restart" (from `guess`), "links" (with the link rows),
+    #                                   "joint" (with the neighbours)
     #                                   or "strict" (a joint one, pinned fingers STRICT_PINNING times harder)
     guess: np.ndarray | None = None   # (K, KNOT_SIZE) initial guess (None: the plan's guess)
 
@@ -199,20 +204,29 @@ def solve_segments(plan: ContactPlan, config: Config, mu: float, executor: Execu
     """(the pieces to stitch, in order; every attempt per segment), with the retries."""
     n = len(plan.nodes) - 1
 
-    strict = dataclasses.replace(config.cito, weight_contact_slack=config.cito.weight_contact_slack * STRICT_PINNING)
+    cito = config.cito
+    on_demand = cito.link_rows and cito.link_rows_on_demand
+    configs = {"strict": dataclasses.replace(cito, weight_contact_slack=cito.weight_contact_slack * STRICT_PINNING),
+               "keyframes": dataclasses.replace(cito, link_rows=False) if on_demand else cito}
+    configs["restart"] = configs["keyframes"]
 
     def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
-        return PieceTask(config.scene, strict if kind == "strict" else config.cito, mu, plan, first, last, kind,
-                         guess)
+        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess)
+
+    def retry(segments: list[int], kind: str, from_last_iterate: bool) -> None:
+        """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
+        guesses = [best[s].solution if from_last_iterate else None for s in segments]
+        for s, r in zip(segments, run_pieces([task(s, s + 1, kind, g) for s, g in zip(segments, guesses)],
+                                             executor, workers)):
+            attempts[s].append(r)
+            best[s] = r
 
     best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers)
     attempts = {s: [best[s]] for s in range(n)}
-    unconverged = [s for s in range(n) if not best[s].converged]
-    if unconverged:
-        for s, r in zip(unconverged, run_pieces([task(s, s + 1, "restart", best[s].solution) for s in unconverged],
-                                                executor, workers)):
-            attempts[s].append(r)
-            best[s] = r
+    retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
+    if on_demand:   # from the guess: from a link deep inside the object (goal -0.089: 21 mm) IPOPT hit max_iter
+        retry([s for s in range(n) if best[s].check.link_penetration_m > LINK_PENETRATION_TOL], "links",
+              from_last_iterate=False)
     pieces = {s: best[s] for s in range(n)}   # keyed by each piece's first node
     for kind in ("joint", "strict"):
         failed = [s for s, p in sorted(pieces.items()) if not p.success]   # single segments: a joint piece passed

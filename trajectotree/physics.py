@@ -14,7 +14,8 @@ Anyone holding plan.npz can recompute these numbers (its arrays: README, "Trajec
   - link_penetration: how deep any finger link's collision box overlaps the box (m; the least
     translation that separates them), given the hand's links (ObjectModel.fingers).
 A plan passes when no fingertip more than GAP_TOL off the box carries more than
-FORCE_TOL, none sinks deeper than PENETRATION_TOL, the cones hold to CONE_TOL and
+FORCE_TOL, none sinks deeper than PENETRATION_TOL, no link overlaps it deeper than
+LINK_PENETRATION_TOL (where the links are given), the cones hold to CONE_TOL and
 Newton-Euler to NEWTON_EULER_TOL.
 """
 
@@ -29,7 +30,8 @@ from trajectotree.geometry import ConvexPolygon, poses_box_to_world, poses_world
 # The check's value type and its tolerances live with the other saved values (plan.json records both).
 if TYPE_CHECKING:  # annotations only: the check itself needs numpy alone
     from trajectotree.scene import FingerGeometry
-from trajectotree.results import CONE_TOL, FORCE_TOL, GAP_TOL, NEWTON_EULER_TOL, PENETRATION_TOL, PhysicsCheck
+from trajectotree.results import (CONE_TOL, FORCE_TOL, GAP_TOL, LINK_PENETRATION_TOL, NEWTON_EULER_TOL, PENETRATION_TOL,
+                                  PhysicsCheck)
 
 
 @dataclass(frozen=True)
@@ -116,6 +118,9 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     if penetration > PENETRATION_TOL:
         reasons.append(f"finger {i_deep} sinks {1e3 * penetration:.2f} mm into the box at knot {k_deep} "
                        f"(limit {1e3 * PENETRATION_TOL:g} mm)")
+    if link_depth > LINK_PENETRATION_TOL:
+        reasons.append(f"a link of finger {i_link} overlaps the box by {1e3 * link_depth:.2f} mm at knot {k_link} "
+                       f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)")
     if cone > CONE_TOL:
         reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
     if max(ne_force, ne_moment) > NEWTON_EULER_TOL:

@@ -38,6 +38,9 @@ NEWTON_EULER_TOL = 1e-4   # N and N m, Newton-Euler residual tolerated: 0.02 % o
 # lies up to log(2)/k = 0.7 mm above the exact one at a corner (cito.sdf_sharpness k); 299 plans of
 # the 60-goal and polygon sweeps sank at most 0.09 mm
 PENETRATION_TOL = 1e-3
+# m, how deep a finger link's collision box may overlap the object: the link rows keep 1 mm of
+# smooth distance (cito.link_clearance), exact at a face
+LINK_PENETRATION_TOL = 1e-3
 
 
 def check_method(method: str) -> str:
@@ -103,7 +106,8 @@ class PhysicsCheck:
         """The fields (non-finite numbers as None: JSON has no NaN) and the tolerances."""
         values = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in asdict(self).items()}
         return {**values, "gap_tol_m": GAP_TOL, "force_tol_N": FORCE_TOL, "cone_tol_N": CONE_TOL,
-                "newton_euler_tol": NEWTON_EULER_TOL, "penetration_tol_m": PENETRATION_TOL}
+                "newton_euler_tol": NEWTON_EULER_TOL, "penetration_tol_m": PENETRATION_TOL,
+                "link_penetration_tol_m": LINK_PENETRATION_TOL}
 
     @staticmethod
     def from_json(data: dict) -> "PhysicsCheck":
