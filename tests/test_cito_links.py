@@ -14,7 +14,7 @@ from trajectotree.cito.program import build_program, link_knots
 from trajectotree.cito.transition import piece_spec, transition_spec
 from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig
 from trajectotree.geometry import rotation_2d
-from trajectotree.keyframes import PieceTask, solve_piece
+from trajectotree.keyframes import PieceTask, solve_piece, solve_segments
 from trajectotree.planners import planning_mu
 from trajectotree.reach import Reachability, rectangles_overlap_polygon
 from trajectotree.scene import NUM_FINGERS, build_scene
@@ -166,7 +166,12 @@ def test_segment_whose_link_cut_the_box_is_clear_with_the_rows(scene):
         return solve_piece(task)
 
     without = segment(dataclasses.replace(CONFIG.cito, link_rows=False))
-    assert without.success and {(i, j) for _, i, j in links_overlap(scene, without.trajectory)} == {(3, 2)}
+    assert without.converged and {(i, j) for _, i, j in links_overlap(scene, without.trajectory)} == {(3, 2)}
+    assert not without.success and "a link of finger 3 overlaps the box" in without.check.reason   # the check's rule
     with_rows = segment(CONFIG.cito)
     assert with_rows.success, with_rows.status
     assert links_overlap(scene, with_rows.trajectory) == []
+    # on demand (the default), that segment alone is solved again with the rows
+    pieces, attempts = solve_segments(contact_plan, CONFIG, planning_mu(CONFIG), workers=1)
+    assert [r.kind for r in attempts[SEGMENT]] == ["keyframes", "links"] and all(p.success for p in pieces)
+    assert all(p.check.link_penetration_m <= 1e-3 for p in pieces)

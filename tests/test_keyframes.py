@@ -87,9 +87,10 @@ def test_keyframes_plan_is_continuous_at_the_nodes_and_physical(scene, contact_p
     check = check_physics(a.arrays(), ObjectModel.from_scene(scene), planning_mu(CONFIG))
     assert check.passed and check == serial.physics_check, check.reason
     assert check.newton_euler_force_N < 1e-6
-    for record in serial.segments:
-        assert record["success"] and record["retries"] == 0 and record["iterations"] > 0
-        assert [r["kind"] for r in record["attempts"]] == ["keyframes"]
+    for record in serial.segments:   # segment 0's link 2 of a finger cuts the box without the link rows
+        assert record["success"] and record["iterations"] > 0
+        assert [r["kind"] for r in record["attempts"]] in (["keyframes"], ["keyframes", "links"])
+    assert [len(r["attempts"]) for r in serial.segments] == [2, 1]
     assert serial.iterations == sum(r["iterations"] for r in serial.segments)
 
 
@@ -176,7 +177,8 @@ def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
     # max_iter 14 stops both segments short (they need 21 and 16 iterations here, 16 and 14 without
     # the link rows); the restart from the last iterate converges within 14 more (11 and 12), so the
     # plan succeeds with one retry per segment.
-    config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, max_iter=14))
+    # The link rows in every segment from the start (not on demand), so no "links" attempt intervenes.
+    config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, max_iter=14, link_rows_on_demand=False))
     result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan,
                   segment_workers=1)
     assert result.success and result.physics_check.passed, result.status
@@ -195,7 +197,8 @@ def test_a_segment_failing_the_physics_check_is_retried_with_its_neighbours(scen
     q[4] += 0.1
     bad = dataclasses.replace(contact_plan, nodes=(contact_plan.nodes[0], dataclasses.replace(node, q=q),
                                                    contact_plan.nodes[2]))
-    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=bad,
+    config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, link_rows_on_demand=False))
+    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=bad,
                   segment_workers=1)
     assert result.success and result.physics_check.passed, result.status
     first, second = result.segments
