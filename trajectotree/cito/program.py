@@ -80,7 +80,8 @@ class _KnotCache:
     Drake passes to the visualization callback at every cost evaluation (`primed`), and
     the knots' latest float-path inputs (`seen`: IPOPT asks for every knot's values at a
     point before its Jacobians there, at the start and after a restoration). Batch rows
-    equal one-knot evaluations bit for bit, so which vector served a knot never matters."""
+    equal one-knot evaluations bit for bit (LinkRows' to rounding: its values_one uses math's exp
+    and log), so which vector served a knot never matters."""
 
     def __init__(self, rows, num_knots: int, width: int = KNOT_SIZE):
         self.rows, self.num_knots, self.width = rows, num_knots, width   # rows: KnotRows, or LinkRows (width LINK_SIZE)
