@@ -62,6 +62,11 @@ class ProgramSpec:
     def num_knots(self) -> int:
         return self.pinned.shape[0]
 
+    @property
+    def last_knot_fixed(self) -> bool:
+        """Both the last knot's pose and joints fixed (keyframes: it is a search node)."""
+        return self.x_end is not None and self.q_end is not None
+
 
 @dataclass
 class CitoProgram:
@@ -230,8 +235,7 @@ def link_knots(spec: ProgramSpec) -> list[int]:
     """The knots whose object pose or joint angles are free: all but the first (x_0, q_0 fixed)
     and, when both are fixed there (keyframes), the last. The search's nodes keep the links
     clear of the object by its own exact test."""
-    last_fixed = spec.x_end is not None and spec.q_end is not None
-    return list(range(1, spec.num_knots - 1 if last_fixed else spec.num_knots))
+    return list(range(1, spec.num_knots - 1 if spec.last_knot_fixed else spec.num_knots))
 
 
 def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, clearance: float) -> list:
@@ -240,7 +244,7 @@ def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, cl
     blocks = np.concatenate([v.x, v.q], axis=1)                       # (K, LINK_SIZE)
     cache = _KnotCache(rows, spec.num_knots, LINK_SIZE)
     prog.AddVisualizationCallback(cache.prime, blocks.ravel())
-    fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.x_end is not None and spec.q_end is not None else [])
+    fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.last_knot_fixed else [])
     lower, upper = rows.bounds(clearance, fixed)
     pattern = rows.sparsity()
     bindings = []
