@@ -19,9 +19,9 @@ import sys
 import numpy as np
 
 from trajectotree.config import Config
-from trajectotree.reference import Reference, reference_from_arrays, reference_from_plan
-from trajectotree.scene import build_scene
-from trajectotree.simulate import simulate_reference
+from trajectotree.execution.reference import Reference, reference_from_arrays, reference_from_plan
+from trajectotree.scene.plant import build_scene
+from trajectotree.execution.simulate import simulate_reference
 
 CONTROLLERS = ("grasp", "paper")
 
@@ -32,7 +32,7 @@ def load_reference(plan_dir: str | None, goal: float) -> tuple[Reference, Config
         from trajectotree.cli.simulate_cmd import read_plan_dir
         arrays, config = read_plan_dir(plan_dir)
         return reference_from_arrays(arrays, build_scene(config.scene)), config
-    from trajectotree.planners import plan
+    from trajectotree.planning.planners import plan
     config = Config()
     scene = build_scene(config.scene)
     result = plan(scene=scene, goal=goal, method="trajectotree", config=config)

@@ -2,7 +2,7 @@
 the paper's 60, seed 0) with each method and prints, per method, the mean and median
 total planning time, the search / build / solve split, IPOPT iterations, the share of
 IPOPT's time spent in function evaluations, build time relative to solve time, the
-success rate (with how many solved plans failed the physics check of trajectotree.physics
+success rate (with how many solved plans failed the physics check of trajectotree.planning.physics
 and the largest force on a fingertip off the box), the converged plans' final orientation error
 and largest constraint violation per group, and TrajectoTree's speedup over each baseline measured
 in this run. --json writes every per-goal row.
@@ -35,10 +35,10 @@ import numpy as np
 from tqdm import tqdm
 
 from trajectotree.config import FORMULATIONS, Config, config_to_dict, load_config
-from trajectotree.keyframes import local_pool, prepare_worker
-from trajectotree.planners import METHODS, plan
-from trajectotree.scene import build_scene
-from trajectotree.sweep import sample_goals
+from trajectotree.planning.keyframes import local_pool, prepare_worker
+from trajectotree.planning.planners import METHODS, plan
+from trajectotree.scene.plant import build_scene
+from trajectotree.experiments.sweep import sample_goals
 
 
 def plan_row(r, search_s: float | None = None) -> dict:
@@ -50,7 +50,7 @@ def plan_row(r, search_s: float | None = None) -> dict:
         "search_s": search, "build_s": r.build_time_s, "solve_s": r.solve_time_s, "iterations": r.iterations,
         "cost": r.cost, "function_evaluations_share": timing.get("nlp_function_evaluations_s", np.nan)
         / timing.get("ipopt_total_s", np.nan),
-        # a solved plan whose arrays fail trajectotree.physics (counted in success = False)
+        # a solved plan whose arrays fail trajectotree.planning.physics (counted in success = False)
         "converged": r.converged, "physics_failed": check is not None and not check.passed,
         "force_at_distance_N": np.nan if check is None else check.force_at_distance_N,
         # deg, the plan's last orientation vs the goal

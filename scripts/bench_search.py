@@ -12,12 +12,12 @@ import numpy as np
 
 from trajectotree.config import SearchConfig
 from trajectotree.geometry import ConvexPolygon
-from trajectotree.grasp import FormClosureLp, grasp_matrix
-from trajectotree.initial_grasp import initial_grasp_candidates
-from trajectotree.reach import Reachability
-from trajectotree.scene import build_scene
-from trajectotree.search import find_contact_plan
-from trajectotree.sweep import sample_goals
+from trajectotree.search.grasp import FormClosureLp, grasp_matrix
+from trajectotree.search.initial_grasp import initial_grasp_candidates
+from trajectotree.search.reach import Reachability
+from trajectotree.scene.plant import build_scene
+from trajectotree.search.tree import find_contact_plan
+from trajectotree.experiments.sweep import sample_goals
 
 
 def lp_times(boundary: ConvexPolygon, mu: float, count: int, rng) -> np.ndarray:

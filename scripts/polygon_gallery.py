@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import Config, ConfigError, ObjectConfig, SceneConfig
-from trajectotree.report import load_sweep
-from trajectotree.sweep import SweepSpec, run_sweep
+from trajectotree.experiments.report import load_sweep
+from trajectotree.experiments.sweep import SweepSpec, run_sweep
 
 
 def regular(sides: int, circumradius: float) -> tuple[tuple[float, float], ...]:
@@ -81,10 +81,10 @@ def keyframe_figure(sweep_dir: Path, rows: list[dict], config: Config, path: Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.figures import figure_keyframes, save_figure
-    from trajectotree.initial_grasp import mu_plan
+    from trajectotree.figures.run import figure_keyframes, save_figure
+    from trajectotree.search.initial_grasp import mu_plan
     from trajectotree.io import load_plan
-    from trajectotree.scene import build_scene
+    from trajectotree.scene.plant import build_scene
     planned = sorted((r for r in rows if r.get("success")), key=lambda r: r["goal_index"])
     if not planned:
         return None

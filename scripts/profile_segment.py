@@ -42,9 +42,9 @@ def measure(segments: int, goals: list[float]) -> list[dict]:
     from trajectotree.cito.solve import solve
     from trajectotree.cito.transition import transition_spec
     from trajectotree.config import Config
-    from trajectotree.planners import planning_mu
-    from trajectotree.scene import build_scene
-    from trajectotree.search import find_contact_plan
+    from trajectotree.planning.planners import planning_mu
+    from trajectotree.scene.plant import build_scene
+    from trajectotree.search.tree import find_contact_plan
 
     base = Config()
     config = dataclasses.replace(base, search=dataclasses.replace(base.search, num_nodes=segments + 1))

@@ -3,11 +3,11 @@
 60 goal rotations drawn uniformly in [-pi, pi] with seed 0; each planned with TrajectoTree,
 CITO and CITO warm-start and executed in simulation under both controllers (the grasp
 controller and the paper's eq. 20); TrajectoTree's plans also under model mismatch and a push
-(trajectotree.executions); then the figures (PNG + PDF) and the tables (Markdown + CSV).
+(trajectotree.experiments.executions); then the figures (PNG + PDF) and the tables (Markdown + CSV).
 The same as
 
     trajectotree sweep --goals 60 --seed 0 --controllers grasp paper --out SWEEP_DIR
-    (the TrajectoTree plans under grasp x mismatch, push: trajectotree.executions.run_executions)
+    (the TrajectoTree plans under grasp x mismatch, push: trajectotree.experiments.executions.run_executions)
     trajectotree report SWEEP_DIR --out REPORT_DIR
 
 The plans are made first (the sweep), the executions after them (a post-pass over the saved
@@ -25,9 +25,9 @@ import time
 from pathlib import Path
 
 from trajectotree.config import CONTROLLERS, Config, ConfigError
-from trajectotree.executions import run_executions
-from trajectotree.report import make_report, table_markdown
-from trajectotree.sweep import METHODS, SweepSpec, run_sweep
+from trajectotree.experiments.executions import run_executions
+from trajectotree.experiments.report import make_report, table_markdown
+from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
 
 def main() -> int:

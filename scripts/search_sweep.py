@@ -1,5 +1,5 @@
 """The paper's search experiment: the contact-sequence planner on 60 goal rotations drawn
-uniformly from [-pi, pi] (seed 0, trajectotree.sweep.sample_goals; N = 10 by default), or
+uniformly from [-pi, pi] (seed 0, trajectotree.experiments.sweep.sample_goals; N = 10 by default), or
 on an evenly spaced grid of goals (--grid K: K goals from -pi to pi). Prints each goal's
 outcome (initial grasp, how many candidate grasps were searched, the largest friction any
 switching stance needs), then the success rate and the median and max search time.
@@ -18,9 +18,9 @@ import dataclasses
 import numpy as np
 
 from trajectotree.cli.common import add_config_options, config_from_args
-from trajectotree.scene import build_scene
-from trajectotree.search import find_contact_plan
-from trajectotree.sweep import sample_goals
+from trajectotree.scene.plant import build_scene
+from trajectotree.search.tree import find_contact_plan
+from trajectotree.experiments.sweep import sample_goals
 
 
 def main() -> None:

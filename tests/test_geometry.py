@@ -152,7 +152,7 @@ def test_bad_polygons_are_named(points, problem):
 
 
 def test_penetration_depth_closed_forms_and_the_search_overlap_test():
-    from trajectotree.reach import rectangles_overlap_polygon
+    from trajectotree.search.reach import rectangles_overlap_polygon
 
     def square(cx, cy, h):
         return np.array([[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h]])

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 import trajectotree
 from trajectotree.config import SceneConfig
-from trajectotree.scene import MODELS_DIR, build_scene
+from trajectotree.scene.plant import MODELS_DIR, build_scene
 site = Path(sys.argv[1]).resolve()
 assert Path(trajectotree.__file__).resolve().is_relative_to(site), trajectotree.__file__
 assert Path(str(MODELS_DIR)).resolve() == site / "trajectotree" / "models", MODELS_DIR

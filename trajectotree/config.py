@@ -127,7 +127,7 @@ class SearchConfig:
     displacement_step: float = 0.02
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
     # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
-    # roots the search at the best ones in turn (trajectotree.initial_grasp).
+    # roots the search at the best ones in turn (trajectotree.search.initial_grasp).
     initial_arclengths: tuple[float, float, float, float] | None = None
     nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
     min_closure_margin: float = 1e-3    # N, form-closure LP margin d* must exceed this
@@ -135,16 +135,16 @@ class SearchConfig:
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
     # bool: every three-finger stance must also be in closure at mu_plan (and off the corners) at
-    # the contacts its sticking fingertip spheres roll to (trajectotree.stance). False: the paper.
+    # the contacts its sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
     rolled_stances: bool = True
     # N, a switch is refused when its three holding fingers need more than this total normal force
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
-    # transition (trajectotree.stance). On polygons the CITO segments that failed needed 12-83 N,
+    # transition (trajectotree.search.stance). On polygons the CITO segments that failed needed 12-83 N,
     # those that converged first time <= 7.3 N (weight 0.49 N; the joints give at most 1 N m).
     # 0: no cap (the paper).
     max_stance_force: float = 10.0
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
-    # (trajectotree.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
+    # (trajectotree.search.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
     initial_grid_step: float = 0.02
     # candidate initial grasps the search is rooted at, best first (per contact grid). The box's plans
     # all come from its first candidate; a small polygon's trees die within a few expansions, so more
@@ -330,7 +330,7 @@ class ControllerGains:
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
-FORMULATIONS = ("keyframes", "joint")  # cito.formulation values: trajectotree.keyframes, the paper's one program
+FORMULATIONS = ("keyframes", "joint")  # cito.formulation values: trajectotree.planning.keyframes, the paper's one program
 
 
 def check_controller(value: str, name: str = "controller") -> str:

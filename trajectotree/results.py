@@ -2,7 +2,7 @@
 
 Planning yields a `PlanResult` (its `Trajectory` holds the plan.npz arrays, its
 `PhysicsCheck` the check of those arrays); executing a plan yields a `SimLog`, which
-`trajectotree.metrics.evaluate` turns into a `SimResult` (the log and its tracking
+`trajectotree.execution.metrics.evaluate` turns into a `SimResult` (the log and its tracking
 metrics: sim.json and sim.npz). `trajectotree.io` saves and loads them all.
 
 This module imports nothing that builds or runs anything (no Drake, no other stage),
@@ -29,7 +29,7 @@ TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t
 # The sim.npz arrays (README, "Executing a plan").
 SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error", "f_W", "f_W_plan")
 
-# The physics check's rule (trajectotree.physics; written into plan.json with each check):
+# The physics check's rule (trajectotree.planning.physics; written into plan.json with each check):
 GAP_TOL = 1e-4            # m, a fingertip sphere farther than this from the box is off it (issue 13's rule)
 FORCE_TOL = 0.01          # N, the most force a fingertip off the box may carry (issue 13's rule)
 CONE_TOL = 1e-6           # N, friction-cone violation tolerated (IPOPT holds the linear cone rows to ~1e-8)
@@ -84,7 +84,7 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class PhysicsCheck:
-    """The check of a plan's arrays (trajectotree.physics.check_physics)."""
+    """The check of a plan's arrays (trajectotree.planning.physics.check_physics)."""
 
     newton_euler_force_N: float        # max |translational residual| over knots, N
     newton_euler_moment_Nm: float      # max |rotational residual| over knots, N m
@@ -139,13 +139,13 @@ class PlanResult:
     converged: bool = False
     formulation: str = "joint"       # cito.formulation that made it (the baselines: always one joint program)
     # keyframes: per segment (plan.json "segments"): nodes, success, status, iterations, time_s,
-    # retries and every attempt (trajectotree.keyframes.segment_records); () for the joint program
+    # retries and every attempt (trajectotree.planning.keyframes.segment_records); () for the joint program
     segments: tuple = ()
 
 
 @dataclass(frozen=True)
 class SimLog:
-    """What one execution of a plan recorded (trajectotree.simulate), sampled at t."""
+    """What one execution of a plan recorded (trajectotree.execution.simulate), sampled at t."""
 
     t: np.ndarray            # (T,) s, sample times
     x: np.ndarray            # (T, 3) simulated object pose (x m, y m, theta rad)
@@ -160,14 +160,14 @@ class SimLog:
 
 @dataclass(frozen=True)
 class SimResult(SimLog):
-    """A SimLog with its tracking metrics (trajectotree.metrics.evaluate): sim.json and sim.npz."""
+    """A SimLog with its tracking metrics (trajectotree.execution.metrics.evaluate): sim.json and sim.npz."""
 
     abs_error: np.ndarray    # (T, 3) |x - x_plan|, held at its drop-time value after a drop
     mae_x: float             # m, time mean of |x error|
     mae_y: float             # m
     mae_theta: float         # rad
     final_error: tuple[float, float, float]  # (m, m, rad) absolute error at the last sample
-    dropped: bool            # the drop rule fired (trajectotree.metrics.detect_drop)
+    dropped: bool            # the drop rule fired (trajectotree.execution.metrics.detect_drop)
     drop_time_s: float | None  # s, when it fired
 
     def to_json(self) -> dict:

@@ -18,7 +18,7 @@ from trajectotree.cito.program import ProgramSpec
 from trajectotree.cito.variables import GROUPS, CitoVariables
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import ConvexPolygon, rotation_2d
-from trajectotree.scene import NUM_FINGERS
+from trajectotree.scene.plant import NUM_FINGERS
 
 # Height (m) the switching finger is lifted off the surface halfway through its
 # move in the plan-based guess, so the guessed path does not cut through the object.

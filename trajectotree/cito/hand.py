@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.kinematics import TwoLinkFinger
-from trajectotree.scene import NUM_FINGERS, Scene
+from trajectotree.scene.kinematics import TwoLinkFinger
+from trajectotree.scene.plant import NUM_FINGERS, Scene
 
 
 def _per_finger(q: np.ndarray) -> np.ndarray:

@@ -35,8 +35,8 @@ from trajectotree.cito.layout import (COL_P, COL_PD, COL_PDD, COL_TH, COL_THD, C
                                       FREE_ROWS, FREE_SLIP, NUM_BODY_ROWS, PIN_MINUS, PIN_PLUS, PINNED_ROWS,
                                       ROW_FORCE, ROW_HAND, ROW_MOMENT, TWO)
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
-from trajectotree.kinematics import K90, jacobian_from_links
-from trajectotree.scene import NUM_FINGERS
+from trajectotree.scene.kinematics import K90, jacobian_from_links
+from trajectotree.scene.plant import NUM_FINGERS
 
 
 class BodyParams:

@@ -18,8 +18,8 @@ from trajectotree.cito.layout import (COL_G, COL_LN, COL_LT, COL_P, COL_P_IDX, C
                                       PIN_MINUS, PIN_PLUS, ROW_FORCE, ROW_HAND, ROW_HAND_IDX,
                                       ROW_MOMENT, TWO)
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
-from trajectotree.kinematics import K90
-from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
+from trajectotree.scene.kinematics import K90
+from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS
 
 _I2 = np.eye(2)
 # Free-finger slip rows FREE_SLIP + s, s = 0..3: gamma + SLIP_SIGN[s] v_a lambda_n, a = SLIP_A[s].

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from trajectotree.cito.variables import SLICES
-from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
+from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS
 
 _F = np.arange(NUM_FINGERS)
 TWO = np.arange(2)

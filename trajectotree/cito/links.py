@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.scene import NUM_FINGERS
+from trajectotree.scene.plant import NUM_FINGERS
 
 # Per link (1, 2), the sampled fractions of its collision box's length from the joint end.
 LINK_FRACTIONS = ((0.5, 1.0), (0.25, 0.5, 0.75))

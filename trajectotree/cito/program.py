@@ -35,7 +35,7 @@ from trajectotree.cito.knot import BodyParams, KnotRows
 from trajectotree.cito.links import LINK_SIZE, LinkRows
 from trajectotree.cito.variables import KNOT_SIZE, CitoVariables, width
 from trajectotree.config import CitoConfig
-from trajectotree.scene import NUM_FINGERS
+from trajectotree.scene.plant import NUM_FINGERS
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ K = (N-1) M_hat + 1 (the paper's M = (N-1) M_hat time steps). In segment s:
 Pinning means the fingertip centre sits at p*_BC + r n*_B in the box frame, relaxed
 by the finger's penalized slack, with the planned contact frame.
 `piece_spec` is the same program over some of the nodes with both ends fixed at them (the
-keyframes formulation, trajectotree.keyframes).
+keyframes formulation, trajectotree.planning.keyframes).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 from trajectotree.cito.program import ProgramSpec
 from trajectotree.config import CitoConfig, ConfigError
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.scene import NUM_FINGERS
+from trajectotree.scene.plant import NUM_FINGERS
 
 
 def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:

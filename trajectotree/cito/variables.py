@@ -16,7 +16,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from trajectotree.scene import NUM_FINGERS, NUM_HAND_JOINTS
+from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS
 
 # (name, width) of each group, in the order of a knot's variable block.
 GROUPS = (("x", 3), ("xd", 3), ("xdd", 3), ("q", NUM_HAND_JOINTS), ("qd", NUM_HAND_JOINTS),

@@ -104,10 +104,10 @@ def config_from_args(args: argparse.Namespace) -> Config:
 
 def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     """ConfigError (exit 2, before any planning) when the hand has no initial grasp of the object
-    at scene.initial_pose (trajectotree.initial_grasp: a finger reaches no corner-free contact,
+    at scene.initial_pose (trajectotree.search.initial_grasp: a finger reaches no corner-free contact,
     or no three-finger stance holds at mu_plan), unless search.initial_arclengths sets the grasp."""
-    from trajectotree import initial_grasp
-    from trajectotree.scene import describe_object
+    from trajectotree.search import initial_grasp
+    from trajectotree.scene.plant import describe_object
     if config.search.initial_arclengths is not None:
         return
     # Not memoized: the planner builds the table again inside its timed search, so

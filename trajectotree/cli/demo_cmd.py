@@ -82,12 +82,12 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
 def run(args) -> int:
     from trajectotree.cli.search_cmd import draw_plan
     from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
-    from trajectotree.figures import figure_finger_forces, save_figure, segment_spans
+    from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
     from trajectotree.io import save_plan, save_sim, write_json_atomic
-    from trajectotree.planners import plan
-    from trajectotree.playback import object_noun, start_meshcat
-    from trajectotree.scene import build_scene, describe_object
-    from trajectotree.simulate import run_simulation
+    from trajectotree.planning.planners import plan
+    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.scene.plant import build_scene, describe_object
+    from trajectotree.execution.simulate import run_simulation
 
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)

@@ -37,9 +37,9 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.io import plan_to_json, save_plan
-    from trajectotree.keyframes import check_workers
-    from trajectotree.planners import plan
-    from trajectotree.scene import build_scene
+    from trajectotree.planning.keyframes import check_workers
+    from trajectotree.planning.planners import plan
+    from trajectotree.scene.plant import build_scene
     goal = check_goal(args.goal, "--goal")
     method = check_method(args.method)
     config = config_from_args(args)
@@ -57,7 +57,7 @@ def run(args) -> int:
         print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces",
               file=sys.stderr)
     if args.html and result.trajectory is not None:
-        from trajectotree.playback import write_plan_html
+        from trajectotree.execution.playback import write_plan_html
         write_plan_html(result, config, args.html)
     if args.json:
         print_json(plan_to_json(result))

@@ -8,7 +8,7 @@ import numpy as np
 
 from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args,
                                       print_json)
-from trajectotree.scene import describe_object
+from trajectotree.scene.plant import describe_object
 
 
 def register(subparsers) -> None:
@@ -71,8 +71,8 @@ class ObjectReach:
 
 
 def object_reach(scene, search) -> ObjectReach:
-    from trajectotree.initial_grasp import grid_contacts, initial_grasp_candidates
-    from trajectotree.reach import Reachability
+    from trajectotree.search.initial_grasp import grid_contacts, initial_grasp_candidates
+    from trajectotree.search.reach import Reachability
     reach = Reachability(scene)
     grasps = initial_grasp_candidates(scene, search, reach)
     q = None
@@ -100,7 +100,7 @@ def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.figures import figure_model, save_figure
+    from trajectotree.figures.run import figure_model, save_figure
     if reach is None:
         fig = figure_model(scene)
     else:
@@ -115,7 +115,7 @@ def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.scene import build_scene
+    from trajectotree.scene.plant import build_scene
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     config = config_from_args(args)

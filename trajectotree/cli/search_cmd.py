@@ -29,7 +29,7 @@ def draw_plan(scene, plan, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from trajectotree.figures import figure_keyframes, save_figure
+    from trajectotree.figures.run import figure_keyframes, save_figure
     fig = figure_keyframes(scene, plan)
     try:
         save_figure(fig, path, dpi=110)
@@ -38,8 +38,8 @@ def draw_plan(scene, plan, path: str) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.scene import build_scene
-    from trajectotree.search import find_contact_plan
+    from trajectotree.scene.plant import build_scene
+    from trajectotree.search.tree import find_contact_plan
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
     if args.figure:

@@ -49,7 +49,7 @@ def register(subparsers) -> None:
 def trajectory_arrays(files: PlanFiles) -> dict[str, np.ndarray]:
     """The plan.npz arrays of a plan folder as checked floats (reference.check_plan_arrays);
     ConfigError naming plan.npz when it holds none (planning produced none) or bad ones."""
-    from trajectotree.reference import check_plan_arrays
+    from trajectotree.execution.reference import check_plan_arrays
     if not files.arrays:  # save_plan writes an empty plan.npz when planning produced nothing
         raise ConfigError(f"{str(files.npz_path)!r} holds no trajectory: planning produced none "
                           f"(plan.json status: {files.data.get('status')!r})")
@@ -93,7 +93,7 @@ def execution_config(args, plan_config: Config) -> Config:
 def plan_segments(files: PlanFiles) -> list:
     """The segments of a TrajectoTree plan (figures.segment_spans) for the forces figure;
     none for the baselines, whose contacts follow no contact sequence."""
-    from trajectotree.figures import segment_spans
+    from trajectotree.figures.run import segment_spans
     if files.data.get("method") != "trajectotree":
         return []
     fingers = [node.get("switching_finger") for node in files.data.get("contact_sequence") or ()]
@@ -112,7 +112,7 @@ def world_conditions(args, config: Config) -> dict:
     """run_simulation's keyword arguments for --sim-mu, --sim-mass and --push, checked
     here so that bad values stop the command before anything is written."""
     from trajectotree.config import check_range
-    from trajectotree.simulate import Conditions, parse_push
+    from trajectotree.execution.simulate import Conditions, parse_push
     if args.sim_mu is not None:
         check_range("--sim-mu", args.sim_mu, 0.0, 5.0, low_open=True)
     if args.sim_mass is not None:
@@ -123,12 +123,12 @@ def world_conditions(args, config: Config) -> dict:
 
 
 def run(args) -> int:
-    from trajectotree.figures import figure_finger_forces, save_figure
+    from trajectotree.figures.run import figure_finger_forces, save_figure
     from trajectotree.io import save_sim
-    from trajectotree.playback import object_noun, start_meshcat
-    from trajectotree.reference import reference_from_arrays
-    from trajectotree.scene import build_scene
-    from trajectotree.simulate import run_simulation
+    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.reference import reference_from_arrays
+    from trajectotree.scene.plant import build_scene
+    from trajectotree.execution.simulate import run_simulation
 
     for option, path, suffixes in (("--html", args.html, HTML_SUFFIXES), ("--gif", args.gif, (".gif",)),
                                    ("--forces", args.forces, FIGURE_SUFFIXES)):

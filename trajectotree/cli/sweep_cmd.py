@@ -16,8 +16,8 @@ import signal
 from trajectotree.cli.common import (add_config_options, check_graspable, check_output_dir, config_from_args,
                                       print_json)
 from trajectotree.config import CONTROLLERS, check_controller
-from trajectotree.executions import CONDITIONS, check_condition, run_executions
-from trajectotree.sweep import METHODS, SweepSpec, run_sweep
+from trajectotree.experiments.executions import CONDITIONS, check_condition, run_executions
+from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
 
 def register(subparsers) -> None:
@@ -35,7 +35,7 @@ def register(subparsers) -> None:
                         "under each of --conditions; resumable, and may be added to a finished sweep")
     p.add_argument("--conditions", nargs="+", metavar="CONDITION",
                    help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
-                        "default: nominal): see `trajectotree.executions`")
+                        "default: nominal): see `trajectotree.experiments.executions`")
     p.add_argument("--out", default="sweep", metavar="DIR",
                    help="sweep directory (default: ./sweep); one sweep at a time (it holds DIR/.lock)")
     p.add_argument("--workers", type=int, metavar="K",
@@ -65,7 +65,7 @@ def run(args) -> int:
     spec = SweepSpec(goals=args.goals, seed=args.seed, methods=tuple(args.methods), simulate=args.simulate,
                      config=config_from_args(args), max_goal=args.max_goal, time_limit_s=args.time_limit)
     if spec.config.scene.object.vertices is not None:  # a polygon: refused here if the hand cannot grasp it
-        from trajectotree.scene import build_scene
+        from trajectotree.scene.plant import build_scene
         check_graspable(build_scene(spec.config.scene), spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]

@@ -1,0 +1,243 @@
+"""The single-run figures (trajectotree.figures.run) checked against closed-form geometry and
+the data they were given: where a box, a finger, a contact or a cone is drawn, which
+force each line shows, what the forces figure's scale and legend hold."""
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from trajectotree.cli import main  # noqa: E402
+from trajectotree.contact_plan import ContactNode, ContactPlan  # noqa: E402
+from trajectotree.figures.run import (FINGER_COLORS, contact_node_legend_handles, figure_finger_forces,  # noqa: E402
+                                  figure_keyframes, figure_model, plot_box, plot_contact_node, plot_contacts, plot_finger_force,
+                                  plot_friction_cones, plot_hand, plot_segments, save_figure, segment_spans)
+from trajectotree.execution.metrics import evaluate  # noqa: E402
+from trajectotree.results import SimLog  # noqa: E402
+from trajectotree.scene.plant import NUM_FINGERS, build_scene  # noqa: E402
+
+
+def span_x(patch) -> tuple[float, ...]:
+    """The distinct x data coordinates of a patch's outline (axvspan: its start and end)."""
+    return tuple(np.unique(np.round(patch.get_patch_transform().transform(patch.get_path().vertices)[:, 0], 12)))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_scene()
+
+
+def test_box_corners_are_the_rotated_half_extents(ax):
+    x, y, theta, w, h = 0.03, -0.02, math.pi / 6, 0.2, 0.1
+    (patch,) = plot_box(ax, w, h, (x, y, theta))
+    c, s = math.cos(theta), math.sin(theta)
+    corners = [(x + c * u - s * v, y + s * u + c * v) for u, v in ((0.1, -0.05), (0.1, 0.05), (-0.1, 0.05), (-0.1, -0.05))]
+    np.testing.assert_allclose(patch.get_xy()[:4], corners, atol=1e-15)
+    np.testing.assert_allclose(patch.get_xy()[4], corners[0], atol=1e-15)   # closed outline
+
+
+def test_hand_is_drawn_where_the_plant_puts_joints_and_fingertips(scene, ax):
+    q = np.array([0.3, 1.1, -0.2, 0.9, 0.5, 0.4, 0.1, 1.4])
+    artists = plot_hand(ax, scene, q)
+    tips = [a for a in artists if isinstance(a, matplotlib.patches.Circle)]
+    plant = scene.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, scene.positions(scene.config.initial_pose, q))
+    p_WF = scene.fingertip_positions(q)
+    assert len(tips) == NUM_FINGERS
+    for i, tip in enumerate(tips):
+        np.testing.assert_allclose(tip.center, p_WF[i], atol=1e-12)
+        assert tip.radius == pytest.approx(scene.tip_radius)
+        assert matplotlib.colors.same_color(tip.get_facecolor(), FINGER_COLORS[i])
+    links = [a for a in artists if isinstance(a, matplotlib.lines.Line2D) and a.get_linestyle() == "-"]
+    for i, line in enumerate(links):   # base, elbow (joint 2), fingertip centre
+        joints = [plant.GetJointByName(f"finger{i}_joint{j}", scene.hand).frame_on_child() for j in (1, 2)]
+        expected = [frame.CalcPoseInWorld(context).translation()[:2] for frame in joints] + [p_WF[i]]
+        np.testing.assert_allclose(np.column_stack(line.get_data()), expected, atol=1e-12)
+
+
+def test_model_figure_draws_each_fingers_full_reach_around_its_base(scene):
+    fig = figure_model(scene)
+    ax = fig.axes[0]
+    reach = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle) and not p.get_fill()]
+    stretched = scene.fingertip_positions(np.zeros(8))   # q = 0: both links in line, the farthest reach
+    assert len(reach) == NUM_FINGERS
+    for circle, finger, tip in zip(reach, scene.fingers, stretched):
+        np.testing.assert_allclose(circle.center, finger.p_W_base)
+        assert circle.radius == pytest.approx(np.linalg.norm(tip - finger.p_W_base), abs=1e-12)
+    c = scene.config
+    box = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon)][0]
+    np.testing.assert_allclose(box.get_xy()[:4].mean(axis=0), c.initial_pose[:2], atol=1e-15)
+    assert [t.get_text() for t in ax.texts if t.get_text().startswith("finger")] == [f"finger {i}" for i in range(4)]
+    plt.close(fig)
+
+
+def test_contacts_normals_and_cones_in_the_world(ax):
+    pose = (0.01, 0.02, math.pi / 2)   # the box's +x face points along +y in W
+    p_BC, n_B = np.array([[0.1, 0.0], [-0.1, 0.02]]), np.array([[1.0, 0.0], [-1.0, 0.0]])
+    scatter, arrows = plot_contacts(ax, pose, p_BC, n_B)
+    np.testing.assert_allclose(scatter.get_offsets(), [[0.01, 0.12], [-0.01, -0.08]], atol=1e-15)
+    np.testing.assert_allclose(np.column_stack([arrows.U, arrows.V]), [[0.0, 1.0], [0.0, -1.0]], atol=1e-15)
+    mu, length = 0.5, 0.03
+    wedge = plot_friction_cones(ax, pose, p_BC[:1], n_B[:1], mu, length=length)[0].get_xy()
+    r = length / math.hypot(1.0, mu)   # edge directions -n -+ mu t, t = z x n, unit length
+    np.testing.assert_allclose(wedge[:3], [[0.01, 0.12], [0.01 + mu * r, 0.12 - r], [0.01 - mu * r, 0.12 - r]],
+                               atol=1e-15)
+
+
+def test_finger_force_lines_are_the_magnitudes_and_the_drop_is_shaded(ax):
+    t = np.linspace(0.0, 1.0, 5)
+    f_sim = np.column_stack([3.0 * t, 4.0 * t])
+    f_plan = np.column_stack([np.ones(5), np.zeros(5)])
+    sim, plan, shade = plot_finger_force(ax, t, f_sim, f_plan, color="tab:red", drop_time=0.5)
+    np.testing.assert_allclose(sim.get_ydata(), 5.0 * t)
+    np.testing.assert_allclose(plan.get_ydata(), np.ones(5))
+    assert sim.get_linestyle() == "-" and plan.get_linestyle() == "--"
+    assert matplotlib.colors.same_color(plan.get_color(), "tab:red")
+    assert span_x(shade) == pytest.approx((0.5, 1.0))
+    assert len(plot_finger_force(ax, t, f_sim, f_plan)) == 2   # no drop: nothing shaded
+
+
+def test_segments_mark_boundaries_and_shade_the_fingers_switches(ax):
+    spans = segment_spans([None, 0, None, 0], knots_per_segment=3, dt=0.1)
+    assert [finger for _, _, finger in spans] == [0, None, 0]
+    np.testing.assert_allclose([(t0, t1) for t0, t1, _ in spans], [(0.0, 0.3), (0.3, 0.6), (0.6, 0.9)])
+    artists = plot_segments(ax, spans, 0)
+    boundaries = [a.get_xdata()[0] for a in artists if isinstance(a, matplotlib.lines.Line2D)]
+    assert boundaries == pytest.approx([0.3, 0.6])
+    shaded = [span_x(a) for a in artists if not isinstance(a, matplotlib.lines.Line2D)]
+    assert shaded == [pytest.approx((0.0, 0.3)), pytest.approx((0.6, 0.9))]
+    assert len(plot_segments(ax, spans, 1)) == 2   # finger 1 never switches
+
+
+def synthetic_run() -> SimLog:
+    """A box that follows the plan, then falls (0.1 m off from t = 0.6 s) while a finger squeezes 50 N."""
+    t = np.linspace(0.0, 1.0, 11)
+    x_plan = np.zeros((11, 3))
+    x = x_plan.copy()
+    x[6:, 1] = -0.1
+    f_plan = np.zeros((11, 4, 2))
+    f_plan[:, :, 0] = [1.0, -1.0, 2.0, -2.0]
+    f_W = f_plan.copy()
+    f_W[:, 1, 1] = 0.5
+    f_W[8:, 3, 0] = -50.0
+    return SimLog(t=t, x=x, q=np.zeros((11, 8)), x_plan=x_plan, f_W=f_W, f_W_plan=f_plan, sim_time_s=0.1,
+                  controller="grasp", conditions={})
+
+
+def test_forces_figure_shares_one_scale_set_before_the_drop_and_marks_segments():
+    result = evaluate(synthetic_run(), drop_distance=0.05)
+    assert result.dropped and result.drop_time_s == pytest.approx(0.6)
+    spans = segment_spans([None, 0, 2], knots_per_segment=2, dt=0.1)
+    assert spans == [(0.0, 0.2, 0), (0.2, 0.4, 2)]
+    fig = figure_finger_forces(result, spans)
+    axes = fig.axes
+    assert len(axes) == NUM_FINGERS and len({ax.get_ylim() for ax in axes}) == 1
+    assert axes[0].get_ylim() == pytest.approx((-0.03 * 2.0, 1.1 * 2.0))   # |f| <= 2 N up to the drop; 50 N clipped
+    for i, ax in enumerate(axes):
+        simulated, planned = ax.lines[:2]
+        np.testing.assert_allclose(simulated.get_ydata(), np.linalg.norm(result.f_W[:, i], axis=1))
+        np.testing.assert_allclose(planned.get_ydata(), np.linalg.norm(result.f_W_plan[:, i], axis=1))
+        shaded = [p for p in ax.patches if p.get_label() == "segment in which this finger switches"]
+        assert len(shaded) == {0: 1, 2: 1}.get(i, 0)   # finger 0 switches in segment 1, finger 2 in segment 2
+    assert all("|f| [N]" in ax.get_ylabel() for ax in axes) and "|f|" in fig._suptitle.get_text()
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert labels == ["simulated |f|", "planned |f|", "after the drop (may be clipped)",
+                      "segment in which this finger switches", "segment boundary"]
+    plt.close(fig)
+
+
+def node(theta: float, switching: int | None) -> ContactNode:
+    p_BC = np.array([[0.1, 0.0], [0.0, 0.05], [-0.1, 0.0], [0.0, -0.05]])
+    n_B = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+    return ContactNode(object_pose=np.array([0.0, 0.0, theta]), q=np.tile([0.25, 1.2], 4),
+                       arclengths=np.zeros(4), p_BC=p_BC, n_B=n_B, switching_finger=switching, closure_margin=0.1)
+
+
+def test_keyframes_one_panel_per_node_with_the_switching_finger(scene, tmp_path):
+    nodes = (node(0.0, None), node(0.1, 2), node(0.2, None))
+    fig = figure_keyframes(scene, ContactPlan(goal=0.2, success=True, reason="", nodes=nodes))
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles == ["n=0  theta=+0.00\ninitial grasp", "n=1  theta=+0.10\nfinger 2 moves",
+                      "n=2  theta=+0.20\nno switch"]
+    thick = [line for line in fig.axes[1].lines if line.get_linewidth() == 4.0]
+    assert len(thick) == 1 and matplotlib.colors.same_color(thick[0].get_color(), "k")
+    assert "goal +0.200 rad" in fig._suptitle.get_text()
+    out = save_figure(fig, tmp_path / "keyframes.svg", dpi=110)   # the format the suffix names
+    plt.close(fig)
+    svg = (tmp_path / "keyframes.svg").read_text()
+    assert out.endswith("keyframes.svg") and svg.startswith("<?xml") and "friction cone" in svg
+
+
+def test_keyframes_draw_the_cones_the_plan_was_searched_with(scene):
+    nodes = (node(0.0, None), node(0.1, 2))
+    for mu_plan, shown in ((0.49, "mu = 0.49"), (float("nan"), f"mu = {scene.config.mu:.2g}")):
+        fig = figure_keyframes(scene, ContactPlan(goal=0.1, success=True, reason="", nodes=nodes, mu_plan=mu_plan))
+        assert any(shown in t.get_text() for t in fig.legends[0].get_texts())
+        plt.close(fig)
+
+
+def test_contact_node_numbers_the_fingers_and_marks_the_previous_contact(scene, ax):
+    previous, current = node(0.0, None), node(0.1, 1)
+    plot_contact_node(ax, scene, current, mu=0.7, previous=previous)
+    assert sorted(t.get_text() for t in ax.texts) == ["0", "1", "2", "3"]
+    hollow = [line for line in ax.lines if line.get_marker() == "o" and line.get_markerfacecolor() == "none"]
+    c, s = math.cos(0.1), math.sin(0.1)
+    np.testing.assert_allclose(np.column_stack(hollow[0].get_data())[0], [c * 0.0 - s * 0.05, s * 0.0 + c * 0.05])
+    labels = [h.get_label() for h in contact_node_legend_handles(0.7)]
+    assert labels == ["contact (finger's colour; arrow: normal)", "friction cone (mu = 0.7)",
+                      "switching finger's previous contact", "switching finger",
+                      "holding fingers (numbered at their bases)"]
+
+
+def test_search_command_draws_the_keyframes_in_the_format_its_suffix_names(tmp_path):
+    out = tmp_path / "keyframes.svg"
+    assert main(["search", "--goal", "0.3", "--segments", "2", "--figure", str(out)]) == 0
+    svg = out.read_text()
+    assert svg.startswith("<?xml") and "switching finger" in svg and "friction cone" in svg
+
+
+# ---- a convex polygon instead of the box (issue 17) ------------------------------------------
+
+QUAD = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
+
+
+def test_polygon_outline_is_its_vertices_at_the_pose(ax):
+    from trajectotree.figures.run import plot_object
+    from trajectotree.geometry import ConvexPolygon
+    shape = ConvexPolygon.from_points(QUAD)
+    pose = (0.02, -0.01, 2.0)
+    (patch,) = plot_object(ax, shape, pose)
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    expected = [(pose[0] + c * u - s * v, pose[1] + s * u + c * v) for u, v in shape.vertices]
+    np.testing.assert_allclose(patch.get_xy()[:4], expected, atol=1e-15)
+    np.testing.assert_allclose(patch.get_xy()[4], expected[0], atol=1e-15)
+
+
+def test_model_figure_of_a_polygon_draws_it_the_hand_and_each_fingers_reachable_contacts():
+    from trajectotree.config import ObjectConfig, SceneConfig
+    config = SceneConfig(object=ObjectConfig(vertices=QUAD), initial_pose=(0.01, 0.02, 0.3))
+    scene = build_scene(config)
+    reachable = [np.array([0.02, 0.06]), np.array([]), np.array([0.3]), np.array([0.1, 0.12, 0.5])]
+    q = np.array([0.3, 1.1, -0.2, 0.9, 0.5, 0.4, 0.1, 1.4])
+    fig = figure_model(scene, q=q, reachable=reachable, note="a note")
+    ax = fig.axes[0]
+    outline = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon)][0]
+    from trajectotree.geometry import box_to_world
+    corners = [box_to_world(config.initial_pose, v) for v in config.shape.vertices]
+    np.testing.assert_allclose(outline.get_xy()[:4], corners, atol=1e-15)
+    dots = ax.collections
+    assert len(dots) == 3   # finger 1 reaches nothing: no dots
+    for dot, i in zip(dots, (0, 2, 3)):
+        p_B, n_B = config.shape.points(reachable[i])
+        expected = [box_to_world(config.initial_pose, p) for p in p_B + 0.004 * (i + 1) * n_B]
+        np.testing.assert_allclose(dot.get_offsets(), expected, atol=1e-15)
+        assert matplotlib.colors.same_color(dot.get_facecolor()[0], FINGER_COLORS[i])
+    tips = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle) and p.get_fill()]
+    np.testing.assert_allclose([t.center for t in tips], scene.fingertip_positions(q), atol=1e-12)
+    assert ax.get_title() == "Planar four-finger hand and quadrilateral (146 cm^2)\na note"
+    plt.close(fig)

@@ -1,0 +1,88 @@
+"""Rolling contacts in the search (search.rolled_stances): a fingertip sphere that sticks to a
+face rolls along it by r times its second link's turn relative to the object. Seed-0 goal 50
+(1.804 rad) dropped its box at 7.4 s under the keyframes formulation: its stance of fingers
+0, 2, 3 while finger 1 moves from node 3 to node 4 is in closure at mu_plan at its planned
+contacts but not at the contacts its fingertips roll to. The rolled contacts are recomputed
+here independently: the link angles from the plant's kinematics at each node's (Drake IK)
+joint angles, the friction from grasp.required_mu_many."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from trajectotree.config import Config, ConfigError, SearchConfig
+from trajectotree.search.grasp import required_mu_many
+from trajectotree.scene.plant import NUM_FINGERS, build_scene
+from trajectotree.search.tree import find_contact_plan
+from trajectotree.experiments.sweep import sample_goals
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_scene()
+
+
+def link2_angles(scene, q) -> np.ndarray:
+    """(4,) the angle in W of each finger's second link body at joint angles q (8,), by the plant."""
+    plant = scene.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, scene.hand, q)
+    out = np.empty(NUM_FINGERS)
+    for i in range(NUM_FINGERS):
+        R = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(f"finger{i}_link2", scene.hand)).rotation().matrix()
+        out[i] = np.arctan2(R[1, 0], R[0, 0])
+    return out
+
+
+def rolled_stance_mus(scene, plan) -> list[tuple[int, float, float]]:
+    """(node n, required mu of the stance at node n - 1, at node n) at its rolled contacts for
+    every node n reached by a switch: the holding fingers' contacts rolled by r times their
+    link's turn relative to the object since they landed. Asserts the rolls stay on the face."""
+    shape, r = scene.config.shape, scene.tip_radius
+    nodes = plan.nodes
+    turn = [link2_angles(scene, n.q) - n.object_pose[2] for n in nodes]
+    corners = shape.corner_arclengths()
+    out = []
+    for n in range(1, len(nodes)):
+        moving = nodes[n].switching_finger
+        if moving is None:
+            continue
+        stance = [j for j in range(NUM_FINGERS) if j != moving]
+        mus = []
+        for m in (n - 1, n):
+            rolled = []
+            for j in stance:
+                landed = max([k for k in range(1, m + 1) if nodes[k].switching_finger == j], default=0)
+                s = nodes[m].arclengths[j]
+                delta = np.angle(np.exp(1j * (turn[m][j] - turn[landed][j])))
+                s_rolled = (s + r * delta) % shape.perimeter
+                assert np.searchsorted(corners, s_rolled, side="right") == np.searchsorted(corners, s, side="right")
+                rolled.append(s_rolled)
+            p_BC, n_B = shape.points(np.array(rolled))
+            mus.append(float(required_mu_many(p_BC[None], n_B[None])[0]))
+        out.append((n, *mus))
+    return out
+
+
+def test_goal_1804_stances_hold_at_their_rolled_contacts(scene):
+    goal = float(sample_goals(60, 0)[50])
+    assert goal == pytest.approx(1.8039, abs=1e-4)
+    config = Config().search
+    mu_plan = config.friction_safety * scene.config.mu
+    fixed = find_contact_plan(scene, goal, dataclasses.replace(config, rolled_stances=False))
+    rolling = find_contact_plan(scene, goal, config)
+    assert fixed.success and rolling.success
+    # the plan of the fixed-contact search: node 3 -> 4 (finger 1 moves) holds with fingers 0, 2, 3
+    # at mu 0.40 planned, but more than mu_plan where they have rolled to by node 4
+    worst_fixed = max(rolled_stance_mus(scene, fixed), key=lambda row: max(row[1:]))
+    assert worst_fixed[0] == 4 and fixed.nodes[4].switching_finger == 1
+    assert fixed.nodes[4].stance_required_mu < mu_plan < worst_fixed[2]
+    # the rolling-aware search's plan: every stance in closure at mu_plan at both ends, rolled
+    assert all(max(mus) <= mu_plan + 1e-6 for _, *mus in rolled_stance_mus(scene, rolling))
+    assert [tuple(n.arclengths) for n in rolling.nodes] != [tuple(n.arclengths) for n in fixed.nodes]
+
+
+def test_rolled_stances_must_be_a_bool():
+    with pytest.raises(ConfigError, match="search.rolled_stances"):
+        SearchConfig(rolled_stances=1)

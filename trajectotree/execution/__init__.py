@@ -1,0 +1,1 @@
+"""Execution: the controllers, the simulation Diagram, tracking metrics and Meshcat playback."""

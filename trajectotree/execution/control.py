@@ -1,0 +1,253 @@
+"""The two executors of a plan: the paper's fingertip impedance controller
+(`ImpedanceController`, eq. 20) and the object-level `GraspController` (the default).
+
+Fingertip impedance controller with gravity compensation (paper eq. 20):
+
+    tau = sum_i J_WF_i^T (kp (p_ref_i - p_i) + kv (v_ref_i - v_i) + f_ref_i) + g_hand
+
+p_i, v_i are the position and velocity of fingertip i (its sphere centre) in W,
+J_WF_i its translational Jacobian, f_ref_i the planned force of finger i on the
+box in W (the box pushes back with -f_ref_i, so the motors must supply J^T f_ref),
+and g_hand the torques that cancel gravity on the links. The gains are the same
+for every planner (paper Sec. IV-D). Torque limits are the plant's effort limits,
+which Drake's discrete plant enforces on the actuation input.
+
+GraspController, periodic at ControllerGains.rate_hz, reads the measured state of
+the box and the hand (the plant's; there is no estimator) and
+  1. asks for the box wrench w = M (a_ref + Kp (X_ref - X) + Kd (V_ref - V)) + gravity
+     (M the planned mass and inertia, X_ref a cubic Hermite through the plan);
+  2. splits it into forces of the fingers in contact with a QP (OSQP, built once):
+     min wrench_weight |G lambda - w|^2 + |lambda - lambda_plan|^2 with
+     lambda_n in s [min, max] N and |lambda_t| <= mu lambda_n, where the force budget s
+     of a switching finger ramps to 0 after lift-off and back before landing;
+  3. commands tau = J^T ((1 - s) K_t (p_target - p) + D (v_target - v)) + J_C^T f + g_hand,
+     with fingertip targets the planned box-frame fingertip positions mapped through the
+     MEASURED box pose (a switching finger follows its box-frame path, lifted): a finger
+     in contact is force-controlled, a free one position-controlled.
+Soft fingertip springs with strong object gains: stiff springs anchored to the
+measured box inject tangential force as the spheres roll and lose the grasp.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.solvers import MathematicalProgram, OsqpSolver, SolverOptions
+from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
+
+from trajectotree.config import ControllerGains, SceneConfig
+from trajectotree.geometry import rotation_2d
+from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
+from trajectotree.execution.reference import GraspSchedule
+from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene, add_hand_and_box
+
+FINGERTIP_VECTOR_SIZE = 2 * NUM_FINGERS  # (x, y) of each finger, finger-major
+
+
+class ImpedanceController(LeafSystem):
+    """Input ports: `hand_state` (the hand model instance's [q; v], 16), `p_WF_ref`,
+    `v_WF_ref`, `f_W_ref` (8 each: finger-major (x, y) in W). Output port:
+    `actuation` (8, the plant's actuation input order)."""
+
+    def __init__(self, scene_config: SceneConfig, gains: ControllerGains):
+        super().__init__()
+        self.gains = gains
+        # Its own plant and context: the controller sees only the measured hand state.
+        self._plant = MultibodyPlant(0.0)
+        self._hand, _ = add_hand_and_box(self._plant, scene_config)
+        self._plant.Finalize()
+        self._plant_context = self._plant.CreateDefaultContext()
+        self._tip_frames = [self._plant.GetFrameByName(f"finger{i}_tip", self._hand) for i in range(NUM_FINGERS)]
+        # u = B^T tau_v maps generalized forces to actuators (B is a selection: one actuator per joint).
+        self._B = self._plant.MakeActuationMatrix()
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
+        self.p_ref_port = self.DeclareVectorInputPort("p_WF_ref", FINGERTIP_VECTOR_SIZE)
+        self.v_ref_port = self.DeclareVectorInputPort("v_WF_ref", FINGERTIP_VECTOR_SIZE)
+        self.f_ref_port = self.DeclareVectorInputPort("f_W_ref", FINGERTIP_VECTOR_SIZE)
+        self.actuation_port = self.DeclareVectorOutputPort(
+            "actuation", BasicVector(self._plant.num_actuators()), self.CalcActuation)
+
+    def fingertip_kinematics(self, hand_state) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """p_WF (4, 2), v_WF (4, 2) and J_WF (4, 2, nv) at a hand state."""
+        plant, ctx = self._plant, self._plant_context
+        plant.SetPositionsAndVelocities(ctx, self._hand, hand_state)
+        v = plant.GetVelocities(ctx)
+        p_WF = np.empty((NUM_FINGERS, 2))
+        J_WF = np.empty((NUM_FINGERS, 2, plant.num_velocities()))
+        for i, frame in enumerate(self._tip_frames):
+            p_WF[i] = frame.CalcPoseInWorld(ctx).translation()[:2]
+            J_WF[i] = plant.CalcJacobianTranslationalVelocity(
+                ctx, JacobianWrtVariable.kV, frame, np.zeros(3), plant.world_frame(), plant.world_frame())[:2]
+        return p_WF, J_WF @ v, J_WF
+
+    def compute_actuation(self, hand_state, p_ref, v_ref, f_ref) -> np.ndarray:
+        """Eq. 20 for one hand state and references (each (4, 2) or flat (8,))."""
+        p_WF, v_WF, J_WF = self.fingertip_kinematics(hand_state)
+        shape = (NUM_FINGERS, 2)
+        F = (self.gains.kp * (np.reshape(p_ref, shape) - p_WF) + self.gains.kv * (np.reshape(v_ref, shape) - v_WF)
+             + np.reshape(f_ref, shape))
+        tau_v = np.einsum("fiv,fi->v", J_WF, F) - self._plant.CalcGravityGeneralizedForces(self._plant_context)
+        return self._B.T @ tau_v
+
+    def CalcActuation(self, context, output):
+        output.SetFromVector(self.compute_actuation(
+            self.hand_state_port.Eval(context), self.p_ref_port.Eval(context),
+            self.v_ref_port.Eval(context), self.f_ref_port.Eval(context)))
+
+
+class HandKinematics:
+    """Closed-form kinematics (kinematics.TwoLinkFinger) and gravity torques of the four
+    two-link fingers at once (the controller's hot path)."""
+
+    def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
+        self.fingers = TwoLinkFinger.stack(fingers)
+        m, c = np.array([f.masses for f in fingers]), np.array([f.coms for f in fingers])
+        # dV/dq = [k1 cos a1 + k2 cos a12, k2 cos a12]
+        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * self.fingers.l1)
+        self._k2 = gravity * m[:, 1] * c[:, 1]
+
+    def __call__(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At joint angles q (8, finger-major): fingertip centres p_WF (4, 2), Jacobians
+        J_WF (4, 2, 2) and the joint torques that hold the fingers up, g (4, 2)."""
+        q = np.reshape(q, (-1, 2))
+        r1, r2 = self.fingers.links(q)
+        # base + (r1 + r2): the controller's summation order since the start (the planners'
+        # tip_from_links adds r1 first), kept so that simulations stay bit-identical.
+        p = self.fingers.p_W_base + (r1 + r2)
+        c1, c12 = (np.cos(a) for a in self.fingers.angles(q))
+        g = np.column_stack([self._k1 * c1 + self._k2 * c12, self._k2 * c12])
+        return p, jacobian_from_links(r1, r2), g
+
+
+def perp(v) -> np.ndarray:
+    """z x v for planar vectors (..., 2)."""
+    out = np.empty_like(v)
+    out[..., 0], out[..., 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+class GraspForceQp:
+    """min wrench_weight |G lambda - w|^2_W + |lambda - lambda_plan|^2 over lambda = (lambda_n,
+    lambda_t) of the 4 fingers, lambda_n in [lo, hi], |lambda_t| <= mu lambda_n. Built once;
+    each solve updates the cost and the bounds (OSQP)."""
+
+    def __init__(self, mu: float, torque_length: float, wrench_weight: float):
+        self._prog = MathematicalProgram()
+        self._z = self._prog.NewContinuousVariables(2 * NUM_FINGERS, "lambda")   # finger-major (n, t)
+        self._cost = self._prog.AddQuadraticCost(np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z,
+                                                 is_convex=True)
+        self._bounds = self._prog.AddBoundingBoxConstraint(np.zeros(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS),
+                                                           self._z)
+        cone = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
+        for i in range(NUM_FINGERS):   # lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0
+            cone[2 * i, 2 * i:2 * i + 2] = (-mu, 1.0)
+            cone[2 * i + 1, 2 * i:2 * i + 2] = (-mu, -1.0)
+        self._prog.AddLinearConstraint(cone, np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z)
+        self._mu = mu
+        self._identity = np.eye(2 * NUM_FINGERS)
+        self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length ** 2])
+        self._solver = OsqpSolver()
+        self._options = SolverOptions()
+        for name, value in (("eps_abs", 1e-6), ("eps_rel", 1e-6), ("polishing", 0), ("verbose", 0)):
+            self._options.SetOption(OsqpSolver.id(), name, value)
+
+    def solve(self, G, wrench, lambda_plan, lo, hi) -> np.ndarray:
+        """lambda (4, 2) for the grasp matrix G (3, 8), the wrench w (3,), the plan's
+        lambda (4, 2) and the normal-force bounds lo, hi (4,). Falls back to the plan's
+        forces, clipped to the bounds, if OSQP fails."""
+        z_plan = lambda_plan.ravel()
+        GtW = G.T @ self._W
+        self._cost.evaluator().UpdateCoefficients(2.0 * (GtW @ G + self._identity),
+                                                  -2.0 * (GtW @ wrench + z_plan), 0.0, True)
+        t_max = self._mu * hi
+        self._bounds.evaluator().set_bounds(np.column_stack([lo, -t_max]).ravel(), np.column_stack([hi, t_max]).ravel())
+        result = self._solver.Solve(self._prog, None, self._options)
+        if not result.is_success():
+            n = np.clip(lambda_plan[:, 0], lo, hi)
+            return np.column_stack([n, np.clip(lambda_plan[:, 1], -self._mu * n, self._mu * n)])
+        return result.get_x_val().reshape(NUM_FINGERS, 2)   # z is the program's only variable
+
+
+class GraspController(LeafSystem):
+    """Object-level grasp control of a planned box motion (see the module doc).
+    Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
+    joint) and `hand_state` (16: the hand's [q; v]). Output port: `actuation` (8, the
+    plant's actuation order), updated every 1 / gains.rate_hz s and held in between.
+    `mass` is the plan's and `mu` the friction its QP's cones allow (simulate passes
+    max(search, controller friction_safety) x scene.mu), not the simulated plant's."""
+
+    def __init__(self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float):
+        super().__init__()
+        c = scene.config
+        self.gains, self.schedule = gains, schedule
+        self._kinematics, self._tip_radius = HandKinematics(scene.fingers, c.gravity), scene.tip_radius
+        self._gravity = c.gravity
+        self._mass = c.box_mass
+        self._inertia = c.shape.inertia(c.box_mass)   # a uniform plate (the box: m (w^2 + h^2) / 12)
+        # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
+        self._qp = GraspForceQp(mu, c.shape.circumradius, gains.wrench_weight)
+        B = scene.plant.MakeActuationMatrix()                       # (nv, nu), a selection
+        self._u_from_tau = B[scene.hand_v_indices].T                 # hand-joint torques -> actuation
+        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
+        state = self.DeclareDiscreteState(B.shape[1])
+        self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
+        self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
+        self.actuation_port = self.DeclareStateOutputPort("actuation", state)
+
+    def UpdateActuation(self, context, discrete_state):
+        discrete_state.set_value(self.compute_actuation(
+            context.get_time(), self.box_state_port.Eval(context), self.hand_state_port.Eval(context)))
+        return EventStatus.Succeeded()
+
+    def desired_wrench(self, n: int, box_state) -> np.ndarray:
+        """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n."""
+        s, g = self.schedule, self.gains
+        error = s.X[n] - box_state[:3]
+        error[2] = (error[2] + np.pi) % (2 * np.pi) - np.pi
+        a = s.A[n] + g.object_kp * error + g.object_kd * (s.V[n] - box_state[3:])
+        return np.array([self._mass * a[0], self._mass * (a[1] + self._gravity), self._inertia * a[2]])
+
+    def finger_forces(self, n: int, box_state, p_WF) -> tuple[np.ndarray, np.ndarray]:
+        """f_W (4, 2), the force each finger should apply to the box at sample n (QP),
+        and n_W (4, 2), the outward normals of the faces it pushes on. The forces act
+        where the measured fingertips p_WF (4, 2) touch the faces: a sphere rolls along
+        the face as the box turns, and with the planned points instead, 2 mm of rolling
+        under 1 N grips left a slow in-grasp turn 0.03 rad behind."""
+        s, g = self.schedule, self.gains
+        n_W = s.n_B[n] @ rotation_2d(box_state[2]).T
+        t_W = perp(n_W)
+        r_W = p_WF - self._tip_radius * n_W - box_state[:2]     # contact points, from the box origin
+        G = np.empty((3, 2 * NUM_FINGERS))
+        G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
+        G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
+        G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
+        scale = s.force_scale[n]
+        lam = self._qp.solve(G, self.desired_wrench(n, box_state), s.lambda_plan[n],
+                             scale * g.min_normal_force, scale * g.max_normal_force)
+        return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
+
+    def compute_actuation(self, t: float, box_state, hand_state) -> np.ndarray:
+        s, g = self.schedule, self.gains
+        n = s.index(t)
+        q, v = hand_state[:NUM_HAND_JOINTS], hand_state[NUM_HAND_JOINTS:]
+        p_WF, J_WF, g_hand = self._kinematics(q)
+        v_WF = np.einsum("fij,fj->fi", J_WF, v.reshape(NUM_FINGERS, 2))
+        f_W, n_W = self.finger_forces(n, box_state, p_WF)
+        R = rotation_2d(box_state[2])
+        r_W = s.p_BF[n] @ R.T
+        p_target = box_state[:2] + r_W
+        v_target = box_state[3:5] + box_state[5] * perp(r_W) + s.v_BF[n] @ R.T
+        # A finger the QP may use is force-controlled: its spring fades with its force budget, so
+        # that what it applies to the box is the QP's force. A tangential spring to a box-fixed
+        # target fights the friction force as the sphere rolls (a slow in-grasp turn ran 0.05 rad
+        # ahead); a lifting finger's normal spring pulled it off while the QP still counted on it.
+        error = (1.0 - s.force_scale[n])[:, None] * (p_target - p_WF)
+        spring = g.tip_kp * error + g.tip_kd * (v_target - v_WF)
+        # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
+        # contact point's Jacobian J_C = J + perp(r_FC) [1 1] (link 2 turns at q1dot + q2dot), a
+        # tangential force also turns the second link (without it a static hold settled 0.035 rad off).
+        lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)       # perp(r_FC) . f
+        tau = np.einsum("fij,fi->fj", J_WF, spring + f_W) + lever[:, None] + g_hand
+        return self._u_from_tau @ tau.ravel()

@@ -1,0 +1,339 @@
+"""Executing a plan in a full-dynamics Drake simulation (paper Sec. III-D, IV-D).
+
+The execution Diagram: a discrete MultibodyPlant with the hand and box from
+models/ (point contact between fingertip spheres, links and the box, friction
+from the config, gravity -y), reference sources from the plan (fingertip
+positions, velocities and forces, held at their last value for
+SimConfig.settle_time after the plan ends), a controller (the object-level
+GraspController, default, or eq. 20's ImpedanceController, `controller="paper"`),
+loggers of the plant state and of each finger's simulated force on the box
+(`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
+`SimLog` (the logs beside the plan at the same times), which
+`trajectotree.execution.metrics.evaluate` turns into the `SimResult` the functions here return.
+
+`Conditions` change the simulated world only, never what the controller assumes:
+the friction coefficient (sim_mu), the box mass (sim_mass: model mismatch) and a
+push, a force on the box in W for SimConfig.push_duration seconds.
+
+The run starts in the plan's initial state (x_0, q_0, at rest). Finger-finger
+collisions are filtered out: the planners do not model them, and the fingers
+only meet when the plan itself is infeasible for the hand.
+"""
+
+from __future__ import annotations
+
+import time
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import CollisionFilterDeclaration, Meshcat
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import (AddMultibodyPlant, ContactResults, ExternallyAppliedSpatialForce,
+                                     MultibodyPlantConfig)
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from trajectotree.execution import metrics, playback
+from trajectotree.config import Config, ConfigError, check_controller, check_range
+from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
+from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
+from trajectotree.results import SimLog, SimResult
+from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
+
+
+@dataclass(frozen=True)
+class Push:
+    """A force on the box's centre, in W, from time_s for duration_s."""
+
+    force: tuple[float, float]   # N, (f_x, f_y) in W
+    time_s: float                # s, when it starts
+    duration_s: float = 0.2      # s, how long it acts
+
+    def __post_init__(self):
+        if len(self.force) != 2:
+            raise ConfigError(f"push force = {self.force!r} must have 2 entries (f_x N, f_y N)")
+        for i, f in enumerate(self.force):
+            check_range(f"push force[{i}]", f, -100.0, 100.0)
+        check_range("push time", self.time_s, 0.0, None)
+        check_range("push duration", self.duration_s, 0.0, 10.0, low_open=True)
+
+
+def parse_push(text: str, duration_s: float = 0.2) -> Push:
+    """A Push from "FX,FY@T" (N, N, s), e.g. "0.2,0@3.5"; ConfigError naming the text."""
+    try:
+        force, at = str(text).split("@")
+        fx, fy = (float(v) for v in force.split(","))
+        start = float(at)
+    except ValueError:
+        raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, "
+                          "e.g. 0.2,0@3.5)") from None
+    try:
+        return Push(force=(fx, fy), time_s=start, duration_s=duration_s)
+    except ConfigError as e:
+        raise ConfigError(f"push {text!r}: {e}") from None
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """The simulated world where it differs from the plan's; the controller keeps the plan's values."""
+
+    mu: float | None = None      # friction coefficient of the simulated plant (None: the scene's)
+    mass: float | None = None    # kg, box mass of the simulated plant (None: the scene's)
+    push: Push | None = None     # a push on the box, or none
+
+    def __post_init__(self):
+        if self.mu is not None:
+            check_range("sim_mu", self.mu, 0.0, 5.0, low_open=True)
+        if self.mass is not None:
+            check_range("sim_mass", self.mass, 0.0, 100.0, low_open=True)
+
+    def scene(self, scene_config):
+        """The simulated plant's SceneConfig."""
+        changes = {k: v for k, v in (("mu", self.mu), ("box_mass", self.mass)) if v is not None}
+        return dataclasses.replace(scene_config, **changes)
+
+    def to_json(self, scene_config) -> dict:
+        sim = self.scene(scene_config)
+        push = None if self.push is None else {"force": list(self.push.force), "time_s": self.push.time_s,
+                                               "duration_s": self.push.duration_s}
+        return {"sim_mu": sim.mu, "sim_mass": sim.box_mass, "plan_mu": scene_config.mu,
+                "plan_mass": scene_config.box_mass, "push": push}
+
+
+class PushSource(LeafSystem):
+    """Output port `spatial_forces` (list of ExternallyAppliedSpatialForce, for the
+    plant's applied-spatial-force input): the push on the box while it acts, else none."""
+
+    def __init__(self, plant, box, push: Push):
+        super().__init__()
+        self._body = plant.GetBodyByName("box", box).index()
+        self._push = push
+        self.spatial_forces_port = self.DeclareAbstractOutputPort(
+            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self.CalcForces)
+
+    def CalcForces(self, context, output):
+        push, t = self._push, context.get_time()
+        forces = []
+        if push.time_s <= t < push.time_s + push.duration_s:
+            applied = ExternallyAppliedSpatialForce()
+            applied.body_index = self._body
+            applied.p_BoBq_B = np.zeros(3)     # at the box origin, its centre of mass
+            applied.F_Bq_W = SpatialForce(np.zeros(3), np.array([push.force[0], push.force[1], 0.0]))
+            forces.append(applied)
+        output.set_value(forces)
+
+
+class FingertipForces(LeafSystem):
+    """Input port `contact_results` (the plant's); output port `f_W` (8, finger-major
+    (x, y)): the force of each finger's second link (fingertip sphere and link) on the
+    box, in W, summed over its point contacts."""
+
+    def __init__(self, plant, hand, box):
+        super().__init__()
+        self._finger_of_body = {plant.GetBodyByName(f"finger{i}_link2", hand).index(): i for i in range(NUM_FINGERS)}
+        self._box_body = plant.GetBodyByName("box", box).index()
+        self.contact_results_port = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
+        self.DeclareVectorOutputPort("f_W", FINGERTIP_VECTOR_SIZE, self.CalcForces)
+
+    def CalcForces(self, context, output):
+        results = self.contact_results_port.Eval(context)
+        f_W = np.zeros((NUM_FINGERS, 2))
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            a, b = info.bodyA_index(), info.bodyB_index()
+            f_on_b = info.contact_force()[:2]   # the force on body B, in W
+            if b == self._box_body and a in self._finger_of_body:
+                f_W[self._finger_of_body[a]] += f_on_b
+            elif a == self._box_body and b in self._finger_of_body:
+                f_W[self._finger_of_body[b]] -= f_on_b
+        output.SetFromVector(f_W.ravel())
+
+
+@dataclass
+class ExecutionDiagram:
+    diagram: object
+    plant: object
+    hand: object               # ModelInstanceIndex
+    box: object                # ModelInstanceIndex
+    state_logger: object       # VectorLogSink of the plant's full state
+    force_logger: object       # VectorLogSink of FingertipForces (8)
+    visualizer: object | None  # MeshcatVisualizer or None
+    duration: float            # s, plan length + settle time
+    controller: str            # "grasp", "paper" or "none" (uncontrolled)
+
+    def initial_context(self, reference: Reference):
+        """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
+        context = self.diagram.CreateDefaultContext()
+        plant_context = self.plant.GetMyMutableContextFromRoot(context)
+        self.plant.SetPositions(plant_context, self.box, reference.x[0])
+        self.plant.SetPositions(plant_context, self.hand, reference.q[0])
+        return context
+
+
+def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
+    """First-order hold through (times, values (K, n)), then constant for `hold` seconds."""
+    if hold > 0:
+        times = np.append(times, times[-1] + hold)
+        values = np.vstack([values, values[-1]])
+    return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
+
+
+def exclude_finger_finger_collisions(plant, scene_graph, hand) -> None:
+    """Filters contact between different fingers (each finger's own links are adjacent)."""
+    fingers = []
+    for i in range(NUM_FINGERS):
+        bodies = [plant.GetBodyByName(f"finger{i}_link{j}", hand) for j in (1, 2)]
+        fingers.append(plant.CollectRegisteredGeometries(bodies))
+    manager = scene_graph.collision_filter_manager()
+    for a in range(NUM_FINGERS):
+        for b in range(a + 1, NUM_FINGERS):
+            manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
+
+
+def add_paper_controller(builder, plant, hand, reference: Reference, config: Config) -> ImpedanceController:
+    """Eq. 20 fed by reference sources (fingertip positions, velocities, forces)."""
+    controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
+    flat = lambda a: a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
+    hold = config.sim.settle_time
+    for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
+        source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))
+        builder.Connect(source.get_output_port(), controller.GetInputPort(name))
+    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
+    return controller
+
+
+def add_grasp_controller(builder, plant, hand, box, reference: Reference, config: Config) -> GraspController:
+    """The GraspController with the plan's scene (mass, size) and friction cones at
+    max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
+    the plan assumed), reading the box and hand state."""
+    scene, gains = build_scene(config.scene), config.controller
+    schedule = grasp_schedule(reference, shape=config.scene.shape,
+                              tip_radius=scene.tip_radius, period=1.0 / gains.rate_hz,
+                              duration=reference.duration + config.sim.settle_time, ramp_time=gains.ramp_time,
+                              swing_lift=gains.swing_lift, contact_distance=gains.contact_distance)
+    mu_control = max(config.search.friction_safety, gains.friction_safety) * config.scene.mu
+    controller = builder.AddNamedSystem("grasp_controller", GraspController(scene, schedule, gains, mu=mu_control))
+    builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
+    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
+    return controller
+
+
+def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
+                            controlled: bool = True, controller: str | None = None,
+                            conditions: Conditions = Conditions()) -> ExecutionDiagram:
+    """The Diagram that executes `reference` with `controller` (default
+    config.sim.controller) in the world `conditions` describe; controlled=False applies
+    zero torque (the open-loop hand, for checking that the controller holds the box)."""
+    kind = check_controller(controller or config.sim.controller)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
+    hand, box = add_hand_and_box(plant, conditions.scene(config.scene))
+    plant.Finalize()
+    exclude_finger_finger_collisions(plant, scene_graph, hand)
+    hold = config.sim.settle_time
+    if not controlled:
+        system = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
+        actuation = system.get_output_port()
+    elif kind == "paper":
+        actuation = add_paper_controller(builder, plant, hand, reference, config).actuation_port
+    else:
+        actuation = add_grasp_controller(builder, plant, hand, box, reference, config).actuation_port
+    builder.Connect(actuation, plant.get_actuation_input_port())
+    if conditions.push is not None:
+        push = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
+        builder.Connect(push.spatial_forces_port, plant.get_applied_spatial_force_input_port())
+    triggers = {TriggerType.kPeriodic, TriggerType.kForced}
+    state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
+    forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box))
+    builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
+    force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
+    visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
+    return ExecutionDiagram(diagram=builder.Build(), plant=plant, hand=hand, box=box, state_logger=state_logger,
+                            force_logger=force_logger, visualizer=visualizer, duration=reference.duration + hold,
+                            controller=kind if controlled else "none")
+
+
+def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t (T,), object pose (T, 3), joint angles (T, 8)) from the plant-state log."""
+    plant = execution.plant
+    box_start = plant.GetJointByName("box_planar").position_start()
+    hand_q = [plant.GetJointByName(f"finger{i}_joint{j}", execution.hand).position_start()
+              for i in range(NUM_FINGERS) for j in (1, 2)]
+    data = log.data()
+    return log.sample_times().copy(), data[box_start:box_start + 3].T.copy(), data[hand_q].T.copy()
+
+
+def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict) -> SimLog:
+    """Runs `simulator` to the execution's end; what it logged, beside the plan at the same times."""
+    start = time.perf_counter()
+    simulator.AdvanceTo(execution.duration)
+    sim_time_s = time.perf_counter() - start
+    logs = []
+    for logger in (execution.state_logger, execution.force_logger):
+        log = logger.FindLog(simulator.get_context())
+        if log.sample_times()[-1] < execution.duration - 1e-9:  # the periodic log can miss the end by rounding
+            logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
+        logs.append(log)
+    t, x, q = split_state_log(execution, logs[0])
+    f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
+    return SimLog(t=t, x=x, q=q, x_plan=reference.object_pose_at(t), f_W=f_W, f_W_plan=reference.forces_at(t),
+                  sim_time_s=sim_time_s, controller=execution.controller, conditions=conditions)
+
+
+def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
+                       html_path: str | Path | None = None, controlled: bool = True,
+                       realtime_rate: float = 0.0, controller: str | None = None,
+                       conditions: Conditions = Conditions()) -> SimResult:
+    """Runs the execution Diagram for the plan's length plus the settle time; the log it
+    records, evaluated by trajectotree.execution.metrics."""
+    if html_path is not None and meshcat is None:
+        meshcat = playback.start_meshcat()
+    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled,
+                                        controller=controller, conditions=conditions)
+    simulator = Simulator(execution.diagram, execution.initial_context(reference))
+    simulator.set_target_realtime_rate(realtime_rate)
+    if meshcat is not None:
+        playback.set_planar_view(meshcat)
+        playback.add_plan_ghost(meshcat, config.scene)
+        meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
+        animation = execution.visualizer.StartRecording()
+    log = record_log(execution, simulator, reference, conditions.to_json(config.scene))
+    result = metrics.evaluate(log, config.sim.drop_distance)
+    if meshcat is not None:
+        frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
+        playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))
+        if html_path is not None:
+            playback.save_recording_html(meshcat, execution.visualizer, html_path, drop_time_s=result.drop_time_s,
+                                         legend=playback.simulated_legend(config.scene),
+                                         noun=playback.object_noun(config.scene))
+        else:
+            execution.visualizer.StopRecording()
+            execution.visualizer.PublishRecording()
+    return result
+
+
+def run_simulation(*, plan, config: Config, meshcat: Meshcat | None = None, html_path: str | Path | None = None,
+                   gif_path: str | Path | None = None, controller: str | None = None, sim_mu: float | None = None,
+                   sim_mass: float | None = None, push: Push | str | None = None) -> SimResult:
+    """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
+    "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
+    `sim_mass` (None: the plan's) and an optional `push` (a Push or "FX,FY@T"); the
+    controller keeps the plan's values. ConfigError on bad values. A live `meshcat` runs
+    in real time; `html_path` writes the recorded playback, `gif_path` a GIF of the run."""
+    if isinstance(push, str):
+        push = parse_push(push, config.sim.push_duration)
+    conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
+    check_controller(controller or config.sim.controller)
+    scene = build_scene(config.scene)
+    reference = reference_from_plan(plan, scene)
+    result = simulate_reference(reference, config, meshcat=meshcat, html_path=html_path,
+                                realtime_rate=1.0 if meshcat is not None else 0.0, controller=controller,
+                                conditions=conditions)
+    if gif_path is not None:
+        playback.write_gif(scene, result.t, result.x, result.q, gif_path, planned_poses=result.x_plan)
+    return result

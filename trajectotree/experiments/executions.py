@@ -1,0 +1,254 @@
+"""Executing a sweep's plans under several controllers and robustness conditions.
+
+A plan does not depend on how it is executed, so a sweep plans each (goal, method) once
+and this module executes every saved plan again for each (controller, condition) pair,
+resumably: `trials/<key>/exec/<controller>_<condition>/sim.json` (+ `sim.npz`). Adding a
+controller or a condition to a finished sweep runs only the new executions.
+
+The conditions (`ConditionSpec`, defaults from the execution issue's acceptance test):
+- `nominal`: the plan's world;
+- `mismatch`: friction `mismatch_mu` (0.55 against the plan's 0.7) and the box mass scaled
+  by `mismatch_mass_factor` (+20 %) in the simulated plant only; the controller keeps the
+  plan's values;
+- `push`: a lateral force `push_force` (0.2 N along +x in W, 40 % of the default box's
+  weight) on the box for `SimConfig.push_duration` (0.2 s), starting in the middle of the
+  plan's middle segment (a switching finger is off the box there when the segment has one).
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_controller,
+                                 check_range)
+from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, write_bytes_atomic
+from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
+
+CONDITIONS = ("nominal", "mismatch", "push")
+EXEC_DIR = "exec"
+
+
+@dataclass(frozen=True)
+class ConditionSpec:
+    """What the named robustness conditions change in the simulated world."""
+
+    mismatch_mu: float = 0.55           # friction coefficient of the simulated plant under `mismatch`
+    mismatch_mass_factor: float = 1.2   # 1, simulated box mass / planned box mass under `mismatch`
+    push_force: tuple[float, float] = (0.2, 0.0)  # N, (f_x, f_y) in W of the push under `push`
+
+    def __post_init__(self):
+        check_range("mismatch_mu", self.mismatch_mu, 0.0, 5.0, low_open=True)
+        check_range("mismatch_mass_factor", self.mismatch_mass_factor, 0.0, 100.0, low_open=True)
+        for i, f in enumerate(self.push_force):
+            check_range(f"push_force[{i}]", f, -100.0, 100.0)
+
+    def simulation_kwargs(self, condition: str, config: Config, plan_duration_s: float) -> dict:
+        """The `run_simulation` keyword arguments (sim_mu, sim_mass, push) of `condition`."""
+        from trajectotree.execution.simulate import Push
+        check_condition(condition)
+        if condition == "mismatch":
+            return {"sim_mu": self.mismatch_mu, "sim_mass": self.mismatch_mass_factor * config.scene.box_mass}
+        if condition == "push":
+            return {"push": Push(force=self.push_force, time_s=middle_of_middle_segment(config, plan_duration_s),
+                                 duration_s=config.sim.push_duration)}
+        return {}
+
+
+def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
+    """s, the middle of segment floor((N-1)/2) of a plan with N nodes of equal-length segments."""
+    segments = max(config.search.num_nodes - 1, 1)
+    length = plan_duration_s / segments
+    return (segments // 2 + 0.5) * length
+
+
+def check_condition(condition: str) -> str:
+    if condition not in CONDITIONS:
+        raise ConfigError(f"condition = {condition!r} is unknown; valid: {', '.join(CONDITIONS)}")
+    return condition
+
+
+def execution_dir(trial_dir: str | Path, controller: str, condition: str) -> Path:
+    return Path(trial_dir) / EXEC_DIR / f"{controller}_{condition}"
+
+
+@dataclass(frozen=True)
+class ExecutionTask:
+    trial_dir: str     # the sweep trial's folder (plan.json, plan.npz)
+    controller: str    # config.CONTROLLERS
+    condition: str     # CONDITIONS
+    spec: ConditionSpec
+    # The executor's gains and simulation settings; None: those saved with the plan.
+    gains: ControllerGains | None = None
+    sim: SimConfig | None = None
+
+
+def execute(task: ExecutionTask) -> dict:
+    """Loads the trial's plan, executes it, writes sim.json + sim.npz into its execution
+    folder; returns sim.json's content (with the trial folder, controller and condition)."""
+    from trajectotree.io import load_plan, save_sim
+    from trajectotree.execution.simulate import run_simulation
+    plan = load_plan(task.trial_dir)
+    config = replace(plan.config, controller=task.gains or plan.config.controller,
+                     sim=replace(task.sim or plan.config.sim, controller=task.controller))
+    duration = float(plan.trajectory.t[-1] - plan.trajectory.t[0])
+    result = run_simulation(plan=plan, config=config, controller=task.controller,
+                            **task.spec.simulation_kwargs(task.condition, config, duration))
+    out = execution_dir(task.trial_dir, task.controller, task.condition)
+    save_sim(result, out)
+    return read_execution(out)
+
+
+def read_execution(folder: Path) -> dict:
+    return json.loads((Path(folder) / SIM_JSON).read_text())
+
+
+def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: ConditionSpec, methods=None,
+                       gains: ControllerGains | None = None, sim: SimConfig | None = None) -> list[ExecutionTask]:
+    """Every (trial with a trajectory, of `methods` (None: all), controller, condition)
+    without a finished execution.
+    A nominal execution the sweep's own --simulate already ran (the trial's sim.json, same
+    controller) is copied instead of rerun."""
+    controllers = [check_controller(c) for c in controllers]
+    conditions = [check_condition(c) for c in conditions]
+    tasks = []
+    for trial_dir in sorted(p for p in (Path(sweep_dir) / TRIALS_DIR).iterdir() if p.is_dir()):
+        try:
+            plan = json.loads((trial_dir / PLAN_JSON).read_text())
+        except (json.JSONDecodeError, OSError):
+            continue  # not a finished trial (the sweep names and recomputes a corrupt one)
+        if not plan.get("iterations") or (methods is not None and plan.get("method") not in methods):
+            continue  # nothing was solved (no trajectory to execute), or not asked for
+        # Compared as saved: a key the plan's file lacks (saved before the field existed) loads as
+        # today's default, but the sweep's simulation did not run with it.
+        saved = plan["config"]
+        same_settings = ((gains is None or _as_saved(gains) == saved.get("controller"))
+                         and (sim is None or {**_as_saved(sim), "controller": None}
+                              == {**saved.get("sim", {}), "controller": None}))
+        for controller in controllers:
+            for condition in conditions:
+                out = execution_dir(trial_dir, controller, condition)
+                if (out / SIM_JSON).is_file() or (
+                        same_settings and _reuse_sweep_simulation(trial_dir, controller, condition, out)):
+                    continue
+                tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim))
+    return tasks
+
+
+def _as_saved(settings) -> dict:
+    """A config dataclass as plan.json holds it (JSON types: lists for tuples)."""
+    return json.loads(json.dumps(asdict(settings)))
+
+
+def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, out: Path) -> bool:
+    """Copies the trial's own sim.json/sim.npz into `out` when they are this nominal execution."""
+    try:
+        sim = json.loads((trial_dir / SIM_JSON).read_text())
+    except (OSError, json.JSONDecodeError):
+        return False
+    nominal = not sim.get("conditions") or (sim["conditions"].get("push") is None
+                                             and sim["conditions"].get("sim_mu") == sim["conditions"].get("plan_mu")
+                                             and sim["conditions"].get("sim_mass") == sim["conditions"].get("plan_mass"))
+    if condition != "nominal" or sim.get("controller") != controller or not nominal or not (trial_dir / SIM_NPZ).is_file():
+        return False
+    write_bytes_atomic(out / SIM_NPZ, (trial_dir / SIM_NPZ).read_bytes())   # npz first: sim.json marks it done
+    write_bytes_atomic(out / SIM_JSON, (trial_dir / SIM_JSON).read_bytes())
+    return True
+
+
+def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions=CONDITIONS,
+                   spec: ConditionSpec = ConditionSpec(), methods=None, gains: ControllerGains | None = None,
+                   sim: SimConfig | None = None, workers: int | None = None, progress: bool = True) -> int:
+    """Runs the pending executions of a sweep's plans (of `methods`, None: all) with the
+    controller `gains` and `sim` settings (None: those saved with each plan) on
+    `workers` local processes, holding the
+    sweep's lock; returns how many ran. A failed execution is reported on stderr and left
+    pending (rerun to retry); the others go on."""
+    sweep_dir = Path(sweep_dir)
+    if not (sweep_dir / TRIALS_DIR).is_dir():
+        raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {TRIALS_DIR}/)")
+    with sweep_lock(sweep_dir):
+        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim)
+        if not tasks:
+            return 0
+        bar = None
+        if progress and sys.stderr.isatty():
+            from tqdm import tqdm
+            bar = tqdm(total=len(tasks), desc="executions", unit="run")
+        done = 0
+        # Fresh interpreters (spawn), not forks of a process that may hold Drake's threads.
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context) as pool:
+            futures = {pool.submit(execute, t): t for t in tasks}
+            for future in as_completed(futures):
+                task = futures[future]
+                try:
+                    future.result()
+                    done += 1
+                except BrokenProcessPool:
+                    raise  # the workers themselves died: every other execution would fail the same way
+                except Exception as e:  # one broken plan must not stop the others
+                    print(f"execution {Path(task.trial_dir).name} {task.controller}/{task.condition} failed: "
+                          f"{type(e).__name__}: {e}", file=sys.stderr)
+                if bar is not None:
+                    bar.update()
+        if bar is not None:
+            bar.close()
+        return done
+
+
+def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
+    """One record per finished execution of the sweep's trials: method, goal, controller,
+    condition and the sim.json metrics."""
+    records = []
+    for row in rows:
+        base = Path(sweep_dir) / TRIALS_DIR / row["key"] / EXEC_DIR
+        if not base.is_dir():
+            continue
+        for folder in sorted(base.iterdir()):
+            if (folder / SIM_JSON).is_file():
+                controller, _, condition = folder.name.partition("_")
+                records.append({"key": row["key"], "method": row["method"], "goal": row["goal"],
+                                "controller": controller, "condition": condition, "folder": str(folder),
+                                **read_execution(folder)})
+    return records
+
+
+FINAL_THETA_TOLERANCE = np.deg2rad(3.0)  # rad, "final orientation held" in the execution table
+
+
+def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
+    """One row per (method, controller, condition), in the order of `methods`, CONTROLLERS
+    and CONDITIONS: executions, drops, mean absolute errors and how many ended within 3 deg
+    of the planned final orientation."""
+    order = lambda names, name: names.index(name) if name in names else len(names)  # noqa: E731
+    keys = sorted({(r["method"], r["controller"], r["condition"]) for r in records},
+                  key=lambda k: (order(methods, k[0]), order(CONTROLLERS, k[1]), order(CONDITIONS, k[2])))
+    table = []
+    for method, controller, condition in keys:
+        mine = [r for r in records if (r["method"], r["controller"], r["condition"]) == (method, controller, condition)]
+        mean = lambda field: float(np.mean([r[field] for r in mine]))  # noqa: E731
+        table.append({"method": method, "controller": controller, "condition": condition, "executed": len(mine),
+                      "dropped": sum(bool(r["dropped"]) for r in mine),
+                      "mae_x": mean("mae_x"), "mae_y": mean("mae_y"), "mae_theta": mean("mae_theta"),
+                      "final_theta_within_3deg": sum(abs(r["final_error"][2]) <= FINAL_THETA_TOLERANCE for r in mine)})
+    return table
+
+
+def execution_markdown(table: list[dict], labels: dict[str, str]) -> str:
+    lines = ["| method | controller | condition | executed | dropped | MAE x [mm] | MAE y [mm] | MAE theta [rad] "
+             "| final theta within 3 deg |", "|---|---|---|---|---|---|---|---|---|"]
+    for s in table:
+        lines.append(f"| {labels.get(s['method'], s['method'])} | {s['controller']} | {s['condition']} | "
+                     f"{s['executed']} | {s['dropped']} ({s['dropped'] / s['executed']:.0%}) | "
+                     f"{1e3 * s['mae_x']:.2f} | {1e3 * s['mae_y']:.2f} | {s['mae_theta']:.3f} | "
+                     f"{s['final_theta_within_3deg']}/{s['executed']} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,204 @@
+"""A sweep's directory (layout: trajectotree.experiments.sweep): the manifest check, the lock,
+reading finished trials (moving corrupt ones aside) and storing new ones atomically.
+Only the sweep process writes here; trials run elsewhere and return their files as bytes."""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+import socket
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from trajectotree import __version__
+from trajectotree.config import ConfigError
+from trajectotree.io import write_bytes_atomic
+from trajectotree.experiments.trial import ROW_FILE, TrialOutcome
+
+MANIFEST_FILE = "manifest.json"
+TRIALS_DIR = "trials"
+ROWS_FILE = "trials.jsonl"
+TMP_PREFIX = ".tmp-"
+LOCK_FILE = ".lock"
+CORRUPT_DIR = "corrupt"
+# Manifest keys that may change between runs of one sweep: not part of a trial's identity.
+RUN_SETTINGS = ("goal_values", "version", "time_limit_s")
+
+
+class CorruptTrialError(ConfigError):
+    """A finished trial's trial.json cannot be read (the message names the file)."""
+
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{str(path)!r} is unreadable ({reason}); rerun the sweep to recompute that trial")
+        self.path, self.reason = path, reason
+
+
+def _flatten(data: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+# Config sections that only executions read: a planning-only sweep's trials do not depend on
+# them (its executions are run later, with the controller settings given then).
+EXECUTION_SECTIONS = ("controller", "sim")
+
+
+def _identity(manifest: dict) -> dict:
+    """The manifest's fields that decide its trials, flattened ('config.cito.dt': 0.1)."""
+    identity = {k: v for k, v in manifest.items() if k not in RUN_SETTINGS}
+    if not manifest.get("simulate"):
+        identity["config"] = {k: v for k, v in manifest.get("config", {}).items() if k not in EXECUTION_SECTIONS}
+    return _flatten(identity)
+
+
+def _manifest_differences(old: dict, new: dict) -> list[str]:
+    """'name: old there, new now' for each differing argument or config field."""
+    old, new = _identity(old), _identity(new)
+    return [f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
+            for key in sorted(set(old) | set(new)) if old.get(key) != new.get(key)]
+
+
+def check_manifest(out_dir: Path, spec) -> bool:
+    """True when out_dir already holds this sweep, False when it holds none;
+    raises ConfigError when it holds a different one (nothing is touched)."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"--out {str(out_dir)!r} is an existing file, not a folder; give a sweep directory")
+    path = out_dir / MANIFEST_FILE
+    if not path.exists():
+        if out_dir.is_dir() and any(p.name != LOCK_FILE for p in out_dir.iterdir()):
+            raise ConfigError(f"--out {str(out_dir)!r} is a non-empty directory without {MANIFEST_FILE}; "
+                              "give a new or empty directory, or the directory of the sweep to resume")
+        return False
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ConfigError(f"{str(path)!r} is not a readable sweep manifest: {e}") from None
+    diffs = _manifest_differences(old, spec.manifest())
+    if diffs:
+        raise ConfigError(f"{str(out_dir)!r} holds a sweep with different arguments ({'; '.join(diffs)}); "
+                          "rerun with the same arguments to resume it, or choose another --out")
+    return True
+
+
+def prepare_dir(out_dir: Path, spec) -> list[str]:
+    """Creates the sweep directory (or reopens it), removes leftovers of a killed run and
+    moves corrupt trials aside (they are recomputed); returns a message per moved trial.
+    The caller holds the directory's lock (sweep_lock)."""
+    exists = check_manifest(out_dir, spec)
+    (out_dir / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
+    manifest = dict(spec.manifest(), version=__version__)
+    if exists:  # keep what the sweep is; record this run's time limit
+        manifest = dict(json.loads((out_dir / MANIFEST_FILE).read_text()), time_limit_s=spec.time_limit_s)
+    write_bytes_atomic(out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2).encode())
+    for leftover in (out_dir / TRIALS_DIR).glob(f"{TMP_PREFIX}*"):  # incl. killed trials' scratch folders
+        shutil.rmtree(leftover) if leftover.is_dir() else leftover.unlink()
+    for leftover in out_dir.glob(".*.tmp"):  # write_bytes_atomic's temporary files
+        leftover.unlink()
+    return set_aside_corrupt_trials(out_dir)
+
+
+@contextmanager
+def sweep_lock(out_dir: Path) -> Iterator[None]:
+    """Holds OUT/.lock (flock, released by the kernel if this process dies) while the sweep
+    runs; ConfigError naming the holder's pid if another sweep holds it. The file keeps the
+    holder's pid while held and is emptied on release, so a pid found on taking it belonged
+    to a sweep that died (its stale lock is taken over, with a note on stderr)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / LOCK_FILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        previous = os.pread(fd, 256, 0).decode(errors="replace").strip()
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = previous or "unknown pid"
+            raise ConfigError(f"--out {str(out_dir)!r} is in use by another sweep (process {holder}; lock file "
+                              f"{str(path)!r}); wait for it to finish or stop it, or choose another --out") from None
+        if previous:
+            print(f"sweep {out_dir}: taking over the stale lock of process {previous}, which is gone", file=sys.stderr)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
+        try:
+            yield
+        finally:
+            os.ftruncate(fd, 0)
+    finally:
+        os.close(fd)
+
+
+def read_row(trial_dir: Path) -> dict:
+    """A finished trial's row; CorruptTrialError naming the file when it is unreadable."""
+    path = trial_dir / ROW_FILE
+    try:
+        row = json.loads(path.read_text())
+        if not isinstance(row, dict) or row.get("key") != trial_dir.name or not isinstance(row.get("method"), str):
+            raise ValueError(f"not the row of trial {trial_dir.name!r}")
+    except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError
+        raise CorruptTrialError(path, f"{type(e).__name__}: {e}") from None
+    return row
+
+
+def _finished_trial_dirs(out_dir: Path) -> list[Path]:
+    trials = out_dir / TRIALS_DIR
+    if not trials.is_dir():
+        return []
+    return [d for d in sorted(trials.iterdir())
+            if d.is_dir() and not d.name.startswith(TMP_PREFIX) and (d / ROW_FILE).is_file()]
+
+
+def read_rows(out_dir: str | Path) -> list[dict]:
+    """The rows of every finished trial, in goal-major order (trial directories are
+    authoritative; trials.jsonl is a convenience copy). CorruptTrialError names an unreadable one."""
+    return [read_row(d) for d in _finished_trial_dirs(Path(out_dir))]
+
+
+def set_aside_corrupt_trials(out_dir: Path) -> list[str]:
+    """Moves each trial whose trial.json is unreadable to OUT/corrupt/ (kept for inspection),
+    so the sweep recomputes it; returns one message per trial moved."""
+    messages = []
+    for trial_dir in _finished_trial_dirs(out_dir):
+        try:
+            read_row(trial_dir)
+        except CorruptTrialError as e:
+            target = out_dir / CORRUPT_DIR / f"{trial_dir.name}-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}"
+            target.parent.mkdir(exist_ok=True)
+            os.replace(trial_dir, target)
+            messages.append(f"{str(e.path)!r} was unreadable ({e.reason}); moved the trial to {str(target)!r}; "
+                            "it is recomputed")
+    return messages
+
+
+def write_rows_file(out_dir: Path) -> None:
+    rows = read_rows(out_dir)
+    write_bytes_atomic(out_dir / ROWS_FILE, "".join(json.dumps(r) + "\n" for r in rows).encode())
+
+
+def store_trial(out_dir: Path, outcome: TrialOutcome) -> None:
+    """Writes the trial's directory under a temporary name, then renames it into place,
+    and appends its row to trials.jsonl."""
+    key = outcome.row["key"]
+    final = out_dir / TRIALS_DIR / key
+    tmp = out_dir / TRIALS_DIR / f"{TMP_PREFIX}{key}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    for name, data in outcome.files.items():
+        with open(tmp / name, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+    if final.exists():  # a retried trial replaces its error record
+        shutil.rmtree(final)
+    os.replace(tmp, final)
+    with open(out_dir / ROWS_FILE, "a") as f:
+        f.write(json.dumps(outcome.row) + "\n")

@@ -1,0 +1,1 @@
+"""Figures: one plan's or one run's drawings, and a sweep's statistics plots."""

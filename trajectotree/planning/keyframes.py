@@ -1,0 +1,309 @@
+"""TrajectoTree's keyframes formulation (cito.formulation: keyframes): one program per segment.
+
+The joint formulation (the paper's) is one program over all N-1 segments, the segment-end
+poses free. Here segment s's first and last knots are the search's nodes s and s+1: object
+pose and joint angles fixed to the node's (each node's grasp is a static stance the search
+verified), velocities zero as in the joint program, and accelerations zero too, so the end
+knot is one static state in both segments that share it. The N-1 programs are then
+independent: they are solved at once (local processes, a given executor, or serially) and
+stitched into one trajectory of the joint program's size. At a shared knot x, q are equal
+and the velocities zero; its forces, torques (and the accelerations, zero in both) are the
+average of both segments': every row of that knot (Newton-Euler, the hand's dynamics, the
+contact rows, the friction cones) is linear in them at the fixed state, and the trapezoidal
+rule on either side sees the same zero acceleration, so the stitched arrays satisfy the
+joint program's constraints wherever both segments do. The final pose is the goal node's.
+
+The link rows (cito.link_rows) are added on demand (cito.link_rows_on_demand): a segment is
+first solved without them and, when one of its links then overlaps the object (the physics
+check's exact test), again with them from the plan's guess ("links").
+
+A segment that fails is retried: one IPOPT did not converge first from its last iterate
+("restart": IPOPT's barrier and L-BFGS memory start afresh; a converged one would only converge
+there again), then, still failing or converged with arrays that fail the physics check, with the
+joint formulation over it and its neighbours ("joint": nodes s-1..s+2, ends still fixed at those
+nodes), which frees the two keyframes next to it; one that still fails gets that joint retry
+once more with its pinned fingers held STRICT_PINNING times harder ("strict":
+cito.weight_contact_slack x 100). The L1 penalty on a pinned fingertip's drift off its contact
+is exact only above the pinning constraint's multiplier; below it a fixed finger may drift 1 mm
+and push from there (goal pi/2, the demo's: 9.35 N from 0.19 mm). As the default for every
+segment that weight doubled the iterations on 24 seed-0 goals and broke one, hence only here.
+Every attempt is recorded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import multiprocessing
+import os
+import resource
+import time
+from concurrent.futures import Executor, ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.cito import solve as cito_solve
+from trajectotree.cito.guess import plan_guess
+from trajectotree.cito.knot import BodyParams
+from trajectotree.cito.program import build_program
+from trajectotree.cito.solve import solve, violations
+from trajectotree.cito.transition import piece_spec
+from trajectotree.cito.variables import CitoVariables
+from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer
+from trajectotree.contact_plan import ContactPlan
+from trajectotree.planning.physics import ObjectModel, check_physics, contact_points
+from trajectotree.results import LINK_PENETRATION_TOL, PhysicsCheck, PlanResult, Trajectory
+from trajectotree.scene.plant import Scene, build_scene
+
+# Local worker processes start by fork where the platform has it: a child inherits the loaded
+# Drake and the parent's scene (tens of ms), where spawn re-imports Drake and rebuilds the scene
+# (~1-2 s, more than most segments take). scripts/bench_planning.py measures both.
+START_METHOD = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+AVERAGED = ("tau", "lambda_n", "lambda_t", "f_W")   # the shared knot's forces: the mean of both segments'
+SHARED = ("x", "xdot", "q", "qdot", "p_W_tip", "p_W_C")   # equal in both segments at a shared knot
+STRICT_PINNING = 100.0   # the last retry's factor on cito.weight_contact_slack (a stricter program)
+_SCENES: dict[SceneConfig, Scene] = {}   # per process: the scene each worker solves in
+
+
+@dataclass(frozen=True)
+class PieceTask:
+    """One program of nodes first..last (plain values: it pickles to any executor)."""
+
+    scene: SceneConfig
+    cito: CitoConfig
+    mu: float                         # the planning friction mu_plan
+    plan: ContactPlan
+    first: int
+    last: int
+    kind: str                         # "keyframes", "restart" (from `guess`), "links" (with the link rows),
+    #                                   "joint" (with the neighbours)
+    #                                   or "strict" (a joint one, pinned fingers STRICT_PINNING times harder)
+    guess: np.ndarray | None = None   # (K, KNOT_SIZE) initial guess (None: the plan's guess)
+
+
+@dataclass(frozen=True)
+class PieceResult:
+    first: int
+    last: int
+    kind: str
+    success: bool                     # IPOPT converged and the piece's arrays pass the physics check
+    converged: bool
+    status: str
+    iterations: int
+    cost: float
+    build_time_s: float
+    solve_time_s: float
+    trajectory: Trajectory
+    check: PhysicsCheck
+    violations: dict
+    timing: dict
+    solution: np.ndarray              # (K, KNOT_SIZE) the last iterate, for a restart
+    max_rss_mb: float                 # MB, peak resident memory of the process that solved it
+    pid: int
+
+    def record(self) -> dict:
+        return {"kind": self.kind, "nodes": [self.first, self.last], "success": self.success,
+                "status": self.status, "iterations": self.iterations,
+                "time_s": self.build_time_s + self.solve_time_s, "max_rss_mb": self.max_rss_mb, "pid": self.pid}
+
+
+def trajectory(program, sol, scene: Scene) -> Trajectory:
+    """The plan.npz arrays of a solution; p_W_C from the planned contacts (pinned) and
+    the box points nearest the fingertips (free)."""
+    spec, kin = program.spec, program.rows.kinematics(sol.stacked())
+    p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B          # c_B is the fingertip centre's target
+    c = scene.config
+    p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.shape)
+    return Trajectory(t=np.arange(spec.num_knots) * spec.dt, x=sol.x, xdot=sol.xd, q=sol.q, qdot=sol.qd,
+                      tau=sol.tau, lambda_n=sol.lambda_n, lambda_t=sol.lambda_t, f_W=kin.f_W, p_W_tip=kin.p_WF,
+                      p_W_C=p_W_C)
+
+
+def _scene(config: SceneConfig) -> Scene:
+    if config not in _SCENES:
+        _SCENES[config] = build_scene(config)
+    return _SCENES[config]
+
+
+def solve_piece(task: PieceTask) -> PieceResult:
+    """Builds and solves one piece in this process (a worker's entry point)."""
+    scene = _scene(task.scene)
+    t0 = time.perf_counter()
+    body = BodyParams(scene, task.cito.sdf_sharpness, mu=task.mu)
+    spec = piece_spec(task.plan, task.first, task.last, radius=scene.tip_radius, config=task.cito)
+    program = build_program(task.cito, spec, body)
+    sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first:task.last + 1])
+    guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
+    build_time = time.perf_counter() - t0
+    outcome = solve(program, guess, task.cito)
+    arrays = trajectory(program, outcome.solution, scene)
+    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
+    return PieceResult(first=task.first, last=task.last, kind=task.kind, success=outcome.success and check.passed,
+                       converged=outcome.success, status=outcome.status, iterations=outcome.iterations,
+                       cost=outcome.cost, build_time_s=build_time, solve_time_s=outcome.solve_time_s,
+                       trajectory=arrays, check=check, violations=violations(program, outcome.solution, scene),
+                       timing=outcome.timing, solution=outcome.solution.stacked(),
+                       max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, pid=os.getpid())
+
+
+def prepare_worker(config: SceneConfig) -> int:
+    """Builds (or finds) the scene in this process; its pid (to warm up a pool, or time its start)."""
+    _scene(config)
+    return os.getpid()
+
+
+def _worker_init() -> None:
+    cito_solve.log_observer = None   # a terminal's progress line is the parent's, not each worker's
+
+
+def local_pool(workers: int, start_method: str = START_METHOD) -> ProcessPoolExecutor:
+    """`workers` local processes for the segment programs (reuse one across plans to pay the
+    start-up once: the scenes solved in are cached per process)."""
+    check_integer("segment workers", workers, 1)
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method),
+                               initializer=_worker_init)
+
+
+def check_workers(workers, name: str = "segment_workers") -> int | None:
+    """None (as many local processes as segments and cores) or an integer >= 1 (1: serial)."""
+    if workers is not None:
+        check_integer(name, workers, 1)
+    return workers
+
+
+def run_pieces(tasks: list[PieceTask], executor: Executor | None, workers: int | None) -> list[PieceResult]:
+    """The tasks' results in order: on `executor`, else in this process (workers 1 or one
+    task), else on a pool of local processes started for these tasks."""
+    if executor is not None:
+        return list(executor.map(solve_piece, tasks))
+    workers = min(len(tasks), os.cpu_count() or 1) if workers is None else min(workers, len(tasks))
+    if workers <= 1:
+        return [solve_piece(t) for t in tasks]
+    for t in tasks:   # a forked worker inherits the scene built here
+        _scene(t.scene)
+    with local_pool(workers) as pool:
+        return list(pool.map(solve_piece, tasks))
+
+
+def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[tuple[int, int]]:
+    """Node ranges (first, last) of the joint retries: each failed segment with its neighbours,
+    overlapping ranges merged; ranges of fewer than min_segments segments dropped (a joint
+    retry of one segment frees nothing; a strict one still holds its fingers harder)."""
+    merged = []
+    for s in sorted(failed):
+        a, b = max(s - 1, 0), min(s + 2, n)
+        if merged and a < merged[-1][1]:   # ranges that only meet at a node stay apart
+            merged[-1] = (merged[-1][0], max(b, merged[-1][1]))
+        else:
+            merged.append((a, b))
+    return [r for r in merged if r[1] - r[0] >= min_segments]
+
+
+def solve_segments(plan: ContactPlan, config: Config, mu: float, executor: Executor | None = None,
+                   workers: int | None = None) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
+    """(the pieces to stitch, in order; every attempt per segment), with the retries."""
+    n = len(plan.nodes) - 1
+
+    cito = config.cito
+    on_demand = cito.link_rows and cito.link_rows_on_demand
+    configs = {"strict": dataclasses.replace(cito, weight_contact_slack=cito.weight_contact_slack * STRICT_PINNING),
+               "keyframes": dataclasses.replace(cito, link_rows=False) if on_demand else cito}
+    configs["restart"] = configs["keyframes"]
+
+    def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
+        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess)
+
+    def retry(segments: list[int], kind: str, from_last_iterate: bool) -> None:
+        """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
+        guesses = [best[s].solution if from_last_iterate else None for s in segments]
+        for s, r in zip(segments, run_pieces([task(s, s + 1, kind, g) for s, g in zip(segments, guesses)],
+                                             executor, workers)):
+            attempts[s].append(r)
+            best[s] = r
+
+    best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers)
+    attempts = {s: [best[s]] for s in range(n)}
+    retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
+    if on_demand:   # from the guess: from a link deep inside the object (goal -0.089: 21 mm) IPOPT hit max_iter
+        retry([s for s in range(n) if best[s].check.link_penetration_m > LINK_PENETRATION_TOL], "links",
+              from_last_iterate=False)
+    pieces = {s: best[s] for s in range(n)}   # keyed by each piece's first node
+    for kind in ("joint", "strict"):
+        failed = [s for s, p in sorted(pieces.items()) if not p.success]   # single segments: a joint piece passed
+        ranges = _neighbour_ranges(failed, n, min_segments=2 if kind == "joint" else 1)
+        for (a, b), r in zip(ranges, run_pieces([task(a, b, kind) for a, b in ranges], executor, workers)):
+            for s in range(a, b):
+                attempts[s].append(r)
+            if r.success:
+                for s in range(a, b):
+                    pieces.pop(s, None)
+                pieces[a] = r
+    return [pieces[s] for s in sorted(pieces)], attempts
+
+
+def stitch(pieces: list[PieceResult]) -> Trajectory:
+    """One trajectory from consecutive pieces: each shared knot once, its forces averaged."""
+    arrays = {name: [getattr(pieces[0].trajectory, name)] for name in SHARED + AVERAGED}
+    for prev, piece in zip(pieces[:-1], pieces[1:]):
+        a, b = prev.trajectory, piece.trajectory
+        for name in SHARED:
+            if not np.array_equal(getattr(a, name)[-1], getattr(b, name)[0]):
+                raise AssertionError(f"pieces at nodes {prev.last} differ in {name}: a bug in the keyframes bounds")
+            arrays[name].append(getattr(b, name)[1:])
+        for name in AVERAGED:
+            arrays[name][-1] = arrays[name][-1].copy()
+            arrays[name][-1][-1] = 0.5 * (getattr(a, name)[-1] + getattr(b, name)[0])
+            arrays[name].append(getattr(b, name)[1:])
+    out = {name: np.concatenate(parts) for name, parts in arrays.items()}
+    dt = pieces[0].trajectory.t[1] - pieces[0].trajectory.t[0]
+    return Trajectory(t=np.arange(len(out["x"])) * dt, **out)
+
+
+def segment_records(attempts: dict[int, list[PieceResult]], pieces: list[PieceResult]) -> tuple[dict, ...]:
+    """plan.json's "segments": per segment its final attempt's status, its attempts' iterations
+    and time summed (a joint retry is listed under each segment it covers), and the retries."""
+    final = {s: p for p in pieces for s in range(p.first, p.last)}
+    return tuple({"nodes": [s, s + 1], "success": final[s].success, "status": final[s].status,
+                  "iterations": sum(r.iterations for r in tried), "time_s": sum(r.build_time_s + r.solve_time_s
+                                                                                for r in tried),
+                  "retries": len(tried) - 1, "attempts": [r.record() for r in tried]}
+                 for s, tried in sorted(attempts.items()))
+
+
+def plan_keyframes(scene: Scene, goal: float, contact_plan: ContactPlan, config: Config, mu: float,
+                   search_time: float, executor: Executor | None = None, workers: int | None = None) -> PlanResult:
+    """The trajectotree PlanResult of the keyframes formulation for a successful contact plan.
+    Times: build_time_s and solve_time_s summed over every attempt (process time in the
+    workers); total_time_s = search_time + the wall-clock time of all segment solves. cost: the
+    stitched pieces' costs summed (a shared knot's effort terms count in both); iterations: every
+    attempt's; violations: each group's largest over the pieces."""
+    t0 = time.perf_counter()
+    pieces, attempts = solve_segments(contact_plan, config, mu, executor, workers)
+    wall = time.perf_counter() - t0
+    distinct = list({id(r): r for tried in attempts.values() for r in tried}.values())
+    arrays = stitch(pieces)
+    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), mu)
+    converged = all(p.converged for p in pieces)
+    failed = [p for p in pieces if not p.success]
+    status = ", ".join(sorted({p.status for p in pieces}))
+    if failed:
+        p = failed[0]
+        why = p.status if not p.converged else f"physics check failed: {p.check.reason}"
+        status = (f"{len(failed)} of {len(pieces)} pieces failed after retries; nodes {p.first}-{p.last} "
+                  f"({p.kind}): {why}")
+    elif not check.passed:
+        status = f"{status}, physics check failed: {check.reason}"
+    timing = {}
+    for r in distinct:
+        for key, value in r.timing.items():
+            timing[key] = timing.get(key, 0.0) + value
+    groups = pieces[0].violations.keys()
+    return PlanResult(method="trajectotree", goal=goal, success=converged and not failed and check.passed,
+                      converged=converged, status=status, search_time_s=search_time,
+                      build_time_s=sum(r.build_time_s for r in distinct),
+                      solve_time_s=sum(r.solve_time_s for r in distinct), total_time_s=search_time + wall,
+                      cost=float(sum(p.cost for p in pieces)), iterations=sum(r.iterations for r in distinct),
+                      contact_plan=contact_plan, trajectory=arrays,
+                      violations={g: max(p.violations[g] for p in pieces) for g in groups}, config=config,
+                      solver_timing=timing, physics_check=check, formulation="keyframes",
+                      segments=segment_records(attempts, pieces))

@@ -1,0 +1,144 @@
+"""The three planners of the paper as one function, `plan(scene=, goal=, method=, config=)`.
+
+- "trajectotree": contact search (Algorithm 1), then the plan-constrained CITO
+  (eqs. 11-19), initialized from the plan.
+- "cito-warm": contact search, then the general CITO (eqs. 1-10), object poses and
+  joint angles initialized from the plan (the contact constraints are not used).
+- "cito": the general CITO initialized in static equilibrium over the whole horizon.
+  It uses no search: its initial grasp q*_0 is the search's initial-grasp chooser's
+  first choice for the goal (`initial_grasp_plan`; closed-form IK) and its incremental goals x*_n the same interpolated object path,
+  so its total time is build + solve only; `contact_plan` then holds node 0 alone.
+
+All three share the program builder, the cost (eq. 11), the friction cones at
+mu_plan = search.friction_safety * scene.mu (`planning_mu`), the solver options, the
+violation report and the physics check of the plan's arrays (trajectotree.planning.physics):
+a converged plan that fails it (e.g. a fingertip pushing the box from a distance) is
+reported with success False and the check's reason in its status. Times:
+search_time_s (0 for cito), build_time_s (program and guess), solve_time_s (IPOPT),
+total_time_s = their sum. TrajectoTree's default formulation, keyframes (cito.formulation),
+solves one program per segment (trajectotree.planning.keyframes); its build and solve times are
+summed over the segments' solves, its total is the search plus their wall-clock time.
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import Executor
+
+import numpy as np
+
+from trajectotree.cito.guess import plan_guess, static_guess
+from trajectotree.cito.hand import HandModel
+from trajectotree.cito.knot import BodyParams
+from trajectotree.cito.program import build_program, general_spec
+from trajectotree.cito.solve import solve, violations
+from trajectotree.cito.transition import check_plan, transition_spec
+from trajectotree.config import Config, ConfigError
+from trajectotree.contact_plan import ContactNode, ContactPlan
+from trajectotree.geometry import box_to_world
+from trajectotree.search.grasp import FormClosure
+from trajectotree.search.initial_grasp import mu_plan
+from trajectotree.planning.keyframes import check_workers, plan_keyframes
+from trajectotree.planning.keyframes import trajectory as segment_trajectory
+from trajectotree.planning.physics import ObjectModel, check_physics
+from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
+from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
+
+
+def planning_mu(config: Config) -> float:
+    """mu_plan = search.friction_safety * scene.mu, the friction every plan may use (the
+    search's grasps and stances and the CITO friction cones: one definition for both)."""
+    return mu_plan(config.scene, config.search)
+
+
+def plan(*, scene: Scene, goal: float, method: str, config: Config,
+         contact_plan: ContactPlan | None = None, segment_executor: Executor | None = None,
+         segment_workers: int | None = None) -> PlanResult:
+    """Plans the rotation `goal` (rad) with `method`. A `contact_plan` may be given
+    for the methods that use one (the search is then skipped; its time counts 0).
+    TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
+    persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
+    `segment_workers` local processes (1: serially in this process, as a sweep's trial
+    does; None: one per segment, at most one per core)."""
+    check_method(method)
+    goal = check_goal(goal)
+    check_workers(segment_workers)
+    if scene.config != config.scene:
+        raise ConfigError("scene was built from a different SceneConfig than config.scene")
+    search_time = 0.0
+    if method == "cito":
+        contact_plan = initial_grasp_plan(scene, goal, config)
+        if not contact_plan.success:
+            return _unsolved(method, goal, contact_plan.reason, 0.0, contact_plan, config)
+    elif contact_plan is None:
+        t0 = time.perf_counter()
+        contact_plan = find_contact_plan(scene, goal, config.search)
+        search_time = time.perf_counter() - t0
+        if not contact_plan.success:
+            return _unsolved(method, goal, f"search failed: {contact_plan.reason}", search_time, contact_plan, config)
+    check_plan(contact_plan, scene, min_nodes=1 if method == "cito" else 2)
+
+    if method == "trajectotree" and config.cito.formulation == "keyframes":
+        return plan_keyframes(scene, goal, contact_plan, config, planning_mu(config), search_time,
+                              segment_executor, segment_workers)
+    t0 = time.perf_counter()
+    body = BodyParams(scene, config.cito.sdf_sharpness, mu=planning_mu(config))
+    if method == "trajectotree":
+        spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
+    else:
+        node0 = contact_plan.nodes[0]
+        path = (object_path(scene.config.initial_pose, goal, config.search.num_nodes) if method == "cito"
+                else contact_plan.object_path)
+        spec = general_spec(x0=node0.object_pose, q0=node0.q, config=config.cito, object_path=path)
+    program = build_program(config.cito, spec, body)
+    guess = static_guess(program.rows, spec) if method == "cito" else plan_guess(program.rows, spec, contact_plan)
+    build_time = time.perf_counter() - t0
+
+    outcome = solve(program, guess, config.cito)
+    sol = outcome.solution
+    trajectory = segment_trajectory(program, sol, scene)
+    check = check_physics(trajectory.arrays(), ObjectModel.from_scene(scene), body.mu)
+    status = outcome.status
+    if outcome.success and not check.passed:
+        status = f"{outcome.status}, physics check failed: {check.reason}"
+    converged = outcome.success and contact_plan.success
+    return PlanResult(method=method, goal=goal, success=converged and check.passed, converged=converged,
+                      status=status, search_time_s=search_time, build_time_s=build_time,
+                      solve_time_s=outcome.solve_time_s, total_time_s=search_time + build_time + outcome.solve_time_s,
+                      cost=outcome.cost, iterations=outcome.iterations, contact_plan=contact_plan,
+                      trajectory=trajectory, violations=violations(program, sol, scene), config=config,
+                      solver_timing=outcome.timing, physics_check=check)
+
+
+def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan:
+    """A one-node ContactPlan with the initial grasp, for `cito` (which has no search):
+    config.search.initial_arclengths, or else the search's initial-grasp chooser's first
+    choice for this goal (trajectotree.search.tree.choose_initial_grasp: the best-ranked candidate
+    whose fingers pass the search's cheap checks for the goal; the search itself may root at a
+    later one). success False with the reason when no grasp qualifies or a contact is out of reach."""
+    c = scene.config
+    boundary = c.shape
+    chosen, reason = choose_initial_grasp(scene, goal, config.search)
+    if chosen is None:
+        return ContactPlan(goal=goal, success=False, reason=reason, mu_plan=mu_plan(c, config.search))
+    arclengths = np.asarray(chosen, dtype=float) % boundary.perimeter
+    points = [boundary.point(s) for s in arclengths]
+    p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
+    hand = HandModel.from_scene(scene)
+    x0 = np.asarray(c.initial_pose, dtype=float)
+    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
+    if any(qi is None for qi in q):
+        return ContactPlan(goal=goal, success=False, reason="initial grasp out of reach of the fingers")
+    closure = FormClosure(boundary, mu_plan(c, config.search), config.search.min_closure_margin)
+    node = ContactNode(object_pose=x0, q=np.concatenate(q), arclengths=arclengths, p_BC=p_BC, n_B=n_B,
+                       switching_finger=None, closure_margin=float(closure.check(arclengths).margin),
+                       required_mu=closure.required_mu(arclengths))
+    return ContactPlan(goal=goal, success=True, reason="", nodes=(node,), mu_plan=closure.mu)
+
+
+def _unsolved(method, goal, status, search_time, contact_plan, config) -> PlanResult:
+    return PlanResult(method=method, goal=goal, success=False, status=status, search_time_s=search_time,
+                      build_time_s=0.0, solve_time_s=0.0, total_time_s=search_time, cost=float("nan"),
+                      iterations=0, contact_plan=contact_plan, trajectory=None,
+                      violations={}, config=config)

@@ -1,0 +1,1 @@
+"""The scene: the hand and object plant built from models/ and the fingers' closed-form kinematics."""

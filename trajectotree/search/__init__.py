@@ -1,0 +1,1 @@
+"""The contact-sequence search (paper Sec. III-A, Algorithm 1): grasps, reachability, stances, the tree."""

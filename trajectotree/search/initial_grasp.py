@@ -1,0 +1,135 @@
+"""The initial grasp, chosen for the configured object (box or convex polygon), not fixed fractions.
+
+Why: with a friction margin (mu_plan = search.friction_safety x scene.mu) no single grasp
+admits plans for every goal. Measured (issue 13) at mu_plan 0.49 on the 0.20 x 0.10 m box: the old
+default (0.54, 0.12, 0.36, 0.48) admits every positive goal and no negative one (its stance
+of fingers 1, 2, 3 needs mu 0.67, so finger 0 can never let go); (0.06, 0.18, 0.32, 0.50)
+admits -3.0..+1.5 but not +2.0..+3.0; the two together cover the 12 goals tried. So the
+search is rooted at several candidates, best first, until one yields a plan.
+
+Candidates: every assignment of grid contacts (arclength multiples of
+search.initial_grid_step) to the four fingers such that each contact is at least
+scene.corner_margin from a corner and reachable at the initial pose (closed-form IK with
+the link collision test, trajectotree.search.reach), no two fingertip spheres overlap, and at least
+one finger may let go (the other three are in frictional form closure at mu_plan, which
+also puts the grasp itself in closure). Ranked by their worst three-finger stance among the
+fingers that may let go (largest required_mu, smallest first), then by more free fingers,
+then by the paper's joint-2 heuristic at the initial pose. Many stances need no friction at
+all (an antipodal pair plus a third contact), hence the tie-breaks.
+For the default scene: 2916 grid assignments, 2583 candidates; the table is built once per
+scene and search settings (0.25 s) and cached. As in the search, fingertips may touch
+(centres 2 r apart) and links of different fingers are not tested against each other (the
+simulation filters finger-finger contact, trajectotree.execution.simulate).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.config import SceneConfig, SearchConfig
+from trajectotree.search.grasp import required_mu_many
+from trajectotree.search.reach import Reachability
+from trajectotree.scene.plant import NUM_FINGERS, Scene
+
+RANKING_BISECTIONS = 20  # required_mu to MU_CAP / 2^20 ~ 1e-5 for ranking (ranked to 1e-4)
+STANCE_FINGERS = tuple(tuple(j for j in range(NUM_FINGERS) if j != i) for i in range(NUM_FINGERS))
+
+
+@dataclass(frozen=True)
+class GraspCandidate:
+    arclengths: tuple[float, float, float, float]  # m, each finger's contact along the boundary, in [0, perimeter)
+    stance_required_mu: tuple[float, ...]          # (4,) required mu of the other three when finger i lets go
+    worst_stance_mu: float                         # the largest of those at most mu_plan (the ranking key)
+    free_fingers: int                              # fingers that may let go at mu_plan
+
+
+@dataclass(frozen=True)
+class GraspCandidates:
+    mu_plan: float
+    candidates: tuple[GraspCandidate, ...]  # ranked, best first
+    reachable: tuple[int, ...]              # grid contacts reachable per finger at the initial pose
+    assignments: int                        # grid assignments before the overlap and closure filters
+    reason: str                             # why there is no candidate ("" when there are)
+
+
+_CACHE: dict[tuple, GraspCandidates] = {}
+
+
+def mu_plan(scene_config: SceneConfig, search: SearchConfig) -> float:
+    """The friction coefficient plans may use: search.friction_safety x scene.mu."""
+    return search.friction_safety * scene_config.mu
+
+
+def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachability | None = None, *,
+                             memoize: bool = True) -> GraspCandidates:
+    """The ranked candidate initial grasps for scene's object; memoized per scene and settings
+    (memoize=False: built afresh and not kept, for a check outside the timed search)."""
+    if not memoize:
+        return _build(scene, search, reach or Reachability(scene))
+    key = (scene.config, search.friction_safety, search.initial_grid_step, search.nominal_joint2)
+    if key not in _CACHE:
+        _CACHE[key] = _build(scene, search, reach or Reachability(scene))
+    return _CACHE[key]
+
+
+def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.ndarray]:
+    """Per finger, the grid arclengths that are corner-free and reachable at the initial pose."""
+    c = scene.config
+    boundary = c.shape
+    grid = np.round(np.arange(0.0, boundary.perimeter - 1e-9, step), 9)
+    grid = grid[[boundary.corner_distance(s) >= c.corner_margin for s in grid]]
+    out = []
+    for finger in range(NUM_FINGERS):
+        q = reach.closed_form_many(np.asarray(c.initial_pose, dtype=float), finger, grid)
+        out.append(grid[np.isfinite(q[:, 0])])
+    return out
+
+
+def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps: np.ndarray) -> np.ndarray:
+    """sum_i |q2_i - nominal_joint2| of each grasp (M, 4) at the initial pose (closed form)."""
+    pose = np.asarray(scene.config.initial_pose, dtype=float)
+    q2 = np.stack([reach.closed_form_many(pose, i, grasps[:, i])[:, 1] for i in range(NUM_FINGERS)], axis=1)
+    return np.abs(q2 - search.nominal_joint2).sum(axis=1)
+
+
+def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCandidates:
+    mu = mu_plan(scene.config, search)
+    per_finger = grid_contacts(scene, search.initial_grid_step, reach)
+    counts = tuple(len(s) for s in per_finger)
+    grasps = np.array(list(itertools.product(*per_finger))).reshape(-1, NUM_FINGERS)
+    assignments = len(grasps)
+    if assignments == 0:
+        missing = [i for i, n in enumerate(counts) if n == 0]
+        return GraspCandidates(mu, (), counts, 0, f"finger(s) {missing} reach no corner-free contact at the initial pose")
+    p, n = reach.contacts(grasps.ravel())
+    p, n = p.reshape(-1, NUM_FINGERS, 2), n.reshape(-1, NUM_FINGERS, 2)
+    tips = p + reach.tip_radius * n
+    apart = np.ones(len(grasps), dtype=bool)
+    for i, j in itertools.combinations(range(NUM_FINGERS), 2):
+        apart &= np.linalg.norm(tips[:, i] - tips[:, j], axis=1) >= 2 * reach.tip_radius
+    grasps, p, n = grasps[apart], p[apart], n[apart]
+    stance_mu = np.empty((len(grasps), NUM_FINGERS))
+    for i, others in enumerate(STANCE_FINGERS):  # one required_mu per distinct stance
+        stances, index = np.unique(grasps[:, others], axis=0, return_inverse=True)
+        first = np.array([np.flatnonzero(index.ravel() == k)[0] for k in range(len(stances))], dtype=int)
+        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others],
+                                           bisections=RANKING_BISECTIONS)[index.ravel()]
+    free = stance_mu < mu
+    worst = np.where(free, stance_mu, -np.inf).max(axis=1)
+    keep = np.flatnonzero(free.any(axis=1))
+    # ties (many stances need ~0: an antipodal pair plus one) go to more free fingers, then to
+    # the paper's heuristic at the initial pose (second joints near search.nominal_joint2)
+    order = keep[np.lexsort((_joint2_cost(scene, search, reach, grasps[keep]), -free[keep].sum(axis=1),
+                             np.round(worst[keep], 4)))]
+    candidates = tuple(GraspCandidate(arclengths=tuple(float(s) for s in grasps[k]),
+                                      stance_required_mu=tuple(float(v) for v in stance_mu[k]),
+                                      worst_stance_mu=float(worst[k]), free_fingers=int(free[k].sum()))
+                       for k in order)
+    reason = "" if candidates else (
+        f"no initial grasp: of {assignments} reachable grid grasps ({int(apart.sum())} without overlapping "
+        f"fingertips) none has a three-finger stance in frictional form closure at mu_plan {mu:.3g} "
+        f"(best stance needs mu {np.min(stance_mu) if stance_mu.size else np.inf:.3g})")
+    return GraspCandidates(mu, candidates, counts, assignments, reason)

@@ -1,0 +1,155 @@
+"""Checks of the three-finger stance that holds the object while the fourth finger switches
+(trajectotree.search.tree; neither is in the paper, whose search only asks that stance to be in
+frictional form closure at its planned contacts).
+
+Rolling contacts (search.rolled_stances): the plan keeps a holding finger's contact point fixed
+on the object, but a fingertip sphere of radius r that sticks to a face rolls along it as the
+finger's second link turns relative to the object, so s - r (a12 - theta) stays constant while it
+holds (a12 the link's absolute angle, theta the object's). Executed, the contacts therefore drift
+by r times the link's turn since the finger landed (goal 1.804 of seed 0: 8 mm and 4 mm after
+4 s, as predicted to 0.3 mm), and a stance in closure at its planned contacts may not be at the
+contacts it really has (there: needs mu 0.40 planned, 0.57 rolled). So each three-finger stance
+must also be in closure at mu_plan, and off the corners, at its rolled contacts at both ends of
+its transition (StanceChecks.rolled). The rolling depends on when each finger landed (the node's
+path); the search still merges states by their contacts, so a state first reached by a worse
+history can hide a plan another would allow (incomplete, never unsafe).
+
+Holding force (search.max_stance_force): closure says the stance can resist any wrench, not at
+what cost. Some three-finger stances on polygons (two fingers nearly antipodal, the third barely
+pushing against gravity) carry the object's weight only through large squeezing forces: at the
+planned contacts, the least total normal force that balances the weight at mu_plan was 12-83 N for
+the CITO segments on the polygon gallery that failed, <= 7.3 N for every segment that converged
+first time (the object weighs 0.49 N). The hand's joints give at most 1 N m, so those segments
+saturate torque and a pinned fingertip drifts (~1 mm), failing the physics check. The search
+therefore refuses a switch whose stance needs more than search.max_stance_force at either end of
+its transition (StanceChecks.too_heavy, the LP of HoldingForceLp).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
+
+from trajectotree.geometry import ConvexPolygon
+from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
+from trajectotree.search.initial_grasp import STANCE_FINGERS
+from trajectotree.search.reach import Reachability
+from trajectotree.scene.plant import Scene
+
+
+def arclength_key(perimeter: float, s: float) -> float:
+    """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
+    return round(float(s) % perimeter, 9)
+
+
+class HoldingForceLp:
+    """The least total normal force of k contacts that balances a wrench w on the object:
+
+        minimize sum x  s.t.  E x = w,  x >= 0,
+
+    x the magnitudes along the 2k cone edges -n +- mu t (each of unit normal component, so
+    sum x = sum lambda_n) and E their wrenches about the object's origin (its centroid). Built
+    once; `solve` only updates E and w (UpdateCoefficients), like grasp.FormClosureLp."""
+
+    def __init__(self, num_contacts: int):
+        prog = MathematicalProgram()
+        x = prog.NewContinuousVariables(2 * num_contacts, "x")
+        self.balance = prog.AddLinearEqualityConstraint(np.zeros((WRENCH_DIM, 2 * num_contacts)),
+                                                        np.zeros(WRENCH_DIM), x)
+        prog.AddBoundingBoxConstraint(0.0, np.inf, x)
+        prog.AddLinearCost(np.ones(2 * num_contacts), 0.0, x)
+        self.prog, self.lp_calls = prog, 0
+        self._solver, self._options = ClpSolver(), SolverOptions()
+
+    def solve(self, p_BC, n_B, mu: float, w_B) -> float:
+        """N, the least sum of normal forces of contacts (p_BC, n_B) (k, 2) at friction mu
+        whose net wrench on the object is w_B (3,); inf when no such forces exist."""
+        A, B = closure_edges_parts(p_BC, n_B)
+        E = np.concatenate([A + mu * B, A - mu * B], axis=0).T  # (3, 2k) wrenches of the cone edges
+        self.balance.evaluator().UpdateCoefficients(E, np.asarray(w_B, dtype=float))
+        self.lp_calls += 1
+        result = self._solver.Solve(self.prog, None, self._options)
+        return float(result.get_optimal_cost()) if result.is_success() else np.inf
+
+
+def weight_support_B(theta: float, weight: float) -> np.ndarray:
+    """(3,) the wrench the fingers must apply to hold the object still at orientation theta:
+    the weight's opposite R(theta)^T (0, m g) in B, no moment about the centroid."""
+    return np.array([np.sin(theta) * weight, np.cos(theta) * weight, 0.0])
+
+
+class StanceChecks:
+    """The rolled-stance and holding-force checks of one search (one object path)."""
+
+    def __init__(self, scene: Scene, reach: Reachability, poses: np.ndarray, mu_plan: float,
+                 max_force: float):
+        self.scene, self.reach, self.poses, self.mu_plan = scene, reach, poses, mu_plan
+        self.boundary: ConvexPolygon = scene.config.shape
+        self.max_force = max_force  # N, 0: no cap
+        self.weight = scene.config.box_mass * scene.config.gravity  # N
+        self.lp = HoldingForceLp(3)
+        self._force: dict[tuple, float] = {}  # (depth, stance arclengths) -> N
+
+    # -- rolling contacts ---------------------------------------------------------------------
+    def rolled(self, node, depth: int, finger: int) -> str:
+        """Why the stance holding the object while `finger` moves from `node` to the child at
+        `depth` fails at its rolled contacts ("" when it holds): at node.depth and at `depth`,
+        every contact still on its face (the rolling law holds along one face) and the three in
+        frictional form closure at mu_plan (grasp.in_closure_many, the exact test behind
+        required_mu; the LP's 1e-3 N margin is not applied here)."""
+        stance = STANCE_FINGERS[finger]
+        rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
+        corners = self.boundary.corner_arclengths()
+        face = lambda s: int(np.searchsorted(corners, s, side="right"))  # noqa: E731
+        if any(face(s) != face(node.arclengths[j]) for row in rolled for j, s in zip(stance, row)):
+            return f"stance of fingers {stance} rolls off a face"
+        p_BC, n_B = self.boundary.points(np.ravel(rolled))
+        A, B = closure_edges_parts(p_BC.reshape(2, 3, 2), n_B.reshape(2, 3, 2))
+        if not np.all(in_closure_many(A, B, self.mu_plan)):
+            return f"stance of fingers {stance} not in closure at mu_plan at its rolled contacts"
+        return ""
+
+    def rolled_arclengths(self, node, depth: int, fingers) -> list[float]:
+        """The contacts of `fingers` (node's arclengths) at node `depth` >= node.depth, each
+        rolled by r times its second link's turn relative to the object since it landed."""
+        r = self.reach.tip_radius
+        out = []
+        for j in fingers:
+            s, step = node.arclengths[j], node
+            while step is not None and step.switching_finger != j:   # back to where finger j landed
+                step = step.parent
+            landed = 0 if step is None else step.depth
+            out.append(arclength_key(self.boundary.perimeter,
+                                     s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s))))
+        return out
+
+    def link_turn(self, depth: int, finger: int, s: float) -> float:
+        """Angle of `finger`'s second link relative to the object at node `depth` with its
+        contact at arclength s (closed-form IK, memoized; the node's Drake IK agrees)."""
+        pose = self.poses[depth]
+        q = self.reach.closed_form(pose, finger, s).q
+        return float(self.scene.fingers[finger].psi + q[0] + q[1] - pose[2])
+
+    # -- holding force ------------------------------------------------------------------------
+    def too_heavy(self, node, depth: int, finger: int) -> str:
+        """Why the stance holding the object while `finger` moves from `node` to the child at
+        `depth` is refused for its force ("" when it is not, or when there is no cap): it needs
+        more than max_force N in total, at its planned contacts (where CITO pins the fingertips),
+        to carry the object's weight at node.depth or at `depth`."""
+        if not self.max_force:
+            return ""
+        stance = STANCE_FINGERS[finger]
+        planned = tuple(node.arclengths[j] for j in stance)
+        if any(self.holding_force(planned, d) > self.max_force for d in (node.depth, depth)):
+            return f"stance of fingers {stance} needs more than {self.max_force:g} N to hold the object's weight"
+        return ""
+
+    def holding_force(self, arclengths: tuple[float, ...], depth: int) -> float:
+        """N, the least total normal force of contacts `arclengths` (friction mu_plan) that holds
+        the object still against gravity at pose x*_depth (HoldingForceLp); memoized."""
+        key = (depth, arclengths)
+        if key not in self._force:
+            p_BC, n_B = self.boundary.points(np.array(arclengths))
+            self._force[key] = self.lp.solve(p_BC, n_B, self.mu_plan,
+                                             weight_support_B(self.poses[depth][2], self.weight))
+        return self._force[key]

@@ -1,0 +1,82 @@
+"""Per finger, every contact it can ever hold along the search's object path, and the fewest
+contact switches it alone needs from each to the last node (trajectotree.search.tree; not in the
+paper, and it changes no plan).
+
+Before the search, one vectorized closed-form pass per finger tabulates every contact the finger
+can ever hold (its initial arclengths plus sums of displacements) at every depth: corner-free and
+reachable or not, and q2 for the heuristic. From that table, the fewest switches per finger to the
+last node: only one finger switches per step, so a node whose fingers together need more switches
+than steps remain is a dead end and is not inserted. Without this bound the DFS spends seconds in
+subtrees that cannot reach the goal (this hand reaches only ~0.15-0.2 m of the boundary from each
+base, so large rotations need most of the nine steps).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trajectotree.config import SearchConfig
+from trajectotree.search.reach import Reachability
+from trajectotree.scene.plant import Scene
+from trajectotree.search.stance import arclength_key
+
+
+class SwitchBound:
+    """The per-finger table of one search (one object path and contact grid)."""
+
+    def __init__(self, scene: Scene, reach: Reachability, poses: np.ndarray, config: SearchConfig):
+        self.scene, self.reach, self.poses, self.config = scene, reach, poses, config
+        self.boundary = scene.config.shape
+        half = (config.num_displacements - 1) // 2
+        self.displacements = config.displacement_step * np.arange(-half, half + 1)
+        self.min_switches: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> switches
+        self.joint2: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> q2 (reachable only)
+        self._moves: dict[float, list[float]] = {}
+
+    def wrap(self, s: float) -> float:
+        return arclength_key(self.boundary.perimeter, s)
+
+    def plan(self, starts) -> None:
+        """Per finger, over the arclengths it can ever hold (its initial contacts, one per
+        candidate root, plus sums of displacements), which are corner-free and reachable
+        (closed form, vectorized) at each depth, with their joint-2 angle for the heuristic;
+        then the fewest contact switches that keep that finger alone on such contacts from
+        each (depth, arclength) to the last node. A node whose fingers together need more
+        switches than steps remain has no completion (one switch per step), so pruning it
+        never removes a plan; it only spares the DFS hopeless subtrees."""
+        last = self.config.num_nodes - 1
+        corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
+        for finger, s0s in enumerate(starts):
+            grid, frontier = set(s0s), set(s0s)  # every arclength the finger can ever hold
+            for _ in range(last):
+                frontier = {m for s in frontier for m in self.moves(s)} - grid
+                grid |= frontier
+            grid = np.array(sorted(grid))
+            gap = np.abs(grid[:, None] - corners[None, :])
+            corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
+            # reachability of the whole grid at every depth in one vectorized call
+            q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger,
+                                             np.tile(grid, last))[:, 1].reshape(last, len(grid))
+            allowed = [dict(zip(grid[ok].tolist(), row[ok].tolist()))
+                       for row in q2 for ok in [corner_free & np.isfinite(row)]]
+            layers = [dict.fromkeys(s0s, np.nan)]
+            for depth in range(1, last + 1):  # forward: contacts reachable from s0 by displacements
+                candidates = {m for s in layers[-1] for m in self.moves(s)}
+                layers.append({s: allowed[depth - 1][s] for s in candidates if s in allowed[depth - 1]})
+            cost = [dict.fromkeys(layers[last], 0)]
+            for depth in range(last - 1, -1, -1):  # backward: fewest switches to the end
+                after, here = cost[0], {}
+                for s in layers[depth]:
+                    here[s] = min(after.get(s, np.inf), 1 + min(after.get(m, np.inf) for m in self.moves(s)))
+                cost.insert(0, here)
+            self.joint2.append(layers)
+            self.min_switches.append(cost)
+
+    def moves(self, s: float) -> list[float]:
+        """The arclengths s + d for every d in D_cp (wrapped keys), memoized."""
+        if s not in self._moves:
+            self._moves[s] = [self.wrap(s + d) for d in self.displacements]
+        return self._moves[s]
+
+    def switches_needed(self, depth: int, arclengths) -> float:
+        return sum(self.min_switches[i][depth].get(s, np.inf) for i, s in enumerate(arclengths))

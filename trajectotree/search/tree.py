@@ -1,0 +1,416 @@
+"""The contact-sequence planner: the paper's Algorithm 1 (Sec. III-A).
+
+A depth-first tree search over contact configurations along a fixed object path of N
+poses (linear interpolation from the initial pose to the goal rotation). A node at depth
+n holds the object pose x*_n, the four contacts (arclengths along the object's boundary, any
+convex polygon, trajectotree.geometry) and
+the joint angles. Expanding a node (GetNeighbors) moves one free finger (the other three
+alone are in frictional form closure) by a displacement from D_cp, or keeps every finger
+(zero displacement), at pose x*_{n+1}. SelectNode takes the deepest open node, ties
+broken by the paper's heuristic sum_i |q2_i - nominal_joint2|.
+
+IsFeasible runs when a node is selected, as in Algorithm 1: frictional form closure (LP,
+trajectotree.search.grasp) and reachability by Drake IK without the links entering the object
+(trajectotree.search.reach). GetNeighbors already drops candidates that fail cheap exact tests
+(corner margin, overlapping fingertips, closed-form reachability), so the LP and the IK
+run only for nodes the search actually visits. States reached twice at the same depth are
+inserted once (their subtrees are identical).
+
+Two additions to the paper, neither of which changes which plans exist:
+- Before the search, a table per finger of every contact it can ever hold at every depth
+  (reachable, q2 for the heuristic) and, from it, the fewest contact switches it alone needs
+  to the last node; a node whose fingers together need more switches than steps remain is
+  not inserted (trajectotree.search.switch_bound).
+- A finger whose contact leaves reach at the next pose must be the one that moves (two
+  such fingers: no child); at a root, the k-th earliest such deadline must be node k or later.
+
+Friction margin (issue 13; not in the paper, whose setting is search.friction_safety = 1):
+every LP uses mu_plan = friction_safety x scene.mu, so every node's grasp and every
+three-finger stance held while a finger switches (is_free) is in frictional form closure
+with friction to spare. Each plan node reports `required_mu` (its grasp) and
+`stance_required_mu` (the three fingers that held the box while it was reached).
+
+Stance checks (trajectotree.search.stance; not in the paper): each three-finger stance that holds the
+object while a finger switches must also be in closure at mu_plan where its sticking fingertips
+roll to (search.rolled_stances), and must carry the object's weight with at most
+search.max_stance_force newtons of total normal force at its planned contacts.
+
+Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
+ranked candidates of trajectotree.search.initial_grasp, best first; a candidate whose fingers
+cannot reach the goal with one switch per step (the bound above) is skipped without a
+search, and each searched candidate gets at most search.root_expansions expansions, up to
+search.max_initial_grasps candidates. States found dead from one root stay dead for the next.
+
+Contact grid (not in the paper): contacts lie on a grid of arclengths, the initial grid plus
+multiples of the displacement step. When it yields no plan, the search is rerun on a grid
+halved search.grid_refinements times (grid_levels), within the same budgets. Short faces need
+it: the 0.14 m triangle's faces hold six 0.02 m grid points (none at a face's middle, where the
+three normals meet): at mu_plan 0.49 the search finds no plan on that grid for 3 of its 12
+seed-0 goals, and one for all 12 on the 0.01 m grid. A plan found on the coarse grid is
+unchanged.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from collections import Counter
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from trajectotree.config import ConfigError, SearchConfig
+from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
+from trajectotree.search.grasp import FormClosure
+from trajectotree.search.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
+from trajectotree.search.reach import Reachability
+from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.search.stance import StanceChecks, arclength_key
+from trajectotree.search.switch_bound import SwitchBound
+
+def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
+    """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
+    x0 = np.asarray(initial_pose, dtype=float)
+    return x0 + np.outer(np.linspace(0.0, 1.0, num_nodes), [0.0, 0.0, goal])
+
+
+@dataclass(frozen=True)
+class _Node:
+    depth: int
+    arclengths: tuple[float, ...]
+    switching_finger: int | None
+    parent: "_Node | None"
+
+
+class _Search:
+    """One run of Algorithm 1; holds the LP and IK caches and the counters."""
+
+    def __init__(self, scene: Scene, goal: float, config: SearchConfig):
+        self.scene, self.config = scene, config
+        self.boundary = scene.config.shape
+        self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
+        self.mu_plan = mu_plan(scene.config, config)
+        self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
+        self.reach = Reachability(scene)
+        self.stance = StanceChecks(scene, self.reach, self.poses, self.mu_plan, config.max_stance_force)
+        self.refused: Counter = Counter()  # why moves were not generated, for the failure reason
+        self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
+        self.expanded = self.generated = 0
+        self.bound = SwitchBound(scene, self.reach, self.poses, config)
+        # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
+        self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
+
+    def wrap(self, s: float) -> float:
+        """The canonical arclength key: in [0, perimeter), rounded to 1e-9 m."""
+        return arclength_key(self.boundary.perimeter, s)
+
+    def plan_switch_bounds(self, starts) -> None:
+        """Tabulates each finger's contacts and fewest switches from `starts` (its initial
+        arclengths, one set per finger; trajectotree.search.switch_bound)."""
+        self.bound.plan(starts)
+
+    # -- IsFeasible -----------------------------------------------------------------------
+    def contacts_allowed(self, arclengths) -> str:
+        """Why these contacts are not allowed on the boundary ("" when they are)."""
+        margin = self.scene.config.corner_margin
+        if any(self.boundary.corner_distance(s) < margin for s in arclengths):
+            return f"a contact lies within {margin} m of a corner"
+        if any(self.tips_overlap(arclengths, i) for i in range(NUM_FINGERS)):
+            return "two fingertips overlap"
+        return ""
+
+    def tips_overlap(self, arclengths, finger: int) -> bool:
+        """Finger `finger`'s fingertip sphere would overlap another finger's."""
+        r = self.reach.tip_radius
+        p, n = self.reach.contact(arclengths[finger])
+        return any(np.linalg.norm(p + r * n - q - r * m) < 2 * r
+                   for i, (q, m) in enumerate(map(self.reach.contact, arclengths)) if i != finger)
+
+    def infeasibility(self, node: _Node) -> str:
+        """Why `node` is a dead end ("" when it is feasible): closure LP, then Drake IK."""
+        return self.not_in_closure(node.arclengths) or self.unreachable(node)
+
+    def not_in_closure(self, arclengths) -> str:
+        closure = self.closure.check(arclengths)
+        if not closure.in_closure:
+            return (f"not in frictional form closure at mu_plan {self.mu_plan:.3g} (margin {closure.margin:.3g}, "
+                    f"needs mu {self.closure.required_mu(arclengths):.3g})")
+        return ""
+
+    def unreachable(self, node: _Node) -> str:
+        pose = self.poses[node.depth]
+        for i, s in enumerate(node.arclengths):
+            reach = self.reach.solve(pose, i, s)
+            if not reach.reachable:
+                return f"finger {i} cannot reach its contact: {reach.reason}"
+        return ""
+
+    # -- GetNeighbors ---------------------------------------------------------------------
+    def neighbors(self, node: _Node):
+        """(heuristic, child) for each candidate child that passes the cheap exact tests."""
+        depth = node.depth + 1
+        # fingers whose contact is out of reach at the next pose must move now (same children,
+        # fewer tests: with two of them there is no child at all)
+        stuck = [i for i, s in enumerate(node.arclengths) if s not in self.joint2[i][depth]]
+        if len(stuck) > 1:
+            self.refused[f"fingers {stuck} lose their contacts (out of reach) at the same node"] += 1
+            return []
+        movers = stuck or list(range(NUM_FINGERS))
+        free = [i for i in movers if self.closure.is_free(node.arclengths, i)]
+        for i in sorted(set(movers) - set(free)):
+            self.refused[f"finger {i} {'must move (out of reach) but is ' if stuck else ''}held: stance of fingers "
+                         f"{STANCE_FINGERS[i]} not in closure at mu_plan"] += 1
+        if not free:
+            return []
+        candidates = {} if stuck else {node.arclengths: None}  # the zero displacement: no finger moves
+        for i in free:
+            for s in self.moves(node.arclengths[i]):
+                if s != node.arclengths[i]:
+                    moved = list(node.arclengths)
+                    moved[i] = s
+                    candidates.setdefault(tuple(moved), i)
+        out, steps_left, stances = [], self.config.num_nodes - 2 - node.depth, {}
+        for arclengths, finger in candidates.items():
+            q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
+            if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
+                self.refused[f"finger {finger} new contact out of reach or at a corner"] += 1
+                continue
+            if self.bound.switches_needed(depth, arclengths) > steps_left:  # no completion exists
+                self.refused["too many switches left (bound)"] += 1
+                continue
+            if finger is not None and self.tips_overlap(arclengths, finger):
+                self.refused["fingertips overlap"] += 1
+                continue
+            if finger is not None:
+                if finger not in stances:   # the stance depends on the finger, not on where it moves
+                    stances[finger] = self.stance_refused(node, depth, finger)
+                if stances[finger]:
+                    self.refused[stances[finger]] += 1
+                    continue
+            h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
+            out.append((h, _Node(depth, arclengths, finger, node)))
+        return out
+
+    def stance_refused(self, node: _Node, depth: int, finger: int) -> str:
+        """Why the stance holding the object while `finger` moves from `node` to the child at
+        `depth` is refused ("" when it is not): its rolled contacts (search.rolled_stances),
+        then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance)."""
+        return ((self.stance.rolled(node, depth, finger) if self.config.rolled_stances else "")
+                or self.stance.too_heavy(node, depth, finger))
+
+    # -- Algorithm 1 ----------------------------------------------------------------------
+    def precheck(self, start: tuple[float, ...], candidate: bool = False) -> str:
+        """Why the search from `start` cannot succeed, by cheap tests ("" when it may). A
+        `candidate` of trajectotree.search.initial_grasp already passed the contact tests (corners,
+        overlap, closure), so the goal's table look-ups come first and its LP last."""
+        if not candidate:
+            reason = self.contacts_allowed(start) or self.not_in_closure(start)
+            if reason:
+                return f"initial grasp {'not allowed' if 'closure' not in reason else 'infeasible'}: {reason}"
+        per_finger = [self.min_switches[i][0].get(s, np.inf) for i, s in enumerate(start)]
+        if not np.isfinite(sum(per_finger)):
+            stuck = [i for i, v in enumerate(per_finger) if not np.isfinite(v)]
+            return f"finger(s) {stuck} have no reachable, corner-free contacts at every node of the object path"
+        if sum(per_finger) > self.config.num_nodes - 1:
+            return (f"the goal needs at least {int(sum(per_finger))} contact switches (per finger "
+                    f"{[int(v) for v in per_finger]}, each finger staying on reachable contacts), more than the "
+                    f"{self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes")
+        # Each finger must switch by the first node where its initial contact is out of reach;
+        # one switch per node, so the k-th earliest such deadline must be at least node k.
+        deadlines = sorted((next((d for d in range(1, self.config.num_nodes) if s not in self.joint2[i][d]),
+                                 np.inf), i) for i, s in enumerate(start))  # inf: never needs to move
+        for k, (deadline, finger) in enumerate(deadlines, start=1):
+            if deadline < k:
+                late = [i for d, i in deadlines[:k]]
+                return (f"fingers {late} all lose their initial contacts (out of reach) by node {deadline}, "
+                        f"but only one finger can switch per node")
+        dead_end = (self.not_in_closure(start) if candidate else "") or self.unreachable(_Node(0, start, None, None))
+        return f"initial grasp infeasible: {dead_end}" if dead_end else ""
+
+    def run(self, start: tuple[float, ...], t0: float, budget: int) -> tuple[_Node | None, str]:
+        """Algorithm 1 from the root `start` with at most `budget` expansions (precheck passed)."""
+        counter = itertools.count()
+        root = _Node(0, start, None, None)
+        open_set = [(0, 0.0, next(counter), root)]
+        inserted = {(0, start)}
+        goal_depth = self.config.num_nodes - 1
+        expanded0 = self.expanded
+        while open_set:
+            if self.expanded - expanded0 >= budget:
+                return None, f"node budget exhausted ({budget} expansions)"
+            if time.perf_counter() - t0 > self.config.time_budget_s:
+                return None, f"time budget exhausted ({self.config.time_budget_s} s)"
+            *_, node = heapq.heappop(open_set)  # SelectNode: deepest, then lowest heuristic
+            self.expanded += 1
+            dead_end = self.infeasibility(node)
+            if dead_end:
+                self.refused[dead_end.split(":")[0]] += 1
+                continue
+            if node.depth == goal_depth:
+                return node, ""
+            for h, child in self.neighbors(node):
+                state = (child.depth, child.arclengths)
+                if state not in inserted and state not in self.dead:
+                    inserted.add(state)
+                    self.generated += 1
+                    heapq.heappush(open_set, (-child.depth, h, next(counter), child))
+        self.dead |= inserted  # the whole tree was searched: none of its states leads to the goal
+        return None, f"tree exhausted after {self.expanded - expanded0} expansions"
+
+    def refusals(self) -> str:
+        """The most frequent reasons moves were refused, e.g. which stance or reach failed."""
+        return "; ".join(f"{why} x{n}" for why, n in self.refused.most_common(4)) or "none"
+
+    def contact_nodes(self, path: list[_Node]) -> tuple[ContactNode, ...]:
+        """The plan's nodes, with the required friction of each grasp and switching stance
+        (both computed in one vectorized pass each)."""
+        stances = [[s for i, s in enumerate(n.arclengths) if i != n.switching_finger]
+                   for n in path if n.switching_finger is not None]
+        grasp_mu = self.closure.required_mus([n.arclengths for n in path])
+        stance_mu = iter(self.closure.required_mus(stances))
+        return tuple(self.contact_node(n, mu, None if n.switching_finger is None else next(stance_mu))
+                     for n, mu in zip(path, grasp_mu))
+
+    def contact_node(self, node: _Node, required_mu: float, stance_required_mu: float | None) -> ContactNode:
+        pose = self.poses[node.depth]
+        points = [self.reach.contact(s) for s in node.arclengths]
+        q = np.concatenate([self.reach.solve(pose, i, s).q for i, s in enumerate(node.arclengths)])
+        return ContactNode(object_pose=pose.copy(), q=q, arclengths=np.array(node.arclengths),
+                           p_BC=np.array([p for p, _ in points]), n_B=np.array([n for _, n in points]),
+                           switching_finger=node.switching_finger,
+                           closure_margin=self.closure.check(node.arclengths).margin,
+                           required_mu=required_mu, stance_required_mu=stance_required_mu)
+
+    def stats(self, t0: float, roots: int = 0, candidates: int = 0) -> SearchStats:
+        return SearchStats(expanded=self.expanded, generated=self.generated, lp_calls=self.closure.lp_calls,
+                           ik_calls=self.reach.ik_calls, time_s=time.perf_counter() - t0,
+                           initial_grasps_searched=roots, initial_grasp_candidates=candidates)
+
+
+def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tuple[float, ...]], str]:
+    """The initial grasps to try, best first: the user's, or the ranked candidates."""
+    if config.initial_arclengths is not None:
+        return [tuple(search.wrap(s) for s in config.initial_arclengths)], ""
+    table = initial_grasp_candidates(scene, config, search.reach)
+    return [c.arclengths for c in table.candidates], table.reason  # grid values: already canonical keys
+
+
+def grid_levels(config: SearchConfig) -> list[SearchConfig]:
+    """The search settings of each contact grid, coarsest (the configured one) first, then
+    search.grid_refinements times halved: initial_grid_step and displacement_step / 2,
+    num_displacements 2 n - 1 (the same longest move); see the module doc for why."""
+    levels = [config]
+    for _ in range(config.grid_refinements):
+        c = levels[-1]
+        levels.append(replace(c, initial_grid_step=c.initial_grid_step / 2, displacement_step=c.displacement_step / 2,
+                              num_displacements=2 * c.num_displacements - 1))
+    return levels
+
+
+def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
+    """The chooser's first choice for `goal` without a tree search: config.initial_arclengths
+    if given, else the best-ranked candidate that passes the cheap checks the search applies
+    before rooting a tree at it (the per-finger switch bound for this goal, closure at mu_plan,
+    Drake IK), on the coarsest grid (grid_levels) where one passes. The search may still end up
+    rooted at a later candidate if this one's tree has no plan. (None, reason) when no
+    candidate passes."""
+    if not np.isfinite(goal):
+        raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
+    reasons = []
+    for level in grid_levels(config):
+        chosen, why = _choose_on_grid(scene, float(goal), level)
+        if chosen is not None:
+            return chosen, ""
+        reasons.append(f"at the {level.displacement_step:g} m grid: {why}")
+    return None, "; ".join(reasons) if len(reasons) > 1 else why
+
+
+def _choose_on_grid(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
+    search = _Search(scene, goal, config)
+    roots, reason = _roots(scene, config, search)
+    if not roots:
+        return None, reason
+    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    first = ""
+    for root in roots:
+        why = search.precheck(root, candidate=config.initial_arclengths is None)
+        if not why:
+            return root, ""
+        first = first or why
+    return None, f"no initial grasp passes the checks for this goal (of {len(roots)}; first: {first})"
+
+
+def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> ContactPlan:
+    """Algorithm 1 for the rotation `goal` (rad) of scene's object: N nodes from the initial
+    grasp (node 0) to the goal pose, each in frictional form closure at mu_plan and
+    reachable, with at most one finger changing contact between consecutive nodes while the
+    other three are in closure at mu_plan. Searched on the configured contact grid, then on
+    the finer ones of grid_levels until a plan is found; the budgets (time, expansions) hold
+    for all grids together. A search that finds no plan returns success=False with the
+    reason of each grid (which stance or reach failed)."""
+    if not np.isfinite(goal):
+        raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
+    t0 = time.perf_counter()
+    total, reasons = SearchStats(), []
+    for level in grid_levels(config):
+        plan = _find_on_grid(scene, float(goal), level, t0, config.max_expansions - total.expanded)
+        total = _add_stats(total, plan.stats, t0)
+        if plan.success:
+            return replace(plan, stats=total)
+        reasons.append(f"at the {level.displacement_step:g} m contact grid: {plan.reason}")
+        if total.expanded >= config.max_expansions or time.perf_counter() - t0 > config.time_budget_s:
+            break
+    reason = "; ".join(reasons) if len(reasons) > 1 else plan.reason
+    return replace(plan, reason=reason, stats=total)
+
+
+def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
+    """The statistics of two grids' searches together (each grid ranks its own candidates)."""
+    return SearchStats(expanded=a.expanded + b.expanded, generated=a.generated + b.generated,
+                       lp_calls=a.lp_calls + b.lp_calls, ik_calls=a.ik_calls + b.ik_calls,
+                       time_s=time.perf_counter() - t0,
+                       initial_grasps_searched=a.initial_grasps_searched + b.initial_grasps_searched,
+                       initial_grasp_candidates=a.initial_grasp_candidates + b.initial_grasp_candidates)
+
+
+def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int) -> ContactPlan:
+    """find_contact_plan on config's contact grid with at most `budget` expansions."""
+    search = _Search(scene, goal, config)
+    roots, reason = _roots(scene, config, search)
+    if not roots:
+        return ContactPlan(goal=goal, success=False, reason=reason, stats=search.stats(t0),
+                           mu_plan=search.mu_plan)
+    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    leaf, searched, skipped, first_skip, last = None, 0, 0, "", ""
+    for root in roots:
+        if searched >= config.max_initial_grasps or search.expanded >= budget \
+                or time.perf_counter() - t0 > config.time_budget_s:
+            break
+        why = search.precheck(root, candidate=config.initial_arclengths is None)
+        if why:
+            skipped += 1
+            first_skip = first_skip or f"{root}: {why}"
+            continue
+        searched += 1
+        leaf, why = search.run(root, t0, min(config.root_expansions, budget - search.expanded))
+        if leaf is not None:
+            break
+        last = f"{root}: {why}"
+    stats = search.stats(t0, searched, len(roots))
+    if leaf is None:
+        if len(roots) == 1 and not searched:
+            reason = first_skip.split(": ", 1)[1]
+        else:
+            reason = (f"no plan from {searched} searched initial grasp(s) of {len(roots)} "
+                      f"({skipped} skipped by cheap checks, first: {first_skip or 'none'}); "
+                      f"last searched {last or 'none'}; moves refused (mu_plan {search.mu_plan:.3g}): "
+                      f"{search.refusals()}")
+        return ContactPlan(goal=goal, success=False, reason=reason, stats=stats, mu_plan=search.mu_plan)
+    path = []
+    while leaf is not None:
+        path.append(leaf)
+        leaf = leaf.parent
+    nodes = search.contact_nodes(path[::-1])
+    return ContactPlan(goal=goal, success=True, reason="", nodes=nodes, stats=search.stats(t0, searched, len(roots)),
+                       mu_plan=search.mu_plan)
