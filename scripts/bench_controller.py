@@ -20,8 +20,8 @@ import numpy as np
 
 from trajectotree.config import Config
 from trajectotree.execution.reference import Reference, reference_from_arrays, reference_from_plan
-from trajectotree.scene.plant import build_scene
 from trajectotree.execution.simulate import simulate_reference
+from trajectotree.scene.plant import build_scene
 
 CONTROLLERS = ("grasp", "paper")
 
@@ -30,9 +30,11 @@ def load_reference(plan_dir: str | None, goal: float) -> tuple[Reference, Config
     """The plan in plan_dir, or a fresh default TrajectoTree plan of `goal`."""
     if plan_dir is not None:
         from trajectotree.cli.simulate_cmd import read_plan_dir
+
         arrays, config = read_plan_dir(plan_dir)
         return reference_from_arrays(arrays, build_scene(config.scene)), config
     from trajectotree.planning.planners import plan
+
     config = Config()
     scene = build_scene(config.scene)
     result = plan(scene=scene, goal=goal, method="trajectotree", config=config)
@@ -49,20 +51,27 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="profile one grasp run (cProfile)")
     args = parser.parse_args()
     reference, config = load_reference(args.plan_dir, args.goal)
-    print(f"plan: {reference.duration:.1f} s, {len(reference.t)} knots; simulated {reference.duration:.1f} + "
-          f"{config.sim.settle_time:.1f} s at time step {config.sim.time_step:g} s, grasp control at "
-          f"{config.controller.rate_hz:g} Hz")
+    print(
+        f"plan: {reference.duration:.1f} s, {len(reference.t)} knots; simulated {reference.duration:.1f} + "
+        f"{config.sim.settle_time:.1f} s at time step {config.sim.time_step:g} s, grasp control at "
+        f"{config.controller.rate_hz:g} Hz"
+    )
     times = {c: [] for c in CONTROLLERS}
     for _ in range(args.repeats):
-        for controller in CONTROLLERS:   # alternating, so a change in machine load hits both
+        for controller in CONTROLLERS:  # alternating, so a change in machine load hits both
             result = simulate_reference(reference, config, controller=controller)
             times[controller].append(result.sim_time_s)
-            print(f"  {controller:5s} {result.sim_time_s:6.2f} s  dropped {result.dropped}  "
-                  f"MAE theta {np.degrees(result.mae_theta):.2f} deg", flush=True)
+            print(
+                f"  {controller:5s} {result.sim_time_s:6.2f} s  dropped {result.dropped}  "
+                f"MAE theta {np.degrees(result.mae_theta):.2f} deg",
+                flush=True,
+            )
     medians = {c: float(np.median(t)) for c, t in times.items()}
     for c in CONTROLLERS:
-        print(f"{c:5s} median {medians[c]:6.2f} s over {args.repeats} runs "
-              f"({reference.duration + config.sim.settle_time:.1f} s simulated)")
+        print(
+            f"{c:5s} median {medians[c]:6.2f} s over {args.repeats} runs "
+            f"({reference.duration + config.sim.settle_time:.1f} s simulated)"
+        )
     print(f"ratio grasp / paper: {medians['grasp'] / medians['paper']:.2f} (target <= 1.5)")
     if args.profile:
         profiler = cProfile.Profile()

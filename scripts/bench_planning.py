@@ -35,10 +35,10 @@ import numpy as np
 from tqdm import tqdm
 
 from trajectotree.config import FORMULATIONS, Config, config_to_dict, load_config
+from trajectotree.experiments.sweep import sample_goals
 from trajectotree.planning.keyframes import local_pool, prepare_worker
 from trajectotree.planning.planners import METHODS, plan
 from trajectotree.scene.plant import build_scene
-from trajectotree.experiments.sweep import sample_goals
 
 
 def plan_row(r, search_s: float | None = None) -> dict:
@@ -46,39 +46,63 @@ def plan_row(r, search_s: float | None = None) -> dict:
     timing, check = r.solver_timing, r.physics_check
     search = r.search_time_s if search_s is None else search_s
     return {
-        "goal": r.goal, "success": r.success, "total_s": r.total_time_s - r.search_time_s + search,
-        "search_s": search, "build_s": r.build_time_s, "solve_s": r.solve_time_s, "iterations": r.iterations,
-        "cost": r.cost, "function_evaluations_share": timing.get("nlp_function_evaluations_s", np.nan)
+        "goal": r.goal,
+        "success": r.success,
+        "total_s": r.total_time_s - r.search_time_s + search,
+        "search_s": search,
+        "build_s": r.build_time_s,
+        "solve_s": r.solve_time_s,
+        "iterations": r.iterations,
+        "cost": r.cost,
+        "function_evaluations_share": timing.get("nlp_function_evaluations_s", np.nan)
         / timing.get("ipopt_total_s", np.nan),
         # a solved plan whose arrays fail trajectotree.planning.physics (counted in success = False)
-        "converged": r.converged, "physics_failed": check is not None and not check.passed,
+        "converged": r.converged,
+        "physics_failed": check is not None and not check.passed,
         "force_at_distance_N": np.nan if check is None else check.force_at_distance_N,
         # deg, the plan's last orientation vs the goal
         "final_error_deg": np.nan if r.trajectory is None else math.degrees(abs(r.trajectory.x[-1, 2] - r.goal)),
-        "status": r.status, "violations": dict(r.violations)}
+        "status": r.status,
+        "violations": dict(r.violations),
+    }
 
 
 def segment_row(r, serial, fresh) -> dict:
     """Keyframes: per-segment numbers of `r` (solved on the persistent pool) and the wall-clock
     time of its segment solves vs the same plan's solved serially and on a pool started for it."""
     wall = lambda result: result.total_time_s - result.search_time_s  # noqa: E731 (the segments' wall clock)
-    same = all(np.array_equal(a, b) for a, b in zip(r.trajectory.arrays().values(),
-                                                    serial.trajectory.arrays().values()))
-    return {"segment_iterations": [s["iterations"] for s in r.segments],
-            "segment_time_s": [s["time_s"] for s in r.segments],
-            "retries": sum(s["retries"] for s in r.segments), "parallel_wall_s": wall(r), "serial_wall_s": wall(serial),
-            "fresh_pool_wall_s": wall(fresh), "serial_identical": same,
-            "worker_max_rss_mb": max(a["max_rss_mb"] for s in r.segments for a in s["attempts"])}
+    same = all(
+        np.array_equal(a, b) for a, b in zip(r.trajectory.arrays().values(), serial.trajectory.arrays().values())
+    )
+    return {
+        "segment_iterations": [s["iterations"] for s in r.segments],
+        "segment_time_s": [s["time_s"] for s in r.segments],
+        "retries": sum(s["retries"] for s in r.segments),
+        "parallel_wall_s": wall(r),
+        "serial_wall_s": wall(serial),
+        "fresh_pool_wall_s": wall(fresh),
+        "serial_identical": same,
+        "worker_max_rss_mb": max(a["max_rss_mb"] for s in r.segments for a in s["attempts"]),
+    }
 
 
-def run(goals, methods, config: Config, formulations=("keyframes",), pool=None,
-        workers: int = 2, done: dict | None = None, on_goal=None) -> dict[str, list[dict]]:
+def run(
+    goals,
+    methods,
+    config: Config,
+    formulations=("keyframes",),
+    pool=None,
+    workers: int = 2,
+    done: dict | None = None,
+    on_goal=None,
+) -> dict[str, list[dict]]:
     """{method (trajectotree: "trajectotree/<formulation>"): one row of times and counts per goal}.
     done: {goal index: {label: row}} measured before (--rows), not planned again; on_goal(index,
     {label: row}) is called after each goal planned here."""
     scene = build_scene(config.scene)
-    labels = [m for m in methods if m != "trajectotree"] + \
-        [f"trajectotree/{f}" for f in formulations if "trajectotree" in methods]
+    labels = [m for m in methods if m != "trajectotree"] + [
+        f"trajectotree/{f}" for f in formulations if "trajectotree" in methods
+    ]
     rows, done = {label: [] for label in labels}, done or {}
     with tqdm(total=len(goals) * len(labels), file=sys.stderr, desc="planning") as bar:
         for index, goal in enumerate(goals):
@@ -95,8 +119,14 @@ def run(goals, methods, config: Config, formulations=("keyframes",), pool=None,
                 contact_plan, search_s = None, None
                 for formulation in formulations:
                     c = dataclasses.replace(config, cito=dataclasses.replace(config.cito, formulation=formulation))
-                    run_plan = lambda **kw: plan(scene=scene, goal=float(goal), method=method, config=c,  # noqa: E731
-                                                 contact_plan=contact_plan, **kw)
+                    run_plan = lambda **kw: plan(
+                        scene=scene,
+                        goal=float(goal),
+                        method=method,
+                        config=c,  # noqa: E731
+                        contact_plan=contact_plan,
+                        **kw,
+                    )
                     r = run_plan(segment_executor=pool)
                     row = plan_row(r, search_s)
                     if contact_plan is None and r.contact_plan.success:
@@ -129,29 +159,38 @@ def resume_rows(path: str, header: dict) -> tuple[dict, callable]:
     def append(index: int, rows: dict) -> None:
         with open(path, "a") as f:
             f.write(json.dumps({"index": index, "rows": rows}, default=float) + "\n")
+
     return done, append
 
 
 def summary_line(method: str, rows: list[dict]) -> str:
-    col = {key: np.array([r[key] for r in rows], dtype=float) for key in rows[0]
-           if not isinstance(rows[0][key], (str, dict, list))}
+    col = {
+        key: np.array([r[key] for r in rows], dtype=float)
+        for key in rows[0]
+        if not isinstance(rows[0][key], (str, dict, list))
+    }
     converged = [r for r in rows if r["converged"]]
     error = col["final_error_deg"][col["converged"] > 0]
-    worst = {group: max(r["violations"][group] for r in converged) for group in converged[0]["violations"]} \
-        if converged else {}
-    return (f"{method:22s} success {int(col['success'].sum())}/{len(rows)} (converged {int(col['converged'].sum())}, "
-            f"physics check failed {int(col['physics_failed'].sum())}, max force at a distance "
-            f"{np.nanmax(col['force_at_distance_N']):.3g} N)  total mean {col['total_s'].mean():6.2f} s "
-            f"median {np.median(col['total_s']):6.2f} s  | search {col['search_s'].mean():.3f} s "
-            f"(median {np.median(col['search_s']):.3f})  build {col['build_s'].mean():.2f} s  "
-            f"solve {col['solve_s'].mean():6.2f} s  | iterations mean {col['iterations'].mean():5.1f} "
-            f"median {np.median(col['iterations']):5.1f}  "
-            f"function evals {100 * np.nanmean(col['function_evaluations_share']):4.1f} % of IPOPT time  "
-            f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  "
-            f"cost mean {np.nanmean(col['cost']):.1f}\n"
-            f"{'':22s} converged plans: final orientation error max {error.max() if error.size else np.nan:.2f} deg, "
-            f"within 5 deg {int(np.sum(error <= 5.0))}/{len(error)}; largest violation "
-            + ", ".join(f"{group} {value:.1e}" for group, value in worst.items()))
+    worst = (
+        {group: max(r["violations"][group] for r in converged) for group in converged[0]["violations"]}
+        if converged
+        else {}
+    )
+    return (
+        f"{method:22s} success {int(col['success'].sum())}/{len(rows)} (converged {int(col['converged'].sum())}, "
+        f"physics check failed {int(col['physics_failed'].sum())}, max force at a distance "
+        f"{np.nanmax(col['force_at_distance_N']):.3g} N)  total mean {col['total_s'].mean():6.2f} s "
+        f"median {np.median(col['total_s']):6.2f} s  | search {col['search_s'].mean():.3f} s "
+        f"(median {np.median(col['search_s']):.3f})  build {col['build_s'].mean():.2f} s  "
+        f"solve {col['solve_s'].mean():6.2f} s  | iterations mean {col['iterations'].mean():5.1f} "
+        f"median {np.median(col['iterations']):5.1f}  "
+        f"function evals {100 * np.nanmean(col['function_evaluations_share']):4.1f} % of IPOPT time  "
+        f"build/solve {100 * col['build_s'].sum() / col['solve_s'].sum():4.1f} %  "
+        f"cost mean {np.nanmean(col['cost']):.1f}\n"
+        f"{'':22s} converged plans: final orientation error max {error.max() if error.size else np.nan:.2f} deg, "
+        f"within 5 deg {int(np.sum(error <= 5.0))}/{len(error)}; largest violation "
+        + ", ".join(f"{group} {value:.1e}" for group, value in worst.items())
+    )
 
 
 def segment_summary(rows: list[dict]) -> str:
@@ -165,18 +204,20 @@ def segment_summary(rows: list[dict]) -> str:
     slowest = max(rows, key=lambda r: max(r["segment_time_s"]))
     wall = {key: np.array([r[key] for r in rows]) for key in ("parallel_wall_s", "serial_wall_s", "fresh_pool_wall_s")}
     serial, pooled, fresh = wall["serial_wall_s"], wall["parallel_wall_s"], wall["fresh_pool_wall_s"]
-    return (f"{'':22s} segments ({len(its)}): iterations mean {its.mean():.1f} median {np.median(its):.0f} max "
-            f"{its.max()}; time mean {times.mean():.2f} s median {np.median(times):.2f} s, slowest {times.max():.2f} s "
-            f"(goal {slowest['goal']:+.3f}); per plan the slowest segment's share of the serial time: mean "
-            f"{np.mean([max(r['segment_time_s']) / sum(r['segment_time_s']) for r in rows]):.2f}; retries "
-            f"{sum(r['retries'] for r in rows)} in {sum(r['retries'] > 0 for r in rows)} plans\n"
-            f"{'':22s} segment solves per plan, wall clock: serial mean {serial.mean():.2f} s median "
-            f"{np.median(serial):.2f} s; persistent pool mean {pooled.mean():.2f} s median {np.median(pooled):.2f} s "
-            f"(speedup {serial.sum() / pooled.sum():.2f}x of the sums, median {np.median(serial / pooled):.2f}x); "
-            f"pool per plan mean {fresh.mean():.2f} s median {np.median(fresh):.2f} s "
-            f"(speedup {serial.sum() / fresh.sum():.2f}x, median {np.median(serial / fresh):.2f}x); "
-            f"parallel arrays identical to serial: {sum(r['serial_identical'] for r in rows)}/{len(rows)}; "
-            f"worker peak RSS max {max(r['worker_max_rss_mb'] for r in rows):.0f} MB")
+    return (
+        f"{'':22s} segments ({len(its)}): iterations mean {its.mean():.1f} median {np.median(its):.0f} max "
+        f"{its.max()}; time mean {times.mean():.2f} s median {np.median(times):.2f} s, slowest {times.max():.2f} s "
+        f"(goal {slowest['goal']:+.3f}); per plan the slowest segment's share of the serial time: mean "
+        f"{np.mean([max(r['segment_time_s']) / sum(r['segment_time_s']) for r in rows]):.2f}; retries "
+        f"{sum(r['retries'] for r in rows)} in {sum(r['retries'] > 0 for r in rows)} plans\n"
+        f"{'':22s} segment solves per plan, wall clock: serial mean {serial.mean():.2f} s median "
+        f"{np.median(serial):.2f} s; persistent pool mean {pooled.mean():.2f} s median {np.median(pooled):.2f} s "
+        f"(speedup {serial.sum() / pooled.sum():.2f}x of the sums, median {np.median(serial / pooled):.2f}x); "
+        f"pool per plan mean {fresh.mean():.2f} s median {np.median(fresh):.2f} s "
+        f"(speedup {serial.sum() / fresh.sum():.2f}x, median {np.median(serial / fresh):.2f}x); "
+        f"parallel arrays identical to serial: {sum(r['serial_identical'] for r in rows)}/{len(rows)}; "
+        f"worker peak RSS max {max(r['worker_max_rss_mb'] for r in rows):.0f} MB"
+    )
 
 
 def pool_startup(config: Config, workers: int) -> str:
@@ -199,33 +240,54 @@ def main() -> None:
     parser.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, from {', '.join(METHODS)}")
     parser.add_argument("--config", help="YAML config (default: the built-in defaults)")
     parser.add_argument("--json", help="also write every per-goal row to this JSON file")
-    parser.add_argument("--formulations", default=",".join(FORMULATIONS),
-                        help=f"TrajectoTree's formulations, comma-separated, from {', '.join(FORMULATIONS)}")
-    parser.add_argument("--workers", type=int, default=os.cpu_count(),
-                        help="local processes solving the keyframes segments (default: one per core)")
-    parser.add_argument("--rows", metavar="FILE.jsonl",
-                        help="append each goal's rows to this file and skip the goals it already holds (a run "
-                             "of hours can stop and go on; the summary covers every goal in the file)")
+    parser.add_argument(
+        "--formulations",
+        default=",".join(FORMULATIONS),
+        help=f"TrajectoTree's formulations, comma-separated, from {', '.join(FORMULATIONS)}",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count(),
+        help="local processes solving the keyframes segments (default: one per core)",
+    )
+    parser.add_argument(
+        "--rows",
+        metavar="FILE.jsonl",
+        help="append each goal's rows to this file and skip the goals it already holds (a run "
+        "of hours can stop and go on; the summary covers every goal in the file)",
+    )
     args = parser.parse_args()
     methods = [m.strip() for m in args.methods.split(",")]
     unknown = [m for m in methods if m not in METHODS]
     formulations = [f.strip() for f in args.formulations.split(",")]
     bad = [f for f in formulations if f not in FORMULATIONS]
     if args.goals < 1 or unknown or bad or args.workers < 1:
-        parser.error(f"--goals must be >= 1 (got {args.goals}); methods must be from {', '.join(METHODS)} "
-                     f"(unknown: {unknown}); formulations from {', '.join(FORMULATIONS)} (unknown: {bad}); "
-                     f"--workers must be >= 1 (got {args.workers})")
+        parser.error(
+            f"--goals must be >= 1 (got {args.goals}); methods must be from {', '.join(METHODS)} "
+            f"(unknown: {unknown}); formulations from {', '.join(FORMULATIONS)} (unknown: {bad}); "
+            f"--workers must be >= 1 (got {args.workers})"
+        )
     config = load_config(args.config) if args.config else Config()
-    header = {"goals": args.goals, "seed": args.seed, "methods": methods, "formulations": formulations,
-              "workers": args.workers, "config": config_to_dict(config)}
+    header = {
+        "goals": args.goals,
+        "seed": args.seed,
+        "methods": methods,
+        "formulations": formulations,
+        "workers": args.workers,
+        "config": config_to_dict(config),
+    }
     done, on_goal = resume_rows(args.rows, header) if args.rows else ({}, None)
     startup = pool_startup(config, args.workers) if "keyframes" in formulations else ""
     with local_pool(args.workers) as pool:
-        pool.map(prepare_worker, [config.scene] * args.workers)   # started once, reused by every plan
-        rows = run(sample_goals(args.goals, args.seed), methods, config, formulations, pool, args.workers,
-                   done, on_goal)
-    print(f"{args.goals} goals, seed {args.seed}, N = {config.search.num_nodes}, "
-          f"M_hat = {config.cito.knots_per_segment}, {args.workers} segment workers; {startup}")
+        pool.map(prepare_worker, [config.scene] * args.workers)  # started once, reused by every plan
+        rows = run(
+            sample_goals(args.goals, args.seed), methods, config, formulations, pool, args.workers, done, on_goal
+        )
+    print(
+        f"{args.goals} goals, seed {args.seed}, N = {config.search.num_nodes}, "
+        f"M_hat = {config.cito.knots_per_segment}, {args.workers} segment workers; {startup}"
+    )
     for label, label_rows in rows.items():
         print(summary_line(label, label_rows))
         if label == "trajectotree/keyframes":
@@ -235,10 +297,14 @@ def main() -> None:
         tt = np.array([r["total_s"] for r in rows[label]])
         for baseline in (m for m in rows if m not in tt_labels):
             other = np.array([r["total_s"] for r in rows[baseline]])
-            print(f"{baseline} / {label} total time: {other.mean() / tt.mean():.1f}x (means), "
-                  f"{np.median(other) / np.median(tt):.1f}x (medians)")
-    print(f"peak RSS of this process (search, serial solves, the joint program): "
-          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+            print(
+                f"{baseline} / {label} total time: {other.mean() / tt.mean():.1f}x (means), "
+                f"{np.median(other) / np.median(tt):.1f}x (medians)"
+            )
+    print(
+        f"peak RSS of this process (search, serial solves, the joint program): "
+        f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
+    )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(rows, f, indent=1)

@@ -11,13 +11,13 @@ import time
 import numpy as np
 
 from trajectotree.config import SearchConfig
+from trajectotree.experiments.sweep import sample_goals
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.plant import build_scene
 from trajectotree.search.grasp import FormClosureLp, grasp_matrix
 from trajectotree.search.initial_grasp import initial_grasp_candidates
 from trajectotree.search.reach import Reachability
-from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan
-from trajectotree.experiments.sweep import sample_goals
 
 
 def lp_times(boundary: ConvexPolygon, mu: float, count: int, rng) -> np.ndarray:
@@ -69,16 +69,20 @@ def main() -> None:
     times = np.array([p.stats.time_s for p in plans])
     print(f"form-closure LP (update + solve): median {1e6 * np.median(lp):.0f} us over {len(lp)} calls")
     print(f"finger IK (Drake, SNOPT, seeded): median {1e6 * np.median(ik):.0f} us over {len(ik)} calls")
-    print(f"initial grasp candidates: {len(table.candidates)} ranked of {table.assignments} grid grasps "
-          f"in {table_time:.3f} s (once per process)")
-    print(f"search over {len(plans)} goals (seed {args.seed}, N = {config.num_nodes}): "
-          f"{sum(p.success for p in plans)} found; median {np.median(times):.3f} s, "
-          f"mean {times.mean():.3f} s, max {times.max():.3f} s (target: median < 0.2 s); "
-          f"CPU time median {np.median(cpu):.3f} s (this process; excludes waiting for a busy CPU); "
-          f"median {np.median([p.stats.expanded for p in plans]):.0f} expansions, "
-          f"{np.median([p.stats.lp_calls for p in plans]):.0f} LP and "
-          f"{np.median([p.stats.ik_calls for p in plans]):.0f} IK calls per search, "
-          f"at most {max(p.stats.initial_grasps_searched for p in plans)} initial grasps searched")
+    print(
+        f"initial grasp candidates: {len(table.candidates)} ranked of {table.assignments} grid grasps "
+        f"in {table_time:.3f} s (once per process)"
+    )
+    print(
+        f"search over {len(plans)} goals (seed {args.seed}, N = {config.num_nodes}): "
+        f"{sum(p.success for p in plans)} found; median {np.median(times):.3f} s, "
+        f"mean {times.mean():.3f} s, max {times.max():.3f} s (target: median < 0.2 s); "
+        f"CPU time median {np.median(cpu):.3f} s (this process; excludes waiting for a busy CPU); "
+        f"median {np.median([p.stats.expanded for p in plans]):.0f} expansions, "
+        f"{np.median([p.stats.lp_calls for p in plans]):.0f} LP and "
+        f"{np.median([p.stats.ik_calls for p in plans]):.0f} IK calls per search, "
+        f"at most {max(p.stats.initial_grasps_searched for p in plans)} initial grasps searched"
+    )
 
 
 if __name__ == "__main__":

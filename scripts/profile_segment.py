@@ -29,9 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent.parent          # this checkout (its trajectotree package)
-KEYS = ("iterations", "cpu_ms_per_it", "fev_ms_per_it", "own_ms_per_it", "factor_ms_per_it", "solve_ms_per_it",
-        "build_ms")
+HERE = Path(__file__).resolve().parent.parent  # this checkout (its trajectotree package)
+KEYS = (
+    "iterations",
+    "cpu_ms_per_it",
+    "fev_ms_per_it",
+    "own_ms_per_it",
+    "factor_ms_per_it",
+    "solve_ms_per_it",
+    "build_ms",
+)
 
 
 def measure(segments: int, goals: list[float]) -> list[dict]:
@@ -64,20 +71,41 @@ def measure(segments: int, goals: list[float]) -> list[dict]:
         outcome = solve(program, guess, config.cito)
         cpu_ms = 1e3 * (time.process_time() - cpu0)
         t, it = outcome.timing, max(outcome.iterations, 1)
-        per_it = {name: 1e3 * t.get(key, np.nan) / it for name, key in (
-            ("fev_ms_per_it", "nlp_function_evaluations_s"), ("own_ms_per_it", "ipopt_without_function_evaluations_s"),
-            ("factor_ms_per_it", "linear_system_factorization_s"), ("solve_ms_per_it", "linear_system_back_solve_s"))}
-        rows.append({"segments": segments, "knots": spec.num_knots, "goal": goal, "success": outcome.success,
-                     "iterations": outcome.iterations, "cost": outcome.cost, "build_ms": build_ms,
-                     "cpu_ms_per_it": cpu_ms / it, **per_it})
+        per_it = {
+            name: 1e3 * t.get(key, np.nan) / it
+            for name, key in (
+                ("fev_ms_per_it", "nlp_function_evaluations_s"),
+                ("own_ms_per_it", "ipopt_without_function_evaluations_s"),
+                ("factor_ms_per_it", "linear_system_factorization_s"),
+                ("solve_ms_per_it", "linear_system_back_solve_s"),
+            )
+        }
+        rows.append(
+            {
+                "segments": segments,
+                "knots": spec.num_knots,
+                "goal": goal,
+                "success": outcome.success,
+                "iterations": outcome.iterations,
+                "cost": outcome.cost,
+                "build_ms": build_ms,
+                "cpu_ms_per_it": cpu_ms / it,
+                **per_it,
+            }
+        )
     return rows
 
 
 def run_worker(package_root: Path, segments: int, goals: list[float]) -> list[dict]:
     """measure() in a fresh process importing trajectotree from package_root."""
     env = {**os.environ, "PYTHONPATH": str(package_root), "OMP_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, __file__, "--worker", str(segments), "--goals", *map(str, goals)],
-                         env=env, capture_output=True, text=True, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, __file__, "--worker", str(segments), "--goals", *map(str, goals)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 
@@ -98,7 +126,7 @@ def main() -> None:
     for r in range(args.rounds):
         for S in args.segments:
             goals = args.goals[:1] if S >= 9 else args.goals
-            for name in (list(trees) if r % 2 else list(trees)[::-1]):   # alternate who goes first
+            for name in list(trees) if r % 2 else list(trees)[::-1]:  # alternate who goes first
                 results[name] += run_worker(trees[name], S, goals)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     print("medians over goals and rounds; ms per IPOPT iteration unless noted")
@@ -109,11 +137,17 @@ def main() -> None:
             if sel:
                 med = [np.median([row[k] for row in sel]) for k in KEYS]
                 print(f"{name:8s} {S:2d} {sel[0]['knots']:5d} {len(sel):3d} " + " ".join(f"{m:16.2f}" for m in med))
-    if args.compare:   # the same goals in both trees: their iterations and costs should agree
+    if args.compare:  # the same goals in both trees: their iterations and costs should agree
         for S in args.segments:
-            pairs = {(row["goal"], row["iterations"], row["cost"]) for name in trees for row in results[name]
-                     if row["segments"] == S}
-            print(f"S={S}: (goal, iterations, cost) {'agree in both trees' if len(pairs) == len({p[0] for p in pairs}) else 'DIFFER: ' + str(sorted(pairs))}")
+            pairs = {
+                (row["goal"], row["iterations"], row["cost"])
+                for name in trees
+                for row in results[name]
+                if row["segments"] == S
+            }
+            print(
+                f"S={S}: (goal, iterations, cost) {'agree in both trees' if len(pairs) == len({p[0] for p in pairs}) else 'DIFFER: ' + str(sorted(pairs))}"
+            )
 
 
 if __name__ == "__main__":

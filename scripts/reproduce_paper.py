@@ -32,10 +32,15 @@ from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="paper-sweep", metavar="SWEEP_DIR",
-                        help="sweep directory (default: %(default)s)")
-    parser.add_argument("--report-dir", default="docs/results", metavar="DIR",
-                        help="where the figures and the table go (default: %(default)s)")
+    parser.add_argument(
+        "--out", default="paper-sweep", metavar="SWEEP_DIR", help="sweep directory (default: %(default)s)"
+    )
+    parser.add_argument(
+        "--report-dir",
+        default="docs/results",
+        metavar="DIR",
+        help="where the figures and the table go (default: %(default)s)",
+    )
     parser.add_argument("--goals", type=int, default=60, help="number of goals (default: 60, the paper's)")
     parser.add_argument("--seed", type=int, default=0, help="goal sampler seed (default: 0)")
     parser.add_argument("--workers", type=int, help="local worker processes (default: the number of CPUs)")
@@ -43,22 +48,32 @@ def main() -> int:
     parser.add_argument("--time-limit", type=float, default=1800.0, metavar="S", help="per-trial limit, s")
     args = parser.parse_args()
     try:
-        spec = SweepSpec(goals=args.goals, seed=args.seed, methods=METHODS, simulate=False, config=Config(),
-                         time_limit_s=args.time_limit)
+        spec = SweepSpec(
+            goals=args.goals,
+            seed=args.seed,
+            methods=METHODS,
+            simulate=False,
+            config=Config(),
+            time_limit_s=args.time_limit,
+        )
         start = time.perf_counter()
         summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler)
         settings = {"gains": spec.config.controller, "sim": spec.config.sim, "workers": args.workers}
         run_executions(args.out, controllers=CONTROLLERS, conditions=["nominal"], **settings)
-        run_executions(args.out, controllers=["grasp"], conditions=["mismatch", "push"], methods=["trajectotree"],
-                       **settings)
+        run_executions(
+            args.out, controllers=["grasp"], conditions=["mismatch", "push"], methods=["trajectotree"], **settings
+        )
         files, table = make_report(args.out, args.report_dir)
     except ConfigError as e:
         print(f"reproduce_paper: error: {e}", file=sys.stderr)
         return 2
     print(summary.line())
     print(table_markdown(table), end="")
-    figures = files.figure_time_cost + (files.figure_tracking or ()) + tuple(
-        path for pair in files.figure_tracking_by_controller.values() for path in pair)
+    figures = (
+        files.figure_time_cost
+        + (files.figure_tracking or ())
+        + tuple(path for pair in files.figure_tracking_by_controller.values() for path in pair)
+    )
     print(f"figures: {', '.join(figures)}")
     if files.executions_md:
         print(Path(files.executions_md).read_text(), end="")

@@ -18,9 +18,9 @@ import dataclasses
 import numpy as np
 
 from trajectotree.cli.common import add_config_options, config_from_args
+from trajectotree.experiments.sweep import sample_goals
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan
-from trajectotree.experiments.sweep import sample_goals
 
 
 def main() -> None:
@@ -33,8 +33,9 @@ def main() -> None:
     args = parser.parse_args()
     config = config_from_args(args)
     if args.friction_safety is not None:
-        config = dataclasses.replace(config, search=dataclasses.replace(config.search,
-                                                                        friction_safety=args.friction_safety))
+        config = dataclasses.replace(
+            config, search=dataclasses.replace(config.search, friction_safety=args.friction_safety)
+        )
     scene = build_scene(config.scene)
     goals = np.linspace(-np.pi, np.pi, args.grid) if args.grid else sample_goals(args.goals, args.seed)
     plans = []
@@ -44,16 +45,21 @@ def main() -> None:
         s = plan.stats
         stance = max((n.stance_required_mu for n in plan.nodes if n.stance_required_mu is not None), default=np.nan)
         grasp = " ".join(f"{v:.2f}" for v in plan.nodes[0].arclengths) if plan.success else "-"
-        print(f"goal {plan.goal:+.3f}  {'ok  ' if plan.success else 'FAIL'}  {s.time_s:.3f} s  "
-              f"grasps {s.initial_grasps_searched:2d}/{s.initial_grasp_candidates}  expanded {s.expanded:5d}  "
-              f"initial [{grasp}]  max stance mu {stance:.3f}  {plan.reason}", flush=True)
+        print(
+            f"goal {plan.goal:+.3f}  {'ok  ' if plan.success else 'FAIL'}  {s.time_s:.3f} s  "
+            f"grasps {s.initial_grasps_searched:2d}/{s.initial_grasp_candidates}  expanded {s.expanded:5d}  "
+            f"initial [{grasp}]  max stance mu {stance:.3f}  {plan.reason}",
+            flush=True,
+        )
     times = np.array([p.stats.time_s for p in plans])
     found = sum(p.success for p in plans)
     c = config.scene
-    print(f"success {found}/{len(plans)} ({100.0 * found / len(plans):.0f}%), box {c.box_width:g} x {c.box_height:g} m, "
-          f"mu {c.mu:g}, mu_plan {plans[0].mu_plan:.3g}, N = {config.search.num_nodes}, "
-          f"{'grid' if args.grid else f'seed {args.seed}'}; search time median {np.median(times):.3f} s, "
-          f"max {times.max():.3f} s")
+    print(
+        f"success {found}/{len(plans)} ({100.0 * found / len(plans):.0f}%), box {c.box_width:g} x {c.box_height:g} m, "
+        f"mu {c.mu:g}, mu_plan {plans[0].mu_plan:.3g}, N = {config.search.num_nodes}, "
+        f"{'grid' if args.grid else f'seed {args.seed}'}; search time median {np.median(times):.3f} s, "
+        f"max {times.max():.3f} s"
+    )
 
 
 if __name__ == "__main__":

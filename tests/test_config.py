@@ -8,18 +8,30 @@ import sys
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.config import (CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, config_from_dict,
-                                 config_to_dict, load_config, save_config)
+from trajectotree.config import (
+    CitoConfig,
+    Config,
+    ConfigError,
+    SceneConfig,
+    SearchConfig,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+    save_config,
+)
 
 
-@pytest.mark.parametrize("field, value, message", [
-    ("box_width", 0.0, "scene.box_width"),
-    ("box_height", -0.1, "scene.box_height"),
-    ("box_mass", 0.0, "scene.box_mass"),
-    ("mu", 0.0, "scene.mu"),
-    ("mu", math.nan, "scene.mu"),
-    ("box_mass", math.inf, "scene.box_mass"),
-])
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("box_width", 0.0, "scene.box_width"),
+        ("box_height", -0.1, "scene.box_height"),
+        ("box_mass", 0.0, "scene.box_mass"),
+        ("mu", 0.0, "scene.mu"),
+        ("mu", math.nan, "scene.mu"),
+        ("box_mass", math.inf, "scene.box_mass"),
+    ],
+)
 def test_invalid_scene_values_name_the_field_and_range(field, value, message):
     with pytest.raises(ConfigError, match=message) as info:
         SceneConfig(**{field: value})
@@ -41,18 +53,21 @@ def test_yaml_round_trip_and_partial_files(tmp_path):
     assert loaded.scene.box_mass == 0.1 and loaded.scene.box_width == 0.2
 
 
-@pytest.mark.parametrize("text, message", [
-    ("scene:\n  box_colour: red\n", "box_colour"),
-    ("scenery: {}\n", "scenery"),
-    ("scene:\n  box_mass: -2\n", "scene.box_mass"),
-    ("scene: [1, 2\n", "not valid YAML"),
-    # Drake's typed loader: each value must have its field's type
-    ("search:\n  num_nodes: 3.5\n", "'num_nodes'"),           # an int field
-    ("sim:\n  controller: 3\n", "'controller'"),              # a str field
-    ("scene:\n  box_mass: [1]\n", "'box_mass'"),              # a sequence for a number
-    ("scene: 3\n", "section scene must be a mapping, got 3"),
-    ("scene:\n  box_mass: abc\n", "scene.box_mass = 'abc': .*; expected float"),   # Drake names only the value
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("scene:\n  box_colour: red\n", "box_colour"),
+        ("scenery: {}\n", "scenery"),
+        ("scene:\n  box_mass: -2\n", "scene.box_mass"),
+        ("scene: [1, 2\n", "not valid YAML"),
+        # Drake's typed loader: each value must have its field's type
+        ("search:\n  num_nodes: 3.5\n", "'num_nodes'"),  # an int field
+        ("sim:\n  controller: 3\n", "'controller'"),  # a str field
+        ("scene:\n  box_mass: [1]\n", "'box_mass'"),  # a sequence for a number
+        ("scene: 3\n", "section scene must be a mapping, got 3"),
+        ("scene:\n  box_mass: abc\n", "scene.box_mass = 'abc': .*; expected float"),  # Drake names only the value
+    ],
+)
 def test_bad_yaml_is_a_named_error(tmp_path, text, message):
     path = tmp_path / "bad.yaml"
     path.write_text(text)
@@ -65,13 +80,15 @@ def test_yaml_sequences_optionals_and_numbers_load_as_the_fields_types(tmp_path)
     path.write_text("search:\n  initial_arclengths: [0.54, 0.12, 0.36, 0.48]\n  max_iter_unused: 1\n")
     with pytest.raises(ConfigError, match="max_iter_unused"):
         load_config(path)
-    path.write_text("search:\n  initial_arclengths: [0.54, 0.12, 0.36, 0.48]\ncito:\n  weight_pose: [1, 2, 3]\n"
-                    "  max_iter: 40.0\nscene:\n")
+    path.write_text(
+        "search:\n  initial_arclengths: [0.54, 0.12, 0.36, 0.48]\ncito:\n  weight_pose: [1, 2, 3]\n"
+        "  max_iter: 40.0\nscene:\n"
+    )
     config = load_config(path)
     assert config.search.initial_arclengths == (0.54, 0.12, 0.36, 0.48)
     assert config.cito.weight_pose == (1.0, 2.0, 3.0) and all(type(w) is float for w in config.cito.weight_pose)
     assert type(config.cito.max_iter) is int and config.cito.max_iter == 40
-    assert config.scene == SceneConfig()   # an empty section keeps its defaults
+    assert config.scene == SceneConfig()  # an empty section keeps its defaults
     save_config(config, path)
     assert load_config(path) == config
     path.write_text("search:\n  initial_arclengths: null\n")
@@ -80,7 +97,7 @@ def test_yaml_sequences_optionals_and_numbers_load_as_the_fields_types(tmp_path)
 
 def test_plan_json_config_round_trip_and_unknown_keys():
     config = Config(search=SearchConfig(initial_arclengths=(0.06, 0.18, 0.32, 0.5)), cito=CitoConfig(max_iter=7))
-    data = json.loads(json.dumps(config_to_dict(config)))   # as stored in plan.json
+    data = json.loads(json.dumps(config_to_dict(config)))  # as stored in plan.json
     assert config_from_dict(data) == config
     assert config_to_dict(config_from_dict(data)) == data
     data["cito"]["weight_typo"] = 1.0
@@ -92,14 +109,17 @@ def run_cli(*args):
     return subprocess.run([sys.executable, "-m", "trajectotree.cli", *args], capture_output=True, text=True)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["scene", "--mass", "0"], "scene.box_mass"),
-    (["scene", "--mu", "nan"], "scene.mu"),
-    (["scene", "--box-size", "0.2", "-0.1"], "scene.box_height"),
-    (["scene", "--config", "/nonexistent.yaml"], "does not exist"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["scene", "--mass", "0"], "scene.box_mass"),
+        (["scene", "--mu", "nan"], "scene.mu"),
+        (["scene", "--box-size", "0.2", "-0.1"], "scene.box_height"),
+        (["scene", "--config", "/nonexistent.yaml"], "does not exist"),
+    ],
+)
 def test_cli_invalid_input_exits_2(args, message, capsys):
-    assert main(args) == 2    # in-process; the slow test below runs the installed entry point
+    assert main(args) == 2  # in-process; the slow test below runs the installed entry point
     assert message in capsys.readouterr().err
 
 

@@ -60,6 +60,7 @@ def test_pose_transforms_round_trip():
 
 # ---- convex polygons ----------------------------------------------------------------------
 
+
 def regular(n: int, radius: float, phase: float = 0.0) -> np.ndarray:
     angles = phase + 2 * np.pi * np.arange(n) / n
     return radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
@@ -72,11 +73,11 @@ HEXAGON = ConvexPolygon.from_points(regular(6, 0.07))
 def test_polygon_closed_forms():
     side = 0.14
     assert TRIANGLE.perimeter == pytest.approx(3 * side)
-    assert TRIANGLE.area == pytest.approx(np.sqrt(3) / 4 * side ** 2)
-    np.testing.assert_allclose(TRIANGLE.vertices.mean(axis=0), 0.0, atol=1e-15)       # re-centred
-    assert TRIANGLE.inertia(2.0) == pytest.approx(2.0 * side ** 2 / 12)                # uniform triangle
+    assert TRIANGLE.area == pytest.approx(np.sqrt(3) / 4 * side**2)
+    np.testing.assert_allclose(TRIANGLE.vertices.mean(axis=0), 0.0, atol=1e-15)  # re-centred
+    assert TRIANGLE.inertia(2.0) == pytest.approx(2.0 * side**2 / 12)  # uniform triangle
     assert HEXAGON.perimeter == pytest.approx(6 * 0.07)
-    assert HEXAGON.inertia(1.0) == pytest.approx(5 / 12 * 0.07 ** 2)                   # regular hexagon
+    assert HEXAGON.inertia(1.0) == pytest.approx(5 / 12 * 0.07**2)  # regular hexagon
     for shape in (TRIANGLE, HEXAGON):
         np.testing.assert_allclose(np.linalg.norm(shape.normals, axis=1), 1.0)
         np.testing.assert_allclose(np.einsum("fa,fa->f", shape.normals, shape.directions), 0.0, atol=1e-15)
@@ -86,7 +87,7 @@ def test_polygon_closed_forms():
 
 
 def test_square_plate_is_the_box():
-    square = ConvexPolygon(ConvexPolygon.box(0.1, 0.1).vertices)   # the generic formulas, no closed forms
+    square = ConvexPolygon(ConvexPolygon.box(0.1, 0.1).vertices)  # the generic formulas, no closed forms
     assert not square.is_box
     assert square.inertia(0.05) == pytest.approx(ConvexPolygon.box(0.1, 0.1).inertia(0.05), rel=1e-14)
     assert square.inertia(0.05) == pytest.approx(0.05 * 0.02 / 12, rel=1e-14)
@@ -97,17 +98,17 @@ def test_square_plate_is_the_box():
 
 
 def test_polygon_signed_distance_cases():
-    r = 0.07 * np.sqrt(3) / 2                                                            # hexagon inradius
+    r = 0.07 * np.sqrt(3) / 2  # hexagon inradius
     assert HEXAGON.signed_distance([0.0, 0.0]) == pytest.approx(-r)
     n = HEXAGON.normals[0]
-    assert HEXAGON.signed_distance((r + 0.01) * n) == pytest.approx(0.01)               # off a face
+    assert HEXAGON.signed_distance((r + 0.01) * n) == pytest.approx(0.01)  # off a face
     v = HEXAGON.vertices[2]
-    assert HEXAGON.signed_distance(1.5 * v) == pytest.approx(0.5 * 0.07)                # off a vertex
+    assert HEXAGON.signed_distance(1.5 * v) == pytest.approx(0.5 * 0.07)  # off a vertex
     for s in np.linspace(0.0, HEXAGON.perimeter, 50, endpoint=False):
         p, _ = HEXAGON.point(s)
         assert HEXAGON.signed_distance(p) == pytest.approx(0.0, abs=1e-15)
         assert HEXAGON.arclength(p) == pytest.approx(s, abs=1e-12)
-        if HEXAGON.corner_distance(s) > 0.004:   # pushed out along the face normal, projected back
+        if HEXAGON.corner_distance(s) > 0.004:  # pushed out along the face normal, projected back
             np.testing.assert_allclose(HEXAGON.project(p + 0.003 * HEXAGON.face_normals(p[None])[0]), p, atol=1e-12)
 
 
@@ -131,20 +132,24 @@ def test_vertex_order_and_start():
     again = ConvexPolygon.from_points(clockwise)
     assert again.is_box
     np.testing.assert_array_equal(again.vertices, box.vertices)
-    shifted = ConvexPolygon.from_points(np.array(clockwise) + [0.3, -0.2])            # re-centred
+    shifted = ConvexPolygon.from_points(np.array(clockwise) + [0.3, -0.2])  # re-centred
     np.testing.assert_allclose(shifted.vertices, box.vertices, atol=1e-15)
-    np.testing.assert_allclose(ConvexPolygon.from_points(TRIANGLE.vertices[::-1]).vertices, TRIANGLE.vertices,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        ConvexPolygon.from_points(TRIANGLE.vertices[::-1]).vertices, TRIANGLE.vertices, atol=1e-15
+    )
 
 
-@pytest.mark.parametrize("points, problem", [
-    ([[0, 0], [1, 0]], "at least 3 vertices"),
-    ([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.2]], "not convex"),
-    ([[0, 0], [1, 1], [1, 0], [0, 1]], "self-intersecting"),
-    ([[0, 0], [1, 0], [1, 0], [0, 1]], "repeat"),
-    ([[0, 0], [1, 0], [2, 0], [1, 1]], "collinear"),
-    (regular(5, 0.07)[[0, 2, 4, 1, 3]], "self-intersecting"),                           # a pentagram
-])
+@pytest.mark.parametrize(
+    "points, problem",
+    [
+        ([[0, 0], [1, 0]], "at least 3 vertices"),
+        ([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.2]], "not convex"),
+        ([[0, 0], [1, 1], [1, 0], [0, 1]], "self-intersecting"),
+        ([[0, 0], [1, 0], [1, 0], [0, 1]], "repeat"),
+        ([[0, 0], [1, 0], [2, 0], [1, 1]], "collinear"),
+        (regular(5, 0.07)[[0, 2, 4, 1, 3]], "self-intersecting"),  # a pentagram
+    ],
+)
 def test_bad_polygons_are_named(points, problem):
     assert problem in polygon_problem(points)
     with pytest.raises(ValueError, match=problem):
@@ -156,9 +161,12 @@ def test_penetration_depth_closed_forms_and_the_search_overlap_test():
 
     def square(cx, cy, h):
         return np.array([[cx - h, cy - h], [cx + h, cy - h], [cx + h, cy + h], [cx - h, cy + h]])
+
     box = ConvexPolygon.box(0.2, 0.1)
-    depths = box.penetration_depths(np.stack([square(0.104, 0.0, 0.01), square(0.2, 0.0, 0.01), square(0.0, 0.0, 0.01)]))
-    np.testing.assert_allclose(depths, [0.006, 0.0, 0.06], atol=1e-15)     # centred: out through the long face
+    depths = box.penetration_depths(
+        np.stack([square(0.104, 0.0, 0.01), square(0.2, 0.0, 0.01), square(0.0, 0.0, 0.01)])
+    )
+    np.testing.assert_allclose(depths, [0.006, 0.0, 0.06], atol=1e-15)  # centred: out through the long face
     triangle = ConvexPolygon.from_points([[0, -0.08], [0.07, 0.04], [-0.07, 0.04]])
     assert triangle.penetration_depths(square(0.0, 0.045, 0.01)) == pytest.approx(0.005)
     # overlap iff depth > 0, as the search's separating-axis test says, on random rectangles

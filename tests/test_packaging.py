@@ -47,7 +47,12 @@ def test_an_installed_wheel_ships_the_models_and_finds_them(tmp_path):
     site = tmp_path / "site"
     subprocess.run([*pip, "install", "--no-deps", "-q", "--target", str(site), str(wheel)], check=True)
     # PYTHONPATH puts the installed copy ahead of the venv's editable finder; run outside the checkout.
-    result = subprocess.run([sys.executable, "-c", INSTALLED_CHECK, str(site)], cwd=tmp_path, capture_output=True,
-                            text=True, env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"})
+    result = subprocess.run(
+        [sys.executable, "-c", INSTALLED_CHECK, str(site)],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
+    )
     assert result.returncode == 0, result.stderr
     assert result.stdout.split()[-1] == "11"  # box (x, y, theta) + 8 hand joints, parsed from the shipped SDFs

@@ -26,8 +26,15 @@ class ConfigError(ValueError):
     """An invalid configuration or command-line value (CLI exit code 2)."""
 
 
-def check_range(name: str, value, low: float | None = None, high: float | None = None,
-                *, low_open: bool = False, high_open: bool = False) -> None:
+def check_range(
+    name: str,
+    value,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> None:
     """Raises ConfigError unless `value` is a finite number within [low, high]."""
     lo = "-inf" if low is None else f"{low:g}"
     hi = "inf" if high is None else f"{high:g}"
@@ -61,7 +68,7 @@ class ObjectConfig:
             if len(v) != 2:
                 raise ConfigError(f"scene.object.vertices[{i}] = {list(v)!r} must be an (x, y) pair in m")
             for j, c in enumerate(v):
-                check_range(f"scene.object.vertices[{i}][{j}]", c, -1.0, 1.0)   # m, before re-centring
+                check_range(f"scene.object.vertices[{i}][{j}]", c, -1.0, 1.0)  # m, before re-centring
         problem = polygon_problem(self.vertices)
         if problem:
             raise ConfigError(f"scene.object.vertices = {[list(v) for v in self.vertices]}: {problem}")
@@ -71,14 +78,14 @@ class ObjectConfig:
 class SceneConfig:
     """The hand, the object and the world."""
 
-    box_width: float = 0.20        # m, object extent along its x axis
-    box_height: float = 0.10       # m, object extent along its y axis
-    box_depth: float = 0.05        # m, extent along z (only for 3D geometry; the task is planar)
-    box_mass: float = 0.05         # kg, the object's mass (box or polygon)
-    mu: float = 0.7                # friction coefficient between fingertips and object
-    gravity: float = 9.81          # m/s^2, magnitude; gravity points along -y in W
+    box_width: float = 0.20  # m, object extent along its x axis
+    box_height: float = 0.10  # m, object extent along its y axis
+    box_depth: float = 0.05  # m, extent along z (only for 3D geometry; the task is planar)
+    box_mass: float = 0.05  # kg, the object's mass (box or polygon)
+    mu: float = 0.7  # friction coefficient between fingertips and object
+    gravity: float = 9.81  # m/s^2, magnitude; gravity points along -y in W
     initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m, m, rad) object pose x_0 in W
-    corner_margin: float = 0.015   # m, contacts closer than this (arclength) to a corner are not allowed
+    corner_margin: float = 0.015  # m, contacts closer than this (arclength) to a corner are not allowed
     object: ObjectConfig = field(default_factory=ObjectConfig)  # a convex polygon instead of the box
 
     @functools.cached_property
@@ -103,25 +110,31 @@ class SceneConfig:
         if self.object.vertices is not None:
             lengths = self.shape.edge_lengths
             if lengths.min() <= shortest:
-                raise ConfigError(f"scene.object.vertices: edge {int(lengths.argmin())} is {lengths.min():.4g} m "
-                                  f"long; contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
-                                  f"corner, so every edge must be longer than {shortest:g} m")
+                raise ConfigError(
+                    f"scene.object.vertices: edge {int(lengths.argmin())} is {lengths.min():.4g} m "
+                    f"long; contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
+                    f"corner, so every edge must be longer than {shortest:g} m"
+                )
             if self.shape.circumradius > 0.3:
-                raise ConfigError(f"scene.object.vertices: a vertex is {self.shape.circumradius:.3g} m from the "
-                                  "centroid; valid range: at most 0.3 m")
+                raise ConfigError(
+                    f"scene.object.vertices: a vertex is {self.shape.circumradius:.3g} m from the "
+                    "centroid; valid range: at most 0.3 m"
+                )
         elif min(self.box_width, self.box_height) <= shortest:
-            raise ConfigError(f"scene.box_width x scene.box_height = {self.box_width:g} x {self.box_height:g} m is "
-                              f"too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
-                              f"corner, so each side must be longer than {shortest:g} m; valid range of each side: "
-                              f"({shortest:g}, 0.3] m")
+            raise ConfigError(
+                f"scene.box_width x scene.box_height = {self.box_width:g} x {self.box_height:g} m is "
+                f"too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
+                f"corner, so each side must be longer than {shortest:g} m; valid range of each side: "
+                f"({shortest:g}, 0.3] m"
+            )
 
 
 @dataclass(frozen=True)
 class SearchConfig:
     """The contact-sequence planner (paper Sec. III-A, Algorithm 1)."""
 
-    num_nodes: int = 10                 # N, nodes in the object path (tree depth), incl. the start
-    num_displacements: int = 17         # |D_cp|, contact displacements per free finger (odd, incl. zero)
+    num_nodes: int = 10  # N, nodes in the object path (tree depth), incl. the start
+    num_displacements: int = 17  # |D_cp|, contact displacements per free finger (odd, incl. zero)
     # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m). With 0.01 m
     # a +-pi goal needs >= 13 contact switches from the default grasp (9 allowed) on this hand.
     displacement_step: float = 0.02
@@ -130,7 +143,7 @@ class SearchConfig:
     # roots the search at the best ones in turn (trajectotree.search.initial_grasp).
     initial_arclengths: tuple[float, float, float, float] | None = None
     nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
-    min_closure_margin: float = 1e-3    # N, form-closure LP margin d* must exceed this
+    min_closure_margin: float = 1e-3  # N, form-closure LP margin d* must exceed this
     # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
@@ -150,9 +163,9 @@ class SearchConfig:
     # all come from its first candidate; a small polygon's trees die within a few expansions, so more
     # roots are cheap: 20 left 3 of the 0.14 m triangle's 60 seed-0 goals without a plan, 200 none.
     max_initial_grasps: int = 200
-    root_expansions: int = 2000         # node budget of the search from one initial grasp
-    max_expansions: int = 20000         # node budget of the search (all initial grasps together)
-    time_budget_s: float = 30.0         # s, wall-clock budget of the search
+    root_expansions: int = 2000  # node budget of the search from one initial grasp
+    max_expansions: int = 20000  # node budget of the search (all initial grasps together)
+    time_budget_s: float = 30.0  # s, wall-clock budget of the search
     # When no plan is found, the search is rerun up to this many times on a finer contact grid
     # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
     # move), within the same budgets. Objects with short faces need it (the 0.14 m triangle: 9/12
@@ -163,8 +176,10 @@ class SearchConfig:
         check_integer("search.num_nodes", self.num_nodes, 2, 100)
         check_integer("search.num_displacements", self.num_displacements, 1, 201)
         if self.num_displacements % 2 == 0:
-            raise ConfigError(f"search.num_displacements = {self.num_displacements} must be odd "
-                              "(symmetric around the zero displacement); valid range: odd integers in [1, 201]")
+            raise ConfigError(
+                f"search.num_displacements = {self.num_displacements} must be odd "
+                "(symmetric around the zero displacement); valid range: odd integers in [1, 201]"
+            )
         check_range("search.displacement_step", self.displacement_step, 0.0, 0.2, low_open=True)
         if self.initial_arclengths is not None:
             if len(self.initial_arclengths) != 4:
@@ -182,27 +197,29 @@ class SearchConfig:
             check_integer(f"search.{name}", getattr(self, name), 1)
         check_range("search.time_budget_s", self.time_budget_s, 0.0, None, low_open=True)
         check_integer("search.grid_refinements", self.grid_refinements, 0, 3)
-        finest = 2 ** self.grid_refinements
+        finest = 2**self.grid_refinements
         if (self.num_displacements - 1) * finest + 1 > 201 or self.initial_grid_step / finest < 0.001:
-            raise ConfigError(f"search.grid_refinements = {self.grid_refinements} refines num_displacements "
-                              f"{self.num_displacements} to {(self.num_displacements - 1) * finest + 1} (at most 201) "
-                              f"and initial_grid_step {self.initial_grid_step} m to {self.initial_grid_step / finest:g} m "
-                              "(at least 0.001); valid range: fewer refinements")
+            raise ConfigError(
+                f"search.grid_refinements = {self.grid_refinements} refines num_displacements "
+                f"{self.num_displacements} to {(self.num_displacements - 1) * finest + 1} (at most 201) "
+                f"and initial_grid_step {self.initial_grid_step} m to {self.initial_grid_step / finest:g} m "
+                "(at least 0.001); valid range: fewer refinements"
+            )
 
 
 @dataclass(frozen=True)
 class CitoConfig:
     """Contact-implicit trajectory optimization (paper Sec. III-B, III-C) and IPOPT."""
 
-    knots_per_segment: int = 12     # M_hat, time steps per transition segment
-    dt: float = 0.1                 # s, collocation time step
+    knots_per_segment: int = 12  # M_hat, time steps per transition segment
+    dt: float = 0.1  # s, collocation time step
     # Q diagonal, on (x m, y m, theta rad); theta's weight keeps the final orientation within a few
     # degrees of the goal (with 1.0 a 0.3 rad goal ended at 0.58 rad; with 30, 5 of the 60 seed-0
     # goals ended 6-8 degrees off, e.g. -1.692 rad: 7.8 deg, 2.7 with 100, 0.7 with 300).
     weight_pose: tuple[float, float, float] = (100.0, 100.0, 300.0)
-    weight_torque: float = 1.0      # R = weight_torque * I, on tau (N m)
-    weight_force: float = 0.01      # L = weight_force * I, on lambda (N)
-    weight_slack: float = 100.0     # L1 penalty on the complementarity slacks gamma (eqs. 5-6), per unit slack
+    weight_torque: float = 1.0  # R = weight_torque * I, on tau (N m)
+    weight_force: float = 0.01  # L = weight_force * I, on lambda (N)
+    weight_slack: float = 100.0  # L1 penalty on the complementarity slacks gamma (eqs. 5-6), per unit slack
     # L1 penalty on the slacks of the plan's contact-point equalities (eqs. 12-15, TrajectoTree only), per m.
     # Large enough that they hold: with 100, a fixed finger sank 1.2 mm into the box (goal -0.3).
     weight_contact_slack: float = 1.0e4
@@ -230,7 +247,7 @@ class CitoConfig:
     # off each link-2 box (smooth distances; never more than the program's fixed end knots, the
     # search's nodes, have). Without them 44 of the 60 seed-0 keyframes plans had a link inside
     # the box mid-segment, up to 32 mm; with them none, at 1.5x the IPOPT iterations.
-    link_rows: bool = True          # false: only the fingertip spheres see the object (the paper)
+    link_rows: bool = True  # false: only the fingertip spheres see the object (the paper)
     # Keyframes: each segment is first solved without the link rows, and again with them (from the
     # plan's guess) only when a link then overlaps the object (the physics check's exact test): most
     # segments never bring a link near it (84 of the 540 seed-0 segments did), and the rows cost 1.5x
@@ -242,13 +259,13 @@ class CitoConfig:
     # IPOPT tol, on the scaled optimality error; constraints are held to constr_viol_tol regardless.
     # 1e-3 instead of 1e-6: 67 instead of 88 iterations on a 3-segment plan, objective 0.007 % higher.
     tol: float = 1e-3
-    constr_viol_tol: float = 1e-6   # IPOPT constr_viol_tol
-    acceptable_tol: float = 1e-1    # IPOPT acceptable_tol
+    constr_viol_tol: float = 1e-6  # IPOPT constr_viol_tol
+    acceptable_tol: float = 1e-1  # IPOPT acceptable_tol
     acceptable_constr_viol_tol: float = 1e-6  # IPOPT acceptable_constr_viol_tol
-    acceptable_iter: int = 5        # IPOPT acceptable_iter
-    max_iter: int = 1000            # IPOPT max_iter
-    lbfgs_history: int = 6          # IPOPT limited_memory_max_history (3: 157 iterations, 6: 89 on a 3-segment plan)
-    print_level: int = 0            # IPOPT print_level (0 silent, 5 verbose)
+    acceptable_iter: int = 5  # IPOPT acceptable_iter
+    max_iter: int = 1000  # IPOPT max_iter
+    lbfgs_history: int = 6  # IPOPT limited_memory_max_history (3: 157 iterations, 6: 89 on a 3-segment plan)
+    print_level: int = 0  # IPOPT print_level (0 silent, 5 verbose)
     formulation: str = "keyframes"  # TrajectoTree: a program per segment between the search's nodes, or "joint" (paper)
 
     def __post_init__(self):
@@ -283,16 +300,16 @@ class ControllerGains:
 
     # Eq. 20, tuned on TrajectoTree plans (seed-0 goals): kp 400 halved the median theta error of
     # kp 200; kp >= 800 made plans drop more; kv must stay below ~2 m_tip / sim.time_step.
-    kp: float = 400.0   # N/m, fingertip position stiffness
-    kv: float = 5.0     # N s/m, fingertip velocity damping
+    kp: float = 400.0  # N/m, fingertip position stiffness
+    kv: float = 5.0  # N s/m, fingertip velocity damping
     # GraspController. Strong object gains with soft fingertip springs: weak object gains (100 s^-2)
     # with stiff springs anchored to the measured box (200 N/m) lost even a static grasp.
-    rate_hz: float = 500.0          # Hz, control rate (torques are held between updates)
-    object_kp: float = 2000.0       # s^-2, box pose error -> desired acceleration (x, y and theta alike)
-    object_kd: float = 80.0         # s^-1, box velocity error -> desired acceleration
-    tip_kp: float = 50.0            # N/m, fingertip spring to its target on the measured box (x (1 - force budget))
-    tip_kd: float = 3.0             # N s/m, fingertip damping to its target's velocity
-    min_normal_force: float = 0.1   # N, least push of a finger in contact (grasp-force QP)
+    rate_hz: float = 500.0  # Hz, control rate (torques are held between updates)
+    object_kp: float = 2000.0  # s^-2, box pose error -> desired acceleration (x, y and theta alike)
+    object_kd: float = 80.0  # s^-1, box velocity error -> desired acceleration
+    tip_kp: float = 50.0  # N/m, fingertip spring to its target on the measured box (x (1 - force budget))
+    tip_kd: float = 3.0  # N s/m, fingertip damping to its target's velocity
+    min_normal_force: float = 0.1  # N, least push of a finger in contact (grasp-force QP)
     # N, most push of a finger in contact (grasp-force QP). 5 N saturated in a plan's two-finger
     # squeeze (~3 N planned) with sim mu 0.55 and mass +20 %: 1 of 6 plans dropped, none with 8 N
     # (theta MAE 3.95 -> 1.50 deg). 8 N at the fingers' reach is near the 1 N m motor limit.
@@ -314,8 +331,8 @@ class ControllerGains:
     # with 0.8 (0.56) 0/60 dropped, 58/60 ended within 3 deg (1 drop under mismatch, 0 under a push;
     # 0.75: 1, 2, 1 drops, 56/60). 0.85 (0.595) made goal -2.038 drop under mismatch.
     friction_safety: float = 0.8
-    ramp_time: float = 0.1          # s, a switching finger's force budget ramps to 0 after lift-off (back before landing)
-    swing_lift: float = 0.008       # m, least fingertip gap mid-swing (its planned path, lifted where lower)
+    ramp_time: float = 0.1  # s, a switching finger's force budget ramps to 0 after lift-off (back before landing)
+    swing_lift: float = 0.008  # m, least fingertip gap mid-swing (its planned path, lifted where lower)
     contact_distance: float = 1e-3  # m, a planned fingertip this close to the planned box is in contact
 
     def __post_init__(self):
@@ -330,7 +347,10 @@ class ControllerGains:
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
-FORMULATIONS = ("keyframes", "joint")  # cito.formulation values: trajectotree.planning.keyframes, the paper's one program
+FORMULATIONS = (
+    "keyframes",
+    "joint",
+)  # cito.formulation values: trajectotree.planning.keyframes, the paper's one program
 
 
 def check_controller(value: str, name: str = "controller") -> str:
@@ -344,12 +364,12 @@ def check_controller(value: str, name: str = "controller") -> str:
 class SimConfig:
     """Full-dynamics execution in a discrete MultibodyPlant."""
 
-    time_step: float = 1e-3       # s, discrete plant step
-    settle_time: float = 0.5      # s, simulated after the plan ends (the last reference is held)
-    drop_distance: float = 0.05   # m, the box is dropped once its position is this far from the plan
-    log_period: float = 0.01      # s, sampling period of the logged box pose and hand state (metrics use it)
-    controller: str = "grasp"     # executor: "grasp" (GraspController) or "paper" (eq. 20, ImpedanceController)
-    push_duration: float = 0.2    # s, how long a push (simulate --push) acts on the box
+    time_step: float = 1e-3  # s, discrete plant step
+    settle_time: float = 0.5  # s, simulated after the plan ends (the last reference is held)
+    drop_distance: float = 0.05  # m, the box is dropped once its position is this far from the plan
+    log_period: float = 0.01  # s, sampling period of the logged box pose and hand state (metrics use it)
+    controller: str = "grasp"  # executor: "grasp" (GraspController) or "paper" (eq. 20, ImpedanceController)
+    push_duration: float = 0.2  # s, how long a push (simulate --push) acts on the box
 
     def __post_init__(self):
         check_range("sim.time_step", self.time_step, 0.0, 0.01, low_open=True)
@@ -386,7 +406,7 @@ def _load_section(cls, data, name: str, where: str):
                 load_typed(cls, {key: value})
             except DRAKE_ERRORS as e:
                 kind = hints.get(key)
-                kind = kind.__name__ if isinstance(kind, type) else kind   # float, tuple[float, float, float]
+                kind = kind.__name__ if isinstance(kind, type) else kind  # float, tuple[float, float, float]
                 why = f"valid keys: {list(hints)}" if kind is None else f"expected {kind}"
                 raise ConfigError(f"{where}: {name}.{key} = {value!r}: {e}; {why}") from None
         raise

@@ -15,13 +15,13 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ContactNode:
-    object_pose: np.ndarray        # (3,) x*_n = (x m, y m, theta rad) in W
-    q: np.ndarray                  # (8,) rad, joint angles q*_n from IK (finger-major)
-    arclengths: np.ndarray         # (4,) m, each finger's contact along the box boundary
-    p_BC: np.ndarray               # (4, 2) m, contact points in the box frame B
-    n_B: np.ndarray                # (4, 2) outward unit normals at the contacts, in B
-    switching_finger: int | None   # finger that moved between node n-1 and node n
-    closure_margin: float          # N, the form-closure LP's margin d* at mu_plan (> 0: in form closure)
+    object_pose: np.ndarray  # (3,) x*_n = (x m, y m, theta rad) in W
+    q: np.ndarray  # (8,) rad, joint angles q*_n from IK (finger-major)
+    arclengths: np.ndarray  # (4,) m, each finger's contact along the box boundary
+    p_BC: np.ndarray  # (4, 2) m, contact points in the box frame B
+    n_B: np.ndarray  # (4, 2) outward unit normals at the contacts, in B
+    switching_finger: int | None  # finger that moved between node n-1 and node n
+    closure_margin: float  # N, the form-closure LP's margin d* at mu_plan (> 0: in form closure)
     # smallest friction coefficient at which the node's four contacts are in frictional form closure
     required_mu: float = float("nan")
     # the same for the three fingers that held the box while switching_finger moved to this node
@@ -36,12 +36,14 @@ class ContactNode:
             "closure_margin": float(self.closure_margin),
             "required_mu": _finite_or_none(self.required_mu),
             "stance_required_mu": _finite_or_none(self.stance_required_mu),
-            "contacts": [{"arclength": float(s), "p_B": [float(v) for v in p], "n_B": [float(v) for v in n]}
-                         for s, p, n in zip(self.arclengths, self.p_BC, self.n_B)],
+            "contacts": [
+                {"arclength": float(s), "p_B": [float(v) for v in p], "n_B": [float(v) for v in n]}
+                for s, p, n in zip(self.arclengths, self.p_BC, self.n_B)
+            ],
         }
 
     @staticmethod
-    def from_json(data: dict) -> "ContactNode":
+    def from_json(data: dict) -> ContactNode:
         contacts = data["contacts"]
         return ContactNode(
             object_pose=np.array(data["object_pose"], dtype=float),
@@ -67,12 +69,12 @@ def _float_or_nan(value) -> float:
 
 @dataclass(frozen=True)
 class SearchStats:
-    expanded: int = 0        # nodes popped from the open set
-    generated: int = 0       # neighbour nodes inserted into the tree
-    lp_calls: int = 0        # form-closure LP solves
-    ik_calls: int = 0        # inverse-kinematics solves
-    time_s: float = 0.0      # wall-clock search time, s
-    initial_grasps_searched: int = 0   # candidate initial grasps the tree search was rooted at
+    expanded: int = 0  # nodes popped from the open set
+    generated: int = 0  # neighbour nodes inserted into the tree
+    lp_calls: int = 0  # form-closure LP solves
+    ik_calls: int = 0  # inverse-kinematics solves
+    time_s: float = 0.0  # wall-clock search time, s
+    initial_grasps_searched: int = 0  # candidate initial grasps the tree search was rooted at
     initial_grasp_candidates: int = 0  # ranked candidate initial grasps (1 when the user gave one)
 
     def to_json(self) -> dict:
@@ -81,12 +83,12 @@ class SearchStats:
 
 @dataclass(frozen=True)
 class ContactPlan:
-    goal: float                                   # rad, goal rotation of the object
-    success: bool                                 # a path of N nodes reached the goal pose
-    reason: str                                   # why not, when success is False ("" otherwise)
-    nodes: tuple[ContactNode, ...] = ()           # N nodes on success, () otherwise
+    goal: float  # rad, goal rotation of the object
+    success: bool  # a path of N nodes reached the goal pose
+    reason: str  # why not, when success is False ("" otherwise)
+    nodes: tuple[ContactNode, ...] = ()  # N nodes on success, () otherwise
     stats: SearchStats = field(default_factory=SearchStats)
-    mu_plan: float = float("nan")                 # friction coefficient the plan was searched with
+    mu_plan: float = float("nan")  # friction coefficient the plan was searched with
 
     @property
     def object_path(self) -> np.ndarray:
@@ -94,12 +96,22 @@ class ContactPlan:
         return np.array([n.object_pose for n in self.nodes])
 
     def to_json(self) -> dict:
-        return {"goal": float(self.goal), "success": self.success, "reason": self.reason,
-                "mu_plan": _finite_or_none(self.mu_plan),
-                "stats": self.stats.to_json(), "contact_sequence": [n.to_json() for n in self.nodes]}
+        return {
+            "goal": float(self.goal),
+            "success": self.success,
+            "reason": self.reason,
+            "mu_plan": _finite_or_none(self.mu_plan),
+            "stats": self.stats.to_json(),
+            "contact_sequence": [n.to_json() for n in self.nodes],
+        }
 
     @staticmethod
-    def from_json(data: dict) -> "ContactPlan":
-        return ContactPlan(goal=float(data["goal"]), success=bool(data["success"]), reason=data.get("reason", ""),
-                           nodes=tuple(ContactNode.from_json(n) for n in data.get("contact_sequence") or ()),
-                           stats=SearchStats(**data.get("stats", {})), mu_plan=_float_or_nan(data.get("mu_plan")))
+    def from_json(data: dict) -> ContactPlan:
+        return ContactPlan(
+            goal=float(data["goal"]),
+            success=bool(data["success"]),
+            reason=data.get("reason", ""),
+            nodes=tuple(ContactNode.from_json(n) for n in data.get("contact_sequence") or ()),
+            stats=SearchStats(**data.get("stats", {})),
+            mu_plan=_float_or_nan(data.get("mu_plan")),
+        )

@@ -30,8 +30,9 @@ def _segments_cross(p1, p2, q1, q2) -> bool:
     d3, d4 = _cross(q2 - q1, p1 - q1), _cross(q2 - q1, p2 - q1)
     if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
         return True
-    on = lambda a, b, c, d: d == 0 and min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) \
-        and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])  # noqa: E731 (c on segment a-b)
+    on = lambda a, b, c, d: (
+        d == 0 and min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
+    )  # noqa: E731 (c on segment a-b)
     return on(p1, p2, q1, d1) or on(p1, p2, q2, d2) or on(q1, q2, p1, d3) or on(q1, q2, p2, d4)
 
 
@@ -75,23 +76,35 @@ class ConvexPolygon:
 
     def __init__(self, vertices, box_half: tuple[float, float] | None = None):
         v = np.array(vertices, dtype=float)
-        self.vertices = v                                           # (V, 2) m
-        self.box_half = box_half                                    # (w/2, h/2) m of the box (its closed forms), else None
+        self.vertices = v  # (V, 2) m
+        self.box_half = box_half  # (w/2, h/2) m of the box (its closed forms), else None
         d = np.roll(v, -1, axis=0) - v
-        self.edge_lengths = np.linalg.norm(d, axis=1)               # (V,) m
-        self.directions = d / self.edge_lengths[:, None]            # (V, 2) counter-clockwise unit tangents
+        self.edge_lengths = np.linalg.norm(d, axis=1)  # (V,) m
+        self.directions = d / self.edge_lengths[:, None]  # (V, 2) counter-clockwise unit tangents
         self.normals = np.stack([self.directions[:, 1], -self.directions[:, 0]], axis=1) + 0.0  # outward (no -0.0)
-        self.offsets = np.einsum("fa,fa->f", self.normals, v)       # (V,) m, face f: n_f . p = offset_f
+        self.offsets = np.einsum("fa,fa->f", self.normals, v)  # (V,) m, face f: n_f . p = offset_f
         self._corners = np.concatenate([[0.0], np.cumsum(self.edge_lengths)[:-1]])
         self.perimeter = float(np.sum(self.edge_lengths))
         if box_half:  # the box's sums in their own order
             w, h = 2 * box_half[0], 2 * box_half[1]
             self._corners, self.perimeter = np.array([0.0, h, h + w, 2 * h + w]), 2.0 * (w + h)
         cross = _cross(v, np.roll(v, -1, axis=0))
-        self.area = float(cross.sum() / 2)                          # m^2
+        self.area = float(cross.sum() / 2)  # m^2
         nxt = np.roll(v, -1, axis=0)
-        polar = float(np.sum(cross * (v[:, 0] ** 2 + v[:, 0] * nxt[:, 0] + nxt[:, 0] ** 2
-                                      + v[:, 1] ** 2 + v[:, 1] * nxt[:, 1] + nxt[:, 1] ** 2)) / 12)
+        polar = float(
+            np.sum(
+                cross
+                * (
+                    v[:, 0] ** 2
+                    + v[:, 0] * nxt[:, 0]
+                    + nxt[:, 0] ** 2
+                    + v[:, 1] ** 2
+                    + v[:, 1] * nxt[:, 1]
+                    + nxt[:, 1] ** 2
+                )
+            )
+            / 12
+        )
         # 12 x the polar second moment per unit area (m^2): inertia = mass * this / 12.
         self._inertia_sum = (box_half[0] * 2) ** 2 + (box_half[1] * 2) ** 2 if box_half else 12 * polar / self.area
 
@@ -115,7 +128,7 @@ class ConvexPolygon:
         centroid = np.sum((p + np.roll(p, -1, axis=0)) * cross[:, None], axis=0) / (3 * cross.sum())
         p = p - centroid + 0.0
         d = np.roll(p, -1, axis=0) - p
-        angles = np.arctan2(-d[:, 0], d[:, 1])                       # outward normal angle of each face
+        angles = np.arctan2(-d[:, 0], d[:, 1])  # outward normal angle of each face
         start = min(range(len(p)), key=lambda f: (round(abs(angles[f]), 12), angles[f]))
         p = np.roll(p, -start, axis=0)
         half = np.abs(p[0])
@@ -215,9 +228,9 @@ class ConvexPolygon:
         if self.box_half:
             q = np.abs(p_B) - np.array(self.box_half)
             return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(q.max(axis=-1), 0.0)
-        faces = p_B @ self.normals.T - self.offsets                               # (..., V)
+        faces = p_B @ self.normals.T - self.offsets  # (..., V)
         t = self._segment_parameters(p_B)
-        nearest = self.vertices + t[..., None] * self.directions                  # (..., V, 2)
+        nearest = self.vertices + t[..., None] * self.directions  # (..., V, 2)
         outside = np.linalg.norm(p_B[..., None, :] - nearest, axis=-1).min(axis=-1)
         inside = faces.max(axis=-1)
         return np.where(inside > 0, outside, inside)
@@ -235,7 +248,7 @@ class ConvexPolygon:
             pushed = np.where(np.arange(2) == axis[..., None], sign * half, p_B)
             return np.where(inside[..., None], pushed, clipped)
         t = self._segment_parameters(p_B)
-        candidates = self.vertices + t[..., None] * self.directions                # (..., V, 2)
+        candidates = self.vertices + t[..., None] * self.directions  # (..., V, 2)
         k = np.argmin(np.linalg.norm(p_B[..., None, :] - candidates, axis=-1), axis=-1)
         return np.take_along_axis(candidates, k[..., None, None], axis=-2)[..., 0, :]
 
@@ -258,10 +271,11 @@ class ConvexPolygon:
         edges = np.roll(c, -1, axis=-2) - c
         their_normals = np.stack([edges[..., 1], -edges[..., 0]], axis=-1)
         their_normals /= np.linalg.norm(their_normals, axis=-1, keepdims=True)
-        axes = np.concatenate([np.broadcast_to(self.normals, (*c.shape[:-2], *self.normals.shape)), their_normals],
-                              axis=-2)                                           # (..., V + m, 2)
-        mine = np.einsum("...ad,vd->...av", axes, self.vertices)                 # (..., axes, V)
-        theirs = np.einsum("...ad,...md->...am", axes, c)                        # (..., axes, m)
+        axes = np.concatenate(
+            [np.broadcast_to(self.normals, (*c.shape[:-2], *self.normals.shape)), their_normals], axis=-2
+        )  # (..., V + m, 2)
+        mine = np.einsum("...ad,vd->...av", axes, self.vertices)  # (..., axes, V)
+        theirs = np.einsum("...ad,...md->...am", axes, c)  # (..., axes, m)
         overlap = np.minimum(mine.max(-1) - theirs.min(-1), theirs.max(-1) - mine.min(-1))
         return np.maximum(overlap.min(-1), 0.0)
 
@@ -286,6 +300,7 @@ def world_to_box(pose, p_W) -> np.ndarray:
 
 
 # ---- vectorized, for whole trajectories (physics check, execution schedule) ----------------
+
 
 def rotations_2d(theta: np.ndarray) -> np.ndarray:
     """R_WB (K, 2, 2) for rotations by theta (K,) about z."""

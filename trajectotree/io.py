@@ -67,17 +67,22 @@ def load_sim(plan_dir: str | Path) -> SimResult:
     """The SimResult saved by save_sim. ConfigError naming the file when sim.json or
     sim.npz is missing or malformed."""
     json_path, npz_path = Path(plan_dir) / SIM_JSON, Path(plan_dir) / SIM_NPZ
-    require_files((json_path, npz_path), f"a run's folder holds {SIM_JSON} and {SIM_NPZ} "
-                                         "(written by `trajectotree simulate`)")
+    require_files(
+        (json_path, npz_path), f"a run's folder holds {SIM_JSON} and {SIM_NPZ} (written by `trajectotree simulate`)"
+    )
     with reading(json_path):
         summary = json.loads(json_path.read_text())
-        values = dict(mae_x=float(summary["mae_x"]), mae_y=float(summary["mae_y"]),
-                      mae_theta=float(summary["mae_theta"]),
-                      final_error=tuple(float(v) for v in summary["final_error"]),
-                      dropped=bool(summary["dropped"]), drop_time_s=summary["drop_time_s"],
-                      sim_time_s=float(summary["sim_time_s"]),
-                      controller=summary.get("controller", "paper"),   # runs before the grasp controller
-                      conditions=summary.get("conditions", {}))
+        values = dict(
+            mae_x=float(summary["mae_x"]),
+            mae_y=float(summary["mae_y"]),
+            mae_theta=float(summary["mae_theta"]),
+            final_error=tuple(float(v) for v in summary["final_error"]),
+            dropped=bool(summary["dropped"]),
+            drop_time_s=summary["drop_time_s"],
+            sim_time_s=float(summary["sim_time_s"]),
+            controller=summary.get("controller", "paper"),  # runs before the grasp controller
+            conditions=summary.get("conditions", {}),
+        )
     with reading(npz_path), np.load(npz_path) as data:
         arrays = {name: data[name] for name in SIM_ARRAYS}
     return SimResult(**arrays, **values)
@@ -87,18 +92,29 @@ def plan_to_json(result: PlanResult) -> dict:
     """plan.json (keys: README, "Trajectory optimization"): the solve report, contact sequence and config."""
     finite = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731 (JSON has no NaN)
     return {
-        "method": result.method, "goal": float(result.goal), "success": bool(result.success),
+        "method": result.method,
+        "goal": float(result.goal),
+        "success": bool(result.success),
         "converged": bool(result.converged),
-        "status": result.status, "search_time_s": float(result.search_time_s),
-        "build_time_s": float(result.build_time_s), "solve_time_s": float(result.solve_time_s),
-        "total_time_s": float(result.total_time_s), "cost": finite(result.cost), "iterations": int(result.iterations),
+        "status": result.status,
+        "search_time_s": float(result.search_time_s),
+        "build_time_s": float(result.build_time_s),
+        "solve_time_s": float(result.solve_time_s),
+        "total_time_s": float(result.total_time_s),
+        "cost": finite(result.cost),
+        "iterations": int(result.iterations),
         "violations": {k: finite(v) for k, v in result.violations.items()},
         "physics_check": None if result.physics_check is None else result.physics_check.to_json(),
-        "search": {"success": result.contact_plan.success, "reason": result.contact_plan.reason,
-                   "stats": result.contact_plan.stats.to_json(), "mu_plan": finite(result.contact_plan.mu_plan)},
+        "search": {
+            "success": result.contact_plan.success,
+            "reason": result.contact_plan.reason,
+            "stats": result.contact_plan.stats.to_json(),
+            "mu_plan": finite(result.contact_plan.mu_plan),
+        },
         "contact_sequence": [n.to_json() for n in result.contact_plan.nodes],
         "solver_timing": dict(result.solver_timing),
-        "formulation": result.formulation, "segments": list(result.segments),
+        "formulation": result.formulation,
+        "segments": list(result.segments),
         "config": config_to_dict(result.config),
     }
 
@@ -116,9 +132,9 @@ class PlanFiles:
     """A plan folder as read: plan.json's data, its Config and the plan.npz arrays."""
 
     folder: Path
-    data: dict                      # plan.json as parsed
-    config: Config                  # plan.json's config
-    arrays: dict[str, np.ndarray]   # every TRAJECTORY_ARRAYS name, or none when planning solved nothing
+    data: dict  # plan.json as parsed
+    config: Config  # plan.json's config
+    arrays: dict[str, np.ndarray]  # every TRAJECTORY_ARRAYS name, or none when planning solved nothing
 
     @property
     def json_path(self) -> Path:
@@ -156,8 +172,9 @@ def read_plan_files(folder: str | Path, name: str = "plan folder") -> PlanFiles:
     if not folder.is_dir():
         raise ConfigError(f"{name} {str(folder)!r} is not a directory")
     json_path, npz_path = folder / PLAN_JSON, folder / PLAN_NPZ
-    require_files((json_path, npz_path),
-                  f"a plan folder holds {PLAN_JSON} and {PLAN_NPZ} (written by `trajectotree plan`)")
+    require_files(
+        (json_path, npz_path), f"a plan folder holds {PLAN_JSON} and {PLAN_NPZ} (written by `trajectotree plan`)"
+    )
     with reading(json_path):
         data = json.loads(json_path.read_text())
         config = config_from_dict(data["config"])
@@ -165,8 +182,10 @@ def read_plan_files(folder: str | Path, name: str = "plan folder") -> PlanFiles:
         arrays = {key: np.array(npz[key]) for key in npz.files}
     missing = [n for n in TRAJECTORY_ARRAYS if n not in arrays]
     if arrays and missing:
-        raise ConfigError(f"{str(npz_path)!r} lacks the arrays {missing}"
-                          + (" (written before plan.npz had p_W_C; plan it again)" if missing == ["p_W_C"] else ""))
+        raise ConfigError(
+            f"{str(npz_path)!r} lacks the arrays {missing}"
+            + (" (written before plan.npz had p_W_C; plan it again)" if missing == ["p_W_C"] else "")
+        )
     return PlanFiles(folder=folder, data=data, config=config, arrays=arrays)
 
 
@@ -177,21 +196,37 @@ def load_plan(out_dir: str | Path) -> PlanResult:
     with reading(files.json_path):
         data = files.data
         search = data.get("search", {})
-        contact_plan = ContactPlan.from_json({"goal": data["goal"], "success": search.get("success", True),
-                                              "reason": search.get("reason", ""), "stats": search.get("stats", {}),
-                                              "mu_plan": search.get("mu_plan"),   # older files lack it
-                                              "contact_sequence": data["contact_sequence"]})
+        contact_plan = ContactPlan.from_json(
+            {
+                "goal": data["goal"],
+                "success": search.get("success", True),
+                "reason": search.get("reason", ""),
+                "stats": search.get("stats", {}),
+                "mu_plan": search.get("mu_plan"),  # older files lack it
+                "contact_sequence": data["contact_sequence"],
+            }
+        )
         nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
         check = data.get("physics_check")
         result = PlanResult(
-            method=data["method"], goal=float(data["goal"]), success=bool(data["success"]),
-            status=str(data["status"]), search_time_s=float(data["search_time_s"]),
-            build_time_s=float(data["build_time_s"]), solve_time_s=float(data["solve_time_s"]),
-            total_time_s=float(data["total_time_s"]), cost=nan(data["cost"]), iterations=int(data["iterations"]),
-            contact_plan=contact_plan, violations={k: nan(v) for k, v in data["violations"].items()},
-            config=files.config, solver_timing=data.get("solver_timing", {}),
+            method=data["method"],
+            goal=float(data["goal"]),
+            success=bool(data["success"]),
+            status=str(data["status"]),
+            search_time_s=float(data["search_time_s"]),
+            build_time_s=float(data["build_time_s"]),
+            solve_time_s=float(data["solve_time_s"]),
+            total_time_s=float(data["total_time_s"]),
+            cost=nan(data["cost"]),
+            iterations=int(data["iterations"]),
+            contact_plan=contact_plan,
+            violations={k: nan(v) for k, v in data["violations"].items()},
+            config=files.config,
+            solver_timing=data.get("solver_timing", {}),
             physics_check=None if check is None else PhysicsCheck.from_json(check),
-            converged=bool(data.get("converged", data["success"])),   # older files: success meant converged
-            formulation=str(data.get("formulation", "joint")), segments=tuple(data.get("segments", ())),
-            trajectory=Trajectory(**{n: files.arrays[n] for n in TRAJECTORY_ARRAYS}) if files.arrays else None)
+            converged=bool(data.get("converged", data["success"])),  # older files: success meant converged
+            formulation=str(data.get("formulation", "joint")),
+            segments=tuple(data.get("segments", ())),
+            trajectory=Trajectory(**{n: files.arrays[n] for n in TRAJECTORY_ARRAYS}) if files.arrays else None,
+        )
     return result

@@ -30,10 +30,10 @@ TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t
 SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error", "f_W", "f_W_plan")
 
 # The physics check's rule (trajectotree.planning.physics; written into plan.json with each check):
-GAP_TOL = 1e-4            # m, a fingertip sphere farther than this from the box is off it (issue 13's rule)
-FORCE_TOL = 0.01          # N, the most force a fingertip off the box may carry (issue 13's rule)
-CONE_TOL = 1e-6           # N, friction-cone violation tolerated (IPOPT holds the linear cone rows to ~1e-8)
-NEWTON_EULER_TOL = 1e-4   # N and N m, Newton-Euler residual tolerated: 0.02 % of the default box's weight
+GAP_TOL = 1e-4  # m, a fingertip sphere farther than this from the box is off it (issue 13's rule)
+FORCE_TOL = 0.01  # N, the most force a fingertip off the box may carry (issue 13's rule)
+CONE_TOL = 1e-6  # N, friction-cone violation tolerated (IPOPT holds the linear cone rows to ~1e-8)
+NEWTON_EULER_TOL = 1e-4  # N and N m, Newton-Euler residual tolerated: 0.02 % of the default box's weight
 # m, how deep a fingertip sphere may sink into the object: the smooth distance CITO's free fingers see
 # lies up to log(2)/k = 0.7 mm above the exact one at a corner (cito.sdf_sharpness k); 299 plans of
 # the 60-goal and polygon sweeps sank at most 0.09 mm
@@ -52,8 +52,12 @@ def check_method(method: str) -> str:
 def check_goal(goal, name: str = "goal") -> float:
     """The goal rotation (rad) in [-pi, pi], where the paper samples its goals; ConfigError
     naming `name` (for a command-line option, with the bounds in the decimals a user types)."""
-    if isinstance(goal, bool) or not isinstance(goal, (int, float, np.floating)) or not math.isfinite(goal) \
-            or abs(goal) > math.pi + 1e-9:
+    if (
+        isinstance(goal, bool)
+        or not isinstance(goal, (int, float, np.floating))
+        or not math.isfinite(goal)
+        or abs(goal) > math.pi + 1e-9
+    ):
         decimals = f", i.e. [-{math.pi:.6f}, {math.pi:.6f}]" if name.startswith("--") else ""
         raise ConfigError(f"{name} = {goal!r} is out of range; valid range: [-pi, pi] rad{decimals}")
     return float(goal)
@@ -63,18 +67,18 @@ def check_goal(goal, name: str = "goal") -> float:
 class Trajectory:
     """The plan at every knot (the plan.npz arrays)."""
 
-    t: np.ndarray          # (K,) s
-    x: np.ndarray          # (K, 3) object pose (x m, y m, theta rad)
-    xdot: np.ndarray       # (K, 3)
-    q: np.ndarray          # (K, 8) rad, finger-major
-    qdot: np.ndarray       # (K, 8) rad/s
-    tau: np.ndarray        # (K, 8) N m
-    lambda_n: np.ndarray   # (K, 4) N, normal force of each finger on the box
-    lambda_t: np.ndarray   # (K, 4) N, tangential force (along t_B = z x n_B)
-    f_W: np.ndarray        # (K, 4, 2) N, force of each finger ON the box, in W
-    p_W_tip: np.ndarray    # (K, 4, 2) m, fingertip positions in W: the sphere centres
+    t: np.ndarray  # (K,) s
+    x: np.ndarray  # (K, 3) object pose (x m, y m, theta rad)
+    xdot: np.ndarray  # (K, 3)
+    q: np.ndarray  # (K, 8) rad, finger-major
+    qdot: np.ndarray  # (K, 8) rad/s
+    tau: np.ndarray  # (K, 8) N m
+    lambda_n: np.ndarray  # (K, 4) N, normal force of each finger on the box
+    lambda_t: np.ndarray  # (K, 4) N, tangential force (along t_B = z x n_B)
+    f_W: np.ndarray  # (K, 4, 2) N, force of each finger ON the box, in W
+    p_W_tip: np.ndarray  # (K, 4, 2) m, fingertip positions in W: the sphere centres
     #                        (finger{i}_tip frames)
-    p_W_C: np.ndarray      # (K, 4, 2) m, where each finger's force acts on the box surface, in W: the
+    p_W_C: np.ndarray  # (K, 4, 2) m, where each finger's force acts on the box surface, in W: the
     #                        planned contact of a pinned finger, else the box point nearest the tip
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -86,31 +90,37 @@ class Trajectory:
 class PhysicsCheck:
     """The check of a plan's arrays (trajectotree.planning.physics.check_physics)."""
 
-    newton_euler_force_N: float        # max |translational residual| over knots, N
-    newton_euler_moment_Nm: float      # max |rotational residual| over knots, N m
-    friction_cone_N: float             # max cone violation (<= 0 inside), N
-    mu: float                          # the friction coefficient the cones were checked with
-    force_at_distance_N: float         # max |f_W| of a fingertip more than GAP_TOL off the box (0 if none), N
-    force_at_distance_knot: int        # where that force is (-1 if none)
+    newton_euler_force_N: float  # max |translational residual| over knots, N
+    newton_euler_moment_Nm: float  # max |rotational residual| over knots, N m
+    friction_cone_N: float  # max cone violation (<= 0 inside), N
+    mu: float  # the friction coefficient the cones were checked with
+    force_at_distance_N: float  # max |f_W| of a fingertip more than GAP_TOL off the box (0 if none), N
+    force_at_distance_knot: int  # where that force is (-1 if none)
     force_at_distance_finger: int
-    force_at_distance_gap_m: float     # that fingertip's distance from the box, m
+    force_at_distance_gap_m: float  # that fingertip's distance from the box, m
     contact_point_off_surface_m: float  # max distance of p_W_C from the box boundary, m
-    penetration_m: float               # deepest any fingertip sphere sinks into the box (0 if none), m
-    link_penetration_m: float          # deepest overlap of a finger link's collision box with the box, m (NaN: unchecked)
-    link_penetration_knot: int         # where that is (-1 if nowhere)
+    penetration_m: float  # deepest any fingertip sphere sinks into the box (0 if none), m
+    link_penetration_m: float  # deepest overlap of a finger link's collision box with the box, m (NaN: unchecked)
+    link_penetration_knot: int  # where that is (-1 if nowhere)
     link_penetration_finger: int
     passed: bool
-    reason: str                        # why it failed ("" if passed)
+    reason: str  # why it failed ("" if passed)
 
     def to_json(self) -> dict:
         """The fields (non-finite numbers as None: JSON has no NaN) and the tolerances."""
         values = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in asdict(self).items()}
-        return {**values, "gap_tol_m": GAP_TOL, "force_tol_N": FORCE_TOL, "cone_tol_N": CONE_TOL,
-                "newton_euler_tol": NEWTON_EULER_TOL, "penetration_tol_m": PENETRATION_TOL,
-                "link_penetration_tol_m": LINK_PENETRATION_TOL}
+        return {
+            **values,
+            "gap_tol_m": GAP_TOL,
+            "force_tol_N": FORCE_TOL,
+            "cone_tol_N": CONE_TOL,
+            "newton_euler_tol": NEWTON_EULER_TOL,
+            "penetration_tol_m": PENETRATION_TOL,
+            "link_penetration_tol_m": LINK_PENETRATION_TOL,
+        }
 
     @staticmethod
-    def from_json(data: dict) -> "PhysicsCheck":
+    def from_json(data: dict) -> PhysicsCheck:
         """Fields a plan.json from before a rule existed lacks (penetration_m) read as NaN: unknown."""
         nan = float("nan")
         return PhysicsCheck(**{f.name: nan if data.get(f.name) is None else data[f.name] for f in fields(PhysicsCheck)})
@@ -119,25 +129,25 @@ class PhysicsCheck:
 @dataclass(frozen=True)
 class PlanResult:
     method: str
-    goal: float                      # rad
-    success: bool                    # IPOPT converged, the physics check passed (the search too, where used)
-    status: str                      # IPOPT status name (+ why the physics check failed), or why the search failed
+    goal: float  # rad
+    success: bool  # IPOPT converged, the physics check passed (the search too, where used)
+    status: str  # IPOPT status name (+ why the physics check failed), or why the search failed
     search_time_s: float
     build_time_s: float
     solve_time_s: float
     total_time_s: float
-    cost: float                      # final objective (nan when nothing was solved)
-    iterations: int                  # IPOPT iterations (0 when nothing was solved)
+    cost: float  # final objective (nan when nothing was solved)
+    iterations: int  # IPOPT iterations (0 when nothing was solved)
     contact_plan: ContactPlan
-    trajectory: Trajectory | None    # None when nothing was solved
-    violations: dict                 # max abs violation per group (solve.VIOLATION_GROUPS)
+    trajectory: Trajectory | None  # None when nothing was solved
+    violations: dict  # max abs violation per group (solve.VIOLATION_GROUPS)
     config: Config
     solver_timing: dict = field(default_factory=dict)  # IPOPT's timing statistics, s
-    physics_check: PhysicsCheck | None = None          # the check of the plan's arrays (None: nothing solved)
+    physics_check: PhysicsCheck | None = None  # the check of the plan's arrays (None: nothing solved)
     # IPOPT converged (and the search found a plan, where used), whether or not the physics check
     # passed: the general CITO baselines converge to plans that push from a distance.
     converged: bool = False
-    formulation: str = "joint"       # cito.formulation that made it (the baselines: always one joint program)
+    formulation: str = "joint"  # cito.formulation that made it (the baselines: always one joint program)
     # keyframes: per segment (plan.json "segments"): nodes, success, status, iterations, time_s,
     # retries and every attempt (trajectotree.planning.keyframes.segment_records); () for the joint program
     segments: tuple = ()
@@ -147,33 +157,42 @@ class PlanResult:
 class SimLog:
     """What one execution of a plan recorded (trajectotree.execution.simulate), sampled at t."""
 
-    t: np.ndarray            # (T,) s, sample times
-    x: np.ndarray            # (T, 3) simulated object pose (x m, y m, theta rad)
-    q: np.ndarray            # (T, 8) rad, simulated joint angles (finger-major)
-    x_plan: np.ndarray       # (T, 3) planned object pose at the same times
-    f_W: np.ndarray          # (T, 4, 2) N, simulated force of each finger on the box, in W
-    f_W_plan: np.ndarray     # (T, 4, 2) N, planned force of each finger on the box at the same times
-    sim_time_s: float        # s, wall-clock time of the simulation
-    controller: str          # which executor ran (config.CONTROLLERS, or "none": zero torque)
-    conditions: dict         # simulate.Conditions.to_json() of the simulated world
+    t: np.ndarray  # (T,) s, sample times
+    x: np.ndarray  # (T, 3) simulated object pose (x m, y m, theta rad)
+    q: np.ndarray  # (T, 8) rad, simulated joint angles (finger-major)
+    x_plan: np.ndarray  # (T, 3) planned object pose at the same times
+    f_W: np.ndarray  # (T, 4, 2) N, simulated force of each finger on the box, in W
+    f_W_plan: np.ndarray  # (T, 4, 2) N, planned force of each finger on the box at the same times
+    sim_time_s: float  # s, wall-clock time of the simulation
+    controller: str  # which executor ran (config.CONTROLLERS, or "none": zero torque)
+    conditions: dict  # simulate.Conditions.to_json() of the simulated world
 
 
 @dataclass(frozen=True)
 class SimResult(SimLog):
     """A SimLog with its tracking metrics (trajectotree.execution.metrics.evaluate): sim.json and sim.npz."""
 
-    abs_error: np.ndarray    # (T, 3) |x - x_plan|, held at its drop-time value after a drop
-    mae_x: float             # m, time mean of |x error|
-    mae_y: float             # m
-    mae_theta: float         # rad
+    abs_error: np.ndarray  # (T, 3) |x - x_plan|, held at its drop-time value after a drop
+    mae_x: float  # m, time mean of |x error|
+    mae_y: float  # m
+    mae_theta: float  # rad
     final_error: tuple[float, float, float]  # (m, m, rad) absolute error at the last sample
-    dropped: bool            # the drop rule fired (trajectotree.execution.metrics.detect_drop)
+    dropped: bool  # the drop rule fired (trajectotree.execution.metrics.detect_drop)
     drop_time_s: float | None  # s, when it fired
 
     def to_json(self) -> dict:
         """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
         the controller and the simulated conditions."""
-        return {"mae_x": self.mae_x, "mae_y": self.mae_y, "mae_theta": self.mae_theta,
-                "final_error": list(self.final_error), "dropped": self.dropped, "drop_time_s": self.drop_time_s,
-                "sim_time_s": self.sim_time_s, "duration_s": float(self.t[-1]), "num_samples": int(len(self.t)),
-                "controller": self.controller, "conditions": self.conditions}
+        return {
+            "mae_x": self.mae_x,
+            "mae_y": self.mae_y,
+            "mae_theta": self.mae_theta,
+            "final_error": list(self.final_error),
+            "dropped": self.dropped,
+            "drop_time_s": self.drop_time_s,
+            "sim_time_s": self.sim_time_s,
+            "duration_s": float(self.t[-1]),
+            "num_samples": int(len(self.t)),
+            "controller": self.controller,
+            "conditions": self.conditions,
+        }

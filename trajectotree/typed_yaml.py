@@ -21,6 +21,7 @@ DRAKE_ERRORS = (RuntimeError, ValueError, TypeError)  # what Drake's loader rais
 def drake_yaml():
     """pydrake.common.yaml, imported on first use."""
     from pydrake.common import yaml
+
     return yaml
 
 
@@ -40,9 +41,17 @@ def _yaml_type(kind):
 def schema(cls):
     """The mutable twin of frozen dataclass `cls` that Drake's typed loader fills."""
     hints, defaults = typing.get_type_hints(cls), cls()
-    return dc.make_dataclass(cls.__name__, [
-        (f.name, _yaml_type(hints[f.name]), dc.field(default_factory=functools.partial(thaw, getattr(defaults, f.name))))
-        for f in dc.fields(cls)])
+    return dc.make_dataclass(
+        cls.__name__,
+        [
+            (
+                f.name,
+                _yaml_type(hints[f.name]),
+                dc.field(default_factory=functools.partial(thaw, getattr(defaults, f.name))),
+            )
+            for f in dc.fields(cls)
+        ],
+    )
 
 
 def thaw(value):
@@ -61,8 +70,14 @@ def freeze(cls, loaded):
     """Frozen dataclass `cls` from its filled twin (lists back to tuples, nested dataclasses
     frozen too; __post_init__ checks the values)."""
     hints = typing.get_type_hints(cls)
-    return cls(**{f.name: freeze(hints[f.name], getattr(loaded, f.name)) if dc.is_dataclass(hints[f.name])
-                  else _tuples(getattr(loaded, f.name)) for f in dc.fields(cls)})
+    return cls(
+        **{
+            f.name: freeze(hints[f.name], getattr(loaded, f.name))
+            if dc.is_dataclass(hints[f.name])
+            else _tuples(getattr(loaded, f.name))
+            for f in dc.fields(cls)
+        }
+    )
 
 
 def load_typed(cls, data: dict):

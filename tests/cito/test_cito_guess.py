@@ -29,15 +29,17 @@ def distances(scene, guess):
     """(K, 4) exact distance of each fingertip sphere from the box, m."""
     tips = BodyParams(scene, 1000.0, mu=scene.config.mu).hand.fingertips(guess.q)
     box = scene.config.shape
-    return np.array([[box.signed_distance(world_to_box(x, p)) for p in p_WF] for x, p_WF in zip(guess.x, tips)]) \
+    return (
+        np.array([[box.signed_distance(world_to_box(x, p)) for p in p_WF] for x, p_WF in zip(guess.x, tips)])
         - scene.tip_radius
+    )
 
 
 def test_rest_to_rest_progress_is_monotone_and_starts_and_ends_at_rest():
     u = rest_to_rest_progress(12)
     assert u[0] == 0.0 and u[-1] == pytest.approx(1.0)
     assert np.all(np.diff(u) > 0)
-    assert np.diff(u)[0] < 0.02 and np.diff(u)[-1] < 0.02        # slow at both ends
+    assert np.diff(u)[0] < 0.02 and np.diff(u)[-1] < 0.02  # slow at both ends
 
 
 @pytest.mark.parametrize("method", ["trajectotree", "cito-warm"])
@@ -52,13 +54,13 @@ def test_plan_guess_keeps_contacts_and_lifts_the_switching_finger(setup, method)
     guess = plan_guess(program.rows, spec, plan)
     phi = distances(scene, guess)
     M = c.knots_per_segment
-    assert phi.min() > -1e-6                                      # nothing cuts through the box
+    assert phi.min() > -1e-6  # nothing cuts through the box
     for s, new in enumerate(plan.nodes[1:]):
         ks = np.arange(s * M, (s + 1) * M + 1)
         for i in range(4):
             if i == new.switching_finger:
-                assert phi[ks[M // 2], i] > 0.01                  # lifted mid-move
+                assert phi[ks[M // 2], i] > 0.01  # lifted mid-move
             else:
-                assert np.abs(phi[ks, i]).max() < 1e-6            # stays on its contact
+                assert np.abs(phi[ks, i]).max() < 1e-6  # stays on its contact
     np.testing.assert_allclose(guess.x[::M], [n.object_pose for n in plan.nodes], atol=1e-12)
     assert np.abs(guess.xd[spec.rest_knots]).max() == 0.0 and np.abs(guess.qd[spec.rest_knots]).max() == 0.0

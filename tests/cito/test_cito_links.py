@@ -16,8 +16,8 @@ from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, S
 from trajectotree.geometry import rotation_2d
 from trajectotree.planning.keyframes import PieceTask, solve_piece, solve_segments
 from trajectotree.planning.planners import planning_mu
-from trajectotree.search.reach import Reachability, rectangles_overlap_polygon
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
+from trajectotree.search.reach import Reachability, rectangles_overlap_polygon
 from trajectotree.search.tree import find_contact_plan
 
 TRIANGLE = tuple((0.08 * np.cos(a), 0.08 * np.sin(a)) for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3))
@@ -51,7 +51,7 @@ def random_knots(n, seed):
 def test_link_jacobian_matches_finite_differences(rows):
     Z = random_knots(4, seed=3)
     val, jac = rows.evaluate(Z, True)
-    assert val.min() < 0 < val.max()               # some rows violated, some not
+    assert val.min() < 0 < val.max()  # some rows violated, some not
     h = 1e-6
     for k in range(4):
         fd = np.zeros_like(jac[k])
@@ -81,7 +81,7 @@ def test_one_knot_paths_agree_with_the_batch(rows):
     val, jac = rows.evaluate(Z, True)
     for k in range(4):
         np.testing.assert_allclose(rows.values_one(Z[k]), val[k], rtol=0, atol=1e-15)
-        v1, j1 = rows.knot(k).evaluate(Z[k:k + 1], True)
+        v1, j1 = rows.knot(k).evaluate(Z[k : k + 1], True)
         np.testing.assert_array_equal(v1[0], val[k])
         np.testing.assert_array_equal(j1[0], jac[k])
 
@@ -95,20 +95,23 @@ def test_rows_against_the_searchs_link_boxes(scene):
     P, V = rows.points.per_finger, len(shape.vertices)
     for z in random_knots(5, seed=5):
         pose, q, val = z[:3], z[3:], rows.values_one(z)
-        point_rows, vertex_rows = val[:NUM_FINGERS * P].reshape(NUM_FINGERS, P), val[NUM_FINGERS * P:].reshape(NUM_FINGERS, V)
+        point_rows, vertex_rows = (
+            val[: NUM_FINGERS * P].reshape(NUM_FINGERS, P),
+            val[NUM_FINGERS * P :].reshape(NUM_FINGERS, V),
+        )
         p_WV = pose[:2] + shape.vertices @ rotation_2d(pose[2]).T
         for i in range(NUM_FINGERS):
-            boxes = reach.link_polygons(i, q[2 * i:2 * i + 2])
+            boxes = reach.link_polygons(i, q[2 * i : 2 * i + 2])
             points = []
             for corners, fractions in zip(boxes, LINK_FRACTIONS):
-                near, far = 0.5 * (corners[2] + corners[3]), 0.5 * (corners[0] + corners[1])   # ends of the centreline
+                near, far = 0.5 * (corners[2] + corners[3]), 0.5 * (corners[0] + corners[1])  # ends of the centreline
                 points += [near + f * (far - near) for f in fractions]
             p_BL = (np.array(points) - pose[:2]) @ rotation_2d(pose[2])
             face_max = np.max(p_BL @ shape.normals.T - shape.offsets, axis=1)
             w = scene.fingers[i].link_boxes[0].half_width
             assert np.all(point_rows[i] + w >= face_max - 1e-12)
             assert np.all(point_rows[i] + w <= face_max + np.log(V) / 1000.0 + 1e-12)
-            c = boxes[1]                                    # link 2's corners, counter-clockwise from (+l, -w)
+            c = boxes[1]  # link 2's corners, counter-clockwise from (+l, -w)
             u = (c[0] - c[3]) / np.linalg.norm(c[0] - c[3])
             rel = p_WV - c.mean(axis=0)
             dx, dy = rel @ u, rel @ np.array([-u[1], u[0]])
@@ -123,8 +126,8 @@ def test_rows_at_the_free_knots_and_none_when_off(scene):
     body = BodyParams(scene, CONFIG.cito.sdf_sharpness, mu=planning_mu(CONFIG))
     piece = piece_spec(contact_plan, 0, 1, radius=scene.tip_radius, config=CONFIG.cito)
     joint = transition_spec(contact_plan, radius=scene.tip_radius, config=CONFIG.cito)
-    assert link_knots(piece) == list(range(1, piece.num_knots - 1))     # both ends fixed at the nodes
-    assert link_knots(joint) == list(range(1, joint.num_knots))         # only x_0, q_0 fixed
+    assert link_knots(piece) == list(range(1, piece.num_knots - 1))  # both ends fixed at the nodes
+    assert link_knots(joint) == list(range(1, joint.num_knots))  # only x_0, q_0 fixed
     program = build_program(CONFIG.cito, piece, body)
     assert [b.evaluator().get_description() for b in program.link_bindings] == [f"links{k}" for k in link_knots(piece)]
     off = build_program(dataclasses.replace(CONFIG.cito, link_rows=False), piece, body)
@@ -147,7 +150,7 @@ def links_overlap(scene, trajectory) -> list[tuple[int, int, int]]:
     for k, (pose, q) in enumerate(zip(trajectory.x, trajectory.q)):
         R_BW = rotation_2d(-pose[2])
         for i in range(NUM_FINGERS):
-            for j, corners in enumerate(reach.link_polygons(i, q[2 * i:2 * i + 2])):
+            for j, corners in enumerate(reach.link_polygons(i, q[2 * i : 2 * i + 2])):
                 rect = scene.fingers[i].link_boxes[j]
                 centre_B = R_BW @ (corners.mean(axis=0) - pose[:2])
                 axis = corners[0] - corners[3]
@@ -167,7 +170,7 @@ def test_segment_whose_link_cut_the_box_is_clear_with_the_rows(scene):
 
     without = segment(dataclasses.replace(CONFIG.cito, link_rows=False))
     assert without.converged and {(i, j) for _, i, j in links_overlap(scene, without.trajectory)} == {(3, 2)}
-    assert not without.success and "a link of finger 3 overlaps the box" in without.check.reason   # the check's rule
+    assert not without.success and "a link of finger 3 overlaps the box" in without.check.reason  # the check's rule
     with_rows = segment(CONFIG.cito)
     assert with_rows.success, with_rows.status
     assert links_overlap(scene, with_rows.trajectory) == []

@@ -10,14 +10,15 @@ from trajectotree.cito.contact import smooth_distance, smooth_normal
 from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams, KnotRows, _smooth_contact
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
-from trajectotree.geometry import ConvexPolygon
 from trajectotree.config import CitoConfig, ObjectConfig, SceneConfig
+from trajectotree.geometry import ConvexPolygon
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
 # Two of the polygons of issue 17: an equilateral triangle of side 0.14 m, a regular hexagon of
 # circumradius 0.07 m (the acceptance's shapes), and an irregular quadrilateral.
-TRIANGLE_POINTS = tuple((0.14 / np.sqrt(3) * np.cos(a), 0.14 / np.sqrt(3) * np.sin(a))
-                        for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3))
+TRIANGLE_POINTS = tuple(
+    (0.14 / np.sqrt(3) * np.cos(a), 0.14 / np.sqrt(3) * np.sin(a)) for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3)
+)
 HEXAGON_POINTS = tuple((0.07 * np.cos(a), 0.07 * np.sin(a)) for a in np.pi / 3 * np.arange(6))
 QUAD_POINTS = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
 TRIANGLE = ConvexPolygon.from_points(TRIANGLE_POINTS)
@@ -43,21 +44,23 @@ def test_hand_dynamics_match_the_plant(scene, hand):
         M_plant = plant.CalcMassMatrix(ctx)[np.ix_(iv, iv)]
         M = np.zeros((8, 8))
         for i, block in enumerate(hand.mass_matrices(q)):
-            M[2 * i:2 * i + 2, 2 * i:2 * i + 2] = block
+            M[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = block
         np.testing.assert_allclose(M, M_plant, atol=1e-12)
-        np.testing.assert_allclose(hand.gravity_forces(q).ravel(), plant.CalcGravityGeneralizedForces(ctx)[iv], atol=1e-12)
+        np.testing.assert_allclose(
+            hand.gravity_forces(q).ravel(), plant.CalcGravityGeneralizedForces(ctx)[iv], atol=1e-12
+        )
         np.testing.assert_allclose(hand.fingertips(q), scene.fingertip_positions(q), atol=1e-9)
         J_plant = scene.fingertip_jacobians(q)
         J = hand.jacobians(q)
         for i in range(NUM_FINGERS):
-            np.testing.assert_allclose(J[i], J_plant[i][:, 2 * i:2 * i + 2], atol=1e-9)
+            np.testing.assert_allclose(J[i], J_plant[i][:, 2 * i : 2 * i + 2], atol=1e-9)
 
 
 def test_hand_ik_inverts_the_kinematics(hand):
     q = np.array([0.3, 1.2, -0.2, 0.9, 0.1, 1.5, -0.4, 0.7])
     tips = hand.fingertips(q)
     for i in range(NUM_FINGERS):
-        np.testing.assert_allclose(hand.ik(i, tips[i]), q[2 * i:2 * i + 2], atol=1e-9)
+        np.testing.assert_allclose(hand.ik(i, tips[i]), q[2 * i : 2 * i + 2], atol=1e-9)
     assert hand.ik(0, hand.fingers.p_W_base[0] + [0.5, 0.0]) is None  # out of reach
     # Many targets at once (the guess's path): each row bit for bit the one-target IK, NaN for None.
     targets = np.array([tips[0], tips[0] + [0.01, -0.02], hand.fingers.p_W_base[0] + [0.5, 0.0], tips[0] - 0.01])
@@ -73,13 +76,13 @@ def test_smooth_distance_matches_the_exact_distance_away_from_corners():
     faces = box.normals, box.offsets
     rng = np.random.default_rng(1)
     s = rng.uniform(0, box.perimeter, 400)
-    s = s[[box.corner_distance(si) > 0.015 for si in s]]          # the search's corner margin
-    for lift in (0.0, 0.01, 0.03):                                  # on the surface, tip centres, further out
+    s = s[[box.corner_distance(si) > 0.015 for si in s]]  # the search's corner margin
+    for lift in (0.0, 0.01, 0.03):  # on the surface, tip centres, further out
         pts = np.array([box.point(si)[0] + lift * box.point(si)[1] for si in s])
         normals = np.array([box.point(si)[1] for si in s])
         phi, grad, hess = smooth_distance(pts, *faces, 200.0)
         exact = np.array([box.signed_distance(p) for p in pts])
-        assert np.all(phi >= exact - 1e-12)                          # log-sum-exp over-estimates the max
+        assert np.all(phi >= exact - 1e-12)  # log-sum-exp over-estimates the max
         # Bound: log(1 + exp(-k * 0.015)) / k = 0.24 mm on the surface 15 mm from a corner.
         np.testing.assert_allclose(phi, exact, atol=2.5e-4)
         n, _ = smooth_normal(grad, hess)
@@ -88,7 +91,7 @@ def test_smooth_distance_matches_the_exact_distance_away_from_corners():
     centres = np.array([[0.1, 0.0], [0.0, 0.05], [-0.1, 0.0], [0.0, -0.05]])
     np.testing.assert_allclose(smooth_distance(centres, *faces, 200.0)[0], 0.0, atol=1e-6)
     assert 0.0 < smooth_distance(np.array([[0.1, 0.05]]), *faces, 200.0)[0][0] <= np.log(4) / 200.0 + 1e-12
-    np.testing.assert_array_equal(box.normals, [[1, 0], [0, 1], [-1, 0], [0, -1]])   # right, top, left, bottom
+    np.testing.assert_array_equal(box.normals, [[1, 0], [0, 1], [-1, 0], [0, -1]])  # right, top, left, bottom
     np.testing.assert_array_equal(box.offsets, [0.1, 0.05, 0.1, 0.05])
 
 
@@ -120,19 +123,19 @@ def test_smooth_distance_of_a_polygon_matches_the_exact_distance(points):
             pts = p + lift * n
             phi, grad, hess = smooth_distance(pts, shape.normals, shape.offsets, sharpness)
             exact = shape.signed_distances(pts)
-            np.testing.assert_allclose(exact, lift, atol=1e-12)              # the reference itself
+            np.testing.assert_allclose(exact, lift, atol=1e-12)  # the reference itself
             assert np.all(phi >= exact - 1e-12) and np.all(phi <= exact + tol + 1e-12)
             np.testing.assert_allclose(smooth_normal(grad, hess)[0], n, atol=2 * rest)
-    assert tol > 1e-5                                                         # the bound is not vacuous at k = 200
+    assert tol > 1e-5  # the bound is not vacuous at k = 200
     # Near the corners: points inside or on the polygon (the exact distance is the max face distance).
     f = rng.integers(0, V, 400)
-    u = rng.uniform(0, 0.015, (400, 2)) * (rng.uniform(size=(400, 1)) > 0.2)   # some on the faces
+    u = rng.uniform(0, 0.015, (400, 2)) * (rng.uniform(size=(400, 1)) > 0.2)  # some on the faces
     near = shape.vertices[f] + u[:, :1] * shape.directions[f] - u[:, 1:] * np.roll(shape.directions, 1, axis=0)[f]
     phi = smooth_distance(near, shape.normals, shape.offsets, k)[0]
     exact = shape.signed_distances(near)
     assert np.all(exact <= 1e-15)
     assert np.all(phi >= exact - 1e-12) and np.all(phi <= exact + np.log(V) / k + 1e-12)
-    assert np.max(phi - exact) > np.log(2) / k * 0.9          # at a corner: log(2)/k, the bound is tight there
+    assert np.max(phi - exact) > np.log(2) / k * 0.9  # at a corner: log(2)/k, the bound is tight there
 
 
 def test_scalar_contact_equals_the_batch_for_polygons_and_the_closed_form_for_the_box():
@@ -194,17 +197,17 @@ def test_body_params_take_the_object_shape(rows):
     assert len(body.normals) == len(body.offsets) == len(body.shape.vertices)
     np.testing.assert_array_equal(body.normals, body.shape.normals)
     assert body.inertia == body.shape.inertia(body.mass)
-    if body.shape.is_box:   # bit for bit the box's closed form
+    if body.shape.is_box:  # bit for bit the box's closed form
         w, h = 0.20, 0.10
-        assert body.inertia == body.mass * (w ** 2 + h ** 2) / 12.0
-    else:                   # an equilateral triangle plate: m a^2 / 12
-        assert body.inertia == pytest.approx(body.mass * 0.14 ** 2 / 12, rel=1e-12)
+        assert body.inertia == body.mass * (w**2 + h**2) / 12.0
+    else:  # an equilateral triangle plate: m a^2 / 12
+        assert body.inertia == pytest.approx(body.mass * 0.14**2 / 12, rel=1e-12)
 
 
 def random_knots(n, seed=3):
     rng = np.random.default_rng(seed)
     Z = rng.uniform(-1, 1, (n, KNOT_SIZE))
-    Z[:, SLICES["x"]][:, :2] *= 0.05                 # object positions within 5 cm
+    Z[:, SLICES["x"]][:, :2] *= 0.05  # object positions within 5 cm
     return Z
 
 
@@ -229,7 +232,7 @@ def test_one_knot_paths_agree_with_the_batch(rows):
         one = rows.knot(k)
         n = one.num_rows[0]
         np.testing.assert_allclose(one.values_one(Z[k]), val[k, :n], atol=1e-12)
-        v1, j1 = one.evaluate(Z[k:k + 1], True)
+        v1, j1 = one.evaluate(Z[k : k + 1], True)
         np.testing.assert_array_equal(j1[0], jac[k, :n])
 
 
@@ -238,7 +241,7 @@ def test_declared_sparsity_is_the_support_of_an_independent_derivative(rows):
     central differences of the scalar `values_one` at other random points: every entry
     that moves is declared, and every declared entry moves."""
     h = 1e-6
-    batch = rows.sparsities()           # all knots in one batch, as build_program asks
+    batch = rows.sparsities()  # all knots in one batch, as build_program asks
     for k in range(4):
         one = rows.knot(k)
         support = set()
@@ -257,7 +260,7 @@ def test_knots_with_the_same_definition_share_a_pattern(rows):
     order = [2, 0, 2, 1, 0, 3, 2]
     repeated = KnotRows(rows.body, rows.pinned[order], rows.c_B[order], rows.n_B[order])
     assert repeated.sparsities() == [rows.sparsity(k) for k in order]
-    assert rows.sparsity(0) != rows.sparsity(1)                     # the knots differ: the test can fail
+    assert rows.sparsity(0) != rows.sparsity(1)  # the knots differ: the test can fail
 
 
 def test_static_object_rows_balance_gravity(scene, rows):
@@ -266,7 +269,7 @@ def test_static_object_rows_balance_gravity(scene, rows):
     one = KnotRows(body, np.ones((1, 4), bool), np.zeros((1, 4, 2)), np.tile([0.0, -1.0], (1, 4, 1)))
     z = np.zeros(KNOT_SIZE)
     z[SLICES["q"]] = np.tile([0.3, 1.2], 4)
-    z[SLICES["lambda_n"]] = body.mass * 9.81 / 4        # normal (0, -1): force +y on the box
+    z[SLICES["lambda_n"]] = body.mass * 9.81 / 4  # normal (0, -1): force +y on the box
     kin = one.kinematics(z[None])
     # Symmetric lever arms cancel only if the tips are symmetric; check the force rows.
     np.testing.assert_allclose(one.evaluate(z[None], False)[0][0, 0:2], 0.0, atol=1e-12)

@@ -20,8 +20,10 @@ from trajectotree.planning.planners import plan, planning_mu
 from trajectotree.scene.plant import build_scene
 
 SIDE = 0.14
-TRIANGLE = tuple((SIDE / math.sqrt(3) * math.cos(a), SIDE / math.sqrt(3) * math.sin(a))
-                 for a in -math.pi / 2 + 2 * math.pi / 3 * np.arange(3))
+TRIANGLE = tuple(
+    (SIDE / math.sqrt(3) * math.cos(a), SIDE / math.sqrt(3) * math.sin(a))
+    for a in -math.pi / 2 + 2 * math.pi / 3 * np.arange(3)
+)
 CONFIG = Config(scene=SceneConfig(object=ObjectConfig(vertices=TRIANGLE)), search=SearchConfig(num_nodes=3))
 GOAL = 0.3
 # (pose theta, arclengths, switching finger) of each node: finger 2 moves from 0.32 m to 0.20 m of
@@ -43,8 +45,17 @@ def contact_plan(scene) -> ContactPlan:
         pose = np.array([0.0, 0.0, theta])
         p_BC, n_B = shape.points(np.array(arclengths))
         q = np.concatenate([hand.ik(i, box_to_world(pose, p_BC[i] + r * n_B[i])) for i in range(4)])
-        nodes.append(ContactNode(object_pose=pose, q=q, arclengths=np.array(arclengths), p_BC=p_BC, n_B=n_B,
-                                 switching_finger=switching, closure_margin=0.1))
+        nodes.append(
+            ContactNode(
+                object_pose=pose,
+                q=q,
+                arclengths=np.array(arclengths),
+                p_BC=p_BC,
+                n_B=n_B,
+                switching_finger=switching,
+                closure_margin=0.1,
+            )
+        )
     return ContactPlan(goal=GOAL, success=True, reason="", nodes=tuple(nodes), mu_plan=planning_mu(CONFIG))
 
 
@@ -53,9 +64,9 @@ def test_the_plan_is_the_triangles_and_moves_a_finger_round_a_corner(scene, cont
     assert len(shape.vertices) == 3 and not shape.is_box
     check_plan(contact_plan, scene)
     corners = shape.corner_arclengths()
-    assert np.any((corners > 0.20) & (corners < 0.32))              # finger 2 crosses a corner
+    assert np.any((corners > 0.20) & (corners < 0.32))  # finger 2 crosses a corner
     box = build_scene(SceneConfig())
-    with pytest.raises(ConfigError, match="off the boundary"):    # the triangle's contacts are not the box's
+    with pytest.raises(ConfigError, match="off the boundary"):  # the triangle's contacts are not the box's
         check_plan(contact_plan, box)
 
 
@@ -75,8 +86,9 @@ def test_the_plan_guess_follows_the_triangle(scene, contact_plan):
 @pytest.mark.parametrize("formulation", ["keyframes", "joint"])
 def test_a_triangle_plan_is_physical(scene, contact_plan, formulation):
     config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CitoConfig(), formulation=formulation))
-    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan,
-                  segment_workers=1)
+    result = plan(
+        scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan, segment_workers=1
+    )
     assert result.success and result.physics_check.passed, result.status
     assert abs(result.trajectory.x[-1, 2] - GOAL) < math.radians(1.0)
     # the plan's object model is the triangle's: its inertia and its boundary
@@ -87,6 +99,13 @@ def test_a_triangle_plan_is_physical(scene, contact_plan, formulation):
     tips = result.trajectory.p_W_tip[:13, 2]
     x = result.trajectory.x[:13]
     shape = scene.config.shape
-    faces = {int(np.argmax(shape.normals @ (np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]])
-                                           @ (p - xi[:2])) - shape.offsets)) for p, xi, t in zip(tips, x, x[:, 2])}
+    faces = {
+        int(
+            np.argmax(
+                shape.normals @ (np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]]) @ (p - xi[:2]))
+                - shape.offsets
+            )
+        )
+        for p, xi, t in zip(tips, x, x[:, 2])
+    }
     assert len(faces) == 2

@@ -39,13 +39,36 @@ def setup():
 
 
 def test_ipopt_options_come_from_the_config():
-    config = CitoConfig(tol=2e-3, constr_viol_tol=3e-6, acceptable_tol=0.2, acceptable_iter=7, max_iter=77,
-                        lbfgs_history=4, print_level=1)
+    config = CitoConfig(
+        tol=2e-3,
+        constr_viol_tol=3e-6,
+        acceptable_tol=0.2,
+        acceptable_iter=7,
+        max_iter=77,
+        lbfgs_history=4,
+        print_level=1,
+    )
     options = cito_solve.ipopt_options(config).options[IpoptSolver.id().name()]
-    assert {k: options[k] for k in ("tol", "constr_viol_tol", "acceptable_tol", "acceptable_iter", "max_iter",
-                                    "limited_memory_max_history", "print_level")} == \
-        {"tol": 2e-3, "constr_viol_tol": 3e-6, "acceptable_tol": 0.2, "acceptable_iter": 7, "max_iter": 77,
-         "limited_memory_max_history": 4, "print_level": 1}
+    assert {
+        k: options[k]
+        for k in (
+            "tol",
+            "constr_viol_tol",
+            "acceptable_tol",
+            "acceptable_iter",
+            "max_iter",
+            "limited_memory_max_history",
+            "print_level",
+        )
+    } == {
+        "tol": 2e-3,
+        "constr_viol_tol": 3e-6,
+        "acceptable_tol": 0.2,
+        "acceptable_iter": 7,
+        "max_iter": 77,
+        "limited_memory_max_history": 4,
+        "print_level": 1,
+    }
     assert options["linear_solver"] == "spral" and options["hessian_approximation"] == "limited-memory"
     assert "output_file" not in options
     logged = cito_solve.ipopt_options(config, "/tmp/ipopt.txt").options[IpoptSolver.id().name()]
@@ -68,13 +91,18 @@ def test_iterations_and_timing_are_read_from_ipopts_log(setup):
         again = cito_solve.solve(program, guess, CONFIG)
     finally:
         cito_solve.log_observer = previous
-    assert not capped.success and capped.iterations == 3          # stopped by max_iter
+    assert not capped.success and capped.iterations == 3  # stopped by max_iter
     assert again.success and again.iterations == outcome.iterations > 3
-    assert table[-1] == again.iterations                          # the summary line agrees with the table
+    assert table[-1] == again.iterations  # the summary line agrees with the table
     for result in (capped, outcome):
-        assert set(result.timing) == {"ipopt_total_s", "function_evaluations_s",
-                                      "ipopt_without_function_evaluations_s", "nlp_function_evaluations_s",
-                                      "linear_system_factorization_s", "linear_system_back_solve_s"}
+        assert set(result.timing) == {
+            "ipopt_total_s",
+            "function_evaluations_s",
+            "ipopt_without_function_evaluations_s",
+            "nlp_function_evaluations_s",
+            "linear_system_factorization_s",
+            "linear_system_back_solve_s",
+        }
         assert all(v >= 0.0 for v in result.timing.values())
     assert cito_solve._iterations("") == -1 and cito_solve._timing("") == {}  # no log: nothing made up
 
@@ -82,8 +110,9 @@ def test_iterations_and_timing_are_read_from_ipopts_log(setup):
 def plant_penetration(scene, sol) -> float:
     """Deepest fingertip sphere in the box over all knots, with fingertips from the Drake plant."""
     box = scene.config.shape
-    phi = [[box.signed_distance(world_to_box(x, p)) for p in scene.fingertip_positions(q)]
-           for x, q in zip(sol.x, sol.q)]
+    phi = [
+        [box.signed_distance(world_to_box(x, p)) for p in scene.fingertip_positions(q)] for x, q in zip(sol.x, sol.q)
+    ]
     return max(0.0, scene.tip_radius - float(np.min(phi)))
 
 
@@ -105,26 +134,29 @@ def test_each_group_reports_a_breach_of_known_size(setup):
     free = int(np.flatnonzero(~spec.pinned[k])[0])
 
     xd = sol.xd.copy()
-    xd[k, 0] += 0.1      # the object's velocity jumps: trapezoidal collocation of xd by xdd breaks by 0.1
-    assert cito_solve.violations(program, dataclasses.replace(sol, xd=xd), scene)["dynamics"] == \
-        pytest.approx(0.1, abs=base["dynamics"] + 1e-12)
+    xd[k, 0] += 0.1  # the object's velocity jumps: trapezoidal collocation of xd by xdd breaks by 0.1
+    assert cito_solve.violations(program, dataclasses.replace(sol, xd=xd), scene)["dynamics"] == pytest.approx(
+        0.1, abs=base["dynamics"] + 1e-12
+    )
 
     lambda_n, lambda_t = sol.lambda_n.copy(), sol.lambda_t.copy()
-    lambda_n[k, pinned], lambda_t[k, pinned] = -0.03, 0.0   # a finger pulling on the box
+    lambda_n[k, pinned], lambda_t[k, pinned] = -0.03, 0.0  # a finger pulling on the box
     pulled = cito_solve.violations(program, dataclasses.replace(sol, lambda_n=lambda_n, lambda_t=lambda_t), scene)
     assert pulled["friction_cone"] == pytest.approx(0.03, abs=1e-12)
-    assert pulled["complementarity"] == base["complementarity"]   # only free fingers count there
+    assert pulled["complementarity"] == base["complementarity"]  # only free fingers count there
 
     lambda_n = sol.lambda_n.copy()
-    lambda_n[k, free] = 0.5                                 # the lifted switching finger pushes
-    phi = scene.config.shape.signed_distance(
-        world_to_box(sol.x[k], scene.fingertip_positions(sol.q[k])[free])) - scene.tip_radius
+    lambda_n[k, free] = 0.5  # the lifted switching finger pushes
+    phi = (
+        scene.config.shape.signed_distance(world_to_box(sol.x[k], scene.fingertip_positions(sol.q[k])[free]))
+        - scene.tip_radius
+    )
     assert phi > 1e-3
     pushed = cito_solve.violations(program, dataclasses.replace(sol, lambda_n=lambda_n), scene)
     assert pushed["complementarity"] >= 0.5 * phi - 1e-9
 
     depths = []
-    for step in (0.02, -0.02):   # a pinned finger's second joint turns: it slides off its point, one way into the box
+    for step in (0.02, -0.02):  # a pinned finger's second joint turns: it slides off its point, one way into the box
         q = sol.q.copy()
         q[k, 2 * pinned + 1] += step
         moved = dataclasses.replace(sol, q=q)
@@ -133,7 +165,7 @@ def test_each_group_reports_a_breach_of_known_size(setup):
         assert report["contact_point"] == pytest.approx(shift, abs=base["contact_point"] + 1e-12)
         assert report["penetration"] == pytest.approx(plant_penetration(scene, moved), abs=1e-12)
         depths.append(report["penetration"])
-    assert max(depths) > 5e-4   # one of the two turns pushed the fingertip into the box
+    assert max(depths) > 5e-4  # one of the two turns pushed the fingertip into the box
 
 
 def test_knot_constraints_give_the_same_numbers_whatever_the_call_order(setup):
@@ -145,7 +177,7 @@ def test_knot_constraints_give_the_same_numbers_whatever_the_call_order(setup):
 
     _, spec, _, guess, outcome = setup
     body = BodyParams(build_scene(), CONFIG.sdf_sharpness, mu=MU_PLAN)
-    Z = 0.5 * (guess.stacked() + outcome.solution.stacked())        # a point neither solve evaluated
+    Z = 0.5 * (guess.stacked() + outcome.solution.stacked())  # a point neither solve evaluated
 
     def ad_rows(program):
         out = []
@@ -154,10 +186,10 @@ def test_knot_constraints_give_the_same_numbers_whatever_the_call_order(setup):
             out.append((ExtractValue(y).tobytes(), ExtractGradient(y).tobytes()))
         return out
 
-    alone = ad_rows(build_program(CONFIG, spec, body))                # empty cache: each knot alone
+    alone = ad_rows(build_program(CONFIG, spec, body))  # empty cache: each knot alone
     seen = build_program(CONFIG, spec, body)
     floats = [b.evaluator().Eval(Z[k]) for k, b in enumerate(seen.knot_bindings)]
-    by_seen = ad_rows(seen)                                           # one batch over the value calls' inputs
+    by_seen = ad_rows(seen)  # one batch over the value calls' inputs
     primed = build_program(CONFIG, spec, body)
     primed.prog.visualization_callbacks()[0].evaluator().Eval(Z.ravel())
     by_primed = ad_rows(primed)

@@ -28,9 +28,15 @@ def body(scene, config: CitoConfig, mu: float = 0.5) -> BodyParams:
 def node(theta, arclengths, switching):
     box = ConvexPolygon.box(0.20, 0.10)
     points = [box.point(s) for s in arclengths]
-    return ContactNode(object_pose=np.array([0.0, 0.0, theta]), q=np.zeros(8), arclengths=np.array(arclengths),
-                       p_BC=np.array([p for p, _ in points]), n_B=np.array([n for _, n in points]),
-                       switching_finger=switching, closure_margin=0.1)
+    return ContactNode(
+        object_pose=np.array([0.0, 0.0, theta]),
+        q=np.zeros(8),
+        arclengths=np.array(arclengths),
+        p_BC=np.array([p for p, _ in points]),
+        n_B=np.array([n for _, n in points]),
+        switching_finger=switching,
+        closure_margin=0.1,
+    )
 
 
 @pytest.fixture
@@ -38,8 +44,9 @@ def plan():
     # Finger 2 moves in segment 0, nobody in segment 1.
     a = [0.5, 0.2, 0.27, 0.48]
     b = [0.5, 0.2, 0.25, 0.48]
-    return ContactPlan(goal=0.2, success=True, reason="",
-                       nodes=(node(0.0, a, None), node(0.1, b, 2), node(0.2, b, None)))
+    return ContactPlan(
+        goal=0.2, success=True, reason="", nodes=(node(0.0, a, None), node(0.1, b, 2), node(0.2, b, None))
+    )
 
 
 def test_transition_spec_pins_fixed_fingers_and_frees_the_switching_one(plan):
@@ -48,13 +55,13 @@ def test_transition_spec_pins_fixed_fingers_and_frees_the_switching_one(plan):
     M = CONFIG.knots_per_segment
     assert spec.num_knots == 2 * M + 1
     free = ~spec.pinned
-    assert np.array_equal(np.argwhere(free), [[k, 2] for k in range(1, M)])     # interior of segment 0 only
+    assert np.array_equal(np.argwhere(free), [[k, 2] for k in range(1, M)])  # interior of segment 0 only
     n0, n1 = plan.nodes[0], plan.nodes[1]
-    np.testing.assert_allclose(spec.c_B[0, 2], n0.p_BC[2] + r * n0.n_B[2])     # old contact at the first knot
-    np.testing.assert_allclose(spec.c_B[M, 2], n1.p_BC[2] + r * n1.n_B[2])     # new contact at the last
+    np.testing.assert_allclose(spec.c_B[0, 2], n0.p_BC[2] + r * n0.n_B[2])  # old contact at the first knot
+    np.testing.assert_allclose(spec.c_B[M, 2], n1.p_BC[2] + r * n1.n_B[2])  # new contact at the last
     np.testing.assert_allclose(spec.c_B[:, 0], np.tile(n0.p_BC[0] + r * n0.n_B[0], (2 * M + 1, 1)))
     assert list(spec.rest_knots) == [0, M, 2 * M]
-    assert [len(g) for g in spec.goal_poses] == [1] * M + [2] + [1] * M          # shared knot: both goals
+    assert [len(g) for g in spec.goal_poses] == [1] * M + [2] + [1] * M  # shared knot: both goals
     np.testing.assert_allclose(spec.goal_poses[1][0], [0.0, 0.0, 0.1])
     np.testing.assert_allclose(spec.goal_poses[-1][0], [0.0, 0.0, 0.2])
 
@@ -66,8 +73,10 @@ def test_programs_have_the_expected_size(scene, plan):
     assert prog.prog.num_vars() == 53 * K
     assert len(prog.knot_bindings) == K
     # 11 body rows per knot, 4 per pinned finger, 6 per free finger.
-    assert sum(b.evaluator().num_constraints() for b in prog.knot_bindings) == 11 * K + 4 * spec.pinned.sum() \
-        + 6 * (~spec.pinned).sum()
+    assert (
+        sum(b.evaluator().num_constraints() for b in prog.knot_bindings)
+        == 11 * K + 4 * spec.pinned.sum() + 6 * (~spec.pinned).sum()
+    )
     general = general_spec(x0=[0, 0, 0], q0=np.zeros(8), object_path=plan.object_path, config=CONFIG)
     assert not general.pinned.any() and list(general.rest_knots) == [0, K - 1]
 
@@ -87,11 +96,12 @@ def test_friction_cones_use_the_planning_friction(scene, plan):
 
 def test_check_plan_rejects_plans_of_another_box(scene, plan):
     check_plan(plan, scene)
-    flat = build_scene(SceneConfig(box_height=0.08))                 # top and bottom faces move
+    flat = build_scene(SceneConfig(box_height=0.08))  # top and bottom faces move
     with pytest.raises(ConfigError, match="off the boundary"):
         check_plan(plan, flat)
-    moved = dataclasses.replace(plan, nodes=(dataclasses.replace(plan.nodes[0], object_pose=np.array([0.1, 0, 0])),)
-                                + plan.nodes[1:])
+    moved = dataclasses.replace(
+        plan, nodes=(dataclasses.replace(plan.nodes[0], object_pose=np.array([0.1, 0, 0])),) + plan.nodes[1:]
+    )
     with pytest.raises(ConfigError, match="starts at pose"):
         check_plan(moved, scene)
     with pytest.raises(ConfigError, match="nodes"):
@@ -102,13 +112,13 @@ def test_switch_clearance_lifts_the_switching_finger_mid_move(scene, plan):
     M, h = CONFIG.knots_per_segment, 0.01
     paper = dataclasses.replace(CONFIG, switch_clearance=0.0)
     assert not transition_spec(plan, radius=scene.tip_radius, config=paper).clearance.any()  # the paper's: none
-    assert CitoConfig().switch_clearance == h                                               # the default lifts
+    assert CitoConfig().switch_clearance == h  # the default lifts
     config = dataclasses.replace(CONFIG, switch_clearance=h)
     spec = transition_spec(plan, radius=scene.tip_radius, config=config)
     expected = np.zeros((spec.num_knots, 4))
-    expected[:M + 1, 2] = h * np.sin(np.pi * np.arange(M + 1) / M)          # finger 2 switches in segment 0
+    expected[: M + 1, 2] = h * np.sin(np.pi * np.arange(M + 1) / M)  # finger 2 switches in segment 0
     np.testing.assert_allclose(spec.clearance, expected, atol=1e-15)
-    assert not spec.clearance[spec.pinned].any()   # not even sin(pi) * h at the arrival knot: it may push there
+    assert not spec.clearance[spec.pinned].any()  # not even sin(pi) * h at the arrival knot: it may push there
     program = build_program(config, spec, body(scene, config))
     for k, binding in enumerate(program.knot_bindings):
         lower = binding.evaluator().lower_bound()

@@ -20,8 +20,23 @@ from trajectotree.experiments.sweep import CORRUPT_DIR, LOCK_FILE, TRIALS_DIR, r
 TINY_PLAN = ["--goal", "0.1", "--segments", "1"]
 # A sweep whose trials are killed by the time limit long before they plan (an interpreter
 # with Drake takes longer than 0.3 s to start): every trial is an error row, quickly.
-TIMED_OUT_SWEEP = ["--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "1", "--methods", "trajectotree",
-                   "--time-limit", "0.3", "--workers", "2", "--no-progress"]
+TIMED_OUT_SWEEP = [
+    "--goals",
+    "2",
+    "--seed",
+    "0",
+    "--max-goal",
+    "0.3",
+    "--segments",
+    "1",
+    "--methods",
+    "trajectotree",
+    "--time-limit",
+    "0.3",
+    "--workers",
+    "2",
+    "--no-progress",
+]
 
 
 def listing(folder: Path) -> list[str]:
@@ -29,6 +44,7 @@ def listing(folder: Path) -> list[str]:
 
 
 # ---- item 2: every output path is checked before any work starts ----------------------------
+
 
 def output_path_cases(tmp: Path) -> list[tuple[list[str], str]]:
     """(arguments, expected message) of output paths no command can write."""
@@ -59,7 +75,7 @@ def test_bad_output_paths_exit_2_naming_the_path_and_write_nothing(tmp_path, cap
         err = capsys.readouterr().err
         assert message in err, (args, err)
         assert "Traceback" not in err
-        assert listing(tmp_path) == before, args   # nothing written, nothing removed
+        assert listing(tmp_path) == before, args  # nothing written, nothing removed
         assert (tmp_path / "a_file.png").read_text() == "keep me"
 
 
@@ -74,10 +90,11 @@ def test_report_into_a_sweep_whose_report_folder_is_a_file(tmp_path, capsys):
 
 # ---- items 3 and 4: a new plan in a used folder; simulating an unconverged plan -----------
 
+
 def test_plan_into_a_used_folder_removes_the_older_simulation(tmp_path, capsys):
     out = tmp_path / "plan"
     out.mkdir()
-    for name in ("sim.json", "sim.npz"):   # an older plan's run
+    for name in ("sim.json", "sim.npz"):  # an older plan's run
         (out / name).write_text("{}")
     (out / "notes.txt").write_text("mine")
     assert main(["plan", *TINY_PLAN, "--out", str(out)]) == 0
@@ -88,7 +105,7 @@ def test_plan_into_a_used_folder_removes_the_older_simulation(tmp_path, capsys):
 
 def test_demo_into_a_used_folder_leaves_none_of_the_older_run(tmp_path, capsys):
     config = tmp_path / "no_search.yaml"
-    config.write_text("search:\n  max_expansions: 1\n")   # the search gives up: no trajectory, no run
+    config.write_text("search:\n  max_expansions: 1\n")  # the search gives up: no trajectory, no run
     out = tmp_path / "demo"
     out.mkdir()
     older = ("sim.json", "sim.npz", "keyframes.png", "playback.html", "forces.png", "summary.json")
@@ -103,7 +120,7 @@ def test_demo_into_a_used_folder_leaves_none_of_the_older_run(tmp_path, capsys):
 
 def test_simulating_an_unconverged_plan_warns_and_records_it(tmp_path, capsys):
     config = tmp_path / "three_iterations.yaml"
-    config.write_text("cito:\n  max_iter: 3\n  formulation: joint\n")   # one program: IPOPT's status as is
+    config.write_text("cito:\n  max_iter: 3\n  formulation: joint\n")  # one program: IPOPT's status as is
     out = tmp_path / "plan"
     assert main(["plan", *TINY_PLAN, "--config", str(config), "--out", str(out)]) == 0
     plan_json = json.loads((out / "plan.json").read_text())
@@ -119,13 +136,14 @@ def test_simulating_an_unconverged_plan_warns_and_records_it(tmp_path, capsys):
 
 # ---- items 5-8: the sweep's faults ---------------------------------------------------------------
 
+
 def test_corrupt_trial_is_named_moved_aside_and_recomputed(tmp_path, capsys):
     sweep = tmp_path / "sweep"
     assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
     capsys.readouterr()
     corrupt = sweep / TRIALS_DIR / "0001_trajectotree" / "trial.json"
-    corrupt.write_text('{"key": "0001_traj')   # torn by a full disk, say
-    assert main(["report", str(sweep)]) == 2   # the report names the file
+    corrupt.write_text('{"key": "0001_traj')  # torn by a full disk, say
+    assert main(["report", str(sweep)]) == 2  # the report names the file
     err = capsys.readouterr().err
     assert f"{str(corrupt)!r} is unreadable (JSONDecodeError" in err and "Traceback" not in err
     assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
@@ -143,8 +161,8 @@ def test_report_names_an_unreadable_manifest_or_sim_npz(tmp_path, capsys):
     assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
     trial = sweep / TRIALS_DIR / "0000_trajectotree"
     row = json.loads((trial / "trial.json").read_text())
-    (trial / "trial.json").write_text(json.dumps(dict(row, simulated=True)))   # as if executed ...
-    (trial / "sim.npz").write_bytes(b"PK\x03\x04 torn")                     # ... and its file torn
+    (trial / "trial.json").write_text(json.dumps(dict(row, simulated=True)))  # as if executed ...
+    (trial / "sim.npz").write_bytes(b"PK\x03\x04 torn")  # ... and its file torn
     capsys.readouterr()
     assert main(["report", str(sweep)]) == 2
     err = capsys.readouterr().err
@@ -158,8 +176,8 @@ def test_retry_errors_may_raise_the_time_limit(tmp_path, capsys):
     sweep = tmp_path / "sweep"
     assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
     assert [r["error"] for r in read_rows(sweep)] == ["timeout: exceeded the trial time limit of 0.3 s"] * 2
-    raised = TIMED_OUT_SWEEP + ["--time-limit", "0.4"]   # the last one counts
-    assert main(["sweep", "--out", str(sweep), *raised]) == 0   # not --retry-errors: both skipped
+    raised = TIMED_OUT_SWEEP + ["--time-limit", "0.4"]  # the last one counts
+    assert main(["sweep", "--out", str(sweep), *raised]) == 0  # not --retry-errors: both skipped
     assert "0 now, 2 before" in capsys.readouterr().out
     assert main(["sweep", "--out", str(sweep), *raised, "--retry-errors"]) == 0
     assert "2 now, 0 before" in capsys.readouterr().out
@@ -185,17 +203,17 @@ def test_second_sweep_on_one_folder_is_refused_and_a_dead_holders_lock_taken_ove
         assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 2
         err = capsys.readouterr().err
         assert f"is in use by another sweep (process pid {holder.pid} on" in err
-        assert listing(sweep) == [LOCK_FILE]   # nothing computed, nothing written
+        assert listing(sweep) == [LOCK_FILE]  # nothing computed, nothing written
     finally:
         holder.kill()
         holder.wait()
         holder.stdout.close()
-    assert f"pid {holder.pid} " in (sweep / LOCK_FILE).read_text()   # the dead holder's stale lock
+    assert f"pid {holder.pid} " in (sweep / LOCK_FILE).read_text()  # the dead holder's stale lock
     assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
     captured = capsys.readouterr()
     assert f"taking over the stale lock of process pid {holder.pid}" in captured.err
     assert "2 now, 0 before" in captured.out
-    assert (sweep / LOCK_FILE).read_text() == ""   # released
+    assert (sweep / LOCK_FILE).read_text() == ""  # released
 
 
 @pytest.mark.slow
@@ -205,20 +223,40 @@ def test_killed_sweep_leaves_no_scratch_in_the_system_temp_folder(tmp_path):
     system_tmp, sweep = tmp_path / "tmp", tmp_path / "sweep"
     system_tmp.mkdir()
     env = {**os.environ, "TMPDIR": str(system_tmp)}
-    command = [sys.executable, "-m", "trajectotree.cli", "sweep", "--out", str(sweep), "--goals", "1", "--seed", "0",
-               "--max-goal", "0.3", "--segments", "1", "--methods", "cito", "--workers", "1", "--no-progress"]
-    first = subprocess.Popen(command, env=env, start_new_session=True, stdout=subprocess.DEVNULL,
-                             stderr=subprocess.DEVNULL)
+    command = [
+        sys.executable,
+        "-m",
+        "trajectotree.cli",
+        "sweep",
+        "--out",
+        str(sweep),
+        "--goals",
+        "1",
+        "--seed",
+        "0",
+        "--max-goal",
+        "0.3",
+        "--segments",
+        "1",
+        "--methods",
+        "cito",
+        "--workers",
+        "1",
+        "--no-progress",
+    ]
+    first = subprocess.Popen(
+        command, env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     deadline = time.monotonic() + 120
     try:
-        while not list((sweep / TRIALS_DIR).glob(".tmp-scratch-*/tmp/*")):   # IPOPT's log: solving
+        while not list((sweep / TRIALS_DIR).glob(".tmp-scratch-*/tmp/*")):  # IPOPT's log: solving
             assert first.poll() is None and time.monotonic() < deadline, "the trial never reached IPOPT"
             time.sleep(0.05)
     finally:
         os.killpg(first.pid, signal.SIGKILL)
         first.wait()
     assert list(system_tmp.iterdir()) == []
-    assert list((sweep / TRIALS_DIR).glob(".tmp-scratch-*"))   # left by the killed trial
+    assert list((sweep / TRIALS_DIR).glob(".tmp-scratch-*"))  # left by the killed trial
     rerun = subprocess.run(command + ["--time-limit", "0.3"], env=env, capture_output=True, text=True, timeout=120)
     assert rerun.returncode == 0, rerun.stderr
     assert not list((sweep / TRIALS_DIR).glob(".tmp-*")) and list(system_tmp.iterdir()) == []
@@ -226,18 +264,33 @@ def test_killed_sweep_leaves_no_scratch_in_the_system_temp_folder(tmp_path):
 
 # ---- item 9: messages state the real limit in the user's terms -------------------------------------
 
-@pytest.mark.parametrize("args, message", [
-    (["search", "--goal", "3.1416"], "--goal = 3.1416 is out of range; valid range: [-pi, pi] rad, "
-                                     "i.e. [-3.141593, 3.141593]"),
-    (["scene", "--box-size", "0", "0.1"], "--box-size W (scene.box_width) = 0.0 is out of range; valid range: (0, 0.3]"),
-    (["scene", "--box-size", "0.2", "0.5"], "--box-size H (scene.box_height) = 0.5 is out of range; valid range: (0, 0.3]"),
-    (["scene", "--box-size", "0.01", "0.01"], "--box-size W H (scene.box_width x scene.box_height) = "
-                                              "0.01 x 0.01 m is too small: contacts keep "
-                                              "scene.corner_margin = 0.015 m from each corner, so each side must "
-                                              "be longer than 0.03 m; valid range of each side: (0.03, 0.3] m"),
-    (["scene", "--mu", "0"], "--mu (scene.mu) = 0.0 is out of range; valid range: (0, 5]"),
-    (["scene", "--config", "."], "config file '.' is a folder; give a YAML file"),
-])
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["search", "--goal", "3.1416"],
+            "--goal = 3.1416 is out of range; valid range: [-pi, pi] rad, i.e. [-3.141593, 3.141593]",
+        ),
+        (
+            ["scene", "--box-size", "0", "0.1"],
+            "--box-size W (scene.box_width) = 0.0 is out of range; valid range: (0, 0.3]",
+        ),
+        (
+            ["scene", "--box-size", "0.2", "0.5"],
+            "--box-size H (scene.box_height) = 0.5 is out of range; valid range: (0, 0.3]",
+        ),
+        (
+            ["scene", "--box-size", "0.01", "0.01"],
+            "--box-size W H (scene.box_width x scene.box_height) = "
+            "0.01 x 0.01 m is too small: contacts keep "
+            "scene.corner_margin = 0.015 m from each corner, so each side must "
+            "be longer than 0.03 m; valid range of each side: (0.03, 0.3] m",
+        ),
+        (["scene", "--mu", "0"], "--mu (scene.mu) = 0.0 is out of range; valid range: (0, 5]"),
+        (["scene", "--config", "."], "config file '.' is a folder; give a YAML file"),
+    ],
+)
 def test_messages_name_the_option_and_its_real_limit(args, message, capsys):
     assert main(args) == 2
     assert capsys.readouterr().err == f"trajectotree {args[0]}: error: {message}\n"
@@ -252,18 +305,24 @@ def test_a_config_file_value_keeps_its_field_name(tmp_path, capsys):
 
 # ---- item 10: IPOPT's progress on a terminal, and nothing the user did not ask for --------------------
 
+
 def run_on_a_terminal(args: list[str]) -> tuple[int, str, str]:
     """Runs the CLI with stderr on a pseudo-terminal: (exit code, stdout, what the terminal showed)."""
     import pty
+
     master, slave = pty.openpty()
-    child = subprocess.Popen([sys.executable, "-m", "trajectotree.cli", *args], stdin=subprocess.DEVNULL,
-                             stdout=subprocess.PIPE, stderr=slave)
+    child = subprocess.Popen(
+        [sys.executable, "-m", "trajectotree.cli", *args],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=slave,
+    )
     os.close(slave)
     shown = b""
     while True:
         try:
             chunk = os.read(master, 4096)
-        except OSError:   # EIO: the child closed the terminal
+        except OSError:  # EIO: the child closed the terminal
             break
         if not chunk:
             break
@@ -279,7 +338,7 @@ def test_ipopt_progress_shows_on_a_terminal_and_not_with_json(tmp_path):
     rc, out, shown = run_on_a_terminal(["plan", *TINY_PLAN, "--out", str(tmp_path / "a")])
     assert rc == 0 and "wrote" in out
     assert re.search(r"IPOPT iteration \d+: objective [-+0-9.e]+, constraint violation [0-9.e+-]+", shown), shown
-    assert shown.endswith("\r\033[K")   # the progress line is cleared before the summary
+    assert shown.endswith("\r\033[K")  # the progress line is cleared before the summary
     rc, out, shown = run_on_a_terminal(["plan", *TINY_PLAN, "--out", str(tmp_path / "b"), "--json"])
     assert rc == 0 and json.loads(out)["method"] == "trajectotree"
     assert "IPOPT" not in shown
@@ -295,13 +354,15 @@ def test_recording_a_playback_prints_no_meshcat_server_line(tmp_path, capsys):
 
 # ---- item 12: small things -----------------------------------------------------------------------------
 
+
 def test_help_cites_no_design_document_and_defines_segments_once(capsys):
     from trajectotree.cli import COMMANDS
     from trajectotree.cli.common import SEGMENTS_HELP
+
     for command in COMMANDS:
         with pytest.raises(SystemExit):
             main([command, "--help"])
-        text = " ".join(capsys.readouterr().out.split())   # argparse wraps lines
+        text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
         assert "DESIGN" not in text, command
         if "--segments" in text:
             assert f"--segments S {SEGMENTS_HELP}" in text, command
@@ -311,8 +372,22 @@ def test_help_cites_no_design_document_and_defines_segments_once(capsys):
 
 def test_default_outputs_are_ignored_by_git():
     root = Path(__file__).resolve().parents[2]
-    ignored = subprocess.run(["git", "check-ignore", "demo/plan.json", "plan_trajectotree_+0.300/plan.json",
-                              "sweep/manifest.json", "paper-sweep/manifest.json"], cwd=root, capture_output=True,
-                             text=True)
-    assert ignored.stdout.split() == ["demo/plan.json", "plan_trajectotree_+0.300/plan.json", "sweep/manifest.json",
-                                      "paper-sweep/manifest.json"]
+    ignored = subprocess.run(
+        [
+            "git",
+            "check-ignore",
+            "demo/plan.json",
+            "plan_trajectotree_+0.300/plan.json",
+            "sweep/manifest.json",
+            "paper-sweep/manifest.json",
+        ],
+        cwd=root,
+        capture_output=True,
+        text=True,
+    )
+    assert ignored.stdout.split() == [
+        "demo/plan.json",
+        "plan_trajectotree_+0.300/plan.json",
+        "sweep/manifest.json",
+        "paper-sweep/manifest.json",
+    ]

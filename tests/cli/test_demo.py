@@ -13,8 +13,16 @@ def test_demo_writes_the_plan_run_figure_playback_and_summary(tmp_path, capsys):
     assert main(["demo", "--out", str(out), "--goal", "0.3", "--segments", "2"]) == 0
     printed = capsys.readouterr().out
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["files"] == ["plan.json", "plan.npz", "keyframes.png", "sim.json", "sim.npz", "playback.html",
-                                "forces.png", "summary.json"]
+    assert summary["files"] == [
+        "plan.json",
+        "plan.npz",
+        "keyframes.png",
+        "sim.json",
+        "sim.npz",
+        "playback.html",
+        "forces.png",
+        "summary.json",
+    ]
     for name in summary["files"]:
         assert (out / name).stat().st_size > 0, name
     plan_json = json.loads((out / "plan.json").read_text())

@@ -13,16 +13,20 @@ import pytest
 from trajectotree.cli import build_parser, main
 from trajectotree.cli.common import config_from_args, in_option_terms, parse_polygon
 from trajectotree.config import Config, ObjectConfig, SceneConfig, save_config
-from trajectotree.search.initial_grasp import initial_grasp_candidates
 from trajectotree.scene.plant import build_scene
+from trajectotree.search.initial_grasp import initial_grasp_candidates
 
-TRIANGLE = "0.07,-0.040415 0,0.080829 -0.07,-0.040415"    # side 0.14 m, about its centroid
-TINY = "0,0 0.04,0 0.02,0.04"                              # too small: fingers 0 and 3 reach no contact
+TRIANGLE = "0.07,-0.040415 0,0.080829 -0.07,-0.040415"  # side 0.14 m, about its centroid
+TINY = "0,0 0.04,0 0.02,0.04"  # too small: fingers 0 and 3 reach no contact
 BAD_POLYGONS = [
-    ("0.1,0 0,0.1", "--polygon (scene.object.vertices) = [[0.1, 0.0], [0.0, 0.1]]: a polygon needs at least 3 "
-                    "vertices, got 2"),
-    ("0,0 0.1,0 0.1,0.1 0,0.1 0.05,0.05", "the polygon is not convex (it turns the other way at vertex 4, "
-                                          "(0.05, 0.05))"),
+    (
+        "0.1,0 0,0.1",
+        "--polygon (scene.object.vertices) = [[0.1, 0.0], [0.0, 0.1]]: a polygon needs at least 3 vertices, got 2",
+    ),
+    (
+        "0,0 0.1,0 0.1,0.1 0,0.1 0.05,0.05",
+        "the polygon is not convex (it turns the other way at vertex 4, (0.05, 0.05))",
+    ),
     ("0,0 0.1,0.1 0.1,0 0,0.1", "edges 0 and 2 intersect: the polygon is self-intersecting"),
     ("0,0 0.1,0 0.1,0 0,0.1", "vertices 1 and 2 repeat the point (0.1, 0)"),
     ("0,0 0.1,a 0,0.1", "--polygon vertex 1 '0.1,a' is not x,y (two numbers in m"),
@@ -30,11 +34,16 @@ BAD_POLYGONS = [
     ("0,0 0.1,0,0 0,0.1", "--polygon vertex 1 '0.1,0,0' is not x,y"),
     ("", "--polygon '' has no vertices"),
     ("0,0 1.5,0 0,0.1", "--polygon (scene.object.vertices[1][0]) = 1.5 is out of range; valid range: [-1, 1]"),
-    ("0,0 0.5,0 0,0.1", "--polygon (scene.object.vertices): a vertex is 0.335 m from the centroid; valid range: at "
-                        "most 0.3 m"),
+    (
+        "0,0 0.5,0 0,0.1",
+        "--polygon (scene.object.vertices): a vertex is 0.335 m from the centroid; valid range: at most 0.3 m",
+    ),
     ("0,0 nan,0 0,0.1", "--polygon (scene.object.vertices[1][0]) = nan is not a finite number"),
-    ("0,0 0.02,0 0,0.02", "--polygon (scene.object.vertices): edge 1 is 0.02 m long; contacts keep "
-                          "scene.corner_margin = 0.015 m from each corner, so every edge must be longer than 0.03 m"),
+    (
+        "0,0 0.02,0 0,0.02",
+        "--polygon (scene.object.vertices): edge 1 is 0.02 m long; contacts keep "
+        "scene.corner_margin = 0.015 m from each corner, so every edge must be longer than 0.03 m",
+    ),
 ]
 
 
@@ -44,9 +53,11 @@ def listing(folder) -> list[str]:
 
 @pytest.mark.parametrize("polygon, message", BAD_POLYGONS)
 def test_bad_polygons_exit_2_naming_the_problem_and_write_nothing(polygon, message, tmp_path, capsys):
-    for args in (["scene", "--polygon", polygon, "--figure", str(tmp_path / "f.png")],
-                 ["plan", "--goal", "0.1", "--segments", "1", "--polygon", polygon, "--out", str(tmp_path / "p")],
-                 ["demo", "--polygon", polygon, "--out", str(tmp_path / "d")]):
+    for args in (
+        ["scene", "--polygon", polygon, "--figure", str(tmp_path / "f.png")],
+        ["plan", "--goal", "0.1", "--segments", "1", "--polygon", polygon, "--out", str(tmp_path / "p")],
+        ["demo", "--polygon", polygon, "--out", str(tmp_path / "d")],
+    ):
         assert main(args) == 2, args
         err = capsys.readouterr().err
         assert err.startswith(f"trajectotree {args[0]}: error: ") and message in err, (args, err)
@@ -64,7 +75,7 @@ def test_polygon_maps_to_object_vertices_and_box_size_back_to_the_box(tmp_path):
     assert config.scene.object.vertices == ((0.07, -0.040415), (0.0, 0.080829), (-0.07, -0.040415))
     assert config.scene.box_mass == 0.08 and not config.scene.shape.is_box
     path = tmp_path / "triangle.yaml"
-    save_config(config, path)   # a config file with a polygon; --box-size on top makes the object a box
+    save_config(config, path)  # a config file with a polygon; --box-size on top makes the object a box
     boxed = config_from_args(parser.parse_args(["scene", "--config", str(path), "--box-size", "0.16", "0.08"]))
     assert boxed.scene.object == ObjectConfig() and (boxed.scene.box_width, boxed.scene.box_height) == (0.16, 0.08)
     assert boxed.scene.box_mass == 0.08
@@ -76,11 +87,15 @@ def test_parse_polygon_reads_signed_and_exponent_numbers():
 
 def test_option_terms_keep_an_elements_index():
     args = build_parser().parse_args(["scene", "--polygon", TRIANGLE])
-    assert in_option_terms("scene.object.vertices[2][0] = 0.5 is out of range", args) == \
-        "--polygon (scene.object.vertices[2][0]) = 0.5 is out of range"
-    assert in_option_terms("scene.object.vertices: edge 1 is short", args) == \
-        "--polygon (scene.object.vertices): edge 1 is short"
-    assert in_option_terms("scene.mu = 0 is out of range", args) == "scene.mu = 0 is out of range"   # not set
+    assert (
+        in_option_terms("scene.object.vertices[2][0] = 0.5 is out of range", args)
+        == "--polygon (scene.object.vertices[2][0]) = 0.5 is out of range"
+    )
+    assert (
+        in_option_terms("scene.object.vertices: edge 1 is short", args)
+        == "--polygon (scene.object.vertices): edge 1 is short"
+    )
+    assert in_option_terms("scene.mu = 0 is out of range", args) == "scene.mu = 0 is out of range"  # not set
 
 
 def test_scene_describes_the_polygon_and_its_reach(tmp_path, capsys):
@@ -91,8 +106,8 @@ def test_scene_describes_the_polygon_and_its_reach(tmp_path, capsys):
     o, reach = summary["object"], summary["reach"]
     assert o["kind"] == "polygon" and o["name"].startswith("triangle") and "size_m" not in o
     np.testing.assert_allclose(o["vertices_m"], config.shape.vertices, atol=1e-6)
-    assert o["area_m2"] == pytest.approx(math.sqrt(3) / 4 * 0.14 ** 2, rel=1e-5)
-    assert o["mass_kg"] == 0.08 and o["inertia_zz_kg_m2"] == pytest.approx(0.08 * 0.14 ** 2 / 12, rel=1e-5)
+    assert o["area_m2"] == pytest.approx(math.sqrt(3) / 4 * 0.14**2, rel=1e-5)
+    assert o["mass_kg"] == 0.08 and o["inertia_zz_kg_m2"] == pytest.approx(0.08 * 0.14**2 / 12, rel=1e-5)
     grasps = initial_grasp_candidates(build_scene(config), Config().search)
     assert reach["graspable"] and reach["reason"] == ""
     assert reach["contacts_per_finger"] == list(grasps.reachable) and min(grasps.reachable) > 0
@@ -104,25 +119,32 @@ def test_scene_describes_the_polygon_and_its_reach(tmp_path, capsys):
 def test_scene_reports_an_object_the_hand_cannot_grasp_and_plan_refuses_it(tmp_path, capsys):
     assert main(["scene", "--polygon", TINY, "--figure", str(tmp_path / "tiny.png")]) == 0
     out = capsys.readouterr().out
-    assert ("reach at the initial pose: [0, 1, 1, 0] corner-free contacts (every 0.02 m) per finger; the hand "
-            "CANNOT grasp the object: finger(s) [0, 3] reach no corner-free contact at the initial pose") in out
+    assert (
+        "reach at the initial pose: [0, 1, 1, 0] corner-free contacts (every 0.02 m) per finger; the hand "
+        "CANNOT grasp the object: finger(s) [0, 3] reach no corner-free contact at the initial pose"
+    ) in out
     assert (tmp_path / "tiny.png").is_file()
-    for args in (["plan", "--goal", "0.3", "--polygon", TINY, "--out", str(tmp_path / "p")],
-                 ["demo", "--polygon", TINY, "--out", str(tmp_path / "d")],
-                 ["sweep", "--goals", "2", "--polygon", TINY, "--out", str(tmp_path / "s"), "--no-progress"]):
+    for args in (
+        ["plan", "--goal", "0.3", "--polygon", TINY, "--out", str(tmp_path / "p")],
+        ["demo", "--polygon", TINY, "--out", str(tmp_path / "d")],
+        ["sweep", "--goals", "2", "--polygon", TINY, "--out", str(tmp_path / "s"), "--no-progress"],
+    ):
         assert main(args) == 2
         err = capsys.readouterr().err
-        assert "--polygon (scene.object.vertices): the hand cannot grasp the triangle (8 cm^2) at " \
-               "scene.initial_pose [0.0, 0.0, 0.0]: finger(s) [0, 3] reach no corner-free contact" in err
+        assert (
+            "--polygon (scene.object.vertices): the hand cannot grasp the triangle (8 cm^2) at "
+            "scene.initial_pose [0.0, 0.0, 0.0]: finger(s) [0, 3] reach no corner-free contact" in err
+        )
     assert listing(tmp_path) == ["tiny.png"]
 
 
 def test_scene_still_describes_the_box():
     parser = build_parser()
     from trajectotree.cli.scene_cmd import describe
+
     o = describe(build_scene(config_from_args(parser.parse_args(["scene", "--box-size", "0.16", "0.08"])).scene))
     assert o["kind"] == "box" and o["size_m"] == [0.16, 0.08] and o["name"] == "0.16 x 0.08 m box"
-    assert o["inertia_zz_kg_m2"] == pytest.approx(0.05 * (0.16 ** 2 + 0.08 ** 2) / 12)
+    assert o["inertia_zz_kg_m2"] == pytest.approx(0.05 * (0.16**2 + 0.08**2) / 12)
 
 
 def float32_triples(html: str) -> bytes:
@@ -134,6 +156,7 @@ def test_plan_playback_of_a_polygon_embeds_its_mesh(tmp_path):
     """The self-contained page carries the prism's vertex positions (float32 x, y, z in the
     object frame) in its own data, and loads nothing from elsewhere."""
     from trajectotree.execution.playback import write_pose_html
+
     config = Config(scene=SceneConfig(object=ObjectConfig(vertices=parse_polygon(TRIANGLE))))
     path = tmp_path / "triangle.html"
     write_pose_html(config, [0.0, 0.5], [(0, 0, 0), (0, 0.01, 0.2)], np.tile([0.25, 1.2], (2, 4)), path)
@@ -142,7 +165,7 @@ def test_plan_playback_of_a_polygon_embeds_its_mesh(tmp_path):
     for x, y in config.scene.shape.vertices:
         for z in (-0.025, 0.025):
             assert np.array([x, y, z], dtype=np.float32).tobytes() in data, (x, y, z)
-    assert not re.search(r"<(script|link|img)[^>]*(src|href)=", html)   # every script inlined
+    assert not re.search(r"<(script|link|img)[^>]*(src|href)=", html)  # every script inlined
     assert "object (planned pose)" in html
 
 
@@ -166,4 +189,4 @@ def test_a_rectangle_given_as_a_polygon_is_described_as_the_box_it_is(capsys):
     assert main(["scene", "--polygon", "-0.12,-0.03 -0.12,0.03 0.12,0.03 0.12,-0.03", "--json"]) == 0
     o = json.loads(capsys.readouterr().out)["object"]
     assert o["kind"] == "box" and o["size_m"] == [0.24, 0.06] and o["name"] == "0.24 x 0.06 m box"
-    assert o["inertia_zz_kg_m2"] == pytest.approx(0.05 * (0.24 ** 2 + 0.06 ** 2) / 12, rel=1e-12)
+    assert o["inertia_zz_kg_m2"] == pytest.approx(0.05 * (0.24**2 + 0.06**2) / 12, rel=1e-12)

@@ -10,10 +10,10 @@ import pytest
 
 from trajectotree.config import Config, ControllerGains
 from trajectotree.execution.control import ImpedanceController
-from trajectotree.geometry import ConvexPolygon
 from trajectotree.execution.reference import static_hold_reference
-from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.execution.simulate import simulate_reference
+from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
 # Two fingers under the box and two above, 4 cm in from the corners.
 HOLD_ARCLENGTHS = (0.56, 0.14, 0.26, 0.44)
@@ -28,8 +28,9 @@ def closed_form_gravity_compensation(finger, q, g):
     """dV/dq of one two-link finger in gravity -y: the torques that hold it still."""
     a1, a12 = finger.psi + q[0], finger.psi + q[0] + q[1]
     (m1, m2), (c1, c2) = finger.masses, finger.coms
-    return g * np.array([m1 * c1 * np.cos(a1) + m2 * (finger.l1 * np.cos(a1) + c2 * np.cos(a12)),
-                         m2 * c2 * np.cos(a12)])
+    return g * np.array(
+        [m1 * c1 * np.cos(a1) + m2 * (finger.l1 * np.cos(a1) + c2 * np.cos(a12)), m2 * c2 * np.cos(a12)]
+    )
 
 
 def test_actuation_is_eq20_in_closed_form(scene):
@@ -41,11 +42,11 @@ def test_actuation_is_eq20_in_closed_form(scene):
         p_ref, v_ref, f_ref = (rng.uniform(-0.5, 0.5, (NUM_FINGERS, 2)) for _ in range(3))
         tau = controller.compute_actuation(np.r_[q, v], p_ref, v_ref, f_ref)
         for i, finger in enumerate(scene.fingers):
-            q_i, v_i = q[2 * i:2 * i + 2], v[2 * i:2 * i + 2]
+            q_i, v_i = q[2 * i : 2 * i + 2], v[2 * i : 2 * i + 2]
             J = finger.jacobian(q_i)
             F = gains.kp * (p_ref[i] - finger.fingertip(q_i)) + gains.kv * (v_ref[i] - J @ v_i) + f_ref[i]
             expected = J.T @ F + closed_form_gravity_compensation(finger, q_i, scene.config.gravity)
-            np.testing.assert_allclose(tau[2 * i:2 * i + 2], expected, atol=1e-9)
+            np.testing.assert_allclose(tau[2 * i : 2 * i + 2], expected, atol=1e-9)
 
 
 def test_controller_ports_are_named(scene):
@@ -90,13 +91,24 @@ def in_grasp_rotation(scene, angle: float, duration: float, knots: int = 21):
     the static hold at every knot (IK, balanced forces), fingertip velocities by
     finite differences."""
     from trajectotree.execution.reference import Reference
+
     times = np.linspace(0.0, duration, knots)
-    holds = [static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=duration,
-                                   pose=(0.0, 0.0, angle * t / duration)) for t in times]
+    holds = [
+        static_hold_reference(
+            scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=duration, pose=(0.0, 0.0, angle * t / duration)
+        )
+        for t in times
+    ]
     assert all(h is not None for h in holds)
     p_WF = np.stack([h.p_WF[0] for h in holds])
-    return Reference(t=times, x=np.stack([h.x[0] for h in holds]), q=np.stack([h.q[0] for h in holds]),
-                     p_WF=p_WF, v_WF=np.gradient(p_WF, times, axis=0), f_W=np.stack([h.f_W[0] for h in holds]))
+    return Reference(
+        t=times,
+        x=np.stack([h.x[0] for h in holds]),
+        q=np.stack([h.q[0] for h in holds]),
+        p_WF=p_WF,
+        v_WF=np.gradient(p_WF, times, axis=0),
+        f_W=np.stack([h.f_W[0] for h in holds]),
+    )
 
 
 @pytest.mark.parametrize("controller", ["paper", "grasp"])
@@ -110,6 +122,7 @@ def test_controller_tracks_a_slow_in_grasp_rotation(scene, hold_config, controll
 
 
 # --- the object-level grasp controller ----------------------------------------------------------
+
 
 def grasp_config(settle_time: float = 0.0) -> Config:
     config = Config()
@@ -128,9 +141,18 @@ def three_finger_hold(scene):
 def test_grasp_controller_ports_are_named(scene, three_finger_hold):
     from trajectotree.execution.control import GraspController
     from trajectotree.execution.reference import grasp_schedule
+
     gains = ControllerGains()
-    schedule = grasp_schedule(three_finger_hold, shape=ConvexPolygon.box(0.2, 0.1), tip_radius=scene.tip_radius, period=0.002,
-                              duration=2.0, ramp_time=0.1, swing_lift=0.008, contact_distance=1e-3)
+    schedule = grasp_schedule(
+        three_finger_hold,
+        shape=ConvexPolygon.box(0.2, 0.1),
+        tip_radius=scene.tip_radius,
+        period=0.002,
+        duration=2.0,
+        ramp_time=0.1,
+        swing_lift=0.008,
+        contact_distance=1e-3,
+    )
     controller = GraspController(scene, schedule, gains, mu=0.49)
     names = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]
     assert names == ["box_state", "hand_state"]
@@ -148,19 +170,20 @@ def test_grasp_controller_holds_a_three_finger_grasp_for_two_seconds(three_finge
     assert position_error.max() < 1e-3
     assert np.abs(result.x[:, 2] - three_finger_hold.x[0, 2]).max() < 0.01
     assert not result.dropped
-    np.testing.assert_array_equal(result.f_W[:, 0], 0.0)   # the lifted finger never touches the box
+    np.testing.assert_array_equal(result.f_W[:, 0], 0.0)  # the lifted finger never touches the box
 
 
 @pytest.mark.slow
 def test_grasp_controller_recovers_from_a_push(three_finger_hold):
     """0.2 N sideways (40 % of the box's weight) for 0.2 s: the box is knocked away and comes back."""
     from trajectotree.execution.simulate import Conditions, Push
+
     push = Push(force=(0.2, 0.0), time_s=0.5, duration_s=0.2)
     result = simulate_reference(three_finger_hold, grasp_config(), controller="grasp", conditions=Conditions(push=push))
     error = np.linalg.norm(result.x[:, :2] - three_finger_hold.x[0, :2], axis=1)
     during = (result.t > 0.5) & (result.t < 0.8)
-    assert error[during].max() > 1e-3                # the push moved the box
-    assert error[result.t > 1.5].max() < 5e-4         # and the controller brought it back
+    assert error[during].max() > 1e-3  # the push moved the box
+    assert error[result.t > 1.5].max() < 5e-4  # and the controller brought it back
     assert np.abs(result.x[result.t > 1.5, 2]).max() < 0.01
     assert not result.dropped
     assert result.conditions["push"] == {"force": [0.2, 0.0], "time_s": 0.5, "duration_s": 0.2}
@@ -172,6 +195,7 @@ def test_grasp_controller_recovers_from_a_push(three_finger_hold):
 def test_grasp_force_qp_meets_a_feasible_wrench_within_the_cones():
     """Four fingers on the faces of an axis-aligned box; finger 0 has no force budget."""
     from trajectotree.execution.control import GraspForceQp
+
     mu = 0.5
     qp = GraspForceQp(mu, torque_length=0.1, wrench_weight=1e4)
     n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])
@@ -198,6 +222,7 @@ def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
     (max(search 0.7, controller 0.8) x 0.7 = 0.56) it holds the box with less than half of that."""
     from trajectotree.execution.control import GraspForceQp, perp
     from trajectotree.geometry import rotation_2d
+
     config = Config()
     R = rotation_2d(0.63)
     n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]]) @ R.T
@@ -208,7 +233,7 @@ def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
     G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
     G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
     weight = np.array([0.0, config.scene.box_mass * config.scene.gravity, 0.0])
-    lo, hi = np.array([0.1, 0.1, 0.1, 0.0]), np.array([8.0, 8.0, 8.0, 0.0])   # finger 3 lifted
+    lo, hi = np.array([0.1, 0.1, 0.1, 0.0]), np.array([8.0, 8.0, 8.0, 0.0])  # finger 3 lifted
 
     def solve(mu):
         lam = GraspForceQp(mu, torque_length=0.112, wrench_weight=1e4).solve(G, weight, np.zeros((4, 2)), lo, hi)
@@ -223,6 +248,7 @@ def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
 
 def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
     from trajectotree.execution.reference import hermite, swing_intervals, swing_profile
+
     t = np.linspace(0.0, 1.0, 11)
     in_contact = np.array([1, 1, 1, 0, 0, 0, 1, 1, 1, 1, 1], dtype=bool)
     intervals = swing_intervals(t, in_contact)
@@ -244,14 +270,16 @@ def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
 
 def test_vectorized_hand_kinematics_match_each_finger(scene):
     from trajectotree.execution.control import HandKinematics
+
     kinematics = HandKinematics(scene.fingers, scene.config.gravity)
     rng = np.random.default_rng(1)
     for _ in range(3):
         q = rng.uniform(-1.0, 1.5, 8)
         p, J, g = kinematics(q)
         for i, finger in enumerate(scene.fingers):
-            q_i = q[2 * i:2 * i + 2]
+            q_i = q[2 * i : 2 * i + 2]
             np.testing.assert_allclose(p[i], finger.fingertip(q_i), atol=1e-12)
             np.testing.assert_allclose(J[i], finger.jacobian(q_i), atol=1e-12)
-            np.testing.assert_allclose(g[i], closed_form_gravity_compensation(finger, q_i, scene.config.gravity),
-                                       atol=1e-12)
+            np.testing.assert_allclose(
+                g[i], closed_form_gravity_compensation(finger, q_i, scene.config.gravity), atol=1e-12
+            )

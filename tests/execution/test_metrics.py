@@ -6,8 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from trajectotree.execution.metrics import (absolute_error, detect_drop, evaluate, final_error, hold_after_drop,
-                                  mean_absolute_error, mean_confidence_interval)
+from trajectotree.execution.metrics import (
+    absolute_error,
+    detect_drop,
+    evaluate,
+    final_error,
+    hold_after_drop,
+    mean_absolute_error,
+    mean_confidence_interval,
+)
 from trajectotree.results import SimLog
 
 
@@ -32,7 +39,7 @@ def free_fall():
     t = np.arange(0.0, 1.0, 0.01)
     ref = np.zeros((t.size, 3))
     fall = ref.copy()
-    fall[:, 1] = -0.5 * 9.81 * t ** 2
+    fall[:, 1] = -0.5 * 9.81 * t**2
     return t, ref, fall
 
 
@@ -40,7 +47,7 @@ def test_free_fall_is_detected_when_it_passes_the_drop_distance():
     t, ref, fall = free_fall()
     dropped, when = detect_drop(t, fall, ref, 0.05)
     assert dropped
-    expected = t[np.argmax(0.5 * 9.81 * t ** 2 > 0.05)]   # first sample beyond 5 cm: sqrt(0.1/9.81) = 0.101 s
+    expected = t[np.argmax(0.5 * 9.81 * t**2 > 0.05)]  # first sample beyond 5 cm: sqrt(0.1/9.81) = 0.101 s
     assert when == pytest.approx(expected) and when == pytest.approx(0.11)
     # rotations alone do not count as a drop; a held box does not drop
     spin = ref.copy()
@@ -53,8 +60,8 @@ def test_error_is_held_after_the_drop():
     _, when = detect_drop(t, fall, ref, 0.05)
     held = hold_after_drop(t, absolute_error(fall, ref), when)
     at_drop = np.flatnonzero(t == when)[0]
-    np.testing.assert_array_equal(held[:at_drop + 1], absolute_error(fall, ref)[:at_drop + 1])
-    assert np.all(held[at_drop:, 1] == held[at_drop, 1]) and held[-1, 1] == pytest.approx(0.5 * 9.81 * when ** 2)
+    np.testing.assert_array_equal(held[: at_drop + 1], absolute_error(fall, ref)[: at_drop + 1])
+    assert np.all(held[at_drop:, 1] == held[at_drop, 1]) and held[-1, 1] == pytest.approx(0.5 * 9.81 * when**2)
     # without a drop nothing changes
     np.testing.assert_array_equal(hold_after_drop(t, absolute_error(fall, ref), None), absolute_error(fall, ref))
 
@@ -62,12 +69,21 @@ def test_error_is_held_after_the_drop():
 def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
     t, ref, fall = free_fall()
     forces = np.ones((t.size, 4, 2))
-    log = SimLog(t=t, x=fall, q=np.zeros((t.size, 8)), x_plan=ref, f_W=forces, f_W_plan=2 * forces, sim_time_s=0.5,
-                 controller="paper", conditions={"push": None})
+    log = SimLog(
+        t=t,
+        x=fall,
+        q=np.zeros((t.size, 8)),
+        x_plan=ref,
+        f_W=forces,
+        f_W_plan=2 * forces,
+        sim_time_s=0.5,
+        controller="paper",
+        conditions={"push": None},
+    )
     result = evaluate(log, drop_distance=0.05)
     assert result.dropped and result.drop_time_s == pytest.approx(0.11)
-    y_at_drop = 0.5 * 9.81 * 0.11 ** 2            # the error is held there after the drop
-    y = np.minimum(0.5 * 9.81 * t ** 2, y_at_drop)
+    y_at_drop = 0.5 * 9.81 * 0.11**2  # the error is held there after the drop
+    y = np.minimum(0.5 * 9.81 * t**2, y_at_drop)
     assert result.mae_y == pytest.approx(y.mean(), rel=1e-12) and result.mae_x == 0.0 and result.mae_theta == 0.0
     assert result.final_error == pytest.approx((0.0, y_at_drop, 0.0))
     np.testing.assert_allclose(result.abs_error[:, 1], y, rtol=1e-12)
@@ -83,7 +99,7 @@ def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
 def test_confidence_interval_matches_the_student_t_formula():
     samples = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
     ci = mean_confidence_interval(samples)
-    half = 2.7764451051977987 * np.std(samples, ddof=1) / math.sqrt(5)   # t_{0.975, 4}
+    half = 2.7764451051977987 * np.std(samples, ddof=1) / math.sqrt(5)  # t_{0.975, 4}
     assert ci.count == 5
     assert ci.mean == pytest.approx(3.0)
     assert (ci.lower, ci.upper) == (pytest.approx(3.0 - half), pytest.approx(3.0 + half))
@@ -91,7 +107,7 @@ def test_confidence_interval_matches_the_student_t_formula():
 
 def test_confidence_interval_per_time_and_coordinate():
     rng = np.random.default_rng(0)
-    samples = rng.normal(1.0, 0.5, (60, 7, 3))    # trials x times x (x, y, theta)
+    samples = rng.normal(1.0, 0.5, (60, 7, 3))  # trials x times x (x, y, theta)
     ci = mean_confidence_interval(samples, 0.95, axis=0)
     assert ci.mean.shape == ci.lower.shape == ci.upper.shape == (7, 3)
     assert np.all(ci.lower < ci.mean) and np.all(ci.mean < ci.upper)

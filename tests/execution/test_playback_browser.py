@@ -12,16 +12,26 @@ import pytest
 from trajectotree.config import Config, SceneConfig
 from trajectotree.execution.playback import VIEW_HALF_WIDTH, write_plan_html
 from trajectotree.execution.reference import Reference, static_hold_reference
-from trajectotree.scene.plant import build_scene
 from trajectotree.execution.simulate import simulate_reference
+from trajectotree.scene.plant import build_scene
 
 pytestmark = pytest.mark.slow  # a headless browser per test (seconds each)
 CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--disable-background-networking", "--disable-component-update", "--disable-default-apps",
-                 "--disable-sync", "--disable-extensions", "--no-first-run", "--mute-audio"]
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-default-apps",
+    "--disable-sync",
+    "--disable-extensions",
+    "--no-first-run",
+    "--mute-audio",
+]
 VIEWPORT = {"width": 640, "height": 640}
-WIDE = {"width": 1200, "height": 600}   # a browser window wider than tall
+WIDE = {"width": 1200, "height": 600}  # a browser window wider than tall
 
 
 @pytest.fixture(scope="module")
@@ -30,26 +40,33 @@ def drop_html(tmp_path_factory):
     the box slides down between the fingers for 0.3 s."""
     config = Config()
     config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=0.0))
-    reference = static_hold_reference(build_scene(config.scene), (0.56, 0.14, 0.26, 0.44),
-                                      min_normal_force=1.0, duration=0.3)
+    reference = static_hold_reference(
+        build_scene(config.scene), (0.56, 0.14, 0.26, 0.44), min_normal_force=1.0, duration=0.3
+    )
     path = tmp_path_factory.mktemp("playback") / "drop.html"
     result = simulate_reference(reference, config, controlled=False, html_path=path)
-    assert result.dropped and result.x[-1, 1] < -0.05   # the box moved well within the view
+    assert result.dropped and result.x[-1, 1] < -0.05  # the box moved well within the view
     drop_times[path] = result.drop_time_s
     return path
 
 
-drop_times: dict[Path, float] = {}   # drop_html -> the run's drop time, s
+drop_times: dict[Path, float] = {}  # drop_html -> the run's drop time, s
 
 
 @pytest.fixture(scope="module")
 def plan_html(tmp_path_factory):
     """Playback of a planned (kinematic) motion: the grasped box lifted by 4 cm and
     turned by 0.3 rad in 1 s, joint angles by IK at both ends."""
-    holds = [static_hold_reference(build_scene(SceneConfig(initial_pose=pose)), (0.56, 0.14, 0.26, 0.44),
-                                   min_normal_force=1.0, duration=1.0) for pose in ((0, 0, 0), (0, 0.04, 0.3))]
-    plan = Reference(t=np.array([0.0, 1.0]), **{name: np.stack([getattr(h, name)[0] for h in holds])
-                                                for name in ("x", "q", "p_WF", "v_WF", "f_W")})
+    holds = [
+        static_hold_reference(
+            build_scene(SceneConfig(initial_pose=pose)), (0.56, 0.14, 0.26, 0.44), min_normal_force=1.0, duration=1.0
+        )
+        for pose in ((0, 0, 0), (0, 0.04, 0.3))
+    ]
+    plan = Reference(
+        t=np.array([0.0, 1.0]),
+        **{name: np.stack([getattr(h, name)[0] for h in holds]) for name in ("x", "q", "p_WF", "v_WF", "f_W")},
+    )
     path = tmp_path_factory.mktemp("playback") / "plan.html"
     write_plan_html(plan, Config(), path)
     return path
@@ -73,6 +90,7 @@ class Page:
     def frame_at(self, t: float) -> np.ndarray:
         """RGB screenshot (H, W, 3) of the paused animation at time t."""
         from PIL import Image
+
         self.page.evaluate(f"() => {{ viewer.animator.pause(); viewer.animator.seek({t}); }}")
         self.page.wait_for_timeout(400)
         return np.asarray(Image.open(io.BytesIO(self.page.screenshot())).convert("RGB")).astype(int)
@@ -90,6 +108,7 @@ def browser():
     if not CHROMIUM.exists():
         pytest.fail("Debian's chromium is missing: `apt-get install chromium` (.ci/run does it)")
     from playwright.sync_api import sync_playwright
+
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
         yield browser
@@ -123,7 +142,7 @@ def test_plan_playback_shows_the_planned_motion(browser, plan_html):
     rows0, _ = np.nonzero(start)
     rows1, _ = np.nonzero(end)
     pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
-    assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)   # lifted 4 cm (+y up)
+    assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)  # lifted 4 cm (+y up)
 
 
 def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(browser, drop_html):
@@ -145,13 +164,18 @@ def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(brow
     # in the screenshot: the overlay and legend are drawn inside the window, the swatches in their colours
     for selector in ("#tt-overlay", "#tt-legend"):
         b = page.page.locator(selector).bounding_box()
-        assert b["x"] >= 0 and b["y"] >= 0 and b["x"] + b["width"] <= WIDE["width"] \
-            and b["y"] + b["height"] <= WIDE["height"], selector
+        assert (
+            b["x"] >= 0
+            and b["y"] >= 0
+            and b["x"] + b["width"] <= WIDE["width"]
+            and b["y"] + b["height"] <= WIDE["height"]
+        ), selector
     swatch = page.page.locator(".tt-swatch").first.bounding_box()
-    np.testing.assert_allclose(after[int(swatch["y"] + swatch["height"] / 2), int(swatch["x"] + swatch["width"] / 2)],
-                               [51, 115, 204], atol=12)
+    np.testing.assert_allclose(
+        after[int(swatch["y"] + swatch["height"] / 2), int(swatch["x"] + swatch["width"] / 2)], [51, 115, 204], atol=12
+    )
     drop_mark = page.page.locator("#tt-drop").bounding_box()
-    assert after[int(drop_mark["y"] + drop_mark["height"] / 2), int(drop_mark["x"] + 1)][0] > 180   # red
+    assert after[int(drop_mark["y"] + drop_mark["height"] / 2), int(drop_mark["x"] + 1)][0] > 180  # red
     # the hand is centred: the box starts in the middle of the wide window
     rows, cols = np.nonzero(box_pixels(before))
     assert abs(cols.mean() - WIDE["width"] / 2) < 25 and abs(rows.mean() - WIDE["height"] / 2) < 25
@@ -171,10 +195,12 @@ def triangle_html(tmp_path_factory):
     """Playback of a run with an equilateral triangle (side 0.14 m, apex up) that the hand lets go."""
     from trajectotree.config import ObjectConfig
     from trajectotree.search.initial_grasp import initial_grasp_candidates
+
     side = 0.14
     r = side / np.sqrt(3)
-    vertices = tuple((r * np.cos(np.pi / 2 + 2 * np.pi * k / 3), r * np.sin(np.pi / 2 + 2 * np.pi * k / 3))
-                     for k in range(3))
+    vertices = tuple(
+        (r * np.cos(np.pi / 2 + 2 * np.pi * k / 3), r * np.sin(np.pi / 2 + 2 * np.pi * k / 3)) for k in range(3)
+    )
     config = Config(scene=SceneConfig(object=ObjectConfig(vertices=vertices)))
     config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=0.0))
     scene = build_scene(config.scene)
@@ -194,8 +220,8 @@ def test_polygon_playback_draws_the_polygon(browser, triangle_html):
     mask = box_pixels(page.frame_at(0.0))
     assert page.requests == [path.resolve().as_uri()] and page.errors == []
     pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
-    area = np.sqrt(3) / 4 * side ** 2 * pixels_per_m ** 2
-    assert mask.sum() == pytest.approx(area, rel=0.12)   # fingertips cover a little of it
+    area = np.sqrt(3) / 4 * side**2 * pixels_per_m**2
+    assert mask.sum() == pytest.approx(area, rel=0.12)  # fingertips cover a little of it
     rows, cols = np.nonzero(mask)
     assert abs(cols.mean() - VIEWPORT["width"] / 2) < 10
     centroid_row = VIEWPORT["height"] / 2

@@ -10,10 +10,10 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, config_to_dict
 from trajectotree.execution.control import ImpedanceController
-from trajectotree.io import load_sim, save_sim
 from trajectotree.execution.reference import check_plan_arrays, reference_from_arrays, static_hold_reference
-from trajectotree.scene.plant import build_scene
 from trajectotree.execution.simulate import held_trajectory, run_simulation, simulate_reference
+from trajectotree.io import load_sim, save_sim
+from trajectotree.scene.plant import build_scene
 
 HOLD_ARCLENGTHS = (0.56, 0.14, 0.26, 0.44)
 SIM_JSON_KEYS = {"mae_x", "mae_y", "mae_theta", "final_error", "dropped", "drop_time_s", "sim_time_s"}
@@ -37,22 +37,32 @@ def hold_plan_arrays(scene, duration: float, knots: int = 6) -> dict:
     ref = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=duration)
     K = knots
     q0, f_W = ref.q[0], ref.f_W[0]
-    n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])    # outward normals of the faces
+    n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])  # outward normals of the faces
     t_W = np.stack([-n_W[:, 1], n_W[:, 0]], axis=1)
     tau = ImpedanceController(scene.config, Config().controller).compute_actuation(
-        np.r_[q0, np.zeros(8)], ref.p_WF[0], np.zeros((4, 2)), f_W)
-    return {"t": np.linspace(0.0, duration, K), "x": np.tile(ref.x[0], (K, 1)), "xdot": np.zeros((K, 3)),
-            "q": np.tile(q0, (K, 1)), "qdot": np.zeros((K, 8)), "tau": np.tile(tau, (K, 1)),
-            "lambda_n": np.tile(-np.sum(f_W * n_W, axis=1), (K, 1)), "lambda_t": np.tile(np.sum(f_W * t_W, axis=1), (K, 1)),
-            "f_W": np.tile(f_W, (K, 1, 1)), "p_W_tip": np.tile(ref.p_WF[0], (K, 1, 1)),
-            "p_W_C": np.tile(ref.p_WF[0] - scene.tip_radius * n_W, (K, 1, 1))}
+        np.r_[q0, np.zeros(8)], ref.p_WF[0], np.zeros((4, 2)), f_W
+    )
+    return {
+        "t": np.linspace(0.0, duration, K),
+        "x": np.tile(ref.x[0], (K, 1)),
+        "xdot": np.zeros((K, 3)),
+        "q": np.tile(q0, (K, 1)),
+        "qdot": np.zeros((K, 8)),
+        "tau": np.tile(tau, (K, 1)),
+        "lambda_n": np.tile(-np.sum(f_W * n_W, axis=1), (K, 1)),
+        "lambda_t": np.tile(np.sum(f_W * t_W, axis=1), (K, 1)),
+        "f_W": np.tile(f_W, (K, 1, 1)),
+        "p_W_tip": np.tile(ref.p_WF[0], (K, 1, 1)),
+        "p_W_C": np.tile(ref.p_WF[0] - scene.tip_radius * n_W, (K, 1, 1)),
+    }
 
 
 def write_plan_dir(folder, arrays, config: Config):
     folder.mkdir(parents=True, exist_ok=True)
     np.savez(folder / "plan.npz", **arrays)
-    (folder / "plan.json").write_text(json.dumps({"method": "static-hold", "success": True,
-                                                  "config": config_to_dict(config)}))
+    (folder / "plan.json").write_text(
+        json.dumps({"method": "static-hold", "success": True, "config": config_to_dict(config)})
+    )
     return folder
 
 
@@ -64,9 +74,19 @@ def test_reference_velocities_are_the_fingertip_velocities(scene):
     qdot = 0.4 * np.cos(2.0 * t)[:, None] * np.linspace(0.5, 1.0, 8)
     p = np.array([scene.fingertip_positions(qk) for qk in q])
     K = t.size
-    arrays = {"t": t, "x": np.zeros((K, 3)), "xdot": np.zeros((K, 3)), "q": q, "qdot": qdot, "tau": np.zeros((K, 8)),
-              "lambda_n": np.zeros((K, 4)), "lambda_t": np.zeros((K, 4)), "f_W": np.zeros((K, 4, 2)), "p_W_tip": p,
-              "p_W_C": p}
+    arrays = {
+        "t": t,
+        "x": np.zeros((K, 3)),
+        "xdot": np.zeros((K, 3)),
+        "q": q,
+        "qdot": qdot,
+        "tau": np.zeros((K, 8)),
+        "lambda_n": np.zeros((K, 4)),
+        "lambda_t": np.zeros((K, 4)),
+        "f_W": np.zeros((K, 4, 2)),
+        "p_W_tip": p,
+        "p_W_C": p,
+    }
     ref = reference_from_arrays(arrays, scene)
     fd = np.gradient(p, t, axis=0)
     np.testing.assert_allclose(ref.v_WF[1:-1], fd[1:-1], atol=2e-5)
@@ -111,18 +131,19 @@ def test_run_simulation_result_files_and_gif(scene, short_config, tmp_path):
     assert result.t[-1] == pytest.approx(0.7)
     assert result.x.shape == result.x_plan.shape == result.abs_error.shape == (len(result.t), 3)
     assert result.q.shape == (len(result.t), 8)
-    np.testing.assert_allclose(result.q[0], arrays["q"][0], atol=1e-9)   # starts in the plan's state
+    np.testing.assert_allclose(result.q[0], arrays["q"][0], atol=1e-9)  # starts in the plan's state
     assert not result.dropped and result.mae_theta < 0.01 and result.mae_y < 0.005
     summary = result.to_json()
     assert SIM_JSON_KEYS <= set(summary)
     json.dumps(summary)
     save_sim(result, tmp_path)
-    assert json.loads((tmp_path / "sim.json").read_text()) == summary   # JSON floats round-trip exactly
+    assert json.loads((tmp_path / "sim.json").read_text()) == summary  # JSON floats round-trip exactly
     loaded = load_sim(tmp_path)
     np.testing.assert_allclose(loaded.abs_error, result.abs_error)
     np.testing.assert_allclose(loaded.f_W, result.f_W)
     assert loaded.to_json() == summary
     from PIL import Image
+
     with Image.open(gif) as image:
         assert image.format == "GIF" and image.n_frames >= 7
 
@@ -131,11 +152,20 @@ def test_sim_files_round_trip_exactly_and_bad_ones_are_named(tmp_path):
     from trajectotree.config import ConfigError
     from trajectotree.execution.metrics import evaluate
     from trajectotree.results import SIM_ARRAYS, SimLog
+
     rng = np.random.default_rng(0)
     t = np.linspace(0.0, 1.0, 11)
-    log = SimLog(t=t, x=rng.normal(size=(11, 3)), q=rng.normal(size=(11, 8)), x_plan=rng.normal(size=(11, 3)),
-                 f_W=rng.normal(size=(11, 4, 2)), f_W_plan=rng.normal(size=(11, 4, 2)), sim_time_s=0.25,
-                 controller="paper", conditions={"sim_mu": 0.5})
+    log = SimLog(
+        t=t,
+        x=rng.normal(size=(11, 3)),
+        q=rng.normal(size=(11, 8)),
+        x_plan=rng.normal(size=(11, 3)),
+        f_W=rng.normal(size=(11, 4, 2)),
+        f_W_plan=rng.normal(size=(11, 4, 2)),
+        sim_time_s=0.25,
+        controller="paper",
+        conditions={"sim_mu": 0.5},
+    )
     result = evaluate(log, drop_distance=10.0)
     save_sim(result, tmp_path)
     loaded = load_sim(tmp_path)
@@ -159,8 +189,9 @@ def test_simulated_finger_forces_hold_the_box_up_as_planned(scene, short_config)
     np.testing.assert_allclose(result.f_W_plan, np.broadcast_to(reference.f_W[0], result.f_W.shape))
     c = scene.config
     late = result.t > 0.2
-    np.testing.assert_allclose(result.f_W[late].sum(axis=1), np.tile([0.0, c.box_mass * c.gravity], (late.sum(), 1)),
-                               atol=0.02)
+    np.testing.assert_allclose(
+        result.f_W[late].sum(axis=1), np.tile([0.0, c.box_mass * c.gravity], (late.sum(), 1)), atol=0.02
+    )
     np.testing.assert_allclose(result.f_W[late], result.f_W_plan[late], atol=0.1)
     # without the controller the fingers let go: no force on the falling box at the end
     open_loop = simulate_reference(reference, short_config, controlled=False)
@@ -220,30 +251,58 @@ def test_simulate_command_rejects_a_different_scene(scene, short_config, tmp_pat
     assert not (plan_dir / "sim.json").exists() and not (tmp_path / "forces.gif").exists()
 
 
-
-
 def test_simulate_command_records_controller_and_conditions(scene, short_config, tmp_path, capsys):
     plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), short_config)
-    assert main(["simulate", str(plan_dir), "--json", "--controller", "paper", "--sim-mu", "0.9",
-                 "--sim-mass", "0.06", "--push", "0.1,-0.05@0.2"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(plan_dir),
+                "--json",
+                "--controller",
+                "paper",
+                "--sim-mu",
+                "0.9",
+                "--sim-mass",
+                "0.06",
+                "--push",
+                "0.1,-0.05@0.2",
+            ]
+        )
+        == 0
+    )
     printed = json.loads(capsys.readouterr().out)
     assert printed["controller"] == "paper"
-    assert printed["conditions"] == {"sim_mu": 0.9, "sim_mass": 0.06, "plan_mu": 0.7, "plan_mass": 0.05,
-                                     "push": {"force": [0.1, -0.05], "time_s": 0.2, "duration_s": 0.2}}
+    assert printed["conditions"] == {
+        "sim_mu": 0.9,
+        "sim_mass": 0.06,
+        "plan_mu": 0.7,
+        "plan_mass": 0.05,
+        "push": {"force": [0.1, -0.05], "time_s": 0.2, "duration_s": 0.2},
+    }
     assert json.loads((plan_dir / "sim.json").read_text())["conditions"] == printed["conditions"]
-    assert main(["simulate", str(plan_dir), "--json"]) == 0     # the default: grasp control, the plan's world
+    assert main(["simulate", str(plan_dir), "--json"]) == 0  # the default: grasp control, the plan's world
     printed = json.loads(capsys.readouterr().out)
     assert printed["controller"] == "grasp" and printed["dropped"] is False
     assert printed["conditions"] == {"sim_mu": 0.7, "sim_mass": 0.05, "plan_mu": 0.7, "plan_mass": 0.05, "push": None}
 
 
-@pytest.mark.parametrize("options, named", [
-    (["--sim-mu", "0"], "--sim-mu = 0.0"), (["--sim-mu", "-0.3"], "--sim-mu = -0.3"),
-    (["--sim-mass", "0"], "--sim-mass = 0.0"), (["--sim-mass", "-1"], "--sim-mass = -1.0"),
-    (["--push", "0.2,0"], "'0.2,0'"), (["--push", "0.2@1"], "'0.2@1'"), (["--push", "a,b@1"], "'a,b@1'"),
-    (["--push", "0.2,0@-1"], "'0.2,0@-1'"), (["--push", "0.2,0@nan"], "'0.2,0@nan'"),
-    (["--controller", "pid"], "--controller 'pid'"), (["--rate", "0"], "controller.rate_hz"),
-])
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--sim-mu", "0"], "--sim-mu = 0.0"),
+        (["--sim-mu", "-0.3"], "--sim-mu = -0.3"),
+        (["--sim-mass", "0"], "--sim-mass = 0.0"),
+        (["--sim-mass", "-1"], "--sim-mass = -1.0"),
+        (["--push", "0.2,0"], "'0.2,0'"),
+        (["--push", "0.2@1"], "'0.2@1'"),
+        (["--push", "a,b@1"], "'a,b@1'"),
+        (["--push", "0.2,0@-1"], "'0.2,0@-1'"),
+        (["--push", "0.2,0@nan"], "'0.2,0@nan'"),
+        (["--controller", "pid"], "--controller 'pid'"),
+        (["--rate", "0"], "controller.rate_hz"),
+    ],
+)
 def test_simulate_command_rejects_bad_conditions(scene, short_config, tmp_path, capsys, options, named):
     plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), short_config)
     html = tmp_path / "run.html"
@@ -257,6 +316,7 @@ def test_run_simulation_conditions_change_the_world_not_the_controller(scene, sh
     """A heavier simulated box (model mismatch) sags more than the planned one under the
     same controller; a downward push for 0.2 s moves it down while it acts."""
     from trajectotree.config import ConfigError
+
     reference = reference_from_arrays(hold_plan_arrays(scene, 0.5), scene)
     nominal = run_simulation(plan=reference, config=short_config)
     heavy = run_simulation(plan=reference, config=short_config, sim_mass=0.1)
@@ -279,6 +339,7 @@ def test_a_trajectotree_plan_executes_end_to_end(tmp_path):
     """Plan a 0.3 rad turn in 2 segments (a finger switch each) with TrajectoTree, execute
     it under the default grasp controller, save and reload."""
     from trajectotree.planning.planners import plan
+
     config = Config()
     config = dataclasses.replace(config, search=dataclasses.replace(config.search, num_nodes=3))
     result = plan(scene=build_scene(config.scene), goal=0.3, method="trajectotree", config=config)

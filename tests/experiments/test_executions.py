@@ -23,6 +23,7 @@ def test_push_starts_in_the_middle_of_the_middle_segment():
 @pytest.mark.slow
 def test_sweep_executes_every_plan_per_controller_and_condition(resumed_sweep, tmp_path, capsys):
     from tests.conftest import SMALL_SWEEP
+
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2"]
@@ -37,12 +38,15 @@ def test_sweep_executes_every_plan_per_controller_and_condition(resumed_sweep, t
         for controller in ("grasp", "paper"):
             sim = json.loads((execution_dir(trial, controller, "push") / "sim.json").read_text())
             assert sim["controller"] == controller
-            assert sim["conditions"]["push"] == {"force": [0.2, 0.0], "time_s": pytest.approx(1.8),
-                                                 "duration_s": pytest.approx(0.2)}
+            assert sim["conditions"]["push"] == {
+                "force": [0.2, 0.0],
+                "time_s": pytest.approx(1.8),
+                "duration_s": pytest.approx(0.2),
+            }
         paper = json.loads((execution_dir(trial, "paper", "nominal") / "sim.json").read_text())
         assert paper["controller"] == "paper" and paper["conditions"]["push"] is None
     assert main(args + ["--controllers", "grasp", "paper", "--conditions", "nominal", "push"]) == 0
-    assert "executions: 0 run" in capsys.readouterr().out   # resumable: everything is there
+    assert "executions: 0 run" in capsys.readouterr().out  # resumable: everything is there
 
     report = tmp_path / "report"
     assert main(["report", str(out), "--out", str(report)]) == 0

@@ -36,6 +36,7 @@ def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, t
     import json
 
     from trajectotree.experiments.sweep import read_rows
+
     assert main(["report", str(resumed_sweep.out), "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     for stem in ("fig2_time_cost", "fig3_tracking"):
@@ -64,21 +65,25 @@ def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, t
 
 # ---- the pictures (issue 15 item 11) ---------------------------------------------------------------
 
+
 def test_time_and_cost_figure_says_no_data_instead_of_empty_axes():
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from trajectotree.experiments.report import figure_time_and_cost
-    rows = [{"method": "trajectotree", "success": True, "total_time_s": 12.0, "cost": 250.0, "goal_index": 0},
-            {"method": "cito", "success": None, "total_time_s": None, "cost": None, "goal_index": 0,
-             "error": "timeout"}]
+
+    rows = [
+        {"method": "trajectotree", "success": True, "total_time_s": 12.0, "cost": 250.0, "goal_index": 0},
+        {"method": "cito", "success": None, "total_time_s": None, "cost": None, "goal_index": 0, "error": "timeout"},
+    ]
     fig = figure_time_and_cost(rows, ["trajectotree", "cito"])
     ax_time, ax_cost = fig.axes
-    assert [t.get_text() for t in ax_time.texts] == ["no data"]   # CITO's slot
+    assert [t.get_text() for t in ax_time.texts] == ["no data"]  # CITO's slot
     assert ax_time.texts[0].get_position()[0] == 2 and len(ax_time.get_yticks()) > 0
     plt.close(fig)
-    fig = figure_time_and_cost(rows[1:], ["cito"])   # nothing at all: no meaningless ticks
+    fig = figure_time_and_cost(rows[1:], ["cito"])  # nothing at all: no meaningless ticks
     assert all([t.get_text() for t in ax.texts] == ["no data"] and len(ax.get_yticks()) == 0 for ax in fig.axes)
     assert fig.axes[0].get_legend() is None
     plt.close(fig)

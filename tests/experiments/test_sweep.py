@@ -11,8 +11,16 @@ import pytest
 
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError
-from trajectotree.experiments.sweep import (MANIFEST_FILE, ROWS_FILE, TRIALS_DIR, SweepSpec, prepare_dir, read_rows, run_sweep,
-                                sample_goals)
+from trajectotree.experiments.sweep import (
+    MANIFEST_FILE,
+    ROWS_FILE,
+    TRIALS_DIR,
+    SweepSpec,
+    prepare_dir,
+    read_rows,
+    run_sweep,
+    sample_goals,
+)
 
 # Small settings: 2 goals within +-0.3 rad, 2 transition segments.
 SMALL = ["--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "2", "--no-progress"]
@@ -21,8 +29,9 @@ SMALL = ["--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "2", 
 def small_spec(**changes) -> SweepSpec:
     config = Config()
     config = dataclasses.replace(config, search=dataclasses.replace(config.search, num_nodes=3))
-    return SweepSpec(**{"goals": 2, "seed": 0, "methods": ("trajectotree",), "config": config, "max_goal": 0.3,
-                        **changes})
+    return SweepSpec(
+        **{"goals": 2, "seed": 0, "methods": ("trajectotree",), "config": config, "max_goal": 0.3, **changes}
+    )
 
 
 def test_same_seed_gives_same_goals_in_range():
@@ -39,18 +48,23 @@ def test_same_seed_gives_same_goals_in_range():
 def test_importing_the_sweep_loads_no_drake():
     # The sweep's parent process only schedules trials (each plans in a child process or on a Dask
     # worker), so it stays light: config and results load Drake's YAML functions only when used.
-    code = "import sys, trajectotree.experiments.sweep; print(sorted(m for m in sys.modules if m.startswith('pydrake')))"
+    code = (
+        "import sys, trajectotree.experiments.sweep; print(sorted(m for m in sys.modules if m.startswith('pydrake')))"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]"
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--goals", "0"], "--goals = 0"),
-    (["--workers", "-1"], "--workers = -1"),
-    (["--methods", "trajectotree", "rrt"], "unknown method 'rrt'"),
-    (["--time-limit", "0"], "--time-limit = 0"),
-    (["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "1"], "cannot reach the Dask scheduler"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--goals", "0"], "--goals = 0"),
+        (["--workers", "-1"], "--workers = -1"),
+        (["--methods", "trajectotree", "rrt"], "unknown method 'rrt'"),
+        (["--time-limit", "0"], "--time-limit = 0"),
+        (["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "1"], "cannot reach the Dask scheduler"),
+    ],
+)
 def test_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):
     out = tmp_path / "sweep"
     assert main(["sweep", "--out", str(out), "--goals", "2", "--no-progress"] + args) == 2
@@ -75,9 +89,12 @@ def test_rerun_with_different_arguments_is_an_error(tmp_path, capsys):
 def test_controller_settings_are_part_of_a_simulating_sweep_only(tmp_path):
     """A planning-only sweep's trials never read the controller or sim sections, so changing
     their defaults must not block resuming it; a sweep that simulates depends on them."""
+
     def with_gain(spec, kp):
-        return dataclasses.replace(spec, config=dataclasses.replace(
-            spec.config, controller=dataclasses.replace(spec.config.controller, kp=kp)))
+        return dataclasses.replace(
+            spec, config=dataclasses.replace(spec.config, controller=dataclasses.replace(spec.config.controller, kp=kp))
+        )
+
     planning, simulating = tmp_path / "plan", tmp_path / "sim"
     prepare_dir(planning, small_spec())
     prepare_dir(simulating, small_spec(simulate=True))
@@ -96,8 +113,9 @@ def test_killed_sweep_reruns_only_unfinished_trials(resumed_sweep):
     after = {d.name: d for d in (out / TRIALS_DIR).iterdir()}
     assert sorted(after) == sorted(keys)
     for key, files in before.items():  # finished trials were not recomputed, not even rewritten
-        assert {f.name: (f.stat().st_ino, f.stat().st_mtime_ns, f.stat().st_size)
-                for f in after[key].iterdir()} == files
+        assert {
+            f.name: (f.stat().st_ino, f.stat().st_mtime_ns, f.stat().st_size) for f in after[key].iterdir()
+        } == files
     assert not [p for p in out.rglob("*") if p.name.startswith(".tmp-")]
     rows = [json.loads(line) for line in (out / ROWS_FILE).read_text().splitlines()]
     assert sorted(r["key"] for r in rows) == sorted(keys) and rows == read_rows(out)
@@ -105,8 +123,11 @@ def test_killed_sweep_reruns_only_unfinished_trials(resumed_sweep):
         assert row["error"] is None
         trial = out / TRIALS_DIR / row["key"]
         plan_json = json.loads((trial / "plan.json").read_text())
-        assert (plan_json["method"], plan_json["success"], plan_json["total_time_s"]) == \
-            (row["method"], row["success"], row["total_time_s"])
+        assert (plan_json["method"], plan_json["success"], plan_json["total_time_s"]) == (
+            row["method"],
+            row["success"],
+            row["total_time_s"],
+        )
         with np.load(trial / "plan.npz") as npz:
             arrays = {name: npz[name] for name in npz.files}
         if row["simulated"]:
@@ -147,8 +168,9 @@ def test_dask_cluster_gives_the_same_trials(tmp_path):
 
     spec = small_spec()
     local = run_sweep(spec, tmp_path / "local", workers=2, progress=False)
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp", host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, protocol="tcp", host="127.0.0.1", dashboard_address=None
+    ) as cluster:
         remote = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address, progress=False)
     assert local.ran == remote.ran == 2 and local.errors == remote.errors == 0
     local_rows = {r["key"]: r for r in read_rows(tmp_path / "local")}
@@ -156,8 +178,9 @@ def test_dask_cluster_gives_the_same_trials(tmp_path):
         mine = local_rows[row["key"]]
         for field in ("goal", "success", "status", "iterations", "switching_fingers", "cost"):
             assert row[field] == mine[field], field
-        plans = [json.loads((tmp_path / d / TRIALS_DIR / row["key"] / "plan.json").read_text())
-                 for d in ("local", "dask")]
+        plans = [
+            json.loads((tmp_path / d / TRIALS_DIR / row["key"] / "plan.json").read_text()) for d in ("local", "dask")
+        ]
         assert plans[0]["contact_sequence"] == plans[1]["contact_sequence"]
         arrays = []
         for d in ("local", "dask"):
@@ -179,8 +202,7 @@ def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
     assert all(r["error"].startswith("timeout: exceeded the trial time limit of 0.2 s") for r in rows)
     again = run_sweep(small_spec(time_limit_s=0.2), tmp_path / "limit", workers=2, progress=False)
     assert (again.ran, again.skipped) == (0, 2)
-    retried = run_sweep(small_spec(time_limit_s=0.2), tmp_path / "limit", workers=2, progress=False,
-                        retry_errors=True)
+    retried = run_sweep(small_spec(time_limit_s=0.2), tmp_path / "limit", workers=2, progress=False, retry_errors=True)
     assert (retried.ran, retried.skipped) == (2, 0)
     # A trial that raises (a goal the planner rejects) is a row with the exception's message.
     task = small_spec().tasks()[0]

@@ -13,10 +13,23 @@ import pytest  # noqa: E402
 
 from trajectotree.cli import main  # noqa: E402
 from trajectotree.contact_plan import ContactNode, ContactPlan  # noqa: E402
-from trajectotree.figures.run import (FINGER_COLORS, contact_node_legend_handles, figure_finger_forces,  # noqa: E402
-                                  figure_keyframes, figure_model, plot_box, plot_contact_node, plot_contacts, plot_finger_force,
-                                  plot_friction_cones, plot_hand, plot_segments, save_figure, segment_spans)
 from trajectotree.execution.metrics import evaluate  # noqa: E402
+from trajectotree.figures.run import (
+    FINGER_COLORS,
+    contact_node_legend_handles,
+    figure_finger_forces,  # noqa: E402
+    figure_keyframes,
+    figure_model,
+    plot_box,
+    plot_contact_node,
+    plot_contacts,
+    plot_finger_force,
+    plot_friction_cones,
+    plot_hand,
+    plot_segments,
+    save_figure,
+    segment_spans,
+)
 from trajectotree.results import SimLog  # noqa: E402
 from trajectotree.scene.plant import NUM_FINGERS, build_scene  # noqa: E402
 
@@ -35,9 +48,11 @@ def test_box_corners_are_the_rotated_half_extents(ax):
     x, y, theta, w, h = 0.03, -0.02, math.pi / 6, 0.2, 0.1
     (patch,) = plot_box(ax, w, h, (x, y, theta))
     c, s = math.cos(theta), math.sin(theta)
-    corners = [(x + c * u - s * v, y + s * u + c * v) for u, v in ((0.1, -0.05), (0.1, 0.05), (-0.1, 0.05), (-0.1, -0.05))]
+    corners = [
+        (x + c * u - s * v, y + s * u + c * v) for u, v in ((0.1, -0.05), (0.1, 0.05), (-0.1, 0.05), (-0.1, -0.05))
+    ]
     np.testing.assert_allclose(patch.get_xy()[:4], corners, atol=1e-15)
-    np.testing.assert_allclose(patch.get_xy()[4], corners[0], atol=1e-15)   # closed outline
+    np.testing.assert_allclose(patch.get_xy()[4], corners[0], atol=1e-15)  # closed outline
 
 
 def test_hand_is_drawn_where_the_plant_puts_joints_and_fingertips(scene, ax):
@@ -54,7 +69,7 @@ def test_hand_is_drawn_where_the_plant_puts_joints_and_fingertips(scene, ax):
         assert tip.radius == pytest.approx(scene.tip_radius)
         assert matplotlib.colors.same_color(tip.get_facecolor(), FINGER_COLORS[i])
     links = [a for a in artists if isinstance(a, matplotlib.lines.Line2D) and a.get_linestyle() == "-"]
-    for i, line in enumerate(links):   # base, elbow (joint 2), fingertip centre
+    for i, line in enumerate(links):  # base, elbow (joint 2), fingertip centre
         joints = [plant.GetJointByName(f"finger{i}_joint{j}", scene.hand).frame_on_child() for j in (1, 2)]
         expected = [frame.CalcPoseInWorld(context).translation()[:2] for frame in joints] + [p_WF[i]]
         np.testing.assert_allclose(np.column_stack(line.get_data()), expected, atol=1e-12)
@@ -64,7 +79,7 @@ def test_model_figure_draws_each_fingers_full_reach_around_its_base(scene):
     fig = figure_model(scene)
     ax = fig.axes[0]
     reach = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle) and not p.get_fill()]
-    stretched = scene.fingertip_positions(np.zeros(8))   # q = 0: both links in line, the farthest reach
+    stretched = scene.fingertip_positions(np.zeros(8))  # q = 0: both links in line, the farthest reach
     assert len(reach) == NUM_FINGERS
     for circle, finger, tip in zip(reach, scene.fingers, stretched):
         np.testing.assert_allclose(circle.center, finger.p_W_base)
@@ -77,16 +92,17 @@ def test_model_figure_draws_each_fingers_full_reach_around_its_base(scene):
 
 
 def test_contacts_normals_and_cones_in_the_world(ax):
-    pose = (0.01, 0.02, math.pi / 2)   # the box's +x face points along +y in W
+    pose = (0.01, 0.02, math.pi / 2)  # the box's +x face points along +y in W
     p_BC, n_B = np.array([[0.1, 0.0], [-0.1, 0.02]]), np.array([[1.0, 0.0], [-1.0, 0.0]])
     scatter, arrows = plot_contacts(ax, pose, p_BC, n_B)
     np.testing.assert_allclose(scatter.get_offsets(), [[0.01, 0.12], [-0.01, -0.08]], atol=1e-15)
     np.testing.assert_allclose(np.column_stack([arrows.U, arrows.V]), [[0.0, 1.0], [0.0, -1.0]], atol=1e-15)
     mu, length = 0.5, 0.03
     wedge = plot_friction_cones(ax, pose, p_BC[:1], n_B[:1], mu, length=length)[0].get_xy()
-    r = length / math.hypot(1.0, mu)   # edge directions -n -+ mu t, t = z x n, unit length
-    np.testing.assert_allclose(wedge[:3], [[0.01, 0.12], [0.01 + mu * r, 0.12 - r], [0.01 - mu * r, 0.12 - r]],
-                               atol=1e-15)
+    r = length / math.hypot(1.0, mu)  # edge directions -n -+ mu t, t = z x n, unit length
+    np.testing.assert_allclose(
+        wedge[:3], [[0.01, 0.12], [0.01 + mu * r, 0.12 - r], [0.01 - mu * r, 0.12 - r]], atol=1e-15
+    )
 
 
 def test_finger_force_lines_are_the_magnitudes_and_the_drop_is_shaded(ax):
@@ -99,7 +115,7 @@ def test_finger_force_lines_are_the_magnitudes_and_the_drop_is_shaded(ax):
     assert sim.get_linestyle() == "-" and plan.get_linestyle() == "--"
     assert matplotlib.colors.same_color(plan.get_color(), "tab:red")
     assert span_x(shade) == pytest.approx((0.5, 1.0))
-    assert len(plot_finger_force(ax, t, f_sim, f_plan)) == 2   # no drop: nothing shaded
+    assert len(plot_finger_force(ax, t, f_sim, f_plan)) == 2  # no drop: nothing shaded
 
 
 def test_segments_mark_boundaries_and_shade_the_fingers_switches(ax):
@@ -111,7 +127,7 @@ def test_segments_mark_boundaries_and_shade_the_fingers_switches(ax):
     assert boundaries == pytest.approx([0.3, 0.6])
     shaded = [span_x(a) for a in artists if not isinstance(a, matplotlib.lines.Line2D)]
     assert shaded == [pytest.approx((0.0, 0.3)), pytest.approx((0.6, 0.9))]
-    assert len(plot_segments(ax, spans, 1)) == 2   # finger 1 never switches
+    assert len(plot_segments(ax, spans, 1)) == 2  # finger 1 never switches
 
 
 def synthetic_run() -> SimLog:
@@ -125,8 +141,17 @@ def synthetic_run() -> SimLog:
     f_W = f_plan.copy()
     f_W[:, 1, 1] = 0.5
     f_W[8:, 3, 0] = -50.0
-    return SimLog(t=t, x=x, q=np.zeros((11, 8)), x_plan=x_plan, f_W=f_W, f_W_plan=f_plan, sim_time_s=0.1,
-                  controller="grasp", conditions={})
+    return SimLog(
+        t=t,
+        x=x,
+        q=np.zeros((11, 8)),
+        x_plan=x_plan,
+        f_W=f_W,
+        f_W_plan=f_plan,
+        sim_time_s=0.1,
+        controller="grasp",
+        conditions={},
+    )
 
 
 def test_forces_figure_shares_one_scale_set_before_the_drop_and_marks_segments():
@@ -137,37 +162,52 @@ def test_forces_figure_shares_one_scale_set_before_the_drop_and_marks_segments()
     fig = figure_finger_forces(result, spans)
     axes = fig.axes
     assert len(axes) == NUM_FINGERS and len({ax.get_ylim() for ax in axes}) == 1
-    assert axes[0].get_ylim() == pytest.approx((-0.03 * 2.0, 1.1 * 2.0))   # |f| <= 2 N up to the drop; 50 N clipped
+    assert axes[0].get_ylim() == pytest.approx((-0.03 * 2.0, 1.1 * 2.0))  # |f| <= 2 N up to the drop; 50 N clipped
     for i, ax in enumerate(axes):
         simulated, planned = ax.lines[:2]
         np.testing.assert_allclose(simulated.get_ydata(), np.linalg.norm(result.f_W[:, i], axis=1))
         np.testing.assert_allclose(planned.get_ydata(), np.linalg.norm(result.f_W_plan[:, i], axis=1))
         shaded = [p for p in ax.patches if p.get_label() == "segment in which this finger switches"]
-        assert len(shaded) == {0: 1, 2: 1}.get(i, 0)   # finger 0 switches in segment 1, finger 2 in segment 2
+        assert len(shaded) == {0: 1, 2: 1}.get(i, 0)  # finger 0 switches in segment 1, finger 2 in segment 2
     assert all("|f| [N]" in ax.get_ylabel() for ax in axes) and "|f|" in fig._suptitle.get_text()
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert labels == ["simulated |f|", "planned |f|", "after the drop (may be clipped)",
-                      "segment in which this finger switches", "segment boundary"]
+    assert labels == [
+        "simulated |f|",
+        "planned |f|",
+        "after the drop (may be clipped)",
+        "segment in which this finger switches",
+        "segment boundary",
+    ]
     plt.close(fig)
 
 
 def node(theta: float, switching: int | None) -> ContactNode:
     p_BC = np.array([[0.1, 0.0], [0.0, 0.05], [-0.1, 0.0], [0.0, -0.05]])
     n_B = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
-    return ContactNode(object_pose=np.array([0.0, 0.0, theta]), q=np.tile([0.25, 1.2], 4),
-                       arclengths=np.zeros(4), p_BC=p_BC, n_B=n_B, switching_finger=switching, closure_margin=0.1)
+    return ContactNode(
+        object_pose=np.array([0.0, 0.0, theta]),
+        q=np.tile([0.25, 1.2], 4),
+        arclengths=np.zeros(4),
+        p_BC=p_BC,
+        n_B=n_B,
+        switching_finger=switching,
+        closure_margin=0.1,
+    )
 
 
 def test_keyframes_one_panel_per_node_with_the_switching_finger(scene, tmp_path):
     nodes = (node(0.0, None), node(0.1, 2), node(0.2, None))
     fig = figure_keyframes(scene, ContactPlan(goal=0.2, success=True, reason="", nodes=nodes))
     titles = [ax.get_title() for ax in fig.axes]
-    assert titles == ["n=0  theta=+0.00\ninitial grasp", "n=1  theta=+0.10\nfinger 2 moves",
-                      "n=2  theta=+0.20\nno switch"]
+    assert titles == [
+        "n=0  theta=+0.00\ninitial grasp",
+        "n=1  theta=+0.10\nfinger 2 moves",
+        "n=2  theta=+0.20\nno switch",
+    ]
     thick = [line for line in fig.axes[1].lines if line.get_linewidth() == 4.0]
     assert len(thick) == 1 and matplotlib.colors.same_color(thick[0].get_color(), "k")
     assert "goal +0.200 rad" in fig._suptitle.get_text()
-    out = save_figure(fig, tmp_path / "keyframes.svg", dpi=110)   # the format the suffix names
+    out = save_figure(fig, tmp_path / "keyframes.svg", dpi=110)  # the format the suffix names
     plt.close(fig)
     svg = (tmp_path / "keyframes.svg").read_text()
     assert out.endswith("keyframes.svg") and svg.startswith("<?xml") and "friction cone" in svg
@@ -189,9 +229,13 @@ def test_contact_node_numbers_the_fingers_and_marks_the_previous_contact(scene, 
     c, s = math.cos(0.1), math.sin(0.1)
     np.testing.assert_allclose(np.column_stack(hollow[0].get_data())[0], [c * 0.0 - s * 0.05, s * 0.0 + c * 0.05])
     labels = [h.get_label() for h in contact_node_legend_handles(0.7)]
-    assert labels == ["contact (finger's colour; arrow: normal)", "friction cone (mu = 0.7)",
-                      "switching finger's previous contact", "switching finger",
-                      "holding fingers (numbered at their bases)"]
+    assert labels == [
+        "contact (finger's colour; arrow: normal)",
+        "friction cone (mu = 0.7)",
+        "switching finger's previous contact",
+        "switching finger",
+        "holding fingers (numbered at their bases)",
+    ]
 
 
 def test_search_command_draws_the_keyframes_in_the_format_its_suffix_names(tmp_path):
@@ -209,6 +253,7 @@ QUAD = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
 def test_polygon_outline_is_its_vertices_at_the_pose(ax):
     from trajectotree.figures.run import plot_object
     from trajectotree.geometry import ConvexPolygon
+
     shape = ConvexPolygon.from_points(QUAD)
     pose = (0.02, -0.01, 2.0)
     (patch,) = plot_object(ax, shape, pose)
@@ -220,6 +265,7 @@ def test_polygon_outline_is_its_vertices_at_the_pose(ax):
 
 def test_model_figure_of_a_polygon_draws_it_the_hand_and_each_fingers_reachable_contacts():
     from trajectotree.config import ObjectConfig, SceneConfig
+
     config = SceneConfig(object=ObjectConfig(vertices=QUAD), initial_pose=(0.01, 0.02, 0.3))
     scene = build_scene(config)
     reachable = [np.array([0.02, 0.06]), np.array([]), np.array([0.3]), np.array([0.1, 0.12, 0.5])]
@@ -228,10 +274,11 @@ def test_model_figure_of_a_polygon_draws_it_the_hand_and_each_fingers_reachable_
     ax = fig.axes[0]
     outline = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon)][0]
     from trajectotree.geometry import box_to_world
+
     corners = [box_to_world(config.initial_pose, v) for v in config.shape.vertices]
     np.testing.assert_allclose(outline.get_xy()[:4], corners, atol=1e-15)
     dots = ax.collections
-    assert len(dots) == 3   # finger 1 reaches nothing: no dots
+    assert len(dots) == 3  # finger 1 reaches nothing: no dots
     for dot, i in zip(dots, (0, 2, 3)):
         p_B, n_B = config.shape.points(reachable[i])
         expected = [box_to_world(config.initial_pose, p) for p in p_B + 0.004 * (i + 1) * n_B]

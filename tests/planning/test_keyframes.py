@@ -22,7 +22,7 @@ from trajectotree.results import TRAJECTORY_ARRAYS
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan
 
-CONFIG = Config(search=SearchConfig(num_nodes=3))      # 2 segments of 12 knots
+CONFIG = Config(search=SearchConfig(num_nodes=3))  # 2 segments of 12 knots
 GOAL = 0.3
 
 
@@ -40,8 +40,9 @@ def contact_plan(scene):
 
 @pytest.fixture(scope="module")
 def serial(scene, contact_plan):
-    return plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan,
-                segment_workers=1)
+    return plan(
+        scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan, segment_workers=1
+    )
 
 
 def test_keyframes_is_the_default_and_joint_the_papers():
@@ -68,7 +69,7 @@ def test_piece_spec_fixes_both_ends_at_the_nodes(scene, contact_plan):
         assert fixed[var.get_id()] == value
     for var in np.concatenate([v.xdd[0], v.qdd[0], v.xdd[-1], v.qdd[-1], v.xd[-1], v.qd[-1]]):
         assert fixed[var.get_id()] == 0.0
-    assert not any(var.get_id() in fixed for var in v.x[5])    # the knots between stay free
+    assert not any(var.get_id() in fixed for var in v.x[5])  # the knots between stay free
 
 
 def test_keyframes_plan_is_continuous_at_the_nodes_and_physical(scene, contact_plan, serial):
@@ -79,15 +80,15 @@ def test_keyframes_plan_is_continuous_at_the_nodes_and_physical(scene, contact_p
     np.testing.assert_allclose(np.diff(a.t), CONFIG.cito.dt)
     for n, node in enumerate(contact_plan.nodes):
         k = n * M
-        np.testing.assert_array_equal(a.x[k], node.object_pose)     # exactly the node: fixed, not solved for
+        np.testing.assert_array_equal(a.x[k], node.object_pose)  # exactly the node: fixed, not solved for
         np.testing.assert_array_equal(a.q[k], node.q)
         assert not a.xdot[k].any() and not a.qdot[k].any()
-    assert a.x[-1, 2] == contact_plan.nodes[-1].object_pose[2]    # the final pose is the goal node's
+    assert a.x[-1, 2] == contact_plan.nodes[-1].object_pose[2]  # the final pose is the goal node's
     # The plan's own check of the stitched arrays, recomputed here from them alone.
     check = check_physics(a.arrays(), ObjectModel.from_scene(scene), planning_mu(CONFIG))
     assert check.passed and check == serial.physics_check, check.reason
     assert check.newton_euler_force_N < 1e-6
-    for record in serial.segments:   # segment 0's link 2 of a finger cuts the box without the link rows
+    for record in serial.segments:  # segment 0's link 2 of a finger cuts the box without the link rows
         assert record["success"] and record["iterations"] > 0
         assert [r["kind"] for r in record["attempts"]] in (["keyframes"], ["keyframes", "links"])
     assert [len(r["attempts"]) for r in serial.segments] == [2, 1]
@@ -111,7 +112,7 @@ def test_stitch_averages_the_forces_at_a_shared_knot(serial):
     for n in TRAJECTORY_ARRAYS:
         np.testing.assert_allclose(getattr(out, n), getattr(a, n), rtol=0, atol=1e-12)
     moved = piece(M, 2 * M + 1, 0.0)
-    moved.trajectory.x[0, 2] += 1e-9     # pieces that do not meet are a bug, never averaged
+    moved.trajectory.x[0, 2] += 1e-9  # pieces that do not meet are a bug, never averaged
     with pytest.raises(AssertionError, match="differ in x"):
         stitch([piece(0, M + 1, 0.0), moved])
 
@@ -119,17 +120,28 @@ def test_stitch_averages_the_forces_at_a_shared_knot(serial):
 @dataclasses.dataclass(frozen=True)
 class _Piece:
     """What stitch reads of a PieceResult."""
+
     trajectory: object
     first: int = 0
     last: int = 1
 
 
 def test_parallel_and_serial_solves_give_identical_arrays(scene, contact_plan, serial):
-    parallel = plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan,
-                    segment_workers=2)
-    with local_pool(2) as pool:     # a given executor, reused across plans
-        given = [plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan,
-                      segment_executor=pool) for _ in range(2)]
+    parallel = plan(
+        scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan, segment_workers=2
+    )
+    with local_pool(2) as pool:  # a given executor, reused across plans
+        given = [
+            plan(
+                scene=scene,
+                goal=GOAL,
+                method="trajectotree",
+                config=CONFIG,
+                contact_plan=contact_plan,
+                segment_executor=pool,
+            )
+            for _ in range(2)
+        ]
     for other in (parallel, *given):
         for name in TRAJECTORY_ARRAYS:
             np.testing.assert_array_equal(getattr(other.trajectory, name), getattr(serial.trajectory, name))
@@ -140,10 +152,20 @@ def test_parallel_and_serial_solves_give_identical_arrays(scene, contact_plan, s
 def test_segments_on_a_dask_cluster_equal_the_serial_solve(scene, contact_plan, serial):
     from distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, protocol="tcp", host="127.0.0.1",
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        result = plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan,
-                      segment_executor=client.get_executor())
+    with (
+        LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, protocol="tcp", host="127.0.0.1", dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        result = plan(
+            scene=scene,
+            goal=GOAL,
+            method="trajectotree",
+            config=CONFIG,
+            contact_plan=contact_plan,
+            segment_executor=client.get_executor(),
+        )
         worker_pids = set(client.run(lambda: __import__("os").getpid()).values())
     for name in TRAJECTORY_ARRAYS:
         np.testing.assert_array_equal(getattr(result.trajectory, name), getattr(serial.trajectory, name))
@@ -156,8 +178,9 @@ def test_a_failing_segment_is_retried_and_recorded(scene, contact_plan, tmp_path
     # from its last iterate, the joint program with its neighbours: here both segments at once,
     # and that joint program again with the pinned fingers held harder).
     config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, max_iter=3))
-    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan,
-                  segment_workers=1)
+    result = plan(
+        scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan, segment_workers=1
+    )
     assert not result.success and not result.converged
     assert "failed after retries" in result.status and "Max iteration exceeded" in result.status
     save_plan(result, tmp_path)
@@ -166,11 +189,15 @@ def test_a_failing_segment_is_retried_and_recorded(scene, contact_plan, tmp_path
     for s, record in enumerate(data["segments"]):
         assert record["retries"] == 3 and record["nodes"] == [s, s + 1] and not record["success"]
         assert [(r["kind"], r["nodes"]) for r in record["attempts"]] == [
-            ("keyframes", [s, s + 1]), ("restart", [s, s + 1]), ("joint", [0, 2]), ("strict", [0, 2])]
+            ("keyframes", [s, s + 1]),
+            ("restart", [s, s + 1]),
+            ("joint", [0, 2]),
+            ("strict", [0, 2]),
+        ]
         assert all(r["iterations"] == 3 for r in record["attempts"])
-    assert data["iterations"] == 6 * 3          # 2 segments x 2 attempts + a joint and a strict retry
+    assert data["iterations"] == 6 * 3  # 2 segments x 2 attempts + a joint and a strict retry
     assert load_plan(tmp_path).segments == tuple(data["segments"])
-    assert result.trajectory.x.shape == (2 * CONFIG.cito.knots_per_segment + 1, 3)   # still saved, as joint's
+    assert result.trajectory.x.shape == (2 * CONFIG.cito.knots_per_segment + 1, 3)  # still saved, as joint's
 
 
 def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
@@ -179,8 +206,9 @@ def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
     # plan succeeds with one retry per segment.
     # The link rows in every segment from the start (not on demand), so no "links" attempt intervenes.
     config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, max_iter=14, link_rows_on_demand=False))
-    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan,
-                  segment_workers=1)
+    result = plan(
+        scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan, segment_workers=1
+    )
     assert result.success and result.physics_check.passed, result.status
     for record in result.segments:
         assert record["success"] and record["retries"] == 1
@@ -195,27 +223,27 @@ def test_a_segment_failing_the_physics_check_is_retried_with_its_neighbours(scen
     node = contact_plan.nodes[1]
     q = node.q.copy()
     q[4] += 0.1
-    bad = dataclasses.replace(contact_plan, nodes=(contact_plan.nodes[0], dataclasses.replace(node, q=q),
-                                                   contact_plan.nodes[2]))
+    bad = dataclasses.replace(
+        contact_plan, nodes=(contact_plan.nodes[0], dataclasses.replace(node, q=q), contact_plan.nodes[2])
+    )
     config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, link_rows_on_demand=False))
-    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=bad,
-                  segment_workers=1)
+    result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=bad, segment_workers=1)
     assert result.success and result.physics_check.passed, result.status
     first, second = result.segments
     assert [(r["kind"], r["success"]) for r in second["attempts"]] == [("keyframes", False), ("joint", True)]
-    assert second["attempts"][0]["status"] in ("Success", "Stop at acceptable point")   # converged
+    assert second["attempts"][0]["status"] in ("Success", "Stop at acceptable point")  # converged
     assert [(r["kind"], r["nodes"]) for r in first["attempts"]] == [("keyframes", [0, 1]), ("joint", [0, 2])]
     assert first["success"] and second["success"] and first["retries"] == second["retries"] == 1
     np.testing.assert_array_equal(result.trajectory.x[-1], contact_plan.nodes[-1].object_pose)
 
 
 def test_joint_retries_take_the_neighbours_and_merge_overlaps():
-    assert _neighbour_ranges([4], 9) == [(3, 6)]                # nodes 3..6: segments 3, 4, 5
+    assert _neighbour_ranges([4], 9) == [(3, 6)]  # nodes 3..6: segments 3, 4, 5
     assert _neighbour_ranges([0], 9) == [(0, 2)] and _neighbour_ranges([8], 9) == [(7, 9)]
-    assert _neighbour_ranges([2, 4], 9) == [(1, 6)]             # overlapping: one program
-    assert _neighbour_ranges([1, 5], 9) == [(0, 3), (4, 7)]     # apart: two
-    assert _neighbour_ranges([0], 1) == []                      # one segment: nothing to free
-    assert _neighbour_ranges([0], 1, min_segments=1) == [(0, 1)]   # but a strict retry holds it harder
+    assert _neighbour_ranges([2, 4], 9) == [(1, 6)]  # overlapping: one program
+    assert _neighbour_ranges([1, 5], 9) == [(0, 3), (4, 7)]  # apart: two
+    assert _neighbour_ranges([0], 1) == []  # one segment: nothing to free
+    assert _neighbour_ranges([0], 1, min_segments=1) == [(0, 1)]  # but a strict retry holds it harder
 
 
 @pytest.mark.slow
@@ -226,8 +254,9 @@ def test_the_demo_goal_plans_physically_through_the_strict_retry():
     joint retry of nodes 4-7; the strict retry of those nodes passes. If a later change makes an
     earlier attempt pass, update the kinds."""
     config = Config(search=SearchConfig(rolled_stances=False, max_stance_force=0.0))
-    result = plan(scene=build_scene(config.scene), goal=np.pi / 2, method="trajectotree", config=config,
-                  segment_workers=1)
+    result = plan(
+        scene=build_scene(config.scene), goal=np.pi / 2, method="trajectotree", config=config, segment_workers=1
+    )
     assert result.success and result.physics_check.passed, result.status
     kinds = [r["kind"] for r in result.segments[5]["attempts"]]
     assert kinds == ["keyframes", "joint", "strict"] and result.segments[5]["attempts"][-1]["nodes"] == [4, 7]
@@ -239,9 +268,10 @@ def test_bad_input_is_refused(scene, tmp_path, capsys):
     for workers in (0, -1, 1.5, True):
         with pytest.raises(ConfigError, match="segment_workers"):
             plan(scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, segment_workers=workers)
-    for args, message in ((["--formulation", "fast"], "--formulation (cito.formulation) = 'fast' is unknown; "
-                                                      "valid: keyframes, joint"),
-                          (["--segment-workers", "0"], "--segment-workers = 0 is out of range; valid range: [1, inf)")):
+    for args, message in (
+        (["--formulation", "fast"], "--formulation (cito.formulation) = 'fast' is unknown; valid: keyframes, joint"),
+        (["--segment-workers", "0"], "--segment-workers = 0 is out of range; valid range: [1, inf)"),
+    ):
         out = tmp_path / "out"
         assert main(["plan", "--goal", "0.3", *args, "--out", str(out)]) == 2
         assert message in capsys.readouterr().err

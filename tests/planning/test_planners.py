@@ -7,20 +7,27 @@ import dataclasses
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from pathlib import Path
-
-from trajectotree.config import (CitoConfig, Config, ConfigError, SceneConfig, SearchConfig, config_to_dict, load_config,
-                                 save_config)
+from trajectotree.config import (
+    CitoConfig,
+    Config,
+    ConfigError,
+    SceneConfig,
+    SearchConfig,
+    config_to_dict,
+    load_config,
+    save_config,
+)
 from trajectotree.geometry import ConvexPolygon, box_to_world, world_to_box
 from trajectotree.io import load_plan, save_plan
 from trajectotree.planning.planners import plan, planning_mu
 from trajectotree.scene.plant import build_scene
 
-CONFIG = Config(search=SearchConfig(num_nodes=3))      # 2 segments, 25 knots: seconds per solve
+CONFIG = Config(search=SearchConfig(num_nodes=3))  # 2 segments, 25 knots: seconds per solve
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +79,9 @@ def check_newton_euler(a, scene_config: SceneConfig, tol=1e-5, moment_tol=1e-4):
 def tip_distances(a, scene_config, radius):
     """(K, 4) exact distance of each fingertip sphere to the box (negative: penetration)."""
     box = scene_config.shape
-    return np.array([[box.signed_distance(world_to_box(x, p)) - radius for p in tips]
-                     for x, tips in zip(a["x"], a["p_W_tip"])])
+    return np.array(
+        [[box.signed_distance(world_to_box(x, p)) - radius for p in tips] for x, tips in zip(a["x"], a["p_W_tip"])]
+    )
 
 
 @pytest.mark.slow
@@ -86,16 +94,16 @@ def test_plan_is_physical(plans, scene, key):
     check_newton_euler(a, c)
     ln, lt = a["lambda_n"], a["lambda_t"]
     mu_plan = planning_mu(CONFIG)
-    assert mu_plan == pytest.approx(0.7 * c.mu)                                      # the default safety
-    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= mu_plan * ln + 1e-7)        # cones at mu_plan
+    assert mu_plan == pytest.approx(0.7 * c.mu)  # the default safety
+    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= mu_plan * ln + 1e-7)  # cones at mu_plan
     pressing = ln > 0.05
-    assert (np.abs(lt[pressing]) / ln[pressing]).max() > 0.9 * mu_plan              # ... and they bind
+    assert (np.abs(lt[pressing]) / ln[pressing]).max() > 0.9 * mu_plan  # ... and they bind
     dist = tip_distances(a, c, r)
-    assert dist.min() > -1e-3                                                         # no tip 1 mm inside
-    away = dist > 1e-4                                                                # no force at a distance
+    assert dist.min() > -1e-3  # no tip 1 mm inside
+    away = dist > 1e-4  # no force at a distance
     assert np.all(np.linalg.norm(a["f_W"], axis=2)[away] <= 0.01), np.linalg.norm(a["f_W"], axis=2)[away].max()
     assert result.physics_check.passed and result.physics_check.mu == pytest.approx(mu_plan)
-    assert abs(a["x"][-1, 2] - key[1]) < np.deg2rad(5)                              # reaches the goal
+    assert abs(a["x"][-1, 2] - key[1]) < np.deg2rad(5)  # reaches the goal
 
 
 @pytest.mark.slow
@@ -112,7 +120,7 @@ def test_trajectotree_keeps_fixed_fingers_on_their_planned_contacts(plans, scene
             for i in range(4):
                 node = nodes[s + 1] if (k == (s + 1) * M or i != moving) else nodes[s]
                 if i == moving and s * M < k < (s + 1) * M:
-                    continue                                                        # free in between
+                    continue  # free in between
                 target = box_to_world(a["x"][k], node.p_BC[i] + r * node.n_B[i])
                 assert np.linalg.norm(a["p_W_tip"][k, i] - target) < 2e-3, (s, k, i)
     assert result.violations["contact_point"] < 2e-3
@@ -125,17 +133,20 @@ def test_the_switching_finger_lifts_off_and_carries_no_force(plans, scene, goal)
     result, folder = plans["trajectotree", goal]
     a, config = npz(folder), result.config
     h, M = config.cito.switch_clearance, config.cito.knots_per_segment
-    assert h > 0                                                                     # the default lifts it
+    assert h > 0  # the default lifts it
     gaps = tip_distances(a, config.scene, scene.tip_radius)
-    switches = [(s, node.switching_finger) for s, node in enumerate(result.contact_plan.nodes[1:])
-                if node.switching_finger is not None]
+    switches = [
+        (s, node.switching_finger)
+        for s, node in enumerate(result.contact_plan.nodes[1:])
+        if node.switching_finger is not None
+    ]
     assert switches
     j = np.arange(1, M)
     for s, finger in switches:
         mid = gaps[s * M + j, finger]
         # The smooth distance the program uses over-estimates the exact one near corners by <= log(2)/1000 m.
         assert np.all(mid >= h * np.sin(np.pi * j / M) - 1e-3), (s, mid)
-        assert mid.max() >= 0.8 * h                                                 # clears the face
+        assert mid.max() >= 0.8 * h  # clears the face
         # ... and, held off the box, it does not push it (no force across the gap)
         assert np.abs(a["f_W"][s * M + j, finger]).max() <= 1e-8, (s, a["f_W"][s * M + j, finger])
         assert np.all(a["lambda_n"][s * M + j, finger] <= 1e-8)
@@ -145,8 +156,20 @@ def test_the_switching_finger_lifts_off_and_carries_no_force(plans, scene, goal)
 def test_saved_plan_round_trips_and_matches_design(plans):
     result, folder = plans["trajectotree", 0.3]
     data = json.loads((folder / "plan.json").read_text())
-    for key in ("method", "goal", "success", "status", "search_time_s", "solve_time_s", "total_time_s", "cost",
-                "iterations", "contact_sequence", "violations", "config"):
+    for key in (
+        "method",
+        "goal",
+        "success",
+        "status",
+        "search_time_s",
+        "solve_time_s",
+        "total_time_s",
+        "cost",
+        "iterations",
+        "contact_sequence",
+        "violations",
+        "config",
+    ):
         assert key in data
     assert set(data["violations"]) == {"dynamics", "friction_cone", "complementarity", "contact_point", "penetration"}
     node = data["contact_sequence"][1]
@@ -154,8 +177,19 @@ def test_saved_plan_round_trips_and_matches_design(plans):
     assert set(node["contacts"][0]) >= {"arclength", "p_B", "n_B"}
     a = npz(folder)
     K = 2 * CONFIG.cito.knots_per_segment + 1
-    shapes = {"t": (K,), "x": (K, 3), "xdot": (K, 3), "q": (K, 8), "qdot": (K, 8), "tau": (K, 8),
-              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2), "p_W_C": (K, 4, 2)}
+    shapes = {
+        "t": (K,),
+        "x": (K, 3),
+        "xdot": (K, 3),
+        "q": (K, 8),
+        "qdot": (K, 8),
+        "tau": (K, 8),
+        "lambda_n": (K, 4),
+        "lambda_t": (K, 4),
+        "f_W": (K, 4, 2),
+        "p_W_tip": (K, 4, 2),
+        "p_W_C": (K, 4, 2),
+    }
     assert {k: v.shape for k, v in a.items()} == shapes
     assert data["physics_check"]["passed"] is True and data["physics_check"]["force_tol_N"] == 0.01
     loaded = load_plan(folder)
@@ -174,8 +208,8 @@ def test_baselines_are_physical_or_say_why_not(plans, scene, method):
     converged plan is a failure with the reason, found again here from plan.npz alone."""
     result, folder = plans[method, 0.3]
     a, c = npz(folder), scene.config
-    assert result.status.split(",")[0] in ("Success", "Stop at acceptable point"), result.status   # converged
-    check_newton_euler(a, c, moment_tol=1e-3)       # forces off the box act 1-2 mm from p_W_C
+    assert result.status.split(",")[0] in ("Success", "Stop at acceptable point"), result.status  # converged
+    check_newton_euler(a, c, moment_tol=1e-3)  # forces off the box act 1-2 mm from p_W_C
     assert np.all(np.abs(a["lambda_t"]) <= planning_mu(CONFIG) * a["lambda_n"] + 1e-7)
     pushing = (tip_distances(a, c, scene.tip_radius) > 1e-4) & (np.linalg.norm(a["f_W"], axis=2) > 0.01)
     assert result.converged and result.success == result.physics_check.passed == (not pushing.any())
@@ -206,15 +240,29 @@ def test_paper_config_loads_with_the_papers_formulation():
     assert config.cito.formulation == "joint"
     assert planning_mu(config) == config.scene.mu
     default = Config()
-    assert dataclasses.replace(config, search=default.search, cito=default.cito) == default   # nothing else differs
+    assert dataclasses.replace(config, search=default.search, cito=default.cito) == default  # nothing else differs
     assert not config.search.rolled_stances and config.search.grid_refinements == 0
     assert config.search.max_stance_force == 0.0
-    assert dataclasses.replace(config.search, friction_safety=default.search.friction_safety, rolled_stances=default.search.rolled_stances,
-                               grid_refinements=default.search.grid_refinements,
-                               max_stance_force=default.search.max_stance_force) == default.search
-    assert not config.cito.link_rows                                # the paper models no links
-    assert dataclasses.replace(config.cito, switch_clearance=default.cito.switch_clearance,
-                               formulation=default.cito.formulation, link_rows=default.cito.link_rows) == default.cito
+    assert (
+        dataclasses.replace(
+            config.search,
+            friction_safety=default.search.friction_safety,
+            rolled_stances=default.search.rolled_stances,
+            grid_refinements=default.search.grid_refinements,
+            max_stance_force=default.search.max_stance_force,
+        )
+        == default.search
+    )
+    assert not config.cito.link_rows  # the paper models no links
+    assert (
+        dataclasses.replace(
+            config.cito,
+            switch_clearance=default.cito.switch_clearance,
+            formulation=default.cito.formulation,
+            link_rows=default.cito.link_rows,
+        )
+        == default.cito
+    )
 
 
 def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):
@@ -235,7 +283,7 @@ def test_load_plan_rejects_missing_and_corrupt_folders(tmp_path):
     (tmp_path / "plan.npz").write_bytes(b"PK\x03\x04 a truncated zip")
     with pytest.raises(ConfigError, match=r"plan.npz' is not a valid plan.npz \(BadZipFile"):
         load_plan(tmp_path)
-    np.savez(tmp_path / "plan.npz")   # nothing solved: plan.json must then hold the rest of the report
+    np.savez(tmp_path / "plan.npz")  # nothing solved: plan.json must then hold the rest of the report
     with pytest.raises(ConfigError, match=r"plan.json' is not a valid plan.json \(KeyError: 'goal'\)"):
         load_plan(tmp_path)
 
@@ -254,17 +302,19 @@ def test_bad_input_raises_config_errors(scene):
 
 def test_contact_plan_not_matching_the_scene_is_rejected(scene):
     from trajectotree.planning.planners import initial_grasp_plan
+
     flat = build_scene(SceneConfig(box_height=0.08))
     config = dataclasses.replace(CONFIG, scene=flat.config)
-    grasp = initial_grasp_plan(scene, 0.3, CONFIG)                  # contacts on the 0.10 m high box
+    grasp = initial_grasp_plan(scene, 0.3, CONFIG)  # contacts on the 0.10 m high box
     two = dataclasses.replace(grasp, nodes=grasp.nodes * 2)
     with pytest.raises(ConfigError, match="off the boundary"):
         plan(scene=flat, goal=0.3, method="trajectotree", config=config, contact_plan=two)
 
 
 def run_cli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "trajectotree.cli", "plan", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "trajectotree.cli", "plan", *args], cwd=cwd, capture_output=True, text=True, timeout=600
+    )
 
 
 @pytest.mark.slow
@@ -278,10 +328,11 @@ def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
 
 @pytest.mark.slow
 def test_cli_non_converged_plan_is_written_with_status(tmp_path):
-    config = dataclasses.replace(CONFIG, cito=CitoConfig(max_iter=3, formulation="joint"))   # one program
+    config = dataclasses.replace(CONFIG, cito=CitoConfig(max_iter=3, formulation="joint"))  # one program
     save_config(config, tmp_path / "c.yaml")
-    proc = run_cli("--goal", "0.2", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "p"), "--json",
-                   cwd=tmp_path)
+    proc = run_cli(
+        "--goal", "0.2", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "p"), "--json", cwd=tmp_path
+    )
     assert proc.returncode == 0, proc.stderr
     data = json.loads(proc.stdout)
     assert data["success"] is False and "iteration" in data["status"].lower() and data["iterations"] == 3

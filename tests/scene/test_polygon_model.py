@@ -13,14 +13,19 @@ from pydrake.multibody.tree import CalcSpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import Config, ObjectConfig, SceneConfig
-from trajectotree.geometry import ConvexPolygon
-from trajectotree.search.initial_grasp import initial_grasp_candidates
 from trajectotree.execution.reference import static_hold_reference
-from trajectotree.scene.plant import add_polygon_object, box_sdf, build_scene, prism_inertia, prism_points
 from trajectotree.execution.simulate import simulate_reference
+from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.plant import add_polygon_object, box_sdf, build_scene, prism_inertia, prism_points
+from trajectotree.search.initial_grasp import initial_grasp_candidates
 
-TRIANGLE = tuple((0.14 / math.sqrt(3) * math.cos(math.pi / 2 + 2 * math.pi * k / 3),
-                  0.14 / math.sqrt(3) * math.sin(math.pi / 2 + 2 * math.pi * k / 3)) for k in range(3))
+TRIANGLE = tuple(
+    (
+        0.14 / math.sqrt(3) * math.cos(math.pi / 2 + 2 * math.pi * k / 3),
+        0.14 / math.sqrt(3) * math.sin(math.pi / 2 + 2 * math.pi * k / 3),
+    )
+    for k in range(3)
+)
 QUAD = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
 
 
@@ -46,8 +51,9 @@ def test_a_square_plate_turned_45_degrees_has_the_box_inertia():
     scene = build_scene(config)
     I = central_inertia(scene)
     assert object_body(scene).default_mass() == m
-    np.testing.assert_allclose(np.diag(I), [m * (s * s + d * d) / 12, m * (s * s + d * d) / 12, m * s * s / 6],
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        np.diag(I), [m * (s * s + d * d) / 12, m * (s * s + d * d) / 12, m * s * s / 6], rtol=1e-12
+    )
     assert np.abs(I - np.diag(np.diag(I))).max() < 1e-18
 
 
@@ -61,8 +67,12 @@ def test_the_box_through_the_polygon_builder_equals_box_sdf():
     plant.Finalize()
     body = plant.GetBodyByName("box", instance)
     box = build_scene(config)
-    np.testing.assert_allclose(body.default_spatial_inertia().CalcRotationalInertia().CopyToFullMatrix3(),
-                               central_inertia(box), rtol=1e-12, atol=1e-20)
+    np.testing.assert_allclose(
+        body.default_spatial_inertia().CalcRotationalInertia().CopyToFullMatrix3(),
+        central_inertia(box),
+        rtol=1e-12,
+        atol=1e-20,
+    )
     assert body.default_mass() == object_body(box).default_mass() == 0.12
     (gid,) = plant.GetCollisionGeometriesForBody(body)
     friction = scene_graph.model_inspector().GetProximityProperties(gid).GetProperty("material", "coulomb_friction")
@@ -76,10 +86,10 @@ def test_polygon_inertia_equals_drakes_integration_of_the_prism_mesh(vertices):
     shape, d = config.shape, config.box_depth
     expected = CalcSpatialInertia(Convex(prism_points(shape, d), "prism"), 0.07 / (shape.area * d))
     assert expected.get_mass() == pytest.approx(0.07, rel=1e-12)
-    np.testing.assert_allclose(expected.get_com(), 0.0, atol=1e-15)   # the vertices are about the centroid
+    np.testing.assert_allclose(expected.get_com(), 0.0, atol=1e-15)  # the vertices are about the centroid
     I = central_inertia(build_scene(config))
     np.testing.assert_allclose(I, expected.CalcRotationalInertia().CopyToFullMatrix3(), rtol=1e-9, atol=1e-15)
-    assert I[2, 2] == shape.inertia(0.07)   # the plate inertia the planners and the controller use
+    assert I[2, 2] == shape.inertia(0.07)  # the plate inertia the planners and the controller use
 
 
 def test_polygon_collision_geometry_is_the_extruded_outline_with_the_configured_friction():
@@ -92,7 +102,7 @@ def test_polygon_collision_geometry_is_the_extruded_outline_with_the_configured_
     hull = shape.GetConvexHull()
     corners = np.array([hull.vertex(i) for i in range(hull.num_vertices())])
     assert len(corners) == 6 and set(np.round(corners[:, 2], 12)) == {-0.02, 0.02}
-    for v in config.shape.vertices:   # each vertex at both ends of the prism
+    for v in config.shape.vertices:  # each vertex at both ends of the prism
         assert np.sum(np.all(np.abs(corners[:, :2] - v) < 1e-12, axis=1)) == 2
     friction = inspector.GetProximityProperties(gid).GetProperty("material", "coulomb_friction")
     assert friction.static_friction() == friction.dynamic_friction() == 0.55
@@ -132,8 +142,8 @@ def test_fingertips_hold_the_triangle_in_simulation():
     assert not held.dropped and np.abs(held.x[:, :2]).max() < 2e-3 and np.abs(held.x[:, 2]).max() < 0.02
     late = held.t >= 0.5
     weight = config.scene.box_mass * config.scene.gravity
-    assert held.f_W[late, :, 1].sum(axis=1).mean() == pytest.approx(weight, rel=0.02)   # fingers carry m g
-    assert np.all(np.linalg.norm(held.f_W[late], axis=2).min(axis=0) > 0.1)              # every finger touches
+    assert held.f_W[late, :, 1].sum(axis=1).mean() == pytest.approx(weight, rel=0.02)  # fingers carry m g
+    assert np.all(np.linalg.norm(held.f_W[late], axis=2).min(axis=0) > 0.1)  # every finger touches
     dropped = simulate_reference(reference, config, controlled=False)
     assert dropped.dropped
 
@@ -150,11 +160,15 @@ def test_scene_graph_distances_from_the_fingertips_are_the_polygons():
     query = scene.scene_graph.get_query_output_port().Eval(scene.scene_graph.GetMyContextFromRoot(context))
     inspector = query.inspector()
     (object_id,) = scene.plant.GetCollisionGeometriesForBody(object_body(scene))
-    assert inspector.GetName(object_id) == "box::collision"   # named as box.sdf's
-    tips = {scene.plant.GetBodyFromFrameId(inspector.GetFrameId(g)).name(): g
-            for g in inspector.GetAllGeometryIds() if inspector.GetName(g).endswith("tip_collision")}
+    assert inspector.GetName(object_id) == "box::collision"  # named as box.sdf's
+    tips = {
+        scene.plant.GetBodyFromFrameId(inspector.GetFrameId(g)).name(): g
+        for g in inspector.GetAllGeometryIds()
+        if inspector.GetName(g).endswith("tip_collision")
+    }
     p_WF = scene.fingertip_positions(q)
     from trajectotree.geometry import world_to_box
+
     for i in range(4):
         pair = query.ComputeSignedDistancePairClosestPoints(tips[f"finger{i}_link2"], object_id)
         expected = config.shape.signed_distance(world_to_box(config.initial_pose, p_WF[i])) - scene.tip_radius

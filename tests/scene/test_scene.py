@@ -14,8 +14,11 @@ def scene():
 
 def closed_form_tip(base, psi, l1, l2, q):
     """Independent 2-link planar forward kinematics."""
-    return (np.asarray(base) + l1 * np.array([np.cos(psi + q[0]), np.sin(psi + q[0])])
-            + l2 * np.array([np.cos(psi + q[0] + q[1]), np.sin(psi + q[0] + q[1])]))
+    return (
+        np.asarray(base)
+        + l1 * np.array([np.cos(psi + q[0]), np.sin(psi + q[0])])
+        + l2 * np.array([np.cos(psi + q[0] + q[1]), np.sin(psi + q[0] + q[1])])
+    )
 
 
 def test_fingertips_match_closed_form_kinematics(scene):
@@ -28,9 +31,9 @@ def test_fingertips_match_closed_form_kinematics(scene):
         for i in range(NUM_FINGERS):
             angle = np.deg2rad(-45 + 90 * i)
             base = 0.22 * np.array([np.cos(angle), np.sin(angle)])
-            expected = closed_form_tip(base, angle + np.pi, 0.10, 0.10, q[2 * i:2 * i + 2])
+            expected = closed_form_tip(base, angle + np.pi, 0.10, 0.10, q[2 * i : 2 * i + 2])
             np.testing.assert_allclose(p_WF[i], expected, atol=1e-6)
-            np.testing.assert_allclose(scene.fingers[i].fingertip(q[2 * i:2 * i + 2]), expected, atol=1e-6)
+            np.testing.assert_allclose(scene.fingers[i].fingertip(q[2 * i : 2 * i + 2]), expected, atol=1e-6)
 
 
 def test_fingertip_jacobians_match_finite_differences(scene):
@@ -44,8 +47,10 @@ def test_fingertip_jacobians_match_finite_differences(scene):
         fd = (scene.fingertip_positions(q + dq) - scene.fingertip_positions(q - dq)) / (2 * eps)
         np.testing.assert_allclose(J[:, :, j], fd, atol=1e-8)
     for i in range(NUM_FINGERS):  # the closed-form Jacobian agrees with the plant
-        np.testing.assert_allclose(scene.fingers[i].jacobian(q[2 * i:2 * i + 2]), J[i][:, 2 * i:2 * i + 2], atol=1e-9)
-        np.testing.assert_allclose(J[i][:, np.r_[0:2 * i, 2 * i + 2:8]], 0.0)  # fingers are independent
+        np.testing.assert_allclose(
+            scene.fingers[i].jacobian(q[2 * i : 2 * i + 2]), J[i][:, 2 * i : 2 * i + 2], atol=1e-9
+        )
+        np.testing.assert_allclose(J[i][:, np.r_[0 : 2 * i, 2 * i + 2 : 8]], 0.0)  # fingers are independent
 
 
 def test_gravity_points_down_y(scene):
@@ -68,14 +73,16 @@ def test_box_parameters_follow_the_config(config):
     scene = build_scene(config)
     mass, izz, size, mu = box_parameters(scene)
     assert mass == pytest.approx(config.box_mass)
-    assert izz == pytest.approx(config.box_mass * (config.box_width ** 2 + config.box_height ** 2) / 12)
+    assert izz == pytest.approx(config.box_mass * (config.box_width**2 + config.box_height**2) / 12)
     assert size == pytest.approx((config.box_width, config.box_height))
     assert mu == pytest.approx(config.mu)
     # the fingers carry the same friction, so Drake's combined coefficient is mu
     inspector = scene.scene_graph.model_inspector()
-    hand_mu = [inspector.GetProximityProperties(g).GetProperty("material", "coulomb_friction").static_friction()
-               for b in scene.plant.GetBodyIndices(scene.hand)
-               for g in scene.plant.GetCollisionGeometriesForBody(scene.plant.get_body(b))]
+    hand_mu = [
+        inspector.GetProximityProperties(g).GetProperty("material", "coulomb_friction").static_friction()
+        for b in scene.plant.GetBodyIndices(scene.hand)
+        for g in scene.plant.GetCollisionGeometriesForBody(scene.plant.get_body(b))
+    ]
     assert len(hand_mu) == 12 and hand_mu == pytest.approx([config.mu] * 12)
 
 

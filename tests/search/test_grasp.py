@@ -7,8 +7,8 @@ from trajectotree.geometry import ConvexPolygon
 from trajectotree.search.grasp import FormClosure, FormClosureLp, grasp_matrix
 
 BOX = ConvexPolygon.box(0.20, 0.10)  # corners at arclength 0, 0.1, 0.3, 0.4; perimeter 0.6
-RIGHT_MID, LEFT_MID = 0.05, 0.35      # (0.1, 0) and (-0.1, 0): an antipodal pair
-TOP_X05, BOTTOM_XM05 = 0.15, 0.45     # (0.05, 0.05) and (-0.05, -0.05): a pair along a 45 degree line
+RIGHT_MID, LEFT_MID = 0.05, 0.35  # (0.1, 0) and (-0.1, 0): an antipodal pair
+TOP_X05, BOTTOM_XM05 = 0.15, 0.45  # (0.05, 0.05) and (-0.05, -0.05): a pair along a 45 degree line
 
 
 def test_grasp_matrix_columns_are_the_contact_wrenches():
@@ -133,8 +133,13 @@ def test_required_mu_of_three_contacts_against_its_closed_form():
 
     def bottom(x):
         return 0.5 + x
-    assert closure.required_mu([top(0.06), bottom(-0.06), bottom(0.02)]) == pytest.approx((0.06 - 0.02) / (2 * b), abs=1e-6)
-    assert closure.required_mu([top(0.08), bottom(-0.02), bottom(0.04)]) == pytest.approx((0.08 - 0.04) / (2 * b), abs=1e-6)
+
+    assert closure.required_mu([top(0.06), bottom(-0.06), bottom(0.02)]) == pytest.approx(
+        (0.06 - 0.02) / (2 * b), abs=1e-6
+    )
+    assert closure.required_mu([top(0.08), bottom(-0.02), bottom(0.04)]) == pytest.approx(
+        (0.08 - 0.04) / (2 * b), abs=1e-6
+    )
     assert closure.required_mu([top(0.01), bottom(-0.06), bottom(0.02)]) == pytest.approx(0.0, abs=1e-6)
 
 

@@ -10,13 +10,15 @@ import pytest
 
 from trajectotree.config import ConfigError, ObjectConfig, SceneConfig, SearchConfig
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
+from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.reach import Reachability, rectangles_overlap_polygon
-from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.tree import find_contact_plan, grid_levels
 
-TRIANGLE = tuple((0.14 / math.sqrt(3) * math.cos(a), 0.14 / math.sqrt(3) * math.sin(a))
-                 for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3))
+TRIANGLE = tuple(
+    (0.14 / math.sqrt(3) * math.cos(a), 0.14 / math.sqrt(3) * math.sin(a))
+    for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3)
+)
 
 
 def _cross(a, b):
@@ -38,8 +40,11 @@ def brute_force_overlap(a, b) -> bool:
     of one strictly inside the other or two edges crossing (exact for general positions)."""
     if any(_strictly_inside(p, b) for p in a) or any(_strictly_inside(p, a) for p in b):
         return True
-    return any(_proper_crossing(a[i], a[(i + 1) % len(a)], b[j], b[(j + 1) % len(b)])
-               for i in range(len(a)) for j in range(len(b)))
+    return any(
+        _proper_crossing(a[i], a[(i + 1) % len(a)], b[j], b[(j + 1) % len(b)])
+        for i in range(len(a))
+        for j in range(len(b))
+    )
 
 
 def rectangle_corners(center, angle, hl, hw):
@@ -62,7 +67,9 @@ def test_separating_axis_test_matches_brute_force():
         angles = rng.uniform(-np.pi, np.pi, 20)
         hl, hw = rng.uniform(0.005, 0.08, 2)
         sat = rectangles_overlap_polygon(polygon, centers, angles, hl, hw)
-        brute = [brute_force_overlap(rectangle_corners(c, g, hl, hw), polygon.vertices) for c, g in zip(centers, angles)]
+        brute = [
+            brute_force_overlap(rectangle_corners(c, g, hl, hw), polygon.vertices) for c, g in zip(centers, angles)
+        ]
         np.testing.assert_array_equal(sat, brute)
         hits += int(np.sum(sat))
     assert 120 < hits < 1080  # both outcomes are well represented
@@ -75,8 +82,10 @@ def test_box_keeps_its_closed_form_and_the_generic_test_agrees():
     assert box.is_box and not generic.is_box
     centers, angles = rng.uniform(-0.2, 0.2, (2000, 2)), rng.uniform(-np.pi, np.pi, 2000)
     closed = rectangles_overlap_polygon(box, centers, angles, 0.05, 0.01)
-    brute = [brute_force_overlap(rectangle_corners(c, g, 0.05, 0.01), box.vertices)
-             for c, g in zip(centers[:400], angles[:400])]
+    brute = [
+        brute_force_overlap(rectangle_corners(c, g, 0.05, 0.01), box.vertices)
+        for c, g in zip(centers[:400], angles[:400])
+    ]
     np.testing.assert_array_equal(closed[:400], brute)
     np.testing.assert_array_equal(closed, rectangles_overlap_polygon(generic, centers, angles, 0.05, 0.01))
     # touching is not overlapping: a rectangle flush against the right face (sizes exact in binary)
@@ -120,9 +129,12 @@ def check_polygon_plan(scene, plan, config: SearchConfig):
         for i in range(NUM_FINGERS):
             assert shape.corner_distance(node.arclengths[i]) >= scene.config.corner_margin - 1e-12
             assert shape.signed_distance(node.p_BC[i]) == pytest.approx(0.0, abs=1e-12)
-            target = box_to_world(node.object_pose, node.p_BC[i]) + scene.tip_radius * rotation_2d(node.object_pose[2]) @ node.n_B[i]
+            target = (
+                box_to_world(node.object_pose, node.p_BC[i])
+                + scene.tip_radius * rotation_2d(node.object_pose[2]) @ node.n_B[i]
+            )
             np.testing.assert_allclose(p_WF[i], target, atol=1e-5)
-            q, f = node.q[2 * i:2 * i + 2], scene.fingers[i]
+            q, f = node.q[2 * i : 2 * i + 2], scene.fingers[i]
             assert np.all(q >= f.q_lower - 1e-7) and np.all(q <= f.q_upper + 1e-7)
             outline = np.array([box_to_world(node.object_pose, v) for v in shape.vertices])
             assert not any(brute_force_overlap(link, outline) for link in reach.link_polygons(i, q))
@@ -152,8 +164,13 @@ def test_grid_levels_and_their_bad_input():
     assert (coarse.displacement_step, coarse.num_displacements, coarse.initial_grid_step) == (0.02, 17, 0.02)
     assert (fine.displacement_step, fine.num_displacements, fine.initial_grid_step) == (0.01, 33, 0.01)
     assert grid_levels(SearchConfig(grid_refinements=0)) == [SearchConfig(grid_refinements=0)]
-    for bad in (dict(grid_refinements=4), dict(grid_refinements=-1), dict(grid_refinements=1.0),
-                dict(num_displacements=101, grid_refinements=2), dict(initial_grid_step=0.003, grid_refinements=2)):
+    for bad in (
+        dict(grid_refinements=4),
+        dict(grid_refinements=-1),
+        dict(grid_refinements=1.0),
+        dict(num_displacements=101, grid_refinements=2),
+        dict(initial_grid_step=0.003, grid_refinements=2),
+    ):
         with pytest.raises(ConfigError, match="search.grid_refinements"):
             SearchConfig(**bad)
 
@@ -161,6 +178,7 @@ def test_grid_levels_and_their_bad_input():
 def test_link_collision_test_matches_scene_graph_on_a_polygon(triangle_scene):
     # the plant's object is the triangle's prism: SceneGraph's signed distances are the reference
     from test_reach import check_link_collisions_against_scene_graph
+
     check_link_collisions_against_scene_graph(triangle_scene, Reachability(triangle_scene), seed=7, min_each=10)
 
 

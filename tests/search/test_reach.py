@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from trajectotree.search.reach import Reachability
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
+from trajectotree.search.reach import Reachability
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +26,7 @@ def test_closed_form_ik_inverts_the_plant_kinematics(scene):
             solutions = finger.ik_solutions(p_WF[i])
             # joint 2 in [0.1, 2.6]: one elbow branch, so exactly one solution
             assert len(solutions) == 1
-            np.testing.assert_allclose(solutions[0], q[2 * i:2 * i + 2], atol=1e-9)
+            np.testing.assert_allclose(solutions[0], q[2 * i : 2 * i + 2], atol=1e-9)
 
 
 def test_drake_ik_touches_the_box_and_agrees_with_the_closed_form(scene, reach):
@@ -36,7 +36,7 @@ def test_drake_ik_touches_the_box_and_agrees_with_the_closed_form(scene, reach):
         result = reach.solve(pose, i, s)
         assert result.reachable, result.reason
         np.testing.assert_allclose(result.q, reach.closed_form(pose, i, s).q, atol=1e-5)
-        q[2 * i:2 * i + 2] = result.q
+        q[2 * i : 2 * i + 2] = result.q
         f = scene.fingers[i]
         assert np.all(result.q >= f.q_lower - 1e-9) and np.all(result.q <= f.q_upper + 1e-9)
     # The plant puts each fingertip sphere tangent to the box at its contact.
@@ -81,8 +81,11 @@ def signed_distances(scene, pose, q):
     for i in range(NUM_FINGERS):
         for j in (1, 2):
             body = scene.plant.GetBodyByName(f"finger{i}_link{j}", scene.hand)
-            (link,) = [g for g in scene.plant.GetCollisionGeometriesForBody(body)
-                       if type(inspector.GetShape(g)).__name__ == "Box"]
+            (link,) = [
+                g
+                for g in scene.plant.GetCollisionGeometriesForBody(body)
+                if type(inspector.GetShape(g)).__name__ == "Box"
+            ]
             out[i, j - 1] = query.ComputeSignedDistancePairClosestPoints(link, box).distance
     return out
 
@@ -99,7 +102,7 @@ def check_link_collisions_against_scene_graph(scene, reach, seed: int, min_each:
             if np.min(np.abs(distances[i])) < 1e-4:
                 continue  # grazing contact: either answer is acceptable
             expected = bool(np.min(distances[i]) < 0)
-            assert reach.links_penetrate(pose, i, q[2 * i:2 * i + 2]) == expected
+            assert reach.links_penetrate(pose, i, q[2 * i : 2 * i + 2]) == expected
             counts[expected] += 1
     assert counts[True] > min_each and counts[False] > min_each  # both outcomes were exercised
 
@@ -122,6 +125,7 @@ def test_link_polygons_follow_the_plant(scene, reach):
 @pytest.mark.parametrize("box", [(0.20, 0.10), (0.16, 0.08)])
 def test_vectorized_closed_form_matches_the_scalar_one(box):
     from trajectotree.config import SceneConfig
+
     reach = Reachability(build_scene(SceneConfig(box_width=box[0], box_height=box[1])))
     rng = np.random.default_rng(5)
     reachable = 0
@@ -144,6 +148,7 @@ def test_link_penetration_depths_match_scene_graph(scene):
     """physics.link_penetrations (planar separating axes) vs SceneGraph's signed distances between
     the link boxes and the box; deeper than the box's half depth, 3D separation is along z."""
     from trajectotree.planning.physics import link_penetrations
+
     rng = np.random.default_rng(5)
     depths, expected = [], []
     for _ in range(100):

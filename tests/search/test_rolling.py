@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from trajectotree.config import Config, ConfigError, SearchConfig
-from trajectotree.search.grasp import required_mu_many
-from trajectotree.scene.plant import NUM_FINGERS, build_scene
-from trajectotree.search.tree import find_contact_plan
 from trajectotree.experiments.sweep import sample_goals
+from trajectotree.scene.plant import NUM_FINGERS, build_scene
+from trajectotree.search.grasp import required_mu_many
+from trajectotree.search.tree import find_contact_plan
 
 
 @pytest.fixture(scope="module")

@@ -12,11 +12,11 @@ import pytest
 from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
+from trajectotree.planning.planners import initial_grasp_plan
+from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import initial_grasp_candidates
-from trajectotree.planning.planners import initial_grasp_plan
 from trajectotree.search.reach import Reachability
-from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.tree import _Node, _Search, choose_initial_grasp, find_contact_plan
 
 OLD_DEFAULT_GRASP = (0.54, 0.12, 0.36, 0.48)  # its stance of fingers 1, 2, 3 needs mu 0.67
@@ -45,11 +45,16 @@ def check_plan(scene, plan, config: SearchConfig):
     # object path: linear interpolation from the initial pose to the goal rotation
     np.testing.assert_allclose(plan.object_path[0], c.initial_pose)
     np.testing.assert_allclose(plan.object_path[-1], np.add(c.initial_pose, (0, 0, plan.goal)))
-    np.testing.assert_allclose(np.diff(plan.object_path, axis=0), plan.goal / (config.num_nodes - 1) * np.array([[0, 0, 1]] * (config.num_nodes - 1)), atol=1e-12)
+    np.testing.assert_allclose(
+        np.diff(plan.object_path, axis=0),
+        plan.goal / (config.num_nodes - 1) * np.array([[0, 0, 1]] * (config.num_nodes - 1)),
+        atol=1e-12,
+    )
     # node 0 is the user's initial grasp, or one of the chooser's candidates
     if config.initial_arclengths is not None:
-        np.testing.assert_allclose(plan.nodes[0].arclengths, np.mod(config.initial_arclengths, boundary.perimeter),
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            plan.nodes[0].arclengths, np.mod(config.initial_arclengths, boundary.perimeter), atol=1e-9
+        )
     else:
         candidates = [c.arclengths for c in initial_grasp_candidates(scene, config).candidates]
         assert tuple(plan.nodes[0].arclengths) in candidates
@@ -71,7 +76,7 @@ def check_plan(scene, plan, config: SearchConfig):
             n_W = rotation_2d(node.object_pose[2]) @ node.n_B[i]
             target = box_to_world(node.object_pose, node.p_BC[i]) + scene.tip_radius * n_W
             np.testing.assert_allclose(p_WF[i], target, atol=1e-5)
-            q = node.q[2 * i:2 * i + 2]
+            q = node.q[2 * i : 2 * i + 2]
             assert np.all(q >= f.q_lower - 1e-7) and np.all(q <= f.q_upper + 1e-7)
         assert np.all(signed_distances(scene, node.object_pose, node.q) > -1e-6)  # no link enters the box
         if n == 0:
@@ -124,7 +129,7 @@ def test_initial_grasp_candidates(scene):
             assert closure.is_free(c.arclengths, i) == (c.stance_required_mu[i] < mu_plan)
         assert closure.check(c.arclengths).in_closure
         tips = [reach.contact(s)[0] + reach.tip_radius * reach.contact(s)[1] for s in c.arclengths]
-        assert min(np.linalg.norm(a - b) for k, a in enumerate(tips) for b in tips[k + 1:]) >= 2 * reach.tip_radius
+        assert min(np.linalg.norm(a - b) for k, a in enumerate(tips) for b in tips[k + 1 :]) >= 2 * reach.tip_radius
     # the old fixed grasp is a candidate, but finger 0 may not let go at mu_plan 0.49
     old = next(c for c in table.candidates if np.allclose(c.arclengths, OLD_DEFAULT_GRASP))
     assert old.stance_required_mu[0] == pytest.approx(0.6698, abs=1e-4) and old.free_fingers == 2
@@ -137,12 +142,16 @@ def test_search_refuses_a_stance_below_the_margin(scene):
         search = _Search(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP, friction_safety=safety))
         search.plan_switch_bounds([{s} for s in OLD_DEFAULT_GRASP])
         return {child.switching_finger for _, child in search.neighbors(_Node(0, OLD_DEFAULT_GRASP, None, None))}
+
     assert 0 in children_moving(1.0) and 0 not in children_moving(0.7)
     paper = find_contact_plan(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP, friction_safety=1.0))
     assert paper.success and paper.nodes[1].switching_finger == 0
     assert paper.nodes[1].stance_required_mu == pytest.approx(0.6698, abs=1e-4)
     refused = find_contact_plan(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP))
-    assert not refused.success and "finger 0 must move (out of reach) but is held: stance of fingers (1, 2, 3)" in refused.reason
+    assert (
+        not refused.success
+        and "finger 0 must move (out of reach) but is held: stance of fingers (1, 2, 3)" in refused.reason
+    )
     # the chooser's grasps find the goal with the margin
     check_plan(scene, find_contact_plan(scene, -1.0, SearchConfig()), SearchConfig())
 
@@ -150,7 +159,9 @@ def test_search_refuses_a_stance_below_the_margin(scene):
 def test_cito_uses_the_choosers_first_choice(scene):
     for goal in (-2.5, 0.4):
         chosen, reason = choose_initial_grasp(scene, goal, SearchConfig())
-        assert reason == "" and chosen in [c.arclengths for c in initial_grasp_candidates(scene, SearchConfig()).candidates]
+        assert reason == "" and chosen in [
+            c.arclengths for c in initial_grasp_candidates(scene, SearchConfig()).candidates
+        ]
         node = initial_grasp_plan(scene, goal, Config()).nodes[0]
         np.testing.assert_allclose(node.arclengths, chosen)
         assert node.required_mu < 0.49 and node.closure_margin > 1e-3
@@ -194,8 +205,9 @@ def test_failures_are_results_with_a_reason(scene):
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "trajectotree.cli", "search", *args], capture_output=True, text=True,
-                          timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "trajectotree.cli", "search", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 @pytest.mark.slow
@@ -207,7 +219,9 @@ def test_cli_json_and_figure(tmp_path):
     assert data["success"] and len(data["contact_sequence"]) == 10
     node = data["contact_sequence"][3]
     assert set(node) >= {"object_pose", "q", "switching_finger", "contacts"}
-    assert len(node["q"]) == 8 and len(node["contacts"]) == 4 and set(node["contacts"][0]) >= {"arclength", "p_B", "n_B"}
+    assert (
+        len(node["q"]) == 8 and len(node["contacts"]) == 4 and set(node["contacts"][0]) >= {"arclength", "p_B", "n_B"}
+    )
     assert figure.stat().st_size > 10_000
     # a failed search still exits 0, with the reason
     out = run_cli("--goal", "3.0", "--segments", "2", "--json")

@@ -9,15 +9,19 @@ import numpy as np
 import pytest
 
 from trajectotree.config import ConfigError, SearchConfig
-from trajectotree.search.initial_grasp import STANCE_FINGERS
-from trajectotree.scene.plant import build_scene
-from trajectotree.search.tree import _Node, _Search, find_contact_plan
-from trajectotree.search.stance import HoldingForceLp, weight_support_B
 from trajectotree.experiments.sweep import sample_goals
+from trajectotree.scene.plant import build_scene
+from trajectotree.search.initial_grasp import STANCE_FINGERS
+from trajectotree.search.stance import HoldingForceLp, weight_support_B
+from trajectotree.search.tree import _Node, _Search, find_contact_plan
 
 W, H, MU, WEIGHT = 0.2, 0.1, 0.49, 0.05 * 9.81
-LEFT, RIGHT, BOTTOM, TOP = ((-W / 2, 0.0), (-1.0, 0.0)), ((W / 2, 0.0), (1.0, 0.0)), \
-    ((0.0, -H / 2), (0.0, -1.0)), ((0.0, H / 2), (0.0, 1.0))
+LEFT, RIGHT, BOTTOM, TOP = (
+    ((-W / 2, 0.0), (-1.0, 0.0)),
+    ((W / 2, 0.0), (1.0, 0.0)),
+    ((0.0, -H / 2), (0.0, -1.0)),
+    ((0.0, H / 2), (0.0, 1.0)),
+)
 
 
 @pytest.fixture(scope="module")
@@ -53,15 +57,20 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
         s = _Search(scene, -1.0, SearchConfig(initial_arclengths=grasp, friction_safety=1.0, max_stance_force=cap))
         s.plan_switch_bounds([{a} for a in grasp])
         return s, s.neighbors(_Node(0, grasp, None, None))
+
     free, children = search(0.0)
     movers = {child.switching_finger for _, child in children} - {None}
-    assert movers   # without the cap some finger may switch
+    assert movers  # without the cap some finger may switch
     # any stance needs at least m g / sqrt(1 + mu^2) > 0.3 N: every switch is refused
     capped, children = search(0.3)
     assert {child.switching_finger for _, child in children} <= {None}
     for finger in movers:
-        assert capped.refused[f"stance of fingers {STANCE_FINGERS[finger]} needs more than 0.3 N to hold "
-                              "the object's weight"] >= 1
+        assert (
+            capped.refused[
+                f"stance of fingers {STANCE_FINGERS[finger]} needs more than 0.3 N to hold the object's weight"
+            ]
+            >= 1
+        )
     # and a cap above every stance's need refuses none of them
     needs = [free.stance.holding_force(tuple(grasp[j] for j in STANCE_FINGERS[f]), d) for f in movers for d in (0, 1)]
     _, children = search(max(needs) + 0.01)
@@ -76,9 +85,13 @@ def test_the_cap_changes_the_plan_of_goal_2_246(scene):
     assert goal == pytest.approx(2.246, abs=1e-3)
 
     def worst(plan, search):
-        return max(search.stance.holding_force(tuple(a.arclengths[j] for j in STANCE_FINGERS[b.switching_finger]), d)
-                   for n, (a, b) in enumerate(zip(plan.nodes[:-1], plan.nodes[1:])) if b.switching_finger is not None
-                   for d in (n, n + 1))
+        return max(
+            search.stance.holding_force(tuple(a.arclengths[j] for j in STANCE_FINGERS[b.switching_finger]), d)
+            for n, (a, b) in enumerate(zip(plan.nodes[:-1], plan.nodes[1:]))
+            if b.switching_finger is not None
+            for d in (n, n + 1)
+        )
+
     off = dataclasses.replace(default, max_stance_force=0.0)
     plans = {cap: find_contact_plan(scene, goal, c) for cap, c in ((0, off), (10, default))}
     assert plans[0].success and plans[10].success

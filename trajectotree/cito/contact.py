@@ -29,11 +29,11 @@ import numpy as np
 def smooth_distance(p_B: np.ndarray, normals: np.ndarray, offsets: np.ndarray, sharpness: float):
     """(phi (P,), grad (P, 2), hess (P, 2, 2)) of the smooth distance at points p_B (P, 2) to the
     polygon of outward unit face normals (V, 2) and offsets (V,) m (n_j . p = h_j on face j)."""
-    d = p_B @ normals.T - offsets                 # (P, V) face distances
+    d = p_B @ normals.T - offsets  # (P, V) face distances
     dmax = d.max(axis=1, keepdims=True)
     e = np.exp(sharpness * (d - dmax))
     s = e.sum(axis=1, keepdims=True)
-    w = e / s                                     # softmax weights
+    w = e / s  # softmax weights
     phi = dmax[:, 0] + np.log(s[:, 0]) / sharpness
     grad = w @ normals
     # hess = k (N^T diag(w) N - grad grad^T)

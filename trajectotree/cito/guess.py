@@ -41,8 +41,13 @@ def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVari
     static-equilibrium forces."""
     M = spec.segment_length
     progress = rest_to_rest_progress(M)
-    x = np.vstack([node.object_pose + np.outer(progress[:-1], nxt.object_pose - node.object_pose)
-                   for node, nxt in zip(plan.nodes[:-1], plan.nodes[1:])] + [plan.nodes[-1].object_pose[None]])
+    x = np.vstack(
+        [
+            node.object_pose + np.outer(progress[:-1], nxt.object_pose - node.object_pose)
+            for node, nxt in zip(plan.nodes[:-1], plan.nodes[1:])
+        ]
+        + [plan.nodes[-1].object_pose[None]]
+    )
     hand, r = rows.body.hand, rows.body.radius
     boundary = rows.body.shape
     q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
@@ -56,8 +61,8 @@ def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVari
                 c_B = [old.p_BC[i] + r * old.n_B[i]] * len(progress)
             # The segment's knots at once (one vectorized IK per finger, bit for bit the one-target IK).
             qi = hand.ik_many(i, np.array([x[k, :2] + rotation_2d(x[k, 2]) @ c for k, c in zip(ks, c_B)]))
-            between = (1 - progress)[:, None] * old.q[2 * i:2 * i + 2] + progress[:, None] * new.q[2 * i:2 * i + 2]
-            q[ks, 2 * i:2 * i + 2] = np.where(np.isnan(qi[:, :1]), between, qi)
+            between = (1 - progress)[:, None] * old.q[2 * i : 2 * i + 2] + progress[:, None] * new.q[2 * i : 2 * i + 2]
+            q[ks, 2 * i : 2 * i + 2] = np.where(np.isnan(qi[:, :1]), between, qi)
     return _complete(rows, spec, x, q, moving=True)
 
 
@@ -81,7 +86,7 @@ def _lifted(boundary: ConvexPolygon, s_old: float, s_new: float, tau: float, rad
 def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *, moving: bool) -> CitoVariables:
     K = spec.num_knots
     x[0], q[0] = spec.x0, spec.q0
-    if spec.x_end is not None:   # keyframes: the last knot is fixed too
+    if spec.x_end is not None:  # keyframes: the last knot is fixed too
         x[-1], q[-1] = spec.x_end, spec.q_end
     zeros = {name: np.zeros((K, w)) for name, w in GROUPS}
     zeros.update(x=x, q=q, slack=np.full((K, NUM_FINGERS), SLACK_GUESS))
@@ -107,8 +112,8 @@ def _static_forces(rows: KnotRows, guess: CitoVariables, touch_tol: float = 1e-3
     fingers that are pinned or within touch_tol of the surface."""
     b = rows.body
     kin = rows.kinematics(guess.stacked())
-    touching = rows.pinned | (kin.phi_tip < touch_tol)                 # (K, 4)
-    cols_n = np.concatenate([-kin.n_W, _cross(kin.arm, -kin.n_W)[..., None]], axis=-1)   # (K, 4, 3)
+    touching = rows.pinned | (kin.phi_tip < touch_tol)  # (K, 4)
+    cols_n = np.concatenate([-kin.n_W, _cross(kin.arm, -kin.n_W)[..., None]], axis=-1)  # (K, 4, 3)
     cols_t = np.concatenate([kin.t_W, _cross(kin.arm, kin.t_W)[..., None]], axis=-1)
     G = np.concatenate([cols_n * touching[..., None], cols_t * touching[..., None]], axis=1).transpose(0, 2, 1)
     weight = b.mass * np.linalg.norm(b.gravity)

@@ -27,15 +27,15 @@ class HandModel:
     kinematics are the four fingers' `TwoLinkFinger` stack."""
 
     fingers: TwoLinkFinger  # (4, ...) p_W_base, psi, l1, l2, joint limits
-    mass_a: np.ndarray    # (4,) kg m^2, M11 = a + 2 b cos q2
-    mass_b: np.ndarray    # (4,) kg m^2, M12 = c + b cos q2
-    mass_c: np.ndarray    # (4,) kg m^2, M22 = c
-    grav_1: np.ndarray    # (4,) N m, g (m1 c1 + m2 l1): gravity moment of link 1 terms
-    grav_2: np.ndarray    # (4,) N m, g m2 c2
-    tau_max: np.ndarray   # (8,) N m
+    mass_a: np.ndarray  # (4,) kg m^2, M11 = a + 2 b cos q2
+    mass_b: np.ndarray  # (4,) kg m^2, M12 = c + b cos q2
+    mass_c: np.ndarray  # (4,) kg m^2, M22 = c
+    grav_1: np.ndarray  # (4,) N m, g (m1 c1 + m2 l1): gravity moment of link 1 terms
+    grav_2: np.ndarray  # (4,) N m, g m2 c2
+    tau_max: np.ndarray  # (8,) N m
 
     @staticmethod
-    def from_scene(scene: Scene) -> "HandModel":
+    def from_scene(scene: Scene) -> HandModel:
         f = scene.fingers
         m1, m2 = (np.array([fi.masses[j] for fi in f]) for j in (0, 1))
         c1, c2 = (np.array([fi.coms[j] for fi in f]) for j in (0, 1))
@@ -44,9 +44,13 @@ class HandModel:
         g = scene.config.gravity
         return HandModel(
             fingers=TwoLinkFinger.stack(f),
-            mass_a=i1 + i2 + m1 * c1 ** 2 + m2 * (l1 ** 2 + c2 ** 2), mass_b=m2 * l1 * c2, mass_c=i2 + m2 * c2 ** 2,
-            grav_1=g * (m1 * c1 + m2 * l1), grav_2=g * m2 * c2,
-            tau_max=np.concatenate([fi.tau_max for fi in f]))
+            mass_a=i1 + i2 + m1 * c1**2 + m2 * (l1**2 + c2**2),
+            mass_b=m2 * l1 * c2,
+            mass_c=i2 + m2 * c2**2,
+            grav_1=g * (m1 * c1 + m2 * l1),
+            grav_2=g * m2 * c2,
+            tau_max=np.concatenate([fi.tau_max for fi in f]),
+        )
 
     @property
     def q_lower(self) -> np.ndarray:
@@ -78,8 +82,13 @@ class HandModel:
         """M (..., 4, 2, 2), each finger's joint-space mass matrix."""
         c2 = np.cos(_per_finger(q)[..., 1])
         m12 = self.mass_c + self.mass_b * c2
-        return np.stack([np.stack([self.mass_a + 2 * self.mass_b * c2, m12], -1),
-                         np.stack([m12, np.broadcast_to(self.mass_c, c2.shape)], -1)], -2)
+        return np.stack(
+            [
+                np.stack([self.mass_a + 2 * self.mass_b * c2, m12], -1),
+                np.stack([m12, np.broadcast_to(self.mass_c, c2.shape)], -1),
+            ],
+            -2,
+        )
 
     def gravity_forces(self, q: np.ndarray) -> np.ndarray:
         """tau_g (..., 4, 2): generalized gravity forces (positive where gravity accelerates q)."""
@@ -97,8 +106,13 @@ class HandModel:
     def mass_derivatives(self, q: np.ndarray) -> np.ndarray:
         """d M / d q2 (..., 4, 2, 2) (M does not depend on q1)."""
         s2 = np.sin(_per_finger(q)[..., 1])
-        return np.stack([np.stack([-2 * self.mass_b * s2, -self.mass_b * s2], -1),
-                         np.stack([-self.mass_b * s2, np.zeros_like(s2)], -1)], -2)
+        return np.stack(
+            [
+                np.stack([-2 * self.mass_b * s2, -self.mass_b * s2], -1),
+                np.stack([-self.mass_b * s2, np.zeros_like(s2)], -1),
+            ],
+            -2,
+        )
 
     def ik(self, i: int, p_WF: np.ndarray) -> np.ndarray | None:
         """Closed-form IK of finger i: the elbow branch q2 > 0 (the joint limits' side), the

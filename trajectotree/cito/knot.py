@@ -31,9 +31,26 @@ import numpy as np
 from trajectotree.cito.contact import smooth_distance, smooth_normal
 from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot_jacobian import knot_jacobian
-from trajectotree.cito.layout import (COL_P, COL_PD, COL_PDD, COL_TH, COL_THD, COL_THDD, FREE_COMP, FREE_PHI,
-                                      FREE_ROWS, FREE_SLIP, NUM_BODY_ROWS, PIN_MINUS, PIN_PLUS, PINNED_ROWS,
-                                      ROW_FORCE, ROW_HAND, ROW_MOMENT, TWO)
+from trajectotree.cito.layout import (
+    COL_P,
+    COL_PD,
+    COL_PDD,
+    COL_TH,
+    COL_THD,
+    COL_THDD,
+    FREE_COMP,
+    FREE_PHI,
+    FREE_ROWS,
+    FREE_SLIP,
+    NUM_BODY_ROWS,
+    PIN_MINUS,
+    PIN_PLUS,
+    PINNED_ROWS,
+    ROW_FORCE,
+    ROW_HAND,
+    ROW_MOMENT,
+    TWO,
+)
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
 from trajectotree.scene.kinematics import K90, jacobian_from_links
 from trajectotree.scene.plant import NUM_FINGERS
@@ -47,46 +64,46 @@ class BodyParams:
     def __init__(self, scene, sharpness: float, *, mu: float):
         c = scene.config
         self.hand = HandModel.from_scene(scene)
-        self.fingers = scene.fingers        # the same fingers one by one, for scalar code
+        self.fingers = scene.fingers  # the same fingers one by one, for scalar code
         self.mass = c.box_mass
         self.mu = float(mu)
-        self.shape = c.shape                # the object's outline (geometry.ConvexPolygon)
-        self.inertia = self.shape.inertia(c.box_mass)   # for the box bit for bit m (w^2 + h^2) / 12
+        self.shape = c.shape  # the object's outline (geometry.ConvexPolygon)
+        self.inertia = self.shape.inertia(c.box_mass)  # for the box bit for bit m (w^2 + h^2) / 12
         self.gravity = np.array([0.0, -c.gravity])
         self.radius = scene.tip_radius
-        self.normals = self.shape.normals   # (V, 2) outward face normals in B
-        self.offsets = self.shape.offsets   # (V,) m, face j: normals[j] . p_B = offsets[j]
+        self.normals = self.shape.normals  # (V, 2) outward face normals in B
+        self.offsets = self.shape.offsets  # (V,) m, face j: normals[j] . p_B = offsets[j]
         self.sharpness = sharpness
-        self.link_boxes = tuple(f.link_boxes for f in self.fingers)   # per finger, its links' collision boxes (links.py)
+        self.link_boxes = tuple(f.link_boxes for f in self.fingers)  # per finger, its links' collision boxes (links.py)
 
 
 def _rot(th):
     c, s = np.cos(th), np.sin(th)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)   # (K, 2, 2)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)  # (K, 2, 2)
 
 
 @dataclass(frozen=True)
 class KnotKinematics:
     """Per-finger quantities of a batch of K knots (shapes (K, 4, ...) unless noted)."""
 
-    R: np.ndarray        # (K, 2, 2) R_WB, the box's rotation
-    RT: np.ndarray       # (K, 2, 2) R_WB^T
-    r1: np.ndarray       # (K, 4, 2) m, link-1 vectors
-    r2: np.ndarray       # (K, 4, 2) m, link-2 vectors
-    J: np.ndarray        # (K, 4, 2, 2) m/rad, fingertip Jacobians J_WF
-    p_WF: np.ndarray     # (K, 4, 2) m, fingertip centres in W
-    rel: np.ndarray      # (K, 4, 2) m, p_WF - p_WB
-    p_BF: np.ndarray     # (K, 4, 2) m, fingertip centres in B
-    grad: np.ndarray     # (K, 4, 2) gradient of the smooth object distance at p_BF
-    dn_s: np.ndarray     # (K, 4, 2, 2) 1/m, d n_B / d p_BF of the smooth normal
-    n_W: np.ndarray      # (K, 4, 2) contact normal in W (the planned one for pinned fingers)
-    t_W: np.ndarray      # (K, 4, 2) contact tangent z x n_W
-    f_W: np.ndarray      # (K, 4, 2) N, force of the finger on the box in W
-    arm: np.ndarray      # (K, 4, 2) m, p_WC - p_WB
-    p_WC: np.ndarray     # (K, 4, 2) m, contact points p_WF - r n_W
+    R: np.ndarray  # (K, 2, 2) R_WB, the box's rotation
+    RT: np.ndarray  # (K, 2, 2) R_WB^T
+    r1: np.ndarray  # (K, 4, 2) m, link-1 vectors
+    r2: np.ndarray  # (K, 4, 2) m, link-2 vectors
+    J: np.ndarray  # (K, 4, 2, 2) m/rad, fingertip Jacobians J_WF
+    p_WF: np.ndarray  # (K, 4, 2) m, fingertip centres in W
+    rel: np.ndarray  # (K, 4, 2) m, p_WF - p_WB
+    p_BF: np.ndarray  # (K, 4, 2) m, fingertip centres in B
+    grad: np.ndarray  # (K, 4, 2) gradient of the smooth object distance at p_BF
+    dn_s: np.ndarray  # (K, 4, 2, 2) 1/m, d n_B / d p_BF of the smooth normal
+    n_W: np.ndarray  # (K, 4, 2) contact normal in W (the planned one for pinned fingers)
+    t_W: np.ndarray  # (K, 4, 2) contact tangent z x n_W
+    f_W: np.ndarray  # (K, 4, 2) N, force of the finger on the box in W
+    arm: np.ndarray  # (K, 4, 2) m, p_WC - p_WB
+    p_WC: np.ndarray  # (K, 4, 2) m, contact points p_WF - r n_W
     phi_tip: np.ndarray  # (K, 4) m, smooth distance of the tip sphere from the object (phi - r)
-    e: np.ndarray        # (K, 4, 2) m, pinned-point error p_WF - p_WB - R c_B
-    v: np.ndarray        # (K, 4, 2) m/s, fingertip velocity relative to the box point under it
+    e: np.ndarray  # (K, 4, 2) m, pinned-point error p_WF - p_WB - R c_B
+    v: np.ndarray  # (K, 4, 2) m/s, fingertip velocity relative to the box point under it
 
 
 def _smooth_contact(bx: float, by: float, k: float, faces: tuple, radius: float):
@@ -107,17 +124,30 @@ def _smooth_contact(bx: float, by: float, k: float, faces: tuple, radius: float)
     return dmax + math.log(total) / k - radius, gx / norm, gy / norm
 
 
-def _scalar_constants(rows: "KnotRows"):
+def _scalar_constants(rows: KnotRows):
     """values_one's constants of a one-knot batch as Python floats: the body's
     (m, g_x, g_y, I, r, sharpness, faces: per face (n_x, n_y, offset)) and per finger
     (psi, l1, l2, p_W_base, mass_a, mass_b, mass_c, grav_1, grav_2, pinned, n_B, c_B)."""
     b, hand = rows.body, rows.body.hand
     faces = tuple((float(n[0]), float(n[1]), float(h)) for n, h in zip(b.normals, b.offsets))
     body = tuple(float(v) for v in (b.mass, *b.gravity, b.inertia, b.radius, b.sharpness)) + (faces,)
-    fingers = tuple((float(f.psi), float(f.l1), float(f.l2), *map(float, f.p_W_base), float(hand.mass_a[i]),
-                     float(hand.mass_b[i]), float(hand.mass_c[i]), float(hand.grav_1[i]), float(hand.grav_2[i]),
-                     bool(rows.pinned[0, i]), *map(float, rows.n_B[0, i]), *map(float, rows.c_B[0, i]))
-                    for i, f in enumerate(b.fingers))
+    fingers = tuple(
+        (
+            float(f.psi),
+            float(f.l1),
+            float(f.l2),
+            *map(float, f.p_W_base),
+            float(hand.mass_a[i]),
+            float(hand.mass_b[i]),
+            float(hand.mass_c[i]),
+            float(hand.grav_1[i]),
+            float(hand.grav_2[i]),
+            bool(rows.pinned[0, i]),
+            *map(float, rows.n_B[0, i]),
+            *map(float, rows.c_B[0, i]),
+        )
+        for i, f in enumerate(b.fingers)
+    )
     return body, fingers
 
 
@@ -132,14 +162,14 @@ class KnotRows:
         self.n_B = np.asarray(n_B, dtype=float).reshape(-1, NUM_FINGERS, 2)
         sizes = np.where(self.pinned, PINNED_ROWS, FREE_ROWS)
         self.row_start = NUM_BODY_ROWS + np.cumsum(sizes, axis=1) - sizes
-        self.num_rows = NUM_BODY_ROWS + sizes.sum(axis=1)               # (K,)
+        self.num_rows = NUM_BODY_ROWS + sizes.sum(axis=1)  # (K,)
         self.kP, self.iP = np.nonzero(self.pinned)
         self.kF, self.iF = np.nonzero(~self.pinned)
-        self._scalars = None            # values_one's constants, made on its first call
-        self.index_cache = {}           # knot_jacobian's flat scatter positions, made on first use
+        self._scalars = None  # values_one's constants, made on its first call
+        self.index_cache = {}  # knot_jacobian's flat scatter positions, made on first use
 
-    def knot(self, k: int) -> "KnotRows":
-        return KnotRows(self.body, self.pinned[k:k + 1], self.c_B[k:k + 1], self.n_B[k:k + 1])
+    def knot(self, k: int) -> KnotRows:
+        return KnotRows(self.body, self.pinned[k : k + 1], self.c_B[k : k + 1], self.n_B[k : k + 1])
 
     def bounds(self, k: int, clearance):
         """(lower, upper) of knot k's rows; `clearance` (4,) m is the lower bound of each
@@ -159,11 +189,11 @@ class KnotRows:
         ln, lt = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]]
         R = _rot(th)
         RT = R.transpose(0, 2, 1)
-        r1, r2 = hand.links(q)                                           # (K, 4, 2)
-        J = jacobian_from_links(r1, r2)                                  # (K, 4, 2, 2)
+        r1, r2 = hand.links(q)  # (K, 4, 2)
+        J = jacobian_from_links(r1, r2)  # (K, 4, 2, 2)
         p_WF = hand.fingers.tip_from_links(r1, r2)
-        rel = p_WF - p[:, None]                                          # p_WF - p_WB
-        p_BF = rel @ R                                                   # R^T rel
+        rel = p_WF - p[:, None]  # p_WF - p_WB
+        p_BF = rel @ R  # R^T rel
         phi, grad, hess = smooth_distance(p_BF.reshape(-1, 2), b.normals, b.offsets, b.sharpness)
         n_s, dn_s = smooth_normal(grad, hess)
         n_B = np.where(self.pinned[..., None], self.n_B, n_s.reshape(nK, NUM_FINGERS, 2))
@@ -171,10 +201,25 @@ class KnotRows:
         t_W = n_W @ K90.T
         f_W = -ln[..., None] * n_W + lt[..., None] * t_W
         return KnotKinematics(
-            R=R, RT=RT, r1=r1, r2=r2, J=J, p_WF=p_WF, rel=rel, p_BF=p_BF, grad=grad.reshape(nK, NUM_FINGERS, 2),
-            dn_s=dn_s.reshape(nK, NUM_FINGERS, 2, 2), n_W=n_W, t_W=t_W, f_W=f_W, arm=rel - r * n_W,
-            p_WC=p_WF - r * n_W, phi_tip=phi.reshape(nK, NUM_FINGERS) - r, e=rel - self.c_B @ RT,
-            v=np.einsum("kiab,kib->kia", J, qd) - pd[:, None] - thd[:, None, None] * (rel @ K90.T))
+            R=R,
+            RT=RT,
+            r1=r1,
+            r2=r2,
+            J=J,
+            p_WF=p_WF,
+            rel=rel,
+            p_BF=p_BF,
+            grad=grad.reshape(nK, NUM_FINGERS, 2),
+            dn_s=dn_s.reshape(nK, NUM_FINGERS, 2, 2),
+            n_W=n_W,
+            t_W=t_W,
+            f_W=f_W,
+            arm=rel - r * n_W,
+            p_WC=p_WF - r * n_W,
+            phi_tip=phi.reshape(nK, NUM_FINGERS) - r,
+            e=rel - self.c_B @ RT,
+            v=np.einsum("kiab,kib->kia", J, qd) - pd[:, None] - thd[:, None, None] * (rel @ K90.T),
+        )
 
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
         """(values (K, R), Jacobians (K, R, KNOT_SIZE) or None), R = max rows; knot k
@@ -192,9 +237,16 @@ class KnotRows:
         f_W, arm, e, v, phi_tip = kin.f_W, kin.arm, kin.e, kin.v, kin.phi_tip
         val = np.zeros((nK, int(self.num_rows.max())))
         val[:, ROW_FORCE] = b.mass * Z[:, COL_PDD] - f_W.sum(1) - b.mass * b.gravity
-        val[:, ROW_MOMENT] = b.inertia * Z[:, COL_THDD] - np.sum(arm[..., 0] * f_W[..., 1] - arm[..., 1] * f_W[..., 0], axis=1)
-        val[:, ROW_HAND] = (np.einsum("kiab,kib->kia", hand.mass_matrices(q), qdd) - tau - hand.gravity_forces(q)
-                            + np.einsum("kiab,kia->kib", kin.J, f_W) - r * lt[..., None]).reshape(nK, -1)
+        val[:, ROW_MOMENT] = b.inertia * Z[:, COL_THDD] - np.sum(
+            arm[..., 0] * f_W[..., 1] - arm[..., 1] * f_W[..., 0], axis=1
+        )
+        val[:, ROW_HAND] = (
+            np.einsum("kiab,kib->kia", hand.mass_matrices(q), qdd)
+            - tau
+            - hand.gravity_forces(q)
+            + np.einsum("kiab,kia->kib", kin.J, f_W)
+            - r * lt[..., None]
+        ).reshape(nK, -1)
         kP, iP, kF, iF = self.kP, self.iP, self.kF, self.iF
         rp, rf = self.row_start[kP, iP], self.row_start[kF, iF]
         val[kP[:, None], rp[:, None] + PIN_MINUS + TWO] = gam[kP, iP, None] - e[kP, iP]
@@ -247,19 +299,31 @@ class KnotRows:
             m11, m12, m22 = ma + 2 * mb * cq2, mc + mb * cq2, mc
             t2 = -g2 * math.cos(a12)
             t1 = -g1 * math.cos(a1) + t2
-            qdd1, qdd2 = qdd[2 * i:2 * i + 2]
-            hand_rows += [m11 * qdd1 + m12 * qdd2 - tau[2 * i] - t1 + u1 - r * lt,
-                          m12 * qdd1 + m22 * qdd2 - tau[2 * i + 1] - t2 + u2 - r * lt]
+            qdd1, qdd2 = qdd[2 * i : 2 * i + 2]
+            hand_rows += [
+                m11 * qdd1 + m12 * qdd2 - tau[2 * i] - t1 + u1 - r * lt,
+                m12 * qdd1 + m22 * qdd2 - tau[2 * i + 1] - t2 + u2 - r * lt,
+            ]
             if pinned:
                 ex, ey = relx - (c * cbx - s * cby), rely - (s * cbx + c * cby)
                 contact_rows += [gam - ex, gam - ey, gam + ex, gam + ey]
             else:
-                qd1, qd2 = qd[2 * i:2 * i + 2]
+                qd1, qd2 = qd[2 * i : 2 * i + 2]
                 vx = -(r1y + r2y) * qd1 - r2y * qd2 - pdx + thd * rely
                 vy = (r1x + r2x) * qd1 + r2x * qd2 - pdy - thd * relx
-                contact_rows += [phi_tip, gam - phi_tip * ln, gam - vx * ln, gam + vx * ln, gam - vy * ln, gam + vy * ln]
-        return np.array([m * z[COL_PDD][0] - fx_sum - m * gx, m * z[COL_PDD][1] - fy_sum - m * gy,
-                         inertia * z[COL_THDD] - torque] + hand_rows + contact_rows)
+                contact_rows += [
+                    phi_tip,
+                    gam - phi_tip * ln,
+                    gam - vx * ln,
+                    gam + vx * ln,
+                    gam - vy * ln,
+                    gam + vy * ln,
+                ]
+        return np.array(
+            [m * z[COL_PDD][0] - fx_sum - m * gx, m * z[COL_PDD][1] - fy_sum - m * gy, inertia * z[COL_THDD] - torque]
+            + hand_rows
+            + contact_rows
+        )
 
     def sparsity(self, k: int) -> list[tuple[int, int]]:
         """(row, col) entries of knot k's Jacobian that can be nonzero (see `sparsities`)."""
@@ -271,8 +335,10 @@ class KnotRows:
         at the same points, in one batch per point (one evaluation per knot and point cost
         ~35 ms per 13-knot program) of the distinct knots only: a knot's rows depend on
         nothing but its pinned, c_B and n_B (a segment's inner knots share theirs)."""
-        keys = [self.pinned[k].tobytes() + self.c_B[k].tobytes() + self.n_B[k].tobytes() for k in range(len(self.num_rows))]
-        first = {}                                  # each distinct key's first knot, in order
+        keys = [
+            self.pinned[k].tobytes() + self.c_B[k].tobytes() + self.n_B[k].tobytes() for k in range(len(self.num_rows))
+        ]
+        first = {}  # each distinct key's first knot, in order
         for k, key in enumerate(keys):
             first.setdefault(key, k)
         distinct = np.array(list(first.values()))
@@ -282,6 +348,8 @@ class KnotRows:
         for _ in range(3):
             z = rng.uniform(-1, 1, (1, KNOT_SIZE))
             mask |= rows.evaluate(np.repeat(z, len(distinct), axis=0), True)[1] != 0.0
-        patterns = [[(int(i), int(j)) for i, j in zip(*np.nonzero(mask[u, :rows.num_rows[u]]))] for u in range(len(distinct))]
+        patterns = [
+            [(int(i), int(j)) for i, j in zip(*np.nonzero(mask[u, : rows.num_rows[u]]))] for u in range(len(distinct))
+        ]
         slot = {key: u for u, key in enumerate(first)}
         return [patterns[slot[key]] for key in keys]

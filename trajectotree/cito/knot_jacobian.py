@@ -13,10 +13,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.cito.layout import (COL_G, COL_LN, COL_LT, COL_P, COL_P_IDX, COL_PD_IDX, COL_PDD, COL_Q, COL_QD,
-                                      COL_QDD, COL_TAU, COL_TH, COL_THD, COL_THDD, FREE_COMP, FREE_PHI, FREE_SLIP,
-                                      PIN_MINUS, PIN_PLUS, ROW_FORCE, ROW_HAND, ROW_HAND_IDX,
-                                      ROW_MOMENT, TWO)
+from trajectotree.cito.layout import (
+    COL_G,
+    COL_LN,
+    COL_LT,
+    COL_P,
+    COL_P_IDX,
+    COL_PD_IDX,
+    COL_PDD,
+    COL_Q,
+    COL_QD,
+    COL_QDD,
+    COL_TAU,
+    COL_TH,
+    COL_THD,
+    COL_THDD,
+    FREE_COMP,
+    FREE_PHI,
+    FREE_SLIP,
+    PIN_MINUS,
+    PIN_PLUS,
+    ROW_FORCE,
+    ROW_HAND,
+    ROW_HAND_IDX,
+    ROW_MOMENT,
+    TWO,
+)
 from trajectotree.cito.variables import KNOT_SIZE, SLICES
 from trajectotree.scene.kinematics import K90
 from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS
@@ -59,15 +81,22 @@ def _partials(rows, Z: np.ndarray, kin) -> _Partials:
     # Derivatives of p_BF = R^T (p_WF - p): wrt p (-R^T), theta (-K p_BF), q_i (R^T J_i).
     dpB_dth = -(kin.p_BF @ K90.T)
     dpB_dq = RT[:, None] @ J
-    dn_s = np.where(rows.pinned[..., None][..., None], 0.0, kin.dn_s)   # pinned normals are fixed in B
-    RdnB = R[:, None] @ dn_s                                         # R dn_B/dp_B
+    dn_s = np.where(rows.pinned[..., None][..., None], 0.0, kin.dn_s)  # pinned normals are fixed in B
+    RdnB = R[:, None] @ dn_s  # R dn_B/dp_B
     dnW_dp = -(RdnB @ RT[:, None])
     dnW_dth = n_W @ K90.T + np.einsum("kiab,kib->kia", RdnB, dpB_dth)
     dnW_dq = RdnB @ dpB_dq
-    A = -ln[..., None, None] * _I2 + lt[..., None, None] * K90       # f_W = A n_W
-    return _Partials(dpB_dth=dpB_dth, dpB_dq=dpB_dq,
-                     df_dp=A @ dnW_dp, df_dth=np.einsum("kiab,kib->kia", A, dnW_dth), df_dq=A @ dnW_dq,
-                     darm_dp=-_I2 - r * dnW_dp, darm_dth=-r * dnW_dth, darm_dq=J - r * dnW_dq)
+    A = -ln[..., None, None] * _I2 + lt[..., None, None] * K90  # f_W = A n_W
+    return _Partials(
+        dpB_dth=dpB_dth,
+        dpB_dq=dpB_dq,
+        df_dp=A @ dnW_dp,
+        df_dth=np.einsum("kiab,kib->kia", A, dnW_dth),
+        df_dq=A @ dnW_dq,
+        darm_dp=-_I2 - r * dnW_dp,
+        darm_dth=-r * dnW_dth,
+        darm_dq=J - r * dnW_dq,
+    )
 
 
 def knot_jacobian(rows, Z: np.ndarray, kin) -> np.ndarray:
@@ -97,8 +126,9 @@ def _object_rows(jac, rows, kin, d: _Partials) -> None:
     jac[:, ROW_MOMENT, COL_P] = np.einsum("kia,kiab->kb", Kf, d.darm_dp) - np.einsum("kia,kiab->kb", Ka, d.df_dp)
     jac[:, ROW_MOMENT, COL_TH] = np.sum(Kf * d.darm_dth, axis=(1, 2)) - np.sum(Ka * d.df_dth, axis=(1, 2))
     jac[:, ROW_MOMENT, COL_THDD] = b.inertia
-    jac[:, ROW_MOMENT, SLICES["q"]] = (np.einsum("kia,kiab->kib", Kf, d.darm_dq)
-                                       - np.einsum("kia,kiab->kib", Ka, d.df_dq)).reshape(nK, -1)
+    jac[:, ROW_MOMENT, SLICES["q"]] = (
+        np.einsum("kia,kiab->kib", Kf, d.darm_dq) - np.einsum("kia,kiab->kib", Ka, d.df_dq)
+    ).reshape(nK, -1)
     jac[:, ROW_MOMENT, COL_LN] = np.sum(Ka * n_W, axis=2)
     jac[:, ROW_MOMENT, COL_LT] = -np.sum(Ka * t_W, axis=2)
 
@@ -121,10 +151,20 @@ def _hand_rows(jac, rows, Z, kin, d: _Partials) -> None:
     _put(jac, rows, "hand_tau", lambda: (kk[..., None], rows_h, COL_TAU[None, :, None, :]), -_I2)
     jac[:, ROW_HAND, COL_P] = (JT @ d.df_dp).reshape(nK, NUM_HAND_JOINTS, 2)
     jac[:, ROW_HAND, COL_TH] = np.einsum("kiab,kib->kia", JT, d.df_dth).reshape(nK, -1)
-    _put(jac, rows, "hand_ln", lambda: (kk, ROW_HAND_IDX[None], COL_LN[None, :, None]),
-         -np.einsum("kiab,kib->kia", JT, kin.n_W))
-    _put(jac, rows, "hand_lt", lambda: (kk, ROW_HAND_IDX[None], COL_LT[None, :, None]),
-         np.einsum("kiab,kib->kia", JT, kin.t_W) - r)
+    _put(
+        jac,
+        rows,
+        "hand_ln",
+        lambda: (kk, ROW_HAND_IDX[None], COL_LN[None, :, None]),
+        -np.einsum("kiab,kib->kia", JT, kin.n_W),
+    )
+    _put(
+        jac,
+        rows,
+        "hand_lt",
+        lambda: (kk, ROW_HAND_IDX[None], COL_LT[None, :, None]),
+        np.einsum("kiab,kib->kia", JT, kin.t_W) - r,
+    )
 
 
 def _pinned_rows(jac, rows, kin) -> None:
@@ -135,7 +175,7 @@ def _pinned_rows(jac, rows, kin) -> None:
     kP2, kP3 = kP[:, None], kP[:, None, None]
     J = kin.J[kP, iP]
     for sign, off in ((-1.0, PIN_MINUS), (1.0, PIN_PLUS)):
-        rws = rp[:, None] + off + TWO                                     # (nP, 2)
+        rws = rp[:, None] + off + TWO  # (nP, 2)
         _put(jac, rows, f"pin_g{off}", lambda: (kP2, rws, COL_G[iP, None]), 1.0)
         _put(jac, rows, f"pin_q{off}", lambda: (kP3, rws[:, :, None], COL_Q[iP][:, None, :]), sign * J)
         _put(jac, rows, f"pin_p{off}", lambda: (kP3, rws[:, :, None], COL_P_IDX), -sign * _I2)
@@ -157,21 +197,31 @@ def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
     colqF = COL_Q[iF]
     for off, scale in ((FREE_PHI, None), (FREE_COMP, -lnF)):
         row = rf + off
-        _put(jac, rows, f"free_p{off}", lambda: (kF2, row[:, None], COL_P_IDX),
-             dphi_dp if scale is None else scale[:, None] * dphi_dp)
+        _put(
+            jac,
+            rows,
+            f"free_p{off}",
+            lambda: (kF2, row[:, None], COL_P_IDX),
+            dphi_dp if scale is None else scale[:, None] * dphi_dp,
+        )
         _put(jac, rows, f"free_th{off}", lambda: (kF, row, COL_TH), dphi_dth if scale is None else scale * dphi_dth)
-        _put(jac, rows, f"free_q{off}", lambda: (kF2, row[:, None], colqF),
-             dphi_dq if scale is None else scale[:, None] * dphi_dq)
+        _put(
+            jac,
+            rows,
+            f"free_q{off}",
+            lambda: (kF2, row[:, None], colqF),
+            dphi_dq if scale is None else scale[:, None] * dphi_dq,
+        )
     _put(jac, rows, "free_comp_ln", lambda: (kF, rf + FREE_COMP, COL_LN[iF]), -kin.phi_tip[kF, iF])
     _put(jac, rows, "free_comp_g", lambda: (kF, rf + FREE_COMP, COL_G[iF]), 1.0)
     qdF, r1F, r2F, JF = qd[kF, iF], kin.r1[kF, iF], kin.r2[kF, iF], kin.J[kF, iF]
     dv_dq = -np.stack([(r1F + r2F) * qdF[:, :1] + r2F * qdF[:, 1:], r2F * (qdF[:, :1] + qdF[:, 1:])], axis=2)
-    dv_dq -= thd[kF, None, None] * (K90 @ JF)                         # (nF, comp, joint)
+    dv_dq -= thd[kF, None, None] * (K90 @ JF)  # (nF, comp, joint)
     dv_dthd = -(kin.rel[kF, iF] @ K90.T)
-    thdK = thd[kF, None, None] * K90                                  # dv/dp
+    thdK = thd[kF, None, None] * K90  # dv/dp
     # The four slip rows at once, s = 0..3: row FREE_SLIP + s, component a = SLIP_A[s], sign SLIP_SIGN[s].
     vF = kin.v[kF, iF]
-    sl = SLIP_SIGN[:, None] * lnF                                    # (4, nF)
+    sl = SLIP_SIGN[:, None] * lnF  # (4, nF)
     rws = rf + (FREE_SLIP + np.arange(4))[:, None]
     _put(jac, rows, "slip_g", lambda: (kF, rws, COL_G[iF]), 1.0)
     _put(jac, rows, "slip_ln", lambda: (kF, rws, COL_LN[iF]), SLIP_SIGN[:, None] * vF.T[SLIP_A])

@@ -56,16 +56,17 @@ def _centreline(box, fractions) -> np.ndarray:
 class LinkPoints:
     """The sampled points of the four fingers, P per finger (finger-major rows i P + j)."""
 
-    link: np.ndarray         # (P,) int, 0: on link 1 (moved by joint 1), 1: on link 2 (both joints)
-    p_JL: np.ndarray         # (4, P, 2) m, point in the frame of the joint that moves its link
-    half_width: np.ndarray   # (4, P) m, half width of that link's collision box
+    link: np.ndarray  # (P,) int, 0: on link 1 (moved by joint 1), 1: on link 2 (both joints)
+    p_JL: np.ndarray  # (4, P, 2) m, point in the frame of the joint that moves its link
+    half_width: np.ndarray  # (4, P) m, half width of that link's collision box
 
     @staticmethod
-    def from_boxes(link_boxes) -> "LinkPoints":
+    def from_boxes(link_boxes) -> LinkPoints:
         """From each finger's `FingerGeometry.link_boxes` (link 1's and link 2's LinkRectangle)."""
         link = np.concatenate([np.full(len(f), j) for j, f in enumerate(LINK_FRACTIONS)])
-        p_JL = np.array([np.concatenate([_centreline(box, f) for box, f in zip(boxes, LINK_FRACTIONS)])
-                         for boxes in link_boxes])
+        p_JL = np.array(
+            [np.concatenate([_centreline(box, f) for box, f in zip(boxes, LINK_FRACTIONS)]) for boxes in link_boxes]
+        )
         half_width = np.array([[boxes[j].half_width for j in link] for boxes in link_boxes])
         return LinkPoints(link=link, p_JL=p_JL, half_width=half_width)
 
@@ -78,16 +79,20 @@ class LinkPoints:
 class _Box2:
     """Each finger's link-2 collision box (LinkRectangle) as arrays (4, ...), in joint 2's frame."""
 
-    p_JG: np.ndarray          # (4, 2) m, box centre
-    angle_JG: np.ndarray      # (4,) rad
-    half_length: np.ndarray   # (4,) m
-    half_width: np.ndarray    # (4,) m
+    p_JG: np.ndarray  # (4, 2) m, box centre
+    angle_JG: np.ndarray  # (4,) rad
+    half_length: np.ndarray  # (4,) m
+    half_width: np.ndarray  # (4,) m
 
     @staticmethod
-    def from_boxes(link_boxes) -> "_Box2":
+    def from_boxes(link_boxes) -> _Box2:
         b = [boxes[1] for boxes in link_boxes]
-        return _Box2(p_JG=np.array([x.p_JG for x in b]), angle_JG=np.array([x.angle_JG for x in b]),
-                     half_length=np.array([x.half_length for x in b]), half_width=np.array([x.half_width for x in b]))
+        return _Box2(
+            p_JG=np.array([x.p_JG for x in b]),
+            angle_JG=np.array([x.angle_JG for x in b]),
+            half_length=np.array([x.half_length for x in b]),
+            half_width=np.array([x.half_width for x in b]),
+        )
 
 
 @dataclass(frozen=True)
@@ -116,7 +121,7 @@ def _weighted(weights: list, normals: list):
 # A link block's variables (its binding's, per knot): the object's pose x (3), then the joints q (8).
 LINK_SIZE = 3 + 2 * NUM_FINGERS
 COL_P, COL_TH = (0, 1), 2
-COL_Q = 3 + 2 * np.arange(NUM_FINGERS)[:, None] + np.arange(2)     # (4, 2)
+COL_Q = 3 + 2 * np.arange(NUM_FINGERS)[:, None] + np.arange(2)  # (4, 2)
 
 
 class LinkRows:
@@ -128,22 +133,34 @@ class LinkRows:
         self.body = body
         self.points = LinkPoints.from_boxes(body.link_boxes)
         self._box2 = _Box2.from_boxes(body.link_boxes)
-        self._vertices = np.asarray(body.shape.vertices, dtype=float)     # (V, 2) m, in B
+        self._vertices = np.asarray(body.shape.vertices, dtype=float)  # (V, 2) m, in B
         self.num_rows = np.full(num_knots, NUM_FINGERS * (self.points.per_finger + len(self._vertices)))
         f = body.hand.fingers
-        self._p_W_base, self._psi, self._l1 = f.p_W_base, f.psi, f.l1      # (4, 2), (4,), (4,)
+        self._p_W_base, self._psi, self._l1 = f.p_W_base, f.psi, f.l1  # (4, 2), (4,), (4,)
         # per face (n_x, n_y, offset) as floats: the sums over faces run elementwise, left to right
         self._faces = [(float(n[0]), float(n[1]), float(h)) for n, h in zip(body.normals, body.offsets)]
         pts = self.points
-        self._scalars = tuple(                  # values_one's constants as Python floats
-            (float(f.psi[i]), float(f.l1[i]), float(f.p_W_base[i, 0]), float(f.p_W_base[i, 1]),
-             tuple((bool(link), float(p[0]), float(p[1]), float(w))
-                   for link, p, w in zip(pts.link, pts.p_JL[i], pts.half_width[i])),
-             (*map(float, self._box2.p_JG[i]), float(self._box2.angle_JG[i]), float(self._box2.half_length[i]),
-              float(self._box2.half_width[i])))
-            for i in range(NUM_FINGERS))
+        self._scalars = tuple(  # values_one's constants as Python floats
+            (
+                float(f.psi[i]),
+                float(f.l1[i]),
+                float(f.p_W_base[i, 0]),
+                float(f.p_W_base[i, 1]),
+                tuple(
+                    (bool(link), float(p[0]), float(p[1]), float(w))
+                    for link, p, w in zip(pts.link, pts.p_JL[i], pts.half_width[i])
+                ),
+                (
+                    *map(float, self._box2.p_JG[i]),
+                    float(self._box2.angle_JG[i]),
+                    float(self._box2.half_length[i]),
+                    float(self._box2.half_width[i]),
+                ),
+            )
+            for i in range(NUM_FINGERS)
+        )
 
-    def knot(self, k: int) -> "LinkRows":
+    def knot(self, k: int) -> LinkRows:
         """Knot k's rows alone: these, as no row depends on the knot (evaluate takes any batch size)."""
         return self
 
@@ -191,13 +208,21 @@ class LinkRows:
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
         """(values (K, R), Jacobians (K, R, LINK_SIZE) or None) at the (x, q) blocks Z (K, LINK_SIZE):
         the point rows (finger-major), then the vertex rows (finger-major)."""
-        q = Z[:, COL_Q]                                                     # (K, 4, 2)
-        a1 = self._psi + q[..., 0]                                          # (K, 4)
+        q = Z[:, COL_Q]  # (K, 4, 2)
+        a1 = self._psi + q[..., 0]  # (K, 4)
         a12 = a1 + q[..., 1]
         th = Z[:, COL_TH, None, None]
         c1, s1 = np.cos(a1), np.sin(a1)
-        kin = _Kinematics(c1=c1, s1=s1, c12=np.cos(a12), s12=np.sin(a12), ct=np.cos(th), st=np.sin(th),
-                          elbow_x=self._p_W_base[:, 0] + self._l1 * c1, elbow_y=self._p_W_base[:, 1] + self._l1 * s1)
+        kin = _Kinematics(
+            c1=c1,
+            s1=s1,
+            c12=np.cos(a12),
+            s12=np.sin(a12),
+            ct=np.cos(th),
+            st=np.sin(th),
+            elbow_x=self._p_W_base[:, 0] + self._l1 * c1,
+            elbow_y=self._p_W_base[:, 1] + self._l1 * s1,
+        )
         parts = [self._point_rows(Z, kin, with_jacobian), self._vertex_rows(Z, kin, a12, with_jacobian)]
         val = np.concatenate([v for v, _ in parts], axis=1)
         return val, (np.concatenate([j for _, j in parts], axis=1) if with_jacobian else None)
@@ -210,26 +235,26 @@ class LinkRows:
 
     def _point_rows(self, Z, kin, with_jacobian: bool):
         pts, nK = self.points, Z.shape[0]
-        on2 = pts.link.astype(bool)                                         # (P,)
+        on2 = pts.link.astype(bool)  # (P,)
         # the frame J of each point's link: origin and angle (K, 4, P)
         ox = np.where(on2, kin.elbow_x[..., None], self._p_W_base[:, 0, None])
         oy = np.where(on2, kin.elbow_y[..., None], self._p_W_base[:, 1, None])
         c = np.where(on2, kin.c12[..., None], kin.c1[..., None])
         s = np.where(on2, kin.s12[..., None], kin.s1[..., None])
-        lx, ly = pts.p_JL[..., 0], pts.p_JL[..., 1]                         # (4, P)
-        wx, wy = ox + (c * lx - s * ly), oy + (s * lx + c * ly)             # p_WL
+        lx, ly = pts.p_JL[..., 0], pts.p_JL[..., 1]  # (4, P)
+        wx, wy = ox + (c * lx - s * ly), oy + (s * lx + c * ly)  # p_WL
         rx, ry = wx - Z[:, 0, None, None], wy - Z[:, 1, None, None]
         ct, st = kin.ct, kin.st
-        bx, by = ct * rx + st * ry, -st * rx + ct * ry                      # p_BL = R^T (p_WL - p)
+        bx, by = ct * rx + st * ry, -st * rx + ct * ry  # p_BL = R^T (p_WL - p)
         phi, w = self._lse([nx * bx + ny * by - h for nx, ny, h in self._faces])
         val = (phi - pts.half_width).reshape(nK, -1)
         if not with_jacobian:
             return val, None
         gx, gy = _weighted(w, [(nx, ny) for nx, ny, _ in self._faces])
-        gwx, gwy = ct * gx - st * gy, st * gx + ct * gy                     # R g = d phi / d p_WL
+        gwx, gwy = ct * gx - st * gy, st * gx + ct * gy  # R g = d phi / d p_WL
         jac = np.zeros((nK, NUM_FINGERS, pts.per_finger, LINK_SIZE))
         jac[..., COL_P[0]], jac[..., COL_P[1]] = -gwx, -gwy
-        jac[..., COL_TH] = gwx * ry - gwy * rx                              # d p_BL / d theta = -R^T K (p_WL - p)
+        jac[..., COL_TH] = gwx * ry - gwy * rx  # d p_BL / d theta = -R^T K (p_WL - p)
         # joint 1 turns every point about the base, joint 2 the link-2 points about the elbow
         d_q1 = gwy * (wx - self._p_W_base[:, 0, None]) - gwx * (wy - self._p_W_base[:, 1, None])
         d_q2 = np.where(on2, gwy * (wx - kin.elbow_x[..., None]) - gwx * (wy - kin.elbow_y[..., None]), 0.0)
@@ -239,23 +264,23 @@ class LinkRows:
     def _vertex_rows(self, Z, kin, a12, with_jacobian: bool):
         """Each object vertex's smooth distance to each finger's link-2 box, in the box's frame G."""
         box, nK = self._box2, Z.shape[0]
-        vx, vy = self._vertices[:, 0], self._vertices[:, 1]                 # (V,)
-        ct, st = kin.ct, kin.st                                             # (K, 1, 1)
-        wx = Z[:, 0, None, None] + (ct * vx - st * vy)                      # p_WV (K, 1, V)
+        vx, vy = self._vertices[:, 0], self._vertices[:, 1]  # (V,)
+        ct, st = kin.ct, kin.st  # (K, 1, 1)
+        wx = Z[:, 0, None, None] + (ct * vx - st * vy)  # p_WV (K, 1, V)
         wy = Z[:, 1, None, None] + (st * vx + ct * vy)
-        ox = kin.elbow_x + (kin.c12 * box.p_JG[:, 0] - kin.s12 * box.p_JG[:, 1])     # G's origin (K, 4)
+        ox = kin.elbow_x + (kin.c12 * box.p_JG[:, 0] - kin.s12 * box.p_JG[:, 1])  # G's origin (K, 4)
         oy = kin.elbow_y + (kin.s12 * box.p_JG[:, 0] + kin.c12 * box.p_JG[:, 1])
         A = a12 + box.angle_JG
-        cA, sA = np.cos(A)[..., None], np.sin(A)[..., None]                 # (K, 4, 1)
-        rx, ry = wx - ox[..., None], wy - oy[..., None]                     # (K, 4, V)
-        gx_, gy_ = cA * rx + sA * ry, -sA * rx + cA * ry                    # p_GV
+        cA, sA = np.cos(A)[..., None], np.sin(A)[..., None]  # (K, 4, 1)
+        rx, ry = wx - ox[..., None], wy - oy[..., None]  # (K, 4, V)
+        gx_, gy_ = cA * rx + sA * ry, -sA * rx + cA * ry  # p_GV
         hl, hw = box.half_length[:, None], box.half_width[:, None]
         phi, w = self._lse([gx_ - hl, -gx_ - hl, gy_ - hw, -gy_ - hw])
         val = phi.reshape(nK, -1)
         if not with_jacobian:
             return val, None
-        gx, gy = w[0] - w[1], w[2] - w[3]                                   # gradient in G
-        gwx, gwy = cA * gx - sA * gy, sA * gx + cA * gy                     # in W
+        gx, gy = w[0] - w[1], w[2] - w[3]  # gradient in G
+        gwx, gwy = cA * gx - sA * gy, sA * gx + cA * gy  # in W
         jac = np.zeros((nK, NUM_FINGERS, len(vx), LINK_SIZE))
         jac[..., COL_P[0]], jac[..., COL_P[1]] = gwx, gwy
         jac[..., COL_TH] = gwy * (wx - Z[:, 0, None, None]) - gwx * (wy - Z[:, 1, None, None])

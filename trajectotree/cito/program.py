@@ -42,20 +42,20 @@ from trajectotree.scene.plant import NUM_FINGERS
 class ProgramSpec:
     """What distinguishes one CITO program from another."""
 
-    dt: float                      # s, knot spacing
-    pinned: np.ndarray             # (K, 4) bool, finger pinned to a planned contact at knot k
-    c_B: np.ndarray                # (K, 4, 2) m, pinned fingertip-centre target in B
-    n_B: np.ndarray                # (K, 4, 2) planned contact normal in B
-    clearance: np.ndarray          # (K, 4) m, least fingertip-surface gap of free fingers
-    x0: np.ndarray                 # (3,) fixed initial object pose
-    q0: np.ndarray                 # (8,) fixed initial joint angles
-    rest_knots: np.ndarray         # knots where object and joint velocities are zero
-    goal_poses: tuple              # per knot, an (n_k, 3) array of incremental goals x*_n (eq. 11)
-    segment_length: int = 0        # M_hat knots per segment (0: not segmented)
+    dt: float  # s, knot spacing
+    pinned: np.ndarray  # (K, 4) bool, finger pinned to a planned contact at knot k
+    c_B: np.ndarray  # (K, 4, 2) m, pinned fingertip-centre target in B
+    n_B: np.ndarray  # (K, 4, 2) planned contact normal in B
+    clearance: np.ndarray  # (K, 4) m, least fingertip-surface gap of free fingers
+    x0: np.ndarray  # (3,) fixed initial object pose
+    q0: np.ndarray  # (8,) fixed initial joint angles
+    rest_knots: np.ndarray  # knots where object and joint velocities are zero
+    goal_poses: tuple  # per knot, an (n_k, 3) array of incremental goals x*_n (eq. 11)
+    segment_length: int = 0  # M_hat knots per segment (0: not segmented)
     # keyframes formulation: the last knot's pose and joints fixed too (None: free), and the knots
     # where the object and hand accelerations are zero (static at a search node; () : none)
-    x_end: np.ndarray | None = None    # (3,) fixed final object pose
-    q_end: np.ndarray | None = None    # (8,) fixed final joint angles
+    x_end: np.ndarray | None = None  # (3,) fixed final object pose
+    q_end: np.ndarray | None = None  # (8,) fixed final joint angles
     static_knots: tuple = ()
 
     @property
@@ -75,7 +75,7 @@ class CitoProgram:
     rows: KnotRows
     spec: ProgramSpec
     knot_bindings: list = field(default_factory=list)
-    link_bindings: list = field(default_factory=list)   # links.py's rows per free knot ([] when off)
+    link_bindings: list = field(default_factory=list)  # links.py's rows per free knot ([] when off)
     build_time_s: float = 0.0
 
 
@@ -89,7 +89,7 @@ class _KnotCache:
     and log), so which vector served a knot never matters."""
 
     def __init__(self, rows, num_knots: int, width: int = KNOT_SIZE):
-        self.rows, self.num_knots, self.width = rows, num_knots, width   # rows: KnotRows, or LinkRows (width LINK_SIZE)
+        self.rows, self.num_knots, self.width = rows, num_knots, width  # rows: KnotRows, or LinkRows (width LINK_SIZE)
         self.Z = self.val = self.jac = None
         self.primed = None
         self.seen = np.full((num_knots, width), np.nan)
@@ -135,13 +135,13 @@ class _KnotConstraint:
     def _values(self, z: np.ndarray) -> np.ndarray:
         self.cache.seen[self.k] = z
         found = self.cache.primed_rows(self.k, z)
-        return found[0][:self.n] if found is not None else self.single.values_one(z)
+        return found[0][: self.n] if found is not None else self.single.values_one(z)
 
     def _rows(self, z: np.ndarray):
         found = self.cache.any_rows(self.k, z)
         if found is None:
             found = tuple(a[0] for a in self.single.evaluate(z[None], True))
-        return found[0][:self.n], found[1][:self.n]
+        return found[0][: self.n], found[1][: self.n]
 
     def __call__(self, z):
         if z.dtype == object:
@@ -157,8 +157,13 @@ def _collocation(prog, a: np.ndarray, b: np.ndarray, dt: float):
     # hstack built the same matrix ~5x slower).
     r = np.arange((K - 1) * n)
     h = -0.5 * dt
-    A = sp.csc_matrix((np.concatenate([np.full(r.size, -1.0), np.ones(r.size), np.full(2 * r.size, h)]),
-                       (np.tile(r, 4), np.concatenate([r, r + n, K * n + r, K * n + n + r]))), shape=(r.size, 2 * K * n))
+    A = sp.csc_matrix(
+        (
+            np.concatenate([np.full(r.size, -1.0), np.ones(r.size), np.full(2 * r.size, h)]),
+            (np.tile(r, 4), np.concatenate([r, r + n, K * n + r, K * n + n + r])),
+        ),
+        shape=(r.size, 2 * K * n),
+    )
     return prog.AddLinearEqualityConstraint(A, np.zeros(A.shape[0]), np.concatenate([a.ravel(), b.ravel()]))
 
 
@@ -184,7 +189,7 @@ def _bounds(v: CitoVariables, spec: ProgramSpec, body: BodyParams):
         lo["x"][-1] = hi["x"][-1] = spec.x_end
     if spec.q_end is not None:
         lo["q"][-1] = hi["q"][-1] = spec.q_end
-    if len(spec.static_knots):   # only then bounds on the accelerations (the joint program has none)
+    if len(spec.static_knots):  # only then bounds on the accelerations (the joint program has none)
         for name in ("xdd", "qdd"):
             lo[name] = np.full(getattr(v, name).shape, -inf)
             hi[name] = np.full(getattr(v, name).shape, inf)
@@ -207,11 +212,17 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     # Friction cone, linear: mu lambda_n - lambda_t >= 0 and mu lambda_n + lambda_t >= 0, with the
     # planning friction mu_plan (body.mu), below the scene's mu by search.friction_safety.
     mu, n = body.mu, K * NUM_FINGERS
-    i = np.arange(n)                    # [[mu I, -I], [mu I, I]], built directly (as for _collocation)
-    A = sp.csc_matrix((np.concatenate([np.full(2 * n, mu), -np.ones(n), np.ones(n)]),
-                       (np.concatenate([i, n + i, i, n + i]), np.concatenate([i, i, n + i, n + i]))), shape=(2 * n, 2 * n))
-    prog.AddLinearConstraint(A, np.zeros(2 * n), np.full(2 * n, np.inf),
-                             np.concatenate([v.lambda_n.ravel(), v.lambda_t.ravel()]))
+    i = np.arange(n)  # [[mu I, -I], [mu I, I]], built directly (as for _collocation)
+    A = sp.csc_matrix(
+        (
+            np.concatenate([np.full(2 * n, mu), -np.ones(n), np.ones(n)]),
+            (np.concatenate([i, n + i, i, n + i]), np.concatenate([i, i, n + i, n + i])),
+        ),
+        shape=(2 * n, 2 * n),
+    )
+    prog.AddLinearConstraint(
+        A, np.zeros(2 * n), np.full(2 * n, np.inf), np.concatenate([v.lambda_n.ravel(), v.lambda_t.ravel()])
+    )
     lo, hi = _bounds(v, spec, body)
     for name in lo:
         prog.AddBoundingBoxConstraint(lo[name].ravel(), hi[name].ravel(), getattr(v, name).ravel())
@@ -227,8 +238,15 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         bindings.append(binding)
     link_bindings = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else []
     _add_costs(prog, v, spec, config)
-    return CitoProgram(prog=prog, variables=v, rows=rows, spec=spec, knot_bindings=bindings,
-                       link_bindings=link_bindings, build_time_s=time.perf_counter() - t0)
+    return CitoProgram(
+        prog=prog,
+        variables=v,
+        rows=rows,
+        spec=spec,
+        knot_bindings=bindings,
+        link_bindings=link_bindings,
+        build_time_s=time.perf_counter() - t0,
+    )
 
 
 def link_knots(spec: ProgramSpec) -> list[int]:
@@ -241,7 +259,7 @@ def link_knots(spec: ProgramSpec) -> list[int]:
 def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, clearance: float) -> list:
     """links.py's rows, one binding per knot of `link_knots` on its pose and joints, served by
     a cache of their own (primed by a second visualization callback over every knot's x, q)."""
-    blocks = np.concatenate([v.x, v.q], axis=1)                       # (K, LINK_SIZE)
+    blocks = np.concatenate([v.x, v.q], axis=1)  # (K, LINK_SIZE)
     cache = _KnotCache(rows, spec.num_knots, LINK_SIZE)
     prog.AddVisualizationCallback(cache.prime, blocks.ravel())
     fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.last_knot_fixed else [])
@@ -265,16 +283,29 @@ def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) ->
         goals = np.asarray(spec.goal_poses[k], dtype=float).reshape(-1, 3)
         if len(goals):
             # sum_j (x - g_j)' Q (x - g_j) = x' (n Q) x - 2 (Q sum_j g_j)' x + sum_j g_j' Q g_j
-            prog.AddQuadraticCost(2 * len(goals) * Q, -2 * Q @ goals.sum(0),
-                                  float(np.einsum("ja,ab,jb->", goals, Q, goals)), v.x[k], is_convex=True)
+            prog.AddQuadraticCost(
+                2 * len(goals) * Q,
+                -2 * Q @ goals.sum(0),
+                float(np.einsum("ja,ab,jb->", goals, Q, goals)),
+                v.x[k],
+                is_convex=True,
+            )
         prog.AddQuadraticCost(2 * config.weight_torque * np.eye(n_tau), np.zeros(n_tau), v.tau[k], is_convex=True)
-        prog.AddQuadraticCost(2 * config.weight_force * np.eye(n_force), np.zeros(n_force),
-                              np.concatenate([v.lambda_n[k], v.lambda_t[k]]), is_convex=True)
+        prog.AddQuadraticCost(
+            2 * config.weight_force * np.eye(n_force),
+            np.zeros(n_force),
+            np.concatenate([v.lambda_n[k], v.lambda_t[k]]),
+            is_convex=True,
+        )
         slack_weights = np.where(spec.pinned[k], config.weight_contact_slack, config.weight_slack)
         prog.AddLinearCost(slack_weights, 0.0, v.slack[k])
         if config.weight_acceleration > 0:
-            prog.AddQuadraticCost(2 * config.weight_acceleration * np.eye(n_acc), np.zeros(n_acc),
-                                  np.concatenate([v.xdd[k], v.qdd[k]]), is_convex=True)
+            prog.AddQuadraticCost(
+                2 * config.weight_acceleration * np.eye(n_acc),
+                np.zeros(n_acc),
+                np.concatenate([v.xdd[k], v.qdd[k]]),
+                is_convex=True,
+            )
 
 
 def general_spec(*, x0, q0, object_path, config: CitoConfig, dt: float | None = None) -> ProgramSpec:
@@ -289,8 +320,15 @@ def general_spec(*, x0, q0, object_path, config: CitoConfig, dt: float | None = 
     for s in range(len(path) - 1):
         for k in range(s * M, (s + 1) * M + 1):
             goals[k].append(path[s + 1])
-    return ProgramSpec(dt=dt or config.dt, pinned=np.zeros((K, NUM_FINGERS), bool),
-                       c_B=np.zeros((K, NUM_FINGERS, 2)), n_B=np.tile([1.0, 0.0], (K, NUM_FINGERS, 1)),
-                       clearance=np.zeros((K, NUM_FINGERS)),
-                       x0=np.asarray(x0, float), q0=np.asarray(q0, float), rest_knots=np.array([0, K - 1]),
-                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
+    return ProgramSpec(
+        dt=dt or config.dt,
+        pinned=np.zeros((K, NUM_FINGERS), bool),
+        c_B=np.zeros((K, NUM_FINGERS, 2)),
+        n_B=np.tile([1.0, 0.0], (K, NUM_FINGERS, 1)),
+        clearance=np.zeros((K, NUM_FINGERS)),
+        x0=np.asarray(x0, float),
+        q0=np.asarray(q0, float),
+        rest_knots=np.array([0, K - 1]),
+        goal_poses=tuple(np.array(g) for g in goals),
+        segment_length=M,
+    )

@@ -30,22 +30,30 @@ VIOLATION_GROUPS = ("dynamics", "friction_cone", "complementarity", "contact_poi
 @dataclass(frozen=True)
 class SolveOutcome:
     success: bool
-    status: str                 # IPOPT's return status name
-    iterations: int             # -1 when IPOPT's summary could not be read
+    status: str  # IPOPT's return status name
+    iterations: int  # -1 when IPOPT's summary could not be read
     cost: float
     solution: CitoVariables
     solve_time_s: float
-    timing: dict = field(default_factory=dict)   # IPOPT's timing statistics (s), when printed
+    timing: dict = field(default_factory=dict)  # IPOPT's timing statistics (s), when printed
 
 
 def ipopt_options(config: CitoConfig, output_file: str | None = None) -> SolverOptions:
     options = SolverOptions()
     settings = {
-        "linear_solver": "spral", "spral_order": "metis", "spral_scaling": "none", "spral_nemin": 4,
-        "hessian_approximation": "limited-memory", "limited_memory_max_history": config.lbfgs_history,
-        "tol": config.tol, "constr_viol_tol": config.constr_viol_tol, "acceptable_tol": config.acceptable_tol,
-        "acceptable_constr_viol_tol": config.acceptable_constr_viol_tol, "acceptable_iter": config.acceptable_iter,
-        "max_iter": config.max_iter, "print_level": config.print_level,
+        "linear_solver": "spral",
+        "spral_order": "metis",
+        "spral_scaling": "none",
+        "spral_nemin": 4,
+        "hessian_approximation": "limited-memory",
+        "limited_memory_max_history": config.lbfgs_history,
+        "tol": config.tol,
+        "constr_viol_tol": config.constr_viol_tol,
+        "acceptable_tol": config.acceptable_tol,
+        "acceptable_constr_viol_tol": config.acceptable_constr_viol_tol,
+        "acceptable_iter": config.acceptable_iter,
+        "max_iter": config.max_iter,
+        "print_level": config.print_level,
     }
     if output_file:
         settings.update(output_file=output_file, file_print_level=3, print_timing_statistics="yes")
@@ -78,9 +86,15 @@ def solve(program: CitoProgram, guess: CitoVariables, config: CitoConfig) -> Sol
         os.unlink(log_path)
     details = result.get_solver_details()
     status = details.ConvertStatusToString()
-    return SolveOutcome(success=bool(result.is_success()), status=status, iterations=_iterations(summary),
-                        cost=float(result.get_optimal_cost()), solution=v.eval_result(result),
-                        solve_time_s=solve_time, timing=_timing(summary))
+    return SolveOutcome(
+        success=bool(result.is_success()),
+        status=status,
+        iterations=_iterations(summary),
+        cost=float(result.get_optimal_cost()),
+        solution=v.eval_result(result),
+        solve_time_s=solve_time,
+        timing=_timing(summary),
+    )
 
 
 def _read(path: str) -> str:
@@ -100,12 +114,14 @@ def _timing(summary: str) -> dict:
     """Seconds from IPOPT's timing statistics: total, in function evaluations, own, and of
     its own the linear solver's factorizations and back-solves."""
     out = {}
-    for key, pattern in (("ipopt_total_s", r"OverallAlgorithm\.*:\s*([\d.]+)"),
-                         ("function_evaluations_s", r"Function Evaluations\.*:\s*([\d.]+)"),
-                         ("linear_system_factorization_s", r"LinearSystemFactorization\.*:\s*([\d.]+)"),
-                         ("linear_system_back_solve_s", r"LinearSystemBackSolve\.*:\s*([\d.]+)"),
-                         ("ipopt_without_function_evaluations_s", r"Total seconds in IPOPT \(w/o function evaluations\)\s*=\s*([\d.]+)"),
-                         ("nlp_function_evaluations_s", r"Total seconds in NLP function evaluations\s*=\s*([\d.]+)")):
+    for key, pattern in (
+        ("ipopt_total_s", r"OverallAlgorithm\.*:\s*([\d.]+)"),
+        ("function_evaluations_s", r"Function Evaluations\.*:\s*([\d.]+)"),
+        ("linear_system_factorization_s", r"LinearSystemFactorization\.*:\s*([\d.]+)"),
+        ("linear_system_back_solve_s", r"LinearSystemBackSolve\.*:\s*([\d.]+)"),
+        ("ipopt_without_function_evaluations_s", r"Total seconds in IPOPT \(w/o function evaluations\)\s*=\s*([\d.]+)"),
+        ("nlp_function_evaluations_s", r"Total seconds in NLP function evaluations\s*=\s*([\d.]+)"),
+    ):
         m = re.search(pattern, summary)
         if m:
             out[key] = float(m.group(1))
@@ -121,9 +137,11 @@ def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
     Z = sol.stacked()
     val, _ = rows.evaluate(Z, False)
     kin = rows.kinematics(Z)
-    col = [np.abs(np.diff(a, axis=0) - 0.5 * dt * (b[1:] + b[:-1])).max()
-           for a, b in ((sol.x, sol.xd), (sol.xd, sol.xdd), (sol.q, sol.qd), (sol.qd, sol.qdd))]
-    mu = rows.body.mu                   # the planning friction mu_plan the cones were built with
+    col = [
+        np.abs(np.diff(a, axis=0) - 0.5 * dt * (b[1:] + b[:-1])).max()
+        for a, b in ((sol.x, sol.xd), (sol.xd, sol.xdd), (sol.q, sol.qd), (sol.qd, sol.qdd))
+    ]
+    mu = rows.body.mu  # the planning friction mu_plan the cones were built with
     ln, lt = sol.lambda_n, sol.lambda_t
     free = ~rows.pinned
     comp = np.maximum(np.abs(kin.phi_tip) * ln, np.linalg.norm(kin.v, axis=-1) * ln)

@@ -36,16 +36,21 @@ def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
         raise ConfigError(f"contact plan has {len(plan.nodes)} nodes; at least {min_nodes} needed")
     c = scene.config
     if not np.allclose(plan.nodes[0].object_pose, c.initial_pose, atol=1e-9):
-        raise ConfigError(f"contact plan starts at pose {list(plan.nodes[0].object_pose)}, "
-                          f"the scene at {list(c.initial_pose)}")
+        raise ConfigError(
+            f"contact plan starts at pose {list(plan.nodes[0].object_pose)}, the scene at {list(c.initial_pose)}"
+        )
     for n, node in enumerate(plan.nodes):
         if np.shape(node.q) != (2 * NUM_FINGERS,) or np.shape(node.p_BC) != (NUM_FINGERS, 2):
-            raise ConfigError(f"contact plan node {n} has q shape {np.shape(node.q)} and p_BC shape "
-                              f"{np.shape(node.p_BC)}; expected (8,) and (4, 2)")
+            raise ConfigError(
+                f"contact plan node {n} has q shape {np.shape(node.q)} and p_BC shape "
+                f"{np.shape(node.p_BC)}; expected (8,) and (4, 2)"
+            )
         # Every contact must lie on this scene's object boundary (the box's or the polygon's).
         if np.any(np.abs(c.shape.signed_distances(node.p_BC)) > 1e-6):
-            raise ConfigError(f"contact plan node {n} has contacts {node.p_BC.tolist()} off the boundary of the "
-                              f"scene's object {_describe(c)}")
+            raise ConfigError(
+                f"contact plan node {n} has contacts {node.p_BC.tolist()} off the boundary of the "
+                f"scene's object {_describe(c)}"
+            )
         if node.switching_finger is not None and node.switching_finger not in range(NUM_FINGERS):
             raise ConfigError(f"contact plan node {n} has switching_finger {node.switching_finger}; valid: 0-3 or null")
 
@@ -75,15 +80,23 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
         f = new.switching_finger
         if f is not None:
             pinned[ks[1:-1], f] = False
-            clearance[ks[1:-1], f] = lift[1:-1]   # free knots only: pinned at both ends
+            clearance[ks[1:-1], f] = lift[1:-1]  # free knots only: pinned at both ends
         c_B[ks[-1]] = new.p_BC + radius * new.n_B
         n_B[ks[-1]] = new.n_B
         for k in ks:
             goals[k].append(new.object_pose)
-    return ProgramSpec(dt=config.dt, pinned=pinned, c_B=c_B, n_B=n_B, clearance=clearance,
-                       x0=np.asarray(plan.nodes[0].object_pose, float), q0=np.asarray(plan.nodes[0].q, float),
-                       rest_knots=np.arange(0, K, M),
-                       goal_poses=tuple(np.array(g) for g in goals), segment_length=M)
+    return ProgramSpec(
+        dt=config.dt,
+        pinned=pinned,
+        c_B=c_B,
+        n_B=n_B,
+        clearance=clearance,
+        x0=np.asarray(plan.nodes[0].object_pose, float),
+        q0=np.asarray(plan.nodes[0].q, float),
+        rest_knots=np.arange(0, K, M),
+        goal_poses=tuple(np.array(g) for g in goals),
+        segment_length=M,
+    )
 
 
 def piece_spec(plan: ContactPlan, first: int, last: int, *, radius: float, config: CitoConfig) -> ProgramSpec:
@@ -93,8 +106,12 @@ def piece_spec(plan: ContactPlan, first: int, last: int, *, radius: float, confi
     angles (each node's grasp is a static stance the search verified), at rest as in the joint
     program, and with zero object and hand accelerations there, so that the
     pieces' end knots are one state and their forces at the shared knot can be averaged."""
-    sub = dataclasses.replace(plan, nodes=plan.nodes[first:last + 1])
+    sub = dataclasses.replace(plan, nodes=plan.nodes[first : last + 1])
     spec = transition_spec(sub, radius=radius, config=config)
     end = sub.nodes[-1]
-    return dataclasses.replace(spec, x_end=np.asarray(end.object_pose, float), q_end=np.asarray(end.q, float),
-                               static_knots=(0, spec.num_knots - 1))
+    return dataclasses.replace(
+        spec,
+        x_end=np.asarray(end.object_pose, float),
+        q_end=np.asarray(end.q, float),
+        static_knots=(0, spec.num_knots - 1),
+    )

@@ -19,9 +19,18 @@ import numpy as np
 from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS
 
 # (name, width) of each group, in the order of a knot's variable block.
-GROUPS = (("x", 3), ("xd", 3), ("xdd", 3), ("q", NUM_HAND_JOINTS), ("qd", NUM_HAND_JOINTS),
-          ("qdd", NUM_HAND_JOINTS), ("tau", NUM_HAND_JOINTS), ("lambda_n", NUM_FINGERS),
-          ("lambda_t", NUM_FINGERS), ("slack", NUM_FINGERS))
+GROUPS = (
+    ("x", 3),
+    ("xd", 3),
+    ("xdd", 3),
+    ("q", NUM_HAND_JOINTS),
+    ("qd", NUM_HAND_JOINTS),
+    ("qdd", NUM_HAND_JOINTS),
+    ("tau", NUM_HAND_JOINTS),
+    ("lambda_n", NUM_FINGERS),
+    ("lambda_t", NUM_FINGERS),
+    ("slack", NUM_FINGERS),
+)
 KNOT_SIZE = sum(w for _, w in GROUPS)
 # Slice of each group inside a knot block.
 SLICES = {}
@@ -38,23 +47,23 @@ def width(*names: str) -> int:
 
 @dataclass(frozen=True)
 class CitoVariables:
-    x: np.ndarray         # (K, 3)
-    xd: np.ndarray        # (K, 3)
-    xdd: np.ndarray       # (K, 3)
-    q: np.ndarray         # (K, 8)
-    qd: np.ndarray        # (K, 8)
-    qdd: np.ndarray       # (K, 8)
-    tau: np.ndarray       # (K, 8)
+    x: np.ndarray  # (K, 3)
+    xd: np.ndarray  # (K, 3)
+    xdd: np.ndarray  # (K, 3)
+    q: np.ndarray  # (K, 8)
+    qd: np.ndarray  # (K, 8)
+    qdd: np.ndarray  # (K, 8)
+    tau: np.ndarray  # (K, 8)
     lambda_n: np.ndarray  # (K, 4)
     lambda_t: np.ndarray  # (K, 4)
-    slack: np.ndarray     # (K, 4)
+    slack: np.ndarray  # (K, 4)
 
     @property
     def num_knots(self) -> int:
         return self.x.shape[0]
 
     @staticmethod
-    def from_prog(prog, num_knots: int) -> "CitoVariables":
+    def from_prog(prog, num_knots: int) -> CitoVariables:
         return CitoVariables(**{name: prog.NewContinuousVariables(num_knots, width, name) for name, width in GROUPS})
 
     def knot(self, k: int) -> np.ndarray:
@@ -66,13 +75,13 @@ class CitoVariables:
         return np.concatenate([getattr(self, name) for name, _ in GROUPS], axis=1)
 
     @staticmethod
-    def from_stacked(blocks: np.ndarray) -> "CitoVariables":
+    def from_stacked(blocks: np.ndarray) -> CitoVariables:
         return CitoVariables(**{name: np.array(blocks[:, SLICES[name]]) for name, _ in GROUPS})
 
-    def eval_result(self, result) -> "CitoVariables":
+    def eval_result(self, result) -> CitoVariables:
         """The same fields as numbers, from a MathematicalProgramResult."""
         return CitoVariables(**{f.name: result.GetSolution(getattr(self, f.name)) for f in fields(self)})
 
-    def set_initial_guess(self, prog, guess: "CitoVariables") -> None:
+    def set_initial_guess(self, prog, guess: CitoVariables) -> None:
         for f in fields(self):
             prog.SetInitialGuess(getattr(self, f.name), getattr(guess, f.name))

@@ -22,7 +22,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="trajectotree",
         description="Plan, execute and evaluate multi-contact finger-gaiting manipulation "
-                    "with TrajectoTree (contact-sequence search + CITO on Drake).")
+        "with TrajectoTree (contact-sequence search + CITO on Drake).",
+    )
     parser.add_argument("--version", action="version", version=f"trajectotree {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:

@@ -13,11 +13,15 @@ from pathlib import Path
 from trajectotree.config import FORMULATIONS, Config, ConfigError, ObjectConfig, check_integer, load_config
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
-SEGMENTS_HELP = ("transition segments S between the N = S + 1 poses of the contact sequence, each with one "
-                 "contact switch at most (default 9, i.e. the paper's N = 10 nodes)")
-FORMULATION_HELP = (f"TrajectoTree's program (cito.formulation; valid: {', '.join(FORMULATIONS)}): keyframes solves "
-                    "each segment alone between the search's nodes, in parallel; joint is the paper's one program "
-                    "(default: keyframes)")
+SEGMENTS_HELP = (
+    "transition segments S between the N = S + 1 poses of the contact sequence, each with one "
+    "contact switch at most (default 9, i.e. the paper's N = 10 nodes)"
+)
+FORMULATION_HELP = (
+    f"TrajectoTree's program (cito.formulation; valid: {', '.join(FORMULATIONS)}): keyframes solves "
+    "each segment alone between the search's nodes, in parallel; joint is the paper's one program "
+    "(default: keyframes)"
+)
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
 HTML_SUFFIXES = (".html", ".htm")
 
@@ -25,12 +29,16 @@ HTML_SUFFIXES = (".html", ".htm")
 def add_scene_options(group, config_help: str = "YAML file with any Config fields") -> None:
     """--config and the scene options on top of it (scene_overrides reads them)."""
     group.add_argument("--config", metavar="FILE.yaml", help=config_help)
-    group.add_argument("--box-size", nargs=2, type=float, metavar=("W", "H"),
-                       help="the object is a box of this width and height, m")
-    group.add_argument("--polygon", metavar='"X,Y X,Y ..."',
-                       help="the object is this convex polygon instead of the box: its vertices (x, y) in m in the "
-                            "object frame, in either orientation (re-centred at its centroid), e.g. "
-                            '"-0.07,-0.04 0.07,-0.04 0,0.08"')
+    group.add_argument(
+        "--box-size", nargs=2, type=float, metavar=("W", "H"), help="the object is a box of this width and height, m"
+    )
+    group.add_argument(
+        "--polygon",
+        metavar='"X,Y X,Y ..."',
+        help="the object is this convex polygon instead of the box: its vertices (x, y) in m in the "
+        "object frame, in either orientation (re-centred at its centroid), e.g. "
+        '"-0.07,-0.04 0.07,-0.04 0,0.08"',
+    )
     group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
 
@@ -46,8 +54,10 @@ def parse_polygon(text: str) -> tuple[tuple[float, float], ...]:
                 raise ValueError
             vertices.append((float(parts[0]), float(parts[1])))
         except ValueError:
-            raise ConfigError(f"--polygon vertex {i} {pair!r} is not x,y (two numbers in m, comma-separated, no "
-                              'space; vertices separated by spaces, e.g. "-0.07,-0.04 0.07,-0.04 0,0.08")') from None
+            raise ConfigError(
+                f"--polygon vertex {i} {pair!r} is not x,y (two numbers in m, comma-separated, no "
+                'space; vertices separated by spaces, e.g. "-0.07,-0.04 0.07,-0.04 0,0.08")'
+            ) from None
     if not vertices:
         raise ConfigError(f"--polygon {text!r} has no vertices: give at least 3 as x,y pairs separated by spaces")
     return tuple(vertices)
@@ -79,8 +89,7 @@ def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True
     group = parser.add_argument_group("scene and planner settings (override --config)")
     add_scene_options(group)
     if segments:
-        group.add_argument("--segments", type=int, metavar="S",
-                           help=SEGMENTS_HELP)
+        group.add_argument("--segments", type=int, metavar="S", help=SEGMENTS_HELP)
     if formulation:
         group.add_argument("--formulation", metavar="NAME", help=FORMULATION_HELP)
 
@@ -95,9 +104,12 @@ def config_from_args(args: argparse.Namespace) -> Config:
     if getattr(args, "formulation", None) is not None:
         cito["formulation"] = args.formulation
     try:
-        return dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
-                                   search=dataclasses.replace(config.search, **search),
-                                   cito=dataclasses.replace(config.cito, **cito))
+        return dataclasses.replace(
+            config,
+            scene=dataclasses.replace(config.scene, **scene),
+            search=dataclasses.replace(config.search, **search),
+            cito=dataclasses.replace(config.cito, **cito),
+        )
     except ConfigError as e:
         raise ConfigError(in_option_terms(str(e), args)) from None
 
@@ -106,26 +118,39 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     """ConfigError (exit 2, before any planning) when the hand has no initial grasp of the object
     at scene.initial_pose (trajectotree.search.initial_grasp: a finger reaches no corner-free contact,
     or no three-finger stance holds at mu_plan), unless search.initial_arclengths sets the grasp."""
-    from trajectotree.search import initial_grasp
     from trajectotree.scene.plant import describe_object
+    from trajectotree.search import initial_grasp
+
     if config.search.initial_arclengths is not None:
         return
     # Not memoized: the planner builds the table again inside its timed search, so
     # search_time_s keeps its meaning (this check costs 0.1-0.4 s more wall time per command).
     grasps = initial_grasp.initial_grasp_candidates(scene, config.search, memoize=False)
     if grasps.reason:
-        option = ("--polygon (scene.object.vertices)" if getattr(args, "polygon", None) is not None else
-                  "scene.object.vertices" if config.scene.object.vertices is not None else "the box")
-        raise ConfigError(f"{option}: the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
-                          f"{list(config.scene.initial_pose)}: {grasps.reason}; corner-free contacts each finger "
-                          f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)")
+        option = (
+            "--polygon (scene.object.vertices)"
+            if getattr(args, "polygon", None) is not None
+            else "scene.object.vertices"
+            if config.scene.object.vertices is not None
+            else "the box"
+        )
+        raise ConfigError(
+            f"{option}: the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
+            f"{list(config.scene.initial_pose)}: {grasps.reason}; corner-free contacts each finger "
+            f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)"
+        )
 
 
 # Config fields set by command-line options, as the user wrote them (longest names first).
-OPTION_NAMES = (("scene.box_width x scene.box_height", "box_size", "--box-size W H"),
-                ("scene.box_width", "box_size", "--box-size W"), ("scene.box_height", "box_size", "--box-size H"),
-                ("scene.box_mass", "mass", "--mass"), ("scene.mu", "mu", "--mu"),
-                ("scene.object.vertices", "polygon", "--polygon"), ("cito.formulation", "formulation", "--formulation"))
+OPTION_NAMES = (
+    ("scene.box_width x scene.box_height", "box_size", "--box-size W H"),
+    ("scene.box_width", "box_size", "--box-size W"),
+    ("scene.box_height", "box_size", "--box-size H"),
+    ("scene.box_mass", "mass", "--mass"),
+    ("scene.mu", "mu", "--mu"),
+    ("scene.object.vertices", "polygon", "--polygon"),
+    ("cito.formulation", "formulation", "--formulation"),
+)
 
 
 def in_option_terms(message: str, args: argparse.Namespace) -> str:
@@ -154,8 +179,9 @@ def check_output_dir(option: str, path: str | Path) -> Path:
     existing ancestor a writable folder. Checked before any work starts (ConfigError: exit 2)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise ConfigError(f"{option} {str(path)!r} is an existing file, not a folder; "
-                         "give a folder (it is created if missing)")
+        raise ConfigError(
+            f"{option} {str(path)!r} is an existing file, not a folder; give a folder (it is created if missing)"
+        )
     base = _nearest_existing(path.absolute())
     if not base.is_dir():
         raise ConfigError(f"{option} {str(path)!r} cannot be created: {str(base)!r} is a file, not a folder")

@@ -16,8 +16,7 @@ import math
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import (add_config_options, check_graspable, check_output_dir, config_from_args,
-                                      print_json)
+from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
@@ -33,20 +32,36 @@ DERIVED_FILES = (SIM_JSON, SIM_NPZ, KEYFRAMES, PLAYBACK, FORCES, SUMMARY)
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("demo", help="plan, simulate and play back a pi/2 rotation (start here)",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "demo", help="plan, simulate and play back a pi/2 rotation (start here)", description=__doc__
+    )
     p.add_argument("--out", default="demo", metavar="DIR", help="output directory (default: ./demo)")
     p.add_argument("--meshcat", action="store_true", help="also watch the run live in Meshcat on localhost")
-    p.add_argument("--goal", type=float, default=math.pi / 2, metavar="RAD",
-                   help="goal rotation of the box, rad, in [-pi, pi] (default: pi/2)")
+    p.add_argument(
+        "--goal",
+        type=float,
+        default=math.pi / 2,
+        metavar="RAD",
+        help="goal rotation of the box, rad, in [-pi, pi] (default: pi/2)",
+    )
     p.add_argument("--json", action="store_true", help="print summary.json instead of the text summary")
     add_config_options(p, formulation=True)
     p.set_defaults(run=run)
 
 
 def plan_summary(result) -> dict:
-    keys = ("method", "goal", "success", "converged", "status", "search_time_s", "build_time_s", "solve_time_s",
-            "total_time_s", "iterations")
+    keys = (
+        "method",
+        "goal",
+        "success",
+        "converged",
+        "status",
+        "search_time_s",
+        "build_time_s",
+        "solve_time_s",
+        "total_time_s",
+        "iterations",
+    )
     summary = {k: getattr(result, k) for k in keys}
     summary["cost"] = result.cost if math.isfinite(result.cost) else None
     summary["switching_fingers"] = [n.switching_finger for n in result.contact_plan.nodes]
@@ -61,19 +76,27 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
     print(f"TrajectoTree demo: rotate the {name} by {p['goal']:+.3f} rad ({math.degrees(p['goal']):+.1f} deg)")
     print(f"  contact search  {p['search_time_s']:6.2f} s   switching fingers per segment: {switches or 'none'}")
     segments = p.get("segments") or ()
-    summed = (f" (summed over {len(segments)} segment programs; "
-              "the total below is wall time)") if segments else ""
-    print(f"  CITO (IPOPT)    {p['build_time_s'] + p['solve_time_s']:6.2f} s   build {p['build_time_s']:.2f} s, "
-          f"solve {p['solve_time_s']:.2f} s, {p['iterations']} iterations{summed}: {p['status']}")
+    summed = (f" (summed over {len(segments)} segment programs; the total below is wall time)") if segments else ""
+    print(
+        f"  CITO (IPOPT)    {p['build_time_s'] + p['solve_time_s']:6.2f} s   build {p['build_time_s']:.2f} s, "
+        f"solve {p['solve_time_s']:.2f} s, {p['iterations']} iterations{summed}: {p['status']}"
+    )
     cost = "n/a" if p["cost"] is None else f"{p['cost']:.4g}"
-    verdict = ("converged, physics check passed" if p["success"] else
-               "converged, but the physics check FAILED (see the status)" if p["converged"] else "NOT converged")
+    verdict = (
+        "converged, physics check passed"
+        if p["success"]
+        else "converged, but the physics check FAILED (see the status)"
+        if p["converged"]
+        else "NOT converged"
+    )
     print(f"  total planning  {p['total_time_s']:6.2f} s   {verdict}, cost {cost}")
     if s is not None:
         held = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held throughout"
-        print(f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, {noun} {held}; "
-              f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
-              f"theta {s['mae_theta']:.3f} rad; final theta error {s['final_error'][2]:.3f} rad")
+        print(
+            f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, {noun} {held}; "
+            f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
+            f"theta {s['mae_theta']:.3f} rad; final theta error {s['final_error'][2]:.3f} rad"
+        )
     else:
         print("  simulation      skipped: no trajectory to execute")
     print(f"files in {out}/: " + ", ".join(summary["files"]))
@@ -82,12 +105,12 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
 def run(args) -> int:
     from trajectotree.cli.search_cmd import draw_plan
     from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
+    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.simulate import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
     from trajectotree.io import save_plan, save_sim, write_json_atomic
     from trajectotree.planning.planners import plan
-    from trajectotree.execution.playback import object_noun, start_meshcat
     from trajectotree.scene.plant import build_scene, describe_object
-    from trajectotree.execution.simulate import run_simulation
 
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
@@ -116,13 +139,17 @@ def run(args) -> int:
         sim = run_simulation(plan=result, config=config, meshcat=meshcat, html_path=out / PLAYBACK)
         save_sim(sim, out)
         sim_json = save_sim_json_with_plan_status(sim, str(out), result.success)
-        spans = segment_spans([n.switching_finger for n in result.contact_plan.nodes], config.cito.knots_per_segment,
-                              config.cito.dt)
+        spans = segment_spans(
+            [n.switching_finger for n in result.contact_plan.nodes], config.cito.knots_per_segment, config.cito.dt
+        )
         save_figure(figure_finger_forces(sim, spans), out / FORCES)
         files += [SIM_JSON, SIM_NPZ, PLAYBACK, FORCES]
-    summary = {"object": describe_object(config.scene), "plan": plan_summary(result),
-               "simulation": None if sim is None else sim_json,
-               "files": files + [SUMMARY]}
+    summary = {
+        "object": describe_object(config.scene),
+        "plan": plan_summary(result),
+        "simulation": None if sim is None else sim_json,
+        "files": files + [SUMMARY],
+    }
     write_json_atomic(out / SUMMARY, summary)
     if args.json:
         print_json(summary)

@@ -8,8 +8,15 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import (HTML_SUFFIXES, add_config_options, check_graspable, check_output_dir,
-                                      check_output_file, config_from_args, print_json)
+from trajectotree.cli.common import (
+    HTML_SUFFIXES,
+    add_config_options,
+    check_graspable,
+    check_output_dir,
+    check_output_file,
+    config_from_args,
+    print_json,
+)
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
 from trajectotree.io import SIM_JSON, SIM_NPZ
@@ -20,16 +27,29 @@ DERIVED_FILES = (SIM_JSON, SIM_NPZ)
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("plan", help="plan a box rotation (contact search + trajectory optimization)",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "plan", help="plan a box rotation (contact search + trajectory optimization)", description=__doc__
+    )
     p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, in [-pi, pi]")
-    p.add_argument("--method", default="trajectotree", metavar="METHOD",
-                   help=f"planner (default: trajectotree; valid: {', '.join(METHODS)})")
+    p.add_argument(
+        "--method",
+        default="trajectotree",
+        metavar="METHOD",
+        help=f"planner (default: trajectotree; valid: {', '.join(METHODS)})",
+    )
     add_config_options(p, formulation=True)
-    p.add_argument("--segment-workers", type=int, metavar="W", help="local processes solving the keyframes "
-                   "formulation's segments (default: one per segment, at most one per core; 1: serially)")
-    p.add_argument("--out", metavar="DIR", help="output folder (default: plan_<method>_<goal>); a previous "
-                   "plan's sim.json and sim.npz there are removed")
+    p.add_argument(
+        "--segment-workers",
+        type=int,
+        metavar="W",
+        help="local processes solving the keyframes "
+        "formulation's segments (default: one per segment, at most one per core; 1: serially)",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        help="output folder (default: plan_<method>_<goal>); a previous plan's sim.json and sim.npz there are removed",
+    )
     p.add_argument("--json", action="store_true", help="print plan.json to stdout")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the planned trajectory")
     p.set_defaults(run=run)
@@ -40,6 +60,7 @@ def run(args) -> int:
     from trajectotree.planning.keyframes import check_workers
     from trajectotree.planning.planners import plan
     from trajectotree.scene.plant import build_scene
+
     goal = check_goal(args.goal, "--goal")
     method = check_method(args.method)
     config = config_from_args(args)
@@ -54,19 +75,23 @@ def run(args) -> int:
     removed = remove_derived_files(out)
     save_plan(result, out)
     if removed:
-        print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces",
-              file=sys.stderr)
+        print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces", file=sys.stderr)
     if args.html and result.trajectory is not None:
         from trajectotree.execution.playback import write_plan_html
+
         write_plan_html(result, config, args.html)
     if args.json:
         print_json(plan_to_json(result))
         return 0
     v = ", ".join(f"{k} {val:.1e}" for k, val in result.violations.items())
-    print(f"{method}: goal {goal:+.3f} rad, {'succeeded' if result.success else 'FAILED'} ({result.status}), "
-          f"{result.iterations} iterations, cost {result.cost:.4g}")
-    print(f"time: search {result.search_time_s:.2f} s, build {result.build_time_s:.2f} s, "
-          f"solve {result.solve_time_s:.2f} s, total {result.total_time_s:.2f} s")
+    print(
+        f"{method}: goal {goal:+.3f} rad, {'succeeded' if result.success else 'FAILED'} ({result.status}), "
+        f"{result.iterations} iterations, cost {result.cost:.4g}"
+    )
+    print(
+        f"time: search {result.search_time_s:.2f} s, build {result.build_time_s:.2f} s, "
+        f"solve {result.solve_time_s:.2f} s, total {result.total_time_s:.2f} s"
+    )
     if result.trajectory is not None:
         x = result.trajectory.x[-1]
         print(f"final pose: x {x[0]:+.4f} m, y {x[1]:+.4f} m, theta {x[2]:+.4f} rad; max violations: {v}")

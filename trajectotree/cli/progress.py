@@ -22,8 +22,10 @@ def format_iteration(line: str) -> str | None:
     m = ITERATION_LINE.match(line)
     if not m:
         return None
-    return (f"IPOPT iteration {int(m.group(1))}: objective {float(m.group(2)):.3e}, "
-            f"constraint violation {float(m.group(3)):.1e}")
+    return (
+        f"IPOPT iteration {int(m.group(1))}: objective {float(m.group(2)):.3e}, "
+        f"constraint violation {float(m.group(3)):.1e}"
+    )
 
 
 def _follow(log_path: str, stream: TextIO, stop: threading.Event) -> None:
@@ -60,6 +62,7 @@ def _show_log(stream: TextIO, log_path: str):
 def ipopt_progress(enabled: bool, stream: TextIO = sys.stderr):
     """While active (and `enabled`), every IPOPT solve shows its progress on `stream`."""
     from trajectotree.cito import solve
+
     if not enabled:
         yield
         return

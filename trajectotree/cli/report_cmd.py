@@ -16,6 +16,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.experiments.report import make_report, table_markdown
+
     if args.out:  # the default, SWEEP_DIR/report, is checked with the sweep directory
         check_output_dir("--out", args.out)
     files, table = make_report(args.sweep_dir, args.out)

@@ -6,17 +6,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args,
-                                      print_json)
+from trajectotree.cli.common import FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args, print_json
 from trajectotree.scene.plant import describe_object
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("scene", help="build the hand and object plant, summarize it, tell whether the hand "
-                              "can grasp the object", description=__doc__)
+    p = subparsers.add_parser(
+        "scene",
+        help="build the hand and object plant, summarize it, tell whether the hand can grasp the object",
+        description=__doc__,
+    )
     add_config_options(p, segments=False)
-    p.add_argument("--figure", metavar="FILE.png", help="draw the model (hand at the best initial grasp, object, "
-                   "reach circles, each finger's reachable contacts); .png, .pdf or .svg")
+    p.add_argument(
+        "--figure",
+        metavar="FILE.png",
+        help="draw the model (hand at the best initial grasp, object, "
+        "reach circles, each finger's reachable contacts); .png, .pdf or .svg",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(run=run)
 
@@ -26,10 +32,17 @@ def describe(scene) -> dict:
     c, shape = scene.config, scene.config.shape
     body = scene.plant.GetBodyByName("box", scene.box)
     inertia = body.default_spatial_inertia().CalcRotationalInertia().CopyToFullMatrix3()
-    out = {"kind": "box" if shape.is_box else "polygon", "name": describe_object(c),
-           "vertices_m": shape.vertices.round(6).tolist(), "area_m2": shape.area, "perimeter_m": shape.perimeter,
-           "depth_m": c.box_depth, "mass_kg": body.default_mass(), "inertia_zz_kg_m2": float(inertia[2, 2]),
-           "mu": c.mu}
+    out = {
+        "kind": "box" if shape.is_box else "polygon",
+        "name": describe_object(c),
+        "vertices_m": shape.vertices.round(6).tolist(),
+        "area_m2": shape.area,
+        "perimeter_m": shape.perimeter,
+        "depth_m": c.box_depth,
+        "mass_kg": body.default_mass(),
+        "inertia_zz_kg_m2": float(inertia[2, 2]),
+        "mu": c.mu,
+    }
     if shape.is_box:
         out["size_m"] = [2 * shape.box_half[0], 2 * shape.box_half[1]]
     return out
@@ -44,9 +57,16 @@ def summarize(scene, reach: dict | None = None) -> dict:
         "num_positions": scene.plant.num_positions(),
         "num_actuators": scene.plant.num_actuators(),
         "tip_radius_m": scene.tip_radius,
-        "fingers": [{"base_W": f.p_W_base.round(6).tolist(), "link_lengths_m": [round(f.l1, 6), round(f.l2, 6)],
-                     "q_lower": f.q_lower.tolist(), "q_upper": f.q_upper.tolist(), "tau_max": f.tau_max.tolist()}
-                    for f in scene.fingers],
+        "fingers": [
+            {
+                "base_W": f.p_W_base.round(6).tolist(),
+                "link_lengths_m": [round(f.l1, 6), round(f.l2, 6)],
+                "q_lower": f.q_lower.tolist(),
+                "q_upper": f.q_upper.tolist(),
+                "tau_max": f.tau_max.tolist(),
+            }
+            for f in scene.fingers
+        ],
     }
 
 
@@ -54,42 +74,50 @@ def summarize(scene, reach: dict | None = None) -> dict:
 class ObjectReach:
     """Whether the hand can grasp the object at its initial pose."""
 
-    contacts: list            # per finger, arclengths (m) of its reachable corner-free grid contacts
+    contacts: list  # per finger, arclengths (m) of its reachable corner-free grid contacts
     #                           (initial_grasp.grid_contacts: what the initial grasps are built from)
-    grasps: object            # initial_grasp.GraspCandidates
+    grasps: object  # initial_grasp.GraspCandidates
     q_best: np.ndarray | None  # (8,) rad, joint angles at the best initial grasp (None without one)
 
     def to_json(self, search) -> dict:
         g = self.grasps
         best = g.candidates[0] if g.candidates else None
-        return {"graspable": best is not None, "grid_step_m": search.initial_grid_step,
-                "contacts_per_finger": [len(s) for s in self.contacts], "mu_plan": g.mu_plan,
-                "initial_grasps": len(g.candidates),
-                "best_grasp_arclengths_m": None if best is None else list(best.arclengths),
-                "best_grasp_worst_stance_mu": None if best is None else best.worst_stance_mu,
-                "reason": g.reason}
+        return {
+            "graspable": best is not None,
+            "grid_step_m": search.initial_grid_step,
+            "contacts_per_finger": [len(s) for s in self.contacts],
+            "mu_plan": g.mu_plan,
+            "initial_grasps": len(g.candidates),
+            "best_grasp_arclengths_m": None if best is None else list(best.arclengths),
+            "best_grasp_worst_stance_mu": None if best is None else best.worst_stance_mu,
+            "reason": g.reason,
+        }
 
 
 def object_reach(scene, search) -> ObjectReach:
     from trajectotree.search.initial_grasp import grid_contacts, initial_grasp_candidates
     from trajectotree.search.reach import Reachability
+
     reach = Reachability(scene)
     grasps = initial_grasp_candidates(scene, search, reach)
     q = None
     if grasps.candidates:
         pose = np.asarray(scene.config.initial_pose, dtype=float)
-        q = np.concatenate([reach.closed_form_many(pose, i, [s])[0]
-                            for i, s in enumerate(grasps.candidates[0].arclengths)])
+        q = np.concatenate(
+            [reach.closed_form_many(pose, i, [s])[0] for i, s in enumerate(grasps.candidates[0].arclengths)]
+        )
     contacts = grid_contacts(scene, search.initial_grid_step, reach)
     return ObjectReach(contacts=contacts, grasps=grasps, q_best=q)
 
 
 def reach_line(reach: dict) -> str:
     counts = reach["contacts_per_finger"]
-    line = (f"reach at the initial pose: {counts} corner-free contacts (every {reach['grid_step_m']:g} m) per finger; ")
+    line = f"reach at the initial pose: {counts} corner-free contacts (every {reach['grid_step_m']:g} m) per finger; "
     if reach["graspable"]:
-        return line + (f"{reach['initial_grasps']} initial grasps, the best needs mu "
-                       f"{reach['best_grasp_worst_stance_mu']:.3g} of mu_plan {reach['mu_plan']:.3g}")
+        return line + (
+            f"{reach['initial_grasps']} initial grasps, the best needs mu "
+            f"{reach['best_grasp_worst_stance_mu']:.3g} of mu_plan {reach['mu_plan']:.3g}"
+        )
     return line + f"the hand CANNOT grasp the object: {reach['reason']}"
 
 
@@ -97,16 +125,19 @@ def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
     """The hand (at the best initial grasp, if any) and the object, each finger's reachable
     contacts (figures.figure_model), written atomically."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from trajectotree.figures.run import figure_model, save_figure
+
     if reach is None:
         fig = figure_model(scene)
     else:
         counts = [len(s) for s in reach.contacts]
-        note = (f"dots: reachable contacts {tuple(counts)}; "
-                + ("hand: best initial grasp" if reach.q_best is not None else "NO initial grasp"))
+        note = f"dots: reachable contacts {tuple(counts)}; " + (
+            "hand: best initial grasp" if reach.q_best is not None else "NO initial grasp"
+        )
         fig = figure_model(scene, q=reach.q_best, reachable=reach.contacts, note=note)
     try:
         save_figure(fig, path, dpi=120)
@@ -116,6 +147,7 @@ def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
 
 def run(args) -> int:
     from trajectotree.scene.plant import build_scene
+
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     config = config_from_args(args)
@@ -130,14 +162,20 @@ def run(args) -> int:
     else:
         o = summary["object"]
         size = f"{o['size_m'][0]:.3f} x {o['size_m'][1]:.3f} m box" if "size_m" in o else o["name"]
-        print(f"object: {size}, {o['mass_kg']:.3f} kg, I_zz {o['inertia_zz_kg_m2']:.3g} kg m^2, mu {o['mu']}; "
-              f"gravity {summary['gravity_W']}")
+        print(
+            f"object: {size}, {o['mass_kg']:.3f} kg, I_zz {o['inertia_zz_kg_m2']:.3g} kg m^2, mu {o['mu']}; "
+            f"gravity {summary['gravity_W']}"
+        )
         if o["kind"] == "polygon":
-            print(f"  vertices (m, counter-clockwise about the centroid): {o['vertices_m']}; "
-                  f"area {o['area_m2']:.4g} m^2, perimeter {o['perimeter_m']:.4g} m")
+            print(
+                f"  vertices (m, counter-clockwise about the centroid): {o['vertices_m']}; "
+                f"area {o['area_m2']:.4g} m^2, perimeter {o['perimeter_m']:.4g} m"
+            )
         for i, f in enumerate(summary["fingers"]):
-            print(f"finger {i}: base {f['base_W']} m, links {f['link_lengths_m']} m, "
-                  f"q in [{f['q_lower']}, {f['q_upper']}] rad, |tau| <= {f['tau_max']} N m")
+            print(
+                f"finger {i}: base {f['base_W']} m, links {f['link_lengths_m']} m, "
+                f"q in [{f['q_lower']}, {f['q_upper']}] rad, |tau| <= {f['tau_max']} N m"
+            )
         print(reach_line(summary["reach"]))
         if args.figure:
             print(f"figure: {args.figure}")

@@ -6,30 +6,40 @@ not a plan was found (`"success": false` with a reason), 2 on invalid input.
 
 from __future__ import annotations
 
-from trajectotree.cli.common import (FIGURE_SUFFIXES, add_config_options, check_output_file,
-                                      config_from_args, print_json)
+from trajectotree.cli.common import FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args, print_json
 from trajectotree.results import check_goal
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("search", help="find a finger-gaiting contact sequence for a goal rotation",
-                              description=__doc__)
-    p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, rad, in [-pi, pi]")
+    p = subparsers.add_parser(
+        "search", help="find a finger-gaiting contact sequence for a goal rotation", description=__doc__
+    )
+    p.add_argument(
+        "--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, rad, in [-pi, pi]"
+    )
     add_config_options(p)
-    p.add_argument("--figure", metavar="FILE.png",
-                   help="draw the sequence as keyframes (like the paper's Fig. 1); .png, .pdf or .svg")
-    p.add_argument("--json", action="store_true",
-                   help="print the plan as JSON (each node: object_pose, q, switching_finger, contacts)")
+    p.add_argument(
+        "--figure",
+        metavar="FILE.png",
+        help="draw the sequence as keyframes (like the paper's Fig. 1); .png, .pdf or .svg",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the plan as JSON (each node: object_pose, q, switching_finger, contacts)",
+    )
     p.set_defaults(run=run)
 
 
 def draw_plan(scene, plan, path: str) -> None:
     """The keyframes of `plan` (figures.figure_keyframes), written atomically."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from trajectotree.figures.run import figure_keyframes, save_figure
+
     fig = figure_keyframes(scene, plan)
     try:
         save_figure(fig, path, dpi=110)
@@ -40,6 +50,7 @@ def draw_plan(scene, plan, path: str) -> None:
 def run(args) -> int:
     from trajectotree.scene.plant import build_scene
     from trajectotree.search.tree import find_contact_plan
+
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
     if args.figure:
@@ -52,21 +63,29 @@ def run(args) -> int:
         print_json(plan.to_json())
         return 0
     s = plan.stats
-    print(f"goal {goal:+.4f} rad, N = {config.search.num_nodes}: "
-          f"{'plan found' if plan.success else 'no plan: ' + plan.reason}")
-    print(f"search {s.time_s:.3f} s, {s.expanded} nodes expanded, {s.generated} generated, "
-          f"{s.lp_calls} LP and {s.ik_calls} IK solves; {s.initial_grasps_searched} of "
-          f"{s.initial_grasp_candidates} candidate initial grasps searched")
-    print(f"friction: scene mu {config.scene.mu:g}, planned with mu_plan {plan.mu_plan:.3g} "
-          f"(search.friction_safety {config.search.friction_safety:g}); required mu = the least friction at "
-          f"which the grasp / the three fingers holding during the switch are in form closure")
+    print(
+        f"goal {goal:+.4f} rad, N = {config.search.num_nodes}: "
+        f"{'plan found' if plan.success else 'no plan: ' + plan.reason}"
+    )
+    print(
+        f"search {s.time_s:.3f} s, {s.expanded} nodes expanded, {s.generated} generated, "
+        f"{s.lp_calls} LP and {s.ik_calls} IK solves; {s.initial_grasps_searched} of "
+        f"{s.initial_grasp_candidates} candidate initial grasps searched"
+    )
+    print(
+        f"friction: scene mu {config.scene.mu:g}, planned with mu_plan {plan.mu_plan:.3g} "
+        f"(search.friction_safety {config.search.friction_safety:g}); required mu = the least friction at "
+        f"which the grasp / the three fingers holding during the switch are in form closure"
+    )
     for n, node in enumerate(plan.nodes):
         moved = "-" if node.switching_finger is None else str(node.switching_finger)
         contacts = " ".join(f"{v:.3f}" for v in node.arclengths)
         stance = "" if node.stance_required_mu is None else f"  stance required mu {node.stance_required_mu:.3f}"
-        print(f"  node {n}: theta {node.object_pose[2]:+.3f}  switching finger {moved}  "
-              f"arclengths [{contacts}] m  closure margin {node.closure_margin:.3f}  "
-              f"required mu {node.required_mu:.3f}{stance}")
+        print(
+            f"  node {n}: theta {node.object_pose[2]:+.3f}  switching finger {moved}  "
+            f"arclengths [{contacts}] m  closure margin {node.closure_margin:.3f}  "
+            f"required mu {node.required_mu:.3f}{stance}"
+        )
     if args.figure:
         print(f"figure: {args.figure}" if plan.success else "figure: not drawn (no plan)")
     return 0

@@ -11,26 +11,37 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.cli.common import (FIGURE_SUFFIXES, HTML_SUFFIXES, add_scene_options, check_output_file,
-                                      print_json, scene_overrides)
+from trajectotree.cli.common import (
+    FIGURE_SUFFIXES,
+    HTML_SUFFIXES,
+    add_scene_options,
+    check_output_file,
+    print_json,
+    scene_overrides,
+)
 from trajectotree.config import Config, ConfigError, check_controller, load_config
 from trajectotree.io import SIM_JSON, PlanFiles, read_plan_files, reading, write_json_atomic
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("simulate", help="execute a saved plan with a controller in a Drake simulation",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "simulate", help="execute a saved plan with a controller in a Drake simulation", description=__doc__
+    )
     p.add_argument("plan_dir", metavar="PLAN_DIR", help="folder with plan.npz and plan.json (from `trajectotree plan`)")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the run")
     p.add_argument("--gif", metavar="FILE", help="write a matplotlib GIF of the run (no WebGL needed)")
-    p.add_argument("--forces", metavar="FILE.png",
-                   help="plot each finger's simulated vs planned force on the box (.png, .pdf or .svg)")
+    p.add_argument(
+        "--forces",
+        metavar="FILE.png",
+        help="plot each finger's simulated vs planned force on the box (.png, .pdf or .svg)",
+    )
     p.add_argument("--meshcat", action="store_true", help="watch live in Meshcat on localhost (runs in real time)")
     p.add_argument("--json", action="store_true", help="print sim.json to stdout")
     group = p.add_argument_group("execution settings (default: the plan's config; the scene must match the plan)")
     add_scene_options(group, config_help="YAML file with the Config to execute with")
-    group.add_argument("--controller", metavar="NAME",
-                       help="grasp (object-level grasp control, the default) or paper (eq. 20)")
+    group.add_argument(
+        "--controller", metavar="NAME", help="grasp (object-level grasp control, the default) or paper (eq. 20)"
+    )
     group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of eq. 20 (--controller paper)")
     group.add_argument("--kv", type=float, metavar="NS/M", help="fingertip damping of eq. 20 (--controller paper)")
     group.add_argument("--object-kp", type=float, metavar="1/S2", help="grasp controller: box pose gain, s^-2")
@@ -41,8 +52,11 @@ def register(subparsers) -> None:
     world = p.add_argument_group("simulated world (differs from the plan's; the controller keeps the plan's values)")
     world.add_argument("--sim-mu", type=float, metavar="MU", help="friction coefficient of the simulated plant")
     world.add_argument("--sim-mass", type=float, metavar="KG", help="box mass of the simulated plant, kg")
-    world.add_argument("--push", metavar="FX,FY@T",
-                       help="push the box with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s")
+    world.add_argument(
+        "--push",
+        metavar="FX,FY@T",
+        help="push the box with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s",
+    )
     p.set_defaults(run=run)
 
 
@@ -50,9 +64,12 @@ def trajectory_arrays(files: PlanFiles) -> dict[str, np.ndarray]:
     """The plan.npz arrays of a plan folder as checked floats (reference.check_plan_arrays);
     ConfigError naming plan.npz when it holds none (planning produced none) or bad ones."""
     from trajectotree.execution.reference import check_plan_arrays
+
     if not files.arrays:  # save_plan writes an empty plan.npz when planning produced nothing
-        raise ConfigError(f"{str(files.npz_path)!r} holds no trajectory: planning produced none "
-                          f"(plan.json status: {files.data.get('status')!r})")
+        raise ConfigError(
+            f"{str(files.npz_path)!r} holds no trajectory: planning produced none "
+            f"(plan.json status: {files.data.get('status')!r})"
+        )
     with reading(files.npz_path):
         return check_plan_arrays(files.arrays)
 
@@ -79,12 +96,17 @@ def execution_config(args, plan_config: Config) -> Config:
     if args.controller is not None:
         check_controller(args.controller, "--controller")
     sim = {} if args.controller is None else {"controller": args.controller}
-    config = dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene),
-                                 controller=dataclasses.replace(config.controller, **gains),
-                                 sim=dataclasses.replace(config.sim, **sim))
-    differ = [f"scene.{f.name} = {getattr(config.scene, f.name)!r} (the plan's: {getattr(plan_config.scene, f.name)!r})"
-              for f in dataclasses.fields(config.scene)
-              if getattr(config.scene, f.name) != getattr(plan_config.scene, f.name)]
+    config = dataclasses.replace(
+        config,
+        scene=dataclasses.replace(config.scene, **scene),
+        controller=dataclasses.replace(config.controller, **gains),
+        sim=dataclasses.replace(config.sim, **sim),
+    )
+    differ = [
+        f"scene.{f.name} = {getattr(config.scene, f.name)!r} (the plan's: {getattr(plan_config.scene, f.name)!r})"
+        for f in dataclasses.fields(config.scene)
+        if getattr(config.scene, f.name) != getattr(plan_config.scene, f.name)
+    ]
     if differ:
         raise ConfigError("the given scene differs from the one the plan was made for: " + "; ".join(differ))
     return config
@@ -94,6 +116,7 @@ def plan_segments(files: PlanFiles) -> list:
     """The segments of a TrajectoTree plan (figures.segment_spans) for the forces figure;
     none for the baselines, whose contacts follow no contact sequence."""
     from trajectotree.figures.run import segment_spans
+
     if files.data.get("method") != "trajectotree":
         return []
     fingers = [node.get("switching_finger") for node in files.data.get("contact_sequence") or ()]
@@ -113,25 +136,29 @@ def world_conditions(args, config: Config) -> dict:
     here so that bad values stop the command before anything is written."""
     from trajectotree.config import check_range
     from trajectotree.execution.simulate import Conditions, parse_push
+
     if args.sim_mu is not None:
         check_range("--sim-mu", args.sim_mu, 0.0, 5.0, low_open=True)
     if args.sim_mass is not None:
         check_range("--sim-mass", args.sim_mass, 0.0, 100.0, low_open=True)
     push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
-    Conditions(mu=args.sim_mu, mass=args.sim_mass, push=push)   # raises ConfigError naming a bad value
+    Conditions(mu=args.sim_mu, mass=args.sim_mass, push=push)  # raises ConfigError naming a bad value
     return {"sim_mu": args.sim_mu, "sim_mass": args.sim_mass, "push": push}
 
 
 def run(args) -> int:
-    from trajectotree.figures.run import figure_finger_forces, save_figure
-    from trajectotree.io import save_sim
     from trajectotree.execution.playback import object_noun, start_meshcat
     from trajectotree.execution.reference import reference_from_arrays
-    from trajectotree.scene.plant import build_scene
     from trajectotree.execution.simulate import run_simulation
+    from trajectotree.figures.run import figure_finger_forces, save_figure
+    from trajectotree.io import save_sim
+    from trajectotree.scene.plant import build_scene
 
-    for option, path, suffixes in (("--html", args.html, HTML_SUFFIXES), ("--gif", args.gif, (".gif",)),
-                                   ("--forces", args.forces, FIGURE_SUFFIXES)):
+    for option, path, suffixes in (
+        ("--html", args.html, HTML_SUFFIXES),
+        ("--gif", args.gif, (".gif",)),
+        ("--forces", args.forces, FIGURE_SUFFIXES),
+    ):
         if path:
             check_output_file(option, path, suffixes)
     files = read_plan_files(args.plan_dir, "PLAN_DIR")
@@ -140,16 +167,19 @@ def run(args) -> int:
     conditions = world_conditions(args, config)
     plan_success = bool(files.data.get("success"))
     if not plan_success:
-        print(f"trajectotree simulate: warning: the plan in {args.plan_dir} did not converge (IPOPT status "
-              f"{str(files.data.get('status'))!r}); executing it anyway, sim.json records plan_success: false",
-              file=sys.stderr)
+        print(
+            f"trajectotree simulate: warning: the plan in {args.plan_dir} did not converge (IPOPT status "
+            f"{str(files.data.get('status'))!r}); executing it anyway, sim.json records plan_success: false",
+            file=sys.stderr,
+        )
     meshcat = None
     if args.meshcat:
         meshcat = start_meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
     reference = reference_from_arrays(arrays, build_scene(config.scene))
-    result = run_simulation(plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif,
-                            **conditions)
+    result = run_simulation(
+        plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif, **conditions
+    )
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_success)
     if args.forces:
@@ -158,10 +188,15 @@ def run(args) -> int:
         print_json(summary)
     else:
         drop = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
-        print(f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: "
-              f"{object_noun(config.scene)} {drop}; "
-              f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad")
-        print(f"wrote {Path(args.plan_dir) / 'sim.json'}" + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p))
+        print(
+            f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: "
+            f"{object_noun(config.scene)} {drop}; "
+            f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad"
+        )
+        print(
+            f"wrote {Path(args.plan_dir) / 'sim.json'}"
+            + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)
+        )
     if meshcat is not None and sys.stdin.isatty():
         input("Meshcat shows the recording; press Enter to exit. ")
     return 0

@@ -13,42 +13,77 @@ from __future__ import annotations
 import math
 import signal
 
-from trajectotree.cli.common import (add_config_options, check_graspable, check_output_dir, config_from_args,
-                                      print_json)
+from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
 from trajectotree.config import CONTROLLERS, check_controller
 from trajectotree.experiments.executions import CONDITIONS, check_condition, run_executions
 from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("sweep", help="run the paper's experiment (random goals x methods), resumable",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "sweep", help="run the paper's experiment (random goals x methods), resumable", description=__doc__
+    )
     p.add_argument("--goals", type=int, default=60, help="number of goal rotations (default: 60, as in the paper)")
     p.add_argument("--seed", type=int, default=0, help="seed of the goal sampler (default: 0)")
-    p.add_argument("--max-goal", type=float, default=math.pi, metavar="RAD",
-                   help="goals are uniform in [-RAD, RAD] (default: pi)")
-    p.add_argument("--methods", nargs="+", default=list(METHODS), metavar="METHOD",
-                   help=f"planners to run (default: all; valid: {', '.join(METHODS)})")
+    p.add_argument(
+        "--max-goal", type=float, default=math.pi, metavar="RAD", help="goals are uniform in [-RAD, RAD] (default: pi)"
+    )
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        default=list(METHODS),
+        metavar="METHOD",
+        help=f"planners to run (default: all; valid: {', '.join(METHODS)})",
+    )
     p.add_argument("--simulate", action="store_true", help="execute every plan in simulation (tracking errors, drops)")
-    p.add_argument("--controllers", nargs="+", metavar="CONTROLLER",
-                   help=f"then execute every plan with each of these controllers (valid: {', '.join(CONTROLLERS)}) "
-                        "under each of --conditions; resumable, and may be added to a finished sweep")
-    p.add_argument("--conditions", nargs="+", metavar="CONDITION",
-                   help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
-                        "default: nominal): see `trajectotree.experiments.executions`")
-    p.add_argument("--out", default="sweep", metavar="DIR",
-                   help="sweep directory (default: ./sweep); one sweep at a time (it holds DIR/.lock)")
-    p.add_argument("--workers", type=int, metavar="K",
-                   help="local worker processes, one trial each at a time (default: the number of CPUs)")
+    p.add_argument(
+        "--controllers",
+        nargs="+",
+        metavar="CONTROLLER",
+        help=f"then execute every plan with each of these controllers (valid: {', '.join(CONTROLLERS)}) "
+        "under each of --conditions; resumable, and may be added to a finished sweep",
+    )
+    p.add_argument(
+        "--conditions",
+        nargs="+",
+        metavar="CONDITION",
+        help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
+        "default: nominal): see `trajectotree.experiments.executions`",
+    )
+    p.add_argument(
+        "--out",
+        default="sweep",
+        metavar="DIR",
+        help="sweep directory (default: ./sweep); one sweep at a time (it holds DIR/.lock)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="K",
+        help="local worker processes, one trial each at a time (default: the number of CPUs)",
+    )
     p.add_argument("--scheduler", metavar="ADDRESS", help="run the trials on this Dask scheduler instead")
-    p.add_argument("--scheduler-timeout", type=float, default=30.0, metavar="S",
-                   help="seconds to wait for the Dask scheduler (default: 30)")
-    p.add_argument("--time-limit", type=float, default=1800.0, metavar="S",
-                   help="wall-clock limit per trial, plan + simulation (default: 1800); "
-                        "a trial past it is killed and recorded as a timeout; may change between runs of a sweep")
-    p.add_argument("--retry-errors", action="store_true",
-                   help="rerun trials recorded with an error (crash, timeout) instead of skipping them, "
-                        "with the --time-limit given now")
+    p.add_argument(
+        "--scheduler-timeout",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="seconds to wait for the Dask scheduler (default: 30)",
+    )
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        default=1800.0,
+        metavar="S",
+        help="wall-clock limit per trial, plan + simulation (default: 1800); "
+        "a trial past it is killed and recorded as a timeout; may change between runs of a sweep",
+    )
+    p.add_argument(
+        "--retry-errors",
+        action="store_true",
+        help="rerun trials recorded with an error (crash, timeout) instead of skipping them, "
+        "with the --time-limit given now",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     add_config_options(p, formulation=True)
@@ -62,27 +97,53 @@ def _interrupt(signum, frame):
 def run(args) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     check_output_dir("--out", args.out)
-    spec = SweepSpec(goals=args.goals, seed=args.seed, methods=tuple(args.methods), simulate=args.simulate,
-                     config=config_from_args(args), max_goal=args.max_goal, time_limit_s=args.time_limit)
+    spec = SweepSpec(
+        goals=args.goals,
+        seed=args.seed,
+        methods=tuple(args.methods),
+        simulate=args.simulate,
+        config=config_from_args(args),
+        max_goal=args.max_goal,
+        time_limit_s=args.time_limit,
+    )
     if spec.config.scene.object.vertices is not None:  # a polygon: refused here if the hand cannot grasp it
         from trajectotree.scene.plant import build_scene
+
         check_graspable(build_scene(spec.config.scene), spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
     if conditions and not controllers:
         controllers = [spec.config.sim.controller]
-    summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler,
-                        scheduler_timeout_s=args.scheduler_timeout, retry_errors=args.retry_errors,
-                        progress=not args.no_progress)
-    ran = run_executions(args.out, controllers=controllers, conditions=conditions or ["nominal"],
-                         gains=spec.config.controller, sim=spec.config.sim, workers=args.workers,
-                         progress=not args.no_progress) if controllers else None
+    summary = run_sweep(
+        spec,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        scheduler_timeout_s=args.scheduler_timeout,
+        retry_errors=args.retry_errors,
+        progress=not args.no_progress,
+    )
+    ran = (
+        run_executions(
+            args.out,
+            controllers=controllers,
+            conditions=conditions or ["nominal"],
+            gains=spec.config.controller,
+            sim=spec.config.sim,
+            workers=args.workers,
+            progress=not args.no_progress,
+        )
+        if controllers
+        else None
+    )
     if args.json:
         print_json({**summary.__dict__, "executions_run": ran})
     else:
         print(summary.line())
         if ran is not None:
-            print(f"executions: {ran} run ({' '.join(controllers)} x {' '.join(conditions or ['nominal'])}); "
-                  "the report tabulates them in executions.md")
+            print(
+                f"executions: {ran} run ({' '.join(controllers)} x {' '.join(conditions or ['nominal'])}); "
+                "the report tabulates them in executions.md"
+            )
         print(f"next: trajectotree report {args.out}")
     return 0

@@ -37,9 +37,9 @@ from pydrake.solvers import MathematicalProgram, OsqpSolver, SolverOptions
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains, SceneConfig
+from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
-from trajectotree.execution.reference import GraspSchedule
 from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene, add_hand_and_box
 
 FINGERTIP_VECTOR_SIZE = 2 * NUM_FINGERS  # (x, y) of each finger, finger-major
@@ -66,7 +66,8 @@ class ImpedanceController(LeafSystem):
         self.v_ref_port = self.DeclareVectorInputPort("v_WF_ref", FINGERTIP_VECTOR_SIZE)
         self.f_ref_port = self.DeclareVectorInputPort("f_W_ref", FINGERTIP_VECTOR_SIZE)
         self.actuation_port = self.DeclareVectorOutputPort(
-            "actuation", BasicVector(self._plant.num_actuators()), self.CalcActuation)
+            "actuation", BasicVector(self._plant.num_actuators()), self.CalcActuation
+        )
 
     def fingertip_kinematics(self, hand_state) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """p_WF (4, 2), v_WF (4, 2) and J_WF (4, 2, nv) at a hand state."""
@@ -78,22 +79,31 @@ class ImpedanceController(LeafSystem):
         for i, frame in enumerate(self._tip_frames):
             p_WF[i] = frame.CalcPoseInWorld(ctx).translation()[:2]
             J_WF[i] = plant.CalcJacobianTranslationalVelocity(
-                ctx, JacobianWrtVariable.kV, frame, np.zeros(3), plant.world_frame(), plant.world_frame())[:2]
+                ctx, JacobianWrtVariable.kV, frame, np.zeros(3), plant.world_frame(), plant.world_frame()
+            )[:2]
         return p_WF, J_WF @ v, J_WF
 
     def compute_actuation(self, hand_state, p_ref, v_ref, f_ref) -> np.ndarray:
         """Eq. 20 for one hand state and references (each (4, 2) or flat (8,))."""
         p_WF, v_WF, J_WF = self.fingertip_kinematics(hand_state)
         shape = (NUM_FINGERS, 2)
-        F = (self.gains.kp * (np.reshape(p_ref, shape) - p_WF) + self.gains.kv * (np.reshape(v_ref, shape) - v_WF)
-             + np.reshape(f_ref, shape))
+        F = (
+            self.gains.kp * (np.reshape(p_ref, shape) - p_WF)
+            + self.gains.kv * (np.reshape(v_ref, shape) - v_WF)
+            + np.reshape(f_ref, shape)
+        )
         tau_v = np.einsum("fiv,fi->v", J_WF, F) - self._plant.CalcGravityGeneralizedForces(self._plant_context)
         return self._B.T @ tau_v
 
     def CalcActuation(self, context, output):
-        output.SetFromVector(self.compute_actuation(
-            self.hand_state_port.Eval(context), self.p_ref_port.Eval(context),
-            self.v_ref_port.Eval(context), self.f_ref_port.Eval(context)))
+        output.SetFromVector(
+            self.compute_actuation(
+                self.hand_state_port.Eval(context),
+                self.p_ref_port.Eval(context),
+                self.v_ref_port.Eval(context),
+                self.f_ref_port.Eval(context),
+            )
+        )
 
 
 class HandKinematics:
@@ -134,19 +144,21 @@ class GraspForceQp:
 
     def __init__(self, mu: float, torque_length: float, wrench_weight: float):
         self._prog = MathematicalProgram()
-        self._z = self._prog.NewContinuousVariables(2 * NUM_FINGERS, "lambda")   # finger-major (n, t)
-        self._cost = self._prog.AddQuadraticCost(np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z,
-                                                 is_convex=True)
-        self._bounds = self._prog.AddBoundingBoxConstraint(np.zeros(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS),
-                                                           self._z)
+        self._z = self._prog.NewContinuousVariables(2 * NUM_FINGERS, "lambda")  # finger-major (n, t)
+        self._cost = self._prog.AddQuadraticCost(
+            np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z, is_convex=True
+        )
+        self._bounds = self._prog.AddBoundingBoxConstraint(
+            np.zeros(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z
+        )
         cone = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
-        for i in range(NUM_FINGERS):   # lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0
-            cone[2 * i, 2 * i:2 * i + 2] = (-mu, 1.0)
-            cone[2 * i + 1, 2 * i:2 * i + 2] = (-mu, -1.0)
+        for i in range(NUM_FINGERS):  # lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0
+            cone[2 * i, 2 * i : 2 * i + 2] = (-mu, 1.0)
+            cone[2 * i + 1, 2 * i : 2 * i + 2] = (-mu, -1.0)
         self._prog.AddLinearConstraint(cone, np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z)
         self._mu = mu
         self._identity = np.eye(2 * NUM_FINGERS)
-        self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length ** 2])
+        self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length**2])
         self._solver = OsqpSolver()
         self._options = SolverOptions()
         for name, value in (("eps_abs", 1e-6), ("eps_rel", 1e-6), ("polishing", 0), ("verbose", 0)):
@@ -158,15 +170,16 @@ class GraspForceQp:
         forces, clipped to the bounds, if OSQP fails."""
         z_plan = lambda_plan.ravel()
         GtW = G.T @ self._W
-        self._cost.evaluator().UpdateCoefficients(2.0 * (GtW @ G + self._identity),
-                                                  -2.0 * (GtW @ wrench + z_plan), 0.0, True)
+        self._cost.evaluator().UpdateCoefficients(
+            2.0 * (GtW @ G + self._identity), -2.0 * (GtW @ wrench + z_plan), 0.0, True
+        )
         t_max = self._mu * hi
         self._bounds.evaluator().set_bounds(np.column_stack([lo, -t_max]).ravel(), np.column_stack([hi, t_max]).ravel())
         result = self._solver.Solve(self._prog, None, self._options)
         if not result.is_success():
             n = np.clip(lambda_plan[:, 0], lo, hi)
             return np.column_stack([n, np.clip(lambda_plan[:, 1], -self._mu * n, self._mu * n)])
-        return result.get_x_val().reshape(NUM_FINGERS, 2)   # z is the program's only variable
+        return result.get_x_val().reshape(NUM_FINGERS, 2)  # z is the program's only variable
 
 
 class GraspController(LeafSystem):
@@ -184,11 +197,11 @@ class GraspController(LeafSystem):
         self._kinematics, self._tip_radius = HandKinematics(scene.fingers, c.gravity), scene.tip_radius
         self._gravity = c.gravity
         self._mass = c.box_mass
-        self._inertia = c.shape.inertia(c.box_mass)   # a uniform plate (the box: m (w^2 + h^2) / 12)
+        self._inertia = c.shape.inertia(c.box_mass)  # a uniform plate (the box: m (w^2 + h^2) / 12)
         # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
         self._qp = GraspForceQp(mu, c.shape.circumradius, gains.wrench_weight)
-        B = scene.plant.MakeActuationMatrix()                       # (nv, nu), a selection
-        self._u_from_tau = B[scene.hand_v_indices].T                 # hand-joint torques -> actuation
+        B = scene.plant.MakeActuationMatrix()  # (nv, nu), a selection
+        self._u_from_tau = B[scene.hand_v_indices].T  # hand-joint torques -> actuation
         self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
         self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
         state = self.DeclareDiscreteState(B.shape[1])
@@ -197,8 +210,11 @@ class GraspController(LeafSystem):
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
 
     def UpdateActuation(self, context, discrete_state):
-        discrete_state.set_value(self.compute_actuation(
-            context.get_time(), self.box_state_port.Eval(context), self.hand_state_port.Eval(context)))
+        discrete_state.set_value(
+            self.compute_actuation(
+                context.get_time(), self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
+            )
+        )
         return EventStatus.Succeeded()
 
     def desired_wrench(self, n: int, box_state) -> np.ndarray:
@@ -218,14 +234,19 @@ class GraspController(LeafSystem):
         s, g = self.schedule, self.gains
         n_W = s.n_B[n] @ rotation_2d(box_state[2]).T
         t_W = perp(n_W)
-        r_W = p_WF - self._tip_radius * n_W - box_state[:2]     # contact points, from the box origin
+        r_W = p_WF - self._tip_radius * n_W - box_state[:2]  # contact points, from the box origin
         G = np.empty((3, 2 * NUM_FINGERS))
         G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
         G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
         G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
         scale = s.force_scale[n]
-        lam = self._qp.solve(G, self.desired_wrench(n, box_state), s.lambda_plan[n],
-                             scale * g.min_normal_force, scale * g.max_normal_force)
+        lam = self._qp.solve(
+            G,
+            self.desired_wrench(n, box_state),
+            s.lambda_plan[n],
+            scale * g.min_normal_force,
+            scale * g.max_normal_force,
+        )
         return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
 
     def compute_actuation(self, t: float, box_state, hand_state) -> np.ndarray:
@@ -248,6 +269,6 @@ class GraspController(LeafSystem):
         # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
         # contact point's Jacobian J_C = J + perp(r_FC) [1 1] (link 2 turns at q1dot + q2dot), a
         # tangential force also turns the second link (without it a static hold settled 0.035 rad off).
-        lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)       # perp(r_FC) . f
+        lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)  # perp(r_FC) . f
         tau = np.einsum("fij,fi->fj", J_WF, spring + f_W) + lever[:, None] + g_hand
         return self._u_from_tau @ tau.ravel()

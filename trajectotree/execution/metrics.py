@@ -65,18 +65,24 @@ def evaluate(log: SimLog, drop_distance: float) -> SimResult:
     dropped, drop_time = detect_drop(log.t, log.x, log.x_plan, drop_distance)
     abs_error = hold_after_drop(log.t, absolute_error(log.x, log.x_plan), drop_time)
     mae = mean_absolute_error(abs_error)
-    return SimResult(**{f.name: getattr(log, f.name) for f in fields(SimLog)}, abs_error=abs_error,
-                     mae_x=float(mae[0]), mae_y=float(mae[1]), mae_theta=float(mae[2]),
-                     final_error=tuple(float(v) for v in final_error(abs_error)),
-                     dropped=dropped, drop_time_s=drop_time)
+    return SimResult(
+        **{f.name: getattr(log, f.name) for f in fields(SimLog)},
+        abs_error=abs_error,
+        mae_x=float(mae[0]),
+        mae_y=float(mae[1]),
+        mae_theta=float(mae[2]),
+        final_error=tuple(float(v) for v in final_error(abs_error)),
+        dropped=dropped,
+        drop_time_s=drop_time,
+    )
 
 
 @dataclass(frozen=True)
 class ConfidenceInterval:
-    mean: np.ndarray    # sample mean across trials
-    lower: np.ndarray   # lower bound of the interval
-    upper: np.ndarray   # upper bound of the interval
-    count: int          # number of trials
+    mean: np.ndarray  # sample mean across trials
+    lower: np.ndarray  # lower bound of the interval
+    upper: np.ndarray  # upper bound of the interval
+    count: int  # number of trials
 
 
 def mean_confidence_interval(samples, confidence: float = 0.95, axis: int = 0) -> ConfidenceInterval:

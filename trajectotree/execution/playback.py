@@ -26,7 +26,7 @@ from trajectotree.config import Config, SceneConfig
 from trajectotree.io import write_bytes_atomic
 from trajectotree.scene.plant import add_hand_and_box
 
-VIEW_HALF_WIDTH = 0.32   # m, the planar view shows [-0.32, 0.32]^2: the hand's full reach
+VIEW_HALF_WIDTH = 0.32  # m, the planar view shows [-0.32, 0.32]^2: the hand's full reach
 PUBLISH_PERIOD = 1 / 32  # s, recorded frame period of the playback
 PLAN_GHOST_PATH = "/plan/box"
 
@@ -46,8 +46,13 @@ def start_meshcat() -> Meshcat:
 
 def set_planar_view(meshcat: Meshcat) -> None:
     """Orthographic camera above the x-y plane looking down -z, +y up."""
-    meshcat.Set2dRenderMode(X_WC=RigidTransform(RotationMatrix.MakeXRotation(-math.pi / 2), [0.0, 0.0, 5.0]),
-                            xmin=-VIEW_HALF_WIDTH, xmax=VIEW_HALF_WIDTH, ymin=-VIEW_HALF_WIDTH, ymax=VIEW_HALF_WIDTH)
+    meshcat.Set2dRenderMode(
+        X_WC=RigidTransform(RotationMatrix.MakeXRotation(-math.pi / 2), [0.0, 0.0, 5.0]),
+        xmin=-VIEW_HALF_WIDTH,
+        xmax=VIEW_HALF_WIDTH,
+        ymin=-VIEW_HALF_WIDTH,
+        ymax=VIEW_HALF_WIDTH,
+    )
 
 
 def add_visualizer(builder: DiagramBuilder, scene_graph, meshcat: Meshcat) -> MeshcatVisualizer:
@@ -77,8 +82,10 @@ def animate_plan_ghost(animation, times, poses) -> None:
 # Legend entries (CSS swatch, text); the colours are the SDF's diffuse colours and the ghost's.
 LEGEND_BOX = ("background: rgb(51, 115, 204)", "box")
 LEGEND_PLANNED = ("border: 2px solid rgb(26, 178, 51)", "planned box pose (outline)")
-LEGEND_FINGERS = ("background: linear-gradient(90deg, rgb(89, 89, 102) 60%, rgb(217, 89, 51) 60%)",
-                  "fingers 0-3: links (grey), fingertips (orange)")
+LEGEND_FINGERS = (
+    "background: linear-gradient(90deg, rgb(89, 89, 102) 60%, rgb(217, 89, 51) 60%)",
+    "fingers 0-3: links (grey), fingertips (orange)",
+)
 SIMULATED_LEGEND = (LEGEND_BOX, LEGEND_PLANNED, LEGEND_FINGERS)
 
 
@@ -152,22 +159,32 @@ def decorate_page(html: str, *, title: str, legend, drop_time_s: float | None = 
     drop = "null" if drop_time_s is None else f"{float(drop_time_s):.6f}"
     marker = "" if drop_time_s is None else '<div id="tt-drop"></div>'
     note = "" if drop_time_s is None else '<div id="tt-drop-note"></div>'
-    items = "".join(f'<div><span class="tt-swatch" style="{escape(style)}"></span>{escape(text)}</div>'
-                    for style, text in legend)
-    overlay = (f'<style>{PAGE_CSS}</style><div id="tt-overlay"><div id="tt-title">{escape(title)}</div>'
-               f'<div id="tt-time"></div><div id="tt-bar"><div id="tt-bar-fill"></div>{marker}</div>{note}</div>'
-               f'<div id="tt-legend">{items}</div>'
-               f'<script>{PAGE_SCRIPT % {"half": VIEW_HALF_WIDTH, "drop": drop, "noun": json.dumps(noun)}}</script>')
+    items = "".join(
+        f'<div><span class="tt-swatch" style="{escape(style)}"></span>{escape(text)}</div>' for style, text in legend
+    )
+    overlay = (
+        f'<style>{PAGE_CSS}</style><div id="tt-overlay"><div id="tt-title">{escape(title)}</div>'
+        f'<div id="tt-time"></div><div id="tt-bar"><div id="tt-bar-fill"></div>{marker}</div>{note}</div>'
+        f'<div id="tt-legend">{items}</div>'
+        f"<script>{PAGE_SCRIPT % {'half': VIEW_HALF_WIDTH, 'drop': drop, 'noun': json.dumps(noun)}}</script>"
+    )
     start, end = html.find("<title>"), html.find("</title>")
     if start >= 0 and end > start:
-        html = html[:start] + f"<title>{escape(title)}</title>" + html[end + len("</title>"):]
+        html = html[:start] + f"<title>{escape(title)}</title>" + html[end + len("</title>") :]
     body_end = html.rfind("</body>")
     return html[:body_end] + overlay + html[body_end:] if body_end >= 0 else html + overlay
 
 
-def save_recording_html(meshcat: Meshcat, visualizer: MeshcatVisualizer, path: str | Path, *,
-                        title: str = "TrajectoTree: simulated run", legend=SIMULATED_LEGEND,
-                        drop_time_s: float | None = None, noun: str = "box") -> None:
+def save_recording_html(
+    meshcat: Meshcat,
+    visualizer: MeshcatVisualizer,
+    path: str | Path,
+    *,
+    title: str = "TrajectoTree: simulated run",
+    legend=SIMULATED_LEGEND,
+    drop_time_s: float | None = None,
+    noun: str = "box",
+) -> None:
     """Stops the visualizer's recording, publishes it and writes the static HTML, with a
     title, a time readout (marking the drop at drop_time_s) and a legend (decorate_page)."""
     visualizer.StopRecording()
@@ -176,8 +193,9 @@ def save_recording_html(meshcat: Meshcat, visualizer: MeshcatVisualizer, path: s
     write_bytes_atomic(path, page.encode())
 
 
-def write_pose_html(config: Config, times, object_poses, joint_angles, path: str | Path,
-                    meshcat: Meshcat | None = None) -> None:
+def write_pose_html(
+    config: Config, times, object_poses, joint_angles, path: str | Path, meshcat: Meshcat | None = None
+) -> None:
     """HTML playback of given poses without physics: each sample is published at
     its time with set_transforms_while_recording=False (the plan's trajectory)."""
     meshcat = meshcat or start_meshcat()
@@ -197,14 +215,21 @@ def write_pose_html(config: Config, times, object_poses, joint_angles, path: str
         plant.SetPositions(plant_context, hand, q)
         diagram.ForcedPublish(context)
     noun = object_noun(config.scene)
-    save_recording_html(meshcat, visualizer, path, title="TrajectoTree: planned trajectory",
-                        legend=(LEGEND_BOX[:1] + (f"{noun} (planned pose)",), LEGEND_FINGERS), noun=noun)
+    save_recording_html(
+        meshcat,
+        visualizer,
+        path,
+        title="TrajectoTree: planned trajectory",
+        legend=(LEGEND_BOX[:1] + (f"{noun} (planned pose)",), LEGEND_FINGERS),
+        noun=noun,
+    )
 
 
 def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | None = None) -> None:
     """Plays the PLANNED trajectory of `plan` (a PlanResult or a Reference) in an HTML file."""
     from trajectotree.execution.reference import reference_from_plan
     from trajectotree.scene.plant import build_scene
+
     reference = reference_from_plan(plan, build_scene(config.scene))
     times = np.arange(0.0, reference.duration + 1e-9, PUBLISH_PERIOD)
     poses = reference.object_pose_at(times)
@@ -212,15 +237,18 @@ def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | N
     write_pose_html(config, times, poses, q, path, meshcat)
 
 
-def write_gif(scene, times, object_poses, joint_angles, path: str | Path, *, planned_poses=None,
-              fps: float = 10.0) -> None:
+def write_gif(
+    scene, times, object_poses, joint_angles, path: str | Path, *, planned_poses=None, fps: float = 10.0
+) -> None:
     """A matplotlib GIF (PillowWriter, no ffmpeg) of the object and hand, the planned pose as an outline."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     from trajectotree.figures.run import plot_hand, plot_object
+
     times = np.asarray(times)
     frames = np.unique(np.searchsorted(times, np.arange(times[0], times[-1] + 1e-9, 1.0 / fps)).clip(0, len(times) - 1))
     shape = scene.config.shape

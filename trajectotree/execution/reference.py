@@ -22,12 +22,12 @@ from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS, Scene
 
 @dataclass(frozen=True)
 class Reference:
-    t: np.ndarray      # (K,) s, knot times, increasing, t[0] = 0
-    x: np.ndarray      # (K, 3) planned object pose (x m, y m, theta rad)
-    q: np.ndarray      # (K, 8) rad, planned joint angles (finger-major)
-    p_WF: np.ndarray   # (K, 4, 2) m, fingertip sphere centres in W
-    v_WF: np.ndarray   # (K, 4, 2) m/s, fingertip velocities in W
-    f_W: np.ndarray    # (K, 4, 2) N, force of each finger on the box, in W
+    t: np.ndarray  # (K,) s, knot times, increasing, t[0] = 0
+    x: np.ndarray  # (K, 3) planned object pose (x m, y m, theta rad)
+    q: np.ndarray  # (K, 8) rad, planned joint angles (finger-major)
+    p_WF: np.ndarray  # (K, 4, 2) m, fingertip sphere centres in W
+    v_WF: np.ndarray  # (K, 4, 2) m/s, fingertip velocities in W
+    f_W: np.ndarray  # (K, 4, 2) N, force of each finger on the box, in W
     xdot: np.ndarray | None = None  # (K, 3) planned object velocity (m/s, m/s, rad/s); None: finite differences of x
     p_WC: np.ndarray | None = None  # (K, 4, 2) m, where each finger's force acts; None: nearest box point to p_WF
 
@@ -59,8 +59,19 @@ def check_plan_arrays(arrays) -> dict[str, np.ndarray]:
         raise ValueError(f"plan arrays lack {missing}")
     out = {name: np.asarray(arrays[name], dtype=float) for name in PLAN_ARRAYS}
     K = out["t"].shape[0] if out["t"].ndim == 1 else -1
-    shapes = {"t": (K,), "x": (K, 3), "xdot": (K, 3), "q": (K, 8), "qdot": (K, 8), "tau": (K, 8),
-              "lambda_n": (K, 4), "lambda_t": (K, 4), "f_W": (K, 4, 2), "p_W_tip": (K, 4, 2), "p_W_C": (K, 4, 2)}
+    shapes = {
+        "t": (K,),
+        "x": (K, 3),
+        "xdot": (K, 3),
+        "q": (K, 8),
+        "qdot": (K, 8),
+        "tau": (K, 8),
+        "lambda_n": (K, 4),
+        "lambda_t": (K, 4),
+        "f_W": (K, 4, 2),
+        "p_W_tip": (K, 4, 2),
+        "p_W_C": (K, 4, 2),
+    }
     for name, shape in shapes.items():
         if K < 2 or out[name].shape != shape:
             raise ValueError(f"plan array {name!r} has shape {out[name].shape}, expected {shape} with K >= 2 knots")
@@ -75,10 +86,18 @@ def reference_from_arrays(arrays, scene: Scene) -> Reference:
     """The reference of a plan from its plan.npz arrays. Fingertip velocities are
     J_WF(q) qdot, consistent with the planned joint motion."""
     a = check_plan_arrays(arrays)
-    J = np.array([scene.fingertip_jacobians(q) for q in a["q"]])       # (K, 4, 2, 8)
+    J = np.array([scene.fingertip_jacobians(q) for q in a["q"]])  # (K, 4, 2, 8)
     v_WF = np.einsum("kfij,kj->kfi", J, a["qdot"])
-    return Reference(t=a["t"] - a["t"][0], x=a["x"], q=a["q"], p_WF=a["p_W_tip"], v_WF=v_WF, f_W=a["f_W"],
-                     xdot=a["xdot"], p_WC=a.get("p_W_C"))
+    return Reference(
+        t=a["t"] - a["t"][0],
+        x=a["x"],
+        q=a["q"],
+        p_WF=a["p_W_tip"],
+        v_WF=v_WF,
+        f_W=a["f_W"],
+        xdot=a["xdot"],
+        p_WC=a.get("p_W_C"),
+    )
 
 
 def reference_from_plan(plan, scene: Scene) -> Reference:
@@ -96,9 +115,18 @@ def reference_from_plan(plan, scene: Scene) -> Reference:
     return reference_from_arrays(arrays, scene)
 
 
-def static_grasp_forces(p_BC, n_B, pose, *, mass: float, gravity: float, mu: float,
-                        min_normal_force: float, friction_margin: float = 0.8,
-                        lifted: int | None = None) -> np.ndarray | None:
+def static_grasp_forces(
+    p_BC,
+    n_B,
+    pose,
+    *,
+    mass: float,
+    gravity: float,
+    mu: float,
+    min_normal_force: float,
+    friction_margin: float = 0.8,
+    lifted: int | None = None,
+) -> np.ndarray | None:
     """Finger forces on the box (4, 2) in W that hold it still against gravity:
     the least-squares forces with every normal force >= min_normal_force (the
     squeeze) inside a friction cone shrunk by friction_margin; finger `lifted`
@@ -106,7 +134,7 @@ def static_grasp_forces(p_BC, n_B, pose, *, mass: float, gravity: float, mu: flo
     R_WB = rotation_2d(pose[2])
     n_W = (R_WB @ np.asarray(n_B, dtype=float).T).T
     t_W = np.stack([-n_W[:, 1], n_W[:, 0]], axis=1)
-    r_W = (R_WB @ np.asarray(p_BC, dtype=float).T).T          # contact points relative to the box origin
+    r_W = (R_WB @ np.asarray(p_BC, dtype=float).T).T  # contact points relative to the box origin
     prog = MathematicalProgram()
     lam_n = prog.NewContinuousVariables(NUM_FINGERS, "lambda_n")
     lam_t = prog.NewContinuousVariables(NUM_FINGERS, "lambda_t")
@@ -131,8 +159,16 @@ def static_grasp_forces(p_BC, n_B, pose, *, mass: float, gravity: float, mu: flo
     return -ln[:, None] * n_W + lt[:, None] * t_W
 
 
-def static_hold_reference(scene: Scene, arclengths, *, min_normal_force: float, duration: float,
-                          pose=None, lifted: int | None = None, lift: float = 0.01) -> Reference | None:
+def static_hold_reference(
+    scene: Scene,
+    arclengths,
+    *,
+    min_normal_force: float,
+    duration: float,
+    pose=None,
+    lifted: int | None = None,
+    lift: float = 0.01,
+) -> Reference | None:
     """A constant reference that holds the box at `pose` (default: the scene's
     initial pose) with contacts at `arclengths`: fingertip centres one tip radius
     outside the faces, joint angles by IK, forces from `static_grasp_forces`.
@@ -148,17 +184,24 @@ def static_hold_reference(scene: Scene, arclengths, *, min_normal_force: float, 
     p_WF = np.array([box_to_world(pose, p + (scene.tip_radius + g) * n) for p, n, g in zip(p_BC, n_B, gaps)])
     q = np.zeros(NUM_HAND_JOINTS)
     for i, finger in enumerate(scene.fingers):
-        q_i = finger.ik_one(p_WF[i], elbow=1, blas_dot=True)   # the model's elbow side; d @ d as always here
+        q_i = finger.ik_one(p_WF[i], elbow=1, blas_dot=True)  # the model's elbow side; d @ d as always here
         if q_i is None:
             return None
-        q[2 * i:2 * i + 2] = q_i
-    f_W = static_grasp_forces(p_BC, n_B, pose, mass=c.box_mass, gravity=c.gravity, mu=c.mu,
-                              min_normal_force=min_normal_force, lifted=lifted)
+        q[2 * i : 2 * i + 2] = q_i
+    f_W = static_grasp_forces(
+        p_BC, n_B, pose, mass=c.box_mass, gravity=c.gravity, mu=c.mu, min_normal_force=min_normal_force, lifted=lifted
+    )
     if f_W is None:
         return None
     K = 2
-    return Reference(t=np.array([0.0, duration]), x=np.tile(pose, (K, 1)), q=np.tile(q, (K, 1)),
-                     p_WF=np.tile(p_WF, (K, 1, 1)), v_WF=np.zeros((K, NUM_FINGERS, 2)), f_W=np.tile(f_W, (K, 1, 1)))
+    return Reference(
+        t=np.array([0.0, duration]),
+        x=np.tile(pose, (K, 1)),
+        q=np.tile(q, (K, 1)),
+        p_WF=np.tile(p_WF, (K, 1, 1)),
+        v_WF=np.zeros((K, NUM_FINGERS, 2)),
+        f_W=np.tile(f_W, (K, 1, 1)),
+    )
 
 
 @dataclass(frozen=True)
@@ -168,16 +211,16 @@ class GraspSchedule:
     a finger is in contact where its planned fingertip is within `contact_distance`
     of the planned box, so no planner internals are needed."""
 
-    period: float              # s, control period
-    X: np.ndarray              # (N, 3) planned object pose: cubic Hermite through the plan's x, xdot
-    V: np.ndarray              # (N, 3) its velocity (m/s, m/s, rad/s)
-    A: np.ndarray              # (N, 3) its acceleration
-    p_BF: np.ndarray           # (N, 4, 2) m, fingertip targets in B (a swinging finger lifted to >= swing_lift)
-    v_BF: np.ndarray           # (N, 4, 2) m/s, their rates in B
-    p_BC: np.ndarray           # (N, 4, 2) m, contact points in B
-    n_B: np.ndarray            # (N, 4, 2) outward unit normals of the faces at p_BC
-    lambda_plan: np.ndarray    # (N, 4, 2) N, planned (normal, tangential) force along (-n_B, t_B), times force_scale
-    force_scale: np.ndarray    # (N, 4) 1 holding, 0 swinging, ramped over ramp_time around lift-off and landing
+    period: float  # s, control period
+    X: np.ndarray  # (N, 3) planned object pose: cubic Hermite through the plan's x, xdot
+    V: np.ndarray  # (N, 3) its velocity (m/s, m/s, rad/s)
+    A: np.ndarray  # (N, 3) its acceleration
+    p_BF: np.ndarray  # (N, 4, 2) m, fingertip targets in B (a swinging finger lifted to >= swing_lift)
+    v_BF: np.ndarray  # (N, 4, 2) m/s, their rates in B
+    p_BC: np.ndarray  # (N, 4, 2) m, contact points in B
+    n_B: np.ndarray  # (N, 4, 2) outward unit normals of the faces at p_BC
+    lambda_plan: np.ndarray  # (N, 4, 2) N, planned (normal, tangential) force along (-n_B, t_B), times force_scale
+    force_scale: np.ndarray  # (N, 4) 1 holding, 0 swinging, ramped over ramp_time around lift-off and landing
 
     def index(self, t: float) -> int:
         return min(int(round(t / self.period)), len(self.X) - 1)
@@ -191,8 +234,12 @@ def hermite(t_knots, values, rates, times) -> tuple[np.ndarray, np.ndarray, np.n
     h = (t_knots[k + 1] - t_knots[k])[:, None]
     s = np.clip((times[:, None] - t_knots[k][:, None]) / h, 0.0, 1.0)
     p0, p1, m0, m1 = values[k], values[k + 1], h * rates[k], h * rates[k + 1]
-    value = (2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0 + (-2 * s**3 + 3 * s**2) * p1 + (s**3 - s**2) * m1
-    rate = ((6 * s**2 - 6 * s) * p0 + (3 * s**2 - 4 * s + 1) * m0 + (-6 * s**2 + 6 * s) * p1 + (3 * s**2 - 2 * s) * m1) / h
+    value = (
+        (2 * s**3 - 3 * s**2 + 1) * p0 + (s**3 - 2 * s**2 + s) * m0 + (-2 * s**3 + 3 * s**2) * p1 + (s**3 - s**2) * m1
+    )
+    rate = (
+        (6 * s**2 - 6 * s) * p0 + (3 * s**2 - 4 * s + 1) * m0 + (-6 * s**2 + 6 * s) * p1 + (3 * s**2 - 2 * s) * m1
+    ) / h
     accel = ((12 * s - 6) * p0 + (6 * s - 4) * m0 + (6 - 12 * s) * p1 + (6 * s - 2) * m1) / h**2
     after = times > t_knots[-1]
     value[after], rate[after], accel[after] = values[-1], 0.0, 0.0
@@ -223,7 +270,7 @@ def swing_profile(times, intervals, ramp_time: float) -> tuple[np.ndarray, np.nd
     ramping before lift-off instead left two fingers holding where the plan has three
     (a box dropped on such a handover). The phase runs 0 -> 1 across an interval (0.5 for
     an open-ended one) and is nan outside."""
-    distance = np.full(len(times), np.inf)      # to the nearest zero-force core
+    distance = np.full(len(times), np.inf)  # to the nearest zero-force core
     phase = np.full(len(times), np.nan)
     for lo, hi in intervals:
         core_lo, core_hi = lo + ramp_time, hi - ramp_time
@@ -236,20 +283,29 @@ def swing_profile(times, intervals, ramp_time: float) -> tuple[np.ndarray, np.nd
     return scale, phase
 
 
-def grasp_schedule(reference: Reference, *, shape: ConvexPolygon, tip_radius: float, period: float,
-                   duration: float, ramp_time: float, swing_lift: float, contact_distance: float) -> GraspSchedule:
+def grasp_schedule(
+    reference: Reference,
+    *,
+    shape: ConvexPolygon,
+    tip_radius: float,
+    period: float,
+    duration: float,
+    ramp_time: float,
+    swing_lift: float,
+    contact_distance: float,
+) -> GraspSchedule:
     """The GraspSchedule of `reference` on the control grid 0, period, ... <= duration."""
     t, x = reference.t, reference.x
     times = np.arange(int(np.floor(duration / period + 1e-9)) + 1) * period
     xdot = reference.xdot if reference.xdot is not None else np.gradient(x, t, axis=0)
     X, V, A = hermite(t, x, xdot, times)
     p_BF_knots = poses_world_to_box(x, reference.p_WF)
-    gap_knots = shape.signed_distances(p_BF_knots) - tip_radius                # (K, 4)
+    gap_knots = shape.signed_distances(p_BF_knots) - tip_radius  # (K, 4)
     if reference.p_WC is not None:
         p_BC_knots = poses_world_to_box(x, reference.p_WC)
-    else:   # the nearest box point: the fingertip centre minus its radius along the outward direction
+    else:  # the nearest box point: the fingertip centre minus its radius along the outward direction
         p_BC_knots = shape.nearest_points(p_BF_knots)
-    f_B_knots = np.einsum("kba,kpb->kpa", rotations_2d(x[:, 2]), reference.f_W)              # R_BW f_W
+    f_B_knots = np.einsum("kba,kpb->kpa", rotations_2d(x[:, 2]), reference.f_W)  # R_BW f_W
     at = lambda values: reference._at(values, times)
     p_BF, p_BC, f_B, gap = at(p_BF_knots), at(p_BC_knots), at(f_B_knots), at(gap_knots)
     n_B = shape.face_normals(p_BC)
@@ -265,5 +321,15 @@ def grasp_schedule(reference: Reference, *, shape: ConvexPolygon, tip_radius: fl
     p_BF = p_BF + extra[..., None] * away
     v_BF = np.gradient(p_BF, times, axis=0) if len(times) > 1 else np.zeros_like(p_BF)
     lambda_plan = np.stack([-np.sum(f_B * n_B, axis=-1), np.sum(f_B * t_B, axis=-1)], axis=-1) * scale[..., None]
-    return GraspSchedule(period=period, X=X, V=V, A=A, p_BF=p_BF, v_BF=v_BF, p_BC=p_BC, n_B=n_B,
-                         lambda_plan=lambda_plan, force_scale=scale)
+    return GraspSchedule(
+        period=period,
+        X=X,
+        V=V,
+        A=A,
+        p_BF=p_BF,
+        v_BF=v_BF,
+        p_BC=p_BC,
+        n_B=n_B,
+        lambda_plan=lambda_plan,
+        force_scale=scale,
+    )

@@ -22,8 +22,8 @@ only meet when the plan itself is infeasible for the hand.
 
 from __future__ import annotations
 
-import time
 import dataclasses
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,15 +31,19 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import CollisionFilterDeclaration, Meshcat
 from pydrake.multibody.math import SpatialForce
-from pydrake.multibody.plant import (AddMultibodyPlant, ContactResults, ExternallyAppliedSpatialForce,
-                                     MultibodyPlantConfig)
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    ContactResults,
+    ExternallyAppliedSpatialForce,
+    MultibodyPlantConfig,
+)
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from trajectotree.execution import metrics, playback
 from trajectotree.config import Config, ConfigError, check_controller, check_range
+from trajectotree.execution import metrics, playback
 from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
 from trajectotree.results import SimLog, SimResult
@@ -50,9 +54,9 @@ from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
 class Push:
     """A force on the box's centre, in W, from time_s for duration_s."""
 
-    force: tuple[float, float]   # N, (f_x, f_y) in W
-    time_s: float                # s, when it starts
-    duration_s: float = 0.2      # s, how long it acts
+    force: tuple[float, float]  # N, (f_x, f_y) in W
+    time_s: float  # s, when it starts
+    duration_s: float = 0.2  # s, how long it acts
 
     def __post_init__(self):
         if len(self.force) != 2:
@@ -70,8 +74,7 @@ def parse_push(text: str, duration_s: float = 0.2) -> Push:
         fx, fy = (float(v) for v in force.split(","))
         start = float(at)
     except ValueError:
-        raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, "
-                          "e.g. 0.2,0@3.5)") from None
+        raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, e.g. 0.2,0@3.5)") from None
     try:
         return Push(force=(fx, fy), time_s=start, duration_s=duration_s)
     except ConfigError as e:
@@ -82,9 +85,9 @@ def parse_push(text: str, duration_s: float = 0.2) -> Push:
 class Conditions:
     """The simulated world where it differs from the plan's; the controller keeps the plan's values."""
 
-    mu: float | None = None      # friction coefficient of the simulated plant (None: the scene's)
-    mass: float | None = None    # kg, box mass of the simulated plant (None: the scene's)
-    push: Push | None = None     # a push on the box, or none
+    mu: float | None = None  # friction coefficient of the simulated plant (None: the scene's)
+    mass: float | None = None  # kg, box mass of the simulated plant (None: the scene's)
+    push: Push | None = None  # a push on the box, or none
 
     def __post_init__(self):
         if self.mu is not None:
@@ -99,10 +102,18 @@ class Conditions:
 
     def to_json(self, scene_config) -> dict:
         sim = self.scene(scene_config)
-        push = None if self.push is None else {"force": list(self.push.force), "time_s": self.push.time_s,
-                                               "duration_s": self.push.duration_s}
-        return {"sim_mu": sim.mu, "sim_mass": sim.box_mass, "plan_mu": scene_config.mu,
-                "plan_mass": scene_config.box_mass, "push": push}
+        push = (
+            None
+            if self.push is None
+            else {"force": list(self.push.force), "time_s": self.push.time_s, "duration_s": self.push.duration_s}
+        )
+        return {
+            "sim_mu": sim.mu,
+            "sim_mass": sim.box_mass,
+            "plan_mu": scene_config.mu,
+            "plan_mass": scene_config.box_mass,
+            "push": push,
+        }
 
 
 class PushSource(LeafSystem):
@@ -114,7 +125,8 @@ class PushSource(LeafSystem):
         self._body = plant.GetBodyByName("box", box).index()
         self._push = push
         self.spatial_forces_port = self.DeclareAbstractOutputPort(
-            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self.CalcForces)
+            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self.CalcForces
+        )
 
     def CalcForces(self, context, output):
         push, t = self._push, context.get_time()
@@ -122,7 +134,7 @@ class PushSource(LeafSystem):
         if push.time_s <= t < push.time_s + push.duration_s:
             applied = ExternallyAppliedSpatialForce()
             applied.body_index = self._body
-            applied.p_BoBq_B = np.zeros(3)     # at the box origin, its centre of mass
+            applied.p_BoBq_B = np.zeros(3)  # at the box origin, its centre of mass
             applied.F_Bq_W = SpatialForce(np.zeros(3), np.array([push.force[0], push.force[1], 0.0]))
             forces.append(applied)
         output.set_value(forces)
@@ -137,7 +149,9 @@ class FingertipForces(LeafSystem):
         super().__init__()
         self._finger_of_body = {plant.GetBodyByName(f"finger{i}_link2", hand).index(): i for i in range(NUM_FINGERS)}
         self._box_body = plant.GetBodyByName("box", box).index()
-        self.contact_results_port = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
+        self.contact_results_port = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
         self.DeclareVectorOutputPort("f_W", FINGERTIP_VECTOR_SIZE, self.CalcForces)
 
     def CalcForces(self, context, output):
@@ -146,7 +160,7 @@ class FingertipForces(LeafSystem):
         for k in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(k)
             a, b = info.bodyA_index(), info.bodyB_index()
-            f_on_b = info.contact_force()[:2]   # the force on body B, in W
+            f_on_b = info.contact_force()[:2]  # the force on body B, in W
             if b == self._box_body and a in self._finger_of_body:
                 f_W[self._finger_of_body[a]] += f_on_b
             elif a == self._box_body and b in self._finger_of_body:
@@ -158,13 +172,13 @@ class FingertipForces(LeafSystem):
 class ExecutionDiagram:
     diagram: object
     plant: object
-    hand: object               # ModelInstanceIndex
-    box: object                # ModelInstanceIndex
-    state_logger: object       # VectorLogSink of the plant's full state
-    force_logger: object       # VectorLogSink of FingertipForces (8)
+    hand: object  # ModelInstanceIndex
+    box: object  # ModelInstanceIndex
+    state_logger: object  # VectorLogSink of the plant's full state
+    force_logger: object  # VectorLogSink of FingertipForces (8)
     visualizer: object | None  # MeshcatVisualizer or None
-    duration: float            # s, plan length + settle time
-    controller: str            # "grasp", "paper" or "none" (uncontrolled)
+    duration: float  # s, plan length + settle time
+    controller: str  # "grasp", "paper" or "none" (uncontrolled)
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -212,10 +226,16 @@ def add_grasp_controller(builder, plant, hand, box, reference: Reference, config
     max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
     the plan assumed), reading the box and hand state."""
     scene, gains = build_scene(config.scene), config.controller
-    schedule = grasp_schedule(reference, shape=config.scene.shape,
-                              tip_radius=scene.tip_radius, period=1.0 / gains.rate_hz,
-                              duration=reference.duration + config.sim.settle_time, ramp_time=gains.ramp_time,
-                              swing_lift=gains.swing_lift, contact_distance=gains.contact_distance)
+    schedule = grasp_schedule(
+        reference,
+        shape=config.scene.shape,
+        tip_radius=scene.tip_radius,
+        period=1.0 / gains.rate_hz,
+        duration=reference.duration + config.sim.settle_time,
+        ramp_time=gains.ramp_time,
+        swing_lift=gains.swing_lift,
+        contact_distance=gains.contact_distance,
+    )
     mu_control = max(config.search.friction_safety, gains.friction_safety) * config.scene.mu
     controller = builder.AddNamedSystem("grasp_controller", GraspController(scene, schedule, gains, mu=mu_control))
     builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
@@ -223,9 +243,15 @@ def add_grasp_controller(builder, plant, hand, box, reference: Reference, config
     return controller
 
 
-def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
-                            controlled: bool = True, controller: str | None = None,
-                            conditions: Conditions = Conditions()) -> ExecutionDiagram:
+def build_execution_diagram(
+    reference: Reference,
+    config: Config,
+    *,
+    meshcat: Meshcat | None = None,
+    controlled: bool = True,
+    controller: str | None = None,
+    conditions: Conditions = Conditions(),
+) -> ExecutionDiagram:
     """The Diagram that executes `reference` with `controller` (default
     config.sim.controller) in the world `conditions` describe; controlled=False applies
     zero torque (the open-loop hand, for checking that the controller holds the box)."""
@@ -253,19 +279,30 @@ def build_execution_diagram(reference: Reference, config: Config, *, meshcat: Me
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
-    return ExecutionDiagram(diagram=builder.Build(), plant=plant, hand=hand, box=box, state_logger=state_logger,
-                            force_logger=force_logger, visualizer=visualizer, duration=reference.duration + hold,
-                            controller=kind if controlled else "none")
+    return ExecutionDiagram(
+        diagram=builder.Build(),
+        plant=plant,
+        hand=hand,
+        box=box,
+        state_logger=state_logger,
+        force_logger=force_logger,
+        visualizer=visualizer,
+        duration=reference.duration + hold,
+        controller=kind if controlled else "none",
+    )
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t (T,), object pose (T, 3), joint angles (T, 8)) from the plant-state log."""
     plant = execution.plant
     box_start = plant.GetJointByName("box_planar").position_start()
-    hand_q = [plant.GetJointByName(f"finger{i}_joint{j}", execution.hand).position_start()
-              for i in range(NUM_FINGERS) for j in (1, 2)]
+    hand_q = [
+        plant.GetJointByName(f"finger{i}_joint{j}", execution.hand).position_start()
+        for i in range(NUM_FINGERS)
+        for j in (1, 2)
+    ]
     data = log.data()
-    return log.sample_times().copy(), data[box_start:box_start + 3].T.copy(), data[hand_q].T.copy()
+    return log.sample_times().copy(), data[box_start : box_start + 3].T.copy(), data[hand_q].T.copy()
 
 
 def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict) -> SimLog:
@@ -281,20 +318,37 @@ def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Ref
         logs.append(log)
     t, x, q = split_state_log(execution, logs[0])
     f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
-    return SimLog(t=t, x=x, q=q, x_plan=reference.object_pose_at(t), f_W=f_W, f_W_plan=reference.forces_at(t),
-                  sim_time_s=sim_time_s, controller=execution.controller, conditions=conditions)
+    return SimLog(
+        t=t,
+        x=x,
+        q=q,
+        x_plan=reference.object_pose_at(t),
+        f_W=f_W,
+        f_W_plan=reference.forces_at(t),
+        sim_time_s=sim_time_s,
+        controller=execution.controller,
+        conditions=conditions,
+    )
 
 
-def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat | None = None,
-                       html_path: str | Path | None = None, controlled: bool = True,
-                       realtime_rate: float = 0.0, controller: str | None = None,
-                       conditions: Conditions = Conditions()) -> SimResult:
+def simulate_reference(
+    reference: Reference,
+    config: Config,
+    *,
+    meshcat: Meshcat | None = None,
+    html_path: str | Path | None = None,
+    controlled: bool = True,
+    realtime_rate: float = 0.0,
+    controller: str | None = None,
+    conditions: Conditions = Conditions(),
+) -> SimResult:
     """Runs the execution Diagram for the plan's length plus the settle time; the log it
     records, evaluated by trajectotree.execution.metrics."""
     if html_path is not None and meshcat is None:
         meshcat = playback.start_meshcat()
-    execution = build_execution_diagram(reference, config, meshcat=meshcat, controlled=controlled,
-                                        controller=controller, conditions=conditions)
+    execution = build_execution_diagram(
+        reference, config, meshcat=meshcat, controlled=controlled, controller=controller, conditions=conditions
+    )
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:
@@ -308,18 +362,32 @@ def simulate_reference(reference: Reference, config: Config, *, meshcat: Meshcat
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
         playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))
         if html_path is not None:
-            playback.save_recording_html(meshcat, execution.visualizer, html_path, drop_time_s=result.drop_time_s,
-                                         legend=playback.simulated_legend(config.scene),
-                                         noun=playback.object_noun(config.scene))
+            playback.save_recording_html(
+                meshcat,
+                execution.visualizer,
+                html_path,
+                drop_time_s=result.drop_time_s,
+                legend=playback.simulated_legend(config.scene),
+                noun=playback.object_noun(config.scene),
+            )
         else:
             execution.visualizer.StopRecording()
             execution.visualizer.PublishRecording()
     return result
 
 
-def run_simulation(*, plan, config: Config, meshcat: Meshcat | None = None, html_path: str | Path | None = None,
-                   gif_path: str | Path | None = None, controller: str | None = None, sim_mu: float | None = None,
-                   sim_mass: float | None = None, push: Push | str | None = None) -> SimResult:
+def run_simulation(
+    *,
+    plan,
+    config: Config,
+    meshcat: Meshcat | None = None,
+    html_path: str | Path | None = None,
+    gif_path: str | Path | None = None,
+    controller: str | None = None,
+    sim_mu: float | None = None,
+    sim_mass: float | None = None,
+    push: Push | str | None = None,
+) -> SimResult:
     """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
     "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
     `sim_mass` (None: the plan's) and an optional `push` (a Push or "FX,FY@T"); the
@@ -331,9 +399,15 @@ def run_simulation(*, plan, config: Config, meshcat: Meshcat | None = None, html
     check_controller(controller or config.sim.controller)
     scene = build_scene(config.scene)
     reference = reference_from_plan(plan, scene)
-    result = simulate_reference(reference, config, meshcat=meshcat, html_path=html_path,
-                                realtime_rate=1.0 if meshcat is not None else 0.0, controller=controller,
-                                conditions=conditions)
+    result = simulate_reference(
+        reference,
+        config,
+        meshcat=meshcat,
+        html_path=html_path,
+        realtime_rate=1.0 if meshcat is not None else 0.0,
+        controller=controller,
+        conditions=conditions,
+    )
     if gif_path is not None:
         playback.write_gif(scene, result.t, result.x, result.q, gif_path, planned_poses=result.x_plan)
     return result

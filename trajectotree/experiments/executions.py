@@ -28,10 +28,17 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.config import (CONTROLLERS, Config, ConfigError, ControllerGains, SimConfig, check_controller,
-                                 check_range)
-from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, write_bytes_atomic
+from trajectotree.config import (
+    CONTROLLERS,
+    Config,
+    ConfigError,
+    ControllerGains,
+    SimConfig,
+    check_controller,
+    check_range,
+)
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
+from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, write_bytes_atomic
 
 CONDITIONS = ("nominal", "mismatch", "push")
 EXEC_DIR = "exec"
@@ -41,8 +48,8 @@ EXEC_DIR = "exec"
 class ConditionSpec:
     """What the named robustness conditions change in the simulated world."""
 
-    mismatch_mu: float = 0.55           # friction coefficient of the simulated plant under `mismatch`
-    mismatch_mass_factor: float = 1.2   # 1, simulated box mass / planned box mass under `mismatch`
+    mismatch_mu: float = 0.55  # friction coefficient of the simulated plant under `mismatch`
+    mismatch_mass_factor: float = 1.2  # 1, simulated box mass / planned box mass under `mismatch`
     push_force: tuple[float, float] = (0.2, 0.0)  # N, (f_x, f_y) in W of the push under `push`
 
     def __post_init__(self):
@@ -54,12 +61,18 @@ class ConditionSpec:
     def simulation_kwargs(self, condition: str, config: Config, plan_duration_s: float) -> dict:
         """The `run_simulation` keyword arguments (sim_mu, sim_mass, push) of `condition`."""
         from trajectotree.execution.simulate import Push
+
         check_condition(condition)
         if condition == "mismatch":
             return {"sim_mu": self.mismatch_mu, "sim_mass": self.mismatch_mass_factor * config.scene.box_mass}
         if condition == "push":
-            return {"push": Push(force=self.push_force, time_s=middle_of_middle_segment(config, plan_duration_s),
-                                 duration_s=config.sim.push_duration)}
+            return {
+                "push": Push(
+                    force=self.push_force,
+                    time_s=middle_of_middle_segment(config, plan_duration_s),
+                    duration_s=config.sim.push_duration,
+                )
+            }
         return {}
 
 
@@ -82,9 +95,9 @@ def execution_dir(trial_dir: str | Path, controller: str, condition: str) -> Pat
 
 @dataclass(frozen=True)
 class ExecutionTask:
-    trial_dir: str     # the sweep trial's folder (plan.json, plan.npz)
-    controller: str    # config.CONTROLLERS
-    condition: str     # CONDITIONS
+    trial_dir: str  # the sweep trial's folder (plan.json, plan.npz)
+    controller: str  # config.CONTROLLERS
+    condition: str  # CONDITIONS
     spec: ConditionSpec
     # The executor's gains and simulation settings; None: those saved with the plan.
     gains: ControllerGains | None = None
@@ -94,14 +107,22 @@ class ExecutionTask:
 def execute(task: ExecutionTask) -> dict:
     """Loads the trial's plan, executes it, writes sim.json + sim.npz into its execution
     folder; returns sim.json's content (with the trial folder, controller and condition)."""
-    from trajectotree.io import load_plan, save_sim
     from trajectotree.execution.simulate import run_simulation
+    from trajectotree.io import load_plan, save_sim
+
     plan = load_plan(task.trial_dir)
-    config = replace(plan.config, controller=task.gains or plan.config.controller,
-                     sim=replace(task.sim or plan.config.sim, controller=task.controller))
+    config = replace(
+        plan.config,
+        controller=task.gains or plan.config.controller,
+        sim=replace(task.sim or plan.config.sim, controller=task.controller),
+    )
     duration = float(plan.trajectory.t[-1] - plan.trajectory.t[0])
-    result = run_simulation(plan=plan, config=config, controller=task.controller,
-                            **task.spec.simulation_kwargs(task.condition, config, duration))
+    result = run_simulation(
+        plan=plan,
+        config=config,
+        controller=task.controller,
+        **task.spec.simulation_kwargs(task.condition, config, duration),
+    )
     out = execution_dir(task.trial_dir, task.controller, task.condition)
     save_sim(result, out)
     return read_execution(out)
@@ -111,8 +132,15 @@ def read_execution(folder: Path) -> dict:
     return json.loads((Path(folder) / SIM_JSON).read_text())
 
 
-def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: ConditionSpec, methods=None,
-                       gains: ControllerGains | None = None, sim: SimConfig | None = None) -> list[ExecutionTask]:
+def pending_executions(
+    sweep_dir: str | Path,
+    controllers,
+    conditions,
+    spec: ConditionSpec,
+    methods=None,
+    gains: ControllerGains | None = None,
+    sim: SimConfig | None = None,
+) -> list[ExecutionTask]:
     """Every (trial with a trajectory, of `methods` (None: all), controller, condition)
     without a finished execution.
     A nominal execution the sweep's own --simulate already ran (the trial's sim.json, same
@@ -130,14 +158,15 @@ def pending_executions(sweep_dir: str | Path, controllers, conditions, spec: Con
         # Compared as saved: a key the plan's file lacks (saved before the field existed) loads as
         # today's default, but the sweep's simulation did not run with it.
         saved = plan["config"]
-        same_settings = ((gains is None or _as_saved(gains) == saved.get("controller"))
-                         and (sim is None or {**_as_saved(sim), "controller": None}
-                              == {**saved.get("sim", {}), "controller": None}))
+        same_settings = (gains is None or _as_saved(gains) == saved.get("controller")) and (
+            sim is None or {**_as_saved(sim), "controller": None} == {**saved.get("sim", {}), "controller": None}
+        )
         for controller in controllers:
             for condition in conditions:
                 out = execution_dir(trial_dir, controller, condition)
                 if (out / SIM_JSON).is_file() or (
-                        same_settings and _reuse_sweep_simulation(trial_dir, controller, condition, out)):
+                    same_settings and _reuse_sweep_simulation(trial_dir, controller, condition, out)
+                ):
                     continue
                 tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim))
     return tasks
@@ -154,19 +183,35 @@ def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, ou
         sim = json.loads((trial_dir / SIM_JSON).read_text())
     except (OSError, json.JSONDecodeError):
         return False
-    nominal = not sim.get("conditions") or (sim["conditions"].get("push") is None
-                                             and sim["conditions"].get("sim_mu") == sim["conditions"].get("plan_mu")
-                                             and sim["conditions"].get("sim_mass") == sim["conditions"].get("plan_mass"))
-    if condition != "nominal" or sim.get("controller") != controller or not nominal or not (trial_dir / SIM_NPZ).is_file():
+    nominal = not sim.get("conditions") or (
+        sim["conditions"].get("push") is None
+        and sim["conditions"].get("sim_mu") == sim["conditions"].get("plan_mu")
+        and sim["conditions"].get("sim_mass") == sim["conditions"].get("plan_mass")
+    )
+    if (
+        condition != "nominal"
+        or sim.get("controller") != controller
+        or not nominal
+        or not (trial_dir / SIM_NPZ).is_file()
+    ):
         return False
-    write_bytes_atomic(out / SIM_NPZ, (trial_dir / SIM_NPZ).read_bytes())   # npz first: sim.json marks it done
+    write_bytes_atomic(out / SIM_NPZ, (trial_dir / SIM_NPZ).read_bytes())  # npz first: sim.json marks it done
     write_bytes_atomic(out / SIM_JSON, (trial_dir / SIM_JSON).read_bytes())
     return True
 
 
-def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions=CONDITIONS,
-                   spec: ConditionSpec = ConditionSpec(), methods=None, gains: ControllerGains | None = None,
-                   sim: SimConfig | None = None, workers: int | None = None, progress: bool = True) -> int:
+def run_executions(
+    sweep_dir: str | Path,
+    *,
+    controllers=CONTROLLERS,
+    conditions=CONDITIONS,
+    spec: ConditionSpec = ConditionSpec(),
+    methods=None,
+    gains: ControllerGains | None = None,
+    sim: SimConfig | None = None,
+    workers: int | None = None,
+    progress: bool = True,
+) -> int:
     """Runs the pending executions of a sweep's plans (of `methods`, None: all) with the
     controller `gains` and `sim` settings (None: those saved with each plan) on
     `workers` local processes, holding the
@@ -182,6 +227,7 @@ def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions
         bar = None
         if progress and sys.stderr.isatty():
             from tqdm import tqdm
+
             bar = tqdm(total=len(tasks), desc="executions", unit="run")
         done = 0
         # Fresh interpreters (spawn), not forks of a process that may hold Drake's threads.
@@ -196,8 +242,11 @@ def run_executions(sweep_dir: str | Path, *, controllers=CONTROLLERS, conditions
                 except BrokenProcessPool:
                     raise  # the workers themselves died: every other execution would fail the same way
                 except Exception as e:  # one broken plan must not stop the others
-                    print(f"execution {Path(task.trial_dir).name} {task.controller}/{task.condition} failed: "
-                          f"{type(e).__name__}: {e}", file=sys.stderr)
+                    print(
+                        f"execution {Path(task.trial_dir).name} {task.controller}/{task.condition} failed: "
+                        f"{type(e).__name__}: {e}",
+                        file=sys.stderr,
+                    )
                 if bar is not None:
                     bar.update()
         if bar is not None:
@@ -216,9 +265,17 @@ def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
         for folder in sorted(base.iterdir()):
             if (folder / SIM_JSON).is_file():
                 controller, _, condition = folder.name.partition("_")
-                records.append({"key": row["key"], "method": row["method"], "goal": row["goal"],
-                                "controller": controller, "condition": condition, "folder": str(folder),
-                                **read_execution(folder)})
+                records.append(
+                    {
+                        "key": row["key"],
+                        "method": row["method"],
+                        "goal": row["goal"],
+                        "controller": controller,
+                        "condition": condition,
+                        "folder": str(folder),
+                        **read_execution(folder),
+                    }
+                )
     return records
 
 
@@ -230,25 +287,41 @@ def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
     and CONDITIONS: executions, drops, mean absolute errors and how many ended within 3 deg
     of the planned final orientation."""
     order = lambda names, name: names.index(name) if name in names else len(names)  # noqa: E731
-    keys = sorted({(r["method"], r["controller"], r["condition"]) for r in records},
-                  key=lambda k: (order(methods, k[0]), order(CONTROLLERS, k[1]), order(CONDITIONS, k[2])))
+    keys = sorted(
+        {(r["method"], r["controller"], r["condition"]) for r in records},
+        key=lambda k: (order(methods, k[0]), order(CONTROLLERS, k[1]), order(CONDITIONS, k[2])),
+    )
     table = []
     for method, controller, condition in keys:
         mine = [r for r in records if (r["method"], r["controller"], r["condition"]) == (method, controller, condition)]
         mean = lambda field: float(np.mean([r[field] for r in mine]))  # noqa: E731
-        table.append({"method": method, "controller": controller, "condition": condition, "executed": len(mine),
-                      "dropped": sum(bool(r["dropped"]) for r in mine),
-                      "mae_x": mean("mae_x"), "mae_y": mean("mae_y"), "mae_theta": mean("mae_theta"),
-                      "final_theta_within_3deg": sum(abs(r["final_error"][2]) <= FINAL_THETA_TOLERANCE for r in mine)})
+        table.append(
+            {
+                "method": method,
+                "controller": controller,
+                "condition": condition,
+                "executed": len(mine),
+                "dropped": sum(bool(r["dropped"]) for r in mine),
+                "mae_x": mean("mae_x"),
+                "mae_y": mean("mae_y"),
+                "mae_theta": mean("mae_theta"),
+                "final_theta_within_3deg": sum(abs(r["final_error"][2]) <= FINAL_THETA_TOLERANCE for r in mine),
+            }
+        )
     return table
 
 
 def execution_markdown(table: list[dict], labels: dict[str, str]) -> str:
-    lines = ["| method | controller | condition | executed | dropped | MAE x [mm] | MAE y [mm] | MAE theta [rad] "
-             "| final theta within 3 deg |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| method | controller | condition | executed | dropped | MAE x [mm] | MAE y [mm] | MAE theta [rad] "
+        "| final theta within 3 deg |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for s in table:
-        lines.append(f"| {labels.get(s['method'], s['method'])} | {s['controller']} | {s['condition']} | "
-                     f"{s['executed']} | {s['dropped']} ({s['dropped'] / s['executed']:.0%}) | "
-                     f"{1e3 * s['mae_x']:.2f} | {1e3 * s['mae_y']:.2f} | {s['mae_theta']:.3f} | "
-                     f"{s['final_theta_within_3deg']}/{s['executed']} |")
+        lines.append(
+            f"| {labels.get(s['method'], s['method'])} | {s['controller']} | {s['condition']} | "
+            f"{s['executed']} | {s['dropped']} ({s['dropped'] / s['executed']:.0%}) | "
+            f"{1e3 * s['mae_x']:.2f} | {1e3 * s['mae_y']:.2f} | {s['mae_theta']:.3f} | "
+            f"{s['final_theta_within_3deg']}/{s['executed']} |"
+        )
     return "\n".join(lines) + "\n"

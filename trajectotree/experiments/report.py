@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import ConfigError
-from trajectotree.figures.run import save_figure
-from trajectotree.io import SIM_NPZ, write_bytes_atomic
 from trajectotree.execution.metrics import mean_confidence_interval
 from trajectotree.experiments.sweep import MANIFEST_FILE, TRIALS_DIR, read_rows
+from trajectotree.figures.run import save_figure
+from trajectotree.io import SIM_NPZ, write_bytes_atomic
 
 METHOD_LABELS = {"trajectotree": "TrajectoTree", "cito": "CITO", "cito-warm": "CITO, warm-start"}
 METHOD_COLORS = {"trajectotree": "tab:blue", "cito": "tab:orange", "cito-warm": "tab:green"}
@@ -36,11 +36,11 @@ ERROR_LABELS = ("x [m]", "y [m]", r"$\theta$ [rad]")
 
 @dataclass(frozen=True)
 class ReportFiles:
-    figure_time_cost: tuple[str, str]   # PNG, PDF
+    figure_time_cost: tuple[str, str]  # PNG, PDF
     figure_tracking: tuple[str, str] | None
     table_md: str
     table_csv: str
-    executions_md: str | None = None    # per method, controller and condition (trajectotree.experiments.executions)
+    executions_md: str | None = None  # per method, controller and condition (trajectotree.experiments.executions)
     figure_tracking_by_controller: dict = field(default_factory=dict)  # controller -> (PNG, PDF), nominal runs
 
 
@@ -49,8 +49,10 @@ def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
     sweep_dir = Path(sweep_dir)
     path = sweep_dir / MANIFEST_FILE
     if not path.is_file():
-        raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {MANIFEST_FILE}); "
-                          "make one with `trajectotree sweep --out DIR`")
+        raise ConfigError(
+            f"{str(sweep_dir)!r} is not a sweep directory (no {MANIFEST_FILE}); "
+            "make one with `trajectotree sweep --out DIR`"
+        )
     try:
         manifest = json.loads(path.read_text())
         if not isinstance(manifest, dict) or not isinstance(manifest.get("methods"), list):
@@ -82,13 +84,17 @@ def paired_speedup(rows: list[dict], method: str) -> tuple[float | None, int]:
     converged on; number of those goals). Pairing keeps a quick failure from counting as
     speed; convergence, not the physics check, is what the solve time measures (the
     baselines' converged plans may push from a distance: the success column tells)."""
-    solved = {m: {r["goal_index"]: r["total_time_s"] for r in rows if r["method"] == m and converged(r)}
-              for m in (method, REFERENCE)}
+    solved = {
+        m: {r["goal_index"]: r["total_time_s"] for r in rows if r["method"] == m and converged(r)}
+        for m in (method, REFERENCE)
+    }
     common = sorted(set(solved[method]) & set(solved[REFERENCE]))
     if method == REFERENCE or not common:
         return None, len(common)
-    return (float(np.mean([solved[method][g] for g in common]))
-            / float(np.mean([solved[REFERENCE][g] for g in common])), len(common))
+    return (
+        float(np.mean([solved[method][g] for g in common])) / float(np.mean([solved[REFERENCE][g] for g in common])),
+        len(common),
+    )
 
 
 def method_summary(rows: list[dict], method: str) -> dict:
@@ -100,13 +106,18 @@ def method_summary(rows: list[dict], method: str) -> dict:
     paper_time = PAPER_MEAN_TIME_S.get(method)
     paper_speedup = (paper_time / PAPER_MEAN_TIME_S[REFERENCE]) if method != REFERENCE and paper_time else None
     return {
-        "method": method, "label": METHOD_LABELS.get(method, method), "trials": len(mine),
+        "method": method,
+        "label": METHOD_LABELS.get(method, method),
+        "trials": len(mine),
         "errors": sum(r.get("error") is not None for r in mine),
         "converged_rate": sum(converged(r) for r in mine) / len(mine) if mine else None,
         "success_rate": sum(bool(r.get("success")) for r in mine) / len(mine) if mine else None,
-        "mean_time_s": float(times.mean()) if times.size else None, "paper_mean_time_s": paper_time,
+        "mean_time_s": float(times.mean()) if times.size else None,
+        "paper_mean_time_s": paper_time,
         "median_time_s": float(np.median(times)) if times.size else None,
-        "speedup": speedup, "speedup_goals": paired, "paper_speedup": paper_speedup,
+        "speedup": speedup,
+        "speedup_goals": paired,
+        "paper_speedup": paper_speedup,
         "mean_cost": float(costs.mean()) if costs.size else None,
         "simulated": len(simulated),
         "drop_rate": sum(bool(r.get("dropped")) for r in simulated) / len(simulated) if simulated else None,
@@ -137,19 +148,32 @@ gives its numbers for the mean planning times only; the rest it shows in Figs. 2
 
 
 def table_markdown(table: list[dict]) -> str:
-    header = ("| method | trials | errors | converged | physically valid | mean time [s] | paper [s] "
-              "| median time [s] | speedup | paper speedup | mean cost | executed | drop rate | MAE x [mm] | MAE y [mm] | MAE theta [rad] |")
+    header = (
+        "| method | trials | errors | converged | physically valid | mean time [s] | paper [s] "
+        "| median time [s] | speedup | paper speedup | mean cost | executed | drop rate | MAE x [mm] | MAE y [mm] | MAE theta [rad] |"
+    )
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for s in table:
         mae_mm = [None if s[f"mae_{c}"] is None else 1e3 * s[f"mae_{c}"] for c in ("x", "y")]
         reference = s["method"] == REFERENCE
-        cells = [s["label"], str(s["trials"]), str(s["errors"]), _fmt(s["converged_rate"], ".0%"),
-                 _fmt(s["success_rate"], ".0%"),
-                 _fmt(s["mean_time_s"], ".2f"), _fmt(s["paper_mean_time_s"], ".0f"), _fmt(s["median_time_s"], ".2f"),
-                 "-" if reference else _fmt(s["speedup"], ".1f", f"x ({s['speedup_goals']})"),
-                 "-" if reference else _fmt(s["paper_speedup"], ".1f", "x"),
-                 _fmt(s["mean_cost"], ".4g"), str(s["simulated"]), _fmt(s["drop_rate"], ".0%"),
-                 _fmt(mae_mm[0], ".2f"), _fmt(mae_mm[1], ".2f"), _fmt(s["mae_theta"], ".3f")]
+        cells = [
+            s["label"],
+            str(s["trials"]),
+            str(s["errors"]),
+            _fmt(s["converged_rate"], ".0%"),
+            _fmt(s["success_rate"], ".0%"),
+            _fmt(s["mean_time_s"], ".2f"),
+            _fmt(s["paper_mean_time_s"], ".0f"),
+            _fmt(s["median_time_s"], ".2f"),
+            "-" if reference else _fmt(s["speedup"], ".1f", f"x ({s['speedup_goals']})"),
+            "-" if reference else _fmt(s["paper_speedup"], ".1f", "x"),
+            _fmt(s["mean_cost"], ".4g"),
+            str(s["simulated"]),
+            _fmt(s["drop_rate"], ".0%"),
+            _fmt(mae_mm[0], ".2f"),
+            _fmt(mae_mm[1], ".2f"),
+            _fmt(s["mae_theta"], ".3f"),
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -167,6 +191,7 @@ def figure_time_and_cost(rows: list[dict], methods: list[str]):
     import matplotlib.pyplot as plt
 
     from trajectotree.figures.statistics import plot_boxes_with_means
+
     fig, (ax_time, ax_cost) = plt.subplots(1, 2, figsize=(8, 3.6))
     colors = [METHOD_COLORS.get(m, "0.6") for m in methods]
     by_method = {m: [r for r in rows if r["method"] == m] for m in methods}
@@ -193,8 +218,11 @@ def load_tracking(sweep_dir: Path, rows: list[dict]) -> dict[str, list[tuple[np.
 
 def load_execution_tracking(records: list[dict], controller: str) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     """method -> [(t, abs_error)] of the nominal executions under `controller`."""
-    return _tracks((r["method"], Path(r["folder"])) for r in records
-                   if r["controller"] == controller and r["condition"] == "nominal")
+    return _tracks(
+        (r["method"], Path(r["folder"]))
+        for r in records
+        if r["controller"] == controller and r["condition"] == "nominal"
+    )
 
 
 def _tracks(method_folders) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
@@ -234,6 +262,7 @@ def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | No
     import matplotlib.pyplot as plt
 
     from trajectotree.figures.statistics import plot_mean_band
+
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
     all_t = [t for m in methods for t, _ in tracks.get(m, ())]
     step = min(float(np.median(np.diff(t))) for t in all_t if t.size > 1)
@@ -243,8 +272,15 @@ def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | No
             continue
         mean, lower, upper = tracking_bands(tracks[m], grid)
         for c, ax in enumerate(axes):
-            plot_mean_band(ax, grid, mean[:, c], lower[:, c], upper[:, c], color=METHOD_COLORS.get(m),
-                           label=f"{METHOD_LABELS.get(m, m)} (n={len(tracks[m])})")
+            plot_mean_band(
+                ax,
+                grid,
+                mean[:, c],
+                lower[:, c],
+                upper[:, c],
+                color=METHOD_COLORS.get(m),
+                label=f"{METHOD_LABELS.get(m, m)} (n={len(tracks[m])})",
+            )
     for ax, label in zip(axes, ERROR_LABELS):
         ax.set_ylim(bottom=0.0)  # errors are >= 0; a t-interval of few trials reaches below
         ax.set_xlabel("time [s]")
@@ -262,6 +298,7 @@ def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | No
 
 def _save(fig, stem: Path) -> tuple[str, str]:
     import matplotlib.pyplot as plt
+
     png, pdf = (save_figure(fig, stem.with_suffix(f".{ext}")) for ext in ("png", "pdf"))
     plt.close(fig)
     return png, pdf
@@ -271,6 +308,7 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     """Writes the figures and the table (default: SWEEP_DIR/report/); returns their
     paths and the table rows."""
     import matplotlib
+
     matplotlib.use("Agg")
 
     sweep_dir = Path(sweep_dir)
@@ -287,9 +325,14 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     tracks = load_tracking(sweep_dir, rows)
     fig3 = _save(figure_tracking(tracks, methods), out / "fig3_tracking") if tracks else None
     executions_md, fig3_by_controller = _execution_report(sweep_dir, rows, methods, out)
-    files = ReportFiles(figure_time_cost=fig2, figure_tracking=fig3, table_md=str(out / "summary.md"),
-                        table_csv=str(out / "summary.csv"), executions_md=executions_md,
-                        figure_tracking_by_controller=fig3_by_controller)
+    files = ReportFiles(
+        figure_time_cost=fig2,
+        figure_tracking=fig3,
+        table_md=str(out / "summary.md"),
+        table_csv=str(out / "summary.csv"),
+        executions_md=executions_md,
+        figure_tracking_by_controller=fig3_by_controller,
+    )
     return files, table
 
 
@@ -297,6 +340,7 @@ def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out
     """executions.md / .csv (drops and errors per method, controller and condition) and one
     Fig. 3 per controller from its nominal executions, when the sweep has executions."""
     from trajectotree.experiments.executions import collect_executions, execution_markdown, execution_summary
+
     records = collect_executions(sweep_dir, rows)
     if not records:
         return None, {}
@@ -307,8 +351,9 @@ def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out
     for controller in sorted({r["controller"] for r in records}):
         tracks = load_execution_tracking(records, controller)
         if tracks:
-            figures[controller] = _save(figure_tracking(tracks, methods, title=f"controller: {controller}"),
-                                        out / f"fig3_tracking_{controller}")
+            figures[controller] = _save(
+                figure_tracking(tracks, methods, title=f"controller: {controller}"), out / f"fig3_tracking_{controller}"
+            )
     return str(out / "executions.md"), figures
 
 

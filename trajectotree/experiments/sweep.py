@@ -37,12 +37,26 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import Config, ConfigError, check_integer, check_range, config_to_dict
+from trajectotree.experiments.sweep_store import (
+    TRIALS_DIR,  # noqa: F401
+    check_manifest,
+    prepare_dir,
+    read_rows,
+    store_trial,
+    sweep_lock,
+    write_rows_file,
+)
+from trajectotree.experiments.trial import (
+    ROW_FILE,
+    TrialInterrupted,
+    TrialOutcome,
+    TrialTask,
+    allow_trials,
+    empty_row,
+    execute_trial,
+    kill_children,
+)
 from trajectotree.results import METHODS  # results imports no Drake, like this module
-from trajectotree.experiments.sweep_store import (CORRUPT_DIR, LOCK_FILE, MANIFEST_FILE, ROWS_FILE, TRIALS_DIR,  # noqa: F401
-                                      CorruptTrialError, check_manifest, prepare_dir, read_rows, store_trial,
-                                      sweep_lock, write_rows_file)
-from trajectotree.experiments.trial import (ROW_FILE, TrialInterrupted, TrialOutcome, TrialTask, allow_trials, empty_row,
-                                execute_trial, kill_children)
 
 MANIFEST_FORMAT = "trajectotree-sweep/1"
 
@@ -57,13 +71,13 @@ def sample_goals(count: int, seed: int, max_abs: float = math.pi) -> np.ndarray:
 class SweepSpec:
     """What a sweep computes; equal specs give identical trials (its manifest)."""
 
-    goals: int                              # number of goal rotations
-    seed: int                               # seed of the goal sampler
-    methods: tuple[str, ...] = METHODS      # planners to compare
-    simulate: bool = False                  # execute every plan that has a trajectory
+    goals: int  # number of goal rotations
+    seed: int  # seed of the goal sampler
+    methods: tuple[str, ...] = METHODS  # planners to compare
+    simulate: bool = False  # execute every plan that has a trajectory
     config: Config = field(default_factory=Config)
-    max_goal: float = math.pi               # rad, goals are uniform in [-max_goal, max_goal]
-    time_limit_s: float = 1800.0            # s, per trial (plan + simulation); a trial past it is killed
+    max_goal: float = math.pi  # rad, goals are uniform in [-max_goal, max_goal]
+    time_limit_s: float = 1800.0  # s, per trial (plan + simulation); a trial past it is killed
 
     def __post_init__(self):
         check_integer("--goals", self.goals, 1, 100000)
@@ -82,16 +96,34 @@ class SweepSpec:
         return sample_goals(self.goals, self.seed, self.max_goal)
 
     def manifest(self) -> dict:
-        return {"format": MANIFEST_FORMAT, "goals": self.goals, "seed": self.seed, "max_goal": self.max_goal,
-                "goal_values": [float(g) for g in self.goal_values()], "methods": list(self.methods),
-                "simulate": self.simulate, "time_limit_s": self.time_limit_s, "config": config_to_dict(self.config)}
+        return {
+            "format": MANIFEST_FORMAT,
+            "goals": self.goals,
+            "seed": self.seed,
+            "max_goal": self.max_goal,
+            "goal_values": [float(g) for g in self.goal_values()],
+            "methods": list(self.methods),
+            "simulate": self.simulate,
+            "time_limit_s": self.time_limit_s,
+            "config": config_to_dict(self.config),
+        }
 
     def tasks(self) -> list[TrialTask]:
         """Goal-major order, so partial results cover every method."""
         config = config_to_dict(self.config)
-        return [TrialTask(key=trial_key(i, m), goal_index=i, goal=float(g), method=m, simulate=self.simulate,
-                          config=config, time_limit_s=self.time_limit_s)
-                for i, g in enumerate(self.goal_values()) for m in self.methods]
+        return [
+            TrialTask(
+                key=trial_key(i, m),
+                goal_index=i,
+                goal=float(g),
+                method=m,
+                simulate=self.simulate,
+                config=config,
+                time_limit_s=self.time_limit_s,
+            )
+            for i, g in enumerate(self.goal_values())
+            for m in self.methods
+        ]
 
 
 def trial_key(goal_index: int, method: str) -> str:
@@ -99,6 +131,7 @@ def trial_key(goal_index: int, method: str) -> str:
 
 
 # ---- executors -----------------------------------------------------------------------
+
 
 def connect_scheduler(address: str, timeout_s: float):
     """A dask.distributed Client for `address`; ConfigError if Dask is missing or the
@@ -110,8 +143,9 @@ def connect_scheduler(address: str, timeout_s: float):
     try:
         return Client(address, timeout=timeout_s)
     except (OSError, TimeoutError, ValueError) as e:
-        raise ConfigError(f"--scheduler {address!r}: cannot reach the Dask scheduler within {timeout_s:g} s "
-                          f"({type(e).__name__}: {e})") from None
+        raise ConfigError(
+            f"--scheduler {address!r}: cannot reach the Dask scheduler within {timeout_s:g} s ({type(e).__name__}: {e})"
+        ) from None
 
 
 def _local_results(tasks: list[TrialTask], workers: int, scratch_root: str | None = None):
@@ -133,6 +167,7 @@ def _local_results(tasks: list[TrialTask], workers: int, scratch_root: str | Non
 
 def _dask_results(tasks: list[TrialTask], client):
     from distributed import as_completed as dask_as_completed
+
     futures = {}
     for t in tasks:
         futures[client.submit(execute_trial, t, key=f"trajectotree-trial-{t.key}-{time.time_ns()}", pure=False)] = t
@@ -154,37 +189,49 @@ def _result_or_error(future):
 
 # ---- the sweep ---------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class SweepSummary:
     out_dir: str
-    total: int                   # trials in the sweep
-    skipped: int                 # finished before this run
-    ran: int                     # finished in this run
-    errors: int                  # trials recorded with an error (all runs)
-    wall_s: float                # s, this run
-    solved: dict[str, int]       # method -> successful plans (all runs)
-    per_method: dict[str, int]   # method -> finished trials (all runs)
-    dropped: dict[str, int]      # method -> simulated drops (all runs)
+    total: int  # trials in the sweep
+    skipped: int  # finished before this run
+    ran: int  # finished in this run
+    errors: int  # trials recorded with an error (all runs)
+    wall_s: float  # s, this run
+    solved: dict[str, int]  # method -> successful plans (all runs)
+    per_method: dict[str, int]  # method -> finished trials (all runs)
+    dropped: dict[str, int]  # method -> simulated drops (all runs)
 
     def line(self) -> str:
-        methods = ", ".join(f"{m} {self.solved.get(m, 0)}/{n} solved"
-                            + (f" {self.dropped[m]} dropped" if m in self.dropped else "")
-                            for m, n in self.per_method.items())
+        methods = ", ".join(
+            f"{m} {self.solved.get(m, 0)}/{n} solved" + (f" {self.dropped[m]} dropped" if m in self.dropped else "")
+            for m, n in self.per_method.items()
+        )
         done = self.skipped + self.ran
-        return (f"sweep {self.out_dir}: {done}/{self.total} trials done ({self.ran} now, {self.skipped} before) "
-                f"in {self.wall_s:.1f} s; {methods}; {self.errors} errors")
+        return (
+            f"sweep {self.out_dir}: {done}/{self.total} trials done ({self.ran} now, {self.skipped} before) "
+            f"in {self.wall_s:.1f} s; {methods}; {self.errors} errors"
+        )
 
 
 def summarize_rows(out_dir: Path, spec: SweepSpec, skipped: int, ran: int, wall_s: float) -> SweepSummary:
     rows = read_rows(out_dir)
     per_method = Counter(r["method"] for r in rows)
     return SweepSummary(
-        out_dir=str(out_dir), total=spec.goals * len(spec.methods), skipped=skipped, ran=ran,
-        errors=sum(r.get("error") is not None for r in rows), wall_s=wall_s,
+        out_dir=str(out_dir),
+        total=spec.goals * len(spec.methods),
+        skipped=skipped,
+        ran=ran,
+        errors=sum(r.get("error") is not None for r in rows),
+        wall_s=wall_s,
         solved=dict(Counter(r["method"] for r in rows if r.get("success"))),
         per_method={m: per_method[m] for m in spec.methods if per_method[m]},
-        dropped={m: sum(bool(r.get("dropped")) for r in rows if r["method"] == m)
-                 for m in spec.methods if spec.simulate and per_method[m]})
+        dropped={
+            m: sum(bool(r.get("dropped")) for r in rows if r["method"] == m)
+            for m in spec.methods
+            if spec.simulate and per_method[m]
+        },
+    )
 
 
 def pending_tasks(out_dir: Path, spec: SweepSpec, retry_errors: bool) -> tuple[list[TrialTask], int]:
@@ -196,8 +243,10 @@ def pending_tasks(out_dir: Path, spec: SweepSpec, retry_errors: bool) -> tuple[l
 
 def check_executor(workers: int | None, scheduler: str | None, scheduler_timeout_s: float) -> int:
     if workers is not None and scheduler is not None:
-        raise ConfigError("--workers sets local worker processes; with --scheduler the cluster's workers run "
-                          "the trials: give one or the other")
+        raise ConfigError(
+            "--workers sets local worker processes; with --scheduler the cluster's workers run "
+            "the trials: give one or the other"
+        )
     check_range("--scheduler-timeout", scheduler_timeout_s, 0.0, None, low_open=True)
     if workers is None:
         return os.cpu_count() or 1
@@ -205,8 +254,16 @@ def check_executor(workers: int | None, scheduler: str | None, scheduler_timeout
     return workers
 
 
-def run_sweep(spec: SweepSpec, out_dir: str | Path, *, workers: int | None = None, scheduler: str | None = None,
-              scheduler_timeout_s: float = 30.0, retry_errors: bool = False, progress: bool = True) -> SweepSummary:
+def run_sweep(
+    spec: SweepSpec,
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    scheduler_timeout_s: float = 30.0,
+    retry_errors: bool = False,
+    progress: bool = True,
+) -> SweepSummary:
     """Runs every unfinished trial of `spec` into out_dir and returns the summary.
     Invalid input raises ConfigError before anything is written."""
     out_dir = Path(out_dir)
@@ -222,8 +279,9 @@ def run_sweep(spec: SweepSpec, out_dir: str | Path, *, workers: int | None = Non
             client.close()
 
 
-def _run_locked(spec: SweepSpec, out_dir: Path, client, workers: int, retry_errors: bool, progress: bool,
-                start: float) -> SweepSummary:
+def _run_locked(
+    spec: SweepSpec, out_dir: Path, client, workers: int, retry_errors: bool, progress: bool, start: float
+) -> SweepSummary:
     from tqdm import tqdm
 
     for message in prepare_dir(out_dir, spec):
@@ -233,8 +291,14 @@ def _run_locked(spec: SweepSpec, out_dir: Path, client, workers: int, retry_erro
     scratch = str(out_dir / TRIALS_DIR)  # trials' scratch folders (.tmp-scratch-*), cleaned on every start
     results = _dask_results(tasks, client) if client else _local_results(tasks, workers, scratch)
     ran = 0
-    bar = tqdm(total=skipped + len(tasks), initial=skipped, unit="trial", desc="sweep", disable=not progress,
-               dynamic_ncols=True)
+    bar = tqdm(
+        total=skipped + len(tasks),
+        initial=skipped,
+        unit="trial",
+        desc="sweep",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
     with closing(results), bar:
         for task, outcome in results:
             if isinstance(outcome, TrialInterrupted):

@@ -17,8 +17,8 @@ from pathlib import Path
 
 from trajectotree import __version__
 from trajectotree.config import ConfigError
-from trajectotree.io import write_bytes_atomic
 from trajectotree.experiments.trial import ROW_FILE, TrialOutcome
+from trajectotree.io import write_bytes_atomic
 
 MANIFEST_FILE = "manifest.json"
 TRIALS_DIR = "trials"
@@ -64,8 +64,11 @@ def _identity(manifest: dict) -> dict:
 def _manifest_differences(old: dict, new: dict) -> list[str]:
     """'name: old there, new now' for each differing argument or config field."""
     old, new = _identity(old), _identity(new)
-    return [f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
-            for key in sorted(set(old) | set(new)) if old.get(key) != new.get(key)]
+    return [
+        f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
+        for key in sorted(set(old) | set(new))
+        if old.get(key) != new.get(key)
+    ]
 
 
 def check_manifest(out_dir: Path, spec) -> bool:
@@ -76,8 +79,10 @@ def check_manifest(out_dir: Path, spec) -> bool:
     path = out_dir / MANIFEST_FILE
     if not path.exists():
         if out_dir.is_dir() and any(p.name != LOCK_FILE for p in out_dir.iterdir()):
-            raise ConfigError(f"--out {str(out_dir)!r} is a non-empty directory without {MANIFEST_FILE}; "
-                              "give a new or empty directory, or the directory of the sweep to resume")
+            raise ConfigError(
+                f"--out {str(out_dir)!r} is a non-empty directory without {MANIFEST_FILE}; "
+                "give a new or empty directory, or the directory of the sweep to resume"
+            )
         return False
     try:
         old = json.loads(path.read_text())
@@ -85,8 +90,10 @@ def check_manifest(out_dir: Path, spec) -> bool:
         raise ConfigError(f"{str(path)!r} is not a readable sweep manifest: {e}") from None
     diffs = _manifest_differences(old, spec.manifest())
     if diffs:
-        raise ConfigError(f"{str(out_dir)!r} holds a sweep with different arguments ({'; '.join(diffs)}); "
-                          "rerun with the same arguments to resume it, or choose another --out")
+        raise ConfigError(
+            f"{str(out_dir)!r} holds a sweep with different arguments ({'; '.join(diffs)}); "
+            "rerun with the same arguments to resume it, or choose another --out"
+        )
     return True
 
 
@@ -122,8 +129,10 @@ def sweep_lock(out_dir: Path) -> Iterator[None]:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = previous or "unknown pid"
-            raise ConfigError(f"--out {str(out_dir)!r} is in use by another sweep (process {holder}; lock file "
-                              f"{str(path)!r}); wait for it to finish or stop it, or choose another --out") from None
+            raise ConfigError(
+                f"--out {str(out_dir)!r} is in use by another sweep (process {holder}; lock file "
+                f"{str(path)!r}); wait for it to finish or stop it, or choose another --out"
+            ) from None
         if previous:
             print(f"sweep {out_dir}: taking over the stale lock of process {previous}, which is gone", file=sys.stderr)
         os.ftruncate(fd, 0)
@@ -152,8 +161,11 @@ def _finished_trial_dirs(out_dir: Path) -> list[Path]:
     trials = out_dir / TRIALS_DIR
     if not trials.is_dir():
         return []
-    return [d for d in sorted(trials.iterdir())
-            if d.is_dir() and not d.name.startswith(TMP_PREFIX) and (d / ROW_FILE).is_file()]
+    return [
+        d
+        for d in sorted(trials.iterdir())
+        if d.is_dir() and not d.name.startswith(TMP_PREFIX) and (d / ROW_FILE).is_file()
+    ]
 
 
 def read_rows(out_dir: str | Path) -> list[dict]:
@@ -173,8 +185,9 @@ def set_aside_corrupt_trials(out_dir: Path) -> list[str]:
             target = out_dir / CORRUPT_DIR / f"{trial_dir.name}-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}"
             target.parent.mkdir(exist_ok=True)
             os.replace(trial_dir, target)
-            messages.append(f"{str(e.path)!r} was unreadable ({e.reason}); moved the trial to {str(target)!r}; "
-                            "it is recomputed")
+            messages.append(
+                f"{str(e.path)!r} was unreadable ({e.reason}); moved the trial to {str(target)!r}; it is recomputed"
+            )
     return messages
 
 

@@ -30,11 +30,25 @@ from pathlib import Path
 from trajectotree.io import PLAN_JSON, SIM_JSON
 
 # Row fields, in the order of trials.jsonl and the CSV table.
-PLAN_FIELDS = ("success", "converged", "status", "search_time_s", "build_time_s", "solve_time_s", "total_time_s",
-               "cost", "iterations")
+PLAN_FIELDS = (
+    "success",
+    "converged",
+    "status",
+    "search_time_s",
+    "build_time_s",
+    "solve_time_s",
+    "total_time_s",
+    "cost",
+    "iterations",
+)
 SIM_FIELDS = ("mae_x", "mae_y", "mae_theta", "final_error", "dropped", "drop_time_s", "sim_time_s")
-ROW_FIELDS = ("key", "goal_index", "goal", "method") + PLAN_FIELDS + ("switching_fingers", "simulated") \
-    + SIM_FIELDS + ("trial_wall_s", "error")
+ROW_FIELDS = (
+    ("key", "goal_index", "goal", "method")
+    + PLAN_FIELDS
+    + ("switching_fingers", "simulated")
+    + SIM_FIELDS
+    + ("trial_wall_s", "error")
+)
 ROW_FILE = "trial.json"
 LOG_FILE = "log.txt"
 STDERR_TAIL_CHARS = 4000
@@ -45,19 +59,19 @@ SCRATCH_PREFIX = ".tmp-scratch-"  # sweep.prepare_dir removes trials/.tmp-* left
 class TrialTask:
     """What one trial does; plain data, so it pickles to any executor."""
 
-    key: str             # "<goal index>_<method>", the trial's directory name
-    goal_index: int      # index into the sweep's goals
-    goal: float          # rad, goal rotation
-    method: str          # "trajectotree" | "cito" | "cito-warm"
-    simulate: bool       # execute the plan in simulation
-    config: dict         # trajectotree.config.config_to_dict(Config)
+    key: str  # "<goal index>_<method>", the trial's directory name
+    goal_index: int  # index into the sweep's goals
+    goal: float  # rad, goal rotation
+    method: str  # "trajectotree" | "cito" | "cito-warm"
+    simulate: bool  # execute the plan in simulation
+    config: dict  # trajectotree.config.config_to_dict(Config)
     time_limit_s: float  # s, wall clock for plan + simulation; the child is killed beyond it
 
 
 @dataclass(frozen=True)
 class TrialOutcome:
-    row: dict                 # one row of trials.jsonl (ROW_FIELDS)
-    files: dict[str, bytes]   # file name -> contents, to be stored in the trial's directory
+    row: dict  # one row of trials.jsonl (ROW_FIELDS)
+    files: dict[str, bytes]  # file name -> contents, to be stored in the trial's directory
 
 
 class TrialInterrupted(RuntimeError):
@@ -108,6 +122,7 @@ def run_trial(task: TrialTask, out_dir: Path) -> dict:
     save_plan(result, out_dir)
     if task.simulate and result.trajectory is not None:
         from trajectotree.execution.simulate import run_simulation
+
         save_sim(run_simulation(plan=result, config=config), out_dir)
     return row_from_files(task, out_dir)
 
@@ -147,8 +162,14 @@ def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutc
         # One OpenMP thread for SPRAL unless the user chose otherwise: trials run side by side anyway,
         # and a threaded factorization may round differently from run to run (same trial, same result).
         env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1"), "TMPDIR": str(tmp_dir)}
-        child = subprocess.Popen([sys.executable, "-m", "trajectotree.experiments.trial", scratch], stdin=subprocess.PIPE,
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+        child = subprocess.Popen(
+            [sys.executable, "-m", "trajectotree.experiments.trial", scratch],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
         with _children_lock:
             _children.add(child)
         try:
@@ -167,14 +188,17 @@ def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutc
         if _stopping.is_set() or child.returncode in (-signal.SIGINT, -signal.SIGTERM):
             raise TrialInterrupted(task.key)
         if timed_out:
-            return _error_outcome(task, f"timeout: exceeded the trial time limit of {task.time_limit_s:g} s",
-                                  wall_s, log)
+            return _error_outcome(
+                task, f"timeout: exceeded the trial time limit of {task.time_limit_s:g} s", wall_s, log
+            )
         if child.returncode < 0:
-            return _error_outcome(task, f"crashed: the trial process died from {_signal_name(child.returncode)}",
-                                  wall_s, log)
+            return _error_outcome(
+                task, f"crashed: the trial process died from {_signal_name(child.returncode)}", wall_s, log
+            )
         if child.returncode != 0:
-            return _error_outcome(task, _last_line(err) or f"the trial process exited with code {child.returncode}",
-                                  wall_s, log)
+            return _error_outcome(
+                task, _last_line(err) or f"the trial process exited with code {child.returncode}", wall_s, log
+            )
         files = {p.name: p.read_bytes() for p in sorted(out_dir.iterdir()) if p.is_file()}
     row = json.loads(files[ROW_FILE])
     row["trial_wall_s"] = wall_s

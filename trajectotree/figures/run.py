@@ -63,7 +63,7 @@ def plot_hand(ax, scene, q, *, colors=FINGER_COLORS, **kwargs):
     """All four fingers of `scene` at joint angles q (8,)."""
     artists = []
     for i, finger in enumerate(scene.fingers):
-        artists += plot_finger(ax, finger, q[2 * i:2 * i + 2], scene.tip_radius, tip_color=colors[i], **kwargs)
+        artists += plot_finger(ax, finger, q[2 * i : 2 * i + 2], scene.tip_radius, tip_color=colors[i], **kwargs)
     return artists
 
 
@@ -77,6 +77,7 @@ def figure_model(scene, q=None, reachable=None, note: str | None = None):
     the object at its initial pose, gravity, and optionally each finger's reachable contacts
     (`reachable`: arclengths per finger, plot_reachable_contacts) and a `note` below the title."""
     import matplotlib.pyplot as plt
+
     from trajectotree.scene.plant import describe_object
 
     fig, ax = plt.subplots(figsize=(5, 5))
@@ -108,8 +109,9 @@ def plot_finger_force(ax, t, f_sim, f_plan, *, color=None, drop_time=None):
     (plan,) = ax.plot(t, np.linalg.norm(f_plan, axis=1), color=sim.get_color(), lw=1.2, ls="--", label="planned |f|")
     artists = [sim, plan]
     if drop_time is not None:
-        artists.append(ax.axvspan(drop_time, t[-1], color="0.85", zorder=0, lw=0,
-                                  label="after the drop (may be clipped)"))
+        artists.append(
+            ax.axvspan(drop_time, t[-1], color="0.85", zorder=0, lw=0, label="after the drop (may be clipped)")
+        )
     return artists
 
 
@@ -119,8 +121,11 @@ def plot_segments(ax, spans, finger: int | None = None, *, color="gold"):
     artists = [ax.axvline(t0, color="0.5", ls=":", lw=0.8, zorder=0) for t0, _, _ in spans[1:]]
     for t0, t1, switching in spans:
         if finger is not None and switching == finger:
-            artists.append(ax.axvspan(t0, t1, color=color, alpha=0.25, lw=0, zorder=0,
-                                      label="segment in which this finger switches"))
+            artists.append(
+                ax.axvspan(
+                    t0, t1, color=color, alpha=0.25, lw=0, zorder=0, label="segment in which this finger switches"
+                )
+            )
     return artists
 
 
@@ -129,9 +134,21 @@ def plot_contacts(ax, pose, p_BC, n_B, *, colors=FINGER_COLORS, size=18):
     outward normals n_B as short arrows."""
     p_W = np.array([box_to_world(pose, p) for p in p_BC])
     n_W = np.array([box_to_world((0.0, 0.0, pose[2]), n) for n in n_B])
-    artists = [ax.scatter(p_W[:, 0], p_W[:, 1], s=size, c=list(colors[:len(p_W)]), edgecolors="k", zorder=6)]
-    artists.append(ax.quiver(p_W[:, 0], p_W[:, 1], n_W[:, 0], n_W[:, 1], angles="xy", scale_units="xy",
-                             scale=1 / 0.02, width=0.004, color="k", zorder=6))
+    artists = [ax.scatter(p_W[:, 0], p_W[:, 1], s=size, c=list(colors[: len(p_W)]), edgecolors="k", zorder=6)]
+    artists.append(
+        ax.quiver(
+            p_W[:, 0],
+            p_W[:, 1],
+            n_W[:, 0],
+            n_W[:, 1],
+            angles="xy",
+            scale_units="xy",
+            scale=1 / 0.02,
+            width=0.004,
+            color="k",
+            zorder=6,
+        )
+    )
     return artists
 
 
@@ -143,8 +160,9 @@ def plot_friction_cones(ax, pose, p_BC, n_B, mu: float, *, length=0.03, color="t
         t = np.array([-n[1], n[0]])
         edges = [(-n + sign * mu * t) / np.hypot(1.0, mu) for sign in (-1.0, 1.0)]
         wedge = [box_to_world(pose, p)] + [box_to_world(pose, p + length * e) for e in edges]
-        artists.append(ax.add_patch(Polygon(np.array(wedge), closed=True, facecolor=color, edgecolor=color,
-                                            alpha=alpha, zorder=5)))
+        artists.append(
+            ax.add_patch(Polygon(np.array(wedge), closed=True, facecolor=color, edgecolor=color, alpha=alpha, zorder=5))
+        )
     return artists
 
 
@@ -156,12 +174,27 @@ def plot_contact_node(ax, scene, node, *, mu: float, previous=None):
     artists = plot_object(ax, c.shape, node.object_pose)
     for i, finger in enumerate(scene.fingers):
         switching = i == node.switching_finger
-        artists += plot_finger(ax, finger, node.q[2 * i:2 * i + 2], scene.tip_radius,
-                               color="k" if switching else "0.55", lw=4.0 if switching else 2.0,
-                               tip_color=FINGER_COLORS[i])
-        artists.append(ax.annotate(str(i), finger.p_W_base, xytext=(0, -10 if finger.p_W_base[1] < 0 else 4),
-                                   textcoords="offset points", ha="center", fontsize=7, color=FINGER_COLORS[i],
-                                   fontweight="bold"))
+        artists += plot_finger(
+            ax,
+            finger,
+            node.q[2 * i : 2 * i + 2],
+            scene.tip_radius,
+            color="k" if switching else "0.55",
+            lw=4.0 if switching else 2.0,
+            tip_color=FINGER_COLORS[i],
+        )
+        artists.append(
+            ax.annotate(
+                str(i),
+                finger.p_W_base,
+                xytext=(0, -10 if finger.p_W_base[1] < 0 else 4),
+                textcoords="offset points",
+                ha="center",
+                fontsize=7,
+                color=FINGER_COLORS[i],
+                fontweight="bold",
+            )
+        )
     artists += plot_friction_cones(ax, node.object_pose, node.p_BC, node.n_B, mu)
     artists += plot_contacts(ax, node.object_pose, node.p_BC, node.n_B)
     if previous is not None and node.switching_finger is not None:
@@ -174,11 +207,23 @@ def contact_node_legend_handles(mu: float):
     """Legend entries of plot_contact_node's marks (proxy artists)."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
+
     return [
-        Line2D([], [], marker="o", ls="none", mfc="0.6", mec="k", ms=6, label="contact (finger's colour; arrow: normal)"),
+        Line2D(
+            [], [], marker="o", ls="none", mfc="0.6", mec="k", ms=6, label="contact (finger's colour; arrow: normal)"
+        ),
         Patch(facecolor="tab:cyan", alpha=0.4, label=f"friction cone (mu = {mu:.2g})"),
-        Line2D([], [], marker="o", ls="none", mfc="none", mec="0.3", ms=7, mew=1.5,
-               label="switching finger's previous contact"),
+        Line2D(
+            [],
+            [],
+            marker="o",
+            ls="none",
+            mfc="none",
+            mec="0.3",
+            ms=7,
+            mew=1.5,
+            label="switching finger's previous contact",
+        ),
         Line2D([], [], color="k", lw=4.0, label="switching finger"),
         Line2D([], [], color="0.55", lw=2.0, label="holding fingers (numbered at their bases)"),
     ]
@@ -203,8 +248,11 @@ def figure_keyframes(scene, plan):
         ax.set_aspect("equal")
         ax.set_xlim(-0.26, 0.26)
         ax.set_ylim(-0.26, 0.26)
-        moved = "initial grasp" if n == 0 else ("no switch" if node.switching_finger is None
-                                                 else f"finger {node.switching_finger} moves")
+        moved = (
+            "initial grasp"
+            if n == 0
+            else ("no switch" if node.switching_finger is None else f"finger {node.switching_finger} moves")
+        )
         ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
     fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
     handles = contact_node_legend_handles(mu)
@@ -236,8 +284,9 @@ def figure_finger_forces(result, segments=None):
     held = result.t <= (result.drop_time_s if result.drop_time_s is not None else np.inf)
     top = max(np.linalg.norm(result.f_W_plan, axis=-1).max(), np.linalg.norm(result.f_W[held], axis=-1).max(), 0.1)
     for i, ax in enumerate(axes):
-        plot_finger_force(ax, result.t, result.f_W[:, i], result.f_W_plan[:, i], color=FINGER_COLORS[i],
-                          drop_time=result.drop_time_s)
+        plot_finger_force(
+            ax, result.t, result.f_W[:, i], result.f_W_plan[:, i], color=FINGER_COLORS[i], drop_time=result.drop_time_s
+        )
         if segments:
             plot_segments(ax, segments, i)
         ax.set_ylabel(f"finger {i}\n|f| [N]")
@@ -251,8 +300,15 @@ def figure_finger_forces(result, segments=None):
         handles[label] = Line2D([], [], color="k", ls=style, lw=1.2)
     if segments:
         handles["segment boundary"] = Line2D([], [], color="0.5", ls=":", lw=0.8)
-    fig.legend(handles.values(), handles.keys(), fontsize=8, ncol=min(len(handles), 3), loc="upper center",
-               bbox_to_anchor=(0.5, 0.97), frameon=False)
+    fig.legend(
+        handles.values(),
+        handles.keys(),
+        fontsize=8,
+        ncol=min(len(handles), 3),
+        loc="upper center",
+        bbox_to_anchor=(0.5, 0.97),
+        frameon=False,
+    )
     fig.suptitle("force of each finger on the box, magnitude |f|", fontsize=10, y=0.995)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout(rect=(0, 0, 1, 0.985 - 0.03 * math.ceil(len(handles) / 3)))

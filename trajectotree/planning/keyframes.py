@@ -59,10 +59,10 @@ from trajectotree.scene.plant import Scene, build_scene
 # Drake and the parent's scene (tens of ms), where spawn re-imports Drake and rebuilds the scene
 # (~1-2 s, more than most segments take). scripts/bench_planning.py measures both.
 START_METHOD = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-AVERAGED = ("tau", "lambda_n", "lambda_t", "f_W")   # the shared knot's forces: the mean of both segments'
-SHARED = ("x", "xdot", "q", "qdot", "p_W_tip", "p_W_C")   # equal in both segments at a shared knot
-STRICT_PINNING = 100.0   # the last retry's factor on cito.weight_contact_slack (a stricter program)
-_SCENES: dict[SceneConfig, Scene] = {}   # per process: the scene each worker solves in
+AVERAGED = ("tau", "lambda_n", "lambda_t", "f_W")  # the shared knot's forces: the mean of both segments'
+SHARED = ("x", "xdot", "q", "qdot", "p_W_tip", "p_W_C")  # equal in both segments at a shared knot
+STRICT_PINNING = 100.0  # the last retry's factor on cito.weight_contact_slack (a stricter program)
+_SCENES: dict[SceneConfig, Scene] = {}  # per process: the scene each worker solves in
 
 
 @dataclass(frozen=True)
@@ -71,14 +71,14 @@ class PieceTask:
 
     scene: SceneConfig
     cito: CitoConfig
-    mu: float                         # the planning friction mu_plan
+    mu: float  # the planning friction mu_plan
     plan: ContactPlan
     first: int
     last: int
-    kind: str                         # "keyframes", "restart" (from `guess`), "links" (with the link rows),
+    kind: str  # "keyframes", "restart" (from `guess`), "links" (with the link rows),
     #                                   "joint" (with the neighbours)
     #                                   or "strict" (a joint one, pinned fingers STRICT_PINNING times harder)
-    guess: np.ndarray | None = None   # (K, KNOT_SIZE) initial guess (None: the plan's guess)
+    guess: np.ndarray | None = None  # (K, KNOT_SIZE) initial guess (None: the plan's guess)
 
 
 @dataclass(frozen=True)
@@ -86,7 +86,7 @@ class PieceResult:
     first: int
     last: int
     kind: str
-    success: bool                     # IPOPT converged and the piece's arrays pass the physics check
+    success: bool  # IPOPT converged and the piece's arrays pass the physics check
     converged: bool
     status: str
     iterations: int
@@ -97,26 +97,43 @@ class PieceResult:
     check: PhysicsCheck
     violations: dict
     timing: dict
-    solution: np.ndarray              # (K, KNOT_SIZE) the last iterate, for a restart
-    max_rss_mb: float                 # MB, peak resident memory of the process that solved it
+    solution: np.ndarray  # (K, KNOT_SIZE) the last iterate, for a restart
+    max_rss_mb: float  # MB, peak resident memory of the process that solved it
     pid: int
 
     def record(self) -> dict:
-        return {"kind": self.kind, "nodes": [self.first, self.last], "success": self.success,
-                "status": self.status, "iterations": self.iterations,
-                "time_s": self.build_time_s + self.solve_time_s, "max_rss_mb": self.max_rss_mb, "pid": self.pid}
+        return {
+            "kind": self.kind,
+            "nodes": [self.first, self.last],
+            "success": self.success,
+            "status": self.status,
+            "iterations": self.iterations,
+            "time_s": self.build_time_s + self.solve_time_s,
+            "max_rss_mb": self.max_rss_mb,
+            "pid": self.pid,
+        }
 
 
 def trajectory(program, sol, scene: Scene) -> Trajectory:
     """The plan.npz arrays of a solution; p_W_C from the planned contacts (pinned) and
     the box points nearest the fingertips (free)."""
     spec, kin = program.spec, program.rows.kinematics(sol.stacked())
-    p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B          # c_B is the fingertip centre's target
+    p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B  # c_B is the fingertip centre's target
     c = scene.config
     p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.shape)
-    return Trajectory(t=np.arange(spec.num_knots) * spec.dt, x=sol.x, xdot=sol.xd, q=sol.q, qdot=sol.qd,
-                      tau=sol.tau, lambda_n=sol.lambda_n, lambda_t=sol.lambda_t, f_W=kin.f_W, p_W_tip=kin.p_WF,
-                      p_W_C=p_W_C)
+    return Trajectory(
+        t=np.arange(spec.num_knots) * spec.dt,
+        x=sol.x,
+        xdot=sol.xd,
+        q=sol.q,
+        qdot=sol.qd,
+        tau=sol.tau,
+        lambda_n=sol.lambda_n,
+        lambda_t=sol.lambda_t,
+        f_W=kin.f_W,
+        p_W_tip=kin.p_WF,
+        p_W_C=p_W_C,
+    )
 
 
 def _scene(config: SceneConfig) -> Scene:
@@ -132,18 +149,31 @@ def solve_piece(task: PieceTask) -> PieceResult:
     body = BodyParams(scene, task.cito.sdf_sharpness, mu=task.mu)
     spec = piece_spec(task.plan, task.first, task.last, radius=scene.tip_radius, config=task.cito)
     program = build_program(task.cito, spec, body)
-    sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first:task.last + 1])
+    sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
     build_time = time.perf_counter() - t0
     outcome = solve(program, guess, task.cito)
     arrays = trajectory(program, outcome.solution, scene)
     check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
-    return PieceResult(first=task.first, last=task.last, kind=task.kind, success=outcome.success and check.passed,
-                       converged=outcome.success, status=outcome.status, iterations=outcome.iterations,
-                       cost=outcome.cost, build_time_s=build_time, solve_time_s=outcome.solve_time_s,
-                       trajectory=arrays, check=check, violations=violations(program, outcome.solution, scene),
-                       timing=outcome.timing, solution=outcome.solution.stacked(),
-                       max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, pid=os.getpid())
+    return PieceResult(
+        first=task.first,
+        last=task.last,
+        kind=task.kind,
+        success=outcome.success and check.passed,
+        converged=outcome.success,
+        status=outcome.status,
+        iterations=outcome.iterations,
+        cost=outcome.cost,
+        build_time_s=build_time,
+        solve_time_s=outcome.solve_time_s,
+        trajectory=arrays,
+        check=check,
+        violations=violations(program, outcome.solution, scene),
+        timing=outcome.timing,
+        solution=outcome.solution.stacked(),
+        max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        pid=os.getpid(),
+    )
 
 
 def prepare_worker(config: SceneConfig) -> int:
@@ -153,15 +183,14 @@ def prepare_worker(config: SceneConfig) -> int:
 
 
 def _worker_init() -> None:
-    cito_solve.log_observer = None   # a terminal's progress line is the parent's, not each worker's
+    cito_solve.log_observer = None  # a terminal's progress line is the parent's, not each worker's
 
 
 def local_pool(workers: int, start_method: str = START_METHOD) -> ProcessPoolExecutor:
     """`workers` local processes for the segment programs (reuse one across plans to pay the
     start-up once: the scenes solved in are cached per process)."""
     check_integer("segment workers", workers, 1)
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method),
-                               initializer=_worker_init)
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method), initializer=_worker_init)
 
 
 def check_workers(workers, name: str = "segment_workers") -> int | None:
@@ -179,7 +208,7 @@ def run_pieces(tasks: list[PieceTask], executor: Executor | None, workers: int |
     workers = min(len(tasks), os.cpu_count() or 1) if workers is None else min(workers, len(tasks))
     if workers <= 1:
         return [solve_piece(t) for t in tasks]
-    for t in tasks:   # a forked worker inherits the scene built here
+    for t in tasks:  # a forked worker inherits the scene built here
         _scene(t.scene)
     with local_pool(workers) as pool:
         return list(pool.map(solve_piece, tasks))
@@ -192,22 +221,25 @@ def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[
     merged = []
     for s in sorted(failed):
         a, b = max(s - 1, 0), min(s + 2, n)
-        if merged and a < merged[-1][1]:   # ranges that only meet at a node stay apart
+        if merged and a < merged[-1][1]:  # ranges that only meet at a node stay apart
             merged[-1] = (merged[-1][0], max(b, merged[-1][1]))
         else:
             merged.append((a, b))
     return [r for r in merged if r[1] - r[0] >= min_segments]
 
 
-def solve_segments(plan: ContactPlan, config: Config, mu: float, executor: Executor | None = None,
-                   workers: int | None = None) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
+def solve_segments(
+    plan: ContactPlan, config: Config, mu: float, executor: Executor | None = None, workers: int | None = None
+) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
     """(the pieces to stitch, in order; every attempt per segment), with the retries."""
     n = len(plan.nodes) - 1
 
     cito = config.cito
     on_demand = cito.link_rows and cito.link_rows_on_demand
-    configs = {"strict": dataclasses.replace(cito, weight_contact_slack=cito.weight_contact_slack * STRICT_PINNING),
-               "keyframes": dataclasses.replace(cito, link_rows=False) if on_demand else cito}
+    configs = {
+        "strict": dataclasses.replace(cito, weight_contact_slack=cito.weight_contact_slack * STRICT_PINNING),
+        "keyframes": dataclasses.replace(cito, link_rows=False) if on_demand else cito,
+    }
     configs["restart"] = configs["keyframes"]
 
     def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
@@ -216,20 +248,24 @@ def solve_segments(plan: ContactPlan, config: Config, mu: float, executor: Execu
     def retry(segments: list[int], kind: str, from_last_iterate: bool) -> None:
         """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
         guesses = [best[s].solution if from_last_iterate else None for s in segments]
-        for s, r in zip(segments, run_pieces([task(s, s + 1, kind, g) for s, g in zip(segments, guesses)],
-                                             executor, workers)):
+        for s, r in zip(
+            segments, run_pieces([task(s, s + 1, kind, g) for s, g in zip(segments, guesses)], executor, workers)
+        ):
             attempts[s].append(r)
             best[s] = r
 
     best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers)
     attempts = {s: [best[s]] for s in range(n)}
     retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
-    if on_demand:   # from the guess: from a link deep inside the object (goal -0.089: 21 mm) IPOPT hit max_iter
-        retry([s for s in range(n) if best[s].check.link_penetration_m > LINK_PENETRATION_TOL], "links",
-              from_last_iterate=False)
-    pieces = {s: best[s] for s in range(n)}   # keyed by each piece's first node
+    if on_demand:  # from the guess: from a link deep inside the object (goal -0.089: 21 mm) IPOPT hit max_iter
+        retry(
+            [s for s in range(n) if best[s].check.link_penetration_m > LINK_PENETRATION_TOL],
+            "links",
+            from_last_iterate=False,
+        )
+    pieces = {s: best[s] for s in range(n)}  # keyed by each piece's first node
     for kind in ("joint", "strict"):
-        failed = [s for s, p in sorted(pieces.items()) if not p.success]   # single segments: a joint piece passed
+        failed = [s for s, p in sorted(pieces.items()) if not p.success]  # single segments: a joint piece passed
         ranges = _neighbour_ranges(failed, n, min_segments=2 if kind == "joint" else 1)
         for (a, b), r in zip(ranges, run_pieces([task(a, b, kind) for a, b in ranges], executor, workers)):
             for s in range(a, b):
@@ -263,15 +299,30 @@ def segment_records(attempts: dict[int, list[PieceResult]], pieces: list[PieceRe
     """plan.json's "segments": per segment its final attempt's status, its attempts' iterations
     and time summed (a joint retry is listed under each segment it covers), and the retries."""
     final = {s: p for p in pieces for s in range(p.first, p.last)}
-    return tuple({"nodes": [s, s + 1], "success": final[s].success, "status": final[s].status,
-                  "iterations": sum(r.iterations for r in tried), "time_s": sum(r.build_time_s + r.solve_time_s
-                                                                                for r in tried),
-                  "retries": len(tried) - 1, "attempts": [r.record() for r in tried]}
-                 for s, tried in sorted(attempts.items()))
+    return tuple(
+        {
+            "nodes": [s, s + 1],
+            "success": final[s].success,
+            "status": final[s].status,
+            "iterations": sum(r.iterations for r in tried),
+            "time_s": sum(r.build_time_s + r.solve_time_s for r in tried),
+            "retries": len(tried) - 1,
+            "attempts": [r.record() for r in tried],
+        }
+        for s, tried in sorted(attempts.items())
+    )
 
 
-def plan_keyframes(scene: Scene, goal: float, contact_plan: ContactPlan, config: Config, mu: float,
-                   search_time: float, executor: Executor | None = None, workers: int | None = None) -> PlanResult:
+def plan_keyframes(
+    scene: Scene,
+    goal: float,
+    contact_plan: ContactPlan,
+    config: Config,
+    mu: float,
+    search_time: float,
+    executor: Executor | None = None,
+    workers: int | None = None,
+) -> PlanResult:
     """The trajectotree PlanResult of the keyframes formulation for a successful contact plan.
     Times: build_time_s and solve_time_s summed over every attempt (process time in the
     workers); total_time_s = search_time + the wall-clock time of all segment solves. cost: the
@@ -289,8 +340,9 @@ def plan_keyframes(scene: Scene, goal: float, contact_plan: ContactPlan, config:
     if failed:
         p = failed[0]
         why = p.status if not p.converged else f"physics check failed: {p.check.reason}"
-        status = (f"{len(failed)} of {len(pieces)} pieces failed after retries; nodes {p.first}-{p.last} "
-                  f"({p.kind}): {why}")
+        status = (
+            f"{len(failed)} of {len(pieces)} pieces failed after retries; nodes {p.first}-{p.last} ({p.kind}): {why}"
+        )
     elif not check.passed:
         status = f"{status}, physics check failed: {check.reason}"
     timing = {}
@@ -298,12 +350,24 @@ def plan_keyframes(scene: Scene, goal: float, contact_plan: ContactPlan, config:
         for key, value in r.timing.items():
             timing[key] = timing.get(key, 0.0) + value
     groups = pieces[0].violations.keys()
-    return PlanResult(method="trajectotree", goal=goal, success=converged and not failed and check.passed,
-                      converged=converged, status=status, search_time_s=search_time,
-                      build_time_s=sum(r.build_time_s for r in distinct),
-                      solve_time_s=sum(r.solve_time_s for r in distinct), total_time_s=search_time + wall,
-                      cost=float(sum(p.cost for p in pieces)), iterations=sum(r.iterations for r in distinct),
-                      contact_plan=contact_plan, trajectory=arrays,
-                      violations={g: max(p.violations[g] for p in pieces) for g in groups}, config=config,
-                      solver_timing=timing, physics_check=check, formulation="keyframes",
-                      segments=segment_records(attempts, pieces))
+    return PlanResult(
+        method="trajectotree",
+        goal=goal,
+        success=converged and not failed and check.passed,
+        converged=converged,
+        status=status,
+        search_time_s=search_time,
+        build_time_s=sum(r.build_time_s for r in distinct),
+        solve_time_s=sum(r.solve_time_s for r in distinct),
+        total_time_s=search_time + wall,
+        cost=float(sum(p.cost for p in pieces)),
+        iterations=sum(r.iterations for r in distinct),
+        contact_plan=contact_plan,
+        trajectory=arrays,
+        violations={g: max(p.violations[g] for p in pieces) for g in groups},
+        config=config,
+        solver_timing=timing,
+        physics_check=check,
+        formulation="keyframes",
+        segments=segment_records(attempts, pieces),
+    )

@@ -36,13 +36,13 @@ from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import Config, ConfigError
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
-from trajectotree.search.grasp import FormClosure
-from trajectotree.search.initial_grasp import mu_plan
 from trajectotree.planning.keyframes import check_workers, plan_keyframes
 from trajectotree.planning.keyframes import trajectory as segment_trajectory
 from trajectotree.planning.physics import ObjectModel, check_physics
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
 from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.search.grasp import FormClosure
+from trajectotree.search.initial_grasp import mu_plan
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
 
 
@@ -52,9 +52,16 @@ def planning_mu(config: Config) -> float:
     return mu_plan(config.scene, config.search)
 
 
-def plan(*, scene: Scene, goal: float, method: str, config: Config,
-         contact_plan: ContactPlan | None = None, segment_executor: Executor | None = None,
-         segment_workers: int | None = None) -> PlanResult:
+def plan(
+    *,
+    scene: Scene,
+    goal: float,
+    method: str,
+    config: Config,
+    contact_plan: ContactPlan | None = None,
+    segment_executor: Executor | None = None,
+    segment_workers: int | None = None,
+) -> PlanResult:
     """Plans the rotation `goal` (rad) with `method`. A `contact_plan` may be given
     for the methods that use one (the search is then skipped; its time counts 0).
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
@@ -80,16 +87,20 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
     check_plan(contact_plan, scene, min_nodes=1 if method == "cito" else 2)
 
     if method == "trajectotree" and config.cito.formulation == "keyframes":
-        return plan_keyframes(scene, goal, contact_plan, config, planning_mu(config), search_time,
-                              segment_executor, segment_workers)
+        return plan_keyframes(
+            scene, goal, contact_plan, config, planning_mu(config), search_time, segment_executor, segment_workers
+        )
     t0 = time.perf_counter()
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=planning_mu(config))
     if method == "trajectotree":
         spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
     else:
         node0 = contact_plan.nodes[0]
-        path = (object_path(scene.config.initial_pose, goal, config.search.num_nodes) if method == "cito"
-                else contact_plan.object_path)
+        path = (
+            object_path(scene.config.initial_pose, goal, config.search.num_nodes)
+            if method == "cito"
+            else contact_plan.object_path
+        )
         spec = general_spec(x0=node0.object_pose, q0=node0.q, config=config.cito, object_path=path)
     program = build_program(config.cito, spec, body)
     guess = static_guess(program.rows, spec) if method == "cito" else plan_guess(program.rows, spec, contact_plan)
@@ -103,12 +114,25 @@ def plan(*, scene: Scene, goal: float, method: str, config: Config,
     if outcome.success and not check.passed:
         status = f"{outcome.status}, physics check failed: {check.reason}"
     converged = outcome.success and contact_plan.success
-    return PlanResult(method=method, goal=goal, success=converged and check.passed, converged=converged,
-                      status=status, search_time_s=search_time, build_time_s=build_time,
-                      solve_time_s=outcome.solve_time_s, total_time_s=search_time + build_time + outcome.solve_time_s,
-                      cost=outcome.cost, iterations=outcome.iterations, contact_plan=contact_plan,
-                      trajectory=trajectory, violations=violations(program, sol, scene), config=config,
-                      solver_timing=outcome.timing, physics_check=check)
+    return PlanResult(
+        method=method,
+        goal=goal,
+        success=converged and check.passed,
+        converged=converged,
+        status=status,
+        search_time_s=search_time,
+        build_time_s=build_time,
+        solve_time_s=outcome.solve_time_s,
+        total_time_s=search_time + build_time + outcome.solve_time_s,
+        cost=outcome.cost,
+        iterations=outcome.iterations,
+        contact_plan=contact_plan,
+        trajectory=trajectory,
+        violations=violations(program, sol, scene),
+        config=config,
+        solver_timing=outcome.timing,
+        physics_check=check,
+    )
 
 
 def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan:
@@ -131,14 +155,33 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan
     if any(qi is None for qi in q):
         return ContactPlan(goal=goal, success=False, reason="initial grasp out of reach of the fingers")
     closure = FormClosure(boundary, mu_plan(c, config.search), config.search.min_closure_margin)
-    node = ContactNode(object_pose=x0, q=np.concatenate(q), arclengths=arclengths, p_BC=p_BC, n_B=n_B,
-                       switching_finger=None, closure_margin=float(closure.check(arclengths).margin),
-                       required_mu=closure.required_mu(arclengths))
+    node = ContactNode(
+        object_pose=x0,
+        q=np.concatenate(q),
+        arclengths=arclengths,
+        p_BC=p_BC,
+        n_B=n_B,
+        switching_finger=None,
+        closure_margin=float(closure.check(arclengths).margin),
+        required_mu=closure.required_mu(arclengths),
+    )
     return ContactPlan(goal=goal, success=True, reason="", nodes=(node,), mu_plan=closure.mu)
 
 
 def _unsolved(method, goal, status, search_time, contact_plan, config) -> PlanResult:
-    return PlanResult(method=method, goal=goal, success=False, status=status, search_time_s=search_time,
-                      build_time_s=0.0, solve_time_s=0.0, total_time_s=search_time, cost=float("nan"),
-                      iterations=0, contact_plan=contact_plan, trajectory=None,
-                      violations={}, config=config)
+    return PlanResult(
+        method=method,
+        goal=goal,
+        success=False,
+        status=status,
+        search_time_s=search_time,
+        build_time_s=0.0,
+        solve_time_s=0.0,
+        total_time_s=search_time,
+        cost=float("nan"),
+        iterations=0,
+        contact_plan=contact_plan,
+        trajectory=None,
+        violations={},
+        config=config,
+    )

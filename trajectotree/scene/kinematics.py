@@ -35,7 +35,7 @@ import numpy as np
 K90 = np.array([[0.0, -1.0], [1.0, 0.0]])
 # Shifts of the wrapped q1 tried by IK, in candidate order.
 Q1_WRAPS = (-2 * np.pi, 0.0, 2 * np.pi)
-ELBOW_BRANCHES = (1, -1)   # sign of q2 per branch, in candidate order
+ELBOW_BRANCHES = (1, -1)  # sign of q2 per branch, in candidate order
 
 
 def jacobian_from_links(r1, r2) -> np.ndarray:
@@ -56,20 +56,21 @@ def first_solution(candidates: np.ndarray, valid: np.ndarray) -> np.ndarray:
 class TwoLinkFinger:
     """The kinematic parameters of one finger (scalars) or of several (leading finger axis)."""
 
-    p_W_base: np.ndarray   # (..., 2) m, joint-1 axis position in W
-    psi: float             # (...) rad, direction of link 1 in W when q1 = 0
-    l1: float              # (...) m, joint 1 to joint 2
-    l2: float              # (...) m, joint 2 to fingertip centre
-    q_lower: np.ndarray    # (..., 2) rad, joint lower limits
-    q_upper: np.ndarray    # (..., 2) rad, joint upper limits
+    p_W_base: np.ndarray  # (..., 2) m, joint-1 axis position in W
+    psi: float  # (...) rad, direction of link 1 in W when q1 = 0
+    l1: float  # (...) m, joint 1 to joint 2
+    l2: float  # (...) m, joint 2 to fingertip centre
+    q_lower: np.ndarray  # (..., 2) rad, joint lower limits
+    q_upper: np.ndarray  # (..., 2) rad, joint upper limits
 
     @staticmethod
-    def stack(fingers) -> "TwoLinkFinger":
+    def stack(fingers) -> TwoLinkFinger:
         """Several fingers as one, each parameter an array with a leading finger axis."""
-        return TwoLinkFinger(**{f.name: np.array([getattr(fi, f.name) for fi in fingers])
-                                for f in fields(TwoLinkFinger)})
+        return TwoLinkFinger(
+            **{f.name: np.array([getattr(fi, f.name) for fi in fingers]) for f in fields(TwoLinkFinger)}
+        )
 
-    def finger(self, i: int) -> "TwoLinkFinger":
+    def finger(self, i: int) -> TwoLinkFinger:
         """Finger i of a stack."""
         return TwoLinkFinger(**{f.name: getattr(self, f.name)[i] for f in fields(TwoLinkFinger)})
 
@@ -101,7 +102,12 @@ class TwoLinkFinger:
         search's collision test); `links` in scalars."""
         a1 = self.psi + q1
         a12 = a1 + q2
-        return a1, a12, (self.l1 * math.cos(a1), self.l1 * math.sin(a1)), (self.l2 * math.cos(a12), self.l2 * math.sin(a12))
+        return (
+            a1,
+            a12,
+            (self.l1 * math.cos(a1), self.l1 * math.sin(a1)),
+            (self.l2 * math.cos(a12), self.l2 * math.sin(a12)),
+        )
 
     def elbow(self, q) -> np.ndarray:
         """p_W of joint 2 (..., 2)."""
@@ -120,12 +126,16 @@ class TwoLinkFinger:
         reference have always used `d @ d`."""
         d = np.asarray(p_WF, dtype=float) - self.p_W_base
         dd = np.vecdot(d, d) if blas_dot else np.sum(d * d, axis=-1)
-        c2 = (dd - self.l1 ** 2 - self.l2 ** 2) / (2 * self.l1 * self.l2)
+        c2 = (dd - self.l1**2 - self.l2**2) / (2 * self.l1 * self.l2)
         acos = np.arccos(np.clip(c2, -1.0, 1.0))
         candidates = []
         for sign in ELBOW_BRANCHES:
             q2 = sign * acos
-            q1 = np.arctan2(d[..., 1], d[..., 0]) - self.psi - np.arctan2(self.l2 * np.sin(q2), self.l1 + self.l2 * np.cos(q2))
+            q1 = (
+                np.arctan2(d[..., 1], d[..., 0])
+                - self.psi
+                - np.arctan2(self.l2 * np.sin(q2), self.l1 + self.l2 * np.cos(q2))
+            )
             q1 = np.remainder(q1 + np.pi, 2 * np.pi) - np.pi
             candidates += [np.stack([q1 + wrap, np.broadcast_to(q2, q1.shape)], axis=-1) for wrap in Q1_WRAPS]
         candidates = np.stack(candidates)

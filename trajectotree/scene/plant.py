@@ -54,7 +54,7 @@ def _set_friction(text: str, mu: float) -> str:
 def box_sdf(config: SceneConfig) -> str:
     """box.sdf with the size, mass, inertia and friction of `config` (the size of its
     `object.vertices` when they are an axis-aligned rectangle)."""
-    a, b = config.shape.box_half   # (w/2, h/2): of box_width x box_height, or of the rectangle given as a polygon
+    a, b = config.shape.box_half  # (w/2, h/2): of box_width x box_height, or of the rectangle given as a polygon
     w, h, d, m = 2 * a, 2 * b, config.box_depth, config.box_mass
     ixx, iyy, izz = m * (h * h + d * d) / 12, m * (w * w + d * d) / 12, m * (w * w + h * h) / 12
     text = (MODELS_DIR / "box.sdf").read_text()
@@ -85,7 +85,7 @@ def prism_inertia(shape: ConvexPolygon, mass: float, depth: float) -> SpatialIne
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
     cross = x0 * y1 - x1 * y0
     area = cross.sum() / 2
-    Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area             # m^2, (1/A) int x^2 dA
+    Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area  # m^2, (1/A) int x^2 dA
     Syy = np.sum(cross * (y0 * y0 + y0 * y1 + y1 * y1)) / 12 / area
     Sxy = np.sum(cross * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)) / 24 / area
     dz = depth * depth / 12
@@ -138,10 +138,10 @@ class LinkRectangle:
     """A link's collision box in the plane, in the frame J of the joint that moves the link
     (all collision geometry is centred on z = 0, so planar overlap is 3D overlap)."""
 
-    p_JG: np.ndarray    # (2,) m, box centre
-    angle_JG: float     # rad, box x axis relative to J's x axis
+    p_JG: np.ndarray  # (2,) m, box centre
+    angle_JG: float  # rad, box x axis relative to J's x axis
     half_length: float  # m, half extent along the box x axis
-    half_width: float   # m, half extent along the box y axis (in the plane)
+    half_width: float  # m, half extent along the box y axis (in the plane)
 
     def corners(self, p_WJ, angle_WJ) -> np.ndarray:
         """(..., 4, 2) corners in W, counter-clockwise, when frame J is at p_WJ (..., 2) with
@@ -149,8 +149,9 @@ class LinkRectangle:
         hl, hw = self.half_length, self.half_width
         local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]]) @ rotation_2d(self.angle_JG).T + self.p_JG
         c, s = np.cos(angle_WJ)[..., None], np.sin(angle_WJ)[..., None]
-        return np.asarray(p_WJ)[..., None, :] + np.stack([c * local[:, 0] - s * local[:, 1],
-                                                          s * local[:, 0] + c * local[:, 1]], axis=-1)
+        return np.asarray(p_WJ)[..., None, :] + np.stack(
+            [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]], axis=-1
+        )
 
 
 @dataclass(frozen=True)
@@ -158,11 +159,13 @@ class FingerGeometry(TwoLinkFinger):
     """One finger as the closed-form kinematics (`TwoLinkFinger`: p_W_base, psi, l1, l2,
     q_lower, q_upper) and dynamics see it, read from the plant."""
 
-    tau_max: np.ndarray    # (2,) N m, torque limits
-    masses: np.ndarray     # (2,) kg, link masses
-    coms: np.ndarray       # (2,) m, link centre of mass along the link's x axis
-    inertias: np.ndarray   # (2,) kg m^2, link rotational inertia about z at its COM
-    link_boxes: tuple      # (LinkRectangle, LinkRectangle): link 1's collision box in joint 1's frame, link 2's in joint 2's
+    tau_max: np.ndarray  # (2,) N m, torque limits
+    masses: np.ndarray  # (2,) kg, link masses
+    coms: np.ndarray  # (2,) m, link centre of mass along the link's x axis
+    inertias: np.ndarray  # (2,) kg m^2, link rotational inertia about z at its COM
+    link_boxes: (
+        tuple  # (LinkRectangle, LinkRectangle): link 1's collision box in joint 1's frame, link 2's in joint 2's
+    )
 
 
 @dataclass
@@ -173,19 +176,29 @@ class Scene:
     diagram: object
     plant: MultibodyPlant
     scene_graph: SceneGraph
-    hand: object          # ModelInstanceIndex
-    box: object           # ModelInstanceIndex
+    hand: object  # ModelInstanceIndex
+    box: object  # ModelInstanceIndex
 
     @cached_property
     def hand_q_indices(self) -> np.ndarray:
         """Indices of the 8 hand joints (finger-major) in the plant's positions."""
-        return np.array([self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).position_start()
-                         for i in range(NUM_FINGERS) for j in (1, 2)])
+        return np.array(
+            [
+                self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).position_start()
+                for i in range(NUM_FINGERS)
+                for j in (1, 2)
+            ]
+        )
 
     @cached_property
     def hand_v_indices(self) -> np.ndarray:
-        return np.array([self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).velocity_start()
-                         for i in range(NUM_FINGERS) for j in (1, 2)])
+        return np.array(
+            [
+                self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).velocity_start()
+                for i in range(NUM_FINGERS)
+                for j in (1, 2)
+            ]
+        )
 
     @cached_property
     def box_q_indices(self) -> np.ndarray:
@@ -236,15 +249,21 @@ class Scene:
     def _read_link_rectangle(self, ctx, joint, body) -> LinkRectangle:
         """The link's box collision geometry from SceneGraph, in the frame of `joint` (which moves it)."""
         inspector = self.scene_graph.model_inspector()
-        boxes = [g for g in self.plant.GetCollisionGeometriesForBody(body) if type(inspector.GetShape(g)).__name__ == "Box"]
+        boxes = [
+            g for g in self.plant.GetCollisionGeometriesForBody(body) if type(inspector.GetShape(g)).__name__ == "Box"
+        ]
         if len(boxes) != 1:
             raise RuntimeError(f"{body.name()} must have exactly one box collision geometry, has {len(boxes)}")
         shape = inspector.GetShape(boxes[0])
         X_WG = body.EvalPoseInWorld(ctx) @ inspector.GetPoseInFrame(boxes[0])
         X_JG = joint.frame_on_child().CalcPoseInWorld(ctx).inverse() @ X_WG
         R_JG = X_JG.rotation().matrix()
-        return LinkRectangle(p_JG=X_JG.translation()[:2].copy(), angle_JG=math.atan2(R_JG[1, 0], R_JG[0, 0]),
-                             half_length=shape.width() / 2, half_width=shape.depth() / 2)
+        return LinkRectangle(
+            p_JG=X_JG.translation()[:2].copy(),
+            angle_JG=math.atan2(R_JG[1, 0], R_JG[0, 0]),
+            half_length=shape.width() / 2,
+            half_width=shape.depth() / 2,
+        )
 
     def _actuators(self, i: int):
         names = {f"finger{i}_joint1": 0, f"finger{i}_joint2": 1}
@@ -276,8 +295,13 @@ class Scene:
         out = np.zeros((NUM_FINGERS, 2, NUM_HAND_JOINTS))
         for i in range(NUM_FINGERS):
             J = plant.CalcJacobianTranslationalVelocity(
-                context, JacobianWrtVariable.kV, self.tip_frame(i), np.zeros(3),
-                plant.world_frame(), plant.world_frame())
+                context,
+                JacobianWrtVariable.kV,
+                self.tip_frame(i),
+                np.zeros(3),
+                plant.world_frame(),
+                plant.world_frame(),
+            )
             out[i] = J[:2, self.hand_v_indices]
         return out
 

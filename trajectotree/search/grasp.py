@@ -35,9 +35,9 @@ from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
 from trajectotree.geometry import ConvexPolygon
 
-WRENCH_DIM = 3      # planar wrench (f_x, f_y, tau_z)
+WRENCH_DIM = 3  # planar wrench (f_x, f_y, tau_z)
 ARCLENGTH_KEY_DIGITS = 9  # arclengths equal to 1 nm share a cache entry
-MU_CAP = 10.0       # required_mu above this is reported as inf (scene.mu is at most 5)
+MU_CAP = 10.0  # required_mu above this is reported as inf (scene.mu is at most 5)
 MU_BISECTIONS = 30  # bisection steps of required_mu: MU_CAP / 2^30 ~ 1e-8
 SIDE_TOLERANCE = 1e-12  # relative; an edge this close to a plane counts as on it (not strictly on a side)
 
@@ -62,6 +62,7 @@ def closure_edges_parts(p_BC, n_B) -> tuple[np.ndarray, np.ndarray]:
 
     def wrench(f):
         return np.concatenate([f, (p[..., 0] * f[..., 1] - p[..., 1] * f[..., 0])[..., None]], axis=-1)
+
     return wrench(-n), wrench(t)
 
 
@@ -101,16 +102,16 @@ def required_mu_many(p_BC, n_B, bisections: int = MU_BISECTIONS) -> np.ndarray:
         mid = 0.5 * (lo + hi)
         ok = in_closure_many(A, B, mid, spans)
         hi, lo = np.where(ok, mid, hi), np.where(ok, lo, mid)
-    out[todo] = np.where(hi <= MU_CAP / 2 ** bisections, 0.0, hi)  # the last bracket holds 0: an infimum of 0
+    out[todo] = np.where(hi <= MU_CAP / 2**bisections, 0.0, hi)  # the last bracket holds 0: an infimum of 0
     return out
 
 
 @dataclass(frozen=True)
 class ClosureResult:
-    in_closure: bool      # rank G = 3 and margin > min_margin
-    margin: float         # N, the LP optimum d* (-inf when the LP failed)
-    rank: int             # rank of the grasp matrix
-    forces: np.ndarray    # (k, 2) the LP's (lambda_n, lambda_t) per contact
+    in_closure: bool  # rank G = 3 and margin > min_margin
+    margin: float  # N, the LP optimum d* (-inf when the LP failed)
+    rank: int  # rank of the grasp matrix
+    forces: np.ndarray  # (k, 2) the LP's (lambda_n, lambda_t) per contact
 
 
 class FormClosureLp:
@@ -122,7 +123,7 @@ class FormClosureLp:
         self.num_contacts = k = num_contacts
         prog = MathematicalProgram()
         x = prog.NewContinuousVariables(2 * k + 1, "x")  # (lambda_n0, lambda_t0, ..., d)
-        lam, d = x[:2 * k], x[2 * k]
+        lam, d = x[: 2 * k], x[2 * k]
         self.equilibrium = prog.AddLinearEqualityConstraint(np.zeros((WRENCH_DIM, 2 * k)), np.zeros(WRENCH_DIM), lam)
         # One constraint block (cone facets, lambda_n >= d, normalization): Clp sets up faster.
         A = np.zeros((3 * k + 1, 2 * k + 1))
@@ -130,7 +131,7 @@ class FormClosureLp:
             A[3 * i, [2 * i, 2 * i + 1, 2 * k]] = (mu, -1.0, -1.0)
             A[3 * i + 1, [2 * i, 2 * i + 1, 2 * k]] = (mu, 1.0, -1.0)
             A[3 * i + 2, [2 * i, 2 * k]] = (1.0, -1.0)
-        A[3 * k, 0:2 * k:2] = 1.0
+        A[3 * k, 0 : 2 * k : 2] = 1.0
         prog.AddLinearConstraint(A, np.r_[np.zeros(3 * k), -np.inf], np.r_[np.full(3 * k, np.inf), k], x)
         prog.AddLinearCost(-d)
         self.prog, self._lam, self._d = prog, lam, d
@@ -179,8 +180,9 @@ class FormClosure:
         if todo:
             k = max(map(len, todo))
             points = [[self.boundary.point(s) for s in key + (key[0],) * (k - len(key))] for key in todo]
-            values = required_mu_many(np.array([[p for p, _ in row] for row in points]),
-                                      np.array([[n for _, n in row] for row in points]))
+            values = required_mu_many(
+                np.array([[p for p, _ in row] for row in points]), np.array([[n for _, n in row] for row in points])
+            )
             self._required_mu.update(zip(todo, values.tolist()))
         return [self._required_mu.get(key, np.inf) for key in keys]  # no contact at all: never
 
@@ -200,5 +202,6 @@ class FormClosure:
         self.lp_calls += 1
         margin, forces = self.lps[k].solve(G)
         rank = int(np.linalg.matrix_rank(G, tol=1e-9))
-        return ClosureResult(in_closure=rank == WRENCH_DIM and margin > self.min_margin,
-                             margin=margin, rank=rank, forces=forces)
+        return ClosureResult(
+            in_closure=rank == WRENCH_DIM and margin > self.min_margin, margin=margin, rank=rank, forces=forces
+        )

@@ -30,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.config import SceneConfig, SearchConfig
+from trajectotree.scene.plant import NUM_FINGERS, Scene
 from trajectotree.search.grasp import required_mu_many
 from trajectotree.search.reach import Reachability
-from trajectotree.scene.plant import NUM_FINGERS, Scene
 
 RANKING_BISECTIONS = 20  # required_mu to MU_CAP / 2^20 ~ 1e-5 for ranking (ranked to 1e-4)
 STANCE_FINGERS = tuple(tuple(j for j in range(NUM_FINGERS) if j != i) for i in range(NUM_FINGERS))
@@ -41,18 +41,18 @@ STANCE_FINGERS = tuple(tuple(j for j in range(NUM_FINGERS) if j != i) for i in r
 @dataclass(frozen=True)
 class GraspCandidate:
     arclengths: tuple[float, float, float, float]  # m, each finger's contact along the boundary, in [0, perimeter)
-    stance_required_mu: tuple[float, ...]          # (4,) required mu of the other three when finger i lets go
-    worst_stance_mu: float                         # the largest of those at most mu_plan (the ranking key)
-    free_fingers: int                              # fingers that may let go at mu_plan
+    stance_required_mu: tuple[float, ...]  # (4,) required mu of the other three when finger i lets go
+    worst_stance_mu: float  # the largest of those at most mu_plan (the ranking key)
+    free_fingers: int  # fingers that may let go at mu_plan
 
 
 @dataclass(frozen=True)
 class GraspCandidates:
     mu_plan: float
     candidates: tuple[GraspCandidate, ...]  # ranked, best first
-    reachable: tuple[int, ...]              # grid contacts reachable per finger at the initial pose
-    assignments: int                        # grid assignments before the overlap and closure filters
-    reason: str                             # why there is no candidate ("" when there are)
+    reachable: tuple[int, ...]  # grid contacts reachable per finger at the initial pose
+    assignments: int  # grid assignments before the overlap and closure filters
+    reason: str  # why there is no candidate ("" when there are)
 
 
 _CACHE: dict[tuple, GraspCandidates] = {}
@@ -63,8 +63,9 @@ def mu_plan(scene_config: SceneConfig, search: SearchConfig) -> float:
     return search.friction_safety * scene_config.mu
 
 
-def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachability | None = None, *,
-                             memoize: bool = True) -> GraspCandidates:
+def initial_grasp_candidates(
+    scene: Scene, search: SearchConfig, reach: Reachability | None = None, *, memoize: bool = True
+) -> GraspCandidates:
     """The ranked candidate initial grasps for scene's object; memoized per scene and settings
     (memoize=False: built afresh and not kept, for a check outside the timed search)."""
     if not memoize:
@@ -103,7 +104,9 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     assignments = len(grasps)
     if assignments == 0:
         missing = [i for i, n in enumerate(counts) if n == 0]
-        return GraspCandidates(mu, (), counts, 0, f"finger(s) {missing} reach no corner-free contact at the initial pose")
+        return GraspCandidates(
+            mu, (), counts, 0, f"finger(s) {missing} reach no corner-free contact at the initial pose"
+        )
     p, n = reach.contacts(grasps.ravel())
     p, n = p.reshape(-1, NUM_FINGERS, 2), n.reshape(-1, NUM_FINGERS, 2)
     tips = p + reach.tip_radius * n
@@ -115,21 +118,35 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     for i, others in enumerate(STANCE_FINGERS):  # one required_mu per distinct stance
         stances, index = np.unique(grasps[:, others], axis=0, return_inverse=True)
         first = np.array([np.flatnonzero(index.ravel() == k)[0] for k in range(len(stances))], dtype=int)
-        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others],
-                                           bisections=RANKING_BISECTIONS)[index.ravel()]
+        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others], bisections=RANKING_BISECTIONS)[
+            index.ravel()
+        ]
     free = stance_mu < mu
     worst = np.where(free, stance_mu, -np.inf).max(axis=1)
     keep = np.flatnonzero(free.any(axis=1))
     # ties (many stances need ~0: an antipodal pair plus one) go to more free fingers, then to
     # the paper's heuristic at the initial pose (second joints near search.nominal_joint2)
-    order = keep[np.lexsort((_joint2_cost(scene, search, reach, grasps[keep]), -free[keep].sum(axis=1),
-                             np.round(worst[keep], 4)))]
-    candidates = tuple(GraspCandidate(arclengths=tuple(float(s) for s in grasps[k]),
-                                      stance_required_mu=tuple(float(v) for v in stance_mu[k]),
-                                      worst_stance_mu=float(worst[k]), free_fingers=int(free[k].sum()))
-                       for k in order)
-    reason = "" if candidates else (
-        f"no initial grasp: of {assignments} reachable grid grasps ({int(apart.sum())} without overlapping "
-        f"fingertips) none has a three-finger stance in frictional form closure at mu_plan {mu:.3g} "
-        f"(best stance needs mu {np.min(stance_mu) if stance_mu.size else np.inf:.3g})")
+    order = keep[
+        np.lexsort(
+            (_joint2_cost(scene, search, reach, grasps[keep]), -free[keep].sum(axis=1), np.round(worst[keep], 4))
+        )
+    ]
+    candidates = tuple(
+        GraspCandidate(
+            arclengths=tuple(float(s) for s in grasps[k]),
+            stance_required_mu=tuple(float(v) for v in stance_mu[k]),
+            worst_stance_mu=float(worst[k]),
+            free_fingers=int(free[k].sum()),
+        )
+        for k in order
+    )
+    reason = (
+        ""
+        if candidates
+        else (
+            f"no initial grasp: of {assignments} reachable grid grasps ({int(apart.sum())} without overlapping "
+            f"fingertips) none has a three-finger stance in frictional form closure at mu_plan {mu:.3g} "
+            f"(best stance needs mu {np.min(stance_mu) if stance_mu.size else np.inf:.3g})"
+        )
+    )
     return GraspCandidates(mu, candidates, counts, assignments, reason)

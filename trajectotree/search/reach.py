@@ -32,19 +32,20 @@ from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.scene.kinematics import first_solution
 from trajectotree.scene.plant import NUM_FINGERS, Scene
 
-IK_TOLERANCE = 1e-6   # m, fingertip position tolerance of the IK constraint
-KEY_DIGITS = 9        # poses and arclengths equal to 1e-9 share a cache entry
+IK_TOLERANCE = 1e-6  # m, fingertip position tolerance of the IK constraint
+KEY_DIGITS = 9  # poses and arclengths equal to 1e-9 share a cache entry
 
 
 @dataclass(frozen=True)
 class FingerReach:
     reachable: bool
-    q: np.ndarray      # (2,) rad, the finger's joint angles (nan when unreachable)
-    reason: str        # why not, "" when reachable
+    q: np.ndarray  # (2,) rad, the finger's joint angles (nan when unreachable)
+    reason: str  # why not, "" when reachable
 
 
-def rectangles_overlap_polygon(polygon: ConvexPolygon, center, angle, half_length: float,
-                               half_width: float) -> np.ndarray:
+def rectangles_overlap_polygon(
+    polygon: ConvexPolygon, center, angle, half_length: float, half_width: float
+) -> np.ndarray:
     """Separating-axis test of rectangles against a convex polygon, all in the polygon's frame:
     centres (k, 2), angles (k,) of their x axes, half sizes. (k,) bool, touching counts as not
     overlapping. Two convex polygons are disjoint iff one of their edge normals separates them,
@@ -58,19 +59,23 @@ def rectangles_overlap_polygon(polygon: ConvexPolygon, center, angle, half_lengt
         a, b = polygon.box_half
         cx, cy = c[:, 0], c[:, 1]
         ux, uy = np.abs(ux_s), np.abs(uy_s)
-        return ((np.abs(cx) < a + hl * ux + hw * uy) & (np.abs(cy) < b + hl * uy + hw * ux)
-                & (np.abs(cx * ux_s + cy * uy_s) < hl + a * ux + b * uy)
-                & (np.abs(-cx * uy_s + cy * ux_s) < hw + a * uy + b * ux))
+        return (
+            (np.abs(cx) < a + hl * ux + hw * uy)
+            & (np.abs(cy) < b + hl * uy + hw * ux)
+            & (np.abs(cx * ux_s + cy * uy_s) < hl + a * ux + b * uy)
+            & (np.abs(-cx * uy_s + cy * ux_s) < hw + a * uy + b * ux)
+        )
     n, v = polygon.normals, polygon.vertices
     # polygon normals: the polygon spans [min_j n_f . v_j, offset_f] along n_f
-    low = np.min(v @ n.T, axis=0)                                              # (V,)
-    centre = c @ n.T                                                           # (k, V)
-    radius = hl * np.abs(ux_s[:, None] * n[:, 0] + uy_s[:, None] * n[:, 1]) \
-        + hw * np.abs(-uy_s[:, None] * n[:, 0] + ux_s[:, None] * n[:, 1])      # (k, V)
+    low = np.min(v @ n.T, axis=0)  # (V,)
+    centre = c @ n.T  # (k, V)
+    radius = hl * np.abs(ux_s[:, None] * n[:, 0] + uy_s[:, None] * n[:, 1]) + hw * np.abs(
+        -uy_s[:, None] * n[:, 0] + ux_s[:, None] * n[:, 1]
+    )  # (k, V)
     overlap = np.all((centre - radius < polygon.offsets) & (centre + radius > low), axis=1)
     # the rectangle's axes u (half size hl) and v (hw)
     for axis, half in ((np.stack([ux_s, uy_s], 1), hl), (np.stack([-uy_s, ux_s], 1), hw)):
-        proj = axis @ v.T                                                      # (k, V)
+        proj = axis @ v.T  # (k, V)
         mid = np.einsum("ka,ka->k", c, axis)
         overlap &= (mid - half < proj.max(axis=1)) & (mid + half > proj.min(axis=1))
     return overlap
@@ -112,16 +117,23 @@ class Reachability:
 
     def link_polygons(self, finger: int, q) -> list[np.ndarray]:
         """Corners (4, 2) in W of the finger's link collision boxes at joint angles q."""
-        return [rect.corners(p_WJ, angle) for rect, (p_WJ, angle)
-                in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q))]
+        return [
+            rect.corners(p_WJ, angle)
+            for rect, (p_WJ, angle) in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q))
+        ]
 
     def links_penetrate(self, pose, finger: int, q) -> bool:
         """True when a link collision box of `finger` at q overlaps the object at `pose`."""
         R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
         for rect, (p_WJ, angle_WJ) in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q)):
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
-            if rectangles_overlap_polygon(self.boundary, R_BW @ (p_WG - p_WB), angle_WJ + rect.angle_JG - pose[2],
-                                          rect.half_length, rect.half_width)[0]:
+            if rectangles_overlap_polygon(
+                self.boundary,
+                R_BW @ (p_WG - p_WB),
+                angle_WJ + rect.angle_JG - pose[2],
+                rect.half_length,
+                rect.half_width,
+            )[0]:
                 return True
         return False
 
@@ -140,7 +152,7 @@ class Reachability:
         p_BF = p_BC + self.tip_radius * n_B
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         p_WF = poses[:, :2] + np.stack([c * p_BF[:, 0] - s * p_BF[:, 1], s * p_BF[:, 0] + c * p_BF[:, 1]], axis=1)
-        candidates, valid = f.ik_candidates(p_WF)      # (6, k, 2), (6, k): the order of ik_solutions
+        candidates, valid = f.ik_candidates(p_WF)  # (6, k, 2), (6, k): the order of ik_solutions
         rows = np.broadcast_to(poses, (len(candidates), *poses.shape))[valid]
         valid[valid] = ~self._links_penetrate_many(rows, finger, candidates[valid])
         return first_solution(candidates, valid)
@@ -154,10 +166,15 @@ class Reachability:
         hit = np.zeros(len(q), dtype=bool)
         for rect, origin, angle in zip(self.fingers[finger].link_boxes, (f.p_W_base, elbow), (a1, a12)):
             c, s = np.cos(angle), np.sin(angle)
-            rel = origin + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1) - poses[:, :2]
+            rel = (
+                origin
+                + np.stack([c * rect.p_JG[0] - s * rect.p_JG[1], s * rect.p_JG[0] + c * rect.p_JG[1]], axis=1)
+                - poses[:, :2]
+            )
             centre = np.stack([ct * rel[:, 0] + st * rel[:, 1], -st * rel[:, 0] + ct * rel[:, 1]], axis=1)  # in B
-            hit |= rectangles_overlap_polygon(self.boundary, centre, angle + rect.angle_JG - poses[:, 2],
-                                              rect.half_length, rect.half_width)
+            hit |= rectangles_overlap_polygon(
+                self.boundary, centre, angle + rect.angle_JG - poses[:, 2], rect.half_length, rect.half_width
+            )
         return hit
 
     # -- IK -------------------------------------------------------------------------------
@@ -172,9 +189,10 @@ class Reachability:
                 for j in (1, 2):
                     plant.GetJointByName(f"finger{k}_joint{j}", scene.hand).Lock(context)
         ik = InverseKinematics(plant, context, with_joint_limits=True)
-        position = ik.AddPositionConstraint(scene.tip_frame(i), np.zeros(3), plant.world_frame(),
-                                            np.zeros(3), np.zeros(3))
-        indices = scene.hand_q_indices[2 * i:2 * i + 2]
+        position = ik.AddPositionConstraint(
+            scene.tip_frame(i), np.zeros(3), plant.world_frame(), np.zeros(3), np.zeros(3)
+        )
+        indices = scene.hand_q_indices[2 * i : 2 * i + 2]
         return ik, position, diagram_context, indices
 
     def _drake_ik(self, finger: int, p_WF, q_guess) -> np.ndarray | None:
@@ -189,8 +207,11 @@ class Reachability:
 
     # -- queries --------------------------------------------------------------------------
     def _key(self, pose, finger: int, arclength: float) -> tuple:
-        return (tuple(round(float(v), KEY_DIGITS) for v in pose), finger,
-                round(float(arclength) % self.boundary.perimeter, KEY_DIGITS))
+        return (
+            tuple(round(float(v), KEY_DIGITS) for v in pose),
+            finger,
+            round(float(arclength) % self.boundary.perimeter, KEY_DIGITS),
+        )
 
     def closed_form(self, pose, finger: int, arclength: float) -> FingerReach:
         """Closed-form reachability (joint limits and link collision), no solver call; memoized."""

@@ -31,10 +31,10 @@ import numpy as np
 from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
 from trajectotree.search.initial_grasp import STANCE_FINGERS
 from trajectotree.search.reach import Reachability
-from trajectotree.scene.plant import Scene
 
 
 def arclength_key(perimeter: float, s: float) -> float:
@@ -54,8 +54,9 @@ class HoldingForceLp:
     def __init__(self, num_contacts: int):
         prog = MathematicalProgram()
         x = prog.NewContinuousVariables(2 * num_contacts, "x")
-        self.balance = prog.AddLinearEqualityConstraint(np.zeros((WRENCH_DIM, 2 * num_contacts)),
-                                                        np.zeros(WRENCH_DIM), x)
+        self.balance = prog.AddLinearEqualityConstraint(
+            np.zeros((WRENCH_DIM, 2 * num_contacts)), np.zeros(WRENCH_DIM), x
+        )
         prog.AddBoundingBoxConstraint(0.0, np.inf, x)
         prog.AddLinearCost(np.ones(2 * num_contacts), 0.0, x)
         self.prog, self.lp_calls = prog, 0
@@ -81,8 +82,7 @@ def weight_support_B(theta: float, weight: float) -> np.ndarray:
 class StanceChecks:
     """The rolled-stance and holding-force checks of one search (one object path)."""
 
-    def __init__(self, scene: Scene, reach: Reachability, poses: np.ndarray, mu_plan: float,
-                 max_force: float):
+    def __init__(self, scene: Scene, reach: Reachability, poses: np.ndarray, mu_plan: float, max_force: float):
         self.scene, self.reach, self.poses, self.mu_plan = scene, reach, poses, mu_plan
         self.boundary: ConvexPolygon = scene.config.shape
         self.max_force = max_force  # N, 0: no cap
@@ -116,11 +116,14 @@ class StanceChecks:
         out = []
         for j in fingers:
             s, step = node.arclengths[j], node
-            while step is not None and step.switching_finger != j:   # back to where finger j landed
+            while step is not None and step.switching_finger != j:  # back to where finger j landed
                 step = step.parent
             landed = 0 if step is None else step.depth
-            out.append(arclength_key(self.boundary.perimeter,
-                                     s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s))))
+            out.append(
+                arclength_key(
+                    self.boundary.perimeter, s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s))
+                )
+            )
         return out
 
     def link_turn(self, depth: int, finger: int, s: float) -> float:
@@ -150,6 +153,7 @@ class StanceChecks:
         key = (depth, arclengths)
         if key not in self._force:
             p_BC, n_B = self.boundary.points(np.array(arclengths))
-            self._force[key] = self.lp.solve(p_BC, n_B, self.mu_plan,
-                                             weight_support_B(self.poses[depth][2], self.weight))
+            self._force[key] = self.lp.solve(
+                p_BC, n_B, self.mu_plan, weight_support_B(self.poses[depth][2], self.weight)
+            )
         return self._force[key]

@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from trajectotree.config import SearchConfig
-from trajectotree.search.reach import Reachability
 from trajectotree.scene.plant import Scene
+from trajectotree.search.reach import Reachability
 from trajectotree.search.stance import arclength_key
 
 
@@ -55,10 +55,12 @@ class SwitchBound:
             gap = np.abs(grid[:, None] - corners[None, :])
             corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
             # reachability of the whole grid at every depth in one vectorized call
-            q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger,
-                                             np.tile(grid, last))[:, 1].reshape(last, len(grid))
-            allowed = [dict(zip(grid[ok].tolist(), row[ok].tolist()))
-                       for row in q2 for ok in [corner_free & np.isfinite(row)]]
+            q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger, np.tile(grid, last))[
+                :, 1
+            ].reshape(last, len(grid))
+            allowed = [
+                dict(zip(grid[ok].tolist(), row[ok].tolist())) for row in q2 for ok in [corner_free & np.isfinite(row)]
+            ]
             layers = [dict.fromkeys(s0s, np.nan)]
             for depth in range(1, last + 1):  # forward: contacts reachable from s0 by displacements
                 candidates = {m for s in layers[-1] for m in self.moves(s)}

@@ -62,12 +62,13 @@ import numpy as np
 
 from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
+from trajectotree.scene.plant import NUM_FINGERS, Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
 from trajectotree.search.reach import Reachability
-from trajectotree.scene.plant import NUM_FINGERS, Scene
 from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
+
 
 def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
     """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
@@ -80,7 +81,7 @@ class _Node:
     depth: int
     arclengths: tuple[float, ...]
     switching_finger: int | None
-    parent: "_Node | None"
+    parent: _Node | None
 
 
 class _Search:
@@ -124,8 +125,11 @@ class _Search:
         """Finger `finger`'s fingertip sphere would overlap another finger's."""
         r = self.reach.tip_radius
         p, n = self.reach.contact(arclengths[finger])
-        return any(np.linalg.norm(p + r * n - q - r * m) < 2 * r
-                   for i, (q, m) in enumerate(map(self.reach.contact, arclengths)) if i != finger)
+        return any(
+            np.linalg.norm(p + r * n - q - r * m) < 2 * r
+            for i, (q, m) in enumerate(map(self.reach.contact, arclengths))
+            if i != finger
+        )
 
     def infeasibility(self, node: _Node) -> str:
         """Why `node` is a dead end ("" when it is feasible): closure LP, then Drake IK."""
@@ -134,8 +138,10 @@ class _Search:
     def not_in_closure(self, arclengths) -> str:
         closure = self.closure.check(arclengths)
         if not closure.in_closure:
-            return (f"not in frictional form closure at mu_plan {self.mu_plan:.3g} (margin {closure.margin:.3g}, "
-                    f"needs mu {self.closure.required_mu(arclengths):.3g})")
+            return (
+                f"not in frictional form closure at mu_plan {self.mu_plan:.3g} (margin {closure.margin:.3g}, "
+                f"needs mu {self.closure.required_mu(arclengths):.3g})"
+            )
         return ""
 
     def unreachable(self, node: _Node) -> str:
@@ -159,8 +165,10 @@ class _Search:
         movers = stuck or list(range(NUM_FINGERS))
         free = [i for i in movers if self.closure.is_free(node.arclengths, i)]
         for i in sorted(set(movers) - set(free)):
-            self.refused[f"finger {i} {'must move (out of reach) but is ' if stuck else ''}held: stance of fingers "
-                         f"{STANCE_FINGERS[i]} not in closure at mu_plan"] += 1
+            self.refused[
+                f"finger {i} {'must move (out of reach) but is ' if stuck else ''}held: stance of fingers "
+                f"{STANCE_FINGERS[i]} not in closure at mu_plan"
+            ] += 1
         if not free:
             return []
         candidates = {} if stuck else {node.arclengths: None}  # the zero displacement: no finger moves
@@ -183,7 +191,7 @@ class _Search:
                 self.refused["fingertips overlap"] += 1
                 continue
             if finger is not None:
-                if finger not in stances:   # the stance depends on the finger, not on where it moves
+                if finger not in stances:  # the stance depends on the finger, not on where it moves
                     stances[finger] = self.stance_refused(node, depth, finger)
                 if stances[finger]:
                     self.refused[stances[finger]] += 1
@@ -196,8 +204,9 @@ class _Search:
         """Why the stance holding the object while `finger` moves from `node` to the child at
         `depth` is refused ("" when it is not): its rolled contacts (search.rolled_stances),
         then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance)."""
-        return ((self.stance.rolled(node, depth, finger) if self.config.rolled_stances else "")
-                or self.stance.too_heavy(node, depth, finger))
+        return (self.stance.rolled(node, depth, finger) if self.config.rolled_stances else "") or self.stance.too_heavy(
+            node, depth, finger
+        )
 
     # -- Algorithm 1 ----------------------------------------------------------------------
     def precheck(self, start: tuple[float, ...], candidate: bool = False) -> str:
@@ -213,18 +222,24 @@ class _Search:
             stuck = [i for i, v in enumerate(per_finger) if not np.isfinite(v)]
             return f"finger(s) {stuck} have no reachable, corner-free contacts at every node of the object path"
         if sum(per_finger) > self.config.num_nodes - 1:
-            return (f"the goal needs at least {int(sum(per_finger))} contact switches (per finger "
-                    f"{[int(v) for v in per_finger]}, each finger staying on reachable contacts), more than the "
-                    f"{self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes")
+            return (
+                f"the goal needs at least {int(sum(per_finger))} contact switches (per finger "
+                f"{[int(v) for v in per_finger]}, each finger staying on reachable contacts), more than the "
+                f"{self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes"
+            )
         # Each finger must switch by the first node where its initial contact is out of reach;
         # one switch per node, so the k-th earliest such deadline must be at least node k.
-        deadlines = sorted((next((d for d in range(1, self.config.num_nodes) if s not in self.joint2[i][d]),
-                                 np.inf), i) for i, s in enumerate(start))  # inf: never needs to move
+        deadlines = sorted(
+            (next((d for d in range(1, self.config.num_nodes) if s not in self.joint2[i][d]), np.inf), i)
+            for i, s in enumerate(start)
+        )  # inf: never needs to move
         for k, (deadline, finger) in enumerate(deadlines, start=1):
             if deadline < k:
                 late = [i for d, i in deadlines[:k]]
-                return (f"fingers {late} all lose their initial contacts (out of reach) by node {deadline}, "
-                        f"but only one finger can switch per node")
+                return (
+                    f"fingers {late} all lose their initial contacts (out of reach) by node {deadline}, "
+                    f"but only one finger can switch per node"
+                )
         dead_end = (self.not_in_closure(start) if candidate else "") or self.unreachable(_Node(0, start, None, None))
         return f"initial grasp infeasible: {dead_end}" if dead_end else ""
 
@@ -265,27 +280,44 @@ class _Search:
     def contact_nodes(self, path: list[_Node]) -> tuple[ContactNode, ...]:
         """The plan's nodes, with the required friction of each grasp and switching stance
         (both computed in one vectorized pass each)."""
-        stances = [[s for i, s in enumerate(n.arclengths) if i != n.switching_finger]
-                   for n in path if n.switching_finger is not None]
+        stances = [
+            [s for i, s in enumerate(n.arclengths) if i != n.switching_finger]
+            for n in path
+            if n.switching_finger is not None
+        ]
         grasp_mu = self.closure.required_mus([n.arclengths for n in path])
         stance_mu = iter(self.closure.required_mus(stances))
-        return tuple(self.contact_node(n, mu, None if n.switching_finger is None else next(stance_mu))
-                     for n, mu in zip(path, grasp_mu))
+        return tuple(
+            self.contact_node(n, mu, None if n.switching_finger is None else next(stance_mu))
+            for n, mu in zip(path, grasp_mu)
+        )
 
     def contact_node(self, node: _Node, required_mu: float, stance_required_mu: float | None) -> ContactNode:
         pose = self.poses[node.depth]
         points = [self.reach.contact(s) for s in node.arclengths]
         q = np.concatenate([self.reach.solve(pose, i, s).q for i, s in enumerate(node.arclengths)])
-        return ContactNode(object_pose=pose.copy(), q=q, arclengths=np.array(node.arclengths),
-                           p_BC=np.array([p for p, _ in points]), n_B=np.array([n for _, n in points]),
-                           switching_finger=node.switching_finger,
-                           closure_margin=self.closure.check(node.arclengths).margin,
-                           required_mu=required_mu, stance_required_mu=stance_required_mu)
+        return ContactNode(
+            object_pose=pose.copy(),
+            q=q,
+            arclengths=np.array(node.arclengths),
+            p_BC=np.array([p for p, _ in points]),
+            n_B=np.array([n for _, n in points]),
+            switching_finger=node.switching_finger,
+            closure_margin=self.closure.check(node.arclengths).margin,
+            required_mu=required_mu,
+            stance_required_mu=stance_required_mu,
+        )
 
     def stats(self, t0: float, roots: int = 0, candidates: int = 0) -> SearchStats:
-        return SearchStats(expanded=self.expanded, generated=self.generated, lp_calls=self.closure.lp_calls,
-                           ik_calls=self.reach.ik_calls, time_s=time.perf_counter() - t0,
-                           initial_grasps_searched=roots, initial_grasp_candidates=candidates)
+        return SearchStats(
+            expanded=self.expanded,
+            generated=self.generated,
+            lp_calls=self.closure.lp_calls,
+            ik_calls=self.reach.ik_calls,
+            time_s=time.perf_counter() - t0,
+            initial_grasps_searched=roots,
+            initial_grasp_candidates=candidates,
+        )
 
 
 def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tuple[float, ...]], str]:
@@ -303,8 +335,14 @@ def grid_levels(config: SearchConfig) -> list[SearchConfig]:
     levels = [config]
     for _ in range(config.grid_refinements):
         c = levels[-1]
-        levels.append(replace(c, initial_grid_step=c.initial_grid_step / 2, displacement_step=c.displacement_step / 2,
-                              num_displacements=2 * c.num_displacements - 1))
+        levels.append(
+            replace(
+                c,
+                initial_grid_step=c.initial_grid_step / 2,
+                displacement_step=c.displacement_step / 2,
+                num_displacements=2 * c.num_displacements - 1,
+            )
+        )
     return levels
 
 
@@ -367,11 +405,15 @@ def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> Contac
 
 def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
     """The statistics of two grids' searches together (each grid ranks its own candidates)."""
-    return SearchStats(expanded=a.expanded + b.expanded, generated=a.generated + b.generated,
-                       lp_calls=a.lp_calls + b.lp_calls, ik_calls=a.ik_calls + b.ik_calls,
-                       time_s=time.perf_counter() - t0,
-                       initial_grasps_searched=a.initial_grasps_searched + b.initial_grasps_searched,
-                       initial_grasp_candidates=a.initial_grasp_candidates + b.initial_grasp_candidates)
+    return SearchStats(
+        expanded=a.expanded + b.expanded,
+        generated=a.generated + b.generated,
+        lp_calls=a.lp_calls + b.lp_calls,
+        ik_calls=a.ik_calls + b.ik_calls,
+        time_s=time.perf_counter() - t0,
+        initial_grasps_searched=a.initial_grasps_searched + b.initial_grasps_searched,
+        initial_grasp_candidates=a.initial_grasp_candidates + b.initial_grasp_candidates,
+    )
 
 
 def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int) -> ContactPlan:
@@ -379,13 +421,15 @@ def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, bu
     search = _Search(scene, goal, config)
     roots, reason = _roots(scene, config, search)
     if not roots:
-        return ContactPlan(goal=goal, success=False, reason=reason, stats=search.stats(t0),
-                           mu_plan=search.mu_plan)
+        return ContactPlan(goal=goal, success=False, reason=reason, stats=search.stats(t0), mu_plan=search.mu_plan)
     search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
     leaf, searched, skipped, first_skip, last = None, 0, 0, "", ""
     for root in roots:
-        if searched >= config.max_initial_grasps or search.expanded >= budget \
-                or time.perf_counter() - t0 > config.time_budget_s:
+        if (
+            searched >= config.max_initial_grasps
+            or search.expanded >= budget
+            or time.perf_counter() - t0 > config.time_budget_s
+        ):
             break
         why = search.precheck(root, candidate=config.initial_arclengths is None)
         if why:
@@ -402,15 +446,23 @@ def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, bu
         if len(roots) == 1 and not searched:
             reason = first_skip.split(": ", 1)[1]
         else:
-            reason = (f"no plan from {searched} searched initial grasp(s) of {len(roots)} "
-                      f"({skipped} skipped by cheap checks, first: {first_skip or 'none'}); "
-                      f"last searched {last or 'none'}; moves refused (mu_plan {search.mu_plan:.3g}): "
-                      f"{search.refusals()}")
+            reason = (
+                f"no plan from {searched} searched initial grasp(s) of {len(roots)} "
+                f"({skipped} skipped by cheap checks, first: {first_skip or 'none'}); "
+                f"last searched {last or 'none'}; moves refused (mu_plan {search.mu_plan:.3g}): "
+                f"{search.refusals()}"
+            )
         return ContactPlan(goal=goal, success=False, reason=reason, stats=stats, mu_plan=search.mu_plan)
     path = []
     while leaf is not None:
         path.append(leaf)
         leaf = leaf.parent
     nodes = search.contact_nodes(path[::-1])
-    return ContactPlan(goal=goal, success=True, reason="", nodes=nodes, stats=search.stats(t0, searched, len(roots)),
-                       mu_plan=search.mu_plan)
+    return ContactPlan(
+        goal=goal,
+        success=True,
+        reason="",
+        nodes=nodes,
+        stats=search.stats(t0, searched, len(roots)),
+        mu_plan=search.mu_plan,
+    )
