@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.experiments.sweep import CORRUPT_DIR, LOCK_FILE, TRIALS_DIR, read_rows
+from trajectotree.experiments.sweep_store import CORRUPT_DIR, LOCK_FILE, TRIALS_DIR, read_rows
 
 # The cheapest plan: one transition segment (13 knots), a small goal.
 TINY_PLAN = ["--goal", "0.1", "--segments", "1"]
@@ -188,7 +188,7 @@ def test_retry_errors_may_raise_the_time_limit(tmp_path, capsys):
 HOLD_LOCK = """
 import sys, time
 from pathlib import Path
-from trajectotree.experiments.sweep import sweep_lock
+from trajectotree.experiments.sweep_store import sweep_lock
 with sweep_lock(Path(sys.argv[1])):
     print("locked", flush=True)
     time.sleep(600)

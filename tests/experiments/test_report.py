@@ -35,7 +35,7 @@ def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, t
     import csv
     import json
 
-    from trajectotree.experiments.sweep import read_rows
+    from trajectotree.experiments.sweep_store import read_rows
 
     assert main(["report", str(resumed_sweep.out), "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out

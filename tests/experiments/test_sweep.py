@@ -11,16 +11,8 @@ import pytest
 
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError
-from trajectotree.experiments.sweep import (
-    MANIFEST_FILE,
-    ROWS_FILE,
-    TRIALS_DIR,
-    SweepSpec,
-    prepare_dir,
-    read_rows,
-    run_sweep,
-    sample_goals,
-)
+from trajectotree.experiments.sweep import SweepSpec, run_sweep, sample_goals
+from trajectotree.experiments.sweep_store import MANIFEST_FILE, ROWS_FILE, TRIALS_DIR, prepare_dir, read_rows
 
 # Small settings: 2 goals within +-0.3 rad, 2 transition segments.
 SMALL = ["--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "2", "--no-progress"]

@@ -22,7 +22,7 @@ import numpy as np
 
 from trajectotree.config import ConfigError
 from trajectotree.execution.metrics import mean_confidence_interval
-from trajectotree.experiments.sweep import MANIFEST_FILE, TRIALS_DIR, read_rows
+from trajectotree.experiments.sweep_store import MANIFEST_FILE, TRIALS_DIR, read_rows
 from trajectotree.figures.run import save_figure
 from trajectotree.io import SIM_NPZ, write_bytes_atomic
 
