@@ -46,7 +46,7 @@ from trajectotree.config import Config, ConfigError, check_controller, check_ran
 from trajectotree.execution import metrics, playback
 from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
-from trajectotree.results import SimLog, SimResult
+from trajectotree.results import PlanResult, SimLog, SimResult
 from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
 
 
@@ -379,7 +379,7 @@ def simulate_reference(
 def run_simulation(
     *,
     plan,
-    config: Config,
+    config: Config | None = None,
     meshcat: Meshcat | None = None,
     html_path: str | Path | None = None,
     gif_path: str | Path | None = None,
@@ -390,9 +390,14 @@ def run_simulation(
 ) -> SimResult:
     """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
     "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
-    `sim_mass` (None: the plan's) and an optional `push` (a Push or "FX,FY@T"); the
-    controller keeps the plan's values. ConfigError on bad values. A live `meshcat` runs
-    in real time; `html_path` writes the recorded playback, `gif_path` a GIF of the run."""
+    `sim_mass` (kg; None: the plan's) and an optional `push` (a Push or "FX,FY@T": N, N, s); the
+    controller keeps the plan's values. `config` defaults to the plan's own (a PlanResult's
+    config). ConfigError on bad values. A live `meshcat` runs in real time; `html_path` writes
+    the recorded playback, `gif_path` a GIF of the run."""
+    if config is None:
+        if not isinstance(plan, PlanResult):
+            raise ConfigError("run_simulation: give config= with a Reference (only a PlanResult carries its own)")
+        config = plan.config
     if isinstance(push, str):
         push = parse_push(push, config.sim.push_duration)
     conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)

@@ -40,7 +40,7 @@ from trajectotree.planning.keyframes import check_workers, plan_keyframes
 from trajectotree.planning.keyframes import trajectory as segment_trajectory
 from trajectotree.planning.physics import ObjectModel, check_physics
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import mu_plan
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
@@ -54,15 +54,17 @@ def planning_mu(config: Config) -> float:
 
 def plan(
     *,
-    scene: Scene,
     goal: float,
-    method: str,
-    config: Config,
+    method: str = "trajectotree",
+    config: Config | None = None,
+    scene: Scene | None = None,
     contact_plan: ContactPlan | None = None,
     segment_executor: Executor | None = None,
     segment_workers: int | None = None,
 ) -> PlanResult:
-    """Plans the rotation `goal` (rad) with `method`. A `contact_plan` may be given
+    """Plans the rotation `goal` (rad, in [-pi, pi]) of the object with `method` ("trajectotree",
+    "cito" or "cito-warm"). `config` defaults to Config() (the paper's scene), `scene` to the plant
+    built from config.scene (pass one to reuse it). A `contact_plan` may be given
     for the methods that use one (the search is then skipped; its time counts 0).
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
     persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
@@ -70,6 +72,8 @@ def plan(
     does; None: one per segment, at most one per core)."""
     check_method(method)
     goal = check_goal(goal)
+    config = config or Config()
+    scene = scene or build_scene(config.scene)
     check_workers(segment_workers)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
