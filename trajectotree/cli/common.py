@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import re
 import sys
@@ -117,11 +118,13 @@ def config_from_args(args: argparse.Namespace) -> Config:
 def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     """ConfigError (exit 2, before any planning) when the hand has no initial grasp of the object
     at scene.initial_pose (trajectotree.search.initial_grasp: a finger reaches no corner-free contact,
-    or no three-finger stance holds at mu_plan), unless search.initial_arclengths sets the grasp."""
+    or no three-finger stance holds at mu_plan), unless search.initial_arclengths sets the grasp,
+    or when the object is heavier than the hand can hold (check_payload)."""
     from trajectotree.scene.plant import describe_object
     from trajectotree.search import initial_grasp
 
     if config.search.initial_arclengths is not None:
+        check_payload(scene, config, args)
         return
     # Not memoized: the planner builds the table again inside its timed search, so
     # search_time_s keeps its meaning (this check costs 0.1-0.4 s more wall time per command).
@@ -139,6 +142,61 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
             f"{list(config.scene.initial_pose)}: {grasps.reason}; corner-free contacts each finger "
             f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)"
         )
+    check_payload(scene, config, args, grasps)
+
+
+def floor_digits(value: float, digits: int = 3) -> float:
+    """`value` rounded down to `digits` significant digits, so that a limit printed as a bound
+    is itself within it (3.2262 kg prints as 3.22, which the check accepts)."""
+    if not math.isfinite(value) or value <= 0:
+        return value
+    scale = 10.0 ** (digits - 1 - math.floor(math.log10(value)))
+    return math.floor(value * scale) / scale
+
+
+def check_payload(scene, config: Config, args: argparse.Namespace, grasps=None) -> None:
+    """ConfigError (exit 2, before any planning) when no initial grasp holds the object's weight
+    at rest within the joint torque limits (trajectotree.search.payload: no plan can exist);
+    a warning on stderr when it is lighter than that but no three-finger stance carries it while
+    the fourth finger lets go (the search can then only find plans that switch no finger)."""
+    from trajectotree.search.initial_grasp import initial_grasp_candidates
+    from trajectotree.search.payload import payload
+
+    mass = config.scene.box_mass
+    if grasps is None and config.search.initial_arclengths is None:
+        grasps = initial_grasp_candidates(scene, config.search, memoize=False)  # as check_graspable, untimed
+    quick = payload(scene, config.search, grasps, first=1)  # the best grasp usually holds it: one small LP
+    if quick is None or (quick.hold_kg >= mass and quick.switch_kg >= mass):
+        return
+    limits = payload(scene, config.search, grasps)
+    where = (
+        f"at scene.initial_pose {list(config.scene.initial_pose)} with friction mu_plan "
+        f"{config.search.friction_safety * config.scene.mu:.3g}, each joint within its {limits.tau_max:g} N m "
+        f"torque limit after carrying its links"
+    )
+    grasps_text = (
+        "search.initial_arclengths' grasp"
+        if config.search.initial_arclengths is not None
+        else f"the strongest of the {limits.grasps} candidate initial grasps"
+    )
+    if mass > limits.hold_kg:
+        hold = floor_digits(limits.hold_kg)
+        raise ConfigError(
+            in_option_terms(
+                f"scene.box_mass = {mass!r} kg is more than the hand can hold: {grasps_text} holds at most "
+                f"{hold:g} kg at rest with four fingers {where}; valid range: (0, {hold:g}] kg",
+                args,
+            )
+        )
+    if mass > limits.switch_kg:
+        cap = config.search.max_stance_force
+        warning = (
+            f"scene.box_mass = {mass!r} kg is more than three fingers can hold while the fourth lets go: at "
+            f"most {floor_digits(limits.switch_kg):g} kg ({grasps_text.replace('the strongest of ', '')}, {where}"
+            + (f", at most search.max_stance_force {cap:g} N of normal force in total" if cap else "")
+            + "); only plans that switch no finger (small rotations) can be found"
+        )
+        print(f"trajectotree {args.command}: warning: {in_option_terms(warning, args)}", file=sys.stderr)
 
 
 # Config fields set by command-line options, as the user wrote them (longest names first).

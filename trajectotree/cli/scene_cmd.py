@@ -78,6 +78,7 @@ class ObjectReach:
     #                           (initial_grasp.grid_contacts: what the initial grasps are built from)
     grasps: object  # initial_grasp.GraspCandidates
     q_best: np.ndarray | None  # (8,) rad, joint angles at the best initial grasp (None without one)
+    payload: object  # search.payload.Payload: the heaviest object they carry (None without a grasp)
 
     def to_json(self, search) -> dict:
         g = self.grasps
@@ -91,11 +92,13 @@ class ObjectReach:
             "best_grasp_arclengths_m": None if best is None else list(best.arclengths),
             "best_grasp_worst_stance_mu": None if best is None else best.worst_stance_mu,
             "reason": g.reason,
+            "payload": None if self.payload is None else self.payload.to_json(),
         }
 
 
 def object_reach(scene, search) -> ObjectReach:
     from trajectotree.search.initial_grasp import grid_contacts, initial_grasp_candidates
+    from trajectotree.search.payload import payload
     from trajectotree.search.reach import Reachability
 
     reach = Reachability(scene)
@@ -107,7 +110,8 @@ def object_reach(scene, search) -> ObjectReach:
             [reach.closed_form_many(pose, i, [s])[0] for i, s in enumerate(grasps.candidates[0].arclengths)]
         )
     contacts = grid_contacts(scene, search.initial_grid_step, reach)
-    return ObjectReach(contacts=contacts, grasps=grasps, q_best=q)
+    limits = payload(scene, search, grasps) if grasps.candidates else None
+    return ObjectReach(contacts=contacts, grasps=grasps, q_best=q, payload=limits)
 
 
 def reach_line(reach: dict) -> str:
@@ -119,6 +123,29 @@ def reach_line(reach: dict) -> str:
             f"{reach['best_grasp_worst_stance_mu']:.3g} of mu_plan {reach['mu_plan']:.3g}"
         )
     return line + f"the hand CANNOT grasp the object: {reach['reason']}"
+
+
+def payload_line(reach: dict, mass: float) -> str:
+    """What the hand can carry (search.payload) against the object's mass."""
+    from trajectotree.cli.common import floor_digits
+
+    p = reach["payload"]
+    hold, switch = floor_digits(p["hold_kg"]), floor_digits(p["switch_kg"])
+    line = (
+        f"payload: the initial grasps hold at most {hold:g} kg at rest, {switch:g} kg while a finger lets go "
+        f"(joints within {p['tau_max_Nm']:g} N m"
+        + (
+            f", stance force within search.max_stance_force {p['max_stance_force_N']:g} N"
+            if p["max_stance_force_N"]
+            else ""
+        )
+        + "); "
+    )
+    if mass > p["hold_kg"]:
+        return line + f"the hand CANNOT hold the object's {mass:g} kg (planning refuses it)"
+    if mass > p["switch_kg"]:
+        return line + f"the object's {mass:g} kg allows only plans that switch no finger"
+    return line + f"the object weighs {mass:g} kg"
 
 
 def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
@@ -177,6 +204,8 @@ def run(args) -> int:
                 f"q in [{f['q_lower']}, {f['q_upper']}] rad, |tau| <= {f['tau_max']} N m"
             )
         print(reach_line(summary["reach"]))
+        if summary["reach"]["payload"] is not None:
+            print(payload_line(summary["reach"], o["mass_kg"]))
         if args.figure:
             print(f"figure: {args.figure}")
     return 0

@@ -6,7 +6,14 @@ not a plan was found (`"success": false` with a reason), 2 on invalid input.
 
 from __future__ import annotations
 
-from trajectotree.cli.common import FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args, print_json
+from trajectotree.cli.common import (
+    FIGURE_SUFFIXES,
+    add_config_options,
+    check_output_file,
+    check_payload,
+    config_from_args,
+    print_json,
+)
 from trajectotree.results import check_goal
 
 
@@ -56,6 +63,7 @@ def run(args) -> int:
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     scene = build_scene(config.scene)
+    check_payload(scene, config, args)
     plan = find_contact_plan(scene, goal, config.search)
     if args.figure and plan.success:
         draw_plan(scene, plan, args.figure)

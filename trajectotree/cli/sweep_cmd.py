@@ -106,10 +106,10 @@ def run(args) -> int:
         max_goal=args.max_goal,
         time_limit_s=args.time_limit,
     )
-    if spec.config.scene.object.vertices is not None:  # a polygon: refused here if the hand cannot grasp it
-        from trajectotree.scene.plant import build_scene
+    from trajectotree.scene.plant import build_scene
 
-        check_graspable(build_scene(spec.config.scene), spec.config, args)
+    # refused here, before any trial, if the hand cannot grasp the object or carry its weight
+    check_graspable(build_scene(spec.config.scene), spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
     if conditions and not controllers:

@@ -1,0 +1,218 @@
+"""The heaviest object the hand can carry from its candidate initial grasps, from the hand alone.
+
+Two limits, both at the initial pose x_0, with friction mu_plan (the plans' cones), each joint's
+torque within its actuator's effort limit (1 N m on this hand) after carrying its own links'
+weight, and both maximised over the grasps the search may be rooted at (initial_grasp's
+candidates, or search.initial_arclengths):
+
+  - hold: the most weight the four fingers of a grasp carry at rest. A heavier object cannot
+    be held where every plan and every run starts, so no plan exists (what the motors cannot
+    carry);
+  - switch: the most weight three fingers of a grasp carry while the fourth lets go (a stance
+    in closure at mu_plan, as the search requires), within search.max_stance_force in total
+    normal force as well when that cap is set. The search refuses every switch of a heavier
+    object at its first node, so only a plan that never switches a finger (a small rotation
+    the four fingers roll the object through) can exist.
+
+Each limit is one LP per grasp or stance (maximize the weight W over the cone-edge
+magnitudes x >= 0: E x = (0, W, 0) the wrench that holds the object, |J_C^T f - tau_g| <=
+tau_max at every joint, sum lambda_n <= cap); all of them are solved as one block-diagonal
+LP (HiGHS), the blocks being independent. J_C is the contact point's Jacobian on the finger's
+second link; tau_g the links' generalized gravity forces from the plant. The object's mass
+enters neither: the limits are weights, divided by scene.gravity into kg.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import linprog
+
+from trajectotree.config import SearchConfig
+from trajectotree.geometry import rotation_2d
+from trajectotree.scene.kinematics import K90
+from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.search.initial_grasp import STANCE_FINGERS, GraspCandidates, initial_grasp_candidates, mu_plan
+from trajectotree.search.reach import Reachability
+
+
+@dataclass(frozen=True)
+class Payload:
+    """The heaviest object (kg) the hand carries from its initial grasps (module docstring)."""
+
+    hold_kg: float  # four fingers at rest at the initial pose, within the torque limits
+    switch_kg: float  # three fingers while the fourth lets go, within the torque limits and the force cap
+    max_stance_force: float  # N, the search's cap the switch limit obeys (0: none)
+    tau_max: float  # N m, the largest joint effort limit of the hand
+    grasps: int  # initial grasps the limits are maximised over
+
+    def to_json(self) -> dict:
+        return {
+            "hold_kg": self.hold_kg,
+            "switch_kg": self.switch_kg,
+            "max_stance_force_N": self.max_stance_force,
+            "tau_max_Nm": self.tau_max,
+            "grasps": self.grasps,
+        }
+
+
+def payload(
+    scene: Scene, search: SearchConfig, grasps: GraspCandidates | None = None, first: int | None = None
+) -> Payload | None:
+    """The Payload of scene's hand and object; None when there is no initial grasp (the search
+    and trajectotree.cli.common.check_graspable say why). `first`: only the best `first`
+    candidates (a quick lower bound: the LP over all of them takes ~1 s on the box's 2583)."""
+    reach = Reachability(scene)
+    mu = mu_plan(scene.config, search)
+    if search.initial_arclengths is not None:
+        arclengths = np.array([search.initial_arclengths], dtype=float)
+        free = np.ones((1, NUM_FINGERS), dtype=bool)  # the search checks this grasp's stances itself
+    else:
+        if grasps is None:
+            grasps = initial_grasp_candidates(scene, search, reach)
+        if not grasps.candidates:
+            return None
+        chosen = grasps.candidates[:first]
+        arclengths = np.array([c.arclengths for c in chosen])
+        free = np.array([[m < grasps.mu_plan for m in c.stance_required_mu] for c in chosen])
+    pose = np.asarray(scene.config.initial_pose, dtype=float)
+    q = np.stack([reach.closed_form_many(pose, i, arclengths[:, i]) for i in range(NUM_FINGERS)], axis=1)
+    reached = np.all(np.isfinite(q), axis=(1, 2))
+    if not reached.any():
+        return None
+    arclengths, free, q = arclengths[reached], free[reached], q[reached]
+    edges, torque, moment, slack = _contact_terms(scene, pose, arclengths, q, mu)
+    everyone = np.arange(NUM_FINGERS)
+    hold = _heaviest(edges, torque, moment, slack, np.broadcast_to(everyone, (len(q), NUM_FINGERS)), 0.0)
+    # each distinct stance once: (grasp, stance) pairs sharing the three contacts share the LP
+    pairs = [(g, i) for g in range(len(q)) for i in range(NUM_FINGERS) if free[g, i]]
+    keys = {}
+    for g, i in pairs:
+        keys.setdefault((i, *arclengths[g, list(STANCE_FINGERS[i])]), (g, i))
+    stances = list(keys.values())
+    switch = _heaviest(
+        edges[[g for g, _ in stances]],
+        torque[[g for g, _ in stances]],
+        moment[[g for g, _ in stances]],
+        slack[[g for g, _ in stances]],
+        np.array([STANCE_FINGERS[i] for _, i in stances]),
+        search.max_stance_force,
+    )
+    g = scene.config.gravity
+    return Payload(
+        hold_kg=float(hold.max()) / g,
+        switch_kg=float(switch.max()) / g if len(switch) else 0.0,
+        max_stance_force=search.max_stance_force,
+        tau_max=float(max(f.tau_max.max() for f in scene.fingers)),
+        grasps=len(q),
+    )
+
+
+def _contact_terms(scene: Scene, pose: np.ndarray, arclengths: np.ndarray, q: np.ndarray, mu: float):
+    """Per grasp (G) and finger, for its two cone edges -n +- mu t (unit normal force): the
+    force in W (G, 4, 2, 2: edge, xy), the joint torques J_C^T f (G, 4, 2, 2: joint, edge) and
+    the moment about the object's centre (G, 4, 2); and the torque room (G, 4, 2, 2: joint,
+    upper/lower), tau_max + tau_g and tau_max - tau_g (u = J_C^T f - tau_g must stay within
+    +-tau_max)."""
+    p_BC, n_B = scene.config.shape.points(arclengths.ravel())
+    shape = (*arclengths.shape, 2)
+    p_BC, n_B = p_BC.reshape(shape), n_B.reshape(shape)
+    R = rotation_2d(pose[2])
+    t_B = n_B @ K90.T
+    edges = np.stack([-n_B + mu * t_B, -n_B - mu * t_B], axis=2) @ R.T  # (G, 4, 2, 2)
+    p_WC = pose[:2] + p_BC @ R.T
+    arm = p_WC - pose[:2]
+    moment = arm[..., None, 0] * edges[..., 1] - arm[..., None, 1] * edges[..., 0]
+    bases = np.array([f.p_W_base for f in scene.fingers])  # (4, 2)
+    elbows = np.stack([f.elbow(q[:, i]) for i, f in enumerate(scene.fingers)], axis=1)  # (G, 4, 2)
+    columns = np.stack([(p_WC - bases) @ K90.T, (p_WC - elbows) @ K90.T], axis=2)  # (G, 4, joint, 2)
+    torque = np.einsum("gfja,gfea->gfje", columns, edges)
+    tau_g = _gravity_torques(scene, arclengths, q)
+    tau_max = np.array([f.tau_max for f in scene.fingers])  # (4, 2)
+    slack = np.stack([tau_max + tau_g, tau_max - tau_g], axis=-1)
+    return edges, torque, moment, slack
+
+
+def _gravity_torques(scene: Scene, arclengths: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """tau_g (G, 4, 2): the generalized gravity forces on each finger's joints at q, from the
+    plant, once per distinct contact of each finger (a finger's own links alone load its joints)."""
+    plant, context = scene.plant, scene.plant.CreateDefaultContext()
+    out = np.empty(q.shape)
+    v = scene.hand_v_indices
+    for i in range(NUM_FINGERS):
+        contacts, where, index = np.unique(arclengths[:, i], return_index=True, return_inverse=True)
+        values = np.empty((len(contacts), 2))
+        for k, g in enumerate(where):
+            plant.SetPositions(context, scene.positions(scene.config.initial_pose, q[g].ravel()))
+            values[k] = plant.CalcGravityGeneralizedForces(context)[v[2 * i : 2 * i + 2]]
+        out[:, i] = values[index.ravel()]
+    return out
+
+
+def _heaviest(edges, torque, moment, slack, fingers: np.ndarray, cap: float) -> np.ndarray:
+    """N, the most weight each of B contact sets carries (one LP block each): `fingers` (B, k)
+    picks the contacts of each block from the per-grasp terms (B, 4, ...). cap > 0: sum
+    lambda_n <= cap as well."""
+    B, k = fingers.shape
+    rows = np.arange(B)[:, None]
+    F = edges[rows, fingers]  # (B, k, 2 edge, 2 xy)
+    T = torque[rows, fingers]  # (B, k, 2 joint, 2 edge)
+    M = moment[rows, fingers]  # (B, k, 2 edge)
+    room = slack[rows, fingers]  # (B, k, 2 joint, 2 upper/lower)
+    n = 2 * k + 1  # variables per block: the cone-edge magnitudes, then W
+    cols = np.arange(B)[:, None] * n
+    # equalities, 3 per block: sum F_x = 0, sum F_y - W = 0, sum moment = 0
+    eq = np.concatenate([F[..., 0].reshape(B, -1), F[..., 1].reshape(B, -1), M.reshape(B, -1)], axis=1)
+    eq_rows = np.repeat(np.arange(3 * B).reshape(B, 3), 2 * k, axis=1)
+    eq_cols = np.tile(cols + np.arange(2 * k), 3)
+    A_eq = sp.coo_matrix(
+        (
+            np.concatenate([eq.ravel(), -np.ones(B)]),
+            (
+                np.concatenate([eq_rows.ravel(), 3 * np.arange(B) + 1]),
+                np.concatenate([eq_cols.ravel(), cols[:, 0] + 2 * k]),
+            ),
+        ),
+        shape=(3 * B, B * n),
+    )
+    # inequalities: per joint, T x <= room_upper and -T x <= room_lower; then the cap
+    per_joint = 2  # the joint's two edges
+    joint_rows = 2 * k  # joints per block
+    values, r, c, bounds = [], [], [], []
+    base = np.arange(B)[:, None, None] * (2 * joint_rows + (1 if cap > 0 else 0))
+    a = np.arange(k)[None, :, None]
+    j = np.arange(2)[None, None, :]
+    row = base + 2 * (2 * a + j)  # (B, k, 2): the upper row; the lower is row + 1
+    col0 = cols[:, :, None] + 2 * a  # (B, k, 1): the finger's first edge
+    for sign, offset, bound in ((1.0, 0, room[..., 0]), (-1.0, 1, room[..., 1])):
+        for e in range(per_joint):
+            values.append(sign * T[..., e].ravel())
+            r.append(np.broadcast_to(row + offset, T[..., e].shape).ravel())
+            c.append(np.broadcast_to(col0 + e, T[..., e].shape).ravel())
+    upper = np.stack([room[..., 0], room[..., 1]], axis=-1).reshape(B, -1)  # row order: (a, j, upper/lower)
+    b_ub = [upper]
+    if cap > 0:
+        values.append(np.ones(B * 2 * k))
+        r.append(np.repeat(base[:, 0, 0] + 2 * joint_rows, 2 * k))
+        c.append((cols + np.arange(2 * k)).ravel())
+        b_ub.append(np.full((B, 1), cap))
+    A_ub = sp.coo_matrix(
+        (np.concatenate(values), (np.concatenate(r), np.concatenate(c))),
+        shape=(B * (2 * joint_rows + (1 if cap > 0 else 0)), B * n),
+    )
+    cost = np.zeros(B * n)
+    cost[cols[:, 0] + 2 * k] = -1.0
+    result = linprog(
+        cost,
+        A_ub=A_ub.tocsr(),
+        b_ub=np.concatenate(b_ub, axis=1).ravel(),
+        A_eq=A_eq.tocsr(),
+        b_eq=np.zeros(3 * B),
+        bounds=(0, None),
+        method="highs",
+    )
+    if result.status != 0:  # x = 0, W = 0 is feasible and W is bounded (J_C has full rank): never
+        raise RuntimeError(f"payload LP failed: {result.message}")
+    return result.x.reshape(B, n)[:, -1]
