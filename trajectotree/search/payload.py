@@ -177,30 +177,22 @@ def _heaviest(edges, torque, moment, slack, fingers: np.ndarray, cap: float) -> 
         ),
         shape=(3 * B, B * n),
     )
-    # inequalities: per joint, T x <= room_upper and -T x <= room_lower; then the cap
-    per_joint = 2  # the joint's two edges
-    joint_rows = 2 * k  # joints per block
-    values, r, c, bounds = [], [], [], []
-    base = np.arange(B)[:, None, None] * (2 * joint_rows + (1 if cap > 0 else 0))
-    a = np.arange(k)[None, :, None]
-    j = np.arange(2)[None, None, :]
-    row = base + 2 * (2 * a + j)  # (B, k, 2): the upper row; the lower is row + 1
-    col0 = cols[:, :, None] + 2 * a  # (B, k, 1): the finger's first edge
-    for sign, offset, bound in ((1.0, 0, room[..., 0]), (-1.0, 1, room[..., 1])):
-        for e in range(per_joint):
-            values.append(sign * T[..., e].ravel())
-            r.append(np.broadcast_to(row + offset, T[..., e].shape).ravel())
-            c.append(np.broadcast_to(col0 + e, T[..., e].shape).ravel())
-    upper = np.stack([room[..., 0], room[..., 1]], axis=-1).reshape(B, -1)  # row order: (a, j, upper/lower)
-    b_ub = [upper]
+    # inequalities, per block: rows 2 (2 a + j) and 2 (2 a + j) + 1 bound joint j of contact a from
+    # above (T x <= tau_max + tau_g) and below (-T x <= tau_max - tau_g); then the cap's row
+    per_block = 4 * k + (1 if cap > 0 else 0)
+    upper_row = (np.arange(B)[:, None, None] * per_block + 2 * (2 * np.arange(k)[:, None] + np.arange(2)))[..., None]
+    edge_col = (cols[:, :, None] + 2 * np.arange(k)[:, None] + np.arange(2))[:, :, None, :]  # (B, k, 1, edge)
+    values = [T.ravel(), -T.ravel()]
+    rows_ub = [np.broadcast_to(upper_row, T.shape).ravel(), np.broadcast_to(upper_row + 1, T.shape).ravel()]
+    cols_ub = [np.broadcast_to(edge_col, T.shape).ravel()] * 2
+    b_ub = [room.reshape(B, -1)]  # (a, j, upper/lower): the rows' order
     if cap > 0:
         values.append(np.ones(B * 2 * k))
-        r.append(np.repeat(base[:, 0, 0] + 2 * joint_rows, 2 * k))
-        c.append((cols + np.arange(2 * k)).ravel())
+        rows_ub.append(np.repeat(np.arange(B) * per_block + 4 * k, 2 * k))
+        cols_ub.append((cols + np.arange(2 * k)).ravel())
         b_ub.append(np.full((B, 1), cap))
     A_ub = sp.coo_matrix(
-        (np.concatenate(values), (np.concatenate(r), np.concatenate(c))),
-        shape=(B * (2 * joint_rows + (1 if cap > 0 else 0)), B * n),
+        (np.concatenate(values), (np.concatenate(rows_ub), np.concatenate(cols_ub))), shape=(B * per_block, B * n)
     )
     cost = np.zeros(B * n)
     cost[cols[:, 0] + 2 * k] = -1.0
