@@ -79,6 +79,7 @@ def load_sim(plan_dir: str | Path) -> SimResult:
             final_error=tuple(float(v) for v in summary["final_error"]),
             dropped=bool(summary["dropped"]),
             drop_time_s=summary["drop_time_s"],
+            error_at_drop=None if summary.get("error_at_drop") is None else tuple(summary["error_at_drop"]),
             sim_time_s=float(summary["sim_time_s"]),
             controller=summary.get("controller", "paper"),  # runs before the grasp controller
             conditions=summary.get("conditions", {}),

@@ -176,9 +176,12 @@ class SimResult(SimLog):
     mae_x: float  # m, time mean of |x error|
     mae_y: float  # m
     mae_theta: float  # rad
-    final_error: tuple[float, float, float]  # (m, m, rad) absolute error at the last sample
+    final_error: tuple[float, float, float]  # (m, m, rad) absolute error at the last sample (not held)
     dropped: bool  # the drop rule fired (trajectotree.execution.metrics.detect_drop)
     drop_time_s: float | None  # s, when it fired
+    # (m, m, rad) the absolute error when the drop rule fired, which abs_error and the means hold
+    # from then on; None without a drop
+    error_at_drop: tuple[float, float, float] | None = None
 
     def to_json(self) -> dict:
         """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
@@ -190,6 +193,7 @@ class SimResult(SimLog):
             "final_error": list(self.final_error),
             "dropped": self.dropped,
             "drop_time_s": self.drop_time_s,
+            "error_at_drop": None if self.error_at_drop is None else list(self.error_at_drop),
             "sim_time_s": self.sim_time_s,
             "duration_s": float(self.t[-1]),
             "num_samples": int(len(self.t)),

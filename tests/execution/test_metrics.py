@@ -85,7 +85,9 @@ def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
     y_at_drop = 0.5 * 9.81 * 0.11**2  # the error is held there after the drop
     y = np.minimum(0.5 * 9.81 * t**2, y_at_drop)
     assert result.mae_y == pytest.approx(y.mean(), rel=1e-12) and result.mae_x == 0.0 and result.mae_theta == 0.0
-    assert result.final_error == pytest.approx((0.0, y_at_drop, 0.0))
+    # the error at the end is the fall's, not the held one; the held one is the error at the drop
+    assert result.final_error == pytest.approx((0.0, 0.5 * 9.81 * t[-1] ** 2, 0.0), rel=1e-12)
+    assert result.error_at_drop == pytest.approx((0.0, y_at_drop, 0.0))
     np.testing.assert_allclose(result.abs_error[:, 1], y, rtol=1e-12)
     # the log passes through unchanged, and sim.json says what was run
     assert result.f_W is log.f_W and result.x_plan is log.x_plan and result.sim_time_s == 0.5
@@ -94,6 +96,35 @@ def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
     assert summary["num_samples"] == t.size and summary["duration_s"] == pytest.approx(0.99)
     held = evaluate(dataclasses.replace(log, x=ref), drop_distance=0.05)
     assert not held.dropped and held.drop_time_s is None and held.final_error == (0.0, 0.0, 0.0)
+    assert held.error_at_drop is None and held.to_json()["error_at_drop"] is None
+
+
+def test_a_box_caught_again_after_the_drop_rule_fired_ends_on_the_plan():
+    """sim.json's final_error is where the run ended, error_at_drop the error the means hold."""
+    t = np.arange(0.0, 1.0, 0.01)
+    ref = np.zeros((t.size, 3))
+    x = ref.copy()
+    away = (t > 0.2) & (t < 0.4)  # 6 cm below the plan and turned 0.714 rad, then back on it
+    x[away, 1], x[away, 2] = -0.06, 0.714
+    forces = np.zeros((t.size, 4, 2))
+    log = SimLog(
+        t=t,
+        x=x,
+        q=np.zeros((t.size, 8)),
+        x_plan=ref,
+        f_W=forces,
+        f_W_plan=forces,
+        sim_time_s=0.1,
+        controller="grasp",
+        conditions={},
+    )
+    result = evaluate(log, drop_distance=0.05)
+    assert result.dropped and result.drop_time_s == pytest.approx(t[away][0])
+    assert result.final_error == (0.0, 0.0, 0.0)
+    assert result.error_at_drop == pytest.approx((0.0, 0.06, 0.714))
+    assert result.mae_theta == pytest.approx(0.714 * np.mean(t >= t[away][0]))  # held from the drop on
+    summary = result.to_json()
+    assert summary["final_error"] == [0.0, 0.0, 0.0] and summary["error_at_drop"] == pytest.approx([0.0, 0.06, 0.714])
 
 
 def test_confidence_interval_matches_the_student_t_formula():

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from trajectotree import __version__
@@ -18,8 +19,24 @@ from trajectotree.config import ConfigError
 COMMANDS = ("demo", "scene", "search", "plan", "simulate", "sweep", "report")
 
 
+# A token that starts with a minus sign and a digit (or ".digit") is a value, never an option:
+# no option of this command looks like that (tests/cli/test_cli_input.py checks it).
+NUMBER_LIKE = re.compile(r"-\.?\d")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse takes "-1e-1" or "-0.2,0@3" for an unknown option ("expected one argument"): its
+    negative-number pattern knows only "-1" and "-.5". Widened to every token NUMBER_LIKE matches
+    (the pattern Python 3.13's argparse adopted); add_subparsers makes each subcommand's parser
+    of this class too."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NUMBER_LIKE
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="trajectotree",
         description="Plan, execute and evaluate multi-contact finger-gaiting manipulation "
         "with TrajectoTree (contact-sequence search + CITO on Drake).",

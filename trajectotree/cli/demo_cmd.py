@@ -96,6 +96,7 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
             f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, {noun} {held}; "
             f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
             f"theta {s['mae_theta']:.3f} rad; final theta error {s['final_error'][2]:.3f} rad"
+            + ("" if s.get("error_at_drop") is None else f" ({s['error_at_drop'][2]:.3f} rad at the drop)")
         )
     else:
         print("  simulation      skipped: no trajectory to execute")

@@ -146,6 +146,17 @@ def world_conditions(args, config: Config) -> dict:
     return {"sim_mu": args.sim_mu, "sim_mass": args.sim_mass, "push": push}
 
 
+def final_error_line(summary: dict) -> str:
+    """The error at the end of the run, and at the drop when there was one (sim.json's final_error,
+    error_at_drop): a box caught again after the drop rule fired may end on the plan."""
+    x, y, theta = summary["final_error"]
+    line = f"final error x {1e3 * x:.1f} mm, y {1e3 * y:.1f} mm, theta {theta:.3f} rad at the end of the run"
+    if summary.get("error_at_drop") is not None:
+        x, y, theta = summary["error_at_drop"]
+        line += f"; at the drop: x {1e3 * x:.1f} mm, y {1e3 * y:.1f} mm, theta {theta:.3f} rad"
+    return line
+
+
 def run(args) -> int:
     from trajectotree.execution.playback import object_noun, start_meshcat
     from trajectotree.execution.reference import reference_from_arrays
@@ -192,7 +203,9 @@ def run(args) -> int:
             f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: "
             f"{object_noun(config.scene)} {drop}; "
             f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad"
+            + (" (errors held at their drop-time values from the drop on)" if result.dropped else "")
         )
+        print(final_error_line(summary))
         print(
             f"wrote {Path(args.plan_dir) / 'sim.json'}"
             + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)

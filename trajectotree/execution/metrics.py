@@ -12,6 +12,8 @@ and crosses this distance within ~0.1 s; a held box stays within millimetres.
 There is no floor, so a dropped box falls for ever: from the drop on, the tracking
 error is held at its value at the drop (`hold_after_drop`), as if the box lay where
 it left the hand; otherwise metres of free fall would swamp every mean.
+`final_error` is the error at the last sample all the same (a box the fingers caught
+again after the drop rule fired may end on the plan), and `error_at_drop` the held value.
 """
 
 from __future__ import annotations
@@ -63,7 +65,8 @@ def evaluate(log: SimLog, drop_distance: float) -> SimResult:
     """The run's tracking metrics against the planned object trajectory, with the drop
     rule at `drop_distance` (m, SimConfig.drop_distance)."""
     dropped, drop_time = detect_drop(log.t, log.x, log.x_plan, drop_distance)
-    abs_error = hold_after_drop(log.t, absolute_error(log.x, log.x_plan), drop_time)
+    error = absolute_error(log.x, log.x_plan)
+    abs_error = hold_after_drop(log.t, error, drop_time)
     mae = mean_absolute_error(abs_error)
     return SimResult(
         **{f.name: getattr(log, f.name) for f in fields(SimLog)},
@@ -71,9 +74,10 @@ def evaluate(log: SimLog, drop_distance: float) -> SimResult:
         mae_x=float(mae[0]),
         mae_y=float(mae[1]),
         mae_theta=float(mae[2]),
-        final_error=tuple(float(v) for v in final_error(abs_error)),
+        final_error=tuple(float(v) for v in final_error(error)),
         dropped=dropped,
         drop_time_s=drop_time,
+        error_at_drop=None if drop_time is None else tuple(float(v) for v in abs_error[-1]),
     )
 
 

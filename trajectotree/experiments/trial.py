@@ -41,7 +41,7 @@ PLAN_FIELDS = (
     "cost",
     "iterations",
 )
-SIM_FIELDS = ("mae_x", "mae_y", "mae_theta", "final_error", "dropped", "drop_time_s", "sim_time_s")
+SIM_FIELDS = ("mae_x", "mae_y", "mae_theta", "final_error", "dropped", "drop_time_s", "error_at_drop", "sim_time_s")
 ROW_FIELDS = (
     ("key", "goal_index", "goal", "method")
     + PLAN_FIELDS
