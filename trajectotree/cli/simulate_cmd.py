@@ -74,10 +74,60 @@ def trajectory_arrays(files: PlanFiles) -> dict[str, np.ndarray]:
         return check_plan_arrays(files.arrays)
 
 
+# m (and rad), how far a plan's arrays may stray from the scene plan.json records: they meet it to
+# rounding (p_W_C is placed on the object's boundary, x[0] is fixed to scene.initial_pose), while a
+# plan.json beside another plan's plan.npz misses by millimetres (a 0.15 m box beside the 0.20 m
+# box's arrays: contact points 25 mm off its boundary).
+FIT_TOL = 1e-4
+
+
+def check_arrays_fit_plan(files: PlanFiles, arrays: dict[str, np.ndarray]) -> None:
+    """ConfigError naming the mismatch when plan.npz's arrays do not belong to the plan plan.json
+    describes (the two files of different plans side by side): every contact point p_W_C on the
+    boundary of plan.json's object at the planned pose, x[0] at its scene.initial_pose, and for a
+    TrajectoTree plan one cito.knots_per_segment knots per transition of its contact sequence,
+    cito.dt apart."""
+    from trajectotree.geometry import poses_world_to_box
+    from trajectotree.scene.plant import describe_object
+
+    config, x = files.config, arrays["x"]
+    where = f"{str(files.npz_path)!r} does not belong to the plan {str(files.json_path)!r} describes"
+    off = np.abs(config.scene.shape.signed_distances(poses_world_to_box(x, arrays["p_W_C"])))
+    k, i = np.unravel_index(int(np.argmax(off)), off.shape)
+    if off[k, i] > FIT_TOL:
+        raise ConfigError(
+            f"{where}: its contact points lie up to {1e3 * off[k, i]:.2f} mm off the {describe_object(config.scene)} "
+            f"plan.json records (finger {i} at knot {k}; a plan's own lie on its object within "
+            f"{1e3 * FIT_TOL:g} mm): put the plan.json and plan.npz of one plan together, or plan again"
+        )
+    start = np.abs(x[0] - np.asarray(config.scene.initial_pose, dtype=float)).max()
+    if start > FIT_TOL:
+        raise ConfigError(
+            f"{where}: it starts at pose {x[0].round(4).tolist()}, plan.json's scene.initial_pose is "
+            f"{list(config.scene.initial_pose)}"
+        )
+    nodes = files.data.get("contact_sequence") or ()
+    if files.data.get("method") != "trajectotree" or len(nodes) < 2:
+        return
+    M, knots = config.cito.knots_per_segment, len(arrays["t"])
+    if knots != (len(nodes) - 1) * M + 1:
+        raise ConfigError(
+            f"{where}: it has {knots} knots, plan.json's {len(nodes)} nodes of cito.knots_per_segment {M} "
+            f"make {(len(nodes) - 1) * M + 1}"
+        )
+    steps = np.diff(arrays["t"])
+    if np.abs(steps - config.cito.dt).max() > 1e-9:
+        raise ConfigError(
+            f"{where}: its knots are {steps.min():g}-{steps.max():g} s apart, plan.json's cito.dt is {config.cito.dt:g} s"
+        )
+
+
 def read_plan_dir(plan_dir: str) -> tuple[dict[str, np.ndarray], Config]:
     """The plan.npz arrays and the Config in plan.json; ConfigError when missing or corrupt."""
     files = read_plan_files(plan_dir, "PLAN_DIR")
-    return trajectory_arrays(files), files.config
+    arrays = trajectory_arrays(files)
+    check_arrays_fit_plan(files, arrays)
+    return arrays, files.config
 
 
 def execution_config(args, plan_config: Config) -> Config:
@@ -131,9 +181,10 @@ def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) ->
     return summary
 
 
-def world_conditions(args, config: Config) -> dict:
+def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
     """run_simulation's keyword arguments for --sim-mu, --sim-mass and --push, checked
-    here so that bad values stop the command before anything is written."""
+    here so that bad values stop the command before anything is written: a push must start
+    before the run ends (the plan's `plan_duration_s` and sim.settle_time), or it never acts."""
     from trajectotree.config import check_range
     from trajectotree.execution.simulate import Conditions, parse_push
 
@@ -142,6 +193,13 @@ def world_conditions(args, config: Config) -> dict:
     if args.sim_mass is not None:
         check_range("--sim-mass", args.sim_mass, 0.0, 100.0, low_open=True)
     push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
+    run_s = plan_duration_s + config.sim.settle_time
+    if push is not None and push.time_s >= run_s:
+        raise ConfigError(
+            f"--push {args.push!r} starts at {push.time_s:g} s, when the run is over: it lasts {run_s:g} s (the "
+            f"plan's {plan_duration_s:g} s and sim.settle_time {config.sim.settle_time:g} s); valid range of T: "
+            f"[0, {run_s:g}) s"
+        )
     Conditions(mu=args.sim_mu, mass=args.sim_mass, push=push)  # raises ConfigError naming a bad value
     return {"sim_mu": args.sim_mu, "sim_mass": args.sim_mass, "push": push}
 
@@ -174,8 +232,9 @@ def run(args) -> int:
             check_output_file(option, path, suffixes)
     files = read_plan_files(args.plan_dir, "PLAN_DIR")
     arrays = trajectory_arrays(files)
+    check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)
-    conditions = world_conditions(args, config)
+    conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
     plan_success = bool(files.data.get("success"))
     if not plan_success:
         print(
