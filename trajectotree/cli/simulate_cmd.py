@@ -118,7 +118,8 @@ def check_arrays_fit_plan(files: PlanFiles, arrays: dict[str, np.ndarray]) -> No
     steps = np.diff(arrays["t"])
     if np.abs(steps - config.cito.dt).max() > 1e-9:
         raise ConfigError(
-            f"{where}: its knots are {steps.min():g}-{steps.max():g} s apart, plan.json's cito.dt is {config.cito.dt:g} s"
+            f"{where}: its knots are {steps.min():g}-{steps.max():g} s apart, plan.json's cito.dt is "
+            f"{config.cito.dt:g} s"
         )
 
 
