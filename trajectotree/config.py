@@ -441,8 +441,17 @@ def load_config(path: str | Path) -> Config:
         raise ConfigError(f"config file {str(path)!r} does not exist")
     try:
         data = drake_yaml().yaml_load_data(path.read_text())
+    except UnicodeDecodeError as e:
+        raise ConfigError(
+            f"config file {str(path)!r} is not a text file (byte {e.start} is not UTF-8); give a YAML file"
+        ) from None
     except yaml.YAMLError as e:
         raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
+    if data is None:  # empty, comments only or null: more often a file not yet written than a wish for defaults
+        raise ConfigError(
+            f"config file {str(path)!r} holds no settings (it is empty, or only comments or null); write the "
+            "fields to change, {} for the defaults, or give no config file"
+        )
     return config_from_dict(data, f"config file {str(path)!r}")
 
 

@@ -58,7 +58,8 @@ def check_goal(goal, name: str = "goal") -> float:
         or not math.isfinite(goal)
         or abs(goal) > math.pi + 1e-9
     ):
-        decimals = f", i.e. [-{math.pi:.6f}, {math.pi:.6f}]" if name.startswith("--") else ""
+        # 8 decimals, rounded down: a bound printed as 3.141593 (above pi) would itself be refused
+        decimals = f", pi = {math.floor(math.pi * 1e8) / 1e8:.8f}" if name.startswith("--") else ""
         raise ConfigError(f"{name} = {goal!r} is out of range; valid range: [-pi, pi] rad{decimals}")
     return float(goal)
 

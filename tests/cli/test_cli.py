@@ -270,7 +270,7 @@ def test_killed_sweep_leaves_no_scratch_in_the_system_temp_folder(tmp_path):
     [
         (
             ["search", "--goal", "3.1416"],
-            "--goal = 3.1416 is out of range; valid range: [-pi, pi] rad, i.e. [-3.141593, 3.141593]",
+            "--goal = 3.1416 is out of range; valid range: [-pi, pi] rad, pi = 3.14159265",
         ),
         (
             ["scene", "--box-size", "0", "0.1"],

@@ -221,6 +221,44 @@ def in_option_terms(message: str, args: argparse.Namespace) -> str:
     return message
 
 
+REASON_WIDTH = 100  # characters: a reason up to this long stays on its line
+
+
+def _top_level_clauses(text: str) -> list[str]:
+    """`text` split at its "; " outside brackets (the search's and the physics check's reasons
+    join their clauses so, and nest bracketed ones)."""
+    clauses, depth, start = [], 0, 0
+    for k, ch in enumerate(text):
+        depth += (ch in "([{") - (ch in ")]}")
+        if depth == 0 and text.startswith("; ", k):
+            clauses.append(text[start:k])
+            start = k + 2
+    return [c for c in clauses + [text[start:]] if c]
+
+
+def reason_lines(reason: str, width: int = REASON_WIDTH) -> tuple[str, list[str]]:
+    """(summary, details) of a failure reason: a reason of at most `width` characters is its own
+    summary with no details; a longer one (a search that found nothing: 700-1,226 characters) is
+    summarized by its first clause without its bracketed parts, and detailed one clause per line,
+    each wrapped to `width` (continuations indented)."""
+    import textwrap
+
+    if len(reason) <= width:
+        return reason, []
+    clauses = _top_level_clauses(reason)
+    summary, depth = "", 0
+    for ch in clauses[0]:
+        depth += ch in "([{"
+        summary += ch if depth == 0 else ""
+        depth -= ch in ")]}"
+    summary = " ".join(summary.split())
+    if len(summary) > width:
+        summary = summary[: width - 3].rstrip() + "..."
+    clauses = clauses[1:] if clauses[0] == summary else clauses  # said once
+    details = [line for c in clauses for line in textwrap.wrap(c, width, subsequent_indent="  ")]
+    return summary, details
+
+
 def print_json(data) -> None:
     json.dump(data, sys.stdout, indent=2)
     sys.stdout.write("\n")

@@ -1,12 +1,13 @@
 """`trajectotree demo`: the whole pipeline on the paper's default job, in one command.
 
-Plans a pi/2 rotation of the 0.20 x 0.10 m, 50 g box with TrajectoTree (contact-sequence
-search, then the plan-constrained CITO solved with IPOPT), executes the plan in a
-full-dynamics Drake simulation with the configured controller (sim.controller: the
-object-level grasp controller by default, or the paper's eq. 20), and writes into --out:
+Plans a pi/2 rotation of the 0.20 x 0.10 m, 50 g box (or of the object --box-size, --polygon
+and --mass describe) with TrajectoTree (contact-sequence search, then the plan-constrained
+CITO solved with IPOPT), executes the plan in a full-dynamics Drake simulation with the
+configured controller (sim.controller: the object-level grasp controller by default, or the
+paper's eq. 20), and writes into --out:
 plan.json + plan.npz (the plan), sim.json + sim.npz (the run and its tracking errors),
 keyframes.png (the contact sequence), playback.html (Meshcat playback of the run, opens
-offline in any browser), forces.png (each finger's simulated vs planned force on the box)
+offline in any browser), forces.png (each finger's simulated vs planned force on the object)
 and summary.json (the numbers printed at the end).
 """
 
@@ -42,7 +43,7 @@ def register(subparsers) -> None:
         type=float,
         default=math.pi / 2,
         metavar="RAD",
-        help="goal rotation of the box, rad, in [-pi, pi] (default: pi/2)",
+        help="goal rotation of the object, rad, in [-pi, pi] (default: pi/2)",
     )
     p.add_argument("--json", action="store_true", help="print summary.json instead of the text summary")
     add_config_options(p, formulation=True)
@@ -65,22 +66,34 @@ def plan_summary(result) -> dict:
     summary = {k: getattr(result, k) for k in keys}
     summary["cost"] = result.cost if math.isfinite(result.cost) else None
     summary["switching_fingers"] = [n.switching_finger for n in result.contact_plan.nodes]
+    # keyframes: build and solve times are summed over this many programs, solved in parallel
+    summary["segment_programs"] = len(result.segments)
     return summary
 
 
 def print_summary(summary: dict, out: Path, noun: str) -> None:
-    """The text summary; `noun` names the object in the simulation line (playback.object_noun)."""
+    """The text summary; `noun` names the object in the simulation line (playback.object_noun).
+    Each time says what it is: wall-clock time, or process time summed over the keyframes'
+    segment programs (which run in parallel, so their sum may exceed the total)."""
+    from trajectotree.cli.common import reason_lines
+
     p, s = summary["plan"], summary["simulation"]
     switches = " ".join("-" if f is None else str(f) for f in p["switching_fingers"][1:])
     name = summary.get("object", "box")
     print(f"TrajectoTree demo: rotate the {name} by {p['goal']:+.3f} rad ({math.degrees(p['goal']):+.1f} deg)")
-    print(f"  contact search  {p['search_time_s']:6.2f} s   switching fingers per segment: {switches or 'none'}")
-    segments = p.get("segments") or ()
-    summed = (f" (summed over {len(segments)} segment programs; the total below is wall time)") if segments else ""
-    print(
-        f"  CITO (IPOPT)    {p['build_time_s'] + p['solve_time_s']:6.2f} s   build {p['build_time_s']:.2f} s, "
-        f"solve {p['solve_time_s']:.2f} s, {p['iterations']} iterations{summed}: {p['status']}"
+    print(f"  contact search  {p['search_time_s']:6.2f} s wall     switching fingers per segment: {switches or 'none'}")
+    programs = p.get("segment_programs") or 0
+    cito = p["build_time_s"] + p["solve_time_s"]
+    status, details = reason_lines(p["status"])
+    how = (
+        f"summed   over its {programs} segment programs, solved in parallel: " if programs else "wall     one program: "
     )
+    print(
+        f"  CITO (IPOPT)    {cito:6.2f} s {how}build {p['build_time_s']:.2f} s, solve {p['solve_time_s']:.2f} s, "
+        f"{p['iterations']} iterations; {status}"
+    )
+    for line in details:
+        print(f"      {line}")
     cost = "n/a" if p["cost"] is None else f"{p['cost']:.4g}"
     verdict = (
         "converged, physics check passed"
@@ -89,11 +102,11 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
         if p["converged"]
         else "NOT converged"
     )
-    print(f"  total planning  {p['total_time_s']:6.2f} s   {verdict}, cost {cost}")
+    print(f"  total planning  {p['total_time_s']:6.2f} s wall     search and CITO: {verdict}, cost {cost}")
     if s is not None:
         held = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held throughout"
         print(
-            f"  simulation      {s['sim_time_s']:6.2f} s   {s['duration_s']:.1f} s simulated, {noun} {held}; "
+            f"  simulation      {s['sim_time_s']:6.2f} s wall     {s['duration_s']:.1f} s simulated, {noun} {held}; "
             f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
             f"theta {s['mae_theta']:.3f} rad; final theta error {s['final_error'][2]:.3f} rad"
             + ("" if s.get("error_at_drop") is None else f" ({s['error_at_drop'][2]:.3f} rad at the drop)")
@@ -101,6 +114,8 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
     else:
         print("  simulation      skipped: no trajectory to execute")
     print(f"files in {out}/: " + ", ".join(summary["files"]))
+    if PLAYBACK in summary["files"]:
+        print(f"open {out / PLAYBACK} in a browser to watch the run (offline, any browser)")
 
 
 def run(args) -> int:

@@ -1,7 +1,8 @@
-"""`trajectotree plan --goal RAD`: plan a rotation of the box with TrajectoTree or a
-CITO baseline; writes DIR/plan.npz (the trajectory at every knot) and DIR/plan.json
-(the solve report, the contact sequence and the config). A plan that does not
-converge is still written, with "success": false and IPOPT's status (exit code 0)."""
+"""`trajectotree plan --goal RAD`: plan a rotation of the object (the box, or any convex
+polygon: --polygon) with TrajectoTree or a CITO baseline; writes DIR/plan.npz (the
+trajectory at every knot) and DIR/plan.json (the solve report, the contact sequence and
+the config). A plan that does not converge is still written, with "success": false and
+IPOPT's status (exit code 0)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from trajectotree.cli.common import (
     check_output_file,
     config_from_args,
     print_json,
+    reason_lines,
 )
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
@@ -28,9 +30,13 @@ DERIVED_FILES = (SIM_JSON, SIM_NPZ)
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "plan", help="plan a box rotation (contact search + trajectory optimization)", description=__doc__
+        "plan",
+        help="plan a rotation of the object, a box or any convex polygon (contact search + trajectory optimization)",
+        description=__doc__,
     )
-    p.add_argument("--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, in [-pi, pi]")
+    p.add_argument(
+        "--goal", type=float, required=True, metavar="RAD", help="goal rotation of the object, rad, in [-pi, pi]"
+    )
     p.add_argument(
         "--method",
         default="trajectotree",
@@ -84,10 +90,13 @@ def run(args) -> int:
         print_json(plan_to_json(result))
         return 0
     v = ", ".join(f"{k} {val:.1e}" for k, val in result.violations.items())
+    status, details = reason_lines(result.status)
     print(
-        f"{method}: goal {goal:+.3f} rad, {'succeeded' if result.success else 'FAILED'} ({result.status}), "
+        f"{method}: goal {goal:+.3f} rad, {'succeeded' if result.success else 'FAILED'} ({status}), "
         f"{result.iterations} iterations, cost {result.cost:.4g}"
     )
+    for line in details:
+        print(f"  {line}")
     print(
         f"time: search {result.search_time_s:.2f} s, build {result.build_time_s:.2f} s, "
         f"solve {result.solve_time_s:.2f} s, total {result.total_time_s:.2f} s"

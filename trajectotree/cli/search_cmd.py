@@ -13,6 +13,7 @@ from trajectotree.cli.common import (
     check_payload,
     config_from_args,
     print_json,
+    reason_lines,
 )
 from trajectotree.results import check_goal
 
@@ -22,7 +23,7 @@ def register(subparsers) -> None:
         "search", help="find a finger-gaiting contact sequence for a goal rotation", description=__doc__
     )
     p.add_argument(
-        "--goal", type=float, required=True, metavar="RAD", help="goal rotation of the box, rad, in [-pi, pi]"
+        "--goal", type=float, required=True, metavar="RAD", help="goal rotation of the object, rad, in [-pi, pi]"
     )
     add_config_options(p)
     p.add_argument(
@@ -71,10 +72,13 @@ def run(args) -> int:
         print_json(plan.to_json())
         return 0
     s = plan.stats
+    summary, details = reason_lines(plan.reason)
     print(
         f"goal {goal:+.4f} rad, N = {config.search.num_nodes}: "
-        f"{'plan found' if plan.success else 'no plan: ' + plan.reason}"
+        f"{'plan found' if plan.success else 'no plan: ' + summary}"
     )
+    for line in details:
+        print(f"  {line}")
     print(
         f"search {s.time_s:.3f} s, {s.expanded} nodes expanded, {s.generated} generated, "
         f"{s.lp_calls} LP and {s.ik_calls} IK solves; {s.initial_grasps_searched} of "

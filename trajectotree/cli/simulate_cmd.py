@@ -33,7 +33,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "--forces",
         metavar="FILE.png",
-        help="plot each finger's simulated vs planned force on the box (.png, .pdf or .svg)",
+        help="plot each finger's simulated vs planned force on the object (.png, .pdf or .svg)",
     )
     p.add_argument("--meshcat", action="store_true", help="watch live in Meshcat on localhost (runs in real time)")
     p.add_argument("--json", action="store_true", help="print sim.json to stdout")
@@ -44,18 +44,18 @@ def register(subparsers) -> None:
     )
     group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of eq. 20 (--controller paper)")
     group.add_argument("--kv", type=float, metavar="NS/M", help="fingertip damping of eq. 20 (--controller paper)")
-    group.add_argument("--object-kp", type=float, metavar="1/S2", help="grasp controller: box pose gain, s^-2")
-    group.add_argument("--object-kd", type=float, metavar="1/S", help="grasp controller: box velocity gain, s^-1")
+    group.add_argument("--object-kp", type=float, metavar="1/S2", help="grasp controller: object pose gain, s^-2")
+    group.add_argument("--object-kd", type=float, metavar="1/S", help="grasp controller: object velocity gain, s^-1")
     group.add_argument("--tip-kp", type=float, metavar="N/M", help="grasp controller: fingertip spring, N/m")
     group.add_argument("--tip-kd", type=float, metavar="NS/M", help="grasp controller: fingertip damping, N s/m")
     group.add_argument("--rate", type=float, metavar="HZ", help="grasp controller: control rate, Hz")
     world = p.add_argument_group("simulated world (differs from the plan's; the controller keeps the plan's values)")
     world.add_argument("--sim-mu", type=float, metavar="MU", help="friction coefficient of the simulated plant")
-    world.add_argument("--sim-mass", type=float, metavar="KG", help="box mass of the simulated plant, kg")
+    world.add_argument("--sim-mass", type=float, metavar="KG", help="object mass of the simulated plant, kg")
     world.add_argument(
         "--push",
         metavar="FX,FY@T",
-        help="push the box with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s",
+        help="push the object with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s",
     )
     p.set_defaults(run=run)
 
