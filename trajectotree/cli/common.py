@@ -247,15 +247,18 @@ def reason_lines(reason: str, width: int = REASON_WIDTH) -> tuple[str, list[str]
         return reason, []
     clauses = _top_level_clauses(reason)
     summary, depth = "", 0
-    for ch in clauses[0]:
-        depth += ch in "([{"
+    for k, ch in enumerate(clauses[0]):  # a bracket after a space opens details; "grasp(s)" stays
+        opens = ch in "([{" and (depth > 0 or k == 0 or clauses[0][k - 1] == " ")
+        depth += opens
         summary += ch if depth == 0 else ""
-        depth -= ch in ")]}"
+        depth -= depth > 0 and ch in ")]}"
     summary = " ".join(summary.split())
     if len(summary) > width:
         summary = summary[: width - 3].rstrip() + "..."
     clauses = clauses[1:] if clauses[0] == summary else clauses  # said once
-    details = [line for c in clauses for line in textwrap.wrap(c, width, subsequent_indent="  ")]
+    details = [
+        line for c in clauses for line in textwrap.wrap(c, width, subsequent_indent="  ", break_on_hyphens=False)
+    ]
     return summary, details
 
 

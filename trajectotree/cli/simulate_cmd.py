@@ -195,7 +195,7 @@ def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
         check_range("--sim-mass", args.sim_mass, 0.0, 100.0, low_open=True)
     push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
     run_s = plan_duration_s + config.sim.settle_time
-    if push is not None and push.time_s >= run_s:
+    if push is not None and push.time_s >= run_s - 1e-9:  # the knot times' rounding: 1.2 + 0.5 s is 1.7000000000000002
         raise ConfigError(
             f"--push {args.push!r} starts at {push.time_s:g} s, when the run is over: it lasts {run_s:g} s (the "
             f"plan's {plan_duration_s:g} s and sim.settle_time {config.sim.settle_time:g} s); valid range of T: "
