@@ -34,7 +34,8 @@ def test_demo_writes_the_plan_run_figure_playback_and_summary(tmp_path, capsys):
     assert (out / "keyframes.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "forces.png").read_bytes()[:4] == b"\x89PNG"
     assert "<html" in (out / "playback.html").read_text()[:2000].lower()
-    assert f"{plan_json['total_time_s']:.2f} s" in printed and str(out) in printed
+    assert f"{plan_json['total_time_s']:.2f} s wall" in printed and str(out) in printed
+    assert f"open {out / 'playback.html'} in a browser" in printed
 
 
 def test_demo_rejects_a_goal_out_of_range(tmp_path, capsys):
