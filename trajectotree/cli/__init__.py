@@ -26,9 +26,9 @@ NUMBER_LIKE = re.compile(r"-\.?\d")
 
 class Parser(argparse.ArgumentParser):
     """argparse takes "-1e-1" or "-0.2,0@3" for an unknown option ("expected one argument"): its
-    negative-number pattern knows only "-1" and "-.5". Widened to every token NUMBER_LIKE matches
-    (the pattern Python 3.13's argparse adopted); add_subparsers makes each subcommand's parser
-    of this class too."""
+    negative-number pattern (Python 3.11's) knows only "-1" and "-.5". Widened to every token
+    NUMBER_LIKE matches (the pattern later Pythons' argparse uses); add_subparsers makes each
+    subcommand's parser of this class too."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

@@ -171,8 +171,8 @@ def check_payload(scene, config: Config, args: argparse.Namespace, grasps=None) 
     limits = payload(scene, config.search, grasps)
     where = (
         f"at scene.initial_pose {list(config.scene.initial_pose)} with friction mu_plan "
-        f"{config.search.friction_safety * config.scene.mu:.3g}, each joint within its {limits.tau_max:g} N m "
-        f"torque limit after carrying its links"
+        f"{config.search.friction_safety * config.scene.mu:.3g} and each joint within its {limits.tau_max:g} N m "
+        f"torque limit (the links' own weight included)"
     )
     grasps_text = (
         "search.initial_arclengths' grasp"
