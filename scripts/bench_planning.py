@@ -119,20 +119,16 @@ def run(
                 contact_plan, search_s = None, None
                 for formulation in formulations:
                     c = dataclasses.replace(config, cito=dataclasses.replace(config.cito, formulation=formulation))
-                    run_plan = lambda **kw: plan(
-                        scene=scene,
-                        goal=float(goal),
-                        method=method,
-                        config=c,  # noqa: E731
-                        contact_plan=contact_plan,
-                        **kw,
-                    )
-                    r = run_plan(segment_executor=pool)
+                    same = dict(scene=scene, goal=float(goal), method=method, config=c)
+                    r = plan(**same, contact_plan=contact_plan, segment_executor=pool)
                     row = plan_row(r, search_s)
                     if contact_plan is None and r.contact_plan.success:
                         contact_plan, search_s = r.contact_plan, r.search_time_s
                     if formulation == "keyframes" and r.trajectory is not None:
-                        row.update(segment_row(r, run_plan(segment_workers=1), run_plan(segment_workers=workers)))
+                        # the same contact plan solved serially and on a pool per plan
+                        serial = plan(**same, contact_plan=contact_plan, segment_workers=1)
+                        fresh = plan(**same, contact_plan=contact_plan, segment_workers=workers)
+                        row.update(segment_row(r, serial, fresh))
                     rows[f"trajectotree/{formulation}"].append(row)
                     bar.update()
             if on_goal:

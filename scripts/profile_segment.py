@@ -145,8 +145,9 @@ def main() -> None:
                 for row in results[name]
                 if row["segments"] == S
             }
+            agree = len(pairs) == len({p[0] for p in pairs})
             print(
-                f"S={S}: (goal, iterations, cost) {'agree in both trees' if len(pairs) == len({p[0] for p in pairs}) else 'DIFFER: ' + str(sorted(pairs))}"
+                f"S={S}: (goal, iterations, cost) {'agree in both trees' if agree else 'DIFFER: ' + str(sorted(pairs))}"
             )
 
 

@@ -30,9 +30,11 @@ def _segments_cross(p1, p2, q1, q2) -> bool:
     d3, d4 = _cross(q2 - q1, p1 - q1), _cross(q2 - q1, p2 - q1)
     if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
         return True
-    on = lambda a, b, c, d: (
-        d == 0 and min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
-    )  # noqa: E731 (c on segment a-b)
+
+    def on(a, b, c, d) -> bool:
+        """c lies on segment a-b, given d, the cross product saying whether it is on the line."""
+        return d == 0 and min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
+
     return on(p1, p2, q1, d1) or on(p1, p2, q2, d2) or on(q1, q2, p1, d3) or on(q1, q2, p2, d4)
 
 

@@ -91,7 +91,10 @@ def load_sim(plan_dir: str | Path) -> SimResult:
 
 def plan_to_json(result: PlanResult) -> dict:
     """plan.json (keys: README, "Trajectory optimization"): the solve report, contact sequence and config."""
-    finite = lambda v: float(v) if v is not None and np.isfinite(v) else None  # noqa: E731 (JSON has no NaN)
+
+    def finite(v) -> float | None:  # JSON has no NaN
+        return float(v) if v is not None and np.isfinite(v) else None
+
     return {
         "method": result.method,
         "goal": float(result.goal),
@@ -207,7 +210,10 @@ def load_plan(out_dir: str | Path) -> PlanResult:
                 "contact_sequence": data["contact_sequence"],
             }
         )
-        nan = lambda v: float("nan") if v is None else float(v)  # noqa: E731
+
+        def nan(v) -> float:
+            return float("nan") if v is None else float(v)
+
         check = data.get("physics_check")
         result = PlanResult(
             method=data["method"],

@@ -261,7 +261,10 @@ def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
     assert np.isnan(phase[0]) and np.isnan(phase[-1])
     # a cubic is reproduced exactly (value, rate, acceleration) from its knot values and rates
     assert swing_profile(np.array([0.4]), [(0.35, 0.45)], ramp_time=0.1)[0] == pytest.approx(0.0)  # short swing
-    f = lambda s: 2 * s**3 - s**2 + 0.5 * s
+
+    def f(s):
+        return 2 * s**3 - s**2 + 0.5 * s
+
     value, rate, accel = hermite(t, f(t)[:, None], (6 * t**2 - 2 * t + 0.5)[:, None], times)
     np.testing.assert_allclose(value[:, 0], f(times), atol=1e-12)
     np.testing.assert_allclose(rate[:, 0], 6 * times**2 - 2 * times + 0.5, atol=1e-10)

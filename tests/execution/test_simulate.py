@@ -323,7 +323,10 @@ def test_run_simulation_conditions_change_the_world_not_the_controller(scene, sh
     pushed = run_simulation(plan=reference, config=short_config, push="0,-0.3@0.2")
     assert heavy.conditions["sim_mass"] == 0.1 and heavy.conditions["plan_mass"] == 0.05
     late = nominal.t > 0.5
-    sag = lambda r: np.mean(r.x_plan[late, 1] - r.x[late, 1])
+
+    def sag(r):
+        return np.mean(r.x_plan[late, 1] - r.x[late, 1])
+
     assert sag(heavy) > sag(nominal) + 1e-5
     during = (pushed.t > 0.25) & (pushed.t < 0.4)
     assert np.all(pushed.x[during, 1] < nominal.x[during, 1])

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+from test_reach import signed_distances
 
 from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig
 from trajectotree.contact_plan import ContactPlan
@@ -20,8 +21,6 @@ from trajectotree.search.reach import Reachability
 from trajectotree.search.tree import _Node, _Search, choose_initial_grasp, find_contact_plan
 
 OLD_DEFAULT_GRASP = (0.54, 0.12, 0.36, 0.48)  # its stance of fingers 1, 2, 3 needs mu 0.67
-
-from test_reach import signed_distances
 
 
 @pytest.fixture(scope="module")

@@ -176,10 +176,10 @@ def _pinned_rows(jac, rows, kin) -> None:
     J = kin.J[kP, iP]
     for sign, off in ((-1.0, PIN_MINUS), (1.0, PIN_PLUS)):
         rws = rp[:, None] + off + TWO  # (nP, 2)
-        _put(jac, rows, f"pin_g{off}", lambda: (kP2, rws, COL_G[iP, None]), 1.0)
-        _put(jac, rows, f"pin_q{off}", lambda: (kP3, rws[:, :, None], COL_Q[iP][:, None, :]), sign * J)
-        _put(jac, rows, f"pin_p{off}", lambda: (kP3, rws[:, :, None], COL_P_IDX), -sign * _I2)
-        _put(jac, rows, f"pin_th{off}", lambda: (kP2, rws, COL_TH), sign * de_dth)
+        _put(jac, rows, f"pin_g{off}", lambda rws=rws: (kP2, rws, COL_G[iP, None]), 1.0)
+        _put(jac, rows, f"pin_q{off}", lambda rws=rws: (kP3, rws[:, :, None], COL_Q[iP][:, None, :]), sign * J)
+        _put(jac, rows, f"pin_p{off}", lambda rws=rws: (kP3, rws[:, :, None], COL_P_IDX), -sign * _I2)
+        _put(jac, rows, f"pin_th{off}", lambda rws=rws: (kP2, rws, COL_TH), sign * de_dth)
 
 
 def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
@@ -201,15 +201,21 @@ def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
             jac,
             rows,
             f"free_p{off}",
-            lambda: (kF2, row[:, None], COL_P_IDX),
+            lambda row=row: (kF2, row[:, None], COL_P_IDX),
             dphi_dp if scale is None else scale[:, None] * dphi_dp,
         )
-        _put(jac, rows, f"free_th{off}", lambda: (kF, row, COL_TH), dphi_dth if scale is None else scale * dphi_dth)
+        _put(
+            jac,
+            rows,
+            f"free_th{off}",
+            lambda row=row: (kF, row, COL_TH),
+            dphi_dth if scale is None else scale * dphi_dth,
+        )
         _put(
             jac,
             rows,
             f"free_q{off}",
-            lambda: (kF2, row[:, None], colqF),
+            lambda row=row: (kF2, row[:, None], colqF),
             dphi_dq if scale is None else scale[:, None] * dphi_dq,
         )
     _put(jac, rows, "free_comp_ln", lambda: (kF, rf + FREE_COMP, COL_LN[iF]), -kin.phi_tip[kF, iF])

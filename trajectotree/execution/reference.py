@@ -306,7 +306,10 @@ def grasp_schedule(
     else:  # the nearest box point: the fingertip centre minus its radius along the outward direction
         p_BC_knots = shape.nearest_points(p_BF_knots)
     f_B_knots = np.einsum("kba,kpb->kpa", rotations_2d(x[:, 2]), reference.f_W)  # R_BW f_W
-    at = lambda values: reference._at(values, times)
+
+    def at(values):
+        return reference._at(values, times)
+
     p_BF, p_BC, f_B, gap = at(p_BF_knots), at(p_BC_knots), at(f_B_knots), at(gap_knots)
     n_B = shape.face_normals(p_BC)
     t_B = np.stack([-n_B[..., 1], n_B[..., 0]], axis=-1)

@@ -212,7 +212,10 @@ def exclude_finger_finger_collisions(plant, scene_graph, hand) -> None:
 def add_paper_controller(builder, plant, hand, reference: Reference, config: Config) -> ImpedanceController:
     """Eq. 20 fed by reference sources (fingertip positions, velocities, forces)."""
     controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
-    flat = lambda a: a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
+
+    def flat(a):
+        return a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
+
     hold = config.sim.settle_time
     for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
         source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))

@@ -286,7 +286,10 @@ def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
     """One row per (method, controller, condition), in the order of `methods`, CONTROLLERS
     and CONDITIONS: executions, drops, mean absolute errors and how many ended within 3 deg
     of the planned final orientation."""
-    order = lambda names, name: names.index(name) if name in names else len(names)  # noqa: E731
+
+    def order(names, name) -> int:
+        return names.index(name) if name in names else len(names)
+
     keys = sorted(
         {(r["method"], r["controller"], r["condition"]) for r in records},
         key=lambda k: (order(methods, k[0]), order(CONTROLLERS, k[1]), order(CONDITIONS, k[2])),
@@ -294,7 +297,10 @@ def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
     table = []
     for method, controller, condition in keys:
         mine = [r for r in records if (r["method"], r["controller"], r["condition"]) == (method, controller, condition)]
-        mean = lambda field: float(np.mean([r[field] for r in mine]))  # noqa: E731
+
+        def mean(field: str, mine=mine) -> float:
+            return float(np.mean([r[field] for r in mine]))
+
         table.append(
             {
                 "method": method,

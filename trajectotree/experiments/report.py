@@ -150,7 +150,8 @@ gives its numbers for the mean planning times only; the rest it shows in Figs. 2
 def table_markdown(table: list[dict]) -> str:
     header = (
         "| method | trials | errors | converged | physically valid | mean time [s] | paper [s] "
-        "| median time [s] | speedup | paper speedup | mean cost | executed | drop rate | MAE x [mm] | MAE y [mm] | MAE theta [rad] |"
+        "| median time [s] | speedup | paper speedup | mean cost | executed | drop rate "
+        "| MAE x [mm] | MAE y [mm] | MAE theta [rad] |"
     )
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for s in table:

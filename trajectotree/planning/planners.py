@@ -6,8 +6,9 @@
   joint angles initialized from the plan (the contact constraints are not used).
 - "cito": the general CITO initialized in static equilibrium over the whole horizon.
   It uses no search: its initial grasp q*_0 is the search's initial-grasp chooser's
-  first choice for the goal (`initial_grasp_plan`; closed-form IK) and its incremental goals x*_n the same interpolated object path,
-  so its total time is build + solve only; `contact_plan` then holds node 0 alone.
+  first choice for the goal (`initial_grasp_plan`; closed-form IK) and its incremental goals
+  x*_n the same interpolated object path, so its total time is build + solve only;
+  `contact_plan` then holds node 0 alone.
 
 All three share the program builder, the cost (eq. 11), the friction cones at
 mu_plan = search.friction_safety * scene.mu (`planning_mu`), the solver options, the

@@ -100,7 +100,10 @@ class StanceChecks:
         stance = STANCE_FINGERS[finger]
         rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
         corners = self.boundary.corner_arclengths()
-        face = lambda s: int(np.searchsorted(corners, s, side="right"))  # noqa: E731
+
+        def face(s) -> int:
+            return int(np.searchsorted(corners, s, side="right"))
+
         if any(face(s) != face(node.arclengths[j]) for row in rolled for j, s in zip(stance, row)):
             return f"stance of fingers {stance} rolls off a face"
         p_BC, n_B = self.boundary.points(np.ravel(rolled))

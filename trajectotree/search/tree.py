@@ -233,7 +233,7 @@ class _Search:
             (next((d for d in range(1, self.config.num_nodes) if s not in self.joint2[i][d]), np.inf), i)
             for i, s in enumerate(start)
         )  # inf: never needs to move
-        for k, (deadline, finger) in enumerate(deadlines, start=1):
+        for k, (deadline, _) in enumerate(deadlines, start=1):
             if deadline < k:
                 late = [i for d, i in deadlines[:k]]
                 return (
