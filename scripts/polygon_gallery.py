@@ -97,10 +97,10 @@ def keyframe_figure(sweep_dir: Path, rows: list[dict], config: Config, path: Pat
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from trajectotree.config import mu_plan
     from trajectotree.figures.run import figure_keyframes, save_figure
     from trajectotree.io import load_plan
     from trajectotree.scene.plant import build_scene
-    from trajectotree.search.initial_grasp import mu_plan
 
     planned = sorted((r for r in rows if r.get("success")), key=lambda r: r["goal_index"])
     if not planned:

@@ -48,15 +48,14 @@ def measure(segments: int, goals: list[float]) -> list[dict]:
     from trajectotree.cito.program import build_program
     from trajectotree.cito.solve import solve
     from trajectotree.cito.transition import transition_spec
-    from trajectotree.config import Config
-    from trajectotree.planning.planners import planning_mu
+    from trajectotree.config import Config, mu_plan
     from trajectotree.scene.plant import build_scene
     from trajectotree.search.tree import find_contact_plan
 
     base = Config()
     config = dataclasses.replace(base, search=dataclasses.replace(base.search, num_nodes=segments + 1))
     scene = build_scene(config.scene)
-    body = BodyParams(scene, config.cito.sdf_sharpness, mu=planning_mu(config))
+    body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
     rows = []
     for goal in goals:
         contact_plan = find_contact_plan(scene, goal, config.search)

@@ -207,6 +207,12 @@ class SearchConfig:
             )
 
 
+def mu_plan(scene: SceneConfig, search: SearchConfig) -> float:
+    """The friction coefficient every plan may use, search.friction_safety x scene.mu: the search's
+    grasps and stances and the CITO friction cones alike."""
+    return search.friction_safety * scene.mu
+
+
 @dataclass(frozen=True)
 class CitoConfig:
     """Contact-implicit trajectory optimization (paper Sec. III-B, III-C) and IPOPT."""

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from trajectotree.refusal import SearchRefusal, refusal_from_json
+
 
 @dataclass(frozen=True)
 class ContactNode:
@@ -85,10 +87,15 @@ class SearchStats:
 class ContactPlan:
     goal: float  # rad, goal rotation of the object
     success: bool  # a path of N nodes reached the goal pose
-    reason: str  # why not, when success is False ("" otherwise)
+    refusal: SearchRefusal | None = None  # why not, when success is False (None otherwise)
     nodes: tuple[ContactNode, ...] = ()  # N nodes on success, () otherwise
     stats: SearchStats = field(default_factory=SearchStats)
     mu_plan: float = float("nan")  # friction coefficient the plan was searched with
+
+    @property
+    def reason(self) -> str:
+        """Why the search found no plan, in words ("" when it found one)."""
+        return "" if self.refusal is None else str(self.refusal)
 
     @property
     def object_path(self) -> np.ndarray:
@@ -100,6 +107,7 @@ class ContactPlan:
             "goal": float(self.goal),
             "success": self.success,
             "reason": self.reason,
+            "refusal": None if self.refusal is None else self.refusal.to_json(),
             "mu_plan": _finite_or_none(self.mu_plan),
             "stats": self.stats.to_json(),
             "contact_sequence": [n.to_json() for n in self.nodes],
@@ -110,7 +118,7 @@ class ContactPlan:
         return ContactPlan(
             goal=float(data["goal"]),
             success=bool(data["success"]),
-            reason=data.get("reason", ""),
+            refusal=refusal_from_json(data.get("refusal"), data.get("reason", "")),
             nodes=tuple(ContactNode.from_json(n) for n in data.get("contact_sequence") or ()),
             stats=SearchStats(**data.get("stats", {})),
             mu_plan=_float_or_nan(data.get("mu_plan")),

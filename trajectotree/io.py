@@ -112,6 +112,7 @@ def plan_to_json(result: PlanResult) -> dict:
         "search": {
             "success": result.contact_plan.success,
             "reason": result.contact_plan.reason,
+            "refusal": None if result.contact_plan.refusal is None else result.contact_plan.refusal.to_json(),
             "stats": result.contact_plan.stats.to_json(),
             "mu_plan": finite(result.contact_plan.mu_plan),
         },
@@ -205,6 +206,7 @@ def load_plan(out_dir: str | Path) -> PlanResult:
                 "goal": data["goal"],
                 "success": search.get("success", True),
                 "reason": search.get("reason", ""),
+                "refusal": search.get("refusal"),  # older files have the reason's text alone
                 "stats": search.get("stats", {}),
                 "mu_plan": search.get("mu_plan"),  # older files lack it
                 "contact_sequence": data["contact_sequence"],

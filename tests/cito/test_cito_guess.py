@@ -8,9 +8,8 @@ from trajectotree.cito.guess import plan_guess, rest_to_rest_progress
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.transition import transition_spec
-from trajectotree.config import Config
+from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import world_to_box
-from trajectotree.planning.planners import planning_mu
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan
 
@@ -50,7 +49,7 @@ def test_plan_guess_keeps_contacts_and_lifts_the_switching_finger(setup, method)
         spec = transition_spec(plan, radius=scene.tip_radius, config=c)
     else:
         spec = general_spec(x0=plan.nodes[0].object_pose, q0=plan.nodes[0].q, object_path=plan.object_path, config=c)
-    program = build_program(c, spec, BodyParams(scene, c.sdf_sharpness, mu=planning_mu(CONFIG)))
+    program = build_program(c, spec, BodyParams(scene, c.sdf_sharpness, mu=mu_plan(CONFIG.scene, CONFIG.search)))
     guess = plan_guess(program.rows, spec, plan)
     phi = distances(scene, guess)
     M = c.knots_per_segment

@@ -12,10 +12,9 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.links import LINK_FRACTIONS, LINK_SIZE, LinkRows
 from trajectotree.cito.program import build_program, link_knots
 from trajectotree.cito.transition import piece_spec, transition_spec
-from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig
+from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig, mu_plan
 from trajectotree.geometry import rotation_2d
 from trajectotree.planning.keyframes import PieceTask, solve_piece, solve_segments
-from trajectotree.planning.planners import planning_mu
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.reach import Reachability, rectangles_overlap_polygon
 from trajectotree.search.tree import find_contact_plan
@@ -123,7 +122,7 @@ def test_rows_against_the_searchs_link_boxes(scene):
 
 def test_rows_at_the_free_knots_and_none_when_off(scene):
     contact_plan = find_contact_plan(scene, 0.3, dataclasses.replace(CONFIG.search, num_nodes=3))
-    body = BodyParams(scene, CONFIG.cito.sdf_sharpness, mu=planning_mu(CONFIG))
+    body = BodyParams(scene, CONFIG.cito.sdf_sharpness, mu=mu_plan(CONFIG.scene, CONFIG.search))
     piece = piece_spec(contact_plan, 0, 1, radius=scene.tip_radius, config=CONFIG.cito)
     joint = transition_spec(contact_plan, radius=scene.tip_radius, config=CONFIG.cito)
     assert link_knots(piece) == list(range(1, piece.num_knots - 1))  # both ends fixed at the nodes
@@ -165,7 +164,9 @@ def test_segment_whose_link_cut_the_box_is_clear_with_the_rows(scene):
     assert contact_plan.success, contact_plan.reason
 
     def segment(cito):
-        task = PieceTask(CONFIG.scene, cito, planning_mu(CONFIG), contact_plan, SEGMENT, SEGMENT + 1, "keyframes")
+        task = PieceTask(
+            CONFIG.scene, cito, mu_plan(CONFIG.scene, CONFIG.search), contact_plan, SEGMENT, SEGMENT + 1, "keyframes"
+        )
         return solve_piece(task)
 
     without = segment(dataclasses.replace(CONFIG.cito, link_rows=False))
@@ -175,6 +176,6 @@ def test_segment_whose_link_cut_the_box_is_clear_with_the_rows(scene):
     assert with_rows.success, with_rows.status
     assert links_overlap(scene, with_rows.trajectory) == []
     # on demand (the default), that segment alone is solved again with the rows
-    pieces, attempts = solve_segments(contact_plan, CONFIG, planning_mu(CONFIG), workers=1)
+    pieces, attempts = solve_segments(contact_plan, CONFIG, workers=1)
     assert [r.kind for r in attempts[SEGMENT]] == ["keyframes", "links"] and all(p.success for p in pieces)
     assert all(p.check.link_penetration_m <= 1e-3 for p in pieces)

@@ -13,10 +13,10 @@ from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
 from trajectotree.cito.transition import check_plan, transition_spec
-from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig, SearchConfig
+from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig, SearchConfig, mu_plan
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
-from trajectotree.planning.planners import plan, planning_mu
+from trajectotree.planning.planners import plan
 from trajectotree.scene.plant import build_scene
 
 SIDE = 0.14
@@ -56,7 +56,7 @@ def contact_plan(scene) -> ContactPlan:
                 closure_margin=0.1,
             )
         )
-    return ContactPlan(goal=GOAL, success=True, reason="", nodes=tuple(nodes), mu_plan=planning_mu(CONFIG))
+    return ContactPlan(goal=GOAL, success=True, nodes=tuple(nodes), mu_plan=mu_plan(CONFIG.scene, CONFIG.search))
 
 
 def test_the_plan_is_the_triangles_and_moves_a_finger_round_a_corner(scene, contact_plan):
@@ -75,7 +75,9 @@ def test_the_plan_guess_follows_the_triangle(scene, contact_plan):
     off the triangle by at least the tip radius all the way round the corner."""
     config = CONFIG.cito
     spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config)
-    program = build_program(config, spec, BodyParams(scene, config.sdf_sharpness, mu=planning_mu(CONFIG)))
+    program = build_program(
+        config, spec, BodyParams(scene, config.sdf_sharpness, mu=mu_plan(CONFIG.scene, CONFIG.search))
+    )
     guess = plan_guess(program.rows, spec, contact_plan)
     kin = program.rows.kinematics(guess.stacked())
     np.testing.assert_allclose(np.linalg.norm(kin.e, axis=-1)[spec.pinned], 0.0, atol=1e-9)

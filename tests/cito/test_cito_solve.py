@@ -85,12 +85,8 @@ def test_iterations_and_timing_are_read_from_ipopts_log(setup):
         with open(log_path) as f:
             table.extend(int(m.group(1)) for m in re.finditer(r"^\s*(\d+)r?\s+[-+]?\d\.\d+e[-+]\d+", f.read(), re.M))
 
-    previous, cito_solve.log_observer = cito_solve.log_observer, read_table
-    try:
-        capped = cito_solve.solve(program, guess, dataclasses.replace(CONFIG, max_iter=3))
-        again = cito_solve.solve(program, guess, CONFIG)
-    finally:
-        cito_solve.log_observer = previous
+    capped = cito_solve.solve(program, guess, dataclasses.replace(CONFIG, max_iter=3), read_table)
+    again = cito_solve.solve(program, guess, CONFIG, read_table)
     assert not capped.success and capped.iterations == 3  # stopped by max_iter
     assert again.success and again.iterations == outcome.iterations > 3
     assert table[-1] == again.iterations  # the summary line agrees with the table

@@ -44,9 +44,7 @@ def plan():
     # Finger 2 moves in segment 0, nobody in segment 1.
     a = [0.5, 0.2, 0.27, 0.48]
     b = [0.5, 0.2, 0.25, 0.48]
-    return ContactPlan(
-        goal=0.2, success=True, reason="", nodes=(node(0.0, a, None), node(0.1, b, 2), node(0.2, b, None))
-    )
+    return ContactPlan(goal=0.2, success=True, nodes=(node(0.0, a, None), node(0.1, b, 2), node(0.2, b, None)))
 
 
 def test_transition_spec_pins_fixed_fingers_and_frees_the_switching_one(plan):

@@ -197,7 +197,7 @@ def node(theta: float, switching: int | None) -> ContactNode:
 
 def test_keyframes_one_panel_per_node_with_the_switching_finger(scene, tmp_path):
     nodes = (node(0.0, None), node(0.1, 2), node(0.2, None))
-    fig = figure_keyframes(scene, ContactPlan(goal=0.2, success=True, reason="", nodes=nodes))
+    fig = figure_keyframes(scene, ContactPlan(goal=0.2, success=True, nodes=nodes))
     titles = [ax.get_title() for ax in fig.axes]
     assert titles == [
         "n=0  theta=+0.00\ninitial grasp",
@@ -216,7 +216,7 @@ def test_keyframes_one_panel_per_node_with_the_switching_finger(scene, tmp_path)
 def test_keyframes_draw_the_cones_the_plan_was_searched_with(scene):
     nodes = (node(0.0, None), node(0.1, 2))
     for mu_plan, shown in ((0.49, "mu = 0.49"), (float("nan"), f"mu = {scene.config.mu:.2g}")):
-        fig = figure_keyframes(scene, ContactPlan(goal=0.1, success=True, reason="", nodes=nodes, mu_plan=mu_plan))
+        fig = figure_keyframes(scene, ContactPlan(goal=0.1, success=True, nodes=nodes, mu_plan=mu_plan))
         assert any(shown in t.get_text() for t in fig.legends[0].get_texts())
         plt.close(fig)
 

@@ -13,11 +13,11 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
 from trajectotree.cito.transition import piece_spec
 from trajectotree.cli import main
-from trajectotree.config import CitoConfig, Config, ConfigError, SearchConfig
+from trajectotree.config import CitoConfig, Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.io import load_plan, save_plan
 from trajectotree.planning.keyframes import _neighbour_ranges, local_pool, stitch
 from trajectotree.planning.physics import ObjectModel, check_physics
-from trajectotree.planning.planners import plan, planning_mu
+from trajectotree.planning.planners import plan
 from trajectotree.results import TRAJECTORY_ARRAYS
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan
@@ -57,7 +57,9 @@ def test_piece_spec_fixes_both_ends_at_the_nodes(scene, contact_plan):
     np.testing.assert_array_equal(spec.x0, first.object_pose)
     np.testing.assert_array_equal(spec.q_end, last.q)
     assert spec.static_knots == (0, spec.num_knots - 1)
-    program = build_program(CONFIG.cito, spec, BodyParams(scene, CONFIG.cito.sdf_sharpness, mu=planning_mu(CONFIG)))
+    program = build_program(
+        CONFIG.cito, spec, BodyParams(scene, CONFIG.cito.sdf_sharpness, mu=mu_plan(CONFIG.scene, CONFIG.search))
+    )
     v, prog = program.variables, program.prog
     fixed = {}
     for binding in prog.bounding_box_constraints():
@@ -85,7 +87,7 @@ def test_keyframes_plan_is_continuous_at_the_nodes_and_physical(scene, contact_p
         assert not a.xdot[k].any() and not a.qdot[k].any()
     assert a.x[-1, 2] == contact_plan.nodes[-1].object_pose[2]  # the final pose is the goal node's
     # The plan's own check of the stitched arrays, recomputed here from them alone.
-    check = check_physics(a.arrays(), ObjectModel.from_scene(scene), planning_mu(CONFIG))
+    check = check_physics(a.arrays(), ObjectModel.from_scene(scene), mu_plan(CONFIG.scene, CONFIG.search))
     assert check.passed and check == serial.physics_check, check.reason
     assert check.newton_euler_force_N < 1e-6
     for record in serial.segments:  # segment 0's link 2 of a finger cuts the box without the link rows

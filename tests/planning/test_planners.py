@@ -20,11 +20,12 @@ from trajectotree.config import (
     SearchConfig,
     config_to_dict,
     load_config,
+    mu_plan,
     save_config,
 )
 from trajectotree.geometry import ConvexPolygon, box_to_world, world_to_box
 from trajectotree.io import load_plan, save_plan
-from trajectotree.planning.planners import plan, planning_mu
+from trajectotree.planning.planners import plan
 from trajectotree.scene.plant import build_scene
 
 CONFIG = Config(search=SearchConfig(num_nodes=3))  # 2 segments, 25 knots: seconds per solve
@@ -93,16 +94,16 @@ def test_plan_is_physical(plans, scene, key):
     c, r = scene.config, scene.tip_radius
     check_newton_euler(a, c)
     ln, lt = a["lambda_n"], a["lambda_t"]
-    mu_plan = planning_mu(CONFIG)
-    assert mu_plan == pytest.approx(0.7 * c.mu)  # the default safety
-    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= mu_plan * ln + 1e-7)  # cones at mu_plan
+    mu = mu_plan(CONFIG.scene, CONFIG.search)
+    assert mu == pytest.approx(0.7 * c.mu)  # the default safety
+    assert np.all(ln >= -1e-7) and np.all(np.abs(lt) <= mu * ln + 1e-7)  # cones at mu_plan
     pressing = ln > 0.05
-    assert (np.abs(lt[pressing]) / ln[pressing]).max() > 0.9 * mu_plan  # ... and they bind
+    assert (np.abs(lt[pressing]) / ln[pressing]).max() > 0.9 * mu  # ... and they bind
     dist = tip_distances(a, c, r)
     assert dist.min() > -1e-3  # no tip 1 mm inside
     away = dist > 1e-4  # no force at a distance
     assert np.all(np.linalg.norm(a["f_W"], axis=2)[away] <= 0.01), np.linalg.norm(a["f_W"], axis=2)[away].max()
-    assert result.physics_check.passed and result.physics_check.mu == pytest.approx(mu_plan)
+    assert result.physics_check.passed and result.physics_check.mu == pytest.approx(mu)
     assert abs(a["x"][-1, 2] - key[1]) < np.deg2rad(5)  # reaches the goal
 
 
@@ -210,7 +211,7 @@ def test_baselines_are_physical_or_say_why_not(plans, scene, method):
     a, c = npz(folder), scene.config
     assert result.status.split(",")[0] in ("Success", "Stop at acceptable point"), result.status  # converged
     check_newton_euler(a, c, moment_tol=1e-3)  # forces off the box act 1-2 mm from p_W_C
-    assert np.all(np.abs(a["lambda_t"]) <= planning_mu(CONFIG) * a["lambda_n"] + 1e-7)
+    assert np.all(np.abs(a["lambda_t"]) <= mu_plan(CONFIG.scene, CONFIG.search) * a["lambda_n"] + 1e-7)
     pushing = (tip_distances(a, c, scene.tip_radius) > 1e-4) & (np.linalg.norm(a["f_W"], axis=2) > 0.01)
     assert result.converged and result.success == result.physics_check.passed == (not pushing.any())
     if pushing.any():
@@ -238,7 +239,7 @@ def test_paper_config_loads_with_the_papers_formulation():
     config = load_config(Path(__file__).parents[2] / "configs" / "paper.yaml")
     assert config.search.friction_safety == 1.0 and config.cito.switch_clearance == 0.0
     assert config.cito.formulation == "joint"
-    assert planning_mu(config) == config.scene.mu
+    assert mu_plan(config.scene, config.search) == config.scene.mu
     default = Config()
     assert dataclasses.replace(config, search=default.search, cito=default.cito) == default  # nothing else differs
     assert not config.search.rolled_stances and config.search.grid_refinements == 0

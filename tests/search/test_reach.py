@@ -34,7 +34,7 @@ def test_drake_ik_touches_the_box_and_agrees_with_the_closed_form(scene, reach):
     q = np.zeros(8)
     for i, s in enumerate((0.55, 0.15, 0.25, 0.45)):
         result = reach.solve(pose, i, s)
-        assert result.reachable, result.reason
+        assert result.reachable, result.refusal
         np.testing.assert_allclose(result.q, reach.closed_form(pose, i, s).q, atol=1e-5)
         q[2 * i : 2 * i + 2] = result.q
         f = scene.fingers[i]

@@ -14,6 +14,7 @@ from trajectotree.config import Config, ConfigError, SceneConfig, SearchConfig
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.planning.planners import initial_grasp_plan
+from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import initial_grasp_candidates
@@ -115,7 +116,7 @@ def test_initial_grasp_candidates(scene):
     mu_plan = config.friction_safety * scene.config.mu
     boundary, reach = ConvexPolygon.box(0.20, 0.10), Reachability(scene)
     closure = FormClosure(boundary, mu_plan, 1e-9)
-    assert table.mu_plan == pytest.approx(mu_plan) and table.reason == ""
+    assert table.mu_plan == pytest.approx(mu_plan) and table.refusal is None
     assert 100 < len(table.candidates) <= table.assignments
     worst = [c.worst_stance_mu for c in table.candidates]
     assert np.all(np.diff(np.round(worst, 4)) >= 0)  # ranked by the worst stance that may let go
@@ -147,25 +148,27 @@ def test_search_refuses_a_stance_below_the_margin(scene):
     assert paper.success and paper.nodes[1].switching_finger == 0
     assert paper.nodes[1].stance_required_mu == pytest.approx(0.6698, abs=1e-4)
     refused = find_contact_plan(scene, -1.0, SearchConfig(initial_arclengths=OLD_DEFAULT_GRASP))
-    assert (
-        not refused.success
-        and "finger 0 must move (out of reach) but is held: stance of fingers (1, 2, 3)" in refused.reason
+    assert not refused.success and "finger 0 must move (out of reach) but is held: stance of fingers (1, 2, 3)" in (
+        refused.reason
     )
+    held = Refusal(RefusalKind.STUCK_FINGER_HELD, fingers=(0,), stance=(1, 2, 3), mu_plan=refused.mu_plan)
+    on_the_grid = refused.refusal.grids[0][1]  # the coarse grid's NoPlan (the fine grid's follows)
+    assert refused.refusal.kind is RefusalKind.ON_GRIDS and held in dict(on_the_grid.refused)
     # the chooser's grasps find the goal with the margin
     check_plan(scene, find_contact_plan(scene, -1.0, SearchConfig()), SearchConfig())
 
 
 def test_cito_uses_the_choosers_first_choice(scene):
     for goal in (-2.5, 0.4):
-        chosen, reason = choose_initial_grasp(scene, goal, SearchConfig())
-        assert reason == "" and chosen in [
+        chosen, refusal = choose_initial_grasp(scene, goal, SearchConfig())
+        assert refusal is None and chosen in [
             c.arclengths for c in initial_grasp_candidates(scene, SearchConfig()).candidates
         ]
         node = initial_grasp_plan(scene, goal, Config()).nodes[0]
         np.testing.assert_allclose(node.arclengths, chosen)
         assert node.required_mu < 0.49 and node.closure_margin > 1e-3
     given = SearchConfig(initial_arclengths=(0.52, 0.14, 0.32, 0.5))
-    assert choose_initial_grasp(scene, 0.8, given) == ((0.52, 0.14, 0.32, 0.5), "")
+    assert choose_initial_grasp(scene, 0.8, given) == ((0.52, 0.14, 0.32, 0.5), None)
 
 
 def test_plan_json_keeps_required_friction(scene):
@@ -189,16 +192,25 @@ def test_custom_initial_grasp_and_segments(scene):
 
 def test_failures_are_results_with_a_reason(scene):
     # all four contacts on the bottom face: not in form closure
-    plan = find_contact_plan(scene, 0.5, SearchConfig(initial_arclengths=(0.43, 0.47, 0.51, 0.55)))
-    assert not plan.success and "initial grasp" in plan.reason and plan.nodes == ()
+    plan = find_contact_plan(scene, 0.5, SearchConfig(initial_arclengths=(0.43, 0.47, 0.51, 0.55), grid_refinements=0))
+    assert not plan.success and plan.nodes == ()
+    assert plan.refusal.kind is RefusalKind.INITIAL_GRASP and plan.refusal.cause.kind is RefusalKind.NOT_IN_CLOSURE
+    assert plan.reason.startswith("initial grasp infeasible: not in frictional form closure at mu_plan 0.49")
     # a half turn in 3 nodes needs more contact switches than 2 steps allow
-    plan = find_contact_plan(scene, np.pi, SearchConfig(num_nodes=3))
+    plan = find_contact_plan(scene, np.pi, SearchConfig(num_nodes=3, grid_refinements=0))
     assert not plan.success and "skipped by cheap checks" in plan.reason and plan.stats.initial_grasps_searched == 0
-    plan = find_contact_plan(scene, np.pi, SearchConfig(num_nodes=3, initial_arclengths=(0.52, 0.14, 0.32, 0.5)))
-    assert not plan.success and "contact switches" in plan.reason
+    assert plan.refusal.kind is RefusalKind.NO_PLAN and plan.refusal.searched == 0
+    given = SearchConfig(num_nodes=3, initial_arclengths=(0.52, 0.14, 0.32, 0.5), grid_refinements=0)
+    plan = find_contact_plan(scene, np.pi, given)
+    assert not plan.success and plan.refusal.kind is RefusalKind.TOO_MANY_SWITCHES and plan.refusal.limit == 2
+    assert "contact switches" in plan.reason and "more than the 2 steps of 3 nodes" in plan.reason
     # a tiny node budget
     plan = find_contact_plan(scene, np.pi, SearchConfig(max_expansions=3))
     assert not plan.success and "budget" in plan.reason and plan.stats.expanded == 3
+    assert plan.refusal.last_searched.refusal == Refusal(RefusalKind.NODE_BUDGET, count=3)
+    # the refusal survives plan.json: the same value, not only its text
+    again = ContactPlan.from_json(json.loads(json.dumps(plan.to_json())))
+    assert again.refusal == plan.refusal and again.reason == plan.reason
     with pytest.raises(ConfigError):
         find_contact_plan(scene, float("nan"), SearchConfig())
 

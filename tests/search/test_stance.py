@@ -10,6 +10,7 @@ import pytest
 
 from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.experiments.sweep import sample_goals
+from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.initial_grasp import STANCE_FINGERS
 from trajectotree.search.stance import HoldingForceLp, weight_support_B
@@ -65,11 +66,11 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
     capped, children = search(0.3)
     assert {child.switching_finger for _, child in children} <= {None}
     for finger in movers:
+        heavy = Refusal(RefusalKind.STANCE_TOO_HEAVY, stance=STANCE_FINGERS[finger], mu_plan=capped.mu_plan, limit=0.3)
+        assert capped.refused[heavy] >= 1
         assert (
-            capped.refused[
-                f"stance of fingers {STANCE_FINGERS[finger]} needs more than 0.3 N to hold the object's weight"
-            ]
-            >= 1
+            str(heavy)
+            == f"stance of fingers {STANCE_FINGERS[finger]} needs more than 0.3 N to hold the object's weight"
         )
     # and a cap above every stance's need refuses none of them
     needs = [free.stance.holding_force(tuple(grasp[j] for j in STANCE_FINGERS[f]), d) for f in movers for d in (0, 1)]

@@ -59,7 +59,7 @@ from trajectotree.scene.plant import NUM_FINGERS
 class BodyParams:
     """The constants the rows need, read once from the scene. `mu` is the friction
     coefficient the plan may use (mu_plan = search.friction_safety * scene.mu, see
-    planners.planning_mu), not necessarily the scene's."""
+    config.mu_plan), not necessarily the scene's."""
 
     def __init__(self, scene, sharpness: float, *, mu: float):
         c = scene.config

@@ -14,6 +14,8 @@ import os
 import re
 import tempfile
 import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -62,13 +64,16 @@ def ipopt_options(config: CitoConfig, output_file: str | None = None) -> SolverO
     return options
 
 
-# Optional, for a progress display (trajectotree.cli.progress): called with the path of IPOPT's
-# log, it returns a context manager that is active while IPOPT runs. The log then also holds
-# IPOPT's iteration lines (file_print_level 5); the solve itself is unchanged.
-log_observer = None
+# Watches a solve, e.g. a progress display (trajectotree.cli.progress): called with the path of
+# IPOPT's log, it returns a context manager that is active while IPOPT runs.
+LogObserver = Callable[[str], AbstractContextManager]
 
 
-def solve(program: CitoProgram, guess: CitoVariables, config: CitoConfig) -> SolveOutcome:
+def solve(
+    program: CitoProgram, guess: CitoVariables, config: CitoConfig, log_observer: LogObserver | None = None
+) -> SolveOutcome:
+    """IPOPT from `guess`; with a `log_observer` the log also holds IPOPT's iteration lines
+    (file_print_level 5) while it runs, and the solve itself is unchanged."""
     prog, v = program.prog, program.variables
     v.set_initial_guess(prog, guess)
     fd, log_path = tempfile.mkstemp(prefix="trajectotree_ipopt_", suffix=".txt")

@@ -126,10 +126,9 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     if config.search.initial_arclengths is not None:
         check_payload(scene, config, args)
         return
-    # Not memoized: the planner builds the table again inside its timed search, so
-    # search_time_s keeps its meaning (this check costs 0.1-0.4 s more wall time per command).
-    grasps = initial_grasp.initial_grasp_candidates(scene, config.search, memoize=False)
-    if grasps.reason:
+    # The planner ranks the grasps again inside its timed search, so search_time_s includes them.
+    grasps = initial_grasp.initial_grasp_candidates(scene, config.search)
+    if grasps.refusal is not None:
         option = (
             "--polygon (scene.object.vertices)"
             if getattr(args, "polygon", None) is not None
@@ -139,7 +138,7 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
         )
         raise ConfigError(
             f"{option}: the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
-            f"{list(config.scene.initial_pose)}: {grasps.reason}; corner-free contacts each finger "
+            f"{list(config.scene.initial_pose)}: {grasps.refusal}; corner-free contacts each finger "
             f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)"
         )
     check_payload(scene, config, args, grasps)

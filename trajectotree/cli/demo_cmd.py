@@ -140,8 +140,9 @@ def run(args) -> int:
         print(f"Meshcat: {meshcat.web_url()} (open it now; the run plays once the plan is ready)", file=log, flush=True)
 
     print(f"planning a {goal:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
-    with ipopt_progress(progress_wanted(args)):
-        result = plan(scene=scene, goal=goal, method="trajectotree", config=config)
+    result = plan(
+        scene=scene, goal=goal, method="trajectotree", config=config, log_observer=ipopt_progress(progress_wanted(args))
+    )
     for name in DERIVED_FILES:
         (out / name).unlink(missing_ok=True)
     save_plan(result, out)

@@ -76,8 +76,14 @@ def run(args) -> int:
         check_output_file("--html", args.html, HTML_SUFFIXES)
     scene = build_scene(config.scene)
     check_graspable(scene, config, args)
-    with ipopt_progress(progress_wanted(args)):
-        result = plan(scene=scene, goal=goal, method=method, config=config, segment_workers=workers)
+    result = plan(
+        scene=scene,
+        goal=goal,
+        method=method,
+        config=config,
+        segment_workers=workers,
+        log_observer=ipopt_progress(progress_wanted(args)),
+    )
     removed = remove_derived_files(out)
     save_plan(result, out)
     if removed:

@@ -58,20 +58,10 @@ def _show_log(stream: TextIO, log_path: str):
         stream.flush()
 
 
-@contextmanager
 def ipopt_progress(enabled: bool, stream: TextIO = sys.stderr):
-    """While active (and `enabled`), every IPOPT solve shows its progress on `stream`."""
-    from trajectotree.cito import solve
-
-    if not enabled:
-        yield
-        return
-    previous = solve.log_observer
-    solve.log_observer = partial(_show_log, stream)
-    try:
-        yield
-    finally:
-        solve.log_observer = previous
+    """The log observer (cito.solve.LogObserver) that shows each IPOPT solve's progress on
+    `stream`, for planners.plan(log_observer=); None when not `enabled`."""
+    return partial(_show_log, stream) if enabled else None
 
 
 def wanted(args) -> bool:

@@ -91,7 +91,8 @@ class ObjectReach:
             "initial_grasps": len(g.candidates),
             "best_grasp_arclengths_m": None if best is None else list(best.arclengths),
             "best_grasp_worst_stance_mu": None if best is None else best.worst_stance_mu,
-            "reason": g.reason,
+            "reason": "" if g.refusal is None else str(g.refusal),
+            "refusal": None if g.refusal is None else g.refusal.to_json(),
             "payload": None if self.payload is None else self.payload.to_json(),
         }
 

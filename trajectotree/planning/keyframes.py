@@ -33,6 +33,7 @@ Every attempt is recorded.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import multiprocessing
 import os
 import resource
@@ -42,14 +43,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.cito import solve as cito_solve
 from trajectotree.cito.guess import plan_guess
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
-from trajectotree.cito.solve import solve, violations
+from trajectotree.cito.solve import LogObserver, solve, violations
 from trajectotree.cito.transition import piece_spec
 from trajectotree.cito.variables import CitoVariables
-from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer
+from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer, mu_plan
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.planning.physics import ObjectModel, check_physics, contact_points
 from trajectotree.results import LINK_PENETRATION_TOL, PhysicsCheck, PlanResult, Trajectory
@@ -62,7 +62,7 @@ START_METHOD = "fork" if "fork" in multiprocessing.get_all_start_methods() else 
 AVERAGED = ("tau", "lambda_n", "lambda_t", "f_W")  # the shared knot's forces: the mean of both segments'
 SHARED = ("x", "xdot", "q", "qdot", "p_W_tip", "p_W_C")  # equal in both segments at a shared knot
 STRICT_PINNING = 100.0  # the last retry's factor on cito.weight_contact_slack (a stricter program)
-_SCENES: dict[SceneConfig, Scene] = {}  # per process: the scene each worker solves in
+WORKER_SCENES = 4  # scenes a worker process keeps built (a pool serves plans of one scene, a sweep's a few)
 
 
 @dataclass(frozen=True)
@@ -136,15 +136,17 @@ def trajectory(program, sol, scene: Scene) -> Trajectory:
     )
 
 
-def _scene(config: SceneConfig) -> Scene:
-    if config not in _SCENES:
-        _SCENES[config] = build_scene(config)
-    return _SCENES[config]
+@functools.lru_cache(maxsize=WORKER_SCENES)
+def worker_scene(config: SceneConfig) -> Scene:
+    """The scene a worker process solves `config`'s pieces in, built on its first piece and kept
+    for the next ones (a forked worker inherits the ones its parent built)."""
+    return build_scene(config)
 
 
-def solve_piece(task: PieceTask) -> PieceResult:
-    """Builds and solves one piece in this process (a worker's entry point)."""
-    scene = _scene(task.scene)
+def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogObserver | None = None) -> PieceResult:
+    """Builds and solves one piece in this process: in `scene` (built from task.scene), else in
+    this process's worker_scene (a worker's entry point); `log_observer` watches its IPOPT solve."""
+    scene = worker_scene(task.scene) if scene is None else scene
     t0 = time.perf_counter()
     body = BodyParams(scene, task.cito.sdf_sharpness, mu=task.mu)
     spec = piece_spec(task.plan, task.first, task.last, radius=scene.tip_radius, config=task.cito)
@@ -152,7 +154,7 @@ def solve_piece(task: PieceTask) -> PieceResult:
     sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
     build_time = time.perf_counter() - t0
-    outcome = solve(program, guess, task.cito)
+    outcome = solve(program, guess, task.cito, log_observer)
     arrays = trajectory(program, outcome.solution, scene)
     check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
     return PieceResult(
@@ -178,19 +180,15 @@ def solve_piece(task: PieceTask) -> PieceResult:
 
 def prepare_worker(config: SceneConfig) -> int:
     """Builds (or finds) the scene in this process; its pid (to warm up a pool, or time its start)."""
-    _scene(config)
+    worker_scene(config)
     return os.getpid()
-
-
-def _worker_init() -> None:
-    cito_solve.log_observer = None  # a terminal's progress line is the parent's, not each worker's
 
 
 def local_pool(workers: int, start_method: str = START_METHOD) -> ProcessPoolExecutor:
     """`workers` local processes for the segment programs (reuse one across plans to pay the
-    start-up once: the scenes solved in are cached per process)."""
+    start-up once: each process keeps the scenes it solved in, worker_scene)."""
     check_integer("segment workers", workers, 1)
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method), initializer=_worker_init)
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method))
 
 
 def check_workers(workers, name: str = "segment_workers") -> int | None:
@@ -200,16 +198,23 @@ def check_workers(workers, name: str = "segment_workers") -> int | None:
     return workers
 
 
-def run_pieces(tasks: list[PieceTask], executor: Executor | None, workers: int | None) -> list[PieceResult]:
+def run_pieces(
+    tasks: list[PieceTask],
+    executor: Executor | None,
+    workers: int | None,
+    scene: Scene | None = None,
+    log_observer: LogObserver | None = None,
+) -> list[PieceResult]:
     """The tasks' results in order: on `executor`, else in this process (workers 1 or one
-    task), else on a pool of local processes started for these tasks."""
+    task; in `scene`, watched by `log_observer`), else on a pool of local processes started
+    for these tasks. Progress is shown only in this process: a terminal has one progress line."""
     if executor is not None:
         return list(executor.map(solve_piece, tasks))
     workers = min(len(tasks), os.cpu_count() or 1) if workers is None else min(workers, len(tasks))
     if workers <= 1:
-        return [solve_piece(t) for t in tasks]
+        return [solve_piece(t, scene, log_observer) for t in tasks]
     for t in tasks:  # a forked worker inherits the scene built here
-        _scene(t.scene)
+        worker_scene(t.scene)
     with local_pool(workers) as pool:
         return list(pool.map(solve_piece, tasks))
 
@@ -229,10 +234,18 @@ def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[
 
 
 def solve_segments(
-    plan: ContactPlan, config: Config, mu: float, executor: Executor | None = None, workers: int | None = None
+    plan: ContactPlan,
+    config: Config,
+    executor: Executor | None = None,
+    workers: int | None = None,
+    *,
+    scene: Scene | None = None,
+    log_observer: LogObserver | None = None,
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
-    """(the pieces to stitch, in order; every attempt per segment), with the retries."""
+    """(the pieces to stitch, in order; every attempt per segment), with the retries; pieces
+    solved in this process use `scene` when given (run_pieces)."""
     n = len(plan.nodes) - 1
+    mu = mu_plan(config.scene, config.search)
 
     cito = config.cito
     on_demand = cito.link_rows and cito.link_rows_on_demand
@@ -249,12 +262,15 @@ def solve_segments(
         """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
         guesses = [best[s].solution if from_last_iterate else None for s in segments]
         for s, r in zip(
-            segments, run_pieces([task(s, s + 1, kind, g) for s, g in zip(segments, guesses)], executor, workers)
+            segments,
+            run_pieces(
+                [task(s, s + 1, kind, g) for s, g in zip(segments, guesses)], executor, workers, scene, log_observer
+            ),
         ):
             attempts[s].append(r)
             best[s] = r
 
-    best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers)
+    best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers, scene, log_observer)
     attempts = {s: [best[s]] for s in range(n)}
     retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
     if on_demand:  # from the guess: from a link deep inside the object (goal -0.089: 21 mm) IPOPT hit max_iter
@@ -267,7 +283,8 @@ def solve_segments(
     for kind in ("joint", "strict"):
         failed = [s for s, p in sorted(pieces.items()) if not p.success]  # single segments: a joint piece passed
         ranges = _neighbour_ranges(failed, n, min_segments=2 if kind == "joint" else 1)
-        for (a, b), r in zip(ranges, run_pieces([task(a, b, kind) for a, b in ranges], executor, workers)):
+        joint = run_pieces([task(a, b, kind) for a, b in ranges], executor, workers, scene, log_observer)
+        for (a, b), r in zip(ranges, joint):
             for s in range(a, b):
                 attempts[s].append(r)
             if r.success:
@@ -318,10 +335,10 @@ def plan_keyframes(
     goal: float,
     contact_plan: ContactPlan,
     config: Config,
-    mu: float,
     search_time: float,
     executor: Executor | None = None,
     workers: int | None = None,
+    log_observer: LogObserver | None = None,
 ) -> PlanResult:
     """The trajectotree PlanResult of the keyframes formulation for a successful contact plan.
     Times: build_time_s and solve_time_s summed over every attempt (process time in the
@@ -329,11 +346,11 @@ def plan_keyframes(
     stitched pieces' costs summed (a shared knot's effort terms count in both); iterations: every
     attempt's; violations: each group's largest over the pieces."""
     t0 = time.perf_counter()
-    pieces, attempts = solve_segments(contact_plan, config, mu, executor, workers)
+    pieces, attempts = solve_segments(contact_plan, config, executor, workers, scene=scene, log_observer=log_observer)
     wall = time.perf_counter() - t0
     distinct = list({id(r): r for tried in attempts.values() for r in tried}.values())
     arrays = stitch(pieces)
-    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), mu)
+    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), mu_plan(config.scene, config.search))
     converged = all(p.converged for p in pieces)
     failed = [p for p in pieces if not p.success]
     status = ", ".join(sorted({p.status for p in pieces}))

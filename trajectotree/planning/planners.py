@@ -11,7 +11,7 @@
   `contact_plan` then holds node 0 alone.
 
 All three share the program builder, the cost (eq. 11), the friction cones at
-mu_plan = search.friction_safety * scene.mu (`planning_mu`), the solver options, the
+mu_plan = search.friction_safety * scene.mu (`config.mu_plan`), the solver options, the
 violation report and the physics check of the plan's arrays (trajectotree.planning.physics):
 a converged plan that fails it (e.g. a fingertip pushing the box from a distance) is
 reported with success False and the check's reason in its status. Times:
@@ -32,25 +32,20 @@ from trajectotree.cito.guess import plan_guess, static_guess
 from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
-from trajectotree.cito.solve import solve, violations
+from trajectotree.cito.solve import LogObserver, solve, violations
 from trajectotree.cito.transition import check_plan, transition_spec
-from trajectotree.config import Config, ConfigError
+from trajectotree.config import Config, ConfigError, mu_plan
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
 from trajectotree.planning.keyframes import check_workers, plan_keyframes
 from trajectotree.planning.keyframes import trajectory as segment_trajectory
 from trajectotree.planning.physics import ObjectModel, check_physics
+from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
 from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
 from trajectotree.search.grasp import FormClosure
-from trajectotree.search.initial_grasp import mu_plan
+from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
-
-
-def planning_mu(config: Config) -> float:
-    """mu_plan = search.friction_safety * scene.mu, the friction every plan may use (the
-    search's grasps and stances and the CITO friction cones: one definition for both)."""
-    return mu_plan(config.scene, config.search)
 
 
 def plan(
@@ -62,6 +57,8 @@ def plan(
     contact_plan: ContactPlan | None = None,
     segment_executor: Executor | None = None,
     segment_workers: int | None = None,
+    grasp_tables: GraspTables | None = None,
+    log_observer: LogObserver | None = None,
 ) -> PlanResult:
     """Plans the rotation `goal` (rad, in [-pi, pi]) of the object with `method` ("trajectotree",
     "cito" or "cito-warm"). `config` defaults to Config() (the paper's scene), `scene` to the plant
@@ -70,7 +67,9 @@ def plan(
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
     persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
     `segment_workers` local processes (1: serially in this process, as a sweep's trial
-    does; None: one per segment, at most one per core)."""
+    does; None: one per segment, at most one per core). `grasp_tables` keeps the ranked
+    initial grasps for the next plan (without it the search ranks them, inside its time);
+    `log_observer` watches each IPOPT solve run in this process (cito.solve.solve)."""
     check_method(method)
     goal = check_goal(goal)
     config = config or Config()
@@ -80,12 +79,12 @@ def plan(
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
     search_time = 0.0
     if method == "cito":
-        contact_plan = initial_grasp_plan(scene, goal, config)
+        contact_plan = initial_grasp_plan(scene, goal, config, grasp_tables)
         if not contact_plan.success:
             return _unsolved(method, goal, contact_plan.reason, 0.0, contact_plan, config)
     elif contact_plan is None:
         t0 = time.perf_counter()
-        contact_plan = find_contact_plan(scene, goal, config.search)
+        contact_plan = find_contact_plan(scene, goal, config.search, grasp_tables)
         search_time = time.perf_counter() - t0
         if not contact_plan.success:
             return _unsolved(method, goal, f"search failed: {contact_plan.reason}", search_time, contact_plan, config)
@@ -93,10 +92,17 @@ def plan(
 
     if method == "trajectotree" and config.cito.formulation == "keyframes":
         return plan_keyframes(
-            scene, goal, contact_plan, config, planning_mu(config), search_time, segment_executor, segment_workers
+            scene,
+            goal,
+            contact_plan,
+            config,
+            search_time,
+            executor=segment_executor,
+            workers=segment_workers,
+            log_observer=log_observer,
         )
     t0 = time.perf_counter()
-    body = BodyParams(scene, config.cito.sdf_sharpness, mu=planning_mu(config))
+    body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
     if method == "trajectotree":
         spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
     else:
@@ -111,7 +117,7 @@ def plan(
     guess = static_guess(program.rows, spec) if method == "cito" else plan_guess(program.rows, spec, contact_plan)
     build_time = time.perf_counter() - t0
 
-    outcome = solve(program, guess, config.cito)
+    outcome = solve(program, guess, config.cito, log_observer)
     sol = outcome.solution
     trajectory = segment_trajectory(program, sol, scene)
     check = check_physics(trajectory.arrays(), ObjectModel.from_scene(scene), body.mu)
@@ -140,17 +146,18 @@ def plan(
     )
 
 
-def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan:
+def initial_grasp_plan(scene: Scene, goal: float, config: Config, tables: GraspTables | None = None) -> ContactPlan:
     """A one-node ContactPlan with the initial grasp, for `cito` (which has no search):
     config.search.initial_arclengths, or else the search's initial-grasp chooser's first
     choice for this goal (trajectotree.search.tree.choose_initial_grasp: the best-ranked candidate
     whose fingers pass the search's cheap checks for the goal; the search itself may root at a
-    later one). success False with the reason when no grasp qualifies or a contact is out of reach."""
+    later one). success False with the refusal when no grasp qualifies or a contact is out of reach."""
     c = scene.config
     boundary = c.shape
-    chosen, reason = choose_initial_grasp(scene, goal, config.search)
+    mu = mu_plan(c, config.search)
+    chosen, refusal = choose_initial_grasp(scene, goal, config.search, tables)
     if chosen is None:
-        return ContactPlan(goal=goal, success=False, reason=reason, mu_plan=mu_plan(c, config.search))
+        return ContactPlan(goal=goal, success=False, refusal=refusal, mu_plan=mu)
     arclengths = np.asarray(chosen, dtype=float) % boundary.perimeter
     points = [boundary.point(s) for s in arclengths]
     p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
@@ -158,8 +165,8 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan
     x0 = np.asarray(c.initial_pose, dtype=float)
     q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
     if any(qi is None for qi in q):
-        return ContactPlan(goal=goal, success=False, reason="initial grasp out of reach of the fingers")
-    closure = FormClosure(boundary, mu_plan(c, config.search), config.search.min_closure_margin)
+        return ContactPlan(goal=goal, success=False, refusal=Refusal(RefusalKind.INITIAL_OUT_OF_REACH), mu_plan=mu)
+    closure = FormClosure(boundary, mu, config.search.min_closure_margin)
     node = ContactNode(
         object_pose=x0,
         q=np.concatenate(q),
@@ -170,7 +177,7 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config) -> ContactPlan
         closure_margin=float(closure.check(arclengths).margin),
         required_mu=closure.required_mu(arclengths),
     )
-    return ContactPlan(goal=goal, success=True, reason="", nodes=(node,), mu_plan=closure.mu)
+    return ContactPlan(goal=goal, success=True, nodes=(node,), mu_plan=closure.mu)
 
 
 def _unsolved(method, goal, status, search_time, contact_plan, config) -> PlanResult:

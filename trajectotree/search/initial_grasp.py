@@ -16,8 +16,8 @@ also puts the grasp itself in closure). Ranked by their worst three-finger stanc
 fingers that may let go (largest required_mu, smallest first), then by more free fingers,
 then by the paper's joint-2 heuristic at the initial pose. Many stances need no friction at
 all (an antipodal pair plus a third contact), hence the tie-breaks.
-For the default scene: 2916 grid assignments, 2583 candidates; the table is built once per
-scene and search settings (0.25 s) and cached. As in the search, fingertips may touch
+For the default scene: 2916 grid assignments, 2583 candidates (0.25 s to build; a GraspTables
+keeps them for the next goal). As in the search, fingertips may touch
 (centres 2 r apart) and links of different fingers are not tested against each other (the
 simulation filters finger-finger contact, trajectotree.execution.simulate).
 """
@@ -29,7 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.config import SceneConfig, SearchConfig
+from trajectotree.config import SearchConfig, mu_plan
+from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.plant import NUM_FINGERS, Scene
 from trajectotree.search.grasp import required_mu_many
 from trajectotree.search.reach import Reachability
@@ -52,28 +53,27 @@ class GraspCandidates:
     candidates: tuple[GraspCandidate, ...]  # ranked, best first
     reachable: tuple[int, ...]  # grid contacts reachable per finger at the initial pose
     assignments: int  # grid assignments before the overlap and closure filters
-    reason: str  # why there is no candidate ("" when there are)
+    refusal: Refusal | None  # why there is no candidate (NO_GRID_CONTACT, NO_INITIAL_GRASP); None when there are
 
 
-_CACHE: dict[tuple, GraspCandidates] = {}
+class GraspTables:
+    """Ranked initial-grasp tables kept by whoever plans many goals of one scene and wants each
+    table built once (a search given none builds its own, and its search time includes it)."""
+
+    def __init__(self):
+        self._tables: dict[tuple, GraspCandidates] = {}
+
+    def get(self, scene: Scene, search: SearchConfig, reach: Reachability | None = None) -> GraspCandidates:
+        """initial_grasp_candidates for these settings, built on the first request."""
+        key = (scene.config, search.friction_safety, search.initial_grid_step, search.nominal_joint2)
+        if key not in self._tables:
+            self._tables[key] = initial_grasp_candidates(scene, search, reach)
+        return self._tables[key]
 
 
-def mu_plan(scene_config: SceneConfig, search: SearchConfig) -> float:
-    """The friction coefficient plans may use: search.friction_safety x scene.mu."""
-    return search.friction_safety * scene_config.mu
-
-
-def initial_grasp_candidates(
-    scene: Scene, search: SearchConfig, reach: Reachability | None = None, *, memoize: bool = True
-) -> GraspCandidates:
-    """The ranked candidate initial grasps for scene's object; memoized per scene and settings
-    (memoize=False: built afresh and not kept, for a check outside the timed search)."""
-    if not memoize:
-        return _build(scene, search, reach or Reachability(scene))
-    key = (scene.config, search.friction_safety, search.initial_grid_step, search.nominal_joint2)
-    if key not in _CACHE:
-        _CACHE[key] = _build(scene, search, reach or Reachability(scene))
-    return _CACHE[key]
+def initial_grasp_candidates(scene: Scene, search: SearchConfig, reach: Reachability | None = None) -> GraspCandidates:
+    """The ranked candidate initial grasps for scene's object (GraspTables keeps them)."""
+    return _build(scene, search, reach or Reachability(scene))
 
 
 def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.ndarray]:
@@ -104,9 +104,7 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     assignments = len(grasps)
     if assignments == 0:
         missing = [i for i, n in enumerate(counts) if n == 0]
-        return GraspCandidates(
-            mu, (), counts, 0, f"finger(s) {missing} reach no corner-free contact at the initial pose"
-        )
+        return GraspCandidates(mu, (), counts, 0, Refusal(RefusalKind.NO_GRID_CONTACT, fingers=tuple(missing)))
     p, n = reach.contacts(grasps.ravel())
     p, n = p.reshape(-1, NUM_FINGERS, 2), n.reshape(-1, NUM_FINGERS, 2)
     tips = p + reach.tip_radius * n
@@ -140,13 +138,15 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
         )
         for k in order
     )
-    reason = (
-        ""
+    refusal = (
+        None
         if candidates
-        else (
-            f"no initial grasp: of {assignments} reachable grid grasps ({int(apart.sum())} without overlapping "
-            f"fingertips) none has a three-finger stance in frictional form closure at mu_plan {mu:.3g} "
-            f"(best stance needs mu {np.min(stance_mu) if stance_mu.size else np.inf:.3g})"
+        else Refusal(
+            RefusalKind.NO_INITIAL_GRASP,
+            mu_plan=mu,
+            required_mu=float(np.min(stance_mu)) if stance_mu.size else np.inf,
+            count=assignments,
+            subset=int(apart.sum()),
         )
     )
-    return GraspCandidates(mu, candidates, counts, assignments, reason)
+    return GraspCandidates(mu, candidates, counts, assignments, refusal)

@@ -29,6 +29,7 @@ from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.solvers import SnoptSolver
 
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
+from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.kinematics import first_solution
 from trajectotree.scene.plant import NUM_FINGERS, Scene
 
@@ -40,7 +41,7 @@ KEY_DIGITS = 9  # poses and arclengths equal to 1e-9 share a cache entry
 class FingerReach:
     reachable: bool
     q: np.ndarray  # (2,) rad, the finger's joint angles (nan when unreachable)
-    reason: str  # why not, "" when reachable
+    refusal: Refusal | None = None  # why not (OUT_OF_REACH, LINKS_PENETRATE or IK_FAILED), None when reachable
 
 
 def rectangles_overlap_polygon(
@@ -223,11 +224,11 @@ class Reachability:
     def _closed_form(self, pose, finger: int, arclength: float) -> FingerReach:
         solutions = self.fingers[finger].ik_solutions(self.tip_target(pose, arclength))
         if not solutions:
-            return FingerReach(False, np.full(2, np.nan), "out of reach within joint limits")
+            return FingerReach(False, np.full(2, np.nan), Refusal(RefusalKind.OUT_OF_REACH))
         free = [q for q in solutions if not self.links_penetrate(pose, finger, q)]
         if not free:
-            return FingerReach(False, solutions[0], "finger links penetrate the box")
-        return FingerReach(True, free[0], "")
+            return FingerReach(False, solutions[0], Refusal(RefusalKind.LINKS_PENETRATE))
+        return FingerReach(True, free[0])
 
     def solve(self, pose, finger: int, arclength: float) -> FingerReach:
         """Drake IK (seeded by the closed form) + collision test: the node's joint angles; memoized."""
@@ -242,7 +243,7 @@ class Reachability:
             return guess
         q = self._drake_ik(finger, self.tip_target(pose, arclength), guess.q)
         if q is None:
-            return FingerReach(False, np.full(2, np.nan), "inverse kinematics failed")
+            return FingerReach(False, np.full(2, np.nan), Refusal(RefusalKind.IK_FAILED))
         if self.links_penetrate(pose, finger, q):
-            return FingerReach(False, q, "finger links penetrate the box")
-        return FingerReach(True, q, "")
+            return FingerReach(False, q, Refusal(RefusalKind.LINKS_PENETRATE))
+        return FingerReach(True, q)

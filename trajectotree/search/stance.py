@@ -31,6 +31,7 @@ import numpy as np
 from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
 from trajectotree.search.initial_grasp import STANCE_FINGERS
@@ -91,9 +92,9 @@ class StanceChecks:
         self._force: dict[tuple, float] = {}  # (depth, stance arclengths) -> N
 
     # -- rolling contacts ---------------------------------------------------------------------
-    def rolled(self, node, depth: int, finger: int) -> str:
+    def rolled(self, node, depth: int, finger: int) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
-        `depth` fails at its rolled contacts ("" when it holds): at node.depth and at `depth`,
+        `depth` fails at its rolled contacts (None when it holds): at node.depth and at `depth`,
         every contact still on its face (the rolling law holds along one face) and the three in
         frictional form closure at mu_plan (grasp.in_closure_many, the exact test behind
         required_mu; the LP's 1e-3 N margin is not applied here)."""
@@ -105,12 +106,12 @@ class StanceChecks:
             return int(np.searchsorted(corners, s, side="right"))
 
         if any(face(s) != face(node.arclengths[j]) for row in rolled for j, s in zip(stance, row)):
-            return f"stance of fingers {stance} rolls off a face"
+            return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance)
         p_BC, n_B = self.boundary.points(np.ravel(rolled))
         A, B = closure_edges_parts(p_BC.reshape(2, 3, 2), n_B.reshape(2, 3, 2))
         if not np.all(in_closure_many(A, B, self.mu_plan)):
-            return f"stance of fingers {stance} not in closure at mu_plan at its rolled contacts"
-        return ""
+            return Refusal(RefusalKind.STANCE_ROLLED_OPEN, stance=stance, mu_plan=self.mu_plan)
+        return None
 
     def rolled_arclengths(self, node, depth: int, fingers) -> list[float]:
         """The contacts of `fingers` (node's arclengths) at node `depth` >= node.depth, each
@@ -137,18 +138,18 @@ class StanceChecks:
         return float(self.scene.fingers[finger].psi + q[0] + q[1] - pose[2])
 
     # -- holding force ------------------------------------------------------------------------
-    def too_heavy(self, node, depth: int, finger: int) -> str:
+    def too_heavy(self, node, depth: int, finger: int) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
-        `depth` is refused for its force ("" when it is not, or when there is no cap): it needs
+        `depth` is refused for its force (None when it is not, or when there is no cap): it needs
         more than max_force N in total, at its planned contacts (where CITO pins the fingertips),
         to carry the object's weight at node.depth or at `depth`."""
         if not self.max_force:
-            return ""
+            return None
         stance = STANCE_FINGERS[finger]
         planned = tuple(node.arclengths[j] for j in stance)
         if any(self.holding_force(planned, d) > self.max_force for d in (node.depth, depth)):
-            return f"stance of fingers {stance} needs more than {self.max_force:g} N to hold the object's weight"
-        return ""
+            return Refusal(RefusalKind.STANCE_TOO_HEAVY, stance=stance, mu_plan=self.mu_plan, limit=self.max_force)
+        return None
 
     def holding_force(self, arclengths: tuple[float, ...], depth: int) -> float:
         """N, the least total normal force of contacts `arclengths` (friction mu_plan) that holds

@@ -24,7 +24,7 @@ Two additions to the paper, neither of which changes which plans exist:
 - A finger whose contact leaves reach at the next pose must be the one that moves (two
   such fingers: no child); at a root, the k-th earliest such deadline must be node k or later.
 
-Friction margin (issue 13; not in the paper, whose setting is search.friction_safety = 1):
+Friction margin (not in the paper, whose setting is search.friction_safety = 1):
 every LP uses mu_plan = friction_safety x scene.mu, so every node's grasp and every
 three-finger stance held while a finger switches (is_free) is in frictional form closure
 with friction to spare. Each plan node reports `required_mu` (its grasp) and
@@ -60,11 +60,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from trajectotree.config import ConfigError, SearchConfig
+from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
+from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
+from trajectotree.results import check_goal
 from trajectotree.scene.plant import NUM_FINGERS, Scene
 from trajectotree.search.grasp import FormClosure
-from trajectotree.search.initial_grasp import STANCE_FINGERS, initial_grasp_candidates, mu_plan
+from trajectotree.search.initial_grasp import STANCE_FINGERS, GraspTables, initial_grasp_candidates
 from trajectotree.search.reach import Reachability
 from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
@@ -95,7 +97,7 @@ class _Search:
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
         self.stance = StanceChecks(scene, self.reach, self.poses, self.mu_plan, config.max_stance_force)
-        self.refused: Counter = Counter()  # why moves were not generated, for the failure reason
+        self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         self.expanded = self.generated = 0
         self.bound = SwitchBound(scene, self.reach, self.poses, config)
@@ -112,14 +114,14 @@ class _Search:
         self.bound.plan(starts)
 
     # -- IsFeasible -----------------------------------------------------------------------
-    def contacts_allowed(self, arclengths) -> str:
-        """Why these contacts are not allowed on the boundary ("" when they are)."""
+    def contacts_allowed(self, arclengths) -> Refusal | None:
+        """Why these contacts are not allowed on the boundary (None when they are)."""
         margin = self.scene.config.corner_margin
         if any(self.boundary.corner_distance(s) < margin for s in arclengths):
-            return f"a contact lies within {margin} m of a corner"
+            return Refusal(RefusalKind.CORNER, limit=margin)
         if any(self.tips_overlap(arclengths, i) for i in range(NUM_FINGERS)):
-            return "two fingertips overlap"
-        return ""
+            return Refusal(RefusalKind.TIPS_OVERLAP)
+        return None
 
     def tips_overlap(self, arclengths, finger: int) -> bool:
         """Finger `finger`'s fingertip sphere would overlap another finger's."""
@@ -131,26 +133,28 @@ class _Search:
             if i != finger
         )
 
-    def infeasibility(self, node: _Node) -> str:
-        """Why `node` is a dead end ("" when it is feasible): closure LP, then Drake IK."""
+    def infeasibility(self, node: _Node) -> Refusal | None:
+        """Why `node` is a dead end (None when it is feasible): closure LP, then Drake IK."""
         return self.not_in_closure(node.arclengths) or self.unreachable(node)
 
-    def not_in_closure(self, arclengths) -> str:
+    def not_in_closure(self, arclengths) -> Refusal | None:
         closure = self.closure.check(arclengths)
         if not closure.in_closure:
-            return (
-                f"not in frictional form closure at mu_plan {self.mu_plan:.3g} (margin {closure.margin:.3g}, "
-                f"needs mu {self.closure.required_mu(arclengths):.3g})"
+            return Refusal(
+                RefusalKind.NOT_IN_CLOSURE,
+                mu_plan=self.mu_plan,
+                margin=closure.margin,
+                required_mu=self.closure.required_mu(arclengths),
             )
-        return ""
+        return None
 
-    def unreachable(self, node: _Node) -> str:
+    def unreachable(self, node: _Node) -> Refusal | None:
         pose = self.poses[node.depth]
         for i, s in enumerate(node.arclengths):
             reach = self.reach.solve(pose, i, s)
             if not reach.reachable:
-                return f"finger {i} cannot reach its contact: {reach.reason}"
-        return ""
+                return Refusal(RefusalKind.UNREACHABLE, fingers=(i,), cause=reach.refusal)
+        return None
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
@@ -160,15 +164,13 @@ class _Search:
         # fewer tests: with two of them there is no child at all)
         stuck = [i for i, s in enumerate(node.arclengths) if s not in self.joint2[i][depth]]
         if len(stuck) > 1:
-            self.refused[f"fingers {stuck} lose their contacts (out of reach) at the same node"] += 1
+            self.refused[Refusal(RefusalKind.CONTACTS_LOST, fingers=tuple(stuck))] += 1
             return []
         movers = stuck or list(range(NUM_FINGERS))
         free = [i for i in movers if self.closure.is_free(node.arclengths, i)]
+        held = RefusalKind.STUCK_FINGER_HELD if stuck else RefusalKind.FINGER_HELD
         for i in sorted(set(movers) - set(free)):
-            self.refused[
-                f"finger {i} {'must move (out of reach) but is ' if stuck else ''}held: stance of fingers "
-                f"{STANCE_FINGERS[i]} not in closure at mu_plan"
-            ] += 1
+            self.refused[Refusal(held, fingers=(i,), stance=STANCE_FINGERS[i], mu_plan=self.mu_plan)] += 1
         if not free:
             return []
         candidates = {} if stuck else {node.arclengths: None}  # the zero displacement: no finger moves
@@ -182,13 +184,13 @@ class _Search:
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
-                self.refused[f"finger {finger} new contact out of reach or at a corner"] += 1
+                self.refused[Refusal(RefusalKind.NEW_CONTACT_UNREACHABLE, fingers=(finger,))] += 1
                 continue
             if self.bound.switches_needed(depth, arclengths) > steps_left:  # no completion exists
-                self.refused["too many switches left (bound)"] += 1
+                self.refused[Refusal(RefusalKind.SWITCH_BOUND)] += 1
                 continue
             if finger is not None and self.tips_overlap(arclengths, finger):
-                self.refused["fingertips overlap"] += 1
+                self.refused[Refusal(RefusalKind.TIPS_OVERLAP)] += 1
                 continue
             if finger is not None:
                 if finger not in stances:  # the stance depends on the finger, not on where it moves
@@ -200,32 +202,32 @@ class _Search:
             out.append((h, _Node(depth, arclengths, finger, node)))
         return out
 
-    def stance_refused(self, node: _Node, depth: int, finger: int) -> str:
+    def stance_refused(self, node: _Node, depth: int, finger: int) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
-        `depth` is refused ("" when it is not): its rolled contacts (search.rolled_stances),
+        `depth` is refused (None when it is not): its rolled contacts (search.rolled_stances),
         then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance)."""
-        return (self.stance.rolled(node, depth, finger) if self.config.rolled_stances else "") or self.stance.too_heavy(
-            node, depth, finger
-        )
+        rolled = self.stance.rolled(node, depth, finger) if self.config.rolled_stances else None
+        return rolled or self.stance.too_heavy(node, depth, finger)
 
     # -- Algorithm 1 ----------------------------------------------------------------------
-    def precheck(self, start: tuple[float, ...], candidate: bool = False) -> str:
-        """Why the search from `start` cannot succeed, by cheap tests ("" when it may). A
+    def precheck(self, start: tuple[float, ...], candidate: bool = False) -> Refusal | None:
+        """Why the search from `start` cannot succeed, by cheap tests (None when it may). A
         `candidate` of trajectotree.search.initial_grasp already passed the contact tests (corners,
         overlap, closure), so the goal's table look-ups come first and its LP last."""
         if not candidate:
-            reason = self.contacts_allowed(start) or self.not_in_closure(start)
-            if reason:
-                return f"initial grasp {'not allowed' if 'closure' not in reason else 'infeasible'}: {reason}"
+            refused = self.contacts_allowed(start) or self.not_in_closure(start)
+            if refused:
+                return Refusal(RefusalKind.INITIAL_GRASP, cause=refused)
         per_finger = [self.min_switches[i][0].get(s, np.inf) for i, s in enumerate(start)]
         if not np.isfinite(sum(per_finger)):
-            stuck = [i for i, v in enumerate(per_finger) if not np.isfinite(v)]
-            return f"finger(s) {stuck} have no reachable, corner-free contacts at every node of the object path"
+            stuck = tuple(i for i, v in enumerate(per_finger) if not np.isfinite(v))
+            return Refusal(RefusalKind.NO_PATH_CONTACTS, fingers=stuck)
         if sum(per_finger) > self.config.num_nodes - 1:
-            return (
-                f"the goal needs at least {int(sum(per_finger))} contact switches (per finger "
-                f"{[int(v) for v in per_finger]}, each finger staying on reachable contacts), more than the "
-                f"{self.config.num_nodes - 1} steps of {self.config.num_nodes} nodes"
+            return Refusal(
+                RefusalKind.TOO_MANY_SWITCHES,
+                count=int(sum(per_finger)),
+                per_finger=tuple(int(v) for v in per_finger),
+                limit=self.config.num_nodes - 1,
             )
         # Each finger must switch by the first node where its initial contact is out of reach;
         # one switch per node, so the k-th earliest such deadline must be at least node k.
@@ -235,15 +237,12 @@ class _Search:
         )  # inf: never needs to move
         for k, (deadline, _) in enumerate(deadlines, start=1):
             if deadline < k:
-                late = [i for d, i in deadlines[:k]]
-                return (
-                    f"fingers {late} all lose their initial contacts (out of reach) by node {deadline}, "
-                    f"but only one finger can switch per node"
-                )
-        dead_end = (self.not_in_closure(start) if candidate else "") or self.unreachable(_Node(0, start, None, None))
-        return f"initial grasp infeasible: {dead_end}" if dead_end else ""
+                late = tuple(i for d, i in deadlines[:k])
+                return Refusal(RefusalKind.DEADLINES, fingers=late, count=int(deadline))
+        dead_end = (self.not_in_closure(start) if candidate else None) or self.unreachable(_Node(0, start, None, None))
+        return Refusal(RefusalKind.INITIAL_GRASP, cause=dead_end) if dead_end else None
 
-    def run(self, start: tuple[float, ...], t0: float, budget: int) -> tuple[_Node | None, str]:
+    def run(self, start: tuple[float, ...], t0: float, budget: int) -> tuple[_Node | None, Refusal | None]:
         """Algorithm 1 from the root `start` with at most `budget` expansions (precheck passed)."""
         counter = itertools.count()
         root = _Node(0, start, None, None)
@@ -253,17 +252,17 @@ class _Search:
         expanded0 = self.expanded
         while open_set:
             if self.expanded - expanded0 >= budget:
-                return None, f"node budget exhausted ({budget} expansions)"
+                return None, Refusal(RefusalKind.NODE_BUDGET, count=budget)
             if time.perf_counter() - t0 > self.config.time_budget_s:
-                return None, f"time budget exhausted ({self.config.time_budget_s} s)"
+                return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
             *_, node = heapq.heappop(open_set)  # SelectNode: deepest, then lowest heuristic
             self.expanded += 1
             dead_end = self.infeasibility(node)
             if dead_end:
-                self.refused[dead_end.split(":")[0]] += 1
+                self.refused[dead_end.coarse()] += 1
                 continue
             if node.depth == goal_depth:
-                return node, ""
+                return node, None
             for h, child in self.neighbors(node):
                 state = (child.depth, child.arclengths)
                 if state not in inserted and state not in self.dead:
@@ -271,11 +270,7 @@ class _Search:
                     self.generated += 1
                     heapq.heappush(open_set, (-child.depth, h, next(counter), child))
         self.dead |= inserted  # the whole tree was searched: none of its states leads to the goal
-        return None, f"tree exhausted after {self.expanded - expanded0} expansions"
-
-    def refusals(self) -> str:
-        """The most frequent reasons moves were refused, e.g. which stance or reach failed."""
-        return "; ".join(f"{why} x{n}" for why, n in self.refused.most_common(4)) or "none"
+        return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded - expanded0)
 
     def contact_nodes(self, path: list[_Node]) -> tuple[ContactNode, ...]:
         """The plan's nodes, with the required friction of each grasp and switching stance
@@ -320,12 +315,18 @@ class _Search:
         )
 
 
-def _roots(scene: Scene, config: SearchConfig, search: _Search) -> tuple[list[tuple[float, ...]], str]:
-    """The initial grasps to try, best first: the user's, or the ranked candidates."""
+def _roots(
+    scene: Scene, config: SearchConfig, search: _Search, tables: GraspTables | None
+) -> tuple[list[tuple[float, ...]], Refusal | None]:
+    """The initial grasps to try, best first: the user's, or the ranked candidates (from
+    `tables` when given, else built here)."""
     if config.initial_arclengths is not None:
-        return [tuple(search.wrap(s) for s in config.initial_arclengths)], ""
-    table = initial_grasp_candidates(scene, config, search.reach)
-    return [c.arclengths for c in table.candidates], table.reason  # grid values: already canonical keys
+        return [tuple(search.wrap(s) for s in config.initial_arclengths)], None
+    if tables is None:
+        table = initial_grasp_candidates(scene, config, search.reach)
+    else:
+        table = tables.get(scene, config, search.reach)
+    return [c.arclengths for c in table.candidates], table.refusal  # grid values: already canonical keys
 
 
 def grid_levels(config: SearchConfig) -> list[SearchConfig]:
@@ -346,61 +347,65 @@ def grid_levels(config: SearchConfig) -> list[SearchConfig]:
     return levels
 
 
-def choose_initial_grasp(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
+def choose_initial_grasp(
+    scene: Scene, goal: float, config: SearchConfig, tables: GraspTables | None = None
+) -> tuple[tuple[float, ...] | None, SearchRefusal | None]:
     """The chooser's first choice for `goal` without a tree search: config.initial_arclengths
     if given, else the best-ranked candidate that passes the cheap checks the search applies
     before rooting a tree at it (the per-finger switch bound for this goal, closure at mu_plan,
     Drake IK), on the coarsest grid (grid_levels) where one passes. The search may still end up
-    rooted at a later candidate if this one's tree has no plan. (None, reason) when no
+    rooted at a later candidate if this one's tree has no plan. (None, refusal) when no
     candidate passes."""
-    if not np.isfinite(goal):
-        raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
-    reasons = []
+    goal = check_goal(goal)
+    refused = []
     for level in grid_levels(config):
-        chosen, why = _choose_on_grid(scene, float(goal), level)
+        chosen, why = _choose_on_grid(scene, goal, level, tables)
         if chosen is not None:
-            return chosen, ""
-        reasons.append(f"at the {level.displacement_step:g} m grid: {why}")
-    return None, "; ".join(reasons) if len(reasons) > 1 else why
+            return chosen, None
+        refused.append((level.displacement_step, why))
+    return None, on_grids(refused)
 
 
-def _choose_on_grid(scene: Scene, goal: float, config: SearchConfig) -> tuple[tuple[float, ...] | None, str]:
+def _choose_on_grid(
+    scene: Scene, goal: float, config: SearchConfig, tables: GraspTables | None
+) -> tuple[tuple[float, ...] | None, Refusal | None]:
     search = _Search(scene, goal, config)
-    roots, reason = _roots(scene, config, search)
+    roots, refusal = _roots(scene, config, search, tables)
     if not roots:
-        return None, reason
+        return None, refusal
     search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
-    first = ""
+    first = None
     for root in roots:
         why = search.precheck(root, candidate=config.initial_arclengths is None)
-        if not why:
-            return root, ""
+        if why is None:
+            return root, None
         first = first or why
-    return None, f"no initial grasp passes the checks for this goal (of {len(roots)}; first: {first})"
+    return None, Refusal(RefusalKind.NO_ROOT_PASSES, count=len(roots), cause=first)
 
 
-def find_contact_plan(scene: Scene, goal: float, config: SearchConfig) -> ContactPlan:
-    """Algorithm 1 for the rotation `goal` (rad) of scene's object: N nodes from the initial
-    grasp (node 0) to the goal pose, each in frictional form closure at mu_plan and
+def find_contact_plan(
+    scene: Scene, goal: float, config: SearchConfig, tables: GraspTables | None = None
+) -> ContactPlan:
+    """Algorithm 1 for the rotation `goal` (rad, in [-pi, pi]) of scene's object: N nodes from
+    the initial grasp (node 0) to the goal pose, each in frictional form closure at mu_plan and
     reachable, with at most one finger changing contact between consecutive nodes while the
     other three are in closure at mu_plan. Searched on the configured contact grid, then on
     the finer ones of grid_levels until a plan is found; the budgets (time, expansions) hold
     for all grids together. A search that finds no plan returns success=False with the
-    reason of each grid (which stance or reach failed)."""
-    if not np.isfinite(goal):
-        raise ConfigError(f"goal = {goal!r} is not a finite number; valid range: [-pi, pi] rad")
+    refusal of each grid (which stance or reach failed). `tables` keeps the ranked initial
+    grasps between searches (without it each search ranks them, inside its time)."""
+    goal = check_goal(goal)
     t0 = time.perf_counter()
-    total, reasons = SearchStats(), []
+    total, refused = SearchStats(), []
     for level in grid_levels(config):
-        plan = _find_on_grid(scene, float(goal), level, t0, config.max_expansions - total.expanded)
+        plan = _find_on_grid(scene, goal, level, t0, config.max_expansions - total.expanded, tables)
         total = _add_stats(total, plan.stats, t0)
         if plan.success:
             return replace(plan, stats=total)
-        reasons.append(f"at the {level.displacement_step:g} m contact grid: {plan.reason}")
+        refused.append((level.displacement_step, plan.refusal))
         if total.expanded >= config.max_expansions or time.perf_counter() - t0 > config.time_budget_s:
             break
-    reason = "; ".join(reasons) if len(reasons) > 1 else plan.reason
-    return replace(plan, reason=reason, stats=total)
+    return replace(plan, refusal=on_grids(refused), stats=total)
 
 
 def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
@@ -416,14 +421,16 @@ def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
     )
 
 
-def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int) -> ContactPlan:
+def _find_on_grid(
+    scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int, tables: GraspTables | None
+) -> ContactPlan:
     """find_contact_plan on config's contact grid with at most `budget` expansions."""
     search = _Search(scene, goal, config)
-    roots, reason = _roots(scene, config, search)
+    roots, refusal = _roots(scene, config, search, tables)
     if not roots:
-        return ContactPlan(goal=goal, success=False, reason=reason, stats=search.stats(t0), mu_plan=search.mu_plan)
+        return ContactPlan(goal=goal, success=False, refusal=refusal, stats=search.stats(t0), mu_plan=search.mu_plan)
     search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
-    leaf, searched, skipped, first_skip, last = None, 0, 0, "", ""
+    leaf, searched, skipped, first_skip, last = None, 0, 0, None, None
     for root in roots:
         if (
             searched >= config.max_initial_grasps
@@ -434,25 +441,28 @@ def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, bu
         why = search.precheck(root, candidate=config.initial_arclengths is None)
         if why:
             skipped += 1
-            first_skip = first_skip or f"{root}: {why}"
+            first_skip = first_skip or AtRoot(root, why)
             continue
         searched += 1
         leaf, why = search.run(root, t0, min(config.root_expansions, budget - search.expanded))
         if leaf is not None:
             break
-        last = f"{root}: {why}"
+        last = AtRoot(root, why)
     stats = search.stats(t0, searched, len(roots))
     if leaf is None:
-        if len(roots) == 1 and not searched:
-            reason = first_skip.split(": ", 1)[1]
+        if len(roots) == 1 and first_skip is not None:  # the one root was skipped: its own refusal
+            refusal = first_skip.refusal
         else:
-            reason = (
-                f"no plan from {searched} searched initial grasp(s) of {len(roots)} "
-                f"({skipped} skipped by cheap checks, first: {first_skip or 'none'}); "
-                f"last searched {last or 'none'}; moves refused (mu_plan {search.mu_plan:.3g}): "
-                f"{search.refusals()}"
+            refusal = NoPlan(
+                searched=searched,
+                candidates=len(roots),
+                skipped=skipped,
+                first_skipped=first_skip,
+                last_searched=last,
+                mu_plan=search.mu_plan,
+                refused=tuple(search.refused.most_common(4)),
             )
-        return ContactPlan(goal=goal, success=False, reason=reason, stats=stats, mu_plan=search.mu_plan)
+        return ContactPlan(goal=goal, success=False, refusal=refusal, stats=stats, mu_plan=search.mu_plan)
     path = []
     while leaf is not None:
         path.append(leaf)
@@ -461,7 +471,6 @@ def _find_on_grid(scene: Scene, goal: float, config: SearchConfig, t0: float, bu
     return ContactPlan(
         goal=goal,
         success=True,
-        reason="",
         nodes=nodes,
         stats=search.stats(t0, searched, len(roots)),
         mu_plan=search.mu_plan,
