@@ -38,6 +38,30 @@ def test_invalid_scene_values_name_the_field_and_range(field, value, message):
     assert "valid range" in str(info.value)
 
 
+def test_an_error_carries_its_field_value_and_valid_range():
+    with pytest.raises(ConfigError) as info:
+        SceneConfig(mu=0.0)
+    e = info.value
+    assert (e.field, e.index, e.value, e.valid) == ("scene.mu", (), 0.0, "(0, 5]")
+    assert str(e) == "scene.mu = 0.0 is out of range; valid range: (0, 5]"
+    assert str(e.as_option("--mu")) == "--mu (scene.mu) = 0.0 is out of range; valid range: (0, 5]"
+    with pytest.raises(ConfigError) as info:
+        CitoConfig(weight_pose=(1.0, -2.0, 3.0))
+    assert (info.value.field, info.value.index, info.value.value) == ("cito.weight_pose", (1,), -2.0)
+    assert str(info.value).startswith("cito.weight_pose[1] = -2.0 is out of range; valid range: [0, inf)")
+    with pytest.raises(ConfigError) as info:
+        CitoConfig(formulation="fast")
+    assert info.value.choices == ("keyframes", "joint") and str(info.value).endswith("valid: keyframes, joint")
+    file_error = ConfigError("config file 'x.yaml' does not exist")  # not about one value: no field
+    assert file_error.field is None and str(file_error) == "config file 'x.yaml' does not exist"
+
+
+def test_the_cli_names_the_option_that_set_a_field(capsys):
+    assert main(["scene", "--mass", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert "--mass (scene.box_mass) = -1.0 is out of range; valid range: (0, inf)" in err
+
+
 def test_search_displacements_must_be_odd():
     with pytest.raises(ConfigError, match="num_displacements"):
         SearchConfig(num_displacements=16)

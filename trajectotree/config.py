@@ -21,9 +21,78 @@ import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions r
 from trajectotree.geometry import ConvexPolygon, polygon_problem
 from trajectotree.typed_yaml import DRAKE_ERRORS, drake_yaml, freeze, load_typed, thaw
 
+_NO_VALUE = object()  # a ConfigError about a field whose value its message does not repeat
+
 
 class ConfigError(ValueError):
-    """An invalid configuration or command-line value (CLI exit code 2)."""
+    """An invalid configuration or command-line value (CLI exit code 2).
+
+    An error about one value carries its `field` (a config field such as "scene.box_mass", or an
+    option such as "--goal"), the element `index` within it, the `value` given (`shown` writes it
+    otherwise than repr), what is wrong with it (`problem`: "is out of range", or after a colon a
+    sentence of its own) and the `valid` range or `choices` (`label` names them otherwise than
+    "valid range" / "valid"). Its message is built from them, so the CLI can name the option that
+    set the field (`as_option`). An error about anything else (a file, two options together) is
+    its message alone, with field None."""
+
+    def __init__(
+        self,
+        message: str | None = None,
+        *,
+        field: str | None = None,
+        value=_NO_VALUE,
+        problem: str = "is out of range",
+        valid: str | None = None,
+        choices: tuple[str, ...] | None = None,
+        index: tuple[int, ...] = (),
+        shown: str | None = None,
+        label: str | None = None,
+        option: str | None = None,
+    ):
+        if (message is None) == (field is None):
+            raise TypeError("ConfigError takes a message or a field, not both")
+        self.field, self.value, self.problem, self.index = field, value, problem, index
+        self.valid = ", ".join(choices) if choices is not None else valid
+        self.choices, self.shown, self.label, self.option = choices, shown, label, option
+        super().__init__(message if field is None else self._text())
+
+    @property
+    def subject(self) -> str:
+        """How the message names the value: the field with its index, after the option that set it."""
+        named = self.field + "".join(f"[{i}]" for i in self.index)
+        return named if self.option is None else f"{self.option} ({named})"
+
+    def _text(self) -> str:
+        if self.value is _NO_VALUE:
+            text = f"{self.subject}: {self.problem}"
+        else:
+            joint = "" if self.problem.startswith(":") else " "  # "is out of range", or ": a sentence of its own"
+            text = f"{self.subject} = {self.shown or repr(self.value)}{joint}{self.problem}"
+        if self.valid is not None:
+            label = self.label or ("valid" if self.choices is not None else "valid range")
+            text += f"; {label}: {self.valid}"
+        return text
+
+    def as_option(self, option: str) -> ConfigError:
+        """The same error, naming the command-line `option` that set its field."""
+        return ConfigError(
+            field=self.field,
+            value=self.value,
+            problem=self.problem,
+            valid=self.valid,
+            choices=self.choices,
+            index=self.index,
+            shown=self.shown,
+            label=self.label,
+            option=option,
+        )
+
+
+def interval(low: float | None, high: float | None, *, low_open: bool = False, high_open: bool = False) -> str:
+    """[low, high] as a message writes it, open at an infinite or an excluded end."""
+    lo = "-inf" if low is None else f"{low:g}"
+    hi = "inf" if high is None else f"{high:g}"
+    return f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
 
 
 def check_range(
@@ -34,23 +103,38 @@ def check_range(
     *,
     low_open: bool = False,
     high_open: bool = False,
+    index: tuple[int, ...] = (),
 ) -> None:
-    """Raises ConfigError unless `value` is a finite number within [low, high]."""
-    lo = "-inf" if low is None else f"{low:g}"
-    hi = "inf" if high is None else f"{high:g}"
-    interval = f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
+    """Raises ConfigError naming `name` (element `index`) unless `value` is a finite number
+    within [low, high]."""
+    valid = interval(low, high, low_open=low_open, high_open=high_open)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{name} = {value!r} is not a finite number; valid range: {interval}")
+        raise ConfigError(field=name, index=index, value=value, problem="is not a finite number", valid=valid)
     too_low = low is not None and (value <= low if low_open else value < low)
     too_high = high is not None and (value >= high if high_open else value > high)
     if too_low or too_high:
-        raise ConfigError(f"{name} = {value!r} is out of range; valid range: {interval}")
+        raise ConfigError(field=name, index=index, value=value, valid=valid)
 
 
 def check_integer(name: str, value, low: int, high: int | None = None) -> None:
+    """Raises ConfigError naming `name` unless `value` is an integer within [low, high]."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise ConfigError(f"{name} = {value!r} must be an integer >= {low}")
+        raise ConfigError(
+            field=name, value=value, problem="is not an integer", valid=f"integers in {interval(low, high)}"
+        )
     check_range(name, value, low, high)
+
+
+def check_bool(name: str, value) -> None:
+    """Raises ConfigError naming `name` unless `value` is true or false."""
+    if not isinstance(value, bool):
+        raise ConfigError(field=name, value=value, problem="is not true or false", choices=("true", "false"))
+
+
+def check_length(name: str, value, length: int, entries: str) -> None:
+    """Raises ConfigError naming `name` unless `value` has `length` entries (`entries` says which)."""
+    if len(value) != length:
+        raise ConfigError(field=name, value=value, problem=f"has {len(value)} entries", valid=f"{length}: {entries}")
 
 
 @dataclass(frozen=True)
@@ -66,12 +150,23 @@ class ObjectConfig:
             return
         for i, v in enumerate(self.vertices):
             if len(v) != 2:
-                raise ConfigError(f"scene.object.vertices[{i}] = {list(v)!r} must be an (x, y) pair in m")
+                raise ConfigError(
+                    field="scene.object.vertices",
+                    index=(i,),
+                    value=list(v),
+                    problem="is not a pair",
+                    valid="(x, y) in m",
+                )
             for j, c in enumerate(v):
-                check_range(f"scene.object.vertices[{i}][{j}]", c, -1.0, 1.0)  # m, before re-centring
+                check_range("scene.object.vertices", c, -1.0, 1.0, index=(i, j))  # m, before re-centring
         problem = polygon_problem(self.vertices)
         if problem:
-            raise ConfigError(f"scene.object.vertices = {[list(v) for v in self.vertices]}: {problem}")
+            raise ConfigError(
+                field="scene.object.vertices",
+                value=[list(v) for v in self.vertices],
+                problem=f": {problem}",
+                valid="at least 3 distinct (x, y) vertices in convex position",
+            )
 
 
 @dataclass(frozen=True)
@@ -101,31 +196,35 @@ class SceneConfig:
         for name in ("box_depth", "box_mass", "gravity"):
             check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
-        if len(self.initial_pose) != 3:
-            raise ConfigError(f"scene.initial_pose = {self.initial_pose!r} must have 3 entries (x m, y m, theta rad)")
+        check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
         for i, v in enumerate(self.initial_pose):
-            check_range(f"scene.initial_pose[{i}]", v, -1.0, 1.0)
+            check_range("scene.initial_pose", v, -1.0, 1.0, index=(i,))
         check_range("scene.corner_margin", self.corner_margin, 0.0, None)
         shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
         if self.object.vertices is not None:
             lengths = self.shape.edge_lengths
             if lengths.min() <= shortest:
                 raise ConfigError(
-                    f"scene.object.vertices: edge {int(lengths.argmin())} is {lengths.min():.4g} m "
-                    f"long; contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
-                    f"corner, so every edge must be longer than {shortest:g} m"
+                    field="scene.object.vertices",
+                    problem=f"edge {int(lengths.argmin())} is {lengths.min():.4g} m long; contacts keep "
+                    f"scene.corner_margin = {self.corner_margin:g} m from each corner, so every edge must be "
+                    f"longer than {shortest:g} m",
                 )
             if self.shape.circumradius > 0.3:
                 raise ConfigError(
-                    f"scene.object.vertices: a vertex is {self.shape.circumradius:.3g} m from the "
-                    "centroid; valid range: at most 0.3 m"
+                    field="scene.object.vertices",
+                    problem=f"a vertex is {self.shape.circumradius:.3g} m from the centroid",
+                    valid="at most 0.3 m",
                 )
         elif min(self.box_width, self.box_height) <= shortest:
             raise ConfigError(
-                f"scene.box_width x scene.box_height = {self.box_width:g} x {self.box_height:g} m is "
-                f"too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
-                f"corner, so each side must be longer than {shortest:g} m; valid range of each side: "
-                f"({shortest:g}, 0.3] m"
+                field="scene.box_width x scene.box_height",
+                value=(self.box_width, self.box_height),
+                shown=f"{self.box_width:g} x {self.box_height:g} m",
+                problem=f"is too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
+                f"corner, so each side must be longer than {shortest:g} m",
+                valid=f"{interval(shortest, 0.3, low_open=True)} m",
+                label="valid range of each side",
             )
 
 
@@ -177,20 +276,20 @@ class SearchConfig:
         check_integer("search.num_displacements", self.num_displacements, 1, 201)
         if self.num_displacements % 2 == 0:
             raise ConfigError(
-                f"search.num_displacements = {self.num_displacements} must be odd "
-                "(symmetric around the zero displacement); valid range: odd integers in [1, 201]"
+                field="search.num_displacements",
+                value=self.num_displacements,
+                problem="is even (the displacements are symmetric around zero)",
+                valid="odd integers in [1, 201]",
             )
         check_range("search.displacement_step", self.displacement_step, 0.0, 0.2, low_open=True)
         if self.initial_arclengths is not None:
-            if len(self.initial_arclengths) != 4:
-                raise ConfigError(f"search.initial_arclengths = {self.initial_arclengths!r} must have 4 entries")
+            check_length("search.initial_arclengths", self.initial_arclengths, 4, "one arclength (m) per finger")
             for i, s in enumerate(self.initial_arclengths):
-                check_range(f"search.initial_arclengths[{i}]", s, 0.0, 10.0)
+                check_range("search.initial_arclengths", s, 0.0, 10.0, index=(i,))
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
-        if not isinstance(self.rolled_stances, bool):
-            raise ConfigError(f"search.rolled_stances = {self.rolled_stances!r} must be true or false")
+        check_bool("search.rolled_stances", self.rolled_stances)
         check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
         for name in ("max_initial_grasps", "root_expansions", "max_expansions"):
@@ -200,10 +299,12 @@ class SearchConfig:
         finest = 2**self.grid_refinements
         if (self.num_displacements - 1) * finest + 1 > 201 or self.initial_grid_step / finest < 0.001:
             raise ConfigError(
-                f"search.grid_refinements = {self.grid_refinements} refines num_displacements "
-                f"{self.num_displacements} to {(self.num_displacements - 1) * finest + 1} (at most 201) "
-                f"and initial_grid_step {self.initial_grid_step} m to {self.initial_grid_step / finest:g} m "
-                "(at least 0.001); valid range: fewer refinements"
+                field="search.grid_refinements",
+                value=self.grid_refinements,
+                problem=f"refines num_displacements {self.num_displacements} to "
+                f"{(self.num_displacements - 1) * finest + 1} (at most 201) and initial_grid_step "
+                f"{self.initial_grid_step} m to {self.initial_grid_step / finest:g} m (at least 0.001)",
+                valid="fewer refinements",
             )
 
 
@@ -277,17 +378,15 @@ class CitoConfig:
     def __post_init__(self):
         check_integer("cito.knots_per_segment", self.knots_per_segment, 2, 200)
         check_range("cito.dt", self.dt, 0.0, 1.0, low_open=True)
-        if len(self.weight_pose) != 3:
-            raise ConfigError(f"cito.weight_pose = {self.weight_pose!r} must have 3 entries")
+        check_length("cito.weight_pose", self.weight_pose, 3, "on x, y, theta")
         for i, v in enumerate(self.weight_pose):
-            check_range(f"cito.weight_pose[{i}]", v, 0.0, None)
+            check_range("cito.weight_pose", v, 0.0, None, index=(i,))
         for name in ("weight_torque", "weight_force", "weight_slack", "weight_contact_slack", "weight_acceleration"):
             check_range(f"cito.{name}", getattr(self, name), 0.0, None)
         check_range("cito.sdf_sharpness", self.sdf_sharpness, 10.0, 1e5)
         check_range("cito.switch_clearance", self.switch_clearance, 0.0, 0.05)
         for name in ("link_rows", "link_rows_on_demand"):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(f"cito.{name} = {getattr(self, name)!r} must be true or false")
+            check_bool(f"cito.{name}", getattr(self, name))
         check_range("cito.link_clearance", self.link_clearance, 0.0, 0.02)
         for name in ("tol", "constr_viol_tol", "acceptable_tol", "acceptable_constr_viol_tol"):
             check_range(f"cito.{name}", getattr(self, name), 0.0, 1.0, low_open=True)
@@ -296,7 +395,9 @@ class CitoConfig:
         check_integer("cito.lbfgs_history", self.lbfgs_history, 1, 100)
         check_integer("cito.print_level", self.print_level, 0, 12)
         if self.formulation not in FORMULATIONS:
-            raise ConfigError(f"cito.formulation = {self.formulation!r} is unknown; valid: {', '.join(FORMULATIONS)}")
+            raise ConfigError(
+                field="cito.formulation", value=self.formulation, problem="is unknown", choices=FORMULATIONS
+            )
 
 
 @dataclass(frozen=True)
@@ -362,7 +463,7 @@ FORMULATIONS = (
 def check_controller(value: str, name: str = "controller") -> str:
     """`value` if it names an executor; ConfigError naming `name` (the field or option) otherwise."""
     if value not in CONTROLLERS:
-        raise ConfigError(f"{name} {value!r} is not a controller; valid: {', '.join(CONTROLLERS)}")
+        raise ConfigError(field=name, value=value, problem="is not a controller", choices=CONTROLLERS)
     return value
 
 

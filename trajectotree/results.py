@@ -45,22 +45,22 @@ LINK_PENETRATION_TOL = 1e-3
 
 def check_method(method: str) -> str:
     if method not in METHODS:
-        raise ConfigError(f"method = {method!r} is unknown; valid: {', '.join(METHODS)}")
+        raise ConfigError(field="method", value=method, problem="is unknown", choices=METHODS)
     return method
 
 
 def check_goal(goal, name: str = "goal") -> float:
-    """The goal rotation (rad) in [-pi, pi], where the paper samples its goals; ConfigError
-    naming `name` (for a command-line option, with the bounds in the decimals a user types)."""
+    """The goal rotation (rad) in [-pi, pi], where the paper samples its goals: the one check of
+    a goal, by the planners, the search and the CLI; ConfigError naming `name` otherwise."""
     if (
         isinstance(goal, bool)
         or not isinstance(goal, (int, float, np.floating))
         or not math.isfinite(goal)
         or abs(goal) > math.pi + 1e-9
     ):
-        # 8 decimals, rounded down: a bound printed as 3.141593 (above pi) would itself be refused
-        decimals = f", pi = {math.floor(math.pi * 1e8) / 1e8:.8f}" if name.startswith("--") else ""
-        raise ConfigError(f"{name} = {goal!r} is out of range; valid range: [-pi, pi] rad{decimals}")
+        # pi in 8 decimals rounded down: a bound printed as 3.141593 (above pi) would itself be refused
+        valid = f"[-pi, pi] rad, pi = {math.floor(math.pi * 1e8) / 1e8:.8f}"
+        raise ConfigError(field=name, value=goal, valid=valid)
     return float(goal)
 
 

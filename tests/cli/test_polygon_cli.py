@@ -12,7 +12,7 @@ import pytest
 
 from trajectotree.cli import build_parser, main
 from trajectotree.cli.common import config_from_args, in_option_terms, parse_polygon
-from trajectotree.config import Config, ObjectConfig, SceneConfig, save_config
+from trajectotree.config import Config, ConfigError, ObjectConfig, SceneConfig, save_config
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.initial_grasp import initial_grasp_candidates
 
@@ -87,15 +87,14 @@ def test_parse_polygon_reads_signed_and_exponent_numbers():
 
 def test_option_terms_keep_an_elements_index():
     args = build_parser().parse_args(["scene", "--polygon", TRIANGLE])
-    assert (
-        in_option_terms("scene.object.vertices[2][0] = 0.5 is out of range", args)
-        == "--polygon (scene.object.vertices[2][0]) = 0.5 is out of range"
-    )
-    assert (
-        in_option_terms("scene.object.vertices: edge 1 is short", args)
-        == "--polygon (scene.object.vertices): edge 1 is short"
-    )
-    assert in_option_terms("scene.mu = 0 is out of range", args) == "scene.mu = 0 is out of range"  # not set
+    element = ConfigError(field="scene.object.vertices", index=(2, 0), value=0.5, valid="[-1, 1]")
+    named = in_option_terms(element, args)
+    assert str(named) == "--polygon (scene.object.vertices[2][0]) = 0.5 is out of range; valid range: [-1, 1]"
+    assert (named.field, named.index, named.value, named.valid) == ("scene.object.vertices", (2, 0), 0.5, "[-1, 1]")
+    short = ConfigError(field="scene.object.vertices", problem="edge 1 is short")
+    assert str(in_option_terms(short, args)) == "--polygon (scene.object.vertices): edge 1 is short"
+    unset = ConfigError(field="scene.mu", value=0, valid="(0, 5]")
+    assert str(in_option_terms(unset, args)) == "scene.mu = 0 is out of range; valid range: (0, 5]"  # not set
 
 
 def test_scene_describes_the_polygon_and_its_reach(tmp_path, capsys):

@@ -199,7 +199,9 @@ def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
     # A trial that raises (a goal the planner rejects) is a row with the exception's message.
     task = small_spec().tasks()[0]
     outcome = execute_trial(dataclasses.replace(task, goal=float("nan")))
-    assert outcome.row["error"].endswith("ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad")
+    assert outcome.row["error"].endswith(
+        "ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad, i.e. [-3.141593, 3.141593]"
+    )
     assert outcome.row["success"] is None
     assert "Traceback" in outcome.files["log.txt"].decode()
 

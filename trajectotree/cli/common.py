@@ -7,11 +7,10 @@ import dataclasses
 import json
 import math
 import os
-import re
 import sys
 from pathlib import Path
 
-from trajectotree.config import FORMULATIONS, Config, ConfigError, ObjectConfig, check_integer, load_config
+from trajectotree.config import FORMULATIONS, Config, ConfigError, ObjectConfig, check_integer, load_config, mu_plan
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
 SEGMENTS_HELP = (
@@ -75,7 +74,7 @@ def scene_overrides(args: argparse.Namespace) -> dict:
         try:
             scene["object"] = ObjectConfig(vertices=parse_polygon(polygon))
         except ConfigError as e:
-            raise ConfigError(in_option_terms(str(e), args)) from None
+            raise in_option_terms(e, args) from None
     if getattr(args, "box_size", None) is not None:
         scene["box_width"], scene["box_height"] = args.box_size
         scene["object"] = ObjectConfig()
@@ -112,7 +111,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
             cito=dataclasses.replace(config.cito, **cito),
         )
     except ConfigError as e:
-        raise ConfigError(in_option_terms(str(e), args)) from None
+        raise in_option_terms(e, args) from None
 
 
 def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
@@ -129,18 +128,14 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     # The planner ranks the grasps again inside its timed search, so search_time_s includes them.
     grasps = initial_grasp.initial_grasp_candidates(scene, config.search)
     if grasps.refusal is not None:
-        option = (
-            "--polygon (scene.object.vertices)"
-            if getattr(args, "polygon", None) is not None
-            else "scene.object.vertices"
-            if config.scene.object.vertices is not None
-            else "the box"
-        )
-        raise ConfigError(
-            f"{option}: the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
+        problem = (
+            f"the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
             f"{list(config.scene.initial_pose)}: {grasps.refusal}; corner-free contacts each finger "
             f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)"
         )
+        if config.scene.object.vertices is None:
+            raise ConfigError(f"the box: {problem}")
+        raise in_option_terms(ConfigError(field="scene.object.vertices", problem=problem), args)
     check_payload(scene, config, args, grasps)
 
 
@@ -163,14 +158,14 @@ def check_payload(scene, config: Config, args: argparse.Namespace, grasps=None) 
 
     mass = config.scene.box_mass
     if grasps is None and config.search.initial_arclengths is None:
-        grasps = initial_grasp_candidates(scene, config.search, memoize=False)  # as check_graspable, untimed
+        grasps = initial_grasp_candidates(scene, config.search)  # as check_graspable: outside the timed search
     quick = payload(scene, config.search, grasps, first=1)  # the best grasp usually holds it: one small LP
     if quick is None or (quick.hold_kg >= mass and quick.switch_kg >= mass):
         return
     limits = payload(scene, config.search, grasps)
     where = (
         f"at scene.initial_pose {list(config.scene.initial_pose)} with friction mu_plan "
-        f"{config.search.friction_safety * config.scene.mu:.3g} and each joint within its {limits.tau_max:g} N m "
+        f"{mu_plan(config.scene, config.search):.3g} and each joint within its {limits.tau_max:g} N m "
         f"torque limit (the links' own weight included)"
     )
     grasps_text = (
@@ -180,44 +175,49 @@ def check_payload(scene, config: Config, args: argparse.Namespace, grasps=None) 
     )
     if mass > limits.hold_kg:
         hold = floor_digits(limits.hold_kg)
-        raise ConfigError(
-            in_option_terms(
-                f"scene.box_mass = {mass!r} kg is more than the hand can hold: {grasps_text} holds at most "
-                f"{hold:g} kg at rest with four fingers {where}; valid range: (0, {hold:g}] kg",
-                args,
-            )
+        refused = ConfigError(
+            field="scene.box_mass",
+            value=mass,
+            shown=f"{mass!r} kg",
+            problem=f"is more than the hand can hold: {grasps_text} holds at most {hold:g} kg at rest with four "
+            f"fingers {where}",
+            valid=f"(0, {hold:g}] kg",
         )
+        raise in_option_terms(refused, args)
     if mass > limits.switch_kg:
         cap = config.search.max_stance_force
-        warning = (
-            f"scene.box_mass = {mass!r} kg is more than three fingers can hold while the fourth lets go: at "
+        warning = ConfigError(  # not raised: its message names the option as an error's would
+            field="scene.box_mass",
+            value=mass,
+            shown=f"{mass!r} kg",
+            problem=f"is more than three fingers can hold while the fourth lets go: at "
             f"most {floor_digits(limits.switch_kg):g} kg ({grasps_text.replace('the strongest of ', '')}, {where}"
             + (f", at most search.max_stance_force {cap:g} N of normal force in total" if cap else "")
-            + "); only plans that switch no finger (small rotations) can be found"
+            + "); only plans that switch no finger (small rotations) can be found",
         )
         print(f"trajectotree {args.command}: warning: {in_option_terms(warning, args)}", file=sys.stderr)
 
 
-# Config fields set by command-line options, as the user wrote them (longest names first).
-OPTION_NAMES = (
-    ("scene.box_width x scene.box_height", "box_size", "--box-size W H"),
-    ("scene.box_width", "box_size", "--box-size W"),
-    ("scene.box_height", "box_size", "--box-size H"),
-    ("scene.box_mass", "mass", "--mass"),
-    ("scene.mu", "mu", "--mu"),
-    ("scene.object.vertices", "polygon", "--polygon"),
-    ("cito.formulation", "formulation", "--formulation"),
-)
+# The config fields command-line options set: field -> (the option's argparse attribute, the option
+# as the user wrote it); a ConfigError about such a field names the option when the user gave it.
+OPTION_FIELDS = {
+    "scene.box_width x scene.box_height": ("box_size", "--box-size W H"),
+    "scene.box_width": ("box_size", "--box-size W"),
+    "scene.box_height": ("box_size", "--box-size H"),
+    "scene.box_mass": ("mass", "--mass"),
+    "scene.mu": ("mu", "--mu"),
+    "scene.object.vertices": ("polygon", "--polygon"),
+    "cito.formulation": ("formulation", "--formulation"),
+}
 
 
-def in_option_terms(message: str, args: argparse.Namespace) -> str:
-    """A config error about a field the user set with an option, named by that option
-    ("scene.object.vertices[2][0] = ..." -> "--polygon (scene.object.vertices[2][0]) = ...")."""
-    for field, attribute, option in OPTION_NAMES:
-        named = re.match(re.escape(field) + r"((?:\[\d+\])*)([ :].*)", message, re.DOTALL)  # field[i][j] ...
-        if getattr(args, attribute, None) is not None and named:
-            return f"{option} ({field}{named.group(1)}){named.group(2)}"
-    return message
+def in_option_terms(error: ConfigError, args: argparse.Namespace) -> ConfigError:
+    """`error`, naming the option that set its field when the user gave that option
+    ("--polygon (scene.object.vertices[2][0]) = ..." for scene.object.vertices[2][0])."""
+    attribute, option = OPTION_FIELDS.get(error.field, (None, None))
+    if attribute is not None and getattr(args, attribute, None) is not None:
+        return error.as_option(option)
+    return error
 
 
 REASON_WIDTH = 100  # characters: a reason up to this long stays on its line

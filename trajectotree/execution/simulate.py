@@ -42,7 +42,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from trajectotree.config import Config, ConfigError, check_controller, check_range
+from trajectotree.config import Config, ConfigError, check_controller, check_length, check_range
 from trajectotree.execution import metrics, playback
 from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
@@ -59,10 +59,9 @@ class Push:
     duration_s: float = 0.2  # s, how long it acts
 
     def __post_init__(self):
-        if len(self.force) != 2:
-            raise ConfigError(f"push force = {self.force!r} must have 2 entries (f_x N, f_y N)")
+        check_length("push force", self.force, 2, "f_x N, f_y N")
         for i, f in enumerate(self.force):
-            check_range(f"push force[{i}]", f, -100.0, 100.0)
+            check_range("push force", f, -100.0, 100.0, index=(i,))
         check_range("push time", self.time_s, 0.0, None)
         check_range("push duration", self.duration_s, 0.0, 10.0, low_open=True)
 

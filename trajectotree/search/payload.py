@@ -30,11 +30,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
-from trajectotree.config import SearchConfig
+from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import K90
 from trajectotree.scene.plant import NUM_FINGERS, Scene
-from trajectotree.search.initial_grasp import STANCE_FINGERS, GraspCandidates, initial_grasp_candidates, mu_plan
+from trajectotree.search.initial_grasp import STANCE_FINGERS, GraspCandidates, initial_grasp_candidates
 from trajectotree.search.reach import Reachability
 
 
