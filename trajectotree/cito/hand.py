@@ -116,10 +116,10 @@ class HandModel:
 
     def ik(self, i: int, p_WF: np.ndarray) -> np.ndarray | None:
         """Closed-form IK of finger i: the elbow branch q2 > 0 (the joint limits' side), the
-        limits widened by 1e-9 rad, |d|^2 as `d @ d` (as this guess has always computed it);
+        limits widened by 1e-9 rad (a node's own joint angles may sit on a limit to rounding);
         None when the point is out of reach or the solution violates the limits."""
-        return self.fingers.finger(i).ik_one(p_WF, elbow=1, tolerance=1e-9, blas_dot=True)
+        return self.fingers.finger(i).ik_one(p_WF, elbow=1, tolerance=1e-9)
 
     def ik_many(self, i: int, p_WF: np.ndarray) -> np.ndarray:
         """`ik` of finger i for targets (..., 2) at once: (..., 2), NaN rows where `ik` gives None."""
-        return self.fingers.finger(i).ik(p_WF, elbow=1, tolerance=1e-9, blas_dot=True)
+        return self.fingers.finger(i).ik(p_WF, elbow=1, tolerance=1e-9)

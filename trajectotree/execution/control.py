@@ -122,9 +122,7 @@ class HandKinematics:
         J_WF (4, 2, 2) and the joint torques that hold the fingers up, g (4, 2)."""
         q = np.reshape(q, (-1, 2))
         r1, r2 = self.fingers.links(q)
-        # base + (r1 + r2): the controller's summation order since the start (the planners'
-        # tip_from_links adds r1 first), kept so that simulations stay bit-identical.
-        p = self.fingers.p_W_base + (r1 + r2)
+        p = self.fingers.tip_from_links(r1, r2)
         c1, c12 = (np.cos(a) for a in self.fingers.angles(q))
         g = np.column_stack([self._k1 * c1 + self._k2 * c12, self._k2 * c12])
         return p, jacobian_from_links(r1, r2), g

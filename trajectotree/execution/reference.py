@@ -184,7 +184,7 @@ def static_hold_reference(
     p_WF = np.array([box_to_world(pose, p + (scene.tip_radius + g) * n) for p, n, g in zip(p_BC, n_B, gaps)])
     q = np.zeros(NUM_HAND_JOINTS)
     for i, finger in enumerate(scene.fingers):
-        q_i = finger.ik_one(p_WF[i], elbow=1, blas_dot=True)  # the model's elbow side; d @ d as always here
+        q_i = finger.ik_one(p_WF[i], elbow=1)  # the model's elbow side
         if q_i is None:
             return None
         q[2 * i : 2 * i + 2] = q_i

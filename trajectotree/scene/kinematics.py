@@ -13,15 +13,12 @@ or several (arrays with a leading finger axis); the numpy methods broadcast join
 q (..., 2) against it. `links_one` is FK for one finger in Python floats by `math`, for
 the scalar hot paths (CITO's one-knot values, the search's collision test).
 
-IK convention, shared by the scalar and the vectorized solver: the candidates are the
-elbow-positive branch q2 = +acos(c2) first, then q2 = -acos(c2), each with q1 wrapped
-into [-pi, pi] and then shifted by -2 pi, 0, +2 pi (joint limits may exceed pi); a
-candidate is a solution when it lies within [q_lower - tolerance, q_upper + tolerance]
-(tolerance 0; the vectorized solver takes another). An unreachable target (|c2| > 1, or no candidate within the
-limits) gives no solution: [] from `ik_solutions`, a NaN row from `ik`, None from
-`ik_one`. The scalar solver uses `math` (the search's hot path, on Python floats), the
-vectorized one numpy; they agree to rounding, not bit for bit (libm's acos and atan2
-differ from numpy's in the last bit), so each caller keeps the one it has always used.
+IK, one solver (`ik_candidates`, vectorized over targets) behind every query: the candidates
+are the elbow-positive branch q2 = +acos(c2) first, then q2 = -acos(c2), each with q1 wrapped
+into [-pi, pi) and then shifted by -2 pi, 0, +2 pi (joint limits may exceed pi); a candidate
+is a solution when it lies within [q_lower - tolerance, q_upper + tolerance] (tolerance 0 by
+default). An unreachable target (|c2| > 1, or no candidate within the limits) gives no
+solution: [] from `ik_solutions`, a NaN row from `ik`, None from `ik_one`.
 """
 
 from __future__ import annotations
@@ -89,7 +86,7 @@ class TwoLinkFinger:
         return r1, r2
 
     def tip_from_links(self, r1, r2) -> np.ndarray:
-        """p_WF (..., 2) = (p_W_base + r1) + r2, in this order (callers' arithmetic depends on it)."""
+        """p_WF (..., 2) = p_W_base + r1 + r2 from the link vectors."""
         return self.p_W_base + r1 + r2
 
     def fingertip(self, q) -> np.ndarray:
@@ -118,14 +115,11 @@ class TwoLinkFinger:
         return jacobian_from_links(*self.links(q))
 
     # -- inverse kinematics, vectorized (numpy) ---------------------------------------------
-    def ik_candidates(self, p_WF, *, tolerance: float = 0.0, blas_dot: bool = False):
+    def ik_candidates(self, p_WF, *, tolerance: float = 0.0):
         """(candidates (6, ..., 2), valid (6, ...)) for targets p_WF (..., 2), in the module's
-        candidate order; valid: reachable and within the limits widened by `tolerance` (rad).
-        blas_dot: |d|^2 by the BLAS inner product (np.vecdot, like `d @ d`) instead of an
-        elementwise sum; the two differ in the last bit, and the CITO guess and the hold
-        reference have always used `d @ d`."""
+        candidate order; valid: reachable and within the limits widened by `tolerance` (rad)."""
         d = np.asarray(p_WF, dtype=float) - self.p_W_base
-        dd = np.vecdot(d, d) if blas_dot else np.sum(d * d, axis=-1)
+        dd = np.sum(d * d, axis=-1)
         c2 = (dd - self.l1**2 - self.l2**2) / (2 * self.l1 * self.l2)
         acos = np.arccos(np.clip(c2, -1.0, 1.0))
         candidates = []
@@ -143,11 +137,11 @@ class TwoLinkFinger:
         valid = (np.abs(c2) <= 1.0)[None] & np.all((candidates >= lower) & (candidates <= upper), axis=-1)
         return candidates, valid
 
-    def ik(self, p_WF, *, elbow: int = 0, tolerance: float = 0.0, blas_dot: bool = False) -> np.ndarray:
+    def ik(self, p_WF, *, elbow: int = 0, tolerance: float = 0.0) -> np.ndarray:
         """Joint angles (..., 2) that put the fingertip centre at p_WF (..., 2): the first
         solution in candidate order, NaN where there is none. elbow=+1 or -1 keeps only
         that branch (sign of q2), 0 both."""
-        candidates, valid = self.ik_candidates(p_WF, tolerance=tolerance, blas_dot=blas_dot)
+        candidates, valid = self.ik_candidates(p_WF, tolerance=tolerance)
         if elbow:
             valid[np.repeat(ELBOW_BRANCHES, len(Q1_WRAPS)) != elbow] = False
         return first_solution(candidates, valid)
@@ -157,23 +151,12 @@ class TwoLinkFinger:
         q = self.ik(p_WF, **options)
         return None if np.isnan(q[0]) else q
 
-    # -- inverse kinematics, scalar (math) --------------------------------------------------
     def ik_solutions(self, p_WF) -> list[np.ndarray]:
-        """Every solution (2,) within the joint limits for one target, in candidate order
-        (one finger, Python floats: the search's hot path); [] when there is none."""
-        dx, dy = float(p_WF[0]) - self.p_W_base[0], float(p_WF[1]) - self.p_W_base[1]
-        l1, l2 = self.l1, self.l2
-        c2 = (dx * dx + dy * dy - l1 * l1 - l2 * l2) / (2 * l1 * l2)
-        if abs(c2) > 1.0:
-            return []
-        (lo1, lo2), (hi1, hi2) = self.q_lower, self.q_upper
+        """Every solution (2,) within the joint limits for one target (2,) of one finger, in
+        candidate order, each once (at full stretch both branches are q2 = 0); [] when there is none."""
+        candidates, valid = self.ik_candidates(p_WF)
         solutions = []
-        for q2 in sorted({math.acos(c2), -math.acos(c2)}, reverse=True):  # one when c2 = 1
-            if not lo2 <= q2 <= hi2:
-                continue
-            q1 = math.atan2(dy, dx) - self.psi - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2))
-            q1 = math.remainder(q1, 2 * math.pi)
-            for wrap in Q1_WRAPS:
-                if lo1 <= q1 + wrap <= hi1:
-                    solutions.append(np.array([q1 + wrap, q2]))
+        for q in candidates[valid]:
+            if not any(np.array_equal(q, s) for s in solutions):
+                solutions.append(q)
         return solutions
