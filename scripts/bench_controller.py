@@ -2,7 +2,7 @@
 full-length plan (9 segments, 10.8 s plus the settle time) with the grasp controller
 and with eq. 20 (`paper`), alternating, REPEATS times each, and prints each
 controller's median wall time of `Simulator.AdvanceTo` (SimResult.sim_time_s) and the
-ratio grasp / paper. Target (issue 13): the grasp controller at most 1.5x eq. 20.
+ratio grasp / paper. Target: the grasp controller at most 1.5x eq. 20.
 
 PLAN_DIR is a folder from `trajectotree plan` (the default plan is a 9-segment
 TrajectoTree plan of goal 0.9 rad, made here first, ~15 s). --profile prints the

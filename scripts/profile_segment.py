@@ -1,4 +1,4 @@
-"""Per-iteration cost of the CITO program by size (issue 14, item 3).
+"""Per-iteration cost of the CITO program by size.
 
 For each number of segments S (--segments, default 1 2 9: 13, 25 and 109 knots) and goal
 (--goals; S = 9 uses the first goal only, one solve takes seconds), the search's contact

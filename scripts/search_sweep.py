@@ -20,6 +20,7 @@ import numpy as np
 from trajectotree.cli.common import add_config_options, config_from_args
 from trajectotree.experiments.sweep import sample_goals
 from trajectotree.scene.plant import build_scene
+from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import find_contact_plan
 
 
@@ -38,9 +39,9 @@ def main() -> None:
         )
     scene = build_scene(config.scene)
     goals = np.linspace(-np.pi, np.pi, args.grid) if args.grid else sample_goals(args.goals, args.seed)
-    plans = []
+    plans, tables = [], GraspTables()  # the initial grasps ranked once for all goals
     for goal in goals:
-        plan = find_contact_plan(scene, float(goal), config.search)
+        plan = find_contact_plan(scene, float(goal), config.search, tables)
         plans.append(plan)
         s = plan.stats
         stance = max((n.stance_required_mu for n in plan.nodes if n.stance_required_mu is not None), default=np.nan)

@@ -234,8 +234,8 @@ class SearchConfig:
 
     num_nodes: int = 10  # N, nodes in the object path (tree depth), incl. the start
     num_displacements: int = 17  # |D_cp|, contact displacements per free finger (odd, incl. zero)
-    # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m). With 0.01 m
-    # a +-pi goal needs >= 13 contact switches from the default grasp (9 allowed) on this hand.
+    # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m), long enough
+    # that a +-pi goal fits in the 9 contact switches of the default 10 nodes.
     displacement_step: float = 0.02
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
     # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
@@ -251,24 +251,21 @@ class SearchConfig:
     rolled_stances: bool = True
     # N, a switch is refused when its three holding fingers need more than this total normal force
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
-    # transition (trajectotree.search.stance). On polygons the CITO segments that failed needed 12-83 N,
-    # those that converged first time <= 7.3 N (weight 0.49 N; the joints give at most 1 N m).
-    # 0: no cap (the paper).
+    # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
     max_stance_force: float = 10.0
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
     # (trajectotree.search.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
     initial_grid_step: float = 0.02
-    # candidate initial grasps the search is rooted at, best first (per contact grid). The box's plans
-    # all come from its first candidate; a small polygon's trees die within a few expansions, so more
-    # roots are cheap: 20 left 3 of the 0.14 m triangle's 60 seed-0 goals without a plan, 200 none.
+    # candidate initial grasps the search is rooted at, best first (per contact grid), many because a
+    # small polygon's trees die within a few expansions, so more roots are cheap.
     max_initial_grasps: int = 200
     root_expansions: int = 2000  # node budget of the search from one initial grasp
     max_expansions: int = 20000  # node budget of the search (all initial grasps together)
     time_budget_s: float = 30.0  # s, wall-clock budget of the search
     # When no plan is found, the search is rerun up to this many times on a finer contact grid
     # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
-    # move), within the same budgets. Objects with short faces need it (the 0.14 m triangle: 9/12
-    # of the seed-0 goals at 0.02 m, 12/12 with one refinement). 0: the paper's single grid.
+    # move), within the same budgets, for objects whose short faces hold few grid contacts.
+    # 0: the paper's single grid.
     grid_refinements: int = 1
 
     def __post_init__(self):
@@ -320,58 +317,46 @@ class CitoConfig:
 
     knots_per_segment: int = 12  # M_hat, time steps per transition segment
     dt: float = 0.1  # s, collocation time step
-    # Q diagonal, on (x m, y m, theta rad); theta's weight keeps the final orientation within a few
-    # degrees of the goal (with 1.0 a 0.3 rad goal ended at 0.58 rad; with 30, 5 of the 60 seed-0
-    # goals ended 6-8 degrees off, e.g. -1.692 rad: 7.8 deg, 2.7 with 100, 0.7 with 300).
+    # Q diagonal, on (x m, y m, theta rad); theta's weight keeps the final orientation within a degree of the goal.
     weight_pose: tuple[float, float, float] = (100.0, 100.0, 300.0)
     weight_torque: float = 1.0  # R = weight_torque * I, on tau (N m)
     weight_force: float = 0.01  # L = weight_force * I, on lambda (N)
     weight_slack: float = 100.0  # L1 penalty on the complementarity slacks gamma (eqs. 5-6), per unit slack
-    # L1 penalty on the slacks of the plan's contact-point equalities (eqs. 12-15, TrajectoTree only), per m.
-    # Large enough that they hold: with 100, a fixed finger sank 1.2 mm into the box (goal -0.3).
+    # L1 penalty on the slacks of the plan's contact-point equalities (eqs. 12-15, TrajectoTree only), per m,
+    # large enough that the equalities hold.
     weight_contact_slack: float = 1.0e4
-    # Regularization (not in the paper): sum of squared accelerations; needed for
-    # IPOPT's L-BFGS to converge (with the paper's cost alone it stalled at 1,000 iterations). 0 disables it.
-    # IPOPT iterations on a 9-segment plan (goal 0.86 rad): 184 with 1e-3, 95 with 1e-2, 62 with 3e-2;
-    # with 1e-1 (45) the contact-point slacks grew to 9 mm.
+    # Regularization (not in the paper): sum of squared accelerations, which IPOPT's L-BFGS needs to
+    # converge; the fewest iterations before the contact-point slacks grow. 0 disables it.
     weight_acceleration: float = 3e-2
-    # 1/m, log-sum-exp sharpness of the smooth box distance. It over-estimates the distance near
-    # corners by up to log(2)/k: with 200 a switching fingertip rounded a corner 0.86 mm deep, with 1000 1 um.
+    # 1/m, log-sum-exp sharpness of the smooth box distance, sharp because it over-estimates the distance
+    # near corners by up to log(2)/k (0.7 mm here), where a switching fingertip may cut the corner.
     sdf_sharpness: float = 1000.0
     # m, TrajectoTree only (not in the paper; configs/paper.yaml sets 0): the switching finger keeps
     # at least switch_clearance sin(pi j / M_hat) between fingertip and box at its segment's j-th
-    # knot, and while lifted its normal force is bounded to 0 (it cannot push across the gap).
-    # 0 leaves it to complementarity, and the optimum then skims the box (gaps 0-3 mm, touching
-    # down mid-move) and may push it from a distance, which the physics check refuses.
-    # Goals 0-7 of seed 0 at mu_plan 0.49 (scripts/bench_planning.py --goals 8 --methods
-    # trajectotree): 0: 98.0 IPOPT iterations, cost 282, 1 plan failed the check (0.11 N from
-    # 0.29 mm); 0.005: 79.0, cost +6 %; 0.01: 75.9, cost +15 %; 0.02: 91.1, cost +45 %, 1 failed
-    # (a fixed finger 0.11 mm off its contact). 0.01 is the fewest iterations.
+    # knot, and while lifted its normal force is bounded to 0 (it cannot push across the gap), so the
+    # optimum cannot skim the box and push it from a distance, which the physics check refuses.
     switch_clearance: float = 0.01
     # Link rows (cito/links.py, not in the paper; configs/paper.yaml turns them off): at every knot
     # whose pose or joints are free, points on each finger's link collision boxes keep the box's
     # half width plus link_clearance off the object, and the object's vertices keep link_clearance
     # off each link-2 box (smooth distances; never more than the program's fixed end knots, the
-    # search's nodes, have). Without them 44 of the 60 seed-0 keyframes plans had a link inside
-    # the box mid-segment, up to 32 mm; with them none, at 1.5x the IPOPT iterations.
+    # search's nodes, have), because the fingertip spheres alone let links pass through the object.
     link_rows: bool = True  # false: only the fingertip spheres see the object (the paper)
     # Keyframes: each segment is first solved without the link rows, and again with them (from the
-    # plan's guess) only when a link then overlaps the object (the physics check's exact test): most
-    # segments never bring a link near it (84 of the 540 seed-0 segments did), and the rows cost 1.5x
-    # the iterations at 1.6x the time per iteration. false: in every segment program from the start.
+    # plan's guess) only when a link then overlaps the object (the physics check's exact test), since
+    # most segments never bring a link near it and the rows cost iterations. false: in every segment
+    # program from the start.
     link_rows_on_demand: bool = True
-    # m. The 60 seed-0 keyframes plans with 0: 46 with a link touching the box (<= 0.04 mm inside),
-    # 29 retries in 6 plans, 374 IPOPT iterations mean; with 1 mm: none inside, 4 retries in 1 plan, 261.
+    # m, the link rows' margin, so that a link the rows hold off the object does not end up touching it.
     link_clearance: float = 0.001
-    # IPOPT tol, on the scaled optimality error; constraints are held to constr_viol_tol regardless.
-    # 1e-3 instead of 1e-6: 67 instead of 88 iterations on a 3-segment plan, objective 0.007 % higher.
+    # IPOPT tol, on the scaled optimality error, loose because constraints are held to constr_viol_tol regardless.
     tol: float = 1e-3
     constr_viol_tol: float = 1e-6  # IPOPT constr_viol_tol
     acceptable_tol: float = 1e-1  # IPOPT acceptable_tol
     acceptable_constr_viol_tol: float = 1e-6  # IPOPT acceptable_constr_viol_tol
     acceptable_iter: int = 5  # IPOPT acceptable_iter
     max_iter: int = 1000  # IPOPT max_iter
-    lbfgs_history: int = 6  # IPOPT limited_memory_max_history (3: 157 iterations, 6: 89 on a 3-segment plan)
+    lbfgs_history: int = 6  # IPOPT limited_memory_max_history (fewer iterations than a shorter history)
     print_level: int = 0  # IPOPT print_level (0 silent, 5 verbose)
     formulation: str = "keyframes"  # TrajectoTree: a program per segment between the search's nodes, or "joint" (paper)
 
@@ -405,38 +390,28 @@ class ControllerGains:
     """Both executors (same gains for every method): the fingertip impedance controller
     of paper eq. 20 (`kp`, `kv`) and the object-level GraspController (the rest)."""
 
-    # Eq. 20, tuned on TrajectoTree plans (seed-0 goals): kp 400 halved the median theta error of
-    # kp 200; kp >= 800 made plans drop more; kv must stay below ~2 m_tip / sim.time_step.
+    # Eq. 20, tuned on TrajectoTree plans; kv must stay below ~2 m_tip / sim.time_step for the discrete
+    # plant to stay stable.
     kp: float = 400.0  # N/m, fingertip position stiffness
     kv: float = 5.0  # N s/m, fingertip velocity damping
-    # GraspController. Strong object gains with soft fingertip springs: weak object gains (100 s^-2)
-    # with stiff springs anchored to the measured box (200 N/m) lost even a static grasp.
+    # GraspController: strong object gains with soft fingertip springs, which hold grasps that stiff
+    # springs anchored to the measured box lose.
     rate_hz: float = 500.0  # Hz, control rate (torques are held between updates)
     object_kp: float = 2000.0  # s^-2, box pose error -> desired acceleration (x, y and theta alike)
     object_kd: float = 80.0  # s^-1, box velocity error -> desired acceleration
     tip_kp: float = 50.0  # N/m, fingertip spring to its target on the measured box (x (1 - force budget))
     tip_kd: float = 3.0  # N s/m, fingertip damping to its target's velocity
     min_normal_force: float = 0.1  # N, least push of a finger in contact (grasp-force QP)
-    # N, most push of a finger in contact (grasp-force QP). 5 N saturated in a plan's two-finger
-    # squeeze (~3 N planned) with sim mu 0.55 and mass +20 %: 1 of 6 plans dropped, none with 8 N
-    # (theta MAE 3.95 -> 1.50 deg). 8 N at the fingers' reach is near the 1 N m motor limit.
+    # N, most push of a finger in contact (grasp-force QP): room above a plan's squeeze, and near the
+    # 1 N m motor limit at the fingers' reach.
     max_normal_force: float = 8.0
     # 1, weight of the box-wrench residual (N; torques divided by the box half-diagonal) in the QP,
-    # relative to the deviation of the finger forces from the plan's (N). With 100 the QP would
-    # rather keep the plan's forces than squeeze harder to turn the box back (8 plans: theta MAE
-    # 1.13 deg, one ending 4.3 deg off); 1e4: 0.86 deg, all ending within 1.5 deg.
+    # relative to the deviation of the finger forces from the plan's (N), large so that the QP
+    # squeezes harder to turn the box back rather than keep the plan's forces.
     wrench_weight: float = 1e4
-    # 1, the grasp-force QP's friction cones use max(search.friction_safety, this) x scene.mu: 0.56 by
-    # default, looser than the plan's 0.49 (just above the mismatched world's 0.55). A sphere sticking to
-    # the box rolls where the plan keeps its contact point fixed (the link turns relative to the box),
-    # so the contacts drift by mm and a stance needs more friction than the plan's: goal 0.861's
-    # two-finger hold (fingers 0, 2) needed 0.40 at the planned points and 0.47 after finger 2 rolled
-    # 6.6 mm; at cone 0.49 the QP squeezed to 8 N, past the 1 N m motors, and the box spun away. 4 of
-    # 4 such plans dropped or ended ~35 deg off at 0.7 (0.49); none at 0.75 (nominal, mismatch, push).
-    # On the 60 seed-0 plans, 0.75 (0.525) still let goal 1.804's pinch (finger 2 rolled 7.7 mm, needing
-    # 0.55-0.56) squeeze into the motor limit and drop, and goal 0.945 end 3.2 deg off at the 8 N limit:
-    # with 0.8 (0.56) 0/60 dropped, 58/60 ended within 3 deg (1 drop under mismatch, 0 under a push;
-    # 0.75: 1, 2, 1 drops, 56/60). 0.85 (0.595) made goal -2.038 drop under mismatch.
+    # 1, the grasp-force QP's friction cones use max(search.friction_safety, this) x scene.mu (0.56 by
+    # default, looser than the plan's 0.49), because a sphere sticking to the box rolls where the plan
+    # keeps its contact fixed, so executed stances need more friction than the plan's.
     friction_safety: float = 0.8
     ramp_time: float = 0.1  # s, a switching finger's force budget ramps to 0 after lift-off (back before landing)
     swing_lift: float = 0.008  # m, least fingertip gap mid-swing (its planned path, lifted where lower)

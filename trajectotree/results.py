@@ -30,13 +30,12 @@ TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t
 SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error", "f_W", "f_W_plan")
 
 # The physics check's rule (trajectotree.planning.physics; written into plan.json with each check):
-GAP_TOL = 1e-4  # m, a fingertip sphere farther than this from the box is off it (issue 13's rule)
-FORCE_TOL = 0.01  # N, the most force a fingertip off the box may carry (issue 13's rule)
+GAP_TOL = 1e-4  # m, a fingertip sphere farther than this from the box is off it
+FORCE_TOL = 0.01  # N, the most force a fingertip off the box may carry
 CONE_TOL = 1e-6  # N, friction-cone violation tolerated (IPOPT holds the linear cone rows to ~1e-8)
 NEWTON_EULER_TOL = 1e-4  # N and N m, Newton-Euler residual tolerated: 0.02 % of the default box's weight
 # m, how deep a fingertip sphere may sink into the object: the smooth distance CITO's free fingers see
-# lies up to log(2)/k = 0.7 mm above the exact one at a corner (cito.sdf_sharpness k); 299 plans of
-# the 60-goal and polygon sweeps sank at most 0.09 mm
+# lies up to log(2)/k = 0.7 mm above the exact one at a corner (cito.sdf_sharpness k)
 PENETRATION_TOL = 1e-3
 # m, how deep a finger link's collision box may overlap the object: the link rows keep 1 mm of
 # smooth distance (cito.link_clearance), exact at a face

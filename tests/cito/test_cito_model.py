@@ -14,8 +14,8 @@ from trajectotree.config import CitoConfig, ObjectConfig, SceneConfig
 from trajectotree.geometry import ConvexPolygon
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
-# Two of the polygons of issue 17: an equilateral triangle of side 0.14 m, a regular hexagon of
-# circumradius 0.07 m (the acceptance's shapes), and an irregular quadrilateral.
+# Polygon objects: an equilateral triangle of side 0.14 m, a regular hexagon of
+# circumradius 0.07 m (the polygon gallery's shapes), and an irregular quadrilateral.
 TRIANGLE_POINTS = tuple(
     (0.14 / np.sqrt(3) * np.cos(a), 0.14 / np.sqrt(3) * np.sin(a)) for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3)
 )

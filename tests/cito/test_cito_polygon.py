@@ -1,5 +1,5 @@
 """CITO on a convex polygon that is not a box: a hand-made two-segment contact plan for the
-equilateral triangle of side 0.14 m (issue 17's first shape) whose switching finger moves
+equilateral triangle of side 0.14 m (the polygon gallery's first shape) whose switching finger moves
 around a corner, planned with both formulations and checked against the physics check."""
 
 import dataclasses

@@ -1,4 +1,4 @@
-"""A newcomer's first hour (issue 15), through the command line: output paths, stale
+"""A newcomer's first hour, through the command line: output paths, stale
 files, unconverged plans, and the sweep's faults (corrupt trials, time limits, locks,
 scratch files). Each test uses the cheapest command that reaches the path it checks."""
 
@@ -43,7 +43,7 @@ def listing(folder: Path) -> list[str]:
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
 
 
-# ---- item 2: every output path is checked before any work starts ----------------------------
+# ---- every output path is checked before any work starts ----------------------------
 
 
 def output_path_cases(tmp: Path) -> list[tuple[list[str], str]]:
@@ -88,7 +88,7 @@ def test_report_into_a_sweep_whose_report_folder_is_a_file(tmp_path, capsys):
     assert f"{str(sweep / 'report')!r} is an existing file" in capsys.readouterr().err
 
 
-# ---- items 3 and 4: a new plan in a used folder; simulating an unconverged plan -----------
+# ---- a new plan in a used folder; simulating an unconverged plan -----------
 
 
 def test_plan_into_a_used_folder_removes_the_older_simulation(tmp_path, capsys):
@@ -134,7 +134,7 @@ def test_simulating_an_unconverged_plan_warns_and_records_it(tmp_path, capsys):
     assert sim_json["plan_success"] is False and json.loads(captured.out) == sim_json
 
 
-# ---- items 5-8: the sweep's faults ---------------------------------------------------------------
+# ---- the sweep's faults ---------------------------------------------------------------
 
 
 def test_corrupt_trial_is_named_moved_aside_and_recomputed(tmp_path, capsys):
@@ -262,7 +262,7 @@ def test_killed_sweep_leaves_no_scratch_in_the_system_temp_folder(tmp_path):
     assert not list((sweep / TRIALS_DIR).glob(".tmp-*")) and list(system_tmp.iterdir()) == []
 
 
-# ---- item 9: messages state the real limit in the user's terms -------------------------------------
+# ---- messages state the real limit in the user's terms -------------------------------------
 
 
 @pytest.mark.parametrize(
@@ -303,7 +303,7 @@ def test_a_config_file_value_keeps_its_field_name(tmp_path, capsys):
     assert "scene.box_width = 0.5 is out of range; valid range: (0, 0.3]" in capsys.readouterr().err
 
 
-# ---- item 10: IPOPT's progress on a terminal, and nothing the user did not ask for --------------------
+# ---- IPOPT's progress on a terminal, and nothing the user did not ask for --------------------
 
 
 def run_on_a_terminal(args: list[str]) -> tuple[int, str, str]:
@@ -352,7 +352,7 @@ def test_recording_a_playback_prints_no_meshcat_server_line(tmp_path, capsys):
     assert "listening" not in captured.out + captured.err and "IPOPT iteration" not in captured.err
 
 
-# ---- item 12: small things -----------------------------------------------------------------------------
+# ---- small things -----------------------------------------------------------------------------
 
 
 def test_help_cites_no_design_document_and_defines_segments_once(capsys):

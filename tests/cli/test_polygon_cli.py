@@ -1,4 +1,4 @@
-"""Objects beyond the box from the command line (issue 17): --polygon, its bad inputs (exit 2,
+"""Objects beyond the box from the command line: --polygon, its bad inputs (exit 2,
 the problem named, nothing written), `scene` telling whether the hand can grasp the object,
 and the HTML playback of a polygon carrying its mesh."""
 

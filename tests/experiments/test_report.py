@@ -63,7 +63,7 @@ def test_report_of_a_small_sweep_has_every_figure_and_the_table(resumed_sweep, t
     assert json.loads(capsys.readouterr().out)["table"][0]["method"] == "trajectotree"
 
 
-# ---- the pictures (issue 15 item 11) ---------------------------------------------------------------
+# ---- the pictures ---------------------------------------------------------------
 
 
 def test_time_and_cost_figure_says_no_data_instead_of_empty_axes():

@@ -245,7 +245,7 @@ def test_search_command_draws_the_keyframes_in_the_format_its_suffix_names(tmp_p
     assert svg.startswith("<?xml") and "switching finger" in svg and "friction cone" in svg
 
 
-# ---- a convex polygon instead of the box (issue 17) ------------------------------------------
+# ---- a convex polygon instead of the box ------------------------------------------
 
 QUAD = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
 

@@ -57,7 +57,7 @@ def test_forward_kinematics_and_jacobian_match_the_plant(scene):
             np.testing.assert_allclose(finger.p_W_base + r1 + r2, p_plant[i], atol=1e-12)
 
 
-def test_ik_round_trips_scalar_and_vectorized(scene):
+def test_ik_round_trips_for_one_and_many_targets(scene):
     qs = random_q(scene, 50, seed=2)
     hand = TwoLinkFinger.stack(scene.fingers)
     np.testing.assert_allclose(hand.ik(hand.fingertip(qs)), qs, atol=1e-9)  # all fingers at once
@@ -95,8 +95,8 @@ def test_tolerance_widens_the_limits(scene):
 
 
 def test_elbow_branches_and_q1_wraps_in_candidate_order(scene):
-    """Wide limits: both elbow branches and q1 + 2 pi are solutions; the scalar solver lists
-    them in the module's order and the vectorized one picks the first (or the asked branch)."""
+    """Wide limits: both elbow branches and q1 + 2 pi are solutions; ik_solutions lists them
+    in the module's order and ik picks the first (or the asked branch)."""
     wide = dataclasses.replace(scene.fingers[2], q_lower=np.array([-4.0, -2.6]), q_upper=np.array([4.0, 2.6]))
     q = np.array([-3.0, 1.2])
     target = wide.fingertip(q)
@@ -111,7 +111,7 @@ def test_elbow_branches_and_q1_wraps_in_candidate_order(scene):
     np.testing.assert_allclose(wide.ik(target, elbow=-1), solutions[2], atol=1e-12)
 
 
-def test_scalar_and_vectorized_ik_choose_the_same_solution(scene):
+def test_ik_picks_the_first_of_ik_solutions(scene):
     rng = np.random.default_rng(3)
     for finger in scene.fingers:
         targets = finger.p_W_base + rng.uniform(-0.2, 0.2, (300, 2))

@@ -5,7 +5,7 @@ and this module executes every saved plan again for each (controller, condition)
 resumably: `trials/<key>/exec/<controller>_<condition>/sim.json` (+ `sim.npz`). Adding a
 controller or a condition to a finished sweep runs only the new executions.
 
-The conditions (`ConditionSpec`, defaults from the execution issue's acceptance test):
+The conditions (`ConditionSpec`):
 - `nominal`: the plan's world;
 - `mismatch`: friction `mismatch_mu` (0.55 against the plan's 0.7) and the box mass scaled
   by `mismatch_mass_factor` (+20 %) in the simulated plant only; the controller keeps the

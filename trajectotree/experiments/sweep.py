@@ -48,13 +48,12 @@ from trajectotree.experiments.sweep_store import (
 )
 from trajectotree.experiments.trial import (
     ROW_FILE,
+    TrialChildren,
     TrialInterrupted,
     TrialOutcome,
     TrialTask,
-    allow_trials,
     empty_row,
     execute_trial,
-    kill_children,
 )
 from trajectotree.results import METHODS  # results imports no Drake, like this module
 
@@ -152,17 +151,17 @@ def _local_results(tasks: list[TrialTask], workers: int, scratch_root: str | Non
     """Yields (task, outcome or exception) as trials finish on `workers` local processes,
     each with its scratch folder under scratch_root (default: the system's temp folder)."""
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="trial")
+    children = TrialChildren()
     completed = False
     try:
-        futures = {pool.submit(execute_trial, t, scratch_root): t for t in tasks}
+        futures = {pool.submit(execute_trial, t, scratch_root, children): t for t in tasks}
         for future in as_completed(futures):
             yield futures[future], _result_or_error(future)
         completed = True
     finally:
         if not completed:  # interrupted: stop the running trials, start no queued one
-            kill_children()
+            children.stop()
         pool.shutdown(wait=True, cancel_futures=True)
-        allow_trials()
 
 
 def _dask_results(tasks: list[TrialTask], client):

@@ -78,10 +78,33 @@ class TrialInterrupted(RuntimeError):
     """The child was stopped by the user (SIGINT/SIGTERM) or the sweep shut down: not a result."""
 
 
-# Children of this process, so an interrupted sweep can stop them (see kill_children).
-_children: set[subprocess.Popen] = set()
-_children_lock = threading.Lock()
-_stopping = threading.Event()
+class TrialChildren:
+    """The trial processes a sweep runs from this process (its threads start them), so that an
+    interrupted sweep can stop the running ones and start no queued one (`stop`)."""
+
+    def __init__(self):
+        self._running: set[subprocess.Popen] = set()
+        self._lock = threading.Lock()
+        self._stopping = threading.Event()
+
+    @property
+    def stopping(self) -> bool:
+        return self._stopping.is_set()
+
+    def add(self, child: subprocess.Popen) -> None:
+        with self._lock:
+            self._running.add(child)
+
+    def discard(self, child: subprocess.Popen) -> None:
+        with self._lock:
+            self._running.discard(child)
+
+    def stop(self) -> None:
+        """Kills every running trial; trials started after this raise TrialInterrupted."""
+        self._stopping.set()
+        with self._lock:
+            for child in list(self._running):
+                child.kill()
 
 
 def empty_row(task: TrialTask) -> dict:
@@ -148,11 +171,15 @@ def _last_line(text: str) -> str:
     return lines[-1].strip() if lines else ""
 
 
-def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutcome:
+def execute_trial(
+    task: TrialTask, scratch_root: str | None = None, children: TrialChildren | None = None
+) -> TrialOutcome:
     """Runs the task in a child process with its time limit; returns its files.
     A child that raises, crashes or runs out of time gives a row with `error` set.
-    The child's scratch folder is made in scratch_root (default: the system's temp folder)."""
-    if _stopping.is_set():
+    The child's scratch folder is made in scratch_root (default: the system's temp folder);
+    `children` (when given) holds the child while it runs, so its sweep can stop it."""
+    children = TrialChildren() if children is None else children
+    if children.stopping:
         raise TrialInterrupted(task.key)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix=f"{SCRATCH_PREFIX}{task.key}-", dir=scratch_root) as scratch:
@@ -170,8 +197,7 @@ def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutc
             text=True,
             env=env,
         )
-        with _children_lock:
-            _children.add(child)
+        children.add(child)
         try:
             try:
                 out, err = child.communicate(json.dumps(asdict(task)), timeout=task.time_limit_s)
@@ -181,11 +207,10 @@ def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutc
                 out, err = child.communicate()
                 timed_out = True
         finally:
-            with _children_lock:
-                _children.discard(child)
+            children.discard(child)
         wall_s = time.perf_counter() - start
         log = (out + err)[-STDERR_TAIL_CHARS:]
-        if _stopping.is_set() or child.returncode in (-signal.SIGINT, -signal.SIGTERM):
+        if children.stopping or child.returncode in (-signal.SIGINT, -signal.SIGTERM):
             raise TrialInterrupted(task.key)
         if timed_out:
             return _error_outcome(
@@ -206,20 +231,6 @@ def execute_trial(task: TrialTask, scratch_root: str | None = None) -> TrialOutc
     if log.strip():
         files[LOG_FILE] = log.encode()
     return TrialOutcome(row=row, files=files)
-
-
-def allow_trials() -> None:
-    """Lets execute_trial start children again (a new sweep in this process)."""
-    _stopping.clear()
-
-
-def kill_children() -> None:
-    """Stops every running trial of this process (an interrupted sweep); trials
-    still queued raise TrialInterrupted until allow_trials()."""
-    _stopping.set()
-    with _children_lock:
-        for child in list(_children):
-            child.kill()
 
 
 def _exit_with_parent(parent_pid: int, scratch: Path) -> None:

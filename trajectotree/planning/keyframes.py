@@ -273,7 +273,7 @@ def solve_segments(
     best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers, scene, log_observer)
     attempts = {s: [best[s]] for s in range(n)}
     retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
-    if on_demand:  # from the guess: from a link deep inside the object (goal -0.089: 21 mm) IPOPT hit max_iter
+    if on_demand:  # from the guess: from a link deep inside the object IPOPT may not recover
         retry(
             [s for s in range(n) if best[s].check.link_penetration_m > LINK_PENETRATION_TOL],
             "links",

@@ -1,7 +1,7 @@
 """The initial grasp, chosen for the configured object (box or convex polygon), not fixed fractions.
 
 Why: with a friction margin (mu_plan = search.friction_safety x scene.mu) no single grasp
-admits plans for every goal. Measured (issue 13) at mu_plan 0.49 on the 0.20 x 0.10 m box: the old
+admits plans for every goal. Measured at mu_plan 0.49 on the 0.20 x 0.10 m box: the old
 default (0.54, 0.12, 0.36, 0.48) admits every positive goal and no negative one (its stance
 of fingers 1, 2, 3 needs mu 0.67, so finger 0 can never let go); (0.06, 0.18, 0.32, 0.50)
 admits -3.0..+1.5 but not +2.0..+3.0; the two together cover the 12 goals tried. So the
