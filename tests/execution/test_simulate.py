@@ -299,7 +299,7 @@ def test_simulate_command_records_controller_and_conditions(scene, short_config,
         (["--push", "a,b@1"], "'a,b@1'"),
         (["--push", "0.2,0@-1"], "'0.2,0@-1'"),
         (["--push", "0.2,0@nan"], "'0.2,0@nan'"),
-        (["--controller", "pid"], "--controller 'pid'"),
+        (["--controller", "pid"], "--controller = 'pid' is not a controller; valid: grasp, paper"),
         (["--rate", "0"], "controller.rate_hz"),
     ],
 )
