@@ -62,7 +62,7 @@ START_METHOD = "fork" if "fork" in multiprocessing.get_all_start_methods() else 
 AVERAGED = ("tau", "lambda_n", "lambda_t", "f_W")  # the shared knot's forces: the mean of both segments'
 SHARED = ("x", "xdot", "q", "qdot", "p_W_tip", "p_W_C")  # equal in both segments at a shared knot
 STRICT_PINNING = 100.0  # the last retry's factor on cito.weight_contact_slack (a stricter program)
-WORKER_SCENES = 4  # scenes a worker process keeps built (a pool serves plans of one scene, a sweep's a few)
+WORKER_SCENES = 4  # scenes a worker process keeps built (a pool usually serves the plans of one scene)
 
 
 @dataclass(frozen=True)
