@@ -66,7 +66,7 @@ def heaviest_by_drake(scene, search, arclengths, fingers, cap: float) -> float:
 @pytest.mark.parametrize("scene_config", [SceneConfig(), SceneConfig(object=ObjectConfig(vertices=QUAD))])
 def test_the_block_lp_matches_one_drake_lp_per_grasp(scene_config):
     scene, search = build_scene(scene_config), SearchConfig()
-    grasps = initial_grasp_candidates(scene, search, memoize=False)
+    grasps = initial_grasp_candidates(scene, search)
     first = grasps.candidates[:3]
     g = scene_config.gravity
     hold = max(heaviest_by_drake(scene, search, c.arclengths, range(4), 0.0) for c in first) / g
@@ -98,7 +98,7 @@ def test_the_limits_carry_the_tested_objects_and_obey_their_bounds(scene_config)
     """Three fingers carry no more than four; the cap bounds the weight by sum |f| <= sqrt(1 + mu^2)
     sum lambda_n; without the cap the torques alone bound it, higher."""
     scene, search = build_scene(scene_config), SearchConfig()
-    grasps = initial_grasp_candidates(scene, search, memoize=False)
+    grasps = initial_grasp_candidates(scene, search)
     limits = payload(scene, search, grasps)
     mu = grasps.mu_plan
     assert limits.grasps == len(grasps.candidates) and limits.tau_max == 1.0

@@ -85,7 +85,7 @@ def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
 
 def check_condition(condition: str) -> str:
     if condition not in CONDITIONS:
-        raise ConfigError(f"condition = {condition!r} is unknown; valid: {', '.join(CONDITIONS)}")
+        raise ConfigError(field="condition", value=condition, problem="is unknown", choices=CONDITIONS)
     return condition
 
 
