@@ -133,7 +133,6 @@ def run(args) -> int:
     out = check_output_dir("--out", args.out)
     scene = build_scene(config.scene)
     check_graspable(scene, config, args)
-    out.mkdir(parents=True, exist_ok=True)
     meshcat = start_meshcat() if args.meshcat else None
     log = sys.stderr if args.json else sys.stdout
     if meshcat is not None:
@@ -142,6 +141,7 @@ def run(args) -> int:
     print(f"planning a {goal:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
     with ipopt_progress(progress_wanted(args)):
         result = plan(scene=scene, goal=goal, method="trajectotree", config=config)
+    out.mkdir(parents=True, exist_ok=True)  # only now: an interrupted plan leaves no folder behind
     for name in DERIVED_FILES:
         (out / name).unlink(missing_ok=True)
     save_plan(result, out)
