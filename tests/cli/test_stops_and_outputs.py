@@ -2,6 +2,7 @@
 written whole or not at all, and a sweep's folder judged only by the sweep holding its lock.
 Real processes throughout; each test uses the cheapest command that reaches its path."""
 
+import json
 import os
 import signal
 import subprocess
@@ -10,6 +11,9 @@ import time
 from pathlib import Path
 
 import pytest
+
+from trajectotree.cli import main
+from trajectotree.experiments.sweep_store import CORRUPT_DIR, TRIALS_DIR
 
 # Two segments whose IPOPT stalls (the paper's cost alone, without the acceleration term, runs
 # to thousands of iterations: ~30 s per segment), so two segment workers are busy for long.
@@ -87,3 +91,126 @@ def test_sigterm_stops_the_segment_workers_exits_143_and_writes_nothing(command,
         except ProcessLookupError:
             pass
         child.wait()
+
+
+# ---- output folders: checked before any work, by trying --------------------------------------------
+
+# The cheapest plan: one transition segment, a small goal.
+TINY_PLAN = ["--goal", "0.1", "--segments", "1"]
+# A sweep whose trials hit the time limit before they plan (an interpreter with Drake takes
+# longer than 0.3 s to start): every trial an error row, quickly.
+TIMED_OUT_SWEEP = [
+    *("--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "1", "--methods", "trajectotree"),
+    *("--time-limit", "0.3", "--workers", "2", "--no-progress"),
+]
+
+
+def listing(folder: Path) -> dict[str, bytes | None]:
+    """Every path under `folder` with its contents (None: a folder), hidden ones too."""
+    return {str(p.relative_to(folder)): None if p.is_dir() else p.read_bytes() for p in sorted(folder.rglob("*"))}
+
+
+@pytest.fixture
+def read_only():
+    """make(folder): `folder` refuses new files from now on (undone after the test). Tests run
+    as root here, and root ignores permission bits (chmod 555 would prove nothing), so as root
+    the folder is made immutable (chattr +i) or bind-mounted read-only; either fails for root
+    too. A folder that still takes a file afterwards skips the test rather than pass it."""
+    undo = []
+
+    def make(folder: Path) -> None:
+        if os.geteuid() != 0:
+            folder.chmod(0o555)
+            undo.append(lambda: folder.chmod(0o755))
+        elif subprocess.run(["chattr", "+i", str(folder)], capture_output=True).returncode == 0:
+            undo.append(lambda: subprocess.run(["chattr", "-i", str(folder)], check=True))
+        elif (
+            subprocess.run(["mount", "--bind", "-o", "ro", str(folder), str(folder)], capture_output=True).returncode
+            == 0
+        ):
+            undo.append(lambda: subprocess.run(["umount", str(folder)], check=True))
+        try:
+            (folder / "probe").touch()
+        except OSError:
+            return  # read-only, for this process too
+        (folder / "probe").unlink()
+        pytest.skip(f"cannot make {folder} read-only for this process (not root with chattr or mount)")
+
+    yield make
+    for step in reversed(undo):
+        step()
+
+
+def test_simulate_into_a_plan_folder_it_cannot_write_exits_2_before_simulating(tmp_path, read_only, capsys):
+    plan = tmp_path / "plan"
+    assert main(["plan", *TINY_PLAN, "--out", str(plan)]) == 0
+    (plan / "sim.npz").mkdir()  # where simulate saves its arrays: no user can write there
+    before = listing(tmp_path)
+    capsys.readouterr()
+    assert main(["simulate", str(plan)]) == 2
+    err = capsys.readouterr().err
+    assert f"PLAN_DIR {str(plan)!r} cannot be written: {str(plan / 'sim.npz')!r} is a folder" in err, err
+    (plan / "sim.npz").rmdir()
+    read_only(plan)
+    before = listing(tmp_path)
+    assert main(["simulate", str(plan)]) == 2
+    err = capsys.readouterr().err
+    assert f"PLAN_DIR {str(plan)!r} cannot be written: no file can be created in {str(plan)!r}" in err, err
+    assert "Traceback" not in err and listing(tmp_path) == before
+
+
+def test_report_of_a_sweep_it_cannot_write_into_exits_2_naming_the_folder(tmp_path, read_only, capsys):
+    sweep = tmp_path / "sweep"
+    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+    read_only(sweep)  # SWEEP_DIR/report, the default, cannot be created
+    before = listing(tmp_path)
+    capsys.readouterr()
+    assert main(["report", str(sweep)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"the report folder (default: SWEEP_DIR/report) {str(sweep / 'report')!r} cannot be written: "
+        f"no file can be created in {str(sweep)!r}"
+    ) in err, err
+    assert "Traceback" not in err and listing(tmp_path) == before
+
+
+def test_plan_html_may_go_into_the_out_folder_it_creates(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["plan", *TINY_PLAN, "--out", str(out), "--html", str(tmp_path / "out" / "sub" / "plan.html")]) == 2
+    assert f"the folder {str(out / 'sub')!r} does not exist" in capsys.readouterr().err  # only --out itself is made
+    assert not out.exists()
+    assert main(["plan", *TINY_PLAN, "--out", str(out), "--html", str(out / "plan.html")]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["plan.html", "plan.json", "plan.npz"]
+    assert "<html" in (out / "plan.html").read_text()[:2000].lower()
+
+
+# ---- a report is written whole or not at all; the sweep recomputes what it cannot read ---------------
+
+
+def test_report_with_a_torn_sim_npz_writes_nothing_and_the_sweep_recomputes_that_trial(tmp_path, capsys):
+    sweep = tmp_path / "sweep"
+    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+    assert main(["report", str(sweep), "--out", str(tmp_path / "older")]) == 0  # an earlier report, kept as is
+    trial = sweep / TRIALS_DIR / "0001_trajectotree"
+    row = json.loads((trial / "trial.json").read_text())
+    (trial / "trial.json").write_text(json.dumps(dict(row, simulated=True)))  # as if executed ...
+    (trial / "sim.npz").write_bytes(b"PK\x03\x04 torn")  # ... and its arrays torn by a full disk
+    before = listing(tmp_path)
+    capsys.readouterr()
+    for out in ([], ["--out", str(tmp_path / "older")]):  # a new report folder, and one with a report in it
+        assert main(["report", str(sweep), *out]) == 2
+        err = capsys.readouterr().err
+        assert f"{str(trial / 'sim.npz')!r} is unreadable (BadZipFile" in err and "rerun the sweep" in err, err
+        assert listing(tmp_path) == before  # no report folder, no half report, no staging folder
+    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+    captured = capsys.readouterr()
+    assert f"{str(trial / 'sim.npz')!r} was unreadable (BadZipFile" in captured.err, captured.err
+    assert "it is recomputed" in captured.err and "1 now, 1 before" in captured.out
+    assert [p.name for p in (sweep / CORRUPT_DIR).iterdir()][0].startswith("0001_trajectotree-")
+    assert main(["report", str(sweep)]) == 0
+    assert sorted(p.name for p in (sweep / "report").iterdir()) == [
+        "fig2_time_cost.pdf",
+        "fig2_time_cost.png",
+        "summary.csv",
+        "summary.md",
+    ]

@@ -130,7 +130,7 @@ def run(args) -> int:
 
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
-    out = check_output_dir("--out", args.out)
+    out = check_output_dir("--out", args.out, (PLAN_JSON, PLAN_NPZ, *DERIVED_FILES))
     scene = build_scene(config.scene)
     check_graspable(scene, config, args)
     meshcat = start_meshcat() if args.meshcat else None
