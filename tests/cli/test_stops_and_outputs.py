@@ -4,6 +4,7 @@ Real processes throughout; each test uses the cheapest command that reaches its 
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -214,3 +215,91 @@ def test_report_with_a_torn_sim_npz_writes_nothing_and_the_sweep_recomputes_that
         "summary.csv",
         "summary.md",
     ]
+
+
+# ---- two sweeps on one folder: the lock decides, before the folder is judged ---------------------------
+
+# A sweep that has taken the lock and made trials/, its manifest not yet written: what a second
+# sweep started at the same instant may find.
+STARTING_SWEEP = """
+import sys, time
+from pathlib import Path
+from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
+out = Path(sys.argv[1])
+with sweep_lock(out):
+    (out / TRIALS_DIR).mkdir()
+    print("started", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_sweep_meeting_another_one_starting_reports_its_lock(tmp_path, capsys):
+    sweep = tmp_path / "sweep"
+    holder = subprocess.Popen([sys.executable, "-c", STARTING_SWEEP, str(sweep)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "started\n"
+        before = listing(sweep)
+        assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 2
+        err = capsys.readouterr().err
+        assert f"is in use by another sweep (process pid {holder.pid} on" in err, err
+        assert listing(sweep) == before
+    finally:
+        holder.kill()
+        holder.wait()
+        holder.stdout.close()
+
+
+def test_two_sweeps_started_together_one_runs_the_other_is_refused_by_the_lock(tmp_path):
+    """Both started at once, the same arguments; trials that stall (killed by SIGTERM at the end)
+    keep the first sweep holding the lock until the second has been refused."""
+    config, sweep = tmp_path / "stalling.yaml", tmp_path / "sweep"
+    config.write_text(STALLING_CITO)
+    args = cli("sweep", "--out", str(sweep), "--config", str(config), *TIMED_OUT_SWEEP, "--time-limit", "300")
+    logs = [tmp_path / "a.txt", tmp_path / "b.txt"]
+    sweeps = []
+    for log in logs:
+        with open(log, "w") as stderr:
+            sweeps.append(subprocess.Popen(args, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr))
+    try:
+        deadline = time.monotonic() + 120
+        while all(s.poll() is None for s in sweeps):
+            assert time.monotonic() < deadline, "neither sweep ended"
+            time.sleep(0.05)
+        (refused, log), (running, _) = sorted(zip(sweeps, logs), key=lambda pair: pair[0].returncode is None)
+        err = log.read_text()
+        assert refused.returncode == 2 and "is in use by another sweep (process pid " in err, err
+        assert "without manifest.json" not in err
+        running.send_signal(signal.SIGTERM)  # stops its trials like Ctrl-C
+        assert running.wait(timeout=60) == 143
+        assert session_processes(running.pid) == []  # its trials stopped too
+        assert (sweep / "manifest.json").is_file() and (sweep / ".lock").read_text() == ""
+    finally:
+        for s in sweeps:
+            try:
+                os.killpg(s.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            s.wait()
+
+
+@pytest.mark.slow
+def test_a_torn_execution_is_named_by_the_report_and_redone_by_the_sweep(resumed_sweep, tmp_path, capsys):
+    from tests.conftest import SMALL_SWEEP
+
+    sweep = tmp_path / "sweep"
+    shutil.copytree(resumed_sweep.out, sweep)
+    args = ["sweep", *SMALL_SWEEP, "--out", str(sweep), "--controllers", "grasp"]  # copies the sweep's own runs
+    assert main(args) == 0
+    trial = sweep / TRIALS_DIR / "0000_trajectotree"
+    torn = trial / "exec" / "grasp_nominal" / "sim.npz"
+    torn.write_bytes(torn.read_bytes()[:1000])
+    before = listing(tmp_path)
+    capsys.readouterr()
+    assert main(["report", str(sweep)]) == 2
+    err = capsys.readouterr().err
+    assert f"{str(torn)!r} is unreadable (" in err and "rerun the sweep" in err, err
+    assert listing(tmp_path) == before
+    assert main(args) == 0
+    assert torn.read_bytes() == (trial / "sim.npz").read_bytes()  # copied again from the trial's run
+    assert main(["report", str(sweep)]) == 0
+    assert (sweep / "report" / "executions.md").is_file()
