@@ -46,23 +46,24 @@ def session_processes(sid: int) -> list[int]:
     return pids
 
 
+def cmdline(pid: int) -> bytes:
+    """`pid`'s command line as /proc has it (b"" when gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
+def children(pid: int) -> list[int]:
+    """`pid`'s live children."""
+    return [p for p in session_processes(pid) if (fields := _stat(p)) and int(fields[1]) == pid]
+
+
 def forked_workers(pid: int) -> list[int]:
     """`pid`'s live children that run its own command line: its forked pool workers (not a
     short-lived helper a library starts, e.g. `uname`)."""
-    try:
-        command = Path(f"/proc/{pid}/cmdline").read_bytes()
-    except OSError:
-        return []
-    workers = []
-    for other in session_processes(pid):
-        fields = _stat(other)
-        try:
-            same = fields and int(fields[1]) == pid and Path(f"/proc/{other}/cmdline").read_bytes() == command
-        except OSError:
-            same = False
-        if same:
-            workers.append(other)
-    return workers
+    command = cmdline(pid)
+    return [p for p in children(pid) if command and cmdline(p) == command]
 
 
 @pytest.mark.parametrize("command", ["plan", "demo"])
@@ -303,3 +304,33 @@ def test_a_torn_execution_is_named_by_the_report_and_redone_by_the_sweep(resumed
     assert torn.read_bytes() == (trial / "sim.npz").read_bytes()  # copied again from the trial's run
     assert main(["report", str(sweep)]) == 0
     assert (sweep / "report" / "executions.md").is_file()
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_sweeps_executions_without_running_the_queued_ones(resumed_sweep, tmp_path):
+    from tests.conftest import SMALL_SWEEP
+
+    sweep, log = tmp_path / "sweep", tmp_path / "stderr.txt"
+    shutil.copytree(resumed_sweep.out, sweep)
+    args = cli("sweep", *SMALL_SWEEP, "--out", str(sweep), "--controllers", "paper", "--workers", "2")
+    with open(log, "w") as stderr:
+        child = subprocess.Popen(args, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr)
+    try:
+        deadline = time.monotonic() + 120
+        while not any(b"multiprocessing" in cmdline(p) for p in children(child.pid)):  # spawned workers
+            assert child.poll() is None, log.read_text()
+            assert time.monotonic() < deadline, "the execution workers never started"
+            time.sleep(0.05)
+        child.send_signal(signal.SIGTERM)  # while the workers still start: no execution has finished
+        assert (child.wait(timeout=60), log.read_text()) == (143, "trajectotree sweep: terminated (SIGTERM)\n")
+        deadline = time.monotonic() + 10  # multiprocessing's resource tracker ends once its pipe closes
+        while session_processes(child.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert session_processes(child.pid) == []
+        assert list(sweep.glob("trials/*/exec/paper_nominal/sim.json")) == []  # the 4 queued ones never ran
+    finally:
+        try:
+            os.killpg(child.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        child.wait()

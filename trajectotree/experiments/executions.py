@@ -258,7 +258,8 @@ def run_executions(
         done = 0
         # Fresh interpreters (spawn), not forks of a process that may hold Drake's threads.
         context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context)
+        try:
             futures = {pool.submit(execute, t): t for t in tasks}
             for future in as_completed(futures):
                 task = futures[future]
@@ -275,9 +276,26 @@ def run_executions(
                     )
                 if bar is not None:
                     bar.update()
+        except BaseException:
+            _kill_pool(pool)  # interrupted (Ctrl-C, SIGTERM) or broken: run no queued execution, stop the running
+            raise
+        pool.shutdown()
         if bar is not None:
             bar.close()
         return done
+
+
+def _kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Kills the pool's workers and shuts it down with its queued tasks cancelled: shutdown()
+    alone would first run every queued execution (as planning.keyframes.kill_workers does for the
+    segment workers; not imported from there, which would load Drake into the sweep process)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # no public kill before Python 3.14
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+    for process in processes:
+        process.join(timeout=10)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
