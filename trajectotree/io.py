@@ -44,6 +44,18 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
         raise
 
 
+def npz_problem(path: str | Path) -> str | None:
+    """Why the .npz file at `path` cannot be read whole (missing, truncated, a corrupt
+    member), or None when every array in it reads back (zip CRCs checked)."""
+    try:
+        with np.load(path) as data:
+            for name in data.files:
+                data[name]
+    except (OSError, ValueError, KeyError, EOFError, TypeError, AttributeError, zipfile.BadZipFile) as e:
+        return f"{type(e).__name__}: {e}"  # TypeError, AttributeError: an .npy or pickle, not an archive
+    return None
+
+
 def write_json_atomic(path: str | Path, data: dict) -> None:
     """`data` as indented JSON with a final newline (every json file of a run)."""
     write_bytes_atomic(path, (json.dumps(data, indent=2) + "\n").encode())

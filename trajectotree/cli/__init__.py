@@ -2,7 +2,9 @@
 package and exposes `register(subparsers)`; `main` adds those named in COMMANDS.
 
 Exit codes: 0 success (a plan that did not converge is still a success of the
-command, reported as "success": false), 2 invalid input, 1 unexpected error.
+command, reported as "success": false), 2 invalid input, 1 unexpected error, 130
+interrupted (Ctrl-C), 143 terminated (SIGTERM). Either stop ends the command's worker
+processes (keyframes' segment workers, a sweep's trials) before it exits.
 """
 
 from __future__ import annotations
@@ -10,7 +12,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import re
+import signal
 import sys
+import threading
 
 from trajectotree import __version__
 from trajectotree.config import ConfigError
@@ -35,6 +39,16 @@ class Parser(argparse.ArgumentParser):
         self._negative_number_matcher = NUMBER_LIKE
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the main thread is: every cleanup that Ctrl-C runs (killing the
+    segment workers, stopping a sweep's trials) runs for `kill` too, which would otherwise
+    end this process at once and leave its children running."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="trajectotree",
@@ -50,14 +64,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # Python lets only the main thread set a handler; main() run in another thread keeps the default.
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
     try:
         return int(args.run(args) or 0)
     except ConfigError as e:  # invalid input: name the value and the valid range
         print(f"trajectotree {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except Terminated:
+        print(f"trajectotree {args.command}: terminated (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print(f"trajectotree {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if in_main_thread:  # main() called from a program (the tests) leaves its handler as it was
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

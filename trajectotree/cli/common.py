@@ -8,6 +8,7 @@ import json
 import math
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from trajectotree.config import FORMULATIONS, Config, ConfigError, ObjectConfig, check_integer, load_config, mu_plan
@@ -272,9 +273,24 @@ def _nearest_existing(path: Path) -> Path:
     return path
 
 
-def check_output_dir(option: str, path: str | Path) -> Path:
-    """An output folder (created later if missing): never an existing file, and its nearest
-    existing ancestor a writable folder. Checked before any work starts (ConfigError: exit 2)."""
+def _cannot_create_in(folder: Path) -> str | None:
+    """Why no file can be created in `folder`, or None when one can: a probe file is made
+    and removed at once. Permission bits (and os.access) do not tell: root ignores them,
+    and they know nothing of an immutable folder or a read-only bind mount."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".trajectotree-probe-")
+    except OSError as e:
+        return e.strerror or type(e).__name__
+    os.close(fd)
+    os.unlink(probe)
+    return None
+
+
+def check_output_dir(option: str, path: str | Path, files: tuple[str, ...] = ()) -> Path:
+    """An output folder (created later if missing): never an existing file, its nearest
+    existing ancestor a folder in which files can be created (tried, not assumed), and none
+    of the `files` the command writes into it an existing folder. Checked before any work
+    starts (ConfigError: exit 2)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ConfigError(
@@ -283,22 +299,38 @@ def check_output_dir(option: str, path: str | Path) -> Path:
     base = _nearest_existing(path.absolute())
     if not base.is_dir():
         raise ConfigError(f"{option} {str(path)!r} cannot be created: {str(base)!r} is a file, not a folder")
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise ConfigError(f"{option} {str(path)!r} cannot be written: no write permission in {str(base)!r}")
+    why = _cannot_create_in(base)
+    if why:
+        raise ConfigError(f"{option} {str(path)!r} cannot be written: no file can be created in {str(base)!r} ({why})")
+    for name in files:
+        if (path / name).is_dir():
+            raise ConfigError(
+                f"{option} {str(path)!r} cannot be written: {str(path / name)!r} is a folder, where the "
+                f"command writes the file {name}; move it away or give another folder"
+            )
     return path
 
 
-def check_output_file(option: str, path: str | Path, suffixes: tuple[str, ...]) -> Path:
+def check_output_file(
+    option: str, path: str | Path, suffixes: tuple[str, ...], *, created: tuple[Path, ...] = ()
+) -> Path:
     """An output file: its name ends in one of `suffixes`, it is not a folder, and it goes
-    into an existing, writable folder. Checked before any work starts (ConfigError: exit 2)."""
+    into an existing folder in which files can be created, or into one of the `created`
+    output folders (the command makes them; check_output_dir checks them). Checked before any
+    work starts (ConfigError: exit 2)."""
     path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise ConfigError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")
     if path.is_dir():
         raise ConfigError(f"{option} {str(path)!r} is a folder; give a file name ending in {' or '.join(suffixes)}")
-    folder = path.absolute().parent
+    folder = Path(os.path.abspath(path)).parent
+    if not folder.exists() and any(folder == Path(os.path.abspath(c)) for c in created):
+        return path  # written after the command has created that folder
     if not folder.is_dir():
         raise ConfigError(f"{option} {str(path)!r}: the folder {str(path.parent)!r} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise ConfigError(f"{option} {str(path)!r} cannot be written: no write permission in {str(path.parent)!r}")
+    why = _cannot_create_in(folder)
+    if why:
+        raise ConfigError(
+            f"{option} {str(path)!r} cannot be written: no file can be created in {str(path.parent)!r} ({why})"
+        )
     return path

@@ -130,10 +130,9 @@ def run(args) -> int:
 
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
-    out = check_output_dir("--out", args.out)
+    out = check_output_dir("--out", args.out, (PLAN_JSON, PLAN_NPZ, *DERIVED_FILES))
     scene = build_scene(config.scene)
     check_graspable(scene, config, args)
-    out.mkdir(parents=True, exist_ok=True)
     meshcat = start_meshcat() if args.meshcat else None
     log = sys.stderr if args.json else sys.stdout
     if meshcat is not None:
@@ -143,6 +142,7 @@ def run(args) -> int:
     result = plan(
         scene=scene, goal=goal, method="trajectotree", config=config, log_observer=ipopt_progress(progress_wanted(args))
     )
+    out.mkdir(parents=True, exist_ok=True)  # only now: an interrupted plan leaves no folder behind
     for name in DERIVED_FILES:
         (out / name).unlink(missing_ok=True)
     save_plan(result, out)

@@ -21,7 +21,7 @@ from trajectotree.cli.common import (
 )
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
-from trajectotree.io import SIM_JSON, SIM_NPZ
+from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
 from trajectotree.results import METHODS, check_goal, check_method
 
 # Files derived from a plan (by `simulate`): stale once a new plan replaces it.
@@ -71,9 +71,9 @@ def run(args) -> int:
     method = check_method(args.method)
     config = config_from_args(args)
     workers = check_workers(args.segment_workers, "--segment-workers")
-    out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}")
-    if args.html:
-        check_output_file("--html", args.html, HTML_SUFFIXES)
+    out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}", (PLAN_JSON, PLAN_NPZ))
+    if args.html:  # it may go into --out, which save_plan creates before the playback is written
+        check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
     scene = build_scene(config.scene)
     check_graspable(scene, config, args)
     result = plan(

@@ -3,6 +3,8 @@ table (Markdown and CSV) beside the paper's numbers, from a sweep's finished tri
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from trajectotree.cli.common import check_output_dir, print_json
 
 
@@ -15,11 +17,11 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.experiments.report import make_report, table_markdown
+    from trajectotree.experiments.report import REPORT_DIR, make_report, table_markdown
 
-    if args.out:  # the default, SWEEP_DIR/report, is checked with the sweep directory
-        check_output_dir("--out", args.out)
-    files, table = make_report(args.sweep_dir, args.out)
+    out = args.out or str(Path(args.sweep_dir) / REPORT_DIR)
+    check_output_dir("--out" if args.out else "the report folder (default: SWEEP_DIR/report)", out)
+    files, table = make_report(args.sweep_dir, out)
     if args.json:
         print_json({"files": files.__dict__, "table": table})
         return 0

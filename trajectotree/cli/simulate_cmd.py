@@ -15,12 +15,13 @@ from trajectotree.cli.common import (
     FIGURE_SUFFIXES,
     HTML_SUFFIXES,
     add_scene_options,
+    check_output_dir,
     check_output_file,
     print_json,
     scene_overrides,
 )
 from trajectotree.config import Config, ConfigError, check_controller, load_config
-from trajectotree.io import SIM_JSON, PlanFiles, read_plan_files, reading, write_json_atomic
+from trajectotree.io import SIM_JSON, SIM_NPZ, PlanFiles, read_plan_files, reading, write_json_atomic
 
 
 def register(subparsers) -> None:
@@ -232,6 +233,7 @@ def run(args) -> int:
         if path:
             check_output_file(option, path, suffixes)
     files = read_plan_files(args.plan_dir, "PLAN_DIR")
+    check_output_dir("PLAN_DIR", args.plan_dir, (SIM_JSON, SIM_NPZ))  # the run is saved there: before it runs
     arrays = trajectory_arrays(files)
     check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)

@@ -11,7 +11,6 @@ the workers). Then: trajectotree report OUT.
 from __future__ import annotations
 
 import math
-import signal
 
 from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
 from trajectotree.config import CONTROLLERS, check_controller
@@ -90,12 +89,7 @@ def register(subparsers) -> None:
     p.set_defaults(run=run)
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt  # SIGTERM stops the running trials like Ctrl-C does
-
-
 def run(args) -> int:
-    signal.signal(signal.SIGTERM, _interrupt)
     check_output_dir("--out", args.out)
     spec = SweepSpec(
         goals=args.goals,

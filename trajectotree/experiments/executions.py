@@ -38,7 +38,7 @@ from trajectotree.config import (
     check_range,
 )
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
-from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, write_bytes_atomic
+from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
 
 CONDITIONS = ("nominal", "mismatch", "push")
 EXEC_DIR = "exec"
@@ -129,7 +129,29 @@ def execute(task: ExecutionTask) -> dict:
 
 
 def read_execution(folder: Path) -> dict:
-    return json.loads((Path(folder) / SIM_JSON).read_text())
+    """An execution's sim.json; ConfigError naming it when it cannot be read."""
+    path = Path(folder) / SIM_JSON
+    try:
+        data = json.loads(path.read_text())
+        if not isinstance(data, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError
+        raise ConfigError(
+            f"{str(path)!r} is unreadable ({type(e).__name__}: {e}); rerun the sweep with the same "
+            "--controllers and --conditions to recompute it"
+        ) from None
+    return data
+
+
+def execution_problem(folder: Path) -> str | None:
+    """Why an execution folder holds no finished execution (sim.json or sim.npz missing or
+    unreadable), or None when it does: such an execution is pending, and is run again."""
+    try:
+        read_execution(folder)
+    except ConfigError as e:
+        return str(e)
+    problem = npz_problem(Path(folder) / SIM_NPZ)
+    return None if problem is None else f"{str(Path(folder) / SIM_NPZ)!r} is unreadable ({problem})"
 
 
 def pending_executions(
@@ -164,7 +186,7 @@ def pending_executions(
         for controller in controllers:
             for condition in conditions:
                 out = execution_dir(trial_dir, controller, condition)
-                if (out / SIM_JSON).is_file() or (
+                if execution_problem(out) is None or (
                     same_settings and _reuse_sweep_simulation(trial_dir, controller, condition, out)
                 ):
                     continue
@@ -192,7 +214,7 @@ def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, ou
         condition != "nominal"
         or sim.get("controller") != controller
         or not nominal
-        or not (trial_dir / SIM_NPZ).is_file()
+        or npz_problem(trial_dir / SIM_NPZ) is not None  # a torn copy would pass for a finished execution
     ):
         return False
     write_bytes_atomic(out / SIM_NPZ, (trial_dir / SIM_NPZ).read_bytes())  # npz first: sim.json marks it done
@@ -224,6 +246,10 @@ def run_executions(
         tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim)
         if not tasks:
             return 0
+        for task in tasks:
+            out = execution_dir(task.trial_dir, task.controller, task.condition)
+            if out.is_dir() and any(out.iterdir()):  # a finished one is not pending: its files are torn
+                print(f"execution {out}: {execution_problem(out)}; it is recomputed", file=sys.stderr)
         bar = None
         if progress and sys.stderr.isatty():
             from tqdm import tqdm
@@ -232,7 +258,8 @@ def run_executions(
         done = 0
         # Fresh interpreters (spawn), not forks of a process that may hold Drake's threads.
         context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context)
+        try:
             futures = {pool.submit(execute, t): t for t in tasks}
             for future in as_completed(futures):
                 task = futures[future]
@@ -249,9 +276,26 @@ def run_executions(
                     )
                 if bar is not None:
                     bar.update()
+        except BaseException:
+            _kill_pool(pool)  # interrupted (Ctrl-C, SIGTERM) or broken: run no queued execution, stop the running
+            raise
+        pool.shutdown()
         if bar is not None:
             bar.close()
         return done
+
+
+def _kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Kills the pool's workers and shuts it down with its queued tasks cancelled: shutdown()
+    alone would first run every queued execution (as planning.keyframes.kill_workers does for the
+    segment workers; not imported from there, which would load Drake into the sweep process)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # no public kill before Python 3.14
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+    for process in processes:
+        process.join(timeout=10)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:

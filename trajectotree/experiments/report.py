@@ -14,7 +14,12 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
+import secrets
+import shutil
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +36,8 @@ METHOD_COLORS = {"trajectotree": "tab:blue", "cito": "tab:orange", "cito-warm": 
 # The paper's numbers (Sec. IV-C): mean total planning time over 60 goals, s.
 PAPER_MEAN_TIME_S = {"trajectotree": 14.0, "cito": 98.0, "cito-warm": 76.0}
 REFERENCE = "trajectotree"
+REPORT_DIR = "report"  # the default output folder, SWEEP_DIR/report
+STAGE_PREFIX = ".tmp-report-"  # a report being written (make_report's _staged)
 ERROR_LABELS = ("x [m]", "y [m]", r"$\theta$ [rad]")
 
 
@@ -235,7 +242,10 @@ def _tracks(method_folders) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
             with np.load(path) as data:
                 tracks.setdefault(method, []).append((data["t"], data["abs_error"]))
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
-            raise ConfigError(f"{str(path)!r} is unreadable ({type(e).__name__}: {e})") from None
+            raise ConfigError(
+                f"{str(path)!r} is unreadable ({type(e).__name__}: {e}); rerun the sweep with the same "
+                "arguments to recompute it"
+            ) from None
     return tracks
 
 
@@ -305,9 +315,34 @@ def _save(fig, stem: Path) -> tuple[str, str]:
     return png, pdf
 
 
+@contextmanager
+def _staged(out: Path) -> Iterator[Path]:
+    """A new folder beside `out` (inside it when it exists) to write out's files into: on
+    success they move into `out` (the folder itself is renamed when `out` is new); on any error
+    it is removed, and `out` is as it was: a report is written whole or not at all."""
+    new = not out.exists()
+    parent = out.parent if new else out
+    parent.mkdir(parents=True, exist_ok=True)
+    # Not named .*.tmp: the sweep removes such leftovers with unlink, which a folder refuses.
+    stage = parent / f"{STAGE_PREFIX}{os.getpid()}-{secrets.token_hex(4)}"
+    stage.mkdir()  # the usual mode (mkdtemp's would be 0o700, and stay so after the rename)
+    try:
+        yield stage
+        if new:
+            os.rename(stage, out)
+        else:
+            for path in sorted(stage.iterdir()):
+                os.replace(path, out / path.name)
+            stage.rmdir()
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+
+
 def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tuple[ReportFiles, list[dict]]:
-    """Writes the figures and the table (default: SWEEP_DIR/report/); returns their
-    paths and the table rows."""
+    """Writes the figures and the table (default: SWEEP_DIR/report/), whole or not at all
+    (ConfigError naming an unreadable input, nothing written); returns their paths and the
+    table rows."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -315,24 +350,28 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     sweep_dir = Path(sweep_dir)
     manifest, rows = load_sweep(sweep_dir)
     methods = [m for m in manifest["methods"] if any(r["method"] == m for r in rows)]
-    out = Path(out_dir) if out_dir is not None else sweep_dir / "report"
+    out = Path(out_dir) if out_dir is not None else sweep_dir / REPORT_DIR
     if out.exists() and not out.is_dir():
         raise ConfigError(f"the report folder {str(out)!r} is an existing file; remove it or give --out DIR")
-    out.mkdir(parents=True, exist_ok=True)
-    table = summary_table(rows, methods)
-    write_bytes_atomic(out / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())
-    write_bytes_atomic(out / "summary.csv", table_csv(table).encode())
-    fig2 = _save(figure_time_and_cost(rows, methods), out / "fig2_time_cost")
-    tracks = load_tracking(sweep_dir, rows)
-    fig3 = _save(figure_tracking(tracks, methods), out / "fig3_tracking") if tracks else None
-    executions_md, fig3_by_controller = _execution_report(sweep_dir, rows, methods, out)
+    with _staged(out) as stage:
+        table = summary_table(rows, methods)
+        write_bytes_atomic(stage / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())
+        write_bytes_atomic(stage / "summary.csv", table_csv(table).encode())
+        fig2 = _save(figure_time_and_cost(rows, methods), stage / "fig2_time_cost")
+        tracks = load_tracking(sweep_dir, rows)
+        fig3 = _save(figure_tracking(tracks, methods), stage / "fig3_tracking") if tracks else None
+        executions_md, fig3_by_controller = _execution_report(sweep_dir, rows, methods, stage)
+
+    def final(paths):  # where the staged files now are
+        return None if paths is None else tuple(str(out / Path(p).name) for p in paths)
+
     files = ReportFiles(
-        figure_time_cost=fig2,
-        figure_tracking=fig3,
+        figure_time_cost=final(fig2),
+        figure_tracking=final(fig3),
         table_md=str(out / "summary.md"),
         table_csv=str(out / "summary.csv"),
-        executions_md=executions_md,
-        figure_tracking_by_controller=fig3_by_controller,
+        executions_md=None if executions_md is None else str(out / Path(executions_md).name),
+        figure_tracking_by_controller={c: final(paths) for c, paths in fig3_by_controller.items()},
     )
     return files, table
 

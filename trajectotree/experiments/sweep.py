@@ -267,7 +267,7 @@ def run_sweep(
     Invalid input raises ConfigError before anything is written."""
     out_dir = Path(out_dir)
     workers = check_executor(workers, scheduler, scheduler_timeout_s)
-    check_manifest(out_dir, spec)
+    check_manifest(out_dir, spec, locked=False)  # a refusal that writes nothing (not even the lock file)
     client = connect_scheduler(scheduler, scheduler_timeout_s) if scheduler else None
     start = time.perf_counter()
     try:

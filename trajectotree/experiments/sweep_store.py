@@ -18,7 +18,7 @@ from pathlib import Path
 from trajectotree import __version__
 from trajectotree.config import ConfigError
 from trajectotree.experiments.trial import ROW_FILE, TrialOutcome
-from trajectotree.io import write_bytes_atomic
+from trajectotree.io import PLAN_NPZ, SIM_NPZ, npz_problem, write_bytes_atomic
 
 MANIFEST_FILE = "manifest.json"
 TRIALS_DIR = "trials"
@@ -71,14 +71,29 @@ def _manifest_differences(old: dict, new: dict) -> list[str]:
     ]
 
 
-def check_manifest(out_dir: Path, spec) -> bool:
+def _made_by_a_sweep(path: Path) -> bool:
+    """What a sweep starting in a folder makes before its manifest is in place: the lock file,
+    write_bytes_atomic's temporary file of the manifest, or (before the manifest came first)
+    an empty trials/; a sweep killed then leaves a folder the next one may still take."""
+    if path.name == TRIALS_DIR:
+        return path.is_dir() and not any(path.iterdir())
+    return path.name == LOCK_FILE or (path.name.startswith(f".{MANIFEST_FILE}.") and path.name.endswith(".tmp"))
+
+
+def check_manifest(out_dir: Path, spec, locked: bool = True) -> bool:
     """True when out_dir already holds this sweep, False when it holds none;
-    raises ConfigError when it holds a different one (nothing is touched)."""
+    raises ConfigError when it holds a different one (nothing is touched).
+    Judged for certain only by the holder of the folder's lock (sweep_lock). Without it
+    (locked False: the early check, which refuses before anything is written) a folder
+    with a lock file but no manifest is left to the lock: another sweep may be starting
+    there this instant, and its lock, not its half-made folder, is what to report."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--out {str(out_dir)!r} is an existing file, not a folder; give a sweep directory")
     path = out_dir / MANIFEST_FILE
     if not path.exists():
-        if out_dir.is_dir() and any(p.name != LOCK_FILE for p in out_dir.iterdir()):
+        if not locked and (out_dir / LOCK_FILE).exists():
+            return False
+        if out_dir.is_dir() and any(not _made_by_a_sweep(p) for p in out_dir.iterdir()):
             raise ConfigError(
                 f"--out {str(out_dir)!r} is a non-empty directory without {MANIFEST_FILE}; "
                 "give a new or empty directory, or the directory of the sweep to resume"
@@ -102,11 +117,12 @@ def prepare_dir(out_dir: Path, spec) -> list[str]:
     moves corrupt trials aside (they are recomputed); returns a message per moved trial.
     The caller holds the directory's lock (sweep_lock)."""
     exists = check_manifest(out_dir, spec)
-    (out_dir / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
     manifest = dict(spec.manifest(), version=__version__)
     if exists:  # keep what the sweep is; record this run's time limit
         manifest = dict(json.loads((out_dir / MANIFEST_FILE).read_text()), time_limit_s=spec.time_limit_s)
+    # The manifest first: a sweep killed before it is written leaves a folder the next one still accepts.
     write_bytes_atomic(out_dir / MANIFEST_FILE, json.dumps(manifest, indent=2).encode())
+    (out_dir / TRIALS_DIR).mkdir(parents=True, exist_ok=True)
     for leftover in (out_dir / TRIALS_DIR).glob(f"{TMP_PREFIX}*"):  # incl. killed trials' scratch folders
         shutil.rmtree(leftover) if leftover.is_dir() else leftover.unlink()
     for leftover in out_dir.glob(".*.tmp"):  # write_bytes_atomic's temporary files
@@ -157,6 +173,19 @@ def read_row(trial_dir: Path) -> dict:
     return row
 
 
+def check_trial(trial_dir: Path) -> dict:
+    """A finished trial's row, once its array files read back whole: plan.npz (a row without
+    an error has one), sim.npz (a simulated row has one) and any other .npz there.
+    CorruptTrialError naming the first unreadable file."""
+    row = read_row(trial_dir)
+    promised = ([PLAN_NPZ] if row.get("error") is None else []) + ([SIM_NPZ] if row.get("simulated") else [])
+    for name in sorted(set(promised) | {p.name for p in trial_dir.glob("*.npz")}):
+        problem = npz_problem(trial_dir / name)
+        if problem:
+            raise CorruptTrialError(trial_dir / name, problem)
+    return row
+
+
 def _finished_trial_dirs(out_dir: Path) -> list[Path]:
     trials = out_dir / TRIALS_DIR
     if not trials.is_dir():
@@ -175,12 +204,13 @@ def read_rows(out_dir: str | Path) -> list[dict]:
 
 
 def set_aside_corrupt_trials(out_dir: Path) -> list[str]:
-    """Moves each trial whose trial.json is unreadable to OUT/corrupt/ (kept for inspection),
-    so the sweep recomputes it; returns one message per trial moved."""
+    """Moves each trial whose trial.json or array files are unreadable (check_trial) to
+    OUT/corrupt/ (kept for inspection), so the sweep recomputes it; returns one message per
+    trial moved."""
     messages = []
     for trial_dir in _finished_trial_dirs(out_dir):
         try:
-            read_row(trial_dir)
+            check_trial(trial_dir)
         except CorruptTrialError as e:
             target = out_dir / CORRUPT_DIR / f"{trial_dir.name}-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}"
             target.parent.mkdir(exist_ok=True)

@@ -37,6 +37,7 @@ import functools
 import multiprocessing
 import os
 import resource
+import signal
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
@@ -184,11 +185,17 @@ def prepare_worker(config: SceneConfig) -> int:
     return os.getpid()
 
 
+def _worker_init() -> None:
+    # A forked worker inherits the parent's handlers; the CLI's turns SIGTERM into an exception,
+    # which in a worker would only unwind its task. A worker told to stop stops.
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def local_pool(workers: int, start_method: str = START_METHOD) -> ProcessPoolExecutor:
     """`workers` local processes for the segment programs (reuse one across plans to pay the
     start-up once: each process keeps the scenes it solved in, worker_scene)."""
     check_integer("segment workers", workers, 1)
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method))
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method), initializer=_worker_init)
 
 
 def check_workers(workers, name: str = "segment_workers") -> int | None:
@@ -215,8 +222,31 @@ def run_pieces(
         return [solve_piece(t, scene, log_observer) for t in tasks]
     for t in tasks:  # a forked worker inherits the scene built here
         worker_scene(t.scene)
-    with local_pool(workers) as pool:
-        return list(pool.map(solve_piece, tasks))
+    pool = local_pool(workers)
+    try:
+        results = list(pool.map(solve_piece, tasks))
+    except BaseException:
+        # Interrupted (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the CLI) or failed:
+        # shutdown() alone would wait for the running solves, minutes deep in IPOPT, and a
+        # killed parent would leave them running as orphans.
+        kill_workers(pool)
+        raise
+    pool.shutdown()
+    return results
+
+
+def kill_workers(pool: ProcessPoolExecutor) -> None:
+    """Kills a local pool's worker processes (SIGKILL: a forked worker inherits the parent's
+    signal handlers, and one inside IPOPT would not run them), reaps them, and shuts the pool
+    down, its queued tasks cancelled."""
+    # ProcessPoolExecutor has no public kill before Python 3.14 (kill_workers); its processes are _processes.
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+    for process in processes:
+        process.join(timeout=10)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[tuple[int, int]]:
