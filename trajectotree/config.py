@@ -197,8 +197,9 @@ class SceneConfig:
             check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
         check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
-        for i, v in enumerate(self.initial_pose):
+        for i, v in enumerate(self.initial_pose[:2]):
             check_range("scene.initial_pose", v, -1.0, 1.0, index=(i,))
+        check_range("scene.initial_pose", self.initial_pose[2], -100.0, 100.0, index=(2,))  # rad: many turns
         check_range("scene.corner_margin", self.corner_margin, 0.0, None)
         shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
         if self.object.vertices is not None:

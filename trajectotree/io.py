@@ -23,6 +23,7 @@ import numpy as np
 from trajectotree.config import Config, ConfigError, config_from_dict, config_to_dict
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.results import SIM_ARRAYS, TRAJECTORY_ARRAYS, PhysicsCheck, PlanResult, SimResult, Trajectory
+from trajectotree.start import StartState
 
 SIM_JSON = "sim.json"
 SIM_NPZ = "sim.npz"
@@ -251,3 +252,22 @@ def load_plan(out_dir: str | Path) -> PlanResult:
             trajectory=Trajectory(**{n: files.arrays[n] for n in TRAJECTORY_ARRAYS}) if files.arrays else None,
         )
     return result
+
+
+def save_start(start: StartState, path: str | Path) -> None:
+    """start.json: a StartState (trajectotree.start), written atomically."""
+    write_json_atomic(path, start.to_json())
+
+
+def load_start(path: str | Path) -> StartState:
+    """A start state from its JSON file; ConfigError naming the file when it cannot be read as one."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_bytes().decode("utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"--start {str(path)!r}: no such file") from None
+    except IsADirectoryError:
+        raise ConfigError(f"--start {str(path)!r} is a folder; give a start.json file") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ConfigError(f"--start {str(path)!r} is not a JSON start state ({e})") from None
+    return StartState.from_json(data, where=f"--start {str(path)!r}")

@@ -20,7 +20,7 @@ from trajectotree import __version__
 from trajectotree.config import ConfigError
 
 # Subcommand modules, in the order `--help` lists them.
-COMMANDS = ("demo", "scene", "search", "plan", "simulate", "sweep", "report")
+COMMANDS = ("demo", "scene", "search", "plan", "simulate", "state", "sweep", "report")
 
 
 # A token that starts with a minus sign and a digit (or ".digit") is a value, never an option:

@@ -45,6 +45,12 @@ def register(subparsers) -> None:
     )
     add_config_options(p, formulation=True)
     p.add_argument(
+        "--start",
+        metavar="FILE.json",
+        help="plan from this measured state (object pose and velocity, joint angles, optional contacts; "
+        "`trajectotree state` writes one from a run); --goal is then the final orientation in W",
+    )
+    p.add_argument(
         "--segment-workers",
         type=int,
         metavar="W",
@@ -62,7 +68,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.io import plan_to_json, save_plan
+    from trajectotree.io import load_start, plan_to_json, save_plan
     from trajectotree.planning.keyframes import check_workers
     from trajectotree.planning.planners import plan
     from trajectotree.scene.plant import build_scene
@@ -74,14 +80,21 @@ def run(args) -> int:
     out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}", (PLAN_JSON, PLAN_NPZ))
     if args.html:  # it may go into --out, which save_plan creates before the playback is written
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
+    start = load_start(args.start) if args.start else None
     scene = build_scene(config.scene)
-    check_graspable(scene, config, args)
+    if start is None:
+        check_graspable(scene, config, args)
+    else:  # refused here, before any planning, when the start cannot hold the object
+        from trajectotree.planning.start import start_config
+
+        start_config(scene, start, config)
     result = plan(
         scene=scene,
         goal=goal,
         method=method,
         config=config,
         segment_workers=workers,
+        start=start,
         log_observer=ipopt_progress(progress_wanted(args)),
     )
     removed = remove_derived_files(out)

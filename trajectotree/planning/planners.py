@@ -40,12 +40,14 @@ from trajectotree.geometry import box_to_world
 from trajectotree.planning.keyframes import check_workers, plan_keyframes
 from trajectotree.planning.keyframes import trajectory as segment_trajectory
 from trajectotree.planning.physics import ObjectModel, check_physics
+from trajectotree.planning.start import begin_at, start_config
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
 from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
+from trajectotree.start import StartState
 
 
 def plan(
@@ -54,6 +56,7 @@ def plan(
     method: str = "trajectotree",
     config: Config | None = None,
     scene: Scene | None = None,
+    start: StartState | None = None,
     contact_plan: ContactPlan | None = None,
     segment_executor: Executor | None = None,
     segment_workers: int | None = None,
@@ -62,7 +65,10 @@ def plan(
 ) -> PlanResult:
     """Plans the rotation `goal` (rad, in [-pi, pi]) of the object with `method` ("trajectotree",
     "cito" or "cito-warm"). `config` defaults to Config() (the paper's scene), `scene` to the plant
-    built from config.scene (pass one to reuse it). A `contact_plan` may be given
+    built from config.scene (pass one to reuse it). With a `start` (a measured StartState) the plan
+    begins there: its grasp roots the search, its joint angles are the first knot's, and `goal` is
+    the object's final orientation in W (StartRefused before any planning when the start cannot
+    hold the object: trajectotree.planning.start). A `contact_plan` may be given
     for the methods that use one (the search is then skipped; its time counts 0).
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
     persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
@@ -74,6 +80,9 @@ def plan(
     goal = check_goal(goal)
     config = config or Config()
     scene = scene or build_scene(config.scene)
+    if start is not None:
+        config = start_config(scene, start, config)
+        scene = build_scene(config.scene)
     check_workers(segment_workers)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
@@ -88,6 +97,8 @@ def plan(
         search_time = time.perf_counter() - t0
         if not contact_plan.success:
             return _unsolved(method, goal, f"search failed: {contact_plan.reason}", search_time, contact_plan, config)
+    if start is not None:
+        contact_plan = begin_at(contact_plan, start)
     check_plan(contact_plan, scene, min_nodes=1 if method == "cito" else 2)
 
     if method == "trajectotree" and config.cito.formulation == "keyframes":

@@ -73,9 +73,9 @@ from trajectotree.search.switch_bound import SwitchBound
 
 
 def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
-    """(N, 3) poses x*_n from the initial pose to the initial pose rotated by `goal`."""
+    """(N, 3) poses x*_n from the initial pose to orientation `goal` (rad in W) at the same position."""
     x0 = np.asarray(initial_pose, dtype=float)
-    return x0 + np.outer(np.linspace(0.0, 1.0, num_nodes), [0.0, 0.0, goal])
+    return x0 + np.outer(np.linspace(0.0, 1.0, num_nodes), [0.0, 0.0, goal - x0[2]])
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,129 @@
+"""Planning from a measured state (trajectotree.start.StartState).
+
+A start is accepted when the object is nearly at rest and every fingertip touches its surface in
+a grasp that is in frictional form closure at mu_plan: the search is then rooted at exactly those
+contacts (search.initial_arclengths) at the start's object pose (scene.initial_pose), and the plan's
+first node carries the measured joint angles, so CITO's first knot is the measured state. Anything
+else is refused before planning, with a `StartRefusal` that names the finger, the value and the limit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.config import Config, ConfigError, mu_plan
+from trajectotree.contact_plan import ContactPlan
+from trajectotree.geometry import world_to_box
+from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.search.grasp import FormClosure
+from trajectotree.start import StartState
+
+# The plan's nodes are static grasps (CITO holds every node's velocities at zero), so a start must be
+# nearly at rest: these bounds are 10x what a settled grasp shows in simulation.
+START_SPEED_LIMIT = 0.02  # m/s
+START_SPIN_LIMIT = 0.2  # rad/s
+# m, a fingertip sphere this close to the surface touches it: simulated grasps sink 0.1-0.5 mm into
+# the object under their squeeze; a lifted (switching) finger is 8 mm or more away
+TOUCH_DISTANCE = 2e-3
+
+
+class StartProblem(enum.Enum):
+    MOVING = "the object is moving"
+    SPINNING = "the object is turning"
+    FINGER_OFF = "a fingertip does not touch the object"
+    CONTACT_MISMATCH = "a given contact is not where the fingertip is"
+    NOT_IN_CLOSURE = "the grasp cannot hold the object"
+
+
+@dataclass(frozen=True)
+class StartRefusal:
+    """Why a start state cannot be planned from, with its numbers."""
+
+    problem: StartProblem
+    finger: int | None = None
+    value: float = float("nan")  # the measured quantity (m, m/s or the friction the grasp needs)
+    limit: float = float("nan")  # what it may be at most
+
+    def __str__(self) -> str:
+        if self.problem is StartProblem.MOVING:
+            return (
+                f"start: the object moves at {self.value:.3g} m/s; a plan starts at rest (at most {self.limit:g} m/s)"
+            )
+        if self.problem is StartProblem.SPINNING:
+            return f"start: the object turns at {self.value:.3g} rad/s; a plan starts at rest (at most {self.limit:g})"
+        if self.problem is StartProblem.FINGER_OFF:
+            return (
+                f"start: fingertip {self.finger} is {self.value * 1e3:.2f} mm from the object's surface; every "
+                f"finger must touch it (within {self.limit * 1e3:g} mm) to start a plan"
+            )
+        if self.problem is StartProblem.CONTACT_MISMATCH:
+            return (
+                f"start: finger {self.finger}'s given contact is {self.value * 1e3:.2f} mm from its fingertip's "
+                f"contact point; at most {self.limit * 1e3:g} mm"
+            )
+        return (
+            f"start: the grasp of fingers (0, 1, 2, 3) is not in frictional form closure at mu_plan "
+            f"{self.limit:.3g}; it needs mu {self.value:.3g}"
+        )
+
+
+class StartRefused(ConfigError):
+    """A start state that cannot be planned from (the CLI exits 2); `refusal` says why."""
+
+    def __init__(self, refusal: StartRefusal):
+        super().__init__(str(refusal))
+        self.refusal = refusal
+
+
+def start_contacts(scene: Scene, start: StartState) -> np.ndarray:
+    """(4,) m, each finger's contact arclength: the boundary point nearest its fingertip sphere,
+    which must touch the surface (StartRefused otherwise); the start's own arclengths, when given,
+    must agree with it."""
+    shape = scene.config.shape
+    p_WF = scene.fingertip_positions(np.asarray(start.q))  # (4, 2)
+    p_BF = np.array([world_to_box(start.object_pose, p) for p in p_WF])
+    gaps = shape.signed_distances(p_BF) - scene.tip_radius
+    for i in range(NUM_FINGERS):
+        if abs(gaps[i]) > TOUCH_DISTANCE:
+            raise StartRefused(StartRefusal(StartProblem.FINGER_OFF, i, float(abs(gaps[i])), TOUCH_DISTANCE))
+    arclengths = np.array([shape.arclength(p) for p in p_BF])
+    if start.arclengths is not None:
+        given = np.mod(np.asarray(start.arclengths, dtype=float), shape.perimeter)
+        p_given, _ = shape.points(given)
+        p_tips = shape.nearest_points(p_BF)
+        for i in range(NUM_FINGERS):
+            off = float(np.linalg.norm(p_given[i] - p_tips[i]))
+            if off > TOUCH_DISTANCE:
+                raise StartRefused(StartRefusal(StartProblem.CONTACT_MISMATCH, i, off, TOUCH_DISTANCE))
+        arclengths = given
+    return arclengths
+
+
+def start_config(scene: Scene, start: StartState, config: Config) -> Config:
+    """The config whose search roots at the start's grasp and pose; StartRefused when the object
+    moves, a finger does not touch it or the grasp is not in closure at mu_plan."""
+    v = np.asarray(start.object_velocity, dtype=float)
+    speed, spin = float(np.hypot(v[0], v[1])), abs(float(v[2]))
+    if speed > START_SPEED_LIMIT:
+        raise StartRefused(StartRefusal(StartProblem.MOVING, value=speed, limit=START_SPEED_LIMIT))
+    if spin > START_SPIN_LIMIT:
+        raise StartRefused(StartRefusal(StartProblem.SPINNING, value=spin, limit=START_SPIN_LIMIT))
+    arclengths = start_contacts(scene, start)
+    mu = mu_plan(config.scene, config.search)
+    closure = FormClosure(scene.config.shape, mu, config.search.min_closure_margin)
+    if not closure.check(arclengths).in_closure:
+        raise StartRefused(StartRefusal(StartProblem.NOT_IN_CLOSURE, value=closure.required_mu(arclengths), limit=mu))
+    scene_config = dataclasses.replace(config.scene, initial_pose=tuple(float(c) for c in start.object_pose))
+    search = dataclasses.replace(config.search, initial_arclengths=tuple(float(s) for s in arclengths))
+    return dataclasses.replace(config, scene=scene_config, search=search)
+
+
+def begin_at(plan: ContactPlan, start: StartState) -> ContactPlan:
+    """The contact plan with its first node at the measured joint angles (the search's IK puts
+    each fingertip exactly on its contact; the measured one may sit up to TOUCH_DISTANCE off)."""
+    first = dataclasses.replace(plan.nodes[0], q=np.asarray(start.q, dtype=float))
+    return dataclasses.replace(plan, nodes=(first, *plan.nodes[1:]))
