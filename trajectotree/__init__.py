@@ -36,10 +36,13 @@ _EXPORTS = {
     "PlanResult": "results",
     "SimResult": "results",
     "PhysicsCheck": "results",
+    "StartState": "start",
     "save_plan": "io",
     "load_plan": "io",
     "save_sim": "io",
     "load_sim": "io",
+    "save_start": "io",
+    "load_start": "io",
     # stages
     "build_scene": "scene.plant",
     "find_contact_plan": "search.tree",
