@@ -163,3 +163,18 @@ def test_cli_version_and_scene_summary(tmp_path):
     assert result.returncode == 0, result.stderr
     assert '"mass_kg": 0.08' in result.stdout
     assert (tmp_path / "m.png").stat().st_size > 10_000
+
+
+def test_round_objects_are_one_outline_each_and_round_trip_through_yaml(tmp_path):
+    from trajectotree.config import ObjectConfig
+
+    with pytest.raises(ConfigError, match="vertices and circle_radius both describe the object"):
+        ObjectConfig(vertices=((0, 0), (0.1, 0), (0, 0.1)), circle_radius=0.05)
+    with pytest.raises(ConfigError, match=r"scene.object.ellipse_semi_axes = \[0.08\] must be two lengths"):
+        ObjectConfig(ellipse_semi_axes=(0.08,))
+    config = Config(scene=SceneConfig(object=ObjectConfig(ellipse_semi_axes=(0.08, 0.05))))
+    assert not config.scene.object.is_box and ObjectConfig().is_box
+    path = tmp_path / "ellipse.yaml"
+    save_config(config, path)
+    assert load_config(path) == config
+    assert len(config.scene.shape.vertices) == 52 and config.scene.shape.edge_lengths.max() <= 0.01

@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from trajectotree.geometry import ConvexPolygon, box_to_world, polygon_problem, world_to_box
+from trajectotree.geometry import (
+    SMOOTH_EDGE,
+    ConvexPolygon,
+    box_to_world,
+    ellipse_points,
+    polygon_problem,
+    world_to_box,
+)
 
 BOX = ConvexPolygon.box(0.20, 0.10)
 
@@ -180,3 +187,51 @@ def test_penetration_depth_closed_forms_and_the_search_overlap_test():
         overlap = rectangles_overlap_polygon(shape, centres, angles, hl, hw)
         depth = shape.penetration_depths(corners)
         assert 50 < overlap.sum() < 450 and np.array_equal(depth > 1e-12, overlap)
+
+
+def regular_polygon(n: int, circumradius: float) -> ConvexPolygon:
+    angles = 2 * np.pi * (np.arange(n) + 0.5) / n
+    return ConvexPolygon.from_points(np.stack([np.cos(angles), np.sin(angles)], axis=1) * circumradius)
+
+
+def test_corner_margins_follow_the_corner_angle_in_closed_form():
+    np.testing.assert_array_equal(BOX.corner_margins(0.015), 0.015)  # the box's right angles keep the full margin
+    for n in (5, 6, 12, 40):  # exterior angle 2 pi / n: margin tan(pi / n) at most
+        np.testing.assert_allclose(regular_polygon(n, 0.07).corner_margins(0.015), 0.015 * min(1, np.tan(np.pi / n)))
+    np.testing.assert_array_equal(regular_polygon(3, 0.08).corner_margins(0.015), 0.015)  # sharper: capped
+    # the 12-gon of circumradius 0.065 m (edges 33.6 mm) keeps 4.0 mm at each corner, 25.6 mm of each edge free
+    gon = regular_polygon(12, 0.065)
+    s = np.linspace(0.0, gon.perimeter, 20001)[:-1]
+    free = gon.corner_free(s, 0.015)
+    assert free.mean() == pytest.approx(1 - 2 * 0.015 * np.tan(np.pi / 12) / gon.edge_lengths[0], abs=1e-3)
+    np.testing.assert_array_equal(
+        BOX.corner_free([0.0, 0.0149, 0.015, 0.05, 0.085, 0.0851], 0.015), [False, False, True, True, True, False]
+    )
+
+
+def test_sides_join_faces_across_blunt_vertices_only():
+    assert set(BOX.sides(np.linspace(0, 0.6, 61)[:-1])) == {0, 1, 2, 3}
+    assert BOX.sides([0.01])[0] != BOX.sides([0.11])[0]  # across the corner at 0.1 m
+    disc = ConvexPolygon.from_points(ellipse_points(0.06, 0.06))
+    assert set(disc.sides(np.linspace(0, disc.perimeter, 100))) == {0}  # no corner at all
+    assert len(set(regular_polygon(12, 0.065).sides(np.linspace(0, 0.4, 400)))) == 12  # 30 deg: corners
+
+
+@pytest.mark.parametrize("semi_x, semi_y", [(0.06, 0.06), (0.08, 0.05)])
+def test_polygonized_round_shapes_against_their_closed_forms(semi_x, semi_y):
+    points = ellipse_points(semi_x, semi_y)
+    n = len(points)
+    assert n % 4 == 0 and polygon_problem(points) is None
+    shape = ConvexPolygon.from_points(points)
+    assert shape.edge_lengths.max() <= SMOOTH_EDGE
+    np.testing.assert_allclose(shape.vertices.mean(axis=0), 0.0, atol=1e-12)  # symmetric about its centre
+    np.testing.assert_allclose(shape.normals[0], [1.0, 0.0], atol=1e-12)  # a face centred on +x, as the box
+    np.testing.assert_allclose((shape.vertices[:, 0] / semi_x) ** 2 + (shape.vertices[:, 1] / semi_y) ** 2, 1.0)
+    if semi_x == semi_y:  # the disc: every contact within r (1 - cos(pi / n)) of the circle, its normal radial
+        p, normal = shape.points(np.linspace(0.0, shape.perimeter, 997))
+        r = np.linalg.norm(p, axis=1)
+        assert np.all(r <= semi_x + 1e-12) and np.all(r >= semi_x * np.cos(np.pi / n) - 1e-12)
+        radial = np.arccos(np.clip(np.einsum("ka,ka->k", normal, p / r[:, None]), -1, 1))
+        assert radial.max() <= np.pi / n + 1e-9
+        assert shape.area == pytest.approx(n / 2 * semi_x**2 * np.sin(2 * np.pi / n), rel=1e-12)
+        assert shape.perimeter == pytest.approx(2 * np.pi * semi_x, rel=2 * (np.pi / n) ** 2 / 6)

@@ -16,9 +16,10 @@ import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions raise
 
-from trajectotree.geometry import ConvexPolygon, polygon_problem
+from trajectotree.geometry import ConvexPolygon, ellipse_points, polygon_problem
 from trajectotree.typed_yaml import DRAKE_ERRORS, drake_yaml, freeze, load_typed, thaw
 
 _NO_VALUE = object()  # a ConfigError about a field whose value its message does not repeat
@@ -139,13 +140,26 @@ def check_length(name: str, value, length: int, entries: str) -> None:
 
 @dataclass(frozen=True)
 class ObjectConfig:
-    """The object's outline when it is not the box (SceneConfig.shape)."""
+    """The object's outline when it is not the box (SceneConfig.shape): one of a polygon's
+    vertices, a disc's radius or an ellipse's semi-axes (the round ones are polygonized,
+    geometry.ellipse_points)."""
 
     # m, (x, y) vertices of a convex polygon in the object frame, in either orientation; it is made
     # counter-clockwise and re-centred at its area centroid. None: the box_width x box_height box.
     vertices: tuple[tuple[float, float], ...] | None = None
+    circle_radius: float | None = None  # m, a disc of this radius
+    ellipse_semi_axes: tuple[float, float] | None = None  # m, an ellipse's semi-axes along the object's x and y
 
     def __post_init__(self):
+        given = [n for n in ("vertices", "circle_radius", "ellipse_semi_axes") if getattr(self, n) is not None]
+        if len(given) > 1:
+            raise ConfigError(f"scene.object: {' and '.join(given)} both describe the object; give one of them")
+        if self.circle_radius is not None:
+            check_range("scene.object.circle_radius", self.circle_radius, 0.0, 0.3, low_open=True)
+        if self.ellipse_semi_axes is not None:
+            check_length("scene.object.ellipse_semi_axes", self.ellipse_semi_axes, 2, "a, b in m")
+            for i, a in enumerate(self.ellipse_semi_axes):
+                check_range("scene.object.ellipse_semi_axes", a, 0.0, 0.3, low_open=True, index=(i,))
         if self.vertices is None:
             return
         for i, v in enumerate(self.vertices):
@@ -168,6 +182,25 @@ class ObjectConfig:
                 valid="at least 3 distinct (x, y) vertices in convex position",
             )
 
+    @property
+    def field_name(self) -> str:
+        """The field that describes the object, for messages ("scene.object.vertices")."""
+        given = [n for n in ("vertices", "circle_radius", "ellipse_semi_axes") if getattr(self, n) is not None]
+        return "scene.object." + (given[0] if given else "vertices")
+
+    @property
+    def is_box(self) -> bool:
+        """No outline given: the object is SceneConfig's box_width x box_height box."""
+        return self.vertices is None and self.circle_radius is None and self.ellipse_semi_axes is None
+
+    def outline(self) -> np.ndarray | None:
+        """(V, 2) m, the polygon's vertices, the round shape's polygonized outline, or None (the box)."""
+        if self.circle_radius is not None:
+            return ellipse_points(self.circle_radius, self.circle_radius)
+        if self.ellipse_semi_axes is not None:
+            return ellipse_points(*self.ellipse_semi_axes)
+        return None if self.vertices is None else np.asarray(self.vertices, dtype=float)
+
 
 @dataclass(frozen=True)
 class SceneConfig:
@@ -185,10 +218,10 @@ class SceneConfig:
 
     @functools.cached_property
     def shape(self) -> ConvexPolygon:
-        """The object's outline in its frame B: the polygon of `object.vertices`, else the box."""
-        if self.object.vertices is None:
+        """The object's outline in its frame B: the polygon, disc or ellipse of `object`, else the box."""
+        if self.object.is_box:
             return ConvexPolygon.box(self.box_width, self.box_height)
-        return ConvexPolygon.from_points(self.object.vertices)
+        return ConvexPolygon.from_points(self.object.outline())
 
     def __post_init__(self):
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
@@ -201,31 +234,36 @@ class SceneConfig:
             check_range("scene.initial_pose", v, -1.0, 1.0, index=(i,))
         check_range("scene.initial_pose", self.initial_pose[2], -100.0, 100.0, index=(2,))  # rad: many turns
         check_range("scene.corner_margin", self.corner_margin, 0.0, None)
-        shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
-        if self.object.vertices is not None:
-            lengths = self.shape.edge_lengths
-            if lengths.min() <= shortest:
+        if self.object.is_box:
+            shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
+            if min(self.box_width, self.box_height) <= shortest:
                 raise ConfigError(
-                    field="scene.object.vertices",
-                    problem=f"edge {int(lengths.argmin())} is {lengths.min():.4g} m long; contacts keep "
-                    f"scene.corner_margin = {self.corner_margin:g} m from each corner, so every edge must be "
-                    f"longer than {shortest:g} m",
+                    field="scene.box_width x scene.box_height",
+                    value=(self.box_width, self.box_height),
+                    shown=f"{self.box_width:g} x {self.box_height:g} m",
+                    problem=f"is too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
+                    f"corner, so each side must be longer than {shortest:g} m",
+                    valid=f"{interval(shortest, 0.3, low_open=True)} m",
+                    label="valid range of each side",
                 )
-            if self.shape.circumradius > 0.3:
-                raise ConfigError(
-                    field="scene.object.vertices",
-                    problem=f"a vertex is {self.shape.circumradius:.3g} m from the centroid",
-                    valid="at most 0.3 m",
-                )
-        elif min(self.box_width, self.box_height) <= shortest:
+            return
+        shape = self.shape
+        margins = shape.corner_margins(self.corner_margin)
+        room = shape.edge_lengths - margins - np.roll(margins, -1)  # face f runs from vertex f to f + 1
+        if room.min() <= 0:
+            f = int(room.argmin())
+            ends = margins[f], margins[(f + 1) % len(margins)]
             raise ConfigError(
-                field="scene.box_width x scene.box_height",
-                value=(self.box_width, self.box_height),
-                shown=f"{self.box_width:g} x {self.box_height:g} m",
-                problem=f"is too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
-                f"corner, so each side must be longer than {shortest:g} m",
-                valid=f"{interval(shortest, 0.3, low_open=True)} m",
-                label="valid range of each side",
+                field=self.object.field_name,
+                problem=f"edge {f} is {shape.edge_lengths[f]:.4g} m long; contacts keep {ends[0]:.3g} m and "
+                f"{ends[1]:.3g} m from its corners (scene.corner_margin = {self.corner_margin:g} m at a right angle, "
+                f"less at a blunter corner), so it must be longer than {sum(ends):.3g} m",
+            )
+        if shape.circumradius > 0.3:
+            raise ConfigError(
+                field=self.object.field_name,
+                problem=f"a vertex is {shape.circumradius:.3g} m from the centroid",
+                valid="at most 0.3 m",
             )
 
 

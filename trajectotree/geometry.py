@@ -19,6 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
+SMOOTH_EDGE = 0.01  # m, the longest edge of a polygonized disc or ellipse: tan(alpha / 2) keeps it a face
+# rad, vertices turning less are no corner for a rolling fingertip: a 1 cm sphere pivoting over one shifts its
+# contact by at most r alpha = 2.6 mm, within the 5 mm the 15 mm corner margin leaves spare at a right angle
+SMOOTH_VERTEX_ANGLE = np.radians(15.0)
+
 
 def _cross(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
@@ -209,6 +214,37 @@ class ConvexPolygon:
         d = np.abs(self._corners - s)
         return float(np.min(np.minimum(d, self.perimeter - d)))
 
+    @property
+    def exterior_angles(self) -> np.ndarray:
+        """(V,) rad, how far the boundary turns at each vertex (pi/2 for the box's corners)."""
+        incoming = np.roll(self.directions, 1, axis=0)
+        return np.arctan2(_cross(incoming, self.directions), np.einsum("va,va->v", incoming, self.directions))
+
+    def corner_margins(self, margin: float) -> np.ndarray:
+        """(V,) m, the arclength kept free of contacts on each side of each vertex: `margin` scaled
+        by tan(alpha / 2) for an exterior angle alpha, at most `margin`.
+
+        A fingertip sphere of radius r on a face touches only that face while it stays at least
+        r tan(alpha / 2) from the vertex, so a blunt corner needs less room than a right angle
+        (tan(pi / 4) = 1: the box keeps the full margin) and a vertex barely bent is a face; sharper
+        corners keep `margin`, which is never smaller than at a right angle."""
+        return margin * np.minimum(1.0, np.round(np.tan(self.exterior_angles / 2), 12))  # round: the box's 1 exactly
+
+    def sides(self, arclengths) -> np.ndarray:
+        """(k,) the side each arclength lies on: a run of faces joined by vertices that turn less
+        than SMOOTH_VERTEX_ANGLE (a polygonized disc is one side; the box has four, its faces).
+        A fingertip rolls across such a vertex as across a face: it pivots by the small angle."""
+        corners = self._corners[self.exterior_angles >= SMOOTH_VERTEX_ANGLE]
+        s = np.mod(np.asarray(arclengths, dtype=float), self.perimeter)
+        return np.searchsorted(corners, s, side="right") % max(len(corners), 1)
+
+    def corner_free(self, arclengths, margin: float) -> np.ndarray:
+        """(k,) bool, whether each arclength keeps corner_margins(margin) from every vertex."""
+        s = np.mod(np.asarray(arclengths, dtype=float), self.perimeter)
+        gap = np.abs(s[..., None] - self._corners)
+        gap = np.minimum(gap, self.perimeter - gap)
+        return np.all(gap >= self.corner_margins(margin), axis=-1)
+
     def signed_distance(self, p_B) -> float:
         """Exact signed distance from p_B to the polygon (negative inside)."""
         p = np.asarray(p_B, dtype=float)
@@ -318,3 +354,13 @@ def poses_world_to_box(x: np.ndarray, p_W: np.ndarray) -> np.ndarray:
 def poses_box_to_world(x: np.ndarray, p_B: np.ndarray) -> np.ndarray:
     """p_W (K, P, 2) of box points p_B (K, P, 2) at object poses x (K, 3)."""
     return x[:, None, :2] + np.einsum("kab,kpb->kpa", rotations_2d(x[:, 2]), p_B)
+
+
+def ellipse_points(semi_x: float, semi_y: float, max_edge: float = SMOOTH_EDGE) -> np.ndarray:
+    """(V, 2) vertices of a convex polygon inscribed in the ellipse with semi-axes `semi_x`, `semi_y`
+    (m; equal: a disc), V a multiple of 4 with every edge at most `max_edge`, and a face centred on
+    each axis (as the box's faces are), so the shape keeps the ellipse's symmetries."""
+    radius = max(semi_x, semi_y)  # an ellipse's chords are at most those of its larger axis' circle
+    n = 4 * int(np.ceil(np.pi / (4 * np.arcsin(min(1.0, max_edge / (2 * radius))))))
+    angles = 2 * np.pi * (np.arange(n) + 0.5) / n
+    return np.stack([semi_x * np.cos(angles), semi_y * np.sin(angles)], axis=1)

@@ -41,8 +41,9 @@ BAD_POLYGONS = [
     ("0,0 nan,0 0,0.1", "--polygon (scene.object.vertices[1][0]) = nan is not a finite number"),
     (
         "0,0 0.02,0 0,0.02",
-        "--polygon (scene.object.vertices): edge 1 is 0.02 m long; contacts keep "
-        "scene.corner_margin = 0.015 m from each corner, so every edge must be longer than 0.03 m",
+        "--polygon (scene.object.vertices): edge 1 is 0.02 m long; contacts keep 0.015 m and 0.015 m from its "
+        "corners (scene.corner_margin = 0.015 m at a right angle, less at a blunter corner), so it must be longer "
+        "than 0.03 m",
     ),
 ]
 
@@ -189,3 +190,40 @@ def test_a_rectangle_given_as_a_polygon_is_described_as_the_box_it_is(capsys):
     o = json.loads(capsys.readouterr().out)["object"]
     assert o["kind"] == "box" and o["size_m"] == [0.24, 0.06] and o["name"] == "0.24 x 0.06 m box"
     assert o["inertia_zz_kg_m2"] == pytest.approx(0.05 * (0.24**2 + 0.06**2) / 12, rel=1e-12)
+
+
+TWELVE_GON = " ".join(
+    f"{0.065 * math.cos(2 * math.pi * (k + 0.5) / 12):.6f},{0.065 * math.sin(2 * math.pi * (k + 0.5) / 12):.6f}"
+    for k in range(12)
+)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--circle", "0"], "--circle (scene.object.circle_radius) = 0.0 is out of range; valid range: (0, 0.3]"),
+        (["--circle", "-0.05"], "--circle (scene.object.circle_radius) = -0.05 is out of range"),
+        (["--ellipse", "0.08", "-0.05"], "--ellipse (scene.object.ellipse_semi_axes[1]) = -0.05 is out of range"),
+        (["--circle", "0.06", "--polygon", TRIANGLE], "--polygon and --circle both describe the object"),
+        (["--ellipse", "0.08", "0.05", "--box-size", "0.2", "0.1"], "--box-size and --ellipse both describe"),
+    ],
+)
+def test_bad_round_objects_exit_2_naming_the_value_and_write_nothing(args, message, tmp_path, capsys):
+    assert main(["plan", "--goal", "0.1", *args, "--out", str(tmp_path / "p")]) == 2
+    err = capsys.readouterr().err
+    assert message in err, err
+    assert listing(tmp_path) == []
+
+
+def test_round_objects_are_polygonized_with_blunt_corners_the_hand_can_grasp(capsys):
+    parser = build_parser()
+    for args, noun in (
+        (["--circle", "0.06"], "disc of radius 0.06 m"),
+        (["--ellipse", "0.08", "0.05"], "ellipse of semi-axes 0.08 x 0.05 m"),
+        (["--polygon", TWELVE_GON], "12-gon"),
+    ):
+        config = config_from_args(parser.parse_args(["scene", *args]))
+        grasps = initial_grasp_candidates(build_scene(config.scene), config.search)
+        assert grasps.reason == "" and len(grasps.candidates) > 0, args  # the 12-gon was refused before
+        assert main(["scene", *args]) == 0
+        assert noun in capsys.readouterr().out

@@ -127,7 +127,7 @@ def check_polygon_plan(scene, plan, config: SearchConfig):
         assert closure.check(node.arclengths).in_closure
         p_WF = scene.fingertip_positions(node.q)
         for i in range(NUM_FINGERS):
-            assert shape.corner_distance(node.arclengths[i]) >= scene.config.corner_margin - 1e-12
+            assert shape.corner_free([node.arclengths[i] + 1e-12], scene.config.corner_margin)[0]
             assert shape.signed_distance(node.p_BC[i]) == pytest.approx(0.0, abs=1e-12)
             target = (
                 box_to_world(node.object_pose, node.p_BC[i])

@@ -56,7 +56,7 @@ def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
 
 
 def _describe(c) -> str:
-    if c.object.vertices is None:
+    if c.object.is_box:
         return f"(the {c.box_width} x {c.box_height} m box)"
     return f"(the polygon {np.round(c.shape.vertices, 6).tolist()} m)"
 

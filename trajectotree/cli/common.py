@@ -40,6 +40,16 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
         "object frame, in either orientation (re-centred at its centroid), e.g. "
         '"-0.07,-0.04 0.07,-0.04 0,0.08"',
     )
+    group.add_argument(
+        "--circle", type=float, metavar="R", help="the object is a disc of radius R m (polygonized, 1 cm edges at most)"
+    )
+    group.add_argument(
+        "--ellipse",
+        nargs=2,
+        type=float,
+        metavar=("A", "B"),
+        help="the object is an ellipse with semi-axes A along its x and B along its y, m (polygonized)",
+    )
     group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
 
@@ -65,17 +75,23 @@ def parse_polygon(text: str) -> tuple[tuple[float, float], ...]:
 
 
 def scene_overrides(args: argparse.Namespace) -> dict:
-    """The SceneConfig fields set by --box-size, --polygon, --mass and --mu. --box-size makes
-    the object a box (object.vertices None), --polygon a polygon; both together: ConfigError."""
+    """The SceneConfig fields set by --box-size, --polygon, --circle, --ellipse, --mass and --mu.
+    --box-size makes the object a box, the others a polygon, disc or ellipse; two of them: ConfigError."""
     scene = {}
-    polygon = getattr(args, "polygon", None)
-    if polygon is not None and getattr(args, "box_size", None) is not None:
-        raise ConfigError("--polygon and --box-size both describe the object: give one of them")
-    if polygon is not None:
-        try:
+    shapes = [o for o in ("polygon", "box_size", "circle", "ellipse") if getattr(args, o, None) is not None]
+    if len(shapes) > 1:
+        names = " and ".join("--" + o.replace("_", "-") for o in shapes)
+        raise ConfigError(f"{names} {'both' if len(shapes) == 2 else 'all'} describe the object: give one of them")
+    polygon, circle, ellipse = (getattr(args, o, None) for o in ("polygon", "circle", "ellipse"))
+    try:
+        if polygon is not None:
             scene["object"] = ObjectConfig(vertices=parse_polygon(polygon))
-        except ConfigError as e:
-            raise in_option_terms(e, args) from None
+        elif circle is not None:
+            scene["object"] = ObjectConfig(circle_radius=circle)
+        elif ellipse is not None:
+            scene["object"] = ObjectConfig(ellipse_semi_axes=tuple(ellipse))
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
     if getattr(args, "box_size", None) is not None:
         scene["box_width"], scene["box_height"] = args.box_size
         scene["object"] = ObjectConfig()
@@ -134,9 +150,9 @@ def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
             f"{list(config.scene.initial_pose)}: {grasps.refusal}; corner-free contacts each finger "
             f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)"
         )
-        if config.scene.object.vertices is None:
+        if config.scene.object.is_box:
             raise ConfigError(f"the box: {problem}")
-        raise in_option_terms(ConfigError(field="scene.object.vertices", problem=problem), args)
+        raise in_option_terms(ConfigError(field=config.scene.object.field_name, problem=problem), args)
     check_payload(scene, config, args, grasps)
 
 
@@ -208,6 +224,8 @@ OPTION_FIELDS = {
     "scene.box_mass": ("mass", "--mass"),
     "scene.mu": ("mu", "--mu"),
     "scene.object.vertices": ("polygon", "--polygon"),
+    "scene.object.circle_radius": ("circle", "--circle"),
+    "scene.object.ellipse_semi_axes": ("ellipse", "--ellipse"),
     "cito.formulation": ("formulation", "--formulation"),
 }
 

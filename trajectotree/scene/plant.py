@@ -322,9 +322,13 @@ POLYGON_NAMES = {3: "triangle", 4: "quadrilateral", 5: "pentagon", 6: "hexagon"}
 
 def describe_object(config: SceneConfig) -> str:
     """A short name of the object for titles: "0.20 x 0.10 m box", "triangle (85 cm^2)"."""
-    shape = config.shape
+    shape, outline = config.shape, config.object
     if shape.is_box:
         a, b = shape.box_half
         return f"{2 * a:.2f} x {2 * b:.2f} m box"
+    if outline.circle_radius is not None:
+        return f"disc of radius {outline.circle_radius:g} m"
+    if outline.ellipse_semi_axes is not None:
+        return f"ellipse of semi-axes {outline.ellipse_semi_axes[0]:g} x {outline.ellipse_semi_axes[1]:g} m"
     n = len(shape.vertices)
     return f"{POLYGON_NAMES.get(n, f'{n}-gon')} ({shape.area * 1e4:.0f} cm^2)"

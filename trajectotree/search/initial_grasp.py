@@ -81,7 +81,7 @@ def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.nda
     c = scene.config
     boundary = c.shape
     grid = np.round(np.arange(0.0, boundary.perimeter - 1e-9, step), 9)
-    grid = grid[[boundary.corner_distance(s) >= c.corner_margin for s in grid]]
+    grid = grid[boundary.corner_free(grid, c.corner_margin)]
     out = []
     for finger in range(NUM_FINGERS):
         q = reach.closed_form_many(np.asarray(c.initial_pose, dtype=float), finger, grid)

@@ -100,12 +100,8 @@ class StanceChecks:
         required_mu; the LP's 1e-3 N margin is not applied here)."""
         stance = STANCE_FINGERS[finger]
         rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
-        corners = self.boundary.corner_arclengths()
-
-        def face(s) -> int:
-            return int(np.searchsorted(corners, s, side="right"))
-
-        if any(face(s) != face(node.arclengths[j]) for row in rolled for j, s in zip(stance, row)):
+        landed = self.boundary.sides([node.arclengths[j] for j in stance])
+        if any(np.any(self.boundary.sides(row) != landed) for row in rolled):
             return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance)
         p_BC, n_B = self.boundary.points(np.ravel(rolled))
         A, B = closure_edges_parts(p_BC.reshape(2, 3, 2), n_B.reshape(2, 3, 2))

@@ -45,15 +45,13 @@ class SwitchBound:
         switches than steps remain has no completion (one switch per step), so pruning it
         never removes a plan; it only spares the DFS hopeless subtrees."""
         last = self.config.num_nodes - 1
-        corners, per = self.boundary.corner_arclengths(), self.boundary.perimeter
         for finger, s0s in enumerate(starts):
             grid, frontier = set(s0s), set(s0s)  # every arclength the finger can ever hold
             for _ in range(last):
                 frontier = {m for s in frontier for m in self.moves(s)} - grid
                 grid |= frontier
             grid = np.array(sorted(grid))
-            gap = np.abs(grid[:, None] - corners[None, :])
-            corner_free = np.min(np.minimum(gap, per - gap), axis=1) >= self.scene.config.corner_margin
+            corner_free = self.boundary.corner_free(grid, self.scene.config.corner_margin)
             # reachability of the whole grid at every depth in one vectorized call
             q2 = self.reach.closed_form_many(np.repeat(self.poses[1:], len(grid), axis=0), finger, np.tile(grid, last))[
                 :, 1

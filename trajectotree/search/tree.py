@@ -117,7 +117,7 @@ class _Search:
     def contacts_allowed(self, arclengths) -> Refusal | None:
         """Why these contacts are not allowed on the boundary (None when they are)."""
         margin = self.scene.config.corner_margin
-        if any(self.boundary.corner_distance(s) < margin for s in arclengths):
+        if not np.all(self.boundary.corner_free(arclengths, margin)):
             return Refusal(RefusalKind.CORNER, limit=margin)
         if any(self.tips_overlap(arclengths, i) for i in range(NUM_FINGERS)):
             return Refusal(RefusalKind.TIPS_OVERLAP)
