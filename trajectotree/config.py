@@ -221,7 +221,7 @@ class SceneConfig:
         """The object's outline in its frame B: the polygon, disc or ellipse of `object`, else the box."""
         if self.object.is_box:
             return ConvexPolygon.box(self.box_width, self.box_height)
-        return ConvexPolygon.from_points(self.object.outline())
+        return ConvexPolygon.from_points(self.object.outline(), smooth=self.object.vertices is None)
 
     def __post_init__(self):
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)

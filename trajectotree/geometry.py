@@ -81,10 +81,13 @@ class ConvexPolygon:
     """A convex polygon in B: vertices (V, 2) counter-clockwise about the origin, vertex 0 the
     start of the right face. Build it with `box` or `from_points`."""
 
-    def __init__(self, vertices, box_half: tuple[float, float] | None = None):
+    def __init__(self, vertices, box_half: tuple[float, float] | None = None, smooth: bool = False):
         v = np.array(vertices, dtype=float)
         self.vertices = v  # (V, 2) m
         self.box_half = box_half  # (w/2, h/2) m of the box (its closed forms), else None
+        # a polygonized smooth outline (a disc, an ellipse): contact normals are the smooth curve's
+        # (interpolated between vertex normals), so no grasp leans on the facets' tilted normals
+        self.smooth = smooth
         d = np.roll(v, -1, axis=0) - v
         self.edge_lengths = np.linalg.norm(d, axis=1)  # (V,) m
         self.directions = d / self.edge_lengths[:, None]  # (V, 2) counter-clockwise unit tangents
@@ -121,10 +124,11 @@ class ConvexPolygon:
         return cls([[a, -b], [a, b], [-a, b], [-a, -b]], box_half=(a, b))
 
     @classmethod
-    def from_points(cls, points) -> ConvexPolygon:
+    def from_points(cls, points, smooth: bool = False) -> ConvexPolygon:
         """The polygon through `points` (V, 2) m, a vertex sequence in either orientation:
         made counter-clockwise, moved so that its area centroid is the origin, and started at
-        its right face. Raises ValueError naming the problem (polygon_problem)."""
+        its right face. `smooth`: the points sample a smooth convex curve (see __init__).
+        Raises ValueError naming the problem (polygon_problem)."""
         problem = polygon_problem(points)
         if problem:
             raise ValueError(problem)
@@ -140,7 +144,9 @@ class ConvexPolygon:
         p = np.roll(p, -start, axis=0)
         half = np.abs(p[0])
         corners = np.array([[1, -1], [1, 1], [-1, 1], [-1, -1]]) * half
-        return cls(p, box_half=(float(half[0]), float(half[1]))) if np.array_equal(p, corners) else cls(p)
+        if np.array_equal(p, corners) and not smooth:
+            return cls(p, box_half=(float(half[0]), float(half[1])))
+        return cls(p, smooth=smooth)
 
     @property
     def is_box(self) -> bool:
@@ -166,16 +172,31 @@ class ConvexPolygon:
         s = float(s) % self.perimeter
         for f in range(len(self.vertices)):
             if s <= self.edge_lengths[f]:
-                return self.vertices[f] + s * self.directions[f], self.normals[f].copy()
+                return self.vertices[f] + s * self.directions[f], self._normal(f, s)
             s -= self.edge_lengths[f]
         f = len(self.vertices) - 1
-        return self.vertices[f] + self.edge_lengths[f] * self.directions[f], self.normals[f].copy()  # s == perimeter
+        return self.vertices[f] + self.edge_lengths[f] * self.directions[f], self._normal(f, self.edge_lengths[f])
 
     def points(self, arclengths) -> tuple[np.ndarray, np.ndarray]:
         """(p_BC (k, 2), n_B (k, 2)) for an array of arclengths (vectorized `point`)."""
         s = np.mod(np.asarray(arclengths, dtype=float), self.perimeter)
         face = np.clip(np.searchsorted(self._corners, s, side="left") - 1, 0, len(self._corners) - 1)
-        return self.vertices[face] + (s - self._corners[face])[:, None] * self.directions[face], self.normals[face]
+        along = s - self._corners[face]
+        return self.vertices[face] + along[:, None] * self.directions[face], self._normals_on(face, along)
+
+    def _normal(self, face: int, along: float) -> np.ndarray:
+        return self._normals_on(np.array([face]), np.array([along]))[0]
+
+    def _normals_on(self, face: np.ndarray, along: np.ndarray) -> np.ndarray:
+        """Outward unit normals at `along` m into faces `face`: the face's, or on a smooth outline the
+        vertex normals (bisectors) interpolated linearly along the face."""
+        if not self.smooth:
+            return self.normals[face].copy()
+        bisectors = self.normals + np.roll(self.normals, 1, axis=0)  # vertex f joins faces f - 1 and f
+        bisectors /= np.linalg.norm(bisectors, axis=1, keepdims=True)
+        u = (along / self.edge_lengths[face])[:, None]
+        n = (1 - u) * bisectors[face] + u * bisectors[(face + 1) % len(self.vertices)]
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
 
     def tangent(self, s: float) -> np.ndarray:
         """Counter-clockwise unit tangent t_B = z x n_B at arclength s."""
@@ -299,7 +320,12 @@ class ConvexPolygon:
             n[..., 0] = np.where(on_side, np.sign(p[..., 0]), 0.0)
             n[..., 1] = np.where(on_side, 0.0, np.sign(p[..., 1]))
             return n
-        return self.normals[np.argmax(p @ self.normals.T - self.offsets, axis=-1)]
+        face = np.argmax(p @ self.normals.T - self.offsets, axis=-1)
+        if not self.smooth:
+            return self.normals[face]
+        along = np.clip(np.einsum("...a,...a->...", p - self.vertices[face], self.directions[face]), 0.0, None)
+        flat_face, flat_along = np.ravel(face), np.ravel(np.minimum(along, self.edge_lengths[face]))
+        return self._normals_on(flat_face, flat_along).reshape(p.shape)
 
     def penetration_depths(self, corners: np.ndarray) -> np.ndarray:
         """How deep convex polygons (..., m, 2: their corners in B, in order) overlap this one:
