@@ -170,7 +170,9 @@ def test_round_objects_are_one_outline_each_and_round_trip_through_yaml(tmp_path
 
     with pytest.raises(ConfigError, match="vertices and circle_radius both describe the object"):
         ObjectConfig(vertices=((0, 0), (0.1, 0), (0, 0.1)), circle_radius=0.05)
-    with pytest.raises(ConfigError, match=r"scene.object.ellipse_semi_axes = \[0.08\] must be two lengths"):
+    with pytest.raises(
+        ConfigError, match=r"scene.object.ellipse_semi_axes = \(0.08,\) has 1 entries; valid range: 2: a, b"
+    ):
         ObjectConfig(ellipse_semi_axes=(0.08,))
     config = Config(scene=SceneConfig(object=ObjectConfig(ellipse_semi_axes=(0.08, 0.05))))
     assert not config.scene.object.is_box and ObjectConfig().is_box

@@ -224,6 +224,6 @@ def test_round_objects_are_polygonized_with_blunt_corners_the_hand_can_grasp(cap
     ):
         config = config_from_args(parser.parse_args(["scene", *args]))
         grasps = initial_grasp_candidates(build_scene(config.scene), config.search)
-        assert grasps.reason == "" and len(grasps.candidates) > 0, args  # the 12-gon was refused before
+        assert grasps.refusal is None and len(grasps.candidates) > 0, args  # the 12-gon was refused before
         assert main(["scene", *args]) == 0
         assert noun in capsys.readouterr().out
