@@ -2,6 +2,7 @@
 the data they were given: where a box, a finger, a contact or a cone is drawn, which
 force each line shows, what the forces figure's scale and legend hold."""
 
+import dataclasses
 import math
 
 import matplotlib
@@ -14,11 +15,17 @@ import pytest  # noqa: E402
 from trajectotree.cli import main  # noqa: E402
 from trajectotree.contact_plan import ContactNode, ContactPlan  # noqa: E402
 from trajectotree.execution.metrics import evaluate  # noqa: E402
-from trajectotree.figures.run import (
+from trajectotree.figures.run import (  # noqa: E402
+    ARROW_MAX_LENGTH,
     FINGER_COLORS,
+    arrow_newtons_per_cm,
+    arrow_scale_text,
     contact_node_legend_handles,
-    figure_finger_forces,  # noqa: E402
+    figure_finger_forces,
     figure_keyframes,
+    force_arrow,
+    forces_title,
+    plot_force_arrows,
     figure_model,
     plot_box,
     plot_contact_node,
@@ -170,6 +177,7 @@ def test_forces_figure_shares_one_scale_set_before_the_drop_and_marks_segments()
         shaded = [p for p in ax.patches if p.get_label() == "segment in which this finger switches"]
         assert len(shaded) == {0: 1, 2: 1}.get(i, 0)  # finger 0 switches in segment 1, finger 2 in segment 2
     assert all("|f| [N]" in ax.get_ylabel() for ax in axes) and "|f|" in fig._suptitle.get_text()
+    assert fig._suptitle.get_text().splitlines()[1] == "grasp controller"  # no goal given
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert labels == [
         "simulated |f|",
@@ -200,13 +208,13 @@ def test_keyframes_one_panel_per_node_with_the_switching_finger(scene, tmp_path)
     fig = figure_keyframes(scene, ContactPlan(goal=0.2, success=True, nodes=nodes))
     titles = [ax.get_title() for ax in fig.axes]
     assert titles == [
-        "n=0  theta=+0.00\ninitial grasp",
-        "n=1  theta=+0.10\nfinger 2 moves",
-        "n=2  theta=+0.20\nno switch",
+        "n=0  θ = +0.00 rad (+0.0°)\ninitial grasp",
+        "n=1  θ = +0.10 rad (+5.7°)\nfinger 2 moves",
+        "n=2  θ = +0.20 rad (+11.5°)\nno switch",
     ]
     thick = [line for line in fig.axes[1].lines if line.get_linewidth() == 4.0]
     assert len(thick) == 1 and matplotlib.colors.same_color(thick[0].get_color(), "k")
-    assert "goal +0.200 rad" in fig._suptitle.get_text()
+    assert "goal θ = +0.200 rad (+11.5°)" in fig._suptitle.get_text()
     out = save_figure(fig, tmp_path / "keyframes.svg", dpi=110)  # the format the suffix names
     plt.close(fig)
     svg = (tmp_path / "keyframes.svg").read_text()
@@ -288,3 +296,88 @@ def test_model_figure_of_a_polygon_draws_it_the_hand_and_each_fingers_reachable_
     np.testing.assert_allclose([t.center for t in tips], scene.fingertip_positions(q), atol=1e-12)
     assert ax.get_title() == "Planar four-finger hand and quadrilateral (146 cm^2)\na note"
     plt.close(fig)
+
+
+# ---- scales, units and titles of the pictures -------------------------------------------------
+
+
+def test_keyframes_share_metre_axes_labelled_on_the_outer_panels(scene):
+    """Seven nodes in rows of five: every panel on the same axes in m, the x label under the last
+    panel of each column (the second row's two, the first row's three with nothing below), the
+    y label on the left column, and ticks that read as a scale."""
+    nodes = tuple(node(0.05 * n, None if n == 0 else n % 4) for n in range(7))
+    fig = figure_keyframes(scene, ContactPlan(goal=0.3, success=True, reason="", nodes=nodes))
+    panels = [ax for ax in fig.axes if ax.axison]
+    assert len(panels) == 7 and len(fig.axes) == 10  # three empty slots, drawn as nothing
+    assert [ax.get_xlabel() for ax in panels] == ["", "", "x [m]", "x [m]", "x [m]", "x [m]", "x [m]"]
+    assert [ax.get_ylabel() for ax in panels] == ["y [m]", "", "", "", "", "y [m]", ""]
+    for ax in panels:
+        assert ax.get_xlim() == pytest.approx((-0.26, 0.26)) and ax.get_ylim() == pytest.approx((-0.26, 0.26))
+        assert list(ax.get_xticks()) == pytest.approx([-0.2, -0.1, 0.0, 0.1, 0.2])
+    fig.canvas.draw()
+    shown = [t.get_text() for t in panels[5].get_xticklabels() if t.get_visible()]
+    assert shown == ["−0.2", "−0.1", "0.0", "0.1", "0.2"]
+    plt.close(fig)
+
+
+def test_forces_title_names_the_goal_the_controller_and_a_changed_world():
+    run = evaluate(synthetic_run(), drop_distance=0.05)
+    assert forces_title(run, 1.5708).splitlines() == [
+        "force of each finger on the box, magnitude |f|",
+        "goal θ = +1.571 rad (+90.0°), grasp controller",
+    ]
+    changed = dataclasses.replace(
+        run,
+        controller="paper",
+        conditions={
+            "sim_mu": 0.55,
+            "plan_mu": 0.7,
+            "sim_mass": 0.06,
+            "plan_mass": 0.05,
+            "push": {"force": [0.2, 0.0], "time_s": 5.5, "duration_s": 0.2},
+        },
+    )
+    assert forces_title(changed, -0.3).splitlines()[1] == (
+        "goal θ = -0.300 rad (-17.2°), paper's controller (eq. 20); simulated mu 0.55 (plan 0.7), "
+        "mass 60 g (plan 50 g), push (0.2, 0) N at 5.5 s for 0.2 s"
+    )
+    uncontrolled = dataclasses.replace(run, controller="none")
+    assert forces_title(uncontrolled, "0.3").splitlines()[1] == "no controller (zero torque)"  # not a number: left out
+    fig = figure_finger_forces(run, goal=0.5)
+    assert fig._suptitle.get_text() == forces_title(run, 0.5)
+    plt.close(fig)
+
+
+@pytest.mark.parametrize(
+    ("top", "scale"), [(0.0, 1.0), (0.9, 0.2), (1.0, 0.2), (1.01, 0.5), (5.0, 1.0), (5.2, 2.0), (40.0, 10.0)]
+)
+def test_arrow_scale_is_the_round_value_that_draws_the_largest_force_at_most_5_cm(top, scale):
+    forces = np.zeros((3, 4, 2))
+    forces[1, 2] = (0.6 * top, -0.8 * top)
+    assert arrow_newtons_per_cm(forces) == pytest.approx(scale)
+    assert arrow_scale_text(scale) == f"1 cm = {scale:g} N, capped at 12 cm"
+
+
+def test_force_arrow_starts_on_the_fingertip_and_is_as_long_as_the_scale_says():
+    tip, r = np.array([0.1, -0.05]), 0.01
+    start, end = force_arrow(tip, (0.0, 0.6), r, newtons_per_cm=0.2)  # 0.6 N up: 3 cm
+    np.testing.assert_allclose(start, [0.1, -0.04])
+    np.testing.assert_allclose(end, [0.1, -0.01])
+    start, end = force_arrow(tip, (-30.0, 0.0), r, newtons_per_cm=0.2)  # 150 cm: capped
+    np.testing.assert_allclose(start, [0.09, -0.05])
+    np.testing.assert_allclose(end, [0.09 - ARROW_MAX_LENGTH, -0.05])
+    assert force_arrow(tip, (0.01, 0.0), r, newtons_per_cm=0.2) is None  # a finger off the box
+
+
+def test_force_arrows_are_drawn_in_the_fingers_colours_where_they_push(ax):
+    tips = np.array([[0.1, 0.0], [0.0, 0.05], [-0.1, 0.0], [0.0, -0.05]])
+    forces = np.array([[-1.0, 0.0], [0.0, 0.0], [0.5, 0.0], [0.0, 0.4]])  # finger 1 pushes nothing
+    arrows = plot_force_arrows(ax, tips, forces, 0.01, newtons_per_cm=0.5)
+    assert len(arrows) == 3
+    for arrow, i in zip(arrows, (0, 2, 3)):
+        assert matplotlib.colors.same_color(arrow.get_facecolor(), FINGER_COLORS[i])
+        xy = arrow.get_xy()
+        start, end = force_arrow(tips[i], forces[i], 0.01, 0.5)
+        direction = (end - start) / np.linalg.norm(end - start)
+        along = (xy - start) @ direction  # the outline spans start..end along the force
+        assert along.min() == pytest.approx(0.0, abs=1e-9) and along.max() == pytest.approx(np.linalg.norm(end - start))

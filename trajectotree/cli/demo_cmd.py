@@ -159,7 +159,7 @@ def run(args) -> int:
         spans = segment_spans(
             [n.switching_finger for n in result.contact_plan.nodes], config.cito.knots_per_segment, config.cito.dt
         )
-        save_figure(figure_finger_forces(sim, spans), out / FORCES)
+        save_figure(figure_finger_forces(sim, spans, goal=goal), out / FORCES)
         files += [SIM_JSON, SIM_NPZ, PLAYBACK, FORCES]
     summary = {
         "object": describe_object(config.scene),

@@ -256,7 +256,7 @@ def run(args) -> int:
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_success)
     if args.forces:
-        save_figure(figure_finger_forces(result, plan_segments(files)), args.forces)
+        save_figure(figure_finger_forces(result, plan_segments(files), goal=files.data.get("goal")), args.forces)
     if args.json:
         print_json(summary)
     else:

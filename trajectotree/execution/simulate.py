@@ -46,6 +46,7 @@ from trajectotree.config import Config, ConfigError, check_controller, check_len
 from trajectotree.execution import metrics, playback
 from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
+from trajectotree.figures.run import arrow_newtons_per_cm, controller_text
 from trajectotree.results import PlanResult, SimLog, SimResult
 from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
 
@@ -280,7 +281,12 @@ def build_execution_diagram(
     forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box))
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
-    visualizer = playback.add_visualizer(builder, scene_graph, meshcat) if meshcat is not None else None
+    visualizer = None
+    if meshcat is not None:
+        visualizer = playback.add_visualizer(builder, plant, scene_graph, hand, meshcat)
+        playback.add_force_arrows_system(
+            builder, plant, scene_graph, hand, meshcat, forces.get_output_port(), arrow_scale(reference)
+        )
     return ExecutionDiagram(
         diagram=builder.Build(),
         plant=plant,
@@ -292,6 +298,12 @@ def build_execution_diagram(
         duration=reference.duration + hold,
         controller=kind if controlled else "none",
     )
+
+
+def arrow_scale(reference: Reference) -> float:
+    """The force arrows' scale (N per cm) of a run of `reference`: set by the plan's forces, so that
+    the playback and the GIF of one plan share it and a dropped box's squeeze does not shrink it."""
+    return arrow_newtons_per_cm(reference.f_W)
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -369,8 +381,9 @@ def simulate_reference(
                 execution.visualizer,
                 html_path,
                 drop_time_s=result.drop_time_s,
-                legend=playback.simulated_legend(config.scene),
+                legend=playback.simulated_legend(config.scene, arrow_scale(reference)),
                 noun=playback.object_noun(config.scene),
+                labels=playback.finger_labels(execution.plant, execution.hand),
             )
         else:
             execution.visualizer.StopRecording()
@@ -416,5 +429,15 @@ def run_simulation(
         conditions=conditions,
     )
     if gif_path is not None:
-        playback.write_gif(scene, result.t, result.x, result.q, gif_path, planned_poses=result.x_plan)
+        playback.write_gif(
+            scene,
+            result.t,
+            result.x,
+            result.q,
+            gif_path,
+            planned_poses=result.x_plan,
+            forces=result.f_W,
+            newtons_per_cm=arrow_scale(reference),
+            title=f"simulated run, {controller_text(result.controller)}",
+        )
     return result

@@ -38,7 +38,11 @@ PAPER_MEAN_TIME_S = {"trajectotree": 14.0, "cito": 98.0, "cito-warm": 76.0}
 REFERENCE = "trajectotree"
 REPORT_DIR = "report"  # the default output folder, SWEEP_DIR/report
 STAGE_PREFIX = ".tmp-report-"  # a report being written (make_report's _staged)
-ERROR_LABELS = ("x [m]", "y [m]", r"$\theta$ [rad]")
+# Fig. 3's panels: label, and the factor from sim.npz's units (m, m, rad) to the label's, as the tables show them.
+ERROR_LABELS = ("x [mm]", "y [mm]", r"$\theta$ [rad]")
+ERROR_SCALES = (1e3, 1e3, 1.0)
+CONFIDENCE = 0.95
+BAND_LABEL = f"shaded: {100 * CONFIDENCE:g} % CI of the mean (Student t, across trials)"
 
 
 @dataclass(frozen=True)
@@ -263,14 +267,16 @@ def tracking_bands(tracks: list[tuple[np.ndarray, np.ndarray]], grid: np.ndarray
         if not mask.any():
             continue
         columns = np.all(covered.T == mask, axis=1)
-        ci = mean_confidence_interval(samples[mask][:, columns], 0.95, axis=0)
+        ci = mean_confidence_interval(samples[mask][:, columns], CONFIDENCE, axis=0)
         mean[columns], lower[columns], upper[columns] = ci.mean, ci.lower, ci.upper
     return mean, lower, upper
 
 
 def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | None = None):
-    """Fig. 3: mean absolute error of x, y, theta over time with 95% confidence bands."""
+    """Fig. 3: mean absolute error of x, y (mm, as the tables) and theta (rad) over time, each method's
+    mean with its 95 % Student-t confidence band (named in the legend)."""
     import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
 
     from trajectotree.figures.statistics import plot_mean_band
 
@@ -283,21 +289,25 @@ def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | No
             continue
         mean, lower, upper = tracking_bands(tracks[m], grid)
         for c, ax in enumerate(axes):
+            k = ERROR_SCALES[c]
             plot_mean_band(
                 ax,
                 grid,
-                mean[:, c],
-                lower[:, c],
-                upper[:, c],
+                k * mean[:, c],
+                k * lower[:, c],
+                k * upper[:, c],
                 color=METHOD_COLORS.get(m),
-                label=f"{METHOD_LABELS.get(m, m)} (n={len(tracks[m])})",
+                label=f"{METHOD_LABELS.get(m, m)} mean (n={len(tracks[m])})",
             )
     for ax, label in zip(axes, ERROR_LABELS):
         ax.set_ylim(bottom=0.0)  # errors are >= 0; a t-interval of few trials reaches below
         ax.set_xlabel("time [s]")
         ax.set_ylabel(f"mean absolute error, {label}")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    handles, _ = axes[0].get_legend_handles_labels()
+    if handles:  # the band's entry: grey, since each method's band is its curve's colour
+        handles.append(Patch(facecolor="0.5", alpha=0.25, lw=0, label=BAND_LABEL))
+        axes[0].legend(handles=handles, fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     missing = [METHOD_LABELS.get(m, m) for m in methods if not tracks.get(m)]

@@ -21,6 +21,87 @@ from trajectotree.geometry import ConvexPolygon, box_to_world
 from trajectotree.io import write_bytes_atomic
 
 FINGER_COLORS = ("tab:red", "tab:green", "tab:purple", "tab:orange")
+ARROW_TARGET_LENGTH = 0.05  # m, the largest force that sets an arrow scale is drawn at most this long
+ARROW_MAX_LENGTH = 0.12  # m, longer arrows are capped (a dropped box squeezed between the fingers)
+ARROW_MIN_FORCE = 0.02  # N, a smaller force (a finger off the box) draws no arrow
+
+
+def arrow_newtons_per_cm(forces) -> float:
+    """The force arrows' scale, N per cm of arrow: the smallest of 1, 2, 5 x 10^k N/cm that
+    draws the largest |f| of `forces` (..., 2) at most ARROW_TARGET_LENGTH long (1 N/cm
+    without forces), so that every picture of one run states one round scale."""
+    top = float(np.max(np.linalg.norm(np.asarray(forces, dtype=float), axis=-1), initial=0.0))
+    if top <= ARROW_MIN_FORCE:
+        return 1.0
+    raw = top / (100 * ARROW_TARGET_LENGTH)
+    decade = 10.0 ** math.floor(math.log10(raw))
+    return next(m * decade for m in (1, 2, 5, 10) if m * decade >= raw * (1 - 1e-12))
+
+
+def arrow_scale_text(newtons_per_cm: float) -> str:
+    """How the pictures state an arrow scale, e.g. "1 cm = 0.2 N" (capped at ARROW_MAX_LENGTH)."""
+    return f"1 cm = {newtons_per_cm:g} N, capped at {100 * ARROW_MAX_LENGTH:g} cm"
+
+
+def force_arrow(tip, f, tip_radius: float, newtons_per_cm: float):
+    """(start, end) in W of the arrow of force f (2,) of a finger on the object, or None for
+    |f| < ARROW_MIN_FORCE: from the fingertip sphere's surface in the force's direction (where
+    it touches the object) along f, |f| / newtons_per_cm cm long, capped at ARROW_MAX_LENGTH."""
+    f = np.asarray(f, dtype=float)
+    magnitude = float(np.hypot(*f))
+    if magnitude < ARROW_MIN_FORCE:
+        return None
+    direction = f / magnitude
+    start = np.asarray(tip, dtype=float) + tip_radius * direction
+    return start, start + min(magnitude / newtons_per_cm / 100, ARROW_MAX_LENGTH) * direction
+
+
+def plot_force_arrows(ax, tips, forces, tip_radius: float, newtons_per_cm: float, *, colors=FINGER_COLORS):
+    """Each finger's force on the object (forces (4, 2), fingertip centres tips (4, 2)) as an
+    arrow in its colour (force_arrow), drawn above the object."""
+    from matplotlib.patches import FancyArrow
+
+    artists = []
+    for i, (tip, f) in enumerate(zip(tips, forces)):
+        arrow = force_arrow(tip, f, tip_radius, newtons_per_cm)
+        if arrow is None:
+            continue
+        start, end = arrow
+        head = min(0.012, float(np.hypot(*(end - start))) / 2)  # m: a short arrow's head takes half of it
+        artists.append(
+            ax.add_patch(
+                FancyArrow(
+                    *start,
+                    *(end - start),
+                    width=0.003,
+                    head_width=head,
+                    head_length=head,
+                    length_includes_head=True,
+                    color=colors[i],
+                    ec="k",
+                    lw=0.4,
+                    zorder=8,
+                )
+            )
+        )
+    return artists
+
+
+def plot_finger_numbers(ax, scene, *, colors=FINGER_COLORS, fontsize=7):
+    """Each finger's number at its base in its colour, below a base in the lower half, above the others."""
+    return [
+        ax.annotate(
+            str(i),
+            finger.p_W_base,
+            xytext=(0, -10 if finger.p_W_base[1] < 0 else 4),
+            textcoords="offset points",
+            ha="center",
+            fontsize=fontsize,
+            color=colors[i],
+            fontweight="bold",
+        )
+        for i, finger in enumerate(scene.fingers)
+    ]
 
 
 def plot_object(ax, shape: ConvexPolygon, pose, *, color="tab:blue", alpha=0.35, **kwargs):
@@ -183,18 +264,7 @@ def plot_contact_node(ax, scene, node, *, mu: float, previous=None):
             lw=4.0 if switching else 2.0,
             tip_color=FINGER_COLORS[i],
         )
-        artists.append(
-            ax.annotate(
-                str(i),
-                finger.p_W_base,
-                xytext=(0, -10 if finger.p_W_base[1] < 0 else 4),
-                textcoords="offset points",
-                ha="center",
-                fontsize=7,
-                color=FINGER_COLORS[i],
-                fontweight="bold",
-            )
-        )
+    artists += plot_finger_numbers(ax, scene)
     artists += plot_friction_cones(ax, node.object_pose, node.p_BC, node.n_B, mu)
     artists += plot_contacts(ax, node.object_pose, node.p_BC, node.n_B)
     if previous is not None and node.switching_finger is not None:
@@ -229,32 +299,61 @@ def contact_node_legend_handles(mu: float):
     ]
 
 
+KEYFRAME_HALF_WIDTH = 0.26  # m, each keyframe panel shows [-0.26, 0.26]^2
+KEYFRAME_TICKS = (-0.2, -0.1, 0.0, 0.1, 0.2)  # m
+
+
+def angle_text(theta: float) -> str:
+    """An angle in rad and in degrees, e.g. "+0.17 rad (+10.0°)"."""
+    return f"{theta:+.2f} rad ({math.degrees(theta):+.1f}°)"
+
+
 def figure_keyframes(scene, plan):
     """A contact plan (ContactPlan) as keyframes like the paper's Fig. 1: one panel per node
-    (plot_contact_node), the legend below. The cones are the plan's (mu_plan, the friction the
-    search planned with; scene.mu for a plan that does not record it)."""
+    (plot_contact_node) on the same x, y axes in m (labelled on the outer panels, a light grid
+    as the scale), each titled with the node's theta in rad and degrees; the legend below. The
+    cones are the plan's (mu_plan, the friction the search planned with; scene.mu for a plan
+    that does not record it)."""
     import matplotlib.pyplot as plt
 
     mu = plan.mu_plan if math.isfinite(plan.mu_plan) else scene.config.mu
     cols = min(5, len(plan.nodes))
     rows = math.ceil(len(plan.nodes) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(max(2.6 * cols, 7.0), 2.6 * rows + 0.9), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(max(2.6 * cols, 7.0) + 0.5, 3.1 * rows + 1.0), squeeze=False, sharex=True, sharey=True
+    )
     for n, ax in enumerate(axes.flat):
-        ax.set_axis_off()
         if n >= len(plan.nodes):
+            ax.set_axis_off()
             continue
         node = plan.nodes[n]
         plot_contact_node(ax, scene, node, mu=mu, previous=plan.nodes[n - 1] if n else None)
         ax.set_aspect("equal")
-        ax.set_xlim(-0.26, 0.26)
-        ax.set_ylim(-0.26, 0.26)
+        ax.set_xlim(-KEYFRAME_HALF_WIDTH, KEYFRAME_HALF_WIDTH)
+        ax.set_ylim(-KEYFRAME_HALF_WIDTH, KEYFRAME_HALF_WIDTH)
+        ax.set_xticks(KEYFRAME_TICKS)
+        ax.set_yticks(KEYFRAME_TICKS)
+        below = n + cols < len(plan.nodes)  # another panel under this one carries the x labels
+        ax.tick_params(labelsize=7, length=2, pad=1, labelbottom=not below, labelleft=n % cols == 0)
+        ax.grid(color="0.92", lw=0.5, zorder=0)
+        ax.set_axisbelow(True)
+        for spine in ax.spines.values():
+            spine.set_color("0.7")
+        if n % cols == 0:
+            ax.set_ylabel("y [m]", fontsize=8, labelpad=1)
+        if not below:
+            ax.set_xlabel("x [m]", fontsize=8, labelpad=1)
         moved = (
             "initial grasp"
             if n == 0
             else ("no switch" if node.switching_finger is None else f"finger {node.switching_finger} moves")
         )
-        ax.set_title(f"n={n}  theta={node.object_pose[2]:+.2f}\n{moved}", fontsize=8)
-    fig.suptitle(f"contact sequence for goal {plan.goal:+.3f} rad (switching finger drawn thick)", fontsize=10)
+        ax.set_title(f"n={n}  θ = {angle_text(node.object_pose[2])}\n{moved}", fontsize=8)
+    fig.suptitle(
+        f"contact sequence for goal θ = {plan.goal:+.3f} rad ({math.degrees(plan.goal):+.1f}°)"
+        " (switching finger drawn thick)",
+        fontsize=10,
+    )
     handles = contact_node_legend_handles(mu)
     ncol = 3 if cols >= 4 else 2
     fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
@@ -270,17 +369,57 @@ def segment_spans(switching_fingers, knots_per_segment: int, dt: float) -> list[
     return [((n - 1) * length, n * length, finger) for n, finger in enumerate(switching_fingers) if n > 0]
 
 
-def figure_finger_forces(result, segments=None):
+CONTROLLER_NAMES = {
+    "grasp": "grasp controller",
+    "paper": "paper's controller (eq. 20)",
+    "none": "no controller (zero torque)",
+}
+
+
+def controller_text(controller: str) -> str:
+    """What the figures call a SimLog's controller, e.g. "grasp controller"."""
+    return CONTROLLER_NAMES.get(controller, f"{controller} controller")
+
+
+def world_text(conditions: dict) -> str | None:
+    """The simulated world where it differs from the plan's (a SimLog's conditions), e.g.
+    "simulated mu 0.55 (plan 0.7), push (0.2, 0) N at 5.6 s"; None for the plan's world."""
+    parts = []
+    if conditions.get("sim_mu") is not None and conditions.get("sim_mu") != conditions.get("plan_mu"):
+        parts.append(f"simulated mu {conditions['sim_mu']:g} (plan {conditions['plan_mu']:g})")
+    if conditions.get("sim_mass") is not None and conditions.get("sim_mass") != conditions.get("plan_mass"):
+        parts.append(f"mass {1e3 * conditions['sim_mass']:g} g (plan {1e3 * conditions['plan_mass']:g} g)")
+    push = conditions.get("push")
+    if push:
+        force = ", ".join(f"{c:g}" for c in push["force"])
+        parts.append(f"push ({force}) N at {push['time_s']:g} s for {push['duration_s']:g} s")
+    return ", ".join(parts) or None
+
+
+def forces_title(result, goal: float | None = None) -> str:
+    """The forces figure's title: what it shows, the goal (if a finite number: a plan.json's
+    may be anything), the controller and any simulated world that differs from the plan's."""
+    known = isinstance(goal, (int, float)) and not isinstance(goal, bool) and math.isfinite(goal)
+    run = ([f"goal θ = {goal:+.3f} rad ({math.degrees(goal):+.1f}°)"] if known else []) + [
+        controller_text(result.controller)
+    ]
+    world = world_text(result.conditions)
+    return "force of each finger on the box, magnitude |f|\n" + ", ".join(run) + (f"; {world}" if world else "")
+
+
+def figure_finger_forces(result, segments=None, goal: float | None = None):
     """Each finger's simulated vs planned force magnitude |f| on the box over one executed
     plan (a SimResult), on one shared scale: where the run leaves the plan's contact forces,
-    and when. `segments` (segment_spans) marks the segments and each finger's switches.
-    The scale covers the plan and the run up to the drop: a fallen box squeezed between
-    the fingers does not set it (clipped in the grey span)."""
+    and when. `segments` (segment_spans) marks the segments and each finger's switches; the
+    title names the plan's `goal` rotation (rad), the controller and the simulated world
+    (forces_title). The scale covers the plan and the run up to the drop: a fallen box
+    squeezed between the fingers does not set it (clipped in the grey span)."""
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
     fingers = result.f_W.shape[1]
-    fig, axes = plt.subplots(fingers, 1, figsize=(8, 1.6 * fingers + 0.9), sharex=True, sharey=True)
+    fig, axes = plt.subplots(fingers, 1, figsize=(8, 1.6 * fingers + 1.1), sharex=True, sharey=True)
+    height = fig.get_figheight()  # inches: the two-line title, then the legend's rows, then the panels
     held = result.t <= (result.drop_time_s if result.drop_time_s is not None else np.inf)
     top = max(np.linalg.norm(result.f_W_plan, axis=-1).max(), np.linalg.norm(result.f_W[held], axis=-1).max(), 0.1)
     for i, ax in enumerate(axes):
@@ -306,12 +445,12 @@ def figure_finger_forces(result, segments=None):
         fontsize=8,
         ncol=min(len(handles), 3),
         loc="upper center",
-        bbox_to_anchor=(0.5, 0.97),
+        bbox_to_anchor=(0.5, 1 - 0.5 / height),
         frameon=False,
     )
-    fig.suptitle("force of each finger on the box, magnitude |f|", fontsize=10, y=0.995)
+    fig.suptitle(forces_title(result, goal), fontsize=10, y=1 - 0.05 / height)
     axes[-1].set_xlabel("time [s]")
-    fig.tight_layout(rect=(0, 0, 1, 0.985 - 0.03 * math.ceil(len(handles) / 3)))
+    fig.tight_layout(rect=(0, 0, 1, 1 - (0.1 + 0.17 * math.ceil(len(handles) / 3)) / height))
     return fig
 
 
