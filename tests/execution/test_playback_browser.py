@@ -5,15 +5,25 @@ No browser is downloaded: playwright drives /usr/bin/chromium."""
 import dataclasses
 import io
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from trajectotree.config import Config, SceneConfig
-from trajectotree.execution.playback import VIEW_HALF_WIDTH, write_plan_html
+from trajectotree.execution.playback import (
+    ARROW_HEAD,
+    ARROW_Z,
+    VIEW_HALF_WIDTH,
+    finger_css,
+    finger_labels,
+    finger_rgb,
+    write_plan_html,
+)
 from trajectotree.execution.reference import Reference, static_hold_reference
 from trajectotree.execution.simulate import simulate_reference
-from trajectotree.scene.plant import build_scene
+from trajectotree.figures.run import arrow_newtons_per_cm, arrow_scale_text, force_arrow
+from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
 pytestmark = pytest.mark.slow  # a headless browser per test (seconds each)
 CHROMIUM = Path("/usr/bin/chromium")
@@ -35,9 +45,9 @@ WIDE = {"width": 1200, "height": 600}  # a browser window wider than tall
 
 
 @pytest.fixture(scope="module")
-def drop_html(tmp_path_factory):
+def drop_run(tmp_path_factory):
     """Playback of a real run that moves the box: the hand lets go (zero torque) and
-    the box slides down between the fingers for 0.3 s."""
+    the box slides down between the fingers for 0.3 s; its reference and result."""
     config = Config()
     config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, settle_time=0.0))
     reference = static_hold_reference(
@@ -46,29 +56,35 @@ def drop_html(tmp_path_factory):
     path = tmp_path_factory.mktemp("playback") / "drop.html"
     result = simulate_reference(reference, config, controlled=False, html_path=path)
     assert result.dropped and result.x[-1, 1] < -0.05  # the box moved well within the view
-    drop_times[path] = result.drop_time_s
-    return path
-
-
-drop_times: dict[Path, float] = {}  # drop_html -> the run's drop time, s
+    return SimpleNamespace(path=path, reference=reference, result=result, config=config)
 
 
 @pytest.fixture(scope="module")
-def plan_html(tmp_path_factory):
-    """Playback of a planned (kinematic) motion: the grasped box lifted by 4 cm and
-    turned by 0.3 rad in 1 s, joint angles by IK at both ends."""
+def drop_html(drop_run):
+    return drop_run.path
+
+
+@pytest.fixture(scope="module")
+def plan_reference():
+    """A planned (kinematic) motion: the grasped box lifted by 4 cm and turned by 0.3 rad
+    in 1 s, joint angles by IK at both ends, each finger pushing 1 N or more."""
     holds = [
         static_hold_reference(
             build_scene(SceneConfig(initial_pose=pose)), (0.56, 0.14, 0.26, 0.44), min_normal_force=1.0, duration=1.0
         )
         for pose in ((0, 0, 0), (0, 0.04, 0.3))
     ]
-    plan = Reference(
+    return Reference(
         t=np.array([0.0, 1.0]),
         **{name: np.stack([getattr(h, name)[0] for h in holds]) for name in ("x", "q", "p_WF", "v_WF", "f_W")},
     )
+
+
+@pytest.fixture(scope="module")
+def plan_html(tmp_path_factory, plan_reference):
+    """Playback of plan_reference."""
     path = tmp_path_factory.mktemp("playback") / "plan.html"
-    write_plan_html(plan, Config(), path)
+    write_plan_html(plan_reference, Config(), path)
     return path
 
 
@@ -94,6 +110,27 @@ class Page:
         self.page.evaluate(f"() => {{ viewer.animator.pause(); viewer.animator.seek({t}); }}")
         self.page.wait_for_timeout(400)
         return np.asarray(Image.open(io.BytesIO(self.page.screenshot())).convert("RGB")).astype(int)
+
+
+def to_pixel(p, viewport=VIEWPORT) -> tuple[int, int]:
+    """(row, column) where the centred planar view draws the point p (x, y) of W."""
+    scale = min(viewport["width"], viewport["height"]) / (2 * VIEW_HALF_WIDTH)  # px per m
+    return round(viewport["height"] / 2 - scale * p[1]), round(viewport["width"] / 2 + scale * p[0])
+
+
+# The scene's colours: each finger's, the box's blue, the links' greys, the white background.
+SCENE_COLORS = [np.multiply(255, finger_rgb(i)) for i in range(NUM_FINGERS)] + [
+    (51, 115, 204),
+    (89, 89, 102),
+    (115, 115, 128),
+    (255, 255, 255),
+]
+
+
+def nearest_color(rgb: np.ndarray, row: int, col: int) -> int:
+    """Index into SCENE_COLORS of the colour nearest the median of the 3 x 3 pixels around (row, col)."""
+    pixel = np.median(rgb[row - 1 : row + 2, col - 1 : col + 2].reshape(-1, 3), axis=0)
+    return int(np.argmin([np.linalg.norm(pixel - np.asarray(c)) for c in SCENE_COLORS]))
 
 
 def box_pixels(rgb: np.ndarray) -> np.ndarray:
@@ -145,13 +182,14 @@ def test_plan_playback_shows_the_planned_motion(browser, plan_html):
     assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)  # lifted 4 cm (+y up)
 
 
-def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(browser, drop_html):
+def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(browser, drop_run):
     """On a wide window: the tab title, the time readout (with the drop marked), the legend,
     read from the page and found in its screenshot, and the hand centred (not in the left half)."""
+    drop_html = drop_run.path
     page = Page(browser, drop_html, viewport=WIDE)
     assert page.page.title() == "TrajectoTree: simulated run"
     duration = page.page.evaluate("() => viewer.animator.duration")
-    drop = drop_times[drop_html]
+    drop = drop_run.result.drop_time_s
     halfway = round(drop / 2, 2)
     before = page.frame_at(halfway)
     assert page.page.inner_text("#tt-time") == f"t = {halfway:.2f} s of {duration:.2f} s"
@@ -160,7 +198,15 @@ def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(brow
     assert page.page.inner_text("#tt-time") == f"t = 0.25 s of {duration:.2f} s"
     assert page.page.inner_text("#tt-drop-note") == f"box dropped at {drop:.2f} s"
     legend = page.page.inner_text("#tt-legend").splitlines()
-    assert legend == ["box", "planned box pose (outline)", "fingers 0-3: links (grey), fingertips (orange)"]
+    scale = arrow_newtons_per_cm(drop_run.reference.f_W)
+    assert scale == 0.5  # the reference's largest force, 1.25 N, is 2.5 cm long
+    assert legend == [
+        "fingertips 0 1 2 3 (numbered at their bases)",
+        "box",
+        "planned box pose (outline)",
+        "finger links",
+        f"arrow: simulated force of each finger on the box, {arrow_scale_text(scale)}",
+    ]
     # in the screenshot: the overlay and legend are drawn inside the window, the swatches in their colours
     for selector in ("#tt-overlay", "#tt-legend"):
         b = page.page.locator(selector).bounding_box()
@@ -187,7 +233,7 @@ def test_plan_page_is_titled_and_has_no_drop_marker(browser, plan_html):
     page.frame_at(0.5)
     assert page.page.inner_text("#tt-time") == "t = 0.50 s of 1.00 s"
     assert page.page.locator("#tt-drop").count() == 0
-    assert page.page.inner_text("#tt-legend").splitlines()[0] == "box (planned pose)"
+    assert page.page.inner_text("#tt-legend").splitlines()[1] == "box (planned pose)"
 
 
 @pytest.fixture(scope="module")
@@ -226,6 +272,84 @@ def test_polygon_playback_draws_the_polygon(browser, triangle_html):
     assert abs(cols.mean() - VIEWPORT["width"] / 2) < 10
     centroid_row = VIEWPORT["height"] / 2
     assert np.sum(rows > centroid_row) / len(rows) == pytest.approx(5 / 9, abs=0.05)
-    assert page.page.inner_text("#tt-legend").splitlines()[:2] == ["object", "planned object pose (outline)"]
+    assert page.page.inner_text("#tt-legend").splitlines()[1:3] == ["object", "planned object pose (outline)"]
     page.frame_at(0.25)
     assert page.page.inner_text("#tt-drop-note") == f"object dropped at {drop:.2f} s"
+
+
+# ---- fingers and forces: coloured, numbered, drawn as arrows ----------------------------------
+
+
+def test_plan_playback_colours_each_fingertip_and_draws_its_planned_force(browser, plan_html, plan_reference):
+    """At t = 0: each fingertip sphere in its finger's colour (figures.run.FINGER_COLORS), each
+    finger's planned force (1 N or more) as an arrow in that colour from the fingertip along the
+    force, as long as the stated scale says: its colour at the arrow's middle, not past its end."""
+    page = Page(browser, plan_html)
+    rgb = page.frame_at(0.0)
+    scale = arrow_newtons_per_cm(plan_reference.f_W)
+    legend = page.page.inner_text("#tt-legend").splitlines()
+    assert legend[-1] == f"arrow: planned force of each finger on the box, {arrow_scale_text(scale)}"
+    tip_radius = build_scene().tip_radius
+    for i in range(NUM_FINGERS):
+        tip, f = plan_reference.p_WF[0, i], plan_reference.f_W[0, i]
+        side = np.array([-f[1], f[0]]) / np.hypot(*f)  # beside the arrow, on the sphere
+        assert nearest_color(rgb, *to_pixel(tip + 0.6 * tip_radius * side)) == i, f"finger {i}'s tip"
+        start, end = force_arrow(tip, f, tip_radius, scale)
+        direction = (end - start) / np.linalg.norm(end - start)
+        assert np.linalg.norm(end - start) > 0.02  # long enough to sample beyond the fingertip
+        assert nearest_color(rgb, *to_pixel(start + 0.6 * (end - start))) == i, f"finger {i}'s arrow"
+        assert nearest_color(rgb, *to_pixel(end + 0.006 * direction)) != i, f"finger {i}'s arrow ends there"
+    dots = page.page.locator(".tt-dot").evaluate_all("(dots) => dots.map((d) => getComputedStyle(d).backgroundColor)")
+    assert dots == [finger_css(i) for i in range(NUM_FINGERS)]
+
+
+@pytest.mark.parametrize("viewport", [VIEWPORT, WIDE])
+def test_finger_numbers_sit_outside_the_bases_in_the_fingers_colours(browser, plan_html, viewport):
+    page = Page(browser, plan_html, viewport=viewport)
+    page.frame_at(0.5)
+    scene = build_scene()
+    for k, (text, color, x, y) in enumerate(finger_labels(scene.plant, scene.hand)):
+        label = page.page.locator(f"#tt-label-{k}")
+        assert label.inner_text() == text == str(k)
+        assert label.evaluate("(e) => getComputedStyle(e).color") == color == finger_css(k)
+        box = label.bounding_box()
+        row, col = to_pixel((x, y), viewport)
+        assert abs(box["x"] + box["width"] / 2 - col) < 2 and abs(box["y"] + box["height"] / 2 - row) < 2
+        base = scene.fingers[k].p_W_base
+        assert np.hypot(x, y) == pytest.approx(np.hypot(*base) + 0.03)
+        assert base[0] * y - base[1] * x == pytest.approx(0.0, abs=1e-12)  # radially outside the base
+
+
+def test_simulated_playback_draws_the_simulated_forces_as_arrows(browser, drop_run):
+    """At t = 0.25 s (a frame of the playback and a sample of the log): each finger pushing 0.02 N
+    or more has its arrow shown from its fingertip along its logged force at the stated scale, the
+    others hidden; the frame has both kinds."""
+    page = Page(browser, drop_run.path)
+    page.frame_at(0.25)
+    arrows = page.page.evaluate(
+        """() => [0, 1, 2, 3].map((i) => {
+             const find = (path) => viewer.scene_tree.find(["forces", "finger" + i, ...path]).object;
+             const group = find([]), shaft = find(["shaft", "<object>"]);
+             return {visible: group.visible, position: group.position.toArray(), angle: group.rotation.z,
+                     shaft: shaft.scale.x};
+           })"""
+    )
+    result, scale = drop_run.result, arrow_newtons_per_cm(drop_run.reference.f_W)
+    k = int(np.argmin(abs(result.t - 0.25)))
+    assert result.t[k] == pytest.approx(0.25)
+    scene = build_scene(drop_run.config.scene)
+    tips = scene.fingertip_positions(result.q[k])
+    shown = []
+    for i, arrow in enumerate(arrows):
+        expected = force_arrow(tips[i], result.f_W[k, i], scene.tip_radius, scale)
+        shown.append(arrow["visible"])
+        if expected is None:
+            assert not arrow["visible"], f"finger {i} pushes nothing: no arrow"
+            continue
+        start, end = expected
+        length = np.linalg.norm(end - start)
+        assert arrow["visible"], f"finger {i}"
+        np.testing.assert_allclose(arrow["position"], [*start, ARROW_Z], atol=1e-6)
+        assert arrow["angle"] == pytest.approx(np.arctan2(end[1] - start[1], end[0] - start[0]), abs=1e-6)
+        assert arrow["shaft"] == pytest.approx(length - min(ARROW_HEAD, length / 2), abs=1e-6)
+    assert any(shown) and not all(shown)

@@ -87,3 +87,31 @@ def test_time_and_cost_figure_says_no_data_instead_of_empty_axes():
     assert all([t.get_text() for t in ax.texts] == ["no data"] and len(ax.get_yticks()) == 0 for ax in fig.axes)
     assert fig.axes[0].get_legend() is None
     plt.close(fig)
+
+
+def test_tracking_figure_plots_x_and_y_in_mm_and_names_the_band():
+    """Fig. 3 in the tables' units: x and y errors in mm (the curves are 1000 x the metres of
+    sim.npz), theta in rad; the legend names each method's mean and the shaded 95 % band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from trajectotree.experiments.report import figure_tracking
+
+    t = np.linspace(0.0, 1.0, 11)
+    trials = [(t, np.column_stack([0.002 * t, 0.001 + 0 * t, 0.05 * t])) for _ in range(2)]
+    trials.append((t, np.column_stack([0.004 * t, 0.003 + 0 * t, 0.02 * t])))
+    fig = figure_tracking({"trajectotree": trials}, ["trajectotree", "cito"])
+    axes = fig.axes[:3]
+    assert [ax.get_ylabel() for ax in axes] == [
+        "mean absolute error, x [mm]",
+        "mean absolute error, y [mm]",
+        r"mean absolute error, $\theta$ [rad]",
+    ]
+    for ax, expected in zip(axes, (1e3 * 0.008 / 3 * t, np.full(11, 1e3 * 0.005 / 3), 0.12 / 3 * t)):
+        np.testing.assert_allclose(ax.lines[0].get_ydata(), expected)
+    labels = [text.get_text() for text in fig.legends[0].get_texts()]
+    assert labels == ["TrajectoTree mean (n=3)", "shaded: 95 % CI of the mean (Student t, across trials)"]
+    assert [t.get_text() for t in fig.texts] == ["no executed plans: CITO"]
+    plt.close(fig)

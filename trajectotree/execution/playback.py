@@ -267,7 +267,7 @@ PAGE_SCRIPT = """
   }
   function place() {  // each label where the camera draws its point, so that it follows a zoom or a pan
     const r = viewer.dom_element.getBoundingClientRect(), c = viewer.camera;
-    const root = viewer.scene_tree.find(["meshcat"]).object;  // Drake's W: z up in three.js's y-up scene
+    const root = viewer.scene_tree.object;  // Drake's W, z up, in three.js's y-up scene
     c.updateMatrixWorld();
     root.updateMatrixWorld();
     LABELS.forEach(function (label, k) {

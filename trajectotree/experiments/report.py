@@ -305,15 +305,18 @@ def figure_tracking(tracks: dict[str, list], methods: list[str], title: str | No
         ax.set_ylabel(f"mean absolute error, {label}")
         ax.grid(alpha=0.3)
     handles, _ = axes[0].get_legend_handles_labels()
-    if handles:  # the band's entry: grey, since each method's band is its curve's colour
+    if handles:  # below the panels, where it hides no curve; the band's entry grey, as each band is its curve's colour
         handles.append(Patch(facecolor="0.5", alpha=0.25, lw=0, label=BAND_LABEL))
-        axes[0].legend(handles=handles, fontsize=8)
+        fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
     if title:
         fig.suptitle(title, fontsize=10)
     missing = [METHOD_LABELS.get(m, m) for m in methods if not tracks.get(m)]
     if missing:  # named, rather than silently absent from the curves
-        fig.text(0.01, 0.01, "no executed plans: " + ", ".join(missing), fontsize=8, color="0.45")
-    fig.tight_layout(rect=(0, 0.04 if missing else 0, 1, 1))
+        fig.text(0.5, 0.0, "no executed plans: " + ", ".join(missing), fontsize=8, color="0.45", ha="center")
+    height = fig.get_figheight()  # inches: the legend's row, then the note's
+    fig.tight_layout(rect=(0, (0.3 if handles else 0) / height + (0.2 if missing else 0) / height, 1, 1))
+    if handles and missing:
+        fig.legends[0].set_bbox_to_anchor((0.5, 0.2 / height), transform=fig.transFigure)
     return fig
 
 
