@@ -453,6 +453,9 @@ def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | N
     write_pose_html(config, times, poses, q, path, meshcat, forces=forces, newtons_per_cm=arrow_newtons_per_cm(forces))
 
 
+GIF_DPI = 120  # the GIF's frames: 552 px wide, its labels readable on a README page
+
+
 def write_gif(
     scene,
     times,
@@ -485,7 +488,7 @@ def write_gif(
         newtons_per_cm = arrow_newtons_per_cm(forces)
     noun = object_noun(scene.config)
     notes = ([f"dashed: planned {noun} pose"] if planned_poses is not None else []) + (
-        [f"arrows: force on the {noun}, {arrow_scale_text(newtons_per_cm)}"] if forces is not None else []
+        [f"arrows: each finger's force on the {noun}, {arrow_scale_text(newtons_per_cm)}"] if forces is not None else []
     )
     fig, ax = plt.subplots(figsize=(4.6, 4.6 + 0.18 * len(notes)))
 
@@ -519,7 +522,7 @@ def write_gif(
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.gif")
     try:
-        animation.save(tmp, writer=PillowWriter(fps=fps))
+        animation.save(tmp, writer=PillowWriter(fps=fps), dpi=GIF_DPI)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)

@@ -73,7 +73,7 @@ def plot_force_arrows(ax, tips, forces, tip_radius: float, newtons_per_cm: float
                 FancyArrow(
                     *start,
                     *(end - start),
-                    width=0.003,
+                    width=0.004,
                     head_width=head,
                     head_length=head,
                     length_includes_head=True,
