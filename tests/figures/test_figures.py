@@ -381,3 +381,34 @@ def test_force_arrows_are_drawn_in_the_fingers_colours_where_they_push(ax):
         direction = (end - start) / np.linalg.norm(end - start)
         along = (xy - start) @ direction  # the outline spans start..end along the force
         assert along.min() == pytest.approx(0.0, abs=1e-9) and along.max() == pytest.approx(np.linalg.norm(end - start))
+
+
+def test_run_frame_has_labelled_metre_axes_the_time_numbers_and_force_arrows(scene, ax):
+    """A GIF frame (plot_run_frame): x, y in m over the view, the title as given (the time), the
+    fingers' numbers at their bases, the planned pose dashed and one arrow per pushing finger."""
+    from trajectotree.figures.run import plot_run_frame
+
+    q = np.tile([0.25, 1.2], 4)
+    forces = np.array([[0.0, 0.5], [0.0, 0.0], [0.3, 0.0], [0.0, -0.2]])
+    plot_run_frame(
+        ax,
+        scene,
+        (0.0, 0.0, 0.1),
+        q,
+        half_width=0.32,
+        planned_pose=(0.0, 0.01, 0.0),
+        forces=forces,
+        newtons_per_cm=0.2,
+        title="t = 1.50 s of 3.00 s",
+    )
+    assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_title()) == ("x [m]", "y [m]", "t = 1.50 s of 3.00 s")
+    assert ax.get_xlim() == pytest.approx((-0.32, 0.32)) and ax.get_ylim() == pytest.approx((-0.32, 0.32))
+    assert [t.get_text() for t in ax.texts] == ["0", "1", "2", "3"]
+    dashed = [p for p in ax.patches if isinstance(p, matplotlib.patches.Polygon) and p.get_linestyle() == "--"]
+    assert len(dashed) == 1
+    arrows = [p for p in ax.patches if isinstance(p, matplotlib.patches.FancyArrow)]
+    assert [a.get_facecolor() for a in arrows] == [matplotlib.colors.to_rgba(FINGER_COLORS[i]) for i in (0, 2, 3)]
+    tips = scene.fingertip_positions(q)
+    for arrow, i in zip(arrows, (0, 2, 3)):
+        start, end = force_arrow(tips[i], forces[i], scene.tip_radius, 0.2)
+        assert np.min(np.linalg.norm(arrow.get_xy() - end, axis=1)) == pytest.approx(0.0, abs=1e-12)  # its tip

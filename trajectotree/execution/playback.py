@@ -479,11 +479,10 @@ def write_gif(
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    from trajectotree.figures.run import plot_finger_numbers, plot_force_arrows, plot_hand, plot_object
+    from trajectotree.figures.run import plot_run_frame
 
     times = np.asarray(times)
     frames = np.unique(np.searchsorted(times, np.arange(times[0], times[-1] + 1e-9, 1.0 / fps)).clip(0, len(times) - 1))
-    shape = scene.config.shape
     if forces is not None and newtons_per_cm is None:
         newtons_per_cm = arrow_newtons_per_cm(forces)
     noun = object_noun(scene.config)
@@ -494,24 +493,18 @@ def write_gif(
 
     def draw(k):
         ax.clear()
-        ax.set_aspect("equal")
-        ax.set_xlim(-VIEW_HALF_WIDTH, VIEW_HALF_WIDTH)
-        ax.set_ylim(-VIEW_HALF_WIDTH, VIEW_HALF_WIDTH)
-        ax.set_xlabel("x [m]", fontsize=9)
-        ax.set_ylabel("y [m]", fontsize=9)
-        ax.tick_params(labelsize=8)
-        ax.grid(color="0.92", lw=0.5)
-        ax.set_axisbelow(True)
-        if planned_poses is not None:
-            plot_object(ax, shape, planned_poses[k], color="none", alpha=1.0, ls="--")
-        plot_object(ax, shape, object_poses[k])
-        plot_hand(ax, scene, joint_angles[k])
-        plot_finger_numbers(ax, scene, fontsize=9)
-        if forces is not None:
-            tips = scene.fingertip_positions(joint_angles[k])
-            plot_force_arrows(ax, tips, forces[k], scene.tip_radius, newtons_per_cm)
         clock = f"t = {times[k]:.2f} s of {times[-1]:.2f} s"
-        ax.set_title(f"{title}\n{clock}" if title else clock, fontsize=9)
+        plot_run_frame(
+            ax,
+            scene,
+            object_poses[k],
+            joint_angles[k],
+            half_width=VIEW_HALF_WIDTH,
+            planned_pose=None if planned_poses is None else planned_poses[k],
+            forces=None if forces is None else forces[k],
+            newtons_per_cm=newtons_per_cm,
+            title=f"{title}\n{clock}" if title else clock,
+        )
 
     if notes:
         fig.text(0.5, 0.01, "\n".join(notes), ha="center", va="bottom", fontsize=7.5, color="0.25")

@@ -153,6 +153,33 @@ def plot_workspace(ax, finger, *, color="0.6"):
     return [ax.add_patch(Circle(finger.p_W_base, finger.l1 + finger.l2, fill=False, ls="--", color=color, lw=0.8))]
 
 
+def plot_run_frame(
+    ax, scene, pose, q, *, half_width: float, planned_pose=None, forces=None, newtons_per_cm=1.0, title=None
+):
+    """One frame of a run (the GIF's): the object at `pose`, the hand at joint angles q with the
+    fingers numbered, the planned pose as a dashed outline, each finger's force on the object
+    (forces (4, 2)) as an arrow at newtons_per_cm (plot_force_arrows), on x, y axes in m over
+    [-half_width, half_width]^2, titled `title`."""
+    ax.set_aspect("equal")
+    ax.set_xlim(-half_width, half_width)
+    ax.set_ylim(-half_width, half_width)
+    ax.set_xlabel("x [m]", fontsize=9)
+    ax.set_ylabel("y [m]", fontsize=9)
+    ax.tick_params(labelsize=8)
+    ax.grid(color="0.92", lw=0.5)
+    ax.set_axisbelow(True)
+    shape = scene.config.shape
+    artists = [] if planned_pose is None else plot_object(ax, shape, planned_pose, color="none", alpha=1.0, ls="--")
+    artists += plot_object(ax, shape, pose)
+    artists += plot_hand(ax, scene, q)
+    artists += plot_finger_numbers(ax, scene, fontsize=9)
+    if forces is not None:
+        artists += plot_force_arrows(ax, scene.fingertip_positions(q), forces, scene.tip_radius, newtons_per_cm)
+    if title:
+        artists.append(ax.set_title(title, fontsize=9))
+    return artists
+
+
 def figure_model(scene, q=None, reachable=None, note: str | None = None):
     """The hand at joint angles q (default: a fixed open pose) with each finger's reach dashed,
     the object at its initial pose, gravity, and optionally each finger's reachable contacts
