@@ -306,7 +306,7 @@ def test_keyframes_share_metre_axes_labelled_on_the_outer_panels(scene):
     panel of each column (the second row's two, the first row's three with nothing below), the
     y label on the left column, and ticks that read as a scale."""
     nodes = tuple(node(0.05 * n, None if n == 0 else n % 4) for n in range(7))
-    fig = figure_keyframes(scene, ContactPlan(goal=0.3, success=True, reason="", nodes=nodes))
+    fig = figure_keyframes(scene, ContactPlan(goal=0.3, success=True, nodes=nodes))
     panels = [ax for ax in fig.axes if ax.axison]
     assert len(panels) == 7 and len(fig.axes) == 10  # three empty slots, drawn as nothing
     assert [ax.get_xlabel() for ax in panels] == ["", "", "x [m]", "x [m]", "x [m]", "x [m]", "x [m]"]
