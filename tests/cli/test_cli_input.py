@@ -82,7 +82,13 @@ def subcommand_parsers():
     return subparsers.choices
 
 
-REQUIRED = {"search": ["--goal", "0.1"], "plan": ["--goal", "0.1"], "simulate": ["p"], "report": ["s"]}
+REQUIRED = {
+    "search": ["--goal", "0.1"],
+    "plan": ["--goal", "0.1"],
+    "simulate": ["p"],
+    "state": ["r", "--time", "1"],
+    "report": ["s"],
+}
 
 
 def test_every_option_that_takes_a_value_accepts_one_with_a_minus_sign():
