@@ -166,7 +166,7 @@ def test_the_push_reflex_squeezes_while_a_push_acts_and_lets_go_after(scene):
 
 def test_open_loop_runs_are_unchanged_bit_for_bit(scene):
     """With the closed loop off, a run is the one main made before the closed loop existed
-    (tests/execution/data/open_loop_hold.npz: commit 8dcf64d, a three-finger hold at friction
+    (tests/execution/data/open_loop_hold.npz: main at 816ba79, a three-finger hold at friction
     0.5 pushed with 0.3 N): the same numbers, to the last bit, and no closed-loop systems."""
     from pathlib import Path
 
@@ -218,7 +218,7 @@ def test_slip_intervals_are_the_runs_of_samples():
 
 
 def test_the_closed_loop_needs_the_grasp_controller(scene):
-    with pytest.raises(ConfigError, match="closed loop runs around the grasp controller"):
+    with pytest.raises(ConfigError, match="controller = 'paper': the closed loop runs around the grasp controller"):
         run_simulation(plan=three_finger_hold(scene, 0), config=hold_config(), controller="paper", closed_loop=True)
 
 
@@ -256,7 +256,7 @@ def test_simulate_command_closed_loop(scene, tmp_path, capsys):
             "controller.friction_floor = 0.0 is out of range; valid range: (0, 1]",
         ),
         (["--closed-loop", "--friction-floor", "1.5"], "controller.friction_floor = 1.5 is out of range"),
-        (["--closed-loop", "--controller", "paper"], "controller 'paper' has none"),
+        (["--closed-loop", "--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
     ],
 )
 def test_simulate_command_refuses_bad_closed_loop_options(scene, tmp_path, capsys, options, named):

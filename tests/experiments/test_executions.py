@@ -4,6 +4,7 @@ import dataclasses
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from trajectotree.cli import main
@@ -65,7 +66,7 @@ def write_trial(sweep_dir, key: str, config: Config, sim_json: dict | None):
     (trial / "plan.json").write_text(json.dumps(plan))
     if sim_json is not None:
         (trial / "sim.json").write_text(json.dumps(sim_json))
-        (trial / "sim.npz").write_bytes(b"npz")
+        np.savez(trial / "sim.npz", t=np.zeros(2))
     return trial
 
 
@@ -82,7 +83,9 @@ def test_closed_loop_executions_are_their_own_and_never_copied(tmp_path):
     assert pending_executions(tmp_path, ["grasp"], ["nominal"], spec) == []  # copied from the sweep's run
     assert (trial / "exec" / "grasp_nominal" / "sim.json").is_file()
     assert not (trial / "exec" / "grasp-closed-loop_nominal").exists()
-    with pytest.raises(ConfigError, match="controller 'paper' has none"):
+    with pytest.raises(
+        ConfigError, match="controller = 'paper': the closed loop .* grasp controller only; valid: grasp"
+    ):
         pending_executions(tmp_path, ["paper"], ["nominal"], spec, closed_loop=True)
 
 
@@ -131,7 +134,8 @@ def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
     assert not out.exists()
     closed = ["sweep", "--out", str(out), "--goals", "1", "--no-progress", "--closed-loop"]
     assert main(closed + ["--controllers", "grasp", "paper"]) == 2
-    assert "--closed-loop runs around the grasp controller; controller 'paper' has none" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "controller = 'paper': the closed loop (--closed-loop) runs around the grasp controller only" in err
     assert main(closed + ["--conditions", "friction-0.5"]) == 2
     assert "condition = 'friction-0.5' is unknown" in capsys.readouterr().err
     assert not out.exists()
