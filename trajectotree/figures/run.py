@@ -250,7 +250,7 @@ def plot_slip_intervals(ax, t, slipping, *, color="crimson"):
     """One finger's slip intervals (a closed-loop run's ClosedLoopLog.slipping[:, i]) as
     hatched spans."""
     return [
-        ax.axvspan(a, b, facecolor="none", edgecolor=color, hatch="////", lw=0, zorder=0, label="slipping")
+        ax.axvspan(a, b, facecolor="none", edgecolor=color, alpha=0.4, hatch="//", lw=0, zorder=0, label="slipping")
         for a, b in slip_intervals(t, slipping)
     ]
 
