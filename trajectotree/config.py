@@ -455,6 +455,26 @@ class ControllerGains:
     ramp_time: float = 0.1  # s, a switching finger's force budget ramps to 0 after lift-off (back before landing)
     swing_lift: float = 0.008  # m, least fingertip gap mid-swing (its planned path, lifted where lower)
     contact_distance: float = 1e-3  # m, a planned fingertip this close to the planned box is in contact
+    # The closed loop (simulate --closed-loop, trajectotree.execution.closed_loop): the contact watch, the
+    # friction and mass estimates the grasp QP then uses, and the push reflex. Unused in open loop.
+    slip_speed: float = 0.005  # m/s, a contact whose tangential velocity at the contact point exceeds this slides
+    slip_min_force: float = 0.05  # N, a contact pushing less is not watched for slip (touch-downs, lift-offs)
+    slip_confirm_time: float = 0.01  # s, a contact must slide this long before its ratio |f_t|/f_n counts
+    # N, and push at least this hard: in Drake's lagged contact model lighter contacts slide below the world's
+    # friction (8 nominal runs at mu 0.7: steady slides under 0.4 N read 0.32-0.68, above it 0.71)
+    friction_evidence_force: float = 0.4
+    friction_floor: float = 0.2  # 1, the friction estimate (only ever lowered, by slides) never goes below this
+    mass_accel_max: float = 0.5  # m/s^2, the fingers' vertical force measures the mass while |box accel| < this
+    mass_time_constant: float = 0.2  # s, low-pass time constant of the mass estimate
+    mass_estimate_range: tuple[float, float] = (0.25, 4.0)  # 1, the mass estimate / planned mass stays within this
+    # N, a force on the box that neither the fingers' measured forces nor gravity explain (m a - f - m g) starts
+    # the reflex when it lasts reflex_confirm_time
+    reflex_force: float = 1.0
+    reflex_confirm_time: float = 0.004  # s
+    reflex_squeeze: float = 2.0  # N, least push of each holding finger during the reflex (<= max_normal_force)
+    reflex_gain: float = 4.0  # 1, object_kp x this during the reflex (object_kd x its square root)
+    reflex_hold: float = 0.2  # s, the reflex stays on this long after its trigger ends
+    reflex_release: float = 0.2  # s, then fades back to the plan's gains and squeeze over this
 
     def __post_init__(self):
         check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
@@ -465,6 +485,23 @@ class ControllerGains:
         check_range("controller.ramp_time", self.ramp_time, 0.0, 2.0)
         check_range("controller.swing_lift", self.swing_lift, 0.0, 0.05)
         check_range("controller.contact_distance", self.contact_distance, 0.0, 0.02, low_open=True)
+        check_range("controller.slip_speed", self.slip_speed, 0.0, 1.0, low_open=True)
+        check_range("controller.slip_min_force", self.slip_min_force, 0.0, self.max_normal_force)
+        check_range("controller.slip_confirm_time", self.slip_confirm_time, 0.0, 1.0)
+        check_range("controller.friction_evidence_force", self.friction_evidence_force, 0.0, self.max_normal_force)
+        check_range("controller.friction_floor", self.friction_floor, 0.0, 1.0, low_open=True)
+        check_range("controller.mass_accel_max", self.mass_accel_max, 0.0, 100.0, low_open=True)
+        check_range("controller.mass_time_constant", self.mass_time_constant, 0.0, 100.0, low_open=True)
+        check_length("controller.mass_estimate_range", self.mass_estimate_range, 2, "low, high")
+        low, high = self.mass_estimate_range
+        check_range("controller.mass_estimate_range", low, 0.0, 1.0, low_open=True, index=(0,))
+        check_range("controller.mass_estimate_range", high, 1.0, 100.0, index=(1,))
+        check_range("controller.reflex_force", self.reflex_force, 0.0, None, low_open=True)
+        check_range("controller.reflex_confirm_time", self.reflex_confirm_time, 0.0, 1.0)
+        check_range("controller.reflex_squeeze", self.reflex_squeeze, 0.0, self.max_normal_force)
+        check_range("controller.reflex_gain", self.reflex_gain, 1.0, 100.0)
+        check_range("controller.reflex_hold", self.reflex_hold, 0.0, 10.0)
+        check_range("controller.reflex_release", self.reflex_release, 0.0, 10.0)
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20

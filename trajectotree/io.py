@@ -22,7 +22,16 @@ import numpy as np
 
 from trajectotree.config import Config, ConfigError, config_from_dict, config_to_dict
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.results import SIM_ARRAYS, TRAJECTORY_ARRAYS, PhysicsCheck, PlanResult, SimResult, Trajectory
+from trajectotree.results import (
+    CLOSED_LOOP_ARRAYS,
+    SIM_ARRAYS,
+    TRAJECTORY_ARRAYS,
+    ClosedLoopLog,
+    PhysicsCheck,
+    PlanResult,
+    SimResult,
+    Trajectory,
+)
 from trajectotree.start import StartState
 
 SIM_JSON = "sim.json"
@@ -71,8 +80,12 @@ def _npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
 def save_sim(result: SimResult, plan_dir: str | Path) -> None:
     """plan_dir/sim.json (SimResult.to_json) and plan_dir/sim.npz (t (T,), abs_error
     (T, 3), the simulated pose x, joint angles q and planned pose x_plan, and the
-    simulated and planned finger forces f_W, f_W_plan (T, 4, 2))."""
-    write_bytes_atomic(Path(plan_dir) / SIM_NPZ, _npz_bytes({name: getattr(result, name) for name in SIM_ARRAYS}))
+    simulated and planned finger forces f_W, f_W_plan (T, 4, 2)), and of a closed-loop run
+    the ClosedLoopLog's arrays too (results.CLOSED_LOOP_ARRAYS)."""
+    arrays = {name: getattr(result, name) for name in SIM_ARRAYS}
+    if result.closed_loop is not None:
+        arrays |= result.closed_loop.arrays()
+    write_bytes_atomic(Path(plan_dir) / SIM_NPZ, _npz_bytes(arrays))
     write_json_atomic(Path(plan_dir) / SIM_JSON, result.to_json())
 
 
@@ -99,7 +112,10 @@ def load_sim(plan_dir: str | Path) -> SimResult:
         )
     with reading(npz_path), np.load(npz_path) as data:
         arrays = {name: data[name] for name in SIM_ARRAYS}
-    return SimResult(**arrays, **values)
+        closed_loop = None
+        if CLOSED_LOOP_ARRAYS[0] in data:  # a closed-loop run
+            closed_loop = ClosedLoopLog(**{name: data[name] for name in CLOSED_LOOP_ARRAYS})
+    return SimResult(**arrays, **values, closed_loop=closed_loop)
 
 
 def plan_to_json(result: PlanResult) -> dict:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -28,6 +28,18 @@ METHODS = ("trajectotree", "cito", "cito-warm")  # the paper's method and its tw
 TRAJECTORY_ARRAYS = ("t", "x", "xdot", "q", "qdot", "tau", "lambda_n", "lambda_t", "f_W", "p_W_tip", "p_W_C")
 # The sim.npz arrays (README, "Executing a plan").
 SIM_ARRAYS = ("t", "x", "q", "x_plan", "abs_error", "f_W", "f_W_plan")
+# The sim.npz arrays of a closed-loop run besides (ClosedLoopLog).
+CLOSED_LOOP_ARRAYS = (
+    "in_contact",
+    "slipping",
+    "force_ratio",
+    "slip_speed",
+    "tracking_error",
+    "mu_estimate",
+    "mass_estimate",
+    "disturbance",
+    "reflex",
+)
 
 # The physics check's rule (trajectotree.planning.physics; written into plan.json with each check):
 GAP_TOL = 1e-4  # m, a fingertip sphere farther than this from the box is off it
@@ -154,6 +166,37 @@ class PlanResult:
 
 
 @dataclass(frozen=True)
+class ClosedLoopLog:
+    """What the closed loop (trajectotree.execution.closed_loop) watched and estimated in one
+    run, at the SimLog's sample times t (T,): sim.npz's CLOSED_LOOP_ARRAYS."""
+
+    in_contact: np.ndarray  # (T, 4) bool, the finger (either link) pushes on the box
+    slipping: np.ndarray  # (T, 4) bool, it pushes >= controller.slip_min_force and slides > slip_speed
+    force_ratio: np.ndarray  # (T, 4) |f_t| / f_n of its force on the box (0 out of contact)
+    slip_speed: np.ndarray  # (T, 4) m/s, relative tangential velocity at its contact points (fastest)
+    tracking_error: np.ndarray  # (T, 3) measured - planned object pose (m, m, rad wrapped to [-pi, pi))
+    mu_estimate: np.ndarray  # (T,) the friction estimate (starts at the plan's scene.mu)
+    mass_estimate: np.ndarray  # (T,) kg, the object mass estimate (starts at the plan's)
+    disturbance: np.ndarray  # (T, 2) N in W, the force on the object its contacts and gravity do not explain
+    reflex: np.ndarray  # (T,) 0..1, the push reflex (1: squeeze and object gains fully raised)
+
+    MONITOR_ARRAYS: ClassVar[tuple[str, ...]] = CLOSED_LOOP_ARRAYS[:5]  # the ContactMonitor's outputs
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: getattr(self, name) for name in CLOSED_LOOP_ARRAYS}
+
+    def to_json(self, t: np.ndarray) -> dict:
+        """sim.json's "closed_loop": the final estimates, how long each finger slid and the reflex was on."""
+        dt = np.diff(t, append=t[-1])  # each sample stands for the time to the next
+        return {
+            "mu_estimate": float(self.mu_estimate[-1]),
+            "mass_estimate": float(self.mass_estimate[-1]),
+            "slipping_s": [float(np.sum(dt[self.slipping[:, i]])) for i in range(self.slipping.shape[1])],
+            "reflex_s": float(np.sum(dt[self.reflex > 0.0])),
+        }
+
+
+@dataclass(frozen=True)
 class SimLog:
     """What one execution of a plan recorded (trajectotree.execution.simulate), sampled at t."""
 
@@ -166,6 +209,9 @@ class SimLog:
     sim_time_s: float  # s, wall-clock time of the simulation
     controller: str  # which executor ran (config.CONTROLLERS, or "none": zero torque)
     conditions: dict  # simulate.Conditions.to_json() of the simulated world
+    # What the closed loop watched and estimated (sim.npz's CLOSED_LOOP_ARRAYS besides SIM_ARRAYS, sim.json's
+    # "closed_loop" summary); None: an open-loop run, whose sim.npz holds SIM_ARRAYS alone
+    closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)
 
 
 @dataclass(frozen=True)
@@ -185,7 +231,7 @@ class SimResult(SimLog):
 
     def to_json(self) -> dict:
         """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
-        the controller and the simulated conditions."""
+        the controller, the simulated conditions and the closed loop's summary (None: open loop)."""
         return {
             "mae_x": self.mae_x,
             "mae_y": self.mae_y,
@@ -199,4 +245,5 @@ class SimResult(SimLog):
             "num_samples": int(len(self.t)),
             "controller": self.controller,
             "conditions": self.conditions,
+            "closed_loop": None if self.closed_loop is None else self.closed_loop.to_json(self.t),
         }

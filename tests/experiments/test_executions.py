@@ -4,11 +4,19 @@ import dataclasses
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.config import Config
-from trajectotree.experiments.executions import ConditionSpec, execution_dir, middle_of_middle_segment
+from trajectotree.config import Config, ConfigError, config_to_dict
+from trajectotree.experiments.executions import (
+    CONDITIONS,
+    ConditionSpec,
+    check_condition,
+    execution_dir,
+    middle_of_middle_segment,
+    pending_executions,
+)
 
 
 def test_push_starts_in_the_middle_of_the_middle_segment():
@@ -18,6 +26,67 @@ def test_push_starts_in_the_middle_of_the_middle_segment():
     assert middle_of_middle_segment(three, 2.4) == pytest.approx(1.8)
     kwargs = ConditionSpec().simulation_kwargs("mismatch", config, 10.8)
     assert kwargs == {"sim_mu": 0.55, "sim_mass": pytest.approx(1.2 * config.scene.box_mass)}
+
+
+def test_the_closed_loop_worlds_are_named_by_their_values():
+    config = Config()
+    spec = ConditionSpec()
+    assert CONDITIONS == (
+        "nominal",
+        "mismatch",
+        "push",
+        "friction-0.4",
+        "friction-0.3",
+        "mass-x2",
+        "push-3N",
+        "push-6N",
+    )
+    assert spec.simulation_kwargs("friction-0.4", config, 10.8) == {"sim_mu": 0.4}
+    assert spec.simulation_kwargs("friction-0.3", config, 10.8) == {"sim_mu": 0.3}
+    assert spec.simulation_kwargs("mass-x2", config, 10.8) == {"sim_mass": pytest.approx(0.1)}
+    assert spec.simulation_kwargs("nominal", config, 10.8) == {}
+    for name, force in (("push-3N", 3.0), ("push-6N", 6.0)):
+        push = spec.simulation_kwargs(name, config, 10.8)["push"]
+        assert push.force == (force, 0.0) and push.time_s == pytest.approx(5.4) and push.duration_s == 0.2
+    other = ConditionSpec(friction_mus=(0.5,), mass_factors=(1.5,), push_forces=(1.0,))
+    assert tuple(other.worlds())[3:] == ("friction-0.5", "mass-x1.5", "push-1N")
+    with pytest.raises(ConfigError, match="condition = 'friction-0.5' is unknown; valid: nominal, mismatch"):
+        check_condition("friction-0.5")
+    assert check_condition("friction-0.5", other) == "friction-0.5"
+    with pytest.raises(ConfigError, match=r"friction_mus\[0\] = 0.0 is out of range"):
+        ConditionSpec(friction_mus=(0.0,))
+
+
+def write_trial(sweep_dir, key: str, config: Config, sim_json: dict | None):
+    """A finished trial folder as the sweep leaves it: plan.json (a solved plan) and, when
+    given, the sweep's own simulation (sim.json, sim.npz)."""
+    trial = sweep_dir / "trials" / key
+    trial.mkdir(parents=True)
+    plan = {"method": "trajectotree", "iterations": 10, "config": config_to_dict(config)}
+    (trial / "plan.json").write_text(json.dumps(plan))
+    if sim_json is not None:
+        (trial / "sim.json").write_text(json.dumps(sim_json))
+        np.savez(trial / "sim.npz", t=np.zeros(2))
+    return trial
+
+
+def test_closed_loop_executions_are_their_own_and_never_copied(tmp_path):
+    """The sweep's own (open-loop) nominal run stands in for the open-loop nominal execution,
+    never for the closed loop's, which goes to exec/grasp-closed-loop_<condition>/."""
+    config = Config()
+    world = {"sim_mu": 0.7, "sim_mass": 0.05, "plan_mu": 0.7, "plan_mass": 0.05, "push": None}
+    trial = write_trial(tmp_path, "t0", config, {"controller": "grasp", "conditions": world, "closed_loop": None})
+    spec = ConditionSpec()
+    closed = pending_executions(tmp_path, ["grasp"], ["nominal"], spec, closed_loop=True)
+    assert [(t.controller, t.condition, t.closed_loop) for t in closed] == [("grasp", "nominal", True)]
+    assert execution_dir(trial, "grasp", "nominal", closed_loop=True) == trial / "exec" / "grasp-closed-loop_nominal"
+    assert pending_executions(tmp_path, ["grasp"], ["nominal"], spec) == []  # copied from the sweep's run
+    assert (trial / "exec" / "grasp_nominal" / "sim.json").is_file()
+    assert not (trial / "exec" / "grasp-closed-loop_nominal").exists()
+    with pytest.raises(
+        ConfigError, match="controller = 'paper': the closed loop .* grasp controller only; valid: grasp"
+    ):
+        pending_executions(tmp_path, ["paper"], ["nominal"], spec, closed_loop=True)
 
 
 @pytest.mark.slow
@@ -63,3 +132,34 @@ def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
     assert main(["sweep", "--out", str(out), "--goals", "1", "--conditions", "earthquake", "--no-progress"]) == 2
     assert "condition = 'earthquake' is unknown" in capsys.readouterr().err
     assert not out.exists()
+    closed = ["sweep", "--out", str(out), "--goals", "1", "--no-progress", "--closed-loop"]
+    assert main(closed + ["--controllers", "grasp", "paper"]) == 2
+    err = capsys.readouterr().err
+    assert "controller = 'paper': the closed loop (--closed-loop) runs around the grasp controller only" in err
+    assert main(closed + ["--conditions", "friction-0.5"]) == 2
+    assert "condition = 'friction-0.5' is unknown" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path, capsys):
+    """The same plans executed open and closed loop under a hard push: the report lists both."""
+    from tests.conftest import SMALL_SWEEP
+
+    out = tmp_path / "sweep"
+    shutil.copytree(resumed_sweep.out, out)
+    args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2", "--conditions", "push-3N"]
+    assert main(args) == 0
+    assert "executions: 4 run (grasp x push-3N)" in capsys.readouterr().out
+    assert main(args + ["--closed-loop"]) == 0
+    assert "executions: 4 run (grasp closed loop x push-3N)" in capsys.readouterr().out
+    trial = next(p for p in (out / "trials").iterdir() if p.is_dir() and not p.name.startswith("."))
+    closed = json.loads((execution_dir(trial, "grasp", "push-3N", closed_loop=True) / "sim.json").read_text())
+    assert closed["controller"] == "grasp" and closed["closed_loop"] is not None
+    assert closed["conditions"]["push"]["force"] == [3.0, 0.0]
+    report = tmp_path / "report"
+    assert main(["report", str(out), "--out", str(report)]) == 0
+    table = (report / "executions.md").read_text()
+    for method in ("TrajectoTree", "CITO, warm-start"):
+        rows = [line for line in table.splitlines() if line.startswith(f"| {method} |") and "push-3N" in line]
+        assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-closed-loop"], table

@@ -1,7 +1,7 @@
 """`trajectotree simulate PLAN_DIR`: execute a saved plan in a full-dynamics Drake
 simulation with the object-level grasp controller (--controller paper: eq. 20), optionally
-in a world that differs from the plan's (--sim-mu, --sim-mass, --push); writes
-PLAN_DIR/sim.json and sim.npz."""
+with its closed loop (--closed-loop) and in a world that differs from the plan's (--sim-mu,
+--sim-mass, --push); writes PLAN_DIR/sim.json and sim.npz."""
 
 from __future__ import annotations
 
@@ -50,6 +50,18 @@ def register(subparsers) -> None:
     group.add_argument("--tip-kp", type=float, metavar="N/M", help="grasp controller: fingertip spring, N/m")
     group.add_argument("--tip-kd", type=float, metavar="NS/M", help="grasp controller: fingertip damping, N s/m")
     group.add_argument("--rate", type=float, metavar="HZ", help="grasp controller: control rate, Hz")
+    group.add_argument(
+        "--closed-loop",
+        action="store_true",
+        help="grasp controller: watch the contacts (slip), estimate the friction and the box mass for the "
+        "grasp forces and squeeze harder against pushes (sim.npz then holds what the loop saw)",
+    )
+    group.add_argument(
+        "--friction-floor",
+        type=float,
+        metavar="MU",
+        help="closed loop: the friction estimate never goes below this, in (0, 1] (default 0.2)",
+    )
     world = p.add_argument_group("simulated world (differs from the plan's; the controller keeps the plan's values)")
     world.add_argument("--sim-mu", type=float, metavar="MU", help="friction coefficient of the simulated plant")
     world.add_argument("--sim-mass", type=float, metavar="KG", help="object mass of the simulated plant, kg")
@@ -145,6 +157,8 @@ def execution_config(args, plan_config: Config) -> Config:
             gains[name] = getattr(args, name)
     if args.rate is not None:
         gains["rate_hz"] = args.rate
+    if args.friction_floor is not None:
+        gains["friction_floor"] = args.friction_floor
     if args.controller is not None:
         check_controller(args.controller, "--controller")
     sim = {} if args.controller is None else {"controller": args.controller}
@@ -238,6 +252,10 @@ def run(args) -> int:
     check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
+    if args.closed_loop:
+        from trajectotree.execution.simulate import check_closed_loop
+
+        check_closed_loop(config.sim.controller, True)
     plan_success = bool(files.data.get("success"))
     if not plan_success:
         print(
@@ -251,7 +269,13 @@ def run(args) -> int:
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
     reference = reference_from_arrays(arrays, build_scene(config.scene))
     result = run_simulation(
-        plan=reference, config=config, meshcat=meshcat, html_path=args.html, gif_path=args.gif, **conditions
+        plan=reference,
+        config=config,
+        meshcat=meshcat,
+        html_path=args.html,
+        gif_path=args.gif,
+        closed_loop=args.closed_loop,
+        **conditions,
     )
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_success)
@@ -268,6 +292,14 @@ def run(args) -> int:
             + (" (errors held at their drop-time values from the drop on)" if result.dropped else "")
         )
         print(final_error_line(summary))
+        loop = summary["closed_loop"]
+        if loop is not None:
+            print(
+                f"closed loop: friction estimate {loop['mu_estimate']:.3f} (plan {config.scene.mu:g}), mass estimate "
+                f"{1e3 * loop['mass_estimate']:.1f} g (plan {1e3 * config.scene.box_mass:g}), slipping "
+                + ", ".join(f"{s:.2f}" for s in loop["slipping_s"])
+                + f" s per finger, reflex on {loop['reflex_s']:.2f} s"
+            )
         print(
             f"wrote {Path(args.plan_dir) / 'sim.json'}"
             + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)

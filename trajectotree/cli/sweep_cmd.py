@@ -14,7 +14,12 @@ import math
 
 from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
 from trajectotree.config import CONTROLLERS, check_controller
-from trajectotree.experiments.executions import CONDITIONS, check_condition, run_executions
+from trajectotree.experiments.executions import (
+    CONDITIONS,
+    check_closed_loop_controllers,
+    check_condition,
+    run_executions,
+)
 from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
 
@@ -48,6 +53,13 @@ def register(subparsers) -> None:
         metavar="CONDITION",
         help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
         "default: nominal): see `trajectotree.experiments.executions`",
+    )
+    p.add_argument(
+        "--closed-loop",
+        action="store_true",
+        help="run those executions with the closed loop (grasp controller only: contact watch, friction "
+        "and mass estimates, push reflex); the report lists them as grasp-closed-loop beside the open-loop "
+        "grasp executions, so run the sweep with and without this option to compare",
     )
     p.add_argument(
         "--out",
@@ -106,8 +118,9 @@ def run(args) -> int:
     check_graspable(build_scene(spec.config.scene), spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
-    if conditions and not controllers:
+    if (conditions or args.closed_loop) and not controllers:
         controllers = [spec.config.sim.controller]
+    check_closed_loop_controllers(controllers, args.closed_loop)
     summary = run_sweep(
         spec,
         args.out,
@@ -124,6 +137,7 @@ def run(args) -> int:
             conditions=conditions or ["nominal"],
             gains=spec.config.controller,
             sim=spec.config.sim,
+            closed_loop=args.closed_loop,
             workers=args.workers,
             progress=not args.no_progress,
         )
@@ -136,7 +150,8 @@ def run(args) -> int:
         print(summary.line())
         if ran is not None:
             print(
-                f"executions: {ran} run ({' '.join(controllers)} x {' '.join(conditions or ['nominal'])}); "
+                f"executions: {ran} run ({' '.join(controllers)}{' closed loop' if args.closed_loop else ''} x "
+                f"{' '.join(conditions or ['nominal'])}); "
                 "the report tabulates them in executions.md"
             )
         print(f"next: trajectotree report {args.out}")

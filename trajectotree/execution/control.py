@@ -30,6 +30,8 @@ measured box inject tangential force as the spheres roll and lose the grasp.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
@@ -138,9 +140,11 @@ def perp(v) -> np.ndarray:
 class GraspForceQp:
     """min wrench_weight |G lambda - w|^2_W + |lambda - lambda_plan|^2 over lambda = (lambda_n,
     lambda_t) of the 4 fingers, lambda_n in [lo, hi], |lambda_t| <= mu lambda_n. Built once;
-    each solve updates the cost and the bounds (OSQP)."""
+    each solve updates the cost and the bounds (OSQP). With `torque_rows` (the closed loop)
+    it also has 2 rows per finger that bound the joint torques lambda makes (`solve`'s
+    `torque`)."""
 
-    def __init__(self, mu: float, torque_length: float, wrench_weight: float):
+    def __init__(self, mu: float, torque_length: float, wrench_weight: float, *, torque_rows: bool = False):
         self._prog = MathematicalProgram()
         self._z = self._prog.NewContinuousVariables(2 * NUM_FINGERS, "lambda")  # finger-major (n, t)
         self._cost = self._prog.AddQuadraticCost(
@@ -149,11 +153,13 @@ class GraspForceQp:
         self._bounds = self._prog.AddBoundingBoxConstraint(
             np.zeros(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z
         )
-        cone = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
-        for i in range(NUM_FINGERS):  # lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0
-            cone[2 * i, 2 * i : 2 * i + 2] = (-mu, 1.0)
-            cone[2 * i + 1, 2 * i : 2 * i + 2] = (-mu, -1.0)
-        self._prog.AddLinearConstraint(cone, np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z)
+        self._cone = self._prog.AddLinearConstraint(
+            cone_rows(mu), np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z
+        )
+        self._torque = None
+        if torque_rows:
+            unbounded = np.full(2 * NUM_FINGERS, np.inf)
+            self._torque = self._prog.AddLinearConstraint(np.eye(2 * NUM_FINGERS), -unbounded, unbounded, self._z)
         self._mu = mu
         self._identity = np.eye(2 * NUM_FINGERS)
         self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length**2])
@@ -162,10 +168,19 @@ class GraspForceQp:
         for name, value in (("eps_abs", 1e-6), ("eps_rel", 1e-6), ("polishing", 0), ("verbose", 0)):
             self._options.SetOption(OsqpSolver.id(), name, value)
 
-    def solve(self, G, wrench, lambda_plan, lo, hi) -> np.ndarray:
+    def set_friction(self, mu: float) -> None:
+        """The cones' friction coefficient from the next solve on."""
+        if mu != self._mu:
+            self._cone.evaluator().UpdateCoefficients(
+                cone_rows(mu), np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS)
+            )
+            self._mu = mu
+
+    def solve(self, G, wrench, lambda_plan, lo, hi, torque=None) -> np.ndarray:
         """lambda (4, 2) for the grasp matrix G (3, 8), the wrench w (3,), the plan's
-        lambda (4, 2) and the normal-force bounds lo, hi (4,). Falls back to the plan's
-        forces, clipped to the bounds, if OSQP fails."""
+        lambda (4, 2) and the normal-force bounds lo, hi (4,); `torque` (A (8, 8), lower (8,),
+        upper (8,)): lower <= A lambda <= upper (a QP built with torque_rows). Falls back to
+        the plan's forces, clipped to the bounds, if OSQP fails."""
         z_plan = lambda_plan.ravel()
         GtW = G.T @ self._W
         self._cost.evaluator().UpdateCoefficients(
@@ -173,6 +188,8 @@ class GraspForceQp:
         )
         t_max = self._mu * hi
         self._bounds.evaluator().set_bounds(np.column_stack([lo, -t_max]).ravel(), np.column_stack([hi, t_max]).ravel())
+        if torque is not None:
+            self._torque.evaluator().UpdateCoefficients(*torque)
         result = self._solver.Solve(self._prog, None, self._options)
         if not result.is_success():
             n = np.clip(lambda_plan[:, 0], lo, hi)
@@ -180,55 +197,137 @@ class GraspForceQp:
         return result.get_x_val().reshape(NUM_FINGERS, 2)  # z is the program's only variable
 
 
+def cone_rows(mu: float) -> np.ndarray:
+    """(8, 8): lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0 for each finger."""
+    cone = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
+    for i in range(NUM_FINGERS):
+        cone[2 * i, 2 * i : 2 * i + 2] = (-mu, 1.0)
+        cone[2 * i + 1, 2 * i : 2 * i + 2] = (-mu, -1.0)
+    return cone
+
+
+@dataclass(frozen=True)
+class Estimates:
+    """What the closed loop (trajectotree.execution.closed_loop) tells the GraspController."""
+
+    mu: float  # the friction coefficient estimate (the QP's cones: this x the controller's safety factor)
+    mass: float  # kg, the box mass estimate (the desired wrench's gravity and inertia)
+    reflex: float  # 0..1, the push reflex (squeeze and object gains raised in proportion)
+
+
+def torque_rows(
+    J_WF, n_W, t_W, tip_radius: float, rest, tau_max
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The joint torques that the finger forces lambda add to `rest` (4, 2: springs and
+    gravity), bounded by the motors' tau_max (4, 2): (A (8, 8) block-diagonal, lower (8,),
+    upper (8,)) for GraspForceQp.solve, and the most normal force (4,) each finger can push
+    with without tangential force. The force -lambda_n n + lambda_t t acts tip_radius from the
+    sphere centre along -n: its lever adds -tip_radius lambda_t to both joints. The bounds
+    are widened to admit lambda = 0 where `rest` alone is beyond the motors, so that the QP
+    stays feasible (the plant clips what is left)."""
+    A = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
+    Jt = np.swapaxes(J_WF, 1, 2)  # (4, 2 joints, 2)
+    normal = np.einsum("fji,fi->fj", Jt, -n_W)
+    tangential = np.einsum("fji,fi->fj", Jt, t_W) - tip_radius
+    for i in range(NUM_FINGERS):
+        A[2 * i : 2 * i + 2, 2 * i] = normal[i]
+        A[2 * i : 2 * i + 2, 2 * i + 1] = tangential[i]
+    lower = np.minimum(-tau_max - rest, 0.0).ravel()
+    upper = np.maximum(tau_max - rest, 0.0).ravel()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(
+            normal > 0, upper.reshape(-1, 2) / normal, np.where(normal < 0, lower.reshape(-1, 2) / normal, np.inf)
+        )
+    return A, lower, upper, room.min(axis=1)
+
+
 class GraspController(LeafSystem):
     """Object-level grasp control of a planned box motion (see the module doc).
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
-    joint) and `hand_state` (16: the hand's [q; v]). Output port: `actuation` (8, the
-    plant's actuation order), updated every 1 / gains.rate_hz s and held in between.
-    `mass` is the plan's and `mu` the friction its QP's cones allow (simulate passes
-    max(search, controller friction_safety) x scene.mu), not the simulated plant's."""
+    joint) and `hand_state` (16: the hand's [q; v]); with closed_loop also `mu_estimate`,
+    `mass_estimate` and `reflex` (1 each, trajectotree.execution.closed_loop). Output port:
+    `actuation` (8, the plant's actuation order), updated every 1 / gains.rate_hz s and held
+    in between. In open loop `mass` is the plan's and `mu` the friction its QP's cones allow
+    (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated
+    plant's; in closed loop the cones are at mu x mu_estimate / scene.mu (the same safety
+    factor on the estimate), the wrench uses the estimated mass, the reflex raises the
+    squeeze and the object gains, and the QP keeps the joint torques within the motors'."""
 
-    def __init__(self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float):
+    def __init__(
+        self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float, closed_loop: bool = False
+    ):
         super().__init__()
         c = scene.config
         self.gains, self.schedule = gains, schedule
         self._kinematics, self._tip_radius = HandKinematics(scene.fingers, c.gravity), scene.tip_radius
         self._gravity = c.gravity
+        self._shape = c.shape
         self._mass = c.box_mass
         self._inertia = c.shape.inertia(c.box_mass)  # a uniform plate (the box: m (w^2 + h^2) / 12)
+        self._friction_safety = mu / c.mu
+        self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (4, 2) N m
         # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
-        self._qp = GraspForceQp(mu, c.shape.circumradius, gains.wrench_weight)
+        self._qp = GraspForceQp(mu, c.shape.circumradius, gains.wrench_weight, torque_rows=closed_loop)
         B = scene.plant.MakeActuationMatrix()  # (nv, nu), a selection
         self._u_from_tau = B[scene.hand_v_indices].T  # hand-joint torques -> actuation
         self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
         self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
+        self.closed_loop = closed_loop
+        if closed_loop:
+            self.mu_estimate_port = self.DeclareVectorInputPort("mu_estimate", 1)
+            self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
+            self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
         state = self.DeclareDiscreteState(B.shape[1])
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
 
+    def estimates(self, context) -> Estimates | None:
+        """The closed loop's inputs (None in open loop)."""
+        if not self.closed_loop:
+            return None
+        return Estimates(
+            mu=float(self.mu_estimate_port.Eval(context)[0]),
+            mass=float(self.mass_estimate_port.Eval(context)[0]),
+            reflex=float(self.reflex_port.Eval(context)[0]),
+        )
+
     def UpdateActuation(self, context, discrete_state):
         discrete_state.set_value(
             self.compute_actuation(
-                context.get_time(), self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
+                context.get_time(),
+                self.box_state_port.Eval(context),
+                self.hand_state_port.Eval(context),
+                self.estimates(context),
             )
         )
         return EventStatus.Succeeded()
 
-    def desired_wrench(self, n: int, box_state) -> np.ndarray:
+    def desired_wrench(self, n: int, box_state, estimates: Estimates | None = None) -> np.ndarray:
         """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n."""
         s, g = self.schedule, self.gains
         error = s.X[n] - box_state[:3]
         error[2] = (error[2] + np.pi) % (2 * np.pi) - np.pi
-        a = s.A[n] + g.object_kp * error + g.object_kd * (s.V[n] - box_state[3:])
-        return np.array([self._mass * a[0], self._mass * (a[1] + self._gravity), self._inertia * a[2]])
+        if estimates is None:
+            mass, inertia, kp, kd = self._mass, self._inertia, g.object_kp, g.object_kd
+        else:
+            # kd grows with the square root of kp: the same damping ratio, a faster response.
+            boost = 1.0 + estimates.reflex * (g.reflex_gain - 1.0)
+            mass, inertia = estimates.mass, self._shape.inertia(estimates.mass)
+            kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
+        a = s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
+        return np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
 
-    def finger_forces(self, n: int, box_state, p_WF) -> tuple[np.ndarray, np.ndarray]:
+    def finger_forces(
+        self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """f_W (4, 2), the force each finger should apply to the box at sample n (QP),
         and n_W (4, 2), the outward normals of the faces it pushes on. The forces act
         where the measured fingertips p_WF (4, 2) touch the faces: a sphere rolls along
         the face as the box turns, and with the planned points instead, 2 mm of rolling
-        under 1 N grips left a slow in-grasp turn 0.03 rad behind."""
+        under 1 N grips left a slow in-grasp turn 0.03 rad behind. In closed loop
+        (`estimates`), `joints` = (J_WF (4, 2, 2), the other joint torques (4, 2)) bound
+        the torques the forces add."""
         s, g = self.schedule, self.gains
         n_W = s.n_B[n] @ rotation_2d(box_state[2]).T
         t_W = perp(n_W)
@@ -238,22 +337,36 @@ class GraspController(LeafSystem):
         G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
         G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
         scale = s.force_scale[n]
-        lam = self._qp.solve(
-            G,
-            self.desired_wrench(n, box_state),
-            s.lambda_plan[n],
-            scale * g.min_normal_force,
-            scale * g.max_normal_force,
-        )
+        if estimates is None:
+            lam = self._qp.solve(
+                G,
+                self.desired_wrench(n, box_state),
+                s.lambda_plan[n],
+                scale * g.min_normal_force,
+                scale * g.max_normal_force,
+            )
+        else:
+            J_WF, rest = joints
+            A, lower, upper, room = torque_rows(J_WF, n_W, t_W, self._tip_radius, rest, self._tau_max)
+            squeeze = g.min_normal_force + estimates.reflex * max(g.reflex_squeeze - g.min_normal_force, 0.0)
+            hi = scale * g.max_normal_force
+            self._qp.set_friction(self._friction_safety * estimates.mu)
+            lam = self._qp.solve(
+                G,
+                self.desired_wrench(n, box_state, estimates),
+                s.lambda_plan[n],
+                np.minimum(scale * squeeze, np.minimum(room, hi)),  # a squeeze the motors can make
+                hi,
+                torque=(A, lower, upper),
+            )
         return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
 
-    def compute_actuation(self, t: float, box_state, hand_state) -> np.ndarray:
+    def compute_actuation(self, t: float, box_state, hand_state, estimates: Estimates | None = None) -> np.ndarray:
         s, g = self.schedule, self.gains
         n = s.index(t)
         q, v = hand_state[:NUM_HAND_JOINTS], hand_state[NUM_HAND_JOINTS:]
         p_WF, J_WF, g_hand = self._kinematics(q)
         v_WF = np.einsum("fij,fj->fi", J_WF, v.reshape(NUM_FINGERS, 2))
-        f_W, n_W = self.finger_forces(n, box_state, p_WF)
         R = rotation_2d(box_state[2])
         r_W = s.p_BF[n] @ R.T
         p_target = box_state[:2] + r_W
@@ -264,6 +377,10 @@ class GraspController(LeafSystem):
         # ahead); a lifting finger's normal spring pulled it off while the QP still counted on it.
         error = (1.0 - s.force_scale[n])[:, None] * (p_target - p_WF)
         spring = g.tip_kp * error + g.tip_kd * (v_target - v_WF)
+        joints = None
+        if estimates is not None:
+            joints = (J_WF, np.einsum("fij,fi->fj", J_WF, spring) + g_hand)
+        f_W, n_W = self.finger_forces(n, box_state, p_WF, estimates, joints)
         # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
         # contact point's Jacobian J_C = J + perp(r_FC) [1 1] (link 2 turns at q1dot + q2dot), a
         # tangential force also turns the second link (without it a static hold settled 0.035 rad off).

@@ -43,11 +43,11 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Tr
 from pydrake.trajectories import PiecewisePolynomial
 
 from trajectotree.config import Config, ConfigError, check_controller, check_length, check_range
-from trajectotree.execution import metrics, playback
+from trajectotree.execution import closed_loop, metrics, playback
 from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
 from trajectotree.figures.run import arrow_newtons_per_cm, controller_text
-from trajectotree.results import PlanResult, SimLog, SimResult
+from trajectotree.results import ClosedLoopLog, PlanResult, SimLog, SimResult
 from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
 
 
@@ -179,6 +179,8 @@ class ExecutionDiagram:
     visualizer: object | None  # MeshcatVisualizer or None
     duration: float  # s, plan length + settle time
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
+    # closed loop: {ClosedLoopLog field: VectorLogSink of the output port of that name}; open loop: None
+    closed_loop_loggers: dict | None = None
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -224,10 +226,13 @@ def add_paper_controller(builder, plant, hand, reference: Reference, config: Con
     return controller
 
 
-def add_grasp_controller(builder, plant, hand, box, reference: Reference, config: Config) -> GraspController:
+def add_grasp_controller(
+    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False
+) -> GraspController:
     """The GraspController with the plan's scene (mass, size) and friction cones at
     max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
-    the plan assumed), reading the box and hand state."""
+    the plan assumed), reading the box and hand state; with closed_loop, its estimate and
+    reflex ports are left for add_closed_loop to connect."""
     scene, gains = build_scene(config.scene), config.controller
     schedule = grasp_schedule(
         reference,
@@ -240,10 +245,53 @@ def add_grasp_controller(builder, plant, hand, box, reference: Reference, config
         contact_distance=gains.contact_distance,
     )
     mu_control = max(config.search.friction_safety, gains.friction_safety) * config.scene.mu
-    controller = builder.AddNamedSystem("grasp_controller", GraspController(scene, schedule, gains, mu=mu_control))
+    controller = builder.AddNamedSystem(
+        "grasp_controller", GraspController(scene, schedule, gains, mu=mu_control, closed_loop=closed_loop)
+    )
     builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
     builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
     return controller
+
+
+def add_closed_loop(builder, plant, hand, box, controller: GraspController, config: Config) -> dict:
+    """The contact and object monitors, the friction and mass estimators and the push reflex
+    (trajectotree.execution.closed_loop), wired to the plant and into `controller`'s estimate
+    ports; returns {output name: output port} of every quantity a ClosedLoopLog records."""
+    gains, scene = config.controller, config.scene
+    monitor = builder.AddNamedSystem(
+        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, controller.schedule, gains)
+    )
+    builder.Connect(plant.get_contact_results_output_port(), monitor.contact_results_port)
+    builder.Connect(plant.get_state_output_port(box), monitor.box_state_port)
+    motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(plant.time_step()))
+    builder.Connect(plant.get_state_output_port(box), motion.box_state_port)
+    builder.Connect(plant.get_generalized_contact_forces_output_port(box), motion.box_contact_forces_port)
+    friction = builder.AddNamedSystem(
+        "friction_estimator", closed_loop.FrictionEstimator(scene.mu, controller.schedule, gains)
+    )
+    mass = builder.AddNamedSystem("mass_estimator", closed_loop.MassEstimator(scene.box_mass, scene.gravity, gains))
+    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene.gravity, gains))
+    for source, target, name in (
+        (monitor, friction, "slipping"),
+        (monitor, friction, "force_ratio"),
+        (monitor, friction, "normal_force"),
+        (monitor, friction, "approach_speed"),
+        (motion, mass, "contact_force"),
+        (motion, mass, "acceleration"),
+        (motion, reflex, "acceleration"),
+        (motion, reflex, "contact_force"),
+        (mass, reflex, "mass_estimate"),
+        (friction, controller, "mu_estimate"),
+        (mass, controller, "mass_estimate"),
+        (reflex, controller, "reflex"),
+    ):
+        builder.Connect(source.GetOutputPort(name), target.GetInputPort(name))
+    logged = {name: monitor.GetOutputPort(name) for name in ClosedLoopLog.MONITOR_ARRAYS}
+    logged |= {
+        "mu_estimate": friction.GetOutputPort("mu_estimate"),
+        "mass_estimate": mass.GetOutputPort("mass_estimate"),
+    }
+    return logged | {name: reflex.GetOutputPort(name) for name in ("disturbance", "reflex")}
 
 
 def build_execution_diagram(
@@ -254,11 +302,14 @@ def build_execution_diagram(
     controlled: bool = True,
     controller: str | None = None,
     conditions: Conditions = Conditions(),
+    closed_loop: bool = False,
 ) -> ExecutionDiagram:
     """The Diagram that executes `reference` with `controller` (default
     config.sim.controller) in the world `conditions` describe; controlled=False applies
-    zero torque (the open-loop hand, for checking that the controller holds the box)."""
-    kind = check_controller(controller or config.sim.controller)
+    zero torque (the open-loop hand, for checking that the controller holds the box).
+    closed_loop adds the contact monitor, the estimators and the push reflex around the
+    grasp controller (add_closed_loop) and their loggers."""
+    kind = check_closed_loop(check_controller(controller or config.sim.controller), closed_loop and controlled)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
     hand, box = add_hand_and_box(plant, conditions.scene(config.scene))
@@ -271,7 +322,8 @@ def build_execution_diagram(
     elif kind == "paper":
         actuation = add_paper_controller(builder, plant, hand, reference, config).actuation_port
     else:
-        actuation = add_grasp_controller(builder, plant, hand, box, reference, config).actuation_port
+        grasp = add_grasp_controller(builder, plant, hand, box, reference, config, closed_loop=closed_loop)
+        actuation = grasp.actuation_port
     builder.Connect(actuation, plant.get_actuation_input_port())
     if conditions.push is not None:
         push = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
@@ -281,6 +333,12 @@ def build_execution_diagram(
     forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box))
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
+    closed_loop_loggers = None
+    if closed_loop and controlled:
+        ports = add_closed_loop(builder, plant, hand, box, grasp, config)
+        closed_loop_loggers = {
+            name: LogVectorOutput(port, builder, triggers, config.sim.log_period) for name, port in ports.items()
+        }
     visualizer = None
     if meshcat is not None:
         visualizer = playback.add_visualizer(builder, plant, scene_graph, hand, meshcat)
@@ -297,6 +355,7 @@ def build_execution_diagram(
         visualizer=visualizer,
         duration=reference.duration + hold,
         controller=kind if controlled else "none",
+        closed_loop_loggers=closed_loop_loggers,
     )
 
 
@@ -304,6 +363,18 @@ def arrow_scale(reference: Reference) -> float:
     """The force arrows' scale (N per cm) of a run of `reference`: set by the plan's forces, so that
     the playback and the GIF of one plan share it and a dropped box's squeeze does not shrink it."""
     return arrow_newtons_per_cm(reference.f_W)
+
+
+def check_closed_loop(controller: str, closed_loop: bool) -> str:
+    """`controller`, unless the closed loop is asked for around another than the grasp controller."""
+    if closed_loop and controller != "grasp":
+        raise ConfigError(
+            field="controller",
+            value=controller,
+            problem=": the closed loop runs around the grasp controller only",
+            choices=("grasp",),
+        )
+    return controller
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -324,14 +395,20 @@ def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Ref
     start = time.perf_counter()
     simulator.AdvanceTo(execution.duration)
     sim_time_s = time.perf_counter() - start
-    logs = []
-    for logger in (execution.state_logger, execution.force_logger):
-        log = logger.FindLog(simulator.get_context())
-        if log.sample_times()[-1] < execution.duration - 1e-9:  # the periodic log can miss the end by rounding
-            logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
-        logs.append(log)
+    logs = [finished_log(execution, simulator, logger) for logger in (execution.state_logger, execution.force_logger)]
     t, x, q = split_state_log(execution, logs[0])
     f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
+    closed = None
+    if execution.closed_loop_loggers is not None:
+        data = {
+            name: finished_log(execution, simulator, logger).data().T.copy()
+            for name, logger in execution.closed_loop_loggers.items()
+        }
+        for name in ("in_contact", "slipping"):
+            data[name] = data[name] > 0.5
+        for name in ("mu_estimate", "mass_estimate", "reflex"):
+            data[name] = data[name][:, 0]
+        closed = ClosedLoopLog(**data)
     return SimLog(
         t=t,
         x=x,
@@ -342,7 +419,16 @@ def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Ref
         sim_time_s=sim_time_s,
         controller=execution.controller,
         conditions=conditions,
+        closed_loop=closed,
     )
+
+
+def finished_log(execution: ExecutionDiagram, simulator: Simulator, logger):
+    """`logger`'s log, with a last sample at the execution's end (the periodic log can miss it by rounding)."""
+    log = logger.FindLog(simulator.get_context())
+    if log.sample_times()[-1] < execution.duration - 1e-9:
+        logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
+    return log
 
 
 def simulate_reference(
@@ -355,13 +441,20 @@ def simulate_reference(
     realtime_rate: float = 0.0,
     controller: str | None = None,
     conditions: Conditions = Conditions(),
+    closed_loop: bool = False,
 ) -> SimResult:
     """Runs the execution Diagram for the plan's length plus the settle time; the log it
     records, evaluated by trajectotree.execution.metrics."""
     if html_path is not None and meshcat is None:
         meshcat = playback.start_meshcat()
     execution = build_execution_diagram(
-        reference, config, meshcat=meshcat, controlled=controlled, controller=controller, conditions=conditions
+        reference,
+        config,
+        meshcat=meshcat,
+        controlled=controlled,
+        controller=controller,
+        conditions=conditions,
+        closed_loop=closed_loop,
     )
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
@@ -402,11 +495,15 @@ def run_simulation(
     sim_mu: float | None = None,
     sim_mass: float | None = None,
     push: Push | str | None = None,
+    closed_loop: bool = False,
 ) -> SimResult:
     """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
     "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
     `sim_mass` (kg; None: the plan's) and an optional `push` (a Push or "FX,FY@T": N, N, s); the
-    controller keeps the plan's values. `config` defaults to the plan's own (a PlanResult's
+    controller keeps the plan's values. closed_loop (grasp controller only) watches the
+    contacts, estimates the friction and the mass for the controller and adds the push
+    reflex (trajectotree.execution.closed_loop; the result's closed_loop holds what they saw);
+    off, the run is the open-loop one. `config` defaults to the plan's own (a PlanResult's
     config). ConfigError on bad values. A live `meshcat` runs in real time; `html_path` writes
     the recorded playback, `gif_path` a GIF of the run."""
     if config is None:
@@ -416,7 +513,7 @@ def run_simulation(
     if isinstance(push, str):
         push = parse_push(push, config.sim.push_duration)
     conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
-    check_controller(controller or config.sim.controller)
+    check_closed_loop(check_controller(controller or config.sim.controller), closed_loop)
     scene = build_scene(config.scene)
     reference = reference_from_plan(plan, scene)
     result = simulate_reference(
@@ -427,6 +524,7 @@ def run_simulation(
         realtime_rate=1.0 if meshcat is not None else 0.0,
         controller=controller,
         conditions=conditions,
+        closed_loop=closed_loop,
     )
     if gif_path is not None:
         playback.write_gif(

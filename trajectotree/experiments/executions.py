@@ -12,7 +12,15 @@ The conditions (`ConditionSpec`):
   plan's values;
 - `push`: a lateral force `push_force` (0.2 N along +x in W, 40 % of the default box's
   weight) on the box for `SimConfig.push_duration` (0.2 s), starting in the middle of the
-  plan's middle segment (a switching finger is off the box there when the segment has one).
+  plan's middle segment (a switching finger is off the box there when the segment has one);
+- the harder worlds of the closed loop, named by their values: `friction-0.4` and
+  `friction-0.3` (`friction_mus`: the simulated friction alone), `mass-x2` (`mass_factors`:
+  the simulated box mass over the planned one), `push-3N` and `push-6N` (`push_forces`: N
+  along +x in W, timed like `push`).
+
+Executions with the closed loop (`closed_loop`: the grasp controller with the contact watch,
+the estimates and the push reflex, trajectotree.execution.closed_loop) are kept and listed
+apart, as the executor `grasp-closed-loop`, beside the open-loop `grasp`.
 """
 
 from __future__ import annotations
@@ -40,8 +48,8 @@ from trajectotree.config import (
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
 from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
 
-CONDITIONS = ("nominal", "mismatch", "push")
 EXEC_DIR = "exec"
+CLOSED_LOOP_SUFFIX = "-closed-loop"  # the executor label of closed-loop executions: grasp-closed-loop
 
 
 @dataclass(frozen=True)
@@ -51,29 +59,54 @@ class ConditionSpec:
     mismatch_mu: float = 0.55  # friction coefficient of the simulated plant under `mismatch`
     mismatch_mass_factor: float = 1.2  # 1, simulated box mass / planned box mass under `mismatch`
     push_force: tuple[float, float] = (0.2, 0.0)  # N, (f_x, f_y) in W of the push under `push`
+    friction_mus: tuple[float, ...] = (0.4, 0.3)  # friction coefficients of the conditions friction-<mu>
+    mass_factors: tuple[float, ...] = (2.0,)  # 1, simulated / planned box mass of the conditions mass-x<factor>
+    push_forces: tuple[float, ...] = (3.0, 6.0)  # N, along +x in W, of the conditions push-<force>N
 
     def __post_init__(self):
         check_range("mismatch_mu", self.mismatch_mu, 0.0, 5.0, low_open=True)
         check_range("mismatch_mass_factor", self.mismatch_mass_factor, 0.0, 100.0, low_open=True)
         for i, f in enumerate(self.push_force):
             check_range(f"push_force[{i}]", f, -100.0, 100.0)
+        for i, mu in enumerate(self.friction_mus):
+            check_range("friction_mus", mu, 0.0, 5.0, low_open=True, index=(i,))
+        for i, factor in enumerate(self.mass_factors):
+            check_range("mass_factors", factor, 0.0, 100.0, low_open=True, index=(i,))
+        for i, f in enumerate(self.push_forces):
+            check_range("push_forces", f, -100.0, 100.0, index=(i,))
+
+    def worlds(self) -> dict[str, tuple[float | None, float | None, tuple[float, float] | None]]:
+        """{condition name: (simulated friction, simulated / planned mass, push force (N, N) in W)},
+        None where the plan's world holds; in the order the tables list them."""
+        worlds = {
+            "nominal": (None, None, None),
+            "mismatch": (self.mismatch_mu, self.mismatch_mass_factor, None),
+            "push": (None, None, tuple(self.push_force)),
+        }
+        worlds |= {f"friction-{mu:g}": (mu, None, None) for mu in self.friction_mus}
+        worlds |= {f"mass-x{factor:g}": (None, factor, None) for factor in self.mass_factors}
+        return worlds | {f"push-{f:g}N": (None, None, (f, 0.0)) for f in self.push_forces}
 
     def simulation_kwargs(self, condition: str, config: Config, plan_duration_s: float) -> dict:
         """The `run_simulation` keyword arguments (sim_mu, sim_mass, push) of `condition`."""
         from trajectotree.execution.simulate import Push
 
-        check_condition(condition)
-        if condition == "mismatch":
-            return {"sim_mu": self.mismatch_mu, "sim_mass": self.mismatch_mass_factor * config.scene.box_mass}
-        if condition == "push":
-            return {
-                "push": Push(
-                    force=self.push_force,
-                    time_s=middle_of_middle_segment(config, plan_duration_s),
-                    duration_s=config.sim.push_duration,
-                )
-            }
-        return {}
+        mu, mass_factor, push = self.worlds()[check_condition(condition, self)]
+        kwargs = {}
+        if mu is not None:
+            kwargs["sim_mu"] = mu
+        if mass_factor is not None:
+            kwargs["sim_mass"] = mass_factor * config.scene.box_mass
+        if push is not None:
+            kwargs["push"] = Push(
+                force=push,
+                time_s=middle_of_middle_segment(config, plan_duration_s),
+                duration_s=config.sim.push_duration,
+            )
+        return kwargs
+
+
+CONDITIONS = tuple(ConditionSpec().worlds())  # the default spec's condition names
 
 
 def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
@@ -83,14 +116,36 @@ def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
     return (segments // 2 + 0.5) * length
 
 
-def check_condition(condition: str) -> str:
-    if condition not in CONDITIONS:
-        raise ConfigError(field="condition", value=condition, problem="is unknown", choices=CONDITIONS)
+def check_condition(condition: str, spec: ConditionSpec | None = None) -> str:
+    """`condition` if `spec` (default: the default spec) names it; ConfigError naming it otherwise."""
+    names = CONDITIONS if spec is None else tuple(spec.worlds())
+    if condition not in names:
+        raise ConfigError(field="condition", value=condition, problem="is unknown", choices=names)
     return condition
 
 
-def execution_dir(trial_dir: str | Path, controller: str, condition: str) -> Path:
-    return Path(trial_dir) / EXEC_DIR / f"{controller}_{condition}"
+def check_closed_loop_controllers(controllers, closed_loop: bool) -> None:
+    """ConfigError when the closed loop is asked for around another than the grasp controller."""
+    others = [c for c in controllers if c != "grasp"]
+    if closed_loop and others:
+        raise ConfigError(
+            field="controller",
+            value=others[0],
+            problem=": the closed loop (--closed-loop) runs around the grasp controller only",
+            choices=("grasp",),
+        )
+
+
+def executor_label(controller: str, closed_loop: bool = False) -> str:
+    """The executor's name in the execution folders and tables: the controller, + -closed-loop."""
+    return controller + CLOSED_LOOP_SUFFIX if closed_loop else controller
+
+
+EXECUTORS = tuple(executor_label(c, loop) for c in CONTROLLERS for loop in (False, True) if c == "grasp" or not loop)
+
+
+def execution_dir(trial_dir: str | Path, controller: str, condition: str, closed_loop: bool = False) -> Path:
+    return Path(trial_dir) / EXEC_DIR / f"{executor_label(controller, closed_loop)}_{condition}"
 
 
 @dataclass(frozen=True)
@@ -102,6 +157,7 @@ class ExecutionTask:
     # The executor's gains and simulation settings; None: those saved with the plan.
     gains: ControllerGains | None = None
     sim: SimConfig | None = None
+    closed_loop: bool = False  # the grasp controller with the closed loop (run_simulation's closed_loop)
 
 
 def execute(task: ExecutionTask) -> dict:
@@ -121,9 +177,10 @@ def execute(task: ExecutionTask) -> dict:
         plan=plan,
         config=config,
         controller=task.controller,
+        closed_loop=task.closed_loop,
         **task.spec.simulation_kwargs(task.condition, config, duration),
     )
-    out = execution_dir(task.trial_dir, task.controller, task.condition)
+    out = execution_dir(task.trial_dir, task.controller, task.condition, task.closed_loop)
     save_sim(result, out)
     return read_execution(out)
 
@@ -162,13 +219,15 @@ def pending_executions(
     methods=None,
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
+    closed_loop: bool = False,
 ) -> list[ExecutionTask]:
     """Every (trial with a trajectory, of `methods` (None: all), controller, condition)
-    without a finished execution.
-    A nominal execution the sweep's own --simulate already ran (the trial's sim.json, same
-    controller) is copied instead of rerun."""
+    without a finished execution (with the closed loop, or without).
+    A nominal open-loop execution the sweep's own --simulate already ran (the trial's
+    sim.json, same controller) is copied instead of rerun."""
     controllers = [check_controller(c) for c in controllers]
-    conditions = [check_condition(c) for c in conditions]
+    conditions = [check_condition(c, spec) for c in conditions]
+    check_closed_loop_controllers(controllers, closed_loop)
     tasks = []
     for trial_dir in sorted(p for p in (Path(sweep_dir) / TRIALS_DIR).iterdir() if p.is_dir()):
         try:
@@ -185,12 +244,12 @@ def pending_executions(
         )
         for controller in controllers:
             for condition in conditions:
-                out = execution_dir(trial_dir, controller, condition)
+                out = execution_dir(trial_dir, controller, condition, closed_loop)
                 if execution_problem(out) is None or (
-                    same_settings and _reuse_sweep_simulation(trial_dir, controller, condition, out)
+                    same_settings and not closed_loop and _reuse_sweep_simulation(trial_dir, controller, condition, out)
                 ):
                     continue
-                tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim))
+                tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim, closed_loop))
     return tasks
 
 
@@ -213,6 +272,7 @@ def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, ou
     if (
         condition != "nominal"
         or sim.get("controller") != controller
+        or sim.get("closed_loop") is not None  # a closed-loop run (an open-loop sim.json has None or lacks it)
         or not nominal
         or npz_problem(trial_dir / SIM_NPZ) is not None  # a torn copy would pass for a finished execution
     ):
@@ -231,19 +291,20 @@ def run_executions(
     methods=None,
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
+    closed_loop: bool = False,
     workers: int | None = None,
     progress: bool = True,
 ) -> int:
     """Runs the pending executions of a sweep's plans (of `methods`, None: all) with the
-    controller `gains` and `sim` settings (None: those saved with each plan) on
-    `workers` local processes, holding the
+    controller `gains` and `sim` settings (None: those saved with each plan), with the closed
+    loop or without, on `workers` local processes, holding the
     sweep's lock; returns how many ran. A failed execution is reported on stderr and left
     pending (rerun to retry); the others go on."""
     sweep_dir = Path(sweep_dir)
     if not (sweep_dir / TRIALS_DIR).is_dir():
         raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {TRIALS_DIR}/)")
     with sweep_lock(sweep_dir):
-        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim)
+        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim, closed_loop)
         if not tasks:
             return 0
         for task in tasks:
@@ -299,8 +360,8 @@ def _kill_pool(pool: ProcessPoolExecutor) -> None:
 
 
 def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
-    """One record per finished execution of the sweep's trials: method, goal, controller,
-    condition and the sim.json metrics."""
+    """One record per finished execution of the sweep's trials: method, goal, controller (the
+    executor label: grasp-closed-loop for the closed loop), condition and the sim.json metrics."""
     records = []
     for row in rows:
         base = Path(sweep_dir) / TRIALS_DIR / row["key"] / EXEC_DIR
@@ -309,15 +370,16 @@ def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
         for folder in sorted(base.iterdir()):
             if (folder / SIM_JSON).is_file():
                 controller, _, condition = folder.name.partition("_")
+                # The folder names the executor: sim.json's "controller" is grasp with the closed loop too.
                 records.append(
                     {
+                        **read_execution(folder),
                         "key": row["key"],
                         "method": row["method"],
                         "goal": row["goal"],
                         "controller": controller,
                         "condition": condition,
                         "folder": str(folder),
-                        **read_execution(folder),
                     }
                 )
     return records
@@ -327,16 +389,16 @@ FINAL_THETA_TOLERANCE = np.deg2rad(3.0)  # rad, "final orientation held" in the 
 
 
 def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
-    """One row per (method, controller, condition), in the order of `methods`, CONTROLLERS
-    and CONDITIONS: executions, drops, mean absolute errors and how many ended within 3 deg
-    of the planned final orientation."""
+    """One row per (method, executor, condition), in the order of `methods`, EXECUTORS (each
+    controller, its closed loop beside it) and CONDITIONS: executions, drops, mean absolute
+    errors and how many ended within 3 deg of the planned final orientation."""
 
     def order(names, name) -> int:
         return names.index(name) if name in names else len(names)
 
     keys = sorted(
         {(r["method"], r["controller"], r["condition"]) for r in records},
-        key=lambda k: (order(methods, k[0]), order(CONTROLLERS, k[1]), order(CONDITIONS, k[2])),
+        key=lambda k: (order(methods, k[0]), order(EXECUTORS, k[1]), order(CONDITIONS, k[2]), k[2]),
     )
     table = []
     for method, controller, condition in keys:

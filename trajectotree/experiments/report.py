@@ -412,8 +412,10 @@ def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out
 
 EXECUTION_NOTES = """
 Each plan executed again per controller (`grasp`: object-level grasp controller, the default;
-`paper`: eq. 20) and condition (`nominal`: the plan's world; `mismatch`: friction 0.55 and box
+`grasp-closed-loop`: the same with the contact watch, the friction and mass estimates and the push
+reflex; `paper`: eq. 20) and condition (`nominal`: the plan's world; `mismatch`: friction 0.55 and box
 mass +20 % in the simulated plant only; `push`: 0.2 N along +x on the box for 0.2 s in the middle
-of the middle segment). MAE: time means of |simulated - planned| box pose (held at its drop-time
+of the middle segment; `friction-MU`: friction MU; `mass-xF`: the box mass times F; `push-FN`: F N
+along +x, timed like `push`). MAE: time means of |simulated - planned| box pose (held at its drop-time
 value after a drop), then means over executions. Final theta: |error| at the end of the run.
 """

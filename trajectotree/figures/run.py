@@ -237,6 +237,24 @@ def plot_segments(ax, spans, finger: int | None = None, *, color="gold"):
     return artists
 
 
+def slip_intervals(t, slipping) -> list[tuple[float, float]]:
+    """(start, end) of each run of samples where `slipping` (T,) holds; a run ends at the next
+    sample's time (the last sample's own time at the end)."""
+    slipping = np.asarray(slipping, dtype=bool)
+    edges = np.flatnonzero(np.diff(np.r_[0, slipping.astype(int), 0]))
+    ends = np.minimum(edges[1::2], len(t) - 1)
+    return [(float(t[a]), float(t[b])) for a, b in zip(edges[0::2], ends)]
+
+
+def plot_slip_intervals(ax, t, slipping, *, color="crimson"):
+    """One finger's slip intervals (a closed-loop run's ClosedLoopLog.slipping[:, i]) as
+    hatched spans."""
+    return [
+        ax.axvspan(a, b, facecolor="none", edgecolor=color, alpha=0.4, hatch="//", lw=0, zorder=0, label="slipping")
+        for a, b in slip_intervals(t, slipping)
+    ]
+
+
 def plot_contacts(ax, pose, p_BC, n_B, *, colors=FINGER_COLORS, size=18):
     """Contact points p_BC (k, 2) of the box at `pose`, one colour per finger, with their
     outward normals n_B as short arrows."""
@@ -437,10 +455,11 @@ def forces_title(result, goal: float | None = None) -> str:
 def figure_finger_forces(result, segments=None, goal: float | None = None):
     """Each finger's simulated vs planned force magnitude |f| on the box over one executed
     plan (a SimResult), on one shared scale: where the run leaves the plan's contact forces,
-    and when. `segments` (segment_spans) marks the segments and each finger's switches; the
-    title names the plan's `goal` rotation (rad), the controller and the simulated world
-    (forces_title). The scale covers the plan and the run up to the drop: a fallen box
-    squeezed between the fingers does not set it (clipped in the grey span)."""
+    and when. `segments` (segment_spans) marks the segments and each finger's switches, and a
+    closed-loop run's slip intervals are hatched; the title names the plan's `goal` rotation
+    (rad), the controller and the simulated world (forces_title). The scale covers the plan and
+    the run up to the drop: a fallen box squeezed between the fingers does not set it (clipped
+    in the grey span)."""
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
@@ -455,6 +474,9 @@ def figure_finger_forces(result, segments=None, goal: float | None = None):
         )
         if segments:
             plot_segments(ax, segments, i)
+        watch = getattr(result, "closed_loop", None)  # what a closed-loop run's contact watch saw
+        if watch is not None:
+            plot_slip_intervals(ax, result.t, watch.slipping[:, i])
         ax.set_ylabel(f"finger {i}\n|f| [N]")
         ax.grid(alpha=0.3)
         ax.set_ylim(-0.03 * top, 1.1 * top)

@@ -1,0 +1,268 @@
+"""The closed loop around the grasp controller (trajectotree.execution.closed_loop): the contact
+watch on a static hold that slips, the friction and mass estimates against the simulated
+world, the push reflex, the files and the command, and the open loop left exactly as it was."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from trajectotree.cli import main
+from trajectotree.config import Config, ConfigError, ControllerGains
+from trajectotree.execution.reference import static_hold_reference
+from trajectotree.execution.simulate import Conditions, Push, run_simulation, simulate_reference
+from trajectotree.io import load_sim, save_sim
+from trajectotree.results import CLOSED_LOOP_ARRAYS
+from trajectotree.scene.plant import build_scene
+
+# Two fingers under the box and two above, 4 cm in from the corners (tests/execution/test_control.py).
+HOLD_ARCLENGTHS = (0.56, 0.14, 0.26, 0.44)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build_scene()
+
+
+def hold_config(**gains) -> Config:
+    config = Config()
+    return dataclasses.replace(
+        config,
+        controller=dataclasses.replace(config.controller, **gains),
+        sim=dataclasses.replace(config.sim, settle_time=0.0),
+    )
+
+
+def three_finger_hold(scene, lifted: int, duration: float = 0.6):
+    reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=duration, lifted=lifted)
+    assert reference is not None
+    return reference
+
+
+def test_closed_loop_ports_are_named(scene):
+    """What a replanner reads: the monitor's, the estimators' and the reflex's output ports by name."""
+    from trajectotree.execution.simulate import build_execution_diagram
+
+    execution = build_execution_diagram(three_finger_hold(scene, 0), hold_config(), closed_loop=True)
+    diagram = execution.diagram
+    names = lambda system: [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]  # noqa: E731
+    monitor = diagram.GetSubsystemByName("contact_monitor")
+    assert names(monitor) == [
+        "in_contact",
+        "slipping",
+        "force_ratio",
+        "normal_force",
+        "slip_speed",
+        "approach_speed",
+        "tracking_error",
+    ]
+    assert names(diagram.GetSubsystemByName("object_monitor")) == ["acceleration", "contact_force"]
+    assert names(diagram.GetSubsystemByName("friction_estimator")) == ["mu_estimate"]
+    assert names(diagram.GetSubsystemByName("mass_estimator")) == ["mass_estimate"]
+    assert names(diagram.GetSubsystemByName("push_reflex")) == ["disturbance", "reflex"]
+    controller = diagram.GetSubsystemByName("grasp_controller")
+    inputs = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]
+    assert inputs == ["box_state", "hand_state", "mu_estimate", "mass_estimate", "reflex"]
+    assert set(execution.closed_loop_loggers) == set(CLOSED_LOOP_ARRAYS)
+
+
+def tip_travel_along_the_box(scene, result) -> np.ndarray:
+    """(4,) m, how far each fingertip centre moved in the box frame over the run: a sliding
+    contact carries its finger along the face, a sticking one (rolling at most) stays put."""
+    from trajectotree.geometry import poses_world_to_box
+
+    tips = np.array([scene.fingertip_positions(q) for q in result.q])
+    p_B = poses_world_to_box(result.x, tips)
+    return np.abs(p_B[-1] - p_B[0]).max(axis=1)
+
+
+def test_a_three_finger_hold_at_lowered_friction_reports_the_slipping_finger(scene):
+    """Fingers 0, 2, 3 hold the box at friction 0.45 while the controller keeps the plan's cones
+    (the friction estimate's floor at the plan's 0.7, so the estimate cannot act): finger 2's
+    contact slides along the top face, the watch says so, and only for finger 2."""
+    reference = three_finger_hold(scene, lifted=1)
+    result = simulate_reference(
+        reference, hold_config(friction_floor=0.7), conditions=Conditions(mu=0.45), closed_loop=True
+    )
+    watch = result.closed_loop
+    assert watch is not None and not result.dropped
+    dt = result.t[1] - result.t[0]
+    slid = watch.slipping.sum(axis=0) * dt  # s per finger
+    assert slid[2] > 0.2, slid
+    assert slid[[0, 1, 3]].max() <= 0.02, slid
+    assert not watch.in_contact[:, 1].any()  # the lifted finger never touches
+    assert watch.in_contact[result.t > 0.05][:, [0, 2, 3]].all()
+    # The truth, from the simulated motion alone: finger 2 travelled along the box, the others did not.
+    travel = tip_travel_along_the_box(scene, result)
+    assert travel[2] > 0.01 and travel[[0, 3]].max() < 1e-3, travel
+    # Sliding means riding the friction cone: finger 2's ratio is the world's friction while it slides.
+    sliding = watch.slipping[:, 2]
+    assert np.median(watch.force_ratio[sliding, 2]) == pytest.approx(0.45, abs=0.03)
+    assert np.all(watch.mu_estimate == 0.7)  # held at the floor: nothing estimated
+    assert np.all(watch.slip_speed[sliding, 2] > Config().controller.slip_speed)
+
+
+@pytest.mark.parametrize("mu, lifted", [(0.45, 1), (0.3, 0)])
+def test_the_friction_estimate_of_a_scripted_slip_is_the_simulated_friction(scene, mu, lifted):
+    """The controller starts at the plan's friction (0.7, cones 0.56) on a three-finger hold
+    that needs more than the world's `mu`: a contact slides, the estimate drops to within 0.05
+    of `mu` (never rising), and the grasp QP's cones then keep the contacts sticking."""
+    result = simulate_reference(
+        three_finger_hold(scene, lifted), hold_config(), conditions=Conditions(mu=mu), closed_loop=True
+    )
+    watch = result.closed_loop
+    assert watch.mu_estimate[0] == pytest.approx(0.7)
+    assert np.all(np.diff(watch.mu_estimate) <= 0.0)
+    assert watch.mu_estimate[-1] == pytest.approx(mu, abs=0.05)
+    assert not result.dropped
+    late = result.t > 0.1
+    assert not watch.slipping[late].any()  # the QP's cones at the estimate: no more sliding
+    assert result.to_json()["closed_loop"]["mu_estimate"] == watch.mu_estimate[-1]
+
+
+def test_the_friction_estimate_stops_at_the_floor(scene):
+    result = simulate_reference(
+        three_finger_hold(scene, 0), hold_config(friction_floor=0.5), conditions=Conditions(mu=0.3), closed_loop=True
+    )
+    assert result.closed_loop.mu_estimate.min() == pytest.approx(0.5)
+
+
+def test_the_mass_estimate_of_a_box_held_at_twice_the_mass(scene):
+    """Four fingers hold a box twice as heavy as planned: the mass estimate reaches the simulated
+    mass within 10 %, and the box, which sags under the plan's mass, hangs where planned."""
+    reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
+    heavy = Conditions(mass=2.0 * scene.config.box_mass)
+    closed = simulate_reference(reference, hold_config(), conditions=heavy, closed_loop=True)
+    estimate = closed.closed_loop.mass_estimate
+    assert estimate[0] == pytest.approx(scene.config.box_mass)
+    late = closed.t > 0.6
+    np.testing.assert_allclose(estimate[late], 2.0 * scene.config.box_mass, rtol=0.1)
+    open_loop = simulate_reference(reference, hold_config(), conditions=heavy)
+    sag = lambda r: np.mean(r.x_plan[late, 1] - r.x[late, 1])  # noqa: E731
+    assert sag(closed) < 0.5 * sag(open_loop), (sag(closed), sag(open_loop))
+    assert not closed.dropped
+
+
+def test_the_push_reflex_squeezes_while_a_push_acts_and_lets_go_after(scene):
+    """A 1.5 N push (3 x the box's weight) along +x for 0.1 s: the disturbance the loop
+    measures is the push, the reflex is on within 10 ms and off once the push has been gone
+    for reflex_hold + reflex_release; no reflex before the push."""
+    gains = ControllerGains()
+    push = Push(force=(1.5, 0.0), time_s=0.3, duration_s=0.1)
+    result = simulate_reference(
+        three_finger_hold(scene, 0, duration=1.0), hold_config(), conditions=Conditions(push=push), closed_loop=True
+    )
+    watch, t = result.closed_loop, result.t
+    assert not result.dropped
+    during = (t > 0.31) & (t < 0.4)
+    np.testing.assert_allclose(watch.disturbance[during], np.tile([1.5, 0.0], (during.sum(), 1)), atol=0.05)
+    assert np.all(watch.reflex[t < 0.3] == 0.0)
+    assert np.all(watch.reflex[(t >= 0.31) & (t < 0.4 + gains.reflex_hold)] == 1.0)
+    assert np.all(watch.reflex[t > 0.4 + gains.reflex_hold + gains.reflex_release + 0.01] == 0.0)
+    quiet = (t > 0.05) & ((t < 0.3) | (t > 0.41))
+    assert np.abs(watch.disturbance[quiet]).max() < 0.05  # the contacts and gravity explain the rest
+
+
+def test_open_loop_runs_are_unchanged_bit_for_bit(scene):
+    """With the closed loop off, a run is the one main made before the closed loop existed
+    (tests/execution/data/open_loop_hold.npz: main at 816ba79, a three-finger hold at friction
+    0.5 pushed with 0.3 N): the same numbers, to the last bit, and no closed-loop systems."""
+    from pathlib import Path
+
+    from trajectotree.execution.simulate import build_execution_diagram
+
+    reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.5, lifted=0)
+    conditions = Conditions(mu=0.5, push=Push(force=(0.3, 0.0), time_s=0.2, duration_s=0.1))
+    result = simulate_reference(reference, hold_config(), conditions=conditions)
+    with np.load(Path(__file__).parent / "data" / "open_loop_hold.npz") as golden:
+        for name in ("t", "x", "q", "f_W", "abs_error"):
+            np.testing.assert_array_equal(getattr(result, name), golden[name], err_msg=name)
+    assert result.closed_loop is None and result.to_json()["closed_loop"] is None
+    diagram = build_execution_diagram(reference, hold_config(), conditions=conditions).diagram
+    names = {diagram.GetSystems()[i].get_name() for i in range(len(diagram.GetSystems()))}
+    assert not names & {"contact_monitor", "object_monitor", "friction_estimator", "mass_estimator", "push_reflex"}
+
+
+def test_closed_loop_files_round_trip_and_the_forces_figure_marks_slips(scene, tmp_path):
+    from trajectotree.figures.run import figure_finger_forces, slip_intervals
+
+    result = simulate_reference(
+        three_finger_hold(scene, 1, duration=0.3),
+        hold_config(friction_floor=0.7),
+        conditions=Conditions(mu=0.45),
+        closed_loop=True,
+    )
+    save_sim(result, tmp_path)
+    with np.load(tmp_path / "sim.npz") as data:
+        assert set(CLOSED_LOOP_ARRAYS) <= set(data.files)
+    loaded = load_sim(tmp_path)
+    for name in CLOSED_LOOP_ARRAYS:
+        np.testing.assert_array_equal(getattr(loaded.closed_loop, name), getattr(result.closed_loop, name))
+    summary = json.loads((tmp_path / "sim.json").read_text())["closed_loop"]
+    assert summary == loaded.to_json()["closed_loop"]
+    assert summary["slipping_s"][2] > 0.1 and summary["mu_estimate"] == 0.7
+    spans = slip_intervals(result.t, result.closed_loop.slipping[:, 2])
+    assert spans and all(b > a for a, b in spans)
+    fig = figure_finger_forces(result)
+    hatched = [[p for p in ax.patches if p.get_hatch()] for ax in fig.axes]
+    assert len(hatched[2]) == len(spans) and not hatched[1]
+
+
+def test_slip_intervals_are_the_runs_of_samples():
+    from trajectotree.figures.run import slip_intervals
+
+    t = np.arange(6) * 0.1
+    assert slip_intervals(t, [0, 1, 1, 0, 1, 1]) == [(t[1], t[3]), (t[4], t[5])]
+    assert slip_intervals(t, np.zeros(6)) == []
+
+
+def test_the_closed_loop_needs_the_grasp_controller(scene):
+    with pytest.raises(ConfigError, match="controller = 'paper': the closed loop runs around the grasp controller"):
+        run_simulation(plan=three_finger_hold(scene, 0), config=hold_config(), controller="paper", closed_loop=True)
+
+
+@pytest.mark.parametrize("floor", [0.0, -0.1, 1.5, float("nan")])
+def test_a_friction_floor_outside_0_1_is_refused(floor):
+    with pytest.raises(ConfigError, match=r"controller.friction_floor = .* valid range: \(0, 1\]"):
+        ControllerGains(friction_floor=floor)
+
+
+def test_simulate_command_closed_loop(scene, tmp_path, capsys):
+    """`simulate --closed-loop` records what the loop saw (sim.json's closed_loop, the arrays in
+    sim.npz) and says it; without the option sim.json's closed_loop is null."""
+    from tests.execution.test_simulate import hold_plan_arrays, write_plan_dir
+
+    config = hold_config()
+    plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), config)
+    forces = tmp_path / "forces.png"
+    assert main(["simulate", str(plan_dir), "--closed-loop", "--forces", str(forces)]) == 0
+    out = capsys.readouterr().out
+    assert "closed loop: friction estimate 0.700 (plan 0.7), mass estimate" in out
+    summary = json.loads((plan_dir / "sim.json").read_text())
+    assert summary["closed_loop"]["mass_estimate"] == pytest.approx(0.05, rel=0.05)
+    with np.load(plan_dir / "sim.npz") as data:
+        assert set(CLOSED_LOOP_ARRAYS) <= set(data.files)
+    assert forces.read_bytes()[:4] == b"\x89PNG"
+    assert main(["simulate", str(plan_dir), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["closed_loop"] is None
+
+
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (
+            ["--closed-loop", "--friction-floor", "0"],
+            "controller.friction_floor = 0.0 is out of range; valid range: (0, 1]",
+        ),
+        (["--closed-loop", "--friction-floor", "1.5"], "controller.friction_floor = 1.5 is out of range"),
+        (["--closed-loop", "--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
+    ],
+)
+def test_simulate_command_refuses_bad_closed_loop_options(scene, tmp_path, capsys, options, named):
+    from tests.execution.test_simulate import hold_plan_arrays, write_plan_dir
+
+    plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), hold_config())
+    assert main(["simulate", str(plan_dir), *options]) == 2
+    assert named in capsys.readouterr().err
+    assert not (plan_dir / "sim.json").exists() and not (plan_dir / "sim.npz").exists()

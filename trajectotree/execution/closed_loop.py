@@ -1,0 +1,310 @@
+"""The closed loop around the GraspController (simulate --closed-loop): a watch of the
+contacts, online estimates of what the plan assumed, and a reflex for pushes.
+
+Five LeafSystems, each with its results in discrete state behind named output ports (so that
+a replanner can read them as the controller does), all periodic at ControllerGains.rate_hz
+but the ObjectMonitor, which samples every plant step:
+
+- `ContactMonitor` reads the plant's `contact_results` and the measured `box_state` and
+  reports per finger `in_contact`, `slipping` (the relative tangential velocity at a contact
+  point above controller.slip_speed while the finger pushes at least slip_min_force),
+  `force_ratio` |f_t| / f_n and `normal_force` of its force on the box and its `slip_speed`;
+  and the box's `tracking_error` (measured - planned pose).
+- `ObjectMonitor` reads the measured `box_state` and the plant's generalized contact forces
+  on the box and reports the box's `acceleration` (its velocity change over the step) and the
+  hand's `contact_force` on it in the same step.
+- `FrictionEstimator` (`mu_estimate`): starts at the plan's scene.mu; a loaded contact that
+  slides steadily for slip_confirm_time lowers it to the median ratio |f_t| / f_n of the slide
+  (a sliding contact rides its friction cone), never below controller.friction_floor, and
+  nothing raises it.
+- `MassEstimator` (`mass_estimate`): starts at the plan's mass and low-pass filters the
+  hand's vertical force on the box over (g + a_y) while the box barely accelerates.
+- `PushReflex` (`disturbance`, `reflex`): the force on the box that neither the contacts nor
+  gravity explain (m a - f - m g, with the estimated mass); the reflex, 0..1, is 1 once it
+  exceeds reflex_force for reflex_confirm_time, held reflex_hold s after it subsides, then
+  fading over reflex_release s.
+
+The GraspController (closed_loop=True) reads mu_estimate, mass_estimate and reflex. Each
+system reads the others' state as of their last update, as sampled controllers do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.plant import ContactResults
+from pydrake.systems.framework import EventStatus, LeafSystem
+
+from trajectotree.config import ControllerGains
+from trajectotree.execution.reference import GraspSchedule
+from trajectotree.scene.plant import NUM_FINGERS
+
+# N, a finger pushing less is out of contact: a contact that opens leaves forces of 1e-18 N, whose
+# ratio |f_t| / f_n means nothing.
+CONTACT_FORCE = 1e-3
+
+
+# The largest relative change of a contact's normal force over a control period (1), and the fastest its
+# contact points may open or close (m/s), for a slide sample to count as evidence of the friction
+# (FrictionEstimator): a sphere pressed over a box corner at 2 mm/s slid at 0.25-0.3 in a world of 0.4.
+STEADY_NORMAL_FORCE = 0.05
+STEADY_APPROACH_SPEED = 2e-4
+
+
+def wrap_angle(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class FingerContacts:
+    """What the point contacts between the hand and the box say, per finger (4,) and in total."""
+
+    normal_force: np.ndarray  # (4,) N, each finger's push along the box's inward normals
+    tangential_force: np.ndarray  # (4, 2) N, its force on the box along the faces, in W
+    slip_speed: np.ndarray  # (4,) m/s, the fastest relative tangential velocity at its contact points
+    approach_speed: np.ndarray  # (4,) m/s, the fastest rate at which one of them opens or closes (|separation speed|)
+
+    @property
+    def in_contact(self) -> np.ndarray:
+        return self.normal_force > CONTACT_FORCE
+
+    @property
+    def force_ratio(self) -> np.ndarray:
+        """(4,) |f_t| / f_n (0 out of contact)."""
+        tangential = np.linalg.norm(self.tangential_force, axis=1)
+        return np.divide(tangential, self.normal_force, out=np.zeros(NUM_FINGERS), where=self.in_contact)
+
+
+def finger_contacts(results: ContactResults, finger_of_body: dict, box_body) -> FingerContacts:
+    """FingerContacts from the plant's point-pair contact results; `finger_of_body` maps the
+    body index of each finger link to its finger."""
+    normal = np.zeros(NUM_FINGERS)
+    tangential = np.zeros((NUM_FINGERS, 2))
+    slip = np.zeros(NUM_FINGERS)
+    approach = np.zeros(NUM_FINGERS)
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        a, b = info.bodyA_index(), info.bodyB_index()
+        if b == box_body and a in finger_of_body:  # nhat_BA_W points from B (the box) to A: out of the box
+            f_box, n_out, i = info.contact_force(), info.point_pair().nhat_BA_W, finger_of_body[a]
+        elif a == box_body and b in finger_of_body:
+            f_box, n_out, i = -info.contact_force(), -info.point_pair().nhat_BA_W, finger_of_body[b]
+        else:
+            continue
+        push = -float(f_box @ n_out)
+        normal[i] += push
+        tangential[i] += (f_box + push * n_out)[:2]
+        slip[i] = max(slip[i], info.slip_speed())
+        approach[i] = max(approach[i], abs(info.separation_speed()))
+    return FingerContacts(normal_force=normal, tangential_force=tangential, slip_speed=slip, approach_speed=approach)
+
+
+class PeriodicSystem(LeafSystem):
+    """A LeafSystem whose state is groups of discrete values, all set by one periodic update
+    (`update(context) -> {group: values}`, groups it omits keep their values) every
+    `period` s and at initialization; `outputs` name the groups behind output ports of
+    those names, `internal` the others (name: initial values, each)."""
+
+    def __init__(self, period: float, outputs: dict, internal: dict | None = None):
+        super().__init__()
+        self.period = period
+        self._groups = {
+            name: self.DeclareDiscreteState(np.atleast_1d(np.asarray(v, dtype=float)))
+            for name, v in {**outputs, **(internal or {})}.items()
+        }
+        for name in outputs:
+            self.DeclareStateOutputPort(name, self._groups[name])
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._Update)
+        self.DeclareInitializationDiscreteUpdateEvent(self._Update)
+
+    def state(self, context, name: str) -> np.ndarray:
+        return context.get_discrete_state(self._groups[name]).get_value()
+
+    def _Update(self, context, discrete_state):
+        for name, values in self.update(context).items():
+            discrete_state.get_mutable_vector(self._groups[name]).SetFromVector(np.atleast_1d(values))
+        return EventStatus.Succeeded()
+
+    def update(self, context) -> dict:
+        raise NotImplementedError
+
+
+class ContactMonitor(PeriodicSystem):
+    """Input ports `contact_results` (the plant's) and `box_state` (6: x, y, theta and their
+    rates). Output ports, per finger (4 each): `in_contact` (1/0), `slipping` (1/0),
+    `force_ratio`, `normal_force` (N), `slip_speed` and `approach_speed` (m/s: how fast a
+    contact point slides, and opens or closes); and the box's `tracking_error` (3: measured -
+    planned pose, theta wrapped)."""
+
+    def __init__(self, plant, hand, box, schedule: GraspSchedule, gains: ControllerGains):
+        four = np.zeros(NUM_FINGERS)
+        outputs = {"in_contact": four, "slipping": four, "force_ratio": four, "normal_force": four}
+        outputs |= {"slip_speed": four, "approach_speed": four}
+        super().__init__(1.0 / gains.rate_hz, outputs | {"tracking_error": np.zeros(3)})
+        self.schedule, self.gains = schedule, gains
+        self._finger_of_body = {
+            plant.GetBodyByName(f"finger{i}_link{j}", hand).index(): i for i in range(NUM_FINGERS) for j in (1, 2)
+        }
+        self._box_body = plant.GetBodyByName("box", box).index()
+        self.contact_results_port = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
+        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+
+    def update(self, context) -> dict:
+        s, g = self.schedule, self.gains
+        contacts = finger_contacts(self.contact_results_port.Eval(context), self._finger_of_body, self._box_body)
+        error = self.box_state_port.Eval(context)[:3] - s.X[s.index(context.get_time())]
+        error[2] = wrap_angle(error[2])
+        return {
+            "in_contact": contacts.in_contact,
+            "slipping": (contacts.normal_force >= g.slip_min_force) & (contacts.slip_speed > g.slip_speed),
+            "force_ratio": contacts.force_ratio,
+            "normal_force": contacts.normal_force,
+            "slip_speed": contacts.slip_speed,
+            "approach_speed": contacts.approach_speed,
+            "tracking_error": error,
+        }
+
+
+class ObjectMonitor(PeriodicSystem):
+    """Input ports `box_state` (6) and `box_contact_forces` (3: the plant's generalized contact
+    forces on the box, f_x N, f_y N in W and the torque N m). Output ports, sampled together
+    at the plant's step: `acceleration` (3, the box's measured velocity change over the step
+    / the step) and `contact_force` (3, the contact forces of that step). At the plant's step,
+    not the control rate: the plant reports the contact forces of the step that led to the
+    measured state, so the velocity change over one step is exactly what they, gravity (and a
+    push) explain; over two steps a finger landing's force, which alternates between them,
+    left 2-3 N unexplained for 4 ms."""
+
+    def __init__(self, time_step: float):
+        three = np.zeros(3)
+        super().__init__(
+            time_step, {"acceleration": three, "contact_force": three}, {"velocity": three, "started": 0.0}
+        )
+        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+        self.box_contact_forces_port = self.DeclareVectorInputPort("box_contact_forces", 3)
+
+    def update(self, context) -> dict:
+        velocity = self.box_state_port.Eval(context)[3:]
+        # No velocity before the first update: the first acceleration is zero, not a jump from rest.
+        started = self.state(context, "started")[0] > 0.0
+        accel = (velocity - self.state(context, "velocity")) / self.period if started else np.zeros(3)
+        return {
+            "acceleration": accel,
+            "contact_force": self.box_contact_forces_port.Eval(context),
+            "velocity": velocity,
+            "started": 1.0,
+        }
+
+
+class FrictionEstimator(PeriodicSystem):
+    """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (4 each,
+    ContactMonitor's).
+    Output port `mu_estimate` (1): the plan's friction `mu_plan` until a contact has slid
+    steadily for gains.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
+    slide's last slip_confirm_time, never below gains.friction_floor and never raised.
+    A slide sample counts when the plan loads the finger fully (`schedule.force_scale` 1), it
+    pushes with at least gains.friction_evidence_force, its normal force changed by at most
+    STEADY_NORMAL_FORCE since the last sample and its contact neither opens nor closes faster
+    than STEADY_APPROACH_SPEED: in Drake's lagged contact model (friction bounded by the
+    previous step's elastic normal force) a light contact, or one whose penetration changes
+    (a landing, a finger letting go, a sphere pressed over a corner), slides at a ratio down to
+    half the world's friction (a nominal run at mu 0.7 read 0.38 and 0.51 from such slides). The median, not
+    the mean: single steady ratios still lie up to 0.05 below or 0.02 above it."""
+
+    def __init__(self, mu_plan: float, schedule: GraspSchedule, gains: ControllerGains):
+        period = 1.0 / gains.rate_hz
+        # Samples in slip_confirm_time (at least one); a period's rounding must not drop one.
+        self._window = max(int(np.floor(gains.slip_confirm_time / period + 1e-9)), 1)
+        four = np.zeros(NUM_FINGERS)
+        internal = {"slide_samples": four, "slide_ratios": np.zeros(NUM_FINGERS * self._window), "normal_force": four}
+        super().__init__(period, {"mu_estimate": max(mu_plan, gains.friction_floor)}, internal)
+        self.gains, self.schedule = gains, schedule
+        self.slipping_port = self.DeclareVectorInputPort("slipping", NUM_FINGERS)
+        self.force_ratio_port = self.DeclareVectorInputPort("force_ratio", NUM_FINGERS)
+        self.normal_force_port = self.DeclareVectorInputPort("normal_force", NUM_FINGERS)
+        self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", NUM_FINGERS)
+
+    def update(self, context) -> dict:
+        normal = self.normal_force_port.Eval(context)
+        steady = np.abs(normal - self.state(context, "normal_force")) <= STEADY_NORMAL_FORCE * normal
+        steady &= self.approach_speed_port.Eval(context) <= STEADY_APPROACH_SPEED
+        loaded = self.schedule.force_scale[self.schedule.index(context.get_time())] >= 1.0
+        pushing = normal >= self.gains.friction_evidence_force
+        valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing
+        samples = np.where(valid, self.state(context, "slide_samples") + 1.0, 0.0)  # a slide ends: reset
+        ratios = self.state(context, "slide_ratios").reshape(NUM_FINGERS, self._window)
+        ratios = np.column_stack([ratios[:, 1:], self.force_ratio_port.Eval(context)])  # the last window, oldest first
+        mu = self.state(context, "mu_estimate")[0]
+        confirmed = samples >= self._window
+        if confirmed.any():
+            mu = min(mu, float(np.min(np.median(ratios[confirmed], axis=1))))
+        return {
+            "mu_estimate": max(mu, self.gains.friction_floor),
+            "slide_samples": samples,
+            "slide_ratios": ratios.ravel(),
+            "normal_force": normal,
+        }
+
+
+class MassEstimator(PeriodicSystem):
+    """Input ports `contact_force` (3, the hand's force on the box in W and its torque) and
+    `acceleration` (3, the box's; both ObjectMonitor's). Output port `mass_estimate` (1, kg):
+    the plan's mass, low-pass filtered (gains.mass_time_constant) towards f_y / (g + a_y)
+    whenever |(a_x, a_y)| < gains.mass_accel_max, within gains.mass_estimate_range x the
+    plan's mass."""
+
+    def __init__(self, mass_plan: float, gravity: float, gains: ControllerGains):
+        super().__init__(1.0 / gains.rate_hz, {"mass_estimate": mass_plan})
+        self.gains, self._gravity = gains, gravity
+        self._range = (gains.mass_estimate_range[0] * mass_plan, gains.mass_estimate_range[1] * mass_plan)
+        self._gain = min(self.period / gains.mass_time_constant, 1.0)  # the filter's step towards a measurement
+        self.contact_force_port = self.DeclareVectorInputPort("contact_force", 3)
+        self.acceleration_port = self.DeclareVectorInputPort("acceleration", 3)
+
+    def update(self, context) -> dict:
+        accel, support = self.acceleration_port.Eval(context), self.contact_force_port.Eval(context)[1]
+        # Not held up (the first sample, before any contact force, among them): nothing to weigh.
+        if np.linalg.norm(accel[:2]) >= self.gains.mass_accel_max or support <= 0.0:
+            return {}
+        mass = self.state(context, "mass_estimate")[0]
+        measured = support / (self._gravity + accel[1])
+        return {"mass_estimate": float(np.clip(mass + self._gain * (measured - mass), *self._range))}
+
+
+class PushReflex(PeriodicSystem):
+    """Input ports `acceleration` and `contact_force` (3 each, the box's: ObjectMonitor's) and
+    `mass_estimate` (1). Output ports `disturbance` (2, N in W): the force on the box
+    that the hand's measured force and gravity do not explain, m a - f - m g; and `reflex`
+    (1): 1 once |disturbance| has exceeded gains.reflex_force for reflex_confirm_time, held
+    while it does and gains.reflex_hold s after, then falling linearly to 0 over
+    gains.reflex_release s. The disturbance, not the box's acceleration against the plan's:
+    the fingers push back within 10 ms, after which a 3 N push barely accelerates the box,
+    and a finger landing jolts it by 40 m/s^2 for a few ms, which its measured force
+    explains."""
+
+    def __init__(self, gravity: float, gains: ControllerGains):
+        period = 1.0 / gains.rate_hz
+        self._confirm = max(int(np.floor(gains.reflex_confirm_time / period + 1e-9)), 1)  # samples
+        internal = {"pushed_samples": 0.0, "quiet_time": np.inf}
+        super().__init__(period, {"disturbance": np.zeros(2), "reflex": 0.0}, internal)
+        self.gains = gains
+        self._gravity_W = np.array([0.0, -gravity])
+        self.acceleration_port = self.DeclareVectorInputPort("acceleration", 3)
+        self.contact_force_port = self.DeclareVectorInputPort("contact_force", 3)
+        self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
+
+    def update(self, context) -> dict:
+        g = self.gains
+        mass = self.mass_estimate_port.Eval(context)[0]
+        accel = self.acceleration_port.Eval(context)[:2]
+        disturbance = mass * (accel - self._gravity_W) - self.contact_force_port.Eval(context)[:2]
+        pushed = np.linalg.norm(disturbance) > g.reflex_force
+        samples = self.state(context, "pushed_samples")[0] + 1.0 if pushed else 0.0
+        quiet = 0.0 if samples >= self._confirm else self.state(context, "quiet_time")[0] + self.period
+        after = quiet - g.reflex_hold
+        level = 1.0 if after <= 0.0 else (max(0.0, 1.0 - after / g.reflex_release) if g.reflex_release > 0 else 0.0)
+        return {"disturbance": disturbance, "reflex": level, "pushed_samples": samples, "quiet_time": quiet}
