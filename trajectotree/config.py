@@ -280,6 +280,9 @@ class SearchConfig:
     # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
     # roots the search at the best ones in turn (trajectotree.search.initial_grasp).
     initial_arclengths: tuple[float, float, float, float] | None = None
+    # bool: initial_arclengths are where a measured start's fingers are (trajectotree.planning.start): the
+    # root keeps them even near a corner or with two fingertips closer than their diameter, as they are
+    measured_start: bool = False
     nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
     min_closure_margin: float = 1e-3  # N, form-closure LP margin d* must exceed this
     # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
@@ -519,6 +522,25 @@ def check_controller(value: str, name: str = "controller") -> str:
 
 
 @dataclass(frozen=True)
+class ReplanConfig:
+    """When the closed loop plans again from the measured state (simulate --replan); checked at
+    the plan's nodes, where every finger holds the object at rest."""
+
+    theta_error: float = 0.05  # rad, tracking error in orientation past which the plan no longer holds (~3 deg)
+    position_error: float = 0.005  # m, the same in position: 10x what a tracked plan shows
+    friction_drop: float = 0.05  # the friction estimate this far below the plan's scene.mu: its stances may slip
+    mass_change: float = 0.2  # 1, a mass estimate this far (relative) from the plan's: its forces are wrong
+    max_replans: int = 4  # per run, so a task the hand cannot do ends rather than replans forever
+
+    def __post_init__(self):
+        check_range("sim.replan.theta_error", self.theta_error, 0.0, math.pi, low_open=True)
+        check_range("sim.replan.position_error", self.position_error, 0.0, 0.05, low_open=True)
+        check_range("sim.replan.friction_drop", self.friction_drop, 0.0, 1.0, low_open=True)
+        check_range("sim.replan.mass_change", self.mass_change, 0.0, 10.0, low_open=True)
+        check_integer("sim.replan.max_replans", self.max_replans, 0, 100)
+
+
+@dataclass(frozen=True)
 class SimConfig:
     """Full-dynamics execution in a discrete MultibodyPlant."""
 
@@ -528,6 +550,7 @@ class SimConfig:
     log_period: float = 0.01  # s, sampling period of the logged box pose and hand state (metrics use it)
     controller: str = "grasp"  # executor: "grasp" (GraspController) or "paper" (eq. 20, ImpedanceController)
     push_duration: float = 0.2  # s, how long a push (simulate --push) acts on the box
+    replan: ReplanConfig = field(default_factory=ReplanConfig)  # when simulate --replan plans again
 
     def __post_init__(self):
         check_range("sim.time_step", self.time_step, 0.0, 0.01, low_open=True)

@@ -11,6 +11,7 @@ so every stage, the sweep's Drake-free parent process included, may import it.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import TYPE_CHECKING, ClassVar
@@ -214,6 +215,30 @@ class SimLog:
     closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)
 
 
+class ReplanReason(enum.Enum):
+    FRICTION = "the friction estimate fell below the plan's"
+    MASS = "the mass estimate is off the plan's"
+    TRACKING = "the object is off its planned pose"
+    CONTACT_LOST = "a holding finger lost its contact"
+
+
+@dataclass(frozen=True)
+class ReplanEvent:
+    """One replan: when the state was measured, why, what the planner was told and what it gave."""
+
+    time_s: float  # s, simulated time of the measured state (a node of the executed plan)
+    reason: ReplanReason
+    mu: float  # the friction coefficient the new plan assumes (the estimate)
+    mass: float  # kg, the mass it assumes (the estimate)
+    latency_s: float  # s, wall-clock time from the measured state to the new plan
+    takes_effect_s: float  # s, simulated time the new plan starts (time_s + latency_s)
+    planned: bool  # a plan came back and was handed to the controller
+    status: str  # the planner's status, or why the start was refused
+
+    def to_json(self) -> dict:
+        return asdict(self) | {"reason": self.reason.name.lower()}
+
+
 @dataclass(frozen=True)
 class SimResult(SimLog):
     """A SimLog with its tracking metrics (trajectotree.execution.metrics.evaluate): sim.json and sim.npz."""
@@ -228,6 +253,7 @@ class SimResult(SimLog):
     # (m, m, rad) the absolute error when the drop rule fired, which abs_error and the means hold
     # from then on; None without a drop
     error_at_drop: tuple[float, float, float] | None = None
+    replans: tuple[ReplanEvent, ...] = ()  # simulate --replan: each time the closed loop planned again
 
     def to_json(self) -> dict:
         """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
@@ -246,4 +272,5 @@ class SimResult(SimLog):
             "controller": self.controller,
             "conditions": self.conditions,
             "closed_loop": None if self.closed_loop is None else self.closed_loop.to_json(self.t),
+            "replans": [event.to_json() for event in self.replans],
         }

@@ -67,9 +67,9 @@ def test_a_plan_from_a_moved_node_begins_at_it_reaches_the_goal_and_executes(sce
 def test_refusals_name_the_finger_the_value_and_the_limit(scene, moved_node):
     _, start = moved_node
     with pytest.raises(
-        StartRefused, match=r"the object moves at 0.05 m/s; a plan starts at rest \(at most 0.02 m/s\)"
+        StartRefused, match=r"the object moves at 0.15 m/s; a plan starts at rest \(at most 0.1 m/s\)"
     ) as e:
-        start_config(scene, dataclasses.replace(start, object_velocity=(0.05, 0.0, 0.0)), CONFIG)
+        start_config(scene, dataclasses.replace(start, object_velocity=(0.15, 0.0, 0.0)), CONFIG)
     assert e.value.refusal.problem is StartProblem.MOVING
     lifted = np.array(start.q)
     lifted[5] += 0.2  # finger 2's second joint: its tip leaves the surface

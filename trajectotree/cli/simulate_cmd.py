@@ -57,6 +57,13 @@ def register(subparsers) -> None:
         "grasp forces and squeeze harder against pushes (sim.npz then holds what the loop saw)",
     )
     group.add_argument(
+        "--replan",
+        action="store_true",
+        help="closed loop, and plan again from the measured state at a node when the friction or mass "
+        "estimate or the tracking error says the plan no longer holds (sim.replan); the new plan takes "
+        "effect once its measured compute time has passed in simulated time",
+    )
+    group.add_argument(
         "--friction-floor",
         type=float,
         metavar="MU",
@@ -252,7 +259,7 @@ def run(args) -> int:
     check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
-    if args.closed_loop:
+    if args.closed_loop or args.replan:
         from trajectotree.execution.simulate import check_closed_loop
 
         check_closed_loop(config.sim.controller, True)
@@ -267,16 +274,24 @@ def run(args) -> int:
     if args.meshcat:
         meshcat = start_meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
-    reference = reference_from_arrays(arrays, build_scene(config.scene))
-    result = run_simulation(
-        plan=reference,
-        config=config,
-        meshcat=meshcat,
-        html_path=args.html,
-        gif_path=args.gif,
-        closed_loop=args.closed_loop,
-        **conditions,
-    )
+    if args.replan:  # the planner needs the plan itself (its goal and config), not only its arrays
+        from trajectotree.execution.replan import simulate_replanning
+        from trajectotree.execution.simulate import Conditions
+        from trajectotree.io import load_plan
+
+        world = Conditions(mu=conditions["sim_mu"], mass=conditions["sim_mass"], push=conditions["push"])
+        result = simulate_replanning(load_plan(args.plan_dir), config, conditions=world)
+    else:
+        reference = reference_from_arrays(arrays, build_scene(config.scene))
+        result = run_simulation(
+            plan=reference,
+            config=config,
+            meshcat=meshcat,
+            html_path=args.html,
+            gif_path=args.gif,
+            closed_loop=args.closed_loop,
+            **conditions,
+        )
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_success)
     if args.forces:

@@ -394,7 +394,13 @@ def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Ref
     """Runs `simulator` to the execution's end; what it logged, beside the plan at the same times."""
     start = time.perf_counter()
     simulator.AdvanceTo(execution.duration)
-    sim_time_s = time.perf_counter() - start
+    return collected_log(execution, simulator, reference, conditions, time.perf_counter() - start)
+
+
+def collected_log(
+    execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict, sim_time_s: float
+) -> SimLog:
+    """What `simulator` logged so far (to the execution's end), beside `reference` at the same times."""
     logs = [finished_log(execution, simulator, logger) for logger in (execution.state_logger, execution.force_logger)]
     t, x, q = split_state_log(execution, logs[0])
     f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()

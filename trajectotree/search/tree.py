@@ -215,7 +215,9 @@ class _Search:
         `candidate` of trajectotree.search.initial_grasp already passed the contact tests (corners,
         overlap, closure), so the goal's table look-ups come first and its LP last."""
         if not candidate:
-            refused = self.contacts_allowed(start) or self.not_in_closure(start)
+            refused = (None if self.config.measured_start else self.contacts_allowed(start)) or self.not_in_closure(
+                start
+            )
             if refused:
                 return Refusal(RefusalKind.INITIAL_GRASP, cause=refused)
         per_finger = [self.min_switches[i][0].get(s, np.inf) for i, s in enumerate(start)]
