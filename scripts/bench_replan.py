@@ -33,7 +33,8 @@ def main() -> None:
         for e in run.replans:
             outcome = "new plan" if e.planned else e.status.split(";")[0][:90]
             print(
-                f"  t {e.time_s:5.2f} s {e.reason.name.lower():9s} mu {e.mu:.3f} latency {e.latency_s:5.2f} s: {outcome}"
+                f"  t {e.time_s:5.2f} s {e.reason.name.lower():9s} mu {e.mu:.3f} latency {e.latency_s:5.2f} s: "
+                + outcome
             )
     print(f"{drops} of {len(args.goals)} dropped at sim mu {args.sim_mu:g}")
     if latencies:
