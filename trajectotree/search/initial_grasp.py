@@ -112,13 +112,17 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     for i, j in itertools.combinations(range(NUM_FINGERS), 2):
         apart &= np.linalg.norm(tips[:, i] - tips[:, j], axis=1) >= 2 * reach.tip_radius
     grasps, p, n = grasps[apart], p[apart], n[apart]
-    stance_mu = np.empty((len(grasps), NUM_FINGERS))
-    for i, others in enumerate(STANCE_FINGERS):  # one required_mu per distinct stance
-        stances, index = np.unique(grasps[:, others], axis=0, return_inverse=True)
-        first = np.array([np.flatnonzero(index.ravel() == k)[0] for k in range(len(stances))], dtype=int)
-        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others], bisections=RANKING_BISECTIONS)[
-            index.ravel()
-        ]
+    # one required_mu per distinct set of three contacts, whichever fingers hold them (closure
+    # does not depend on their order), in one vectorized bisection
+    stances = np.concatenate([grasps[:, others] for others in STANCE_FINGERS])  # (4 M, 3), finger i's first
+    order = np.argsort(stances, axis=1)
+    _, first, index = np.unique(
+        np.take_along_axis(stances, order, axis=1), axis=0, return_index=True, return_inverse=True
+    )
+    grasp_of, stance_of = first % len(grasps), first // len(grasps)
+    pick = np.array(STANCE_FINGERS)[stance_of]  # (U, 3) the fingers of each distinct stance's first holder
+    mus = required_mu_many(p[grasp_of[:, None], pick], n[grasp_of[:, None], pick], bisections=RANKING_BISECTIONS)
+    stance_mu = mus[index.ravel()].reshape(NUM_FINGERS, len(grasps)).T
     free = stance_mu < mu
     worst = np.where(free, stance_mu, -np.inf).max(axis=1)
     keep = np.flatnonzero(free.any(axis=1))
@@ -130,13 +134,10 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
         )
     ]
     candidates = tuple(
-        GraspCandidate(
-            arclengths=tuple(float(s) for s in grasps[k]),
-            stance_required_mu=tuple(float(v) for v in stance_mu[k]),
-            worst_stance_mu=float(worst[k]),
-            free_fingers=int(free[k].sum()),
+        GraspCandidate(arclengths=tuple(s), stance_required_mu=tuple(m), worst_stance_mu=w, free_fingers=f)
+        for s, m, w, f in zip(  # as Python floats and ints, in one conversion per array
+            grasps[order].tolist(), stance_mu[order].tolist(), worst[order].tolist(), free[order].sum(axis=1).tolist()
         )
-        for k in order
     )
     refusal = (
         None

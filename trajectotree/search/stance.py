@@ -55,8 +55,8 @@ class HoldingForceLp:
     def __init__(self, num_contacts: int):
         prog = MathematicalProgram()
         x = prog.NewContinuousVariables(2 * num_contacts, "x")
-        self.balance = prog.AddLinearEqualityConstraint(
-            np.zeros((WRENCH_DIM, 2 * num_contacts)), np.zeros(WRENCH_DIM), x
+        self.balance = prog.AddLinearEqualityConstraint(  # column-major: see grasp.FormClosureLp
+            np.zeros((WRENCH_DIM, 2 * num_contacts), order="F"), np.zeros(WRENCH_DIM), x
         )
         prog.AddBoundingBoxConstraint(0.0, np.inf, x)
         prog.AddLinearCost(np.ones(2 * num_contacts), 0.0, x)

@@ -100,6 +100,7 @@ class _Search:
         self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         self.expanded = self.generated = 0
+        self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
         self.bound = SwitchBound(scene, self.reach, self.poses, config)
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
@@ -125,13 +126,19 @@ class _Search:
 
     def tips_overlap(self, arclengths, finger: int) -> bool:
         """Finger `finger`'s fingertip sphere would overlap another finger's."""
-        r = self.reach.tip_radius
-        p, n = self.reach.contact(arclengths[finger])
-        return any(
-            np.linalg.norm(p + r * n - q - r * m) < 2 * r
-            for i, (q, m) in enumerate(map(self.reach.contact, arclengths))
-            if i != finger
-        )
+        s = arclengths[finger]
+        return any(self.tip_overlaps(s, t) for i, t in enumerate(arclengths) if i != finger)
+
+    def tip_overlaps(self, s: float, t: float) -> bool:
+        """A fingertip sphere touching the object at arclength s overlaps one touching it at t
+        (memoized by the ordered pair: the distance is computed from s's side, as tips that just
+        touch sit at the threshold)."""
+        hit = self.overlaps.get((s, t))
+        if hit is None:
+            r = self.reach.tip_radius
+            (p, n), (q, m) = self.reach.contact(s), self.reach.contact(t)
+            hit = self.overlaps[(s, t)] = bool(np.linalg.norm(p + r * n - q - r * m) < 2 * r)
+        return hit
 
     def infeasibility(self, node: _Node) -> Refusal | None:
         """Why `node` is a dead end (None when it is feasible): closure LP, then Drake IK."""
