@@ -60,7 +60,7 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
         return s, s.neighbors(_Node(0, grasp, None, None))
 
     free, children = search(0.0)
-    movers = {child.switching_finger for _, child in children} - {None}
+    movers = {child.switching_finger for *_, child in children} - {None}
     assert movers  # without the cap some finger may switch
     # any stance needs at least m g / sqrt(1 + mu^2) > 0.3 N: every switch is refused
     capped, children = search(0.3)

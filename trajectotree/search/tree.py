@@ -91,7 +91,9 @@ class _Node:
 class _Search:
     """One run of Algorithm 1; holds the LP and IK caches and the counters."""
 
-    def __init__(self, scene: Scene, goal: GoalPose, config: SearchConfig):
+    def __init__(self, scene: Scene, goal, config: SearchConfig):
+        goal = check_goal(goal)
+        config = with_segments(config, scene.config.initial_pose, goal)
         self.scene, self.config = scene, config
         self.boundary = scene.config.shape
         self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
