@@ -92,8 +92,11 @@ def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.nda
 def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps: np.ndarray) -> np.ndarray:
     """sum_i |q2_i - nominal_joint2| of each grasp (M, 4) at the initial pose (closed form)."""
     pose = np.asarray(scene.config.initial_pose, dtype=float)
-    q2 = np.stack([reach.closed_form_many(pose, i, grasps[:, i])[:, 1] for i in range(NUM_FINGERS)], axis=1)
-    return np.abs(q2 - search.nominal_joint2).sum(axis=1)
+    cost = np.zeros(len(grasps))
+    for i in range(NUM_FINGERS):  # each finger holds a few distinct contacts: their IK once each
+        contacts, index = np.unique(grasps[:, i], return_inverse=True)
+        cost = cost + np.abs(reach.closed_form_many(pose, i, contacts)[:, 1] - search.nominal_joint2)[index.ravel()]
+    return cost
 
 
 def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCandidates:

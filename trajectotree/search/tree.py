@@ -100,12 +100,14 @@ class _Search:
         self.mu_plan = mu_plan(scene.config, config)
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
-        self.stance = StanceChecks(scene, self.reach, self.poses, self.mu_plan, config.max_stance_force)
+        self.bound = SwitchBound(scene, self.reach, self.poses, config)
+        self.stance = StanceChecks(
+            scene, self.reach, self.poses, self.mu_plan, config.max_stance_force, angles=self.bound.angles
+        )
         self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         self.expanded = self.generated = self.backups = 0
         self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
-        self.bound = SwitchBound(scene, self.reach, self.poses, config)
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
