@@ -30,6 +30,8 @@ class SwitchBound:
         half = (config.num_displacements - 1) // 2
         self.displacements = config.displacement_step * np.arange(-half, half + 1)
         self.min_switches: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> switches
+        # [finger][depth][arclength] -> the first later node at which that contact is out of reach (inf: none)
+        self.lost: list[list[dict[float, float]]] = []
         self.joint2: list[list[dict[float, float]]] = []  # [finger][depth][arclength] -> q2 (reachable only)
         # [finger][depth][arclength] -> (q1, q2), the closed form's joint angles where joint2 has q2
         # (and at depth 0 for the roots' contacts)
@@ -76,9 +78,14 @@ class SwitchBound:
                 for s in layers[depth]:
                     here[s] = min(after.get(s, np.inf), 1 + min(after.get(m, np.inf) for m in self.moves(s)))
                 cost.insert(0, here)
+            lost = [dict.fromkeys(layers[last], np.inf)]  # backward: the first later node without the contact
+            for depth in range(last - 1, -1, -1):
+                later, there = lost[0], layers[depth + 1]
+                lost.insert(0, {s: later[s] if s in there else depth + 1 for s in layers[depth]})
             self.joint2.append(layers)
             self.joints.append(angles)
             self.min_switches.append(cost)
+            self.lost.append(lost)
 
     def moves(self, s: float) -> list[float]:
         """The arclengths s + d for every d in D_cp (wrapped keys), memoized."""
@@ -93,6 +100,13 @@ class SwitchBound:
         if q is None or q[0] != q[0]:  # not tabulated, or nan
             return self.reach.closed_form(self.poses[depth], finger, s).q
         return np.array(q)
+
+    def deadlines_met(self, depth: int, arclengths) -> bool:
+        """Whether the fingers can switch in time: each must have moved by the first node at which
+        its contact at `depth` is out of reach, one switch per node, so the k-th earliest of those
+        nodes must be depth + k or later (precheck's test at the root, here at any node)."""
+        deadlines = sorted(self.lost[i][depth].get(s, depth) for i, s in enumerate(arclengths))
+        return all(d >= depth + k for k, d in enumerate(deadlines, start=1))
 
     def switches_needed(self, depth: int, arclengths) -> float:
         return sum(self.min_switches[i][depth].get(s, np.inf) for i, s in enumerate(arclengths))

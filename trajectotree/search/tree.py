@@ -201,7 +201,7 @@ class _Search:
                 self.refused[Refusal(RefusalKind.NEW_CONTACT_UNREACHABLE, fingers=(finger,))] += 1
                 continue
             switches = self.bound.switches_needed(depth, arclengths)
-            if switches > steps_left:  # no completion exists
+            if switches > steps_left or not self.bound.deadlines_met(depth, arclengths):  # no completion exists
                 self.refused[Refusal(RefusalKind.SWITCH_BOUND)] += 1
                 continue
             if finger is not None and self.tips_overlap(arclengths, finger):
