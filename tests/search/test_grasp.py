@@ -187,3 +187,24 @@ def test_closure_polynomials_agree_with_the_edge_test():
             assert 0 < decided.sum() < len(decided) or mu in (1e-5, MU_CAP) or k == 2
     rows = np.array([3, 1, 4])
     np.testing.assert_array_equal(polynomials.subset(rows).in_closure(0.3), polynomials.in_closure(0.3)[rows])
+
+
+def test_the_box_symmetries_share_a_stance_key_and_its_friction():
+    # the table computes required_mu once per key: the half turn and the mirrors of a stance need the
+    # same friction (to the bisection's resolution), and a polygon's stances are only sorted
+    from trajectotree.search.grasp import required_mu_many
+    from trajectotree.search.initial_grasp import symmetric_key
+
+    rng = np.random.default_rng(4)
+    grid = np.round(np.arange(0.0, BOX.perimeter, 0.01), 9)
+    corner_free = grid[[BOX.corner_distance(s) >= 0.015 for s in grid]]  # a corner's normal is either face's
+    stances = rng.choice(corner_free, size=(300, 3))
+    images = [stances, stances + 0.3, 0.4 - stances, 0.7 - stances]  # P/2 = 0.3, 2 h + w = 0.4
+    keys = [symmetric_key(BOX, np.mod(x, BOX.perimeter)) for x in images]
+    for k in keys[1:]:
+        np.testing.assert_array_equal(k, keys[0])
+    mus = [required_mu_many(*(a.reshape(-1, 3, 2) for a in BOX.points(x.ravel()))) for x in images]
+    for m in mus[1:]:
+        np.testing.assert_allclose(m, mus[0], atol=2e-8)
+    triangle = ConvexPolygon.from_points(((0.07, -0.04), (0.0, 0.08), (-0.07, -0.04)))
+    np.testing.assert_array_equal(symmetric_key(triangle, stances[:, ::-1]), np.sort(stances, axis=1))

@@ -99,6 +99,27 @@ def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps
     return cost
 
 
+def symmetric_key(boundary, stances: np.ndarray) -> np.ndarray:
+    """(K, 3) a key per set of contacts (K, 3) (arclengths), equal for sets whose frictional form
+    closure is the same at every mu: their sorted arclengths and, on the box, the least of those
+    of its four images under the box's symmetries (the half turn s + P/2 and the mirror in its y
+    axis 2 h + w - s, the mirror in x being their product), which map contacts, normals and cone
+    edges onto one another and the wrench space linearly onto itself."""
+    if not boundary.is_box:
+        return np.sort(stances, axis=1)
+    per, (a, b) = boundary.perimeter, boundary.box_half
+    mirror = 4 * b + 2 * a  # 2 h + w
+    images = [stances, stances + per / 2, mirror - stances, mirror - stances + per / 2]
+
+    def wrapped(x):  # arclength keys in [0, perimeter) to 1e-9 m, as the search's
+        key = np.round(np.mod(x, per), 9)
+        return np.where(key >= round(per, 9), 0.0, key)
+
+    keys = np.stack([np.sort(wrapped(x), axis=1) for x in images])  # (4, K, 3)
+    best = np.lexsort(keys.transpose(2, 0, 1)[::-1], axis=0)[0]  # the least image of each row
+    return keys[best, np.arange(len(stances))]
+
+
 def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCandidates:
     mu = mu_plan(scene.config, search)
     per_finger = grid_contacts(scene, search.initial_grid_step, reach)
@@ -116,11 +137,10 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
         apart &= np.linalg.norm(tips[:, i] - tips[:, j], axis=1) >= 2 * reach.tip_radius
     grasps, p, n = grasps[apart], p[apart], n[apart]
     # one required_mu per distinct set of three contacts, whichever fingers hold them (closure
-    # does not depend on their order), in one vectorized bisection
+    # does not depend on their order) and, on the box, up to its symmetries, in one vectorized bisection
     stances = np.concatenate([grasps[:, others] for others in STANCE_FINGERS])  # (4 M, 3), finger i's first
-    order = np.argsort(stances, axis=1)
     _, first, index = np.unique(
-        np.take_along_axis(stances, order, axis=1), axis=0, return_index=True, return_inverse=True
+        symmetric_key(scene.config.shape, stances), axis=0, return_index=True, return_inverse=True
     )
     grasp_of, stance_of = first % len(grasps), first // len(grasps)
     pick = np.array(STANCE_FINGERS)[stance_of]  # (U, 3) the fingers of each distinct stance's first holder

@@ -235,15 +235,17 @@ class Reachability:
             return FingerReach(False, solutions[0], Refusal(RefusalKind.LINKS_PENETRATE))
         return FingerReach(True, free[0])
 
-    def solve(self, pose, finger: int, arclength: float) -> FingerReach:
-        """Drake IK (seeded by the closed form) + collision test: the node's joint angles; memoized."""
+    def solve(self, pose, finger: int, arclength: float, seed: np.ndarray | None = None) -> FingerReach:
+        """Drake IK (seeded by the closed form) + collision test: the node's joint angles; memoized.
+        `seed`: the closed form's joint angles when the caller has them (closed_form_many's), which
+        spares computing them again."""
         key = self._key(pose, finger, arclength)
         if key not in self._cache:
-            self._cache[key] = self._solve(pose, finger, arclength)
+            self._cache[key] = self._solve(pose, finger, arclength, seed)
         return self._cache[key]
 
-    def _solve(self, pose, finger: int, arclength: float) -> FingerReach:
-        guess = self.closed_form(pose, finger, arclength)
+    def _solve(self, pose, finger: int, arclength: float, seed: np.ndarray | None = None) -> FingerReach:
+        guess = self.closed_form(pose, finger, arclength) if seed is None else FingerReach(True, seed)
         if not guess.reachable:
             return guess
         q = self._drake_ik(finger, self.tip_target(pose, arclength), guess.q)

@@ -93,13 +93,16 @@ class SwitchBound:
             self._moves[s] = [self.wrap(s + d) for d in self.displacements]
         return self._moves[s]
 
-    def angles(self, depth: int, finger: int, s: float) -> np.ndarray:
+    def tabulated(self, depth: int, finger: int, s: float) -> np.ndarray | None:
         """(2,) rad, `finger`'s closed-form joint angles with its contact at arclength s at node
-        `depth`: from the table (plan), else Reachability.closed_form (nan when out of reach)."""
+        `depth` from the table (plan); None when it has none there (not tabulated, or out of reach)."""
         q = self.joints[finger][depth].get(s) if self.joints else None
-        if q is None or q[0] != q[0]:  # not tabulated, or nan
-            return self.reach.closed_form(self.poses[depth], finger, s).q
-        return np.array(q)
+        return None if q is None or q[0] != q[0] else np.array(q)  # q[0] != q[0]: nan
+
+    def angles(self, depth: int, finger: int, s: float) -> np.ndarray:
+        """The same, else Reachability.closed_form's (nan when out of reach)."""
+        q = self.tabulated(depth, finger, s)
+        return self.reach.closed_form(self.poses[depth], finger, s).q if q is None else q
 
     def deadlines_met(self, depth: int, arclengths) -> bool:
         """Whether the fingers can switch in time: each must have moved by the first node at which

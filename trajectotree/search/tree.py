@@ -164,7 +164,7 @@ class _Search:
     def unreachable(self, node: _Node) -> Refusal | None:
         pose = self.poses[node.depth]
         for i, s in enumerate(node.arclengths):
-            reach = self.reach.solve(pose, i, s)
+            reach = self.reach.solve(pose, i, s, seed=self.bound.tabulated(node.depth, i, s))
             if not reach.reachable:
                 return Refusal(RefusalKind.UNREACHABLE, fingers=(i,), cause=reach.refusal)
         return None
