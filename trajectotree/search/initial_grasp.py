@@ -24,6 +24,7 @@ simulation filters finger-finger contact, trajectotree.execution.simulate).
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -47,13 +48,40 @@ class GraspCandidate:
     free_fingers: int  # fingers that may let go at mu_plan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GraspCandidates:
+    """The ranked candidates, kept as arrays: a search reads the few it roots at, and `candidates`
+    makes the thousands of GraspCandidate values only when asked (their allocation alone set off a
+    full garbage collection, 20-80 ms, in a fresh process)."""
+
     mu_plan: float
-    candidates: tuple[GraspCandidate, ...]  # ranked, best first
+    arclengths: np.ndarray  # (K, 4) m, the candidates' contacts, ranked, best first
+    stance_mu: np.ndarray  # (K, 4) GraspCandidate.stance_required_mu of each
+    worst_stance_mu: np.ndarray  # (K,)
+    free_fingers: np.ndarray  # (K,) int
     reachable: tuple[int, ...]  # grid contacts reachable per finger at the initial pose
     assignments: int  # grid assignments before the overlap and closure filters
     refusal: Refusal | None  # why there is no candidate (NO_GRID_CONTACT, NO_INITIAL_GRASP); None when there are
+
+    @functools.cached_property
+    def candidates(self) -> tuple[GraspCandidate, ...]:
+        """Ranked, best first (Python floats and ints, converted one array at a time)."""
+        return tuple(
+            GraspCandidate(arclengths=tuple(s), stance_required_mu=tuple(m), worst_stance_mu=w, free_fingers=f)
+            for s, m, w, f in zip(
+                self.arclengths.tolist(),
+                self.stance_mu.tolist(),
+                self.worst_stance_mu.tolist(),
+                self.free_fingers.tolist(),
+            )
+        )
+
+    def __len__(self) -> int:
+        return len(self.arclengths)
+
+    def root(self, k: int) -> tuple[float, ...]:
+        """Candidate k's contacts as the search's keys (grid values: already canonical)."""
+        return tuple(self.arclengths[k].tolist())
 
 
 class GraspTables:
@@ -128,7 +156,17 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     assignments = len(grasps)
     if assignments == 0:
         missing = [i for i, n in enumerate(counts) if n == 0]
-        return GraspCandidates(mu, (), counts, 0, Refusal(RefusalKind.NO_GRID_CONTACT, fingers=tuple(missing)))
+        none = np.zeros((0, NUM_FINGERS))
+        return GraspCandidates(
+            mu,
+            none,
+            none,
+            np.zeros(0),
+            np.zeros(0, dtype=int),
+            counts,
+            0,
+            Refusal(RefusalKind.NO_GRID_CONTACT, fingers=tuple(missing)),
+        )
     p, n = reach.contacts(grasps.ravel())
     p, n = p.reshape(-1, NUM_FINGERS, 2), n.reshape(-1, NUM_FINGERS, 2)
     tips = p + reach.tip_radius * n
@@ -156,15 +194,9 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
             (_joint2_cost(scene, search, reach, grasps[keep]), -free[keep].sum(axis=1), np.round(worst[keep], 4))
         )
     ]
-    candidates = tuple(
-        GraspCandidate(arclengths=tuple(s), stance_required_mu=tuple(m), worst_stance_mu=w, free_fingers=f)
-        for s, m, w, f in zip(  # as Python floats and ints, in one conversion per array
-            grasps[order].tolist(), stance_mu[order].tolist(), worst[order].tolist(), free[order].sum(axis=1).tolist()
-        )
-    )
     refusal = (
         None
-        if candidates
+        if len(order)
         else Refusal(
             RefusalKind.NO_INITIAL_GRASP,
             mu_plan=mu,
@@ -173,4 +205,6 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
             subset=int(apart.sum()),
         )
     )
-    return GraspCandidates(mu, candidates, counts, assignments, refusal)
+    return GraspCandidates(
+        mu, grasps[order], stance_mu[order], worst[order], free[order].sum(axis=1), counts, assignments, refusal
+    )

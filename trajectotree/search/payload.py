@@ -71,11 +71,9 @@ def payload(
     else:
         if grasps is None:
             grasps = initial_grasp_candidates(scene, search, reach)
-        if not grasps.candidates:
+        if not len(grasps):
             return None
-        chosen = grasps.candidates[:first]
-        arclengths = np.array([c.arclengths for c in chosen])
-        free = np.array([[m < grasps.mu_plan for m in c.stance_required_mu] for c in chosen])
+        arclengths, free = grasps.arclengths[:first], grasps.stance_mu[:first] < grasps.mu_plan
     pose = np.asarray(scene.config.initial_pose, dtype=float)
     q = np.stack([reach.closed_form_many(pose, i, arclengths[:, i]) for i in range(NUM_FINGERS)], axis=1)
     reached = np.all(np.isfinite(q), axis=(1, 2))

@@ -362,18 +362,35 @@ class _Search:
         )
 
 
+class _Roots:
+    """The initial grasps to try, best first, made search keys one by one as the search reaches them."""
+
+    def __init__(self, arclengths: np.ndarray):
+        self.arclengths = np.asarray(arclengths, dtype=float).reshape(-1, NUM_FINGERS)
+
+    def __len__(self) -> int:
+        return len(self.arclengths)
+
+    def __iter__(self):
+        return (tuple(self.arclengths[k].tolist()) for k in range(len(self.arclengths)))
+
+    def per_finger(self) -> list[set[float]]:
+        """Each finger's initial contacts over all roots (the switch-bound tables' starts)."""
+        return [set(self.arclengths[:, i].tolist()) for i in range(NUM_FINGERS)]
+
+
 def _roots(
     scene: Scene, config: SearchConfig, search: _Search, tables: GraspTables | None
-) -> tuple[list[tuple[float, ...]], Refusal | None]:
+) -> tuple[_Roots, Refusal | None]:
     """The initial grasps to try, best first: the user's, or the ranked candidates (from
     `tables` when given, else built here)."""
     if config.initial_arclengths is not None:
-        return [tuple(search.wrap(s) for s in config.initial_arclengths)], None
+        return _Roots([[search.wrap(s) for s in config.initial_arclengths]]), None
     if tables is None:
         table = initial_grasp_candidates(scene, config, search.reach)
     else:
         table = tables.get(scene, config, search.reach)
-    return [c.arclengths for c in table.candidates], table.refusal  # grid values: already canonical keys
+    return _Roots(table.arclengths), table.refusal  # grid values: already canonical keys
 
 
 def grid_levels(config: SearchConfig) -> list[SearchConfig]:
@@ -421,7 +438,7 @@ def _choose_on_grid(
     roots, refusal = _roots(scene, config, search, tables)
     if not roots:
         return None, refusal
-    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    search.plan_switch_bounds(roots.per_finger())
     first = None
     for root in roots:
         why = search.precheck(root, candidate=config.initial_arclengths is None)
@@ -484,7 +501,7 @@ def _find_on_grid(
             stats=search.stats(t0),
             mu_plan=search.mu_plan,
         )
-    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    search.plan_switch_bounds(roots.per_finger())
     leaf, searched, skipped, first_skip, last = None, 0, 0, None, None
     for root in roots:
         if (
