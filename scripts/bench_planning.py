@@ -285,7 +285,7 @@ def main() -> None:
             sample_goals(args.goals, args.seed), methods, config, formulations, pool, args.workers, done, on_goal
         )
     print(
-        f"{args.goals} goals, seed {args.seed}, N = {config.search.num_nodes}, "
+        f"{args.goals} goals, seed {args.seed}, N = {config.search.num_nodes or 'from the distance (10 within pi)'}, "
         f"M_hat = {config.cito.knots_per_segment}, {args.workers} segment workers; {startup}"
     )
     for label, label_rows in rows.items():

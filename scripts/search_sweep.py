@@ -57,7 +57,7 @@ def main() -> None:
     c = config.scene
     print(
         f"success {found}/{len(plans)} ({100.0 * found / len(plans):.0f}%), box {c.box_width:g} x {c.box_height:g} m, "
-        f"mu {c.mu:g}, mu_plan {plans[0].mu_plan:.3g}, N = {config.search.num_nodes}, "
+        f"mu {c.mu:g}, mu_plan {plans[0].mu_plan:.3g}, N = {sorted({len(p.nodes) for p in plans if p.success})}, "
         f"{'grid' if args.grid else f'seed {args.seed}'}; search time median {np.median(times):.3f} s, "
         f"max {times.max():.3f} s"
     )

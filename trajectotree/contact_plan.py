@@ -85,12 +85,13 @@ class SearchStats:
 
 @dataclass(frozen=True)
 class ContactPlan:
-    goal: float  # rad, goal rotation of the object
+    goal: float  # rad, the goal orientation of the object in W
     success: bool  # a path of N nodes reached the goal pose
     refusal: SearchRefusal | None = None  # why not, when success is False (None otherwise)
     nodes: tuple[ContactNode, ...] = ()  # N nodes on success, () otherwise
     stats: SearchStats = field(default_factory=SearchStats)
     mu_plan: float = float("nan")  # friction coefficient the plan was searched with
+    goal_position: tuple[float, float] | None = None  # m, the goal position in W; None: the start's
 
     @property
     def reason(self) -> str:
@@ -105,6 +106,7 @@ class ContactPlan:
     def to_json(self) -> dict:
         return {
             "goal": float(self.goal),
+            "goal_position": None if self.goal_position is None else [float(v) for v in self.goal_position],
             "success": self.success,
             "reason": self.reason,
             "refusal": None if self.refusal is None else self.refusal.to_json(),
@@ -122,4 +124,5 @@ class ContactPlan:
             nodes=tuple(ContactNode.from_json(n) for n in data.get("contact_sequence") or ()),
             stats=SearchStats(**data.get("stats", {})),
             mu_plan=_float_or_nan(data.get("mu_plan")),
+            goal_position=None if data.get("goal_position") is None else tuple(data["goal_position"]),
         )

@@ -127,6 +127,7 @@ def plan_to_json(result: PlanResult) -> dict:
     return {
         "method": result.method,
         "goal": float(result.goal),
+        "goal_position": None if result.contact_plan.goal_position is None else list(result.contact_plan.goal_position),
         "success": bool(result.success),
         "converged": bool(result.converged),
         "status": result.status,
@@ -233,6 +234,7 @@ def load_plan(out_dir: str | Path) -> PlanResult:
         contact_plan = ContactPlan.from_json(
             {
                 "goal": data["goal"],
+                "goal_position": data.get("goal_position"),  # older files: rotations only
                 "success": search.get("success", True),
                 "reason": search.get("reason", ""),
                 "refusal": search.get("refusal"),  # older files have the reason's text alone

@@ -18,7 +18,14 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from trajectotree.config import ConfigError
+from trajectotree.config import (
+    GOAL_ROTATION_BOUND,
+    ConfigError,
+    GoalPose,
+    check_goal_rotation,
+    check_length,
+    check_range,
+)
 
 if TYPE_CHECKING:  # annotations only: config and contact_plan are values too, loaded by io
     from trajectotree.config import Config
@@ -61,19 +68,28 @@ def check_method(method: str) -> str:
     return method
 
 
-def check_goal(goal, name: str = "goal") -> float:
-    """The goal rotation (rad) in [-pi, pi], where the paper samples its goals: the one check of
-    a goal, by the planners, the search and the CLI; ConfigError naming `name` otherwise."""
-    if (
-        isinstance(goal, bool)
-        or not isinstance(goal, (int, float, np.floating))
-        or not math.isfinite(goal)
-        or abs(goal) > math.pi + 1e-9
-    ):
-        # pi in 8 decimals rounded down: a bound printed as 3.141593 (above pi) would itself be refused
-        valid = f"[-pi, pi] rad, pi = {math.floor(math.pi * 1e8) / 1e8:.8f}"
-        raise ConfigError(field=name, value=goal, valid=valid)
-    return float(goal)
+def check_goal(goal, name: str = "goal") -> GoalPose:
+    """The goal, checked: a rotation (rad, a number: the object keeps its start position), a pose
+    (x m, y m, theta rad) or a GoalPose, its orientation within +-20 pi (ten turns either way) and
+    its position within the scene's +-1 m. The one check of a goal, by the planners, the search and
+    the CLI; ConfigError naming `name` (and the entry of a pose) otherwise. Whether the hand can
+    carry the object there is the workspace's check (trajectotree.search.workspace)."""
+    if isinstance(goal, GoalPose):
+        if goal.theta is None:
+            raise ConfigError(field=f"{name}.theta", problem="is not given", valid=GOAL_ROTATION_BOUND)
+        return goal
+    if isinstance(goal, (str, bytes)) or not hasattr(goal, "__len__"):
+        return GoalPose(theta=check_goal_rotation(name, _number(goal)))
+    check_length(name, goal, 3, "x m, y m, theta rad")
+    for i in range(2):
+        check_range(name, _number(goal[i]), -1.0, 1.0, index=(i,))
+    theta = check_goal_rotation(name, _number(goal[2]), index=(2,))
+    return GoalPose(theta=theta, position=(float(goal[0]), float(goal[1])))
+
+
+def _number(value):
+    """A numpy scalar as the Python number it holds (the checks take int and float)."""
+    return value.item() if isinstance(value, np.generic) else value
 
 
 @dataclass(frozen=True)

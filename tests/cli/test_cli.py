@@ -269,8 +269,8 @@ def test_killed_sweep_leaves_no_scratch_in_the_system_temp_folder(tmp_path):
     "args, message",
     [
         (
-            ["search", "--goal", "3.1416"],
-            "--goal = 3.1416 is out of range; valid range: [-pi, pi] rad, pi = 3.14159265",
+            ["search", "--goal", "62.8319"],
+            "--goal = 62.8319 is out of range; valid range: [-20 pi, 20 pi] rad, 20 pi = 62.83185307",
         ),
         (
             ["scene", "--box-size", "0", "0.1"],

@@ -82,13 +82,8 @@ def subcommand_parsers():
     return subparsers.choices
 
 
-REQUIRED = {
-    "search": ["--goal", "0.1"],
-    "plan": ["--goal", "0.1"],
-    "simulate": ["p"],
-    "state": ["r", "--time", "1"],
-    "report": ["s"],
-}
+# --goal and --goal-pose exclude each other, so neither is required
+REQUIRED = {"simulate": ["p"], "state": ["r", "--time", "1"], "report": ["s"]}
 
 
 def test_every_option_that_takes_a_value_accepts_one_with_a_minus_sign():
@@ -113,9 +108,10 @@ def test_every_option_that_takes_a_value_accepts_one_with_a_minus_sign():
 
 
 def test_negative_values_reach_the_range_checks(tmp_path, capsys):
-    assert main(["search", "--goal", "-4"]) == 2
+    assert main(["search", "--goal", "-63"]) == 2
     assert capsys.readouterr().err == (
-        "trajectotree search: error: --goal = -4.0 is out of range; valid range: [-pi, pi] rad, pi = 3.14159265\n"
+        "trajectotree search: error: --goal = -63.0 is out of range; valid range: [-20 pi, 20 pi] rad, "
+        "20 pi = 62.83185307\n"
     )
     assert main(["scene", "--box-size", "-0.1", "0.1"]) == 2
     assert "--box-size W (scene.box_width) = -0.1 is out of range; valid range: (0, 0.3]" in capsys.readouterr().err
@@ -129,12 +125,15 @@ def test_negative_values_reach_the_range_checks(tmp_path, capsys):
 
 
 def test_the_goal_bound_prints_pi_in_digits_that_are_within_it(capsys):
-    assert main(["search", "--goal", "3.141593"]) == 2  # 3.141593 > pi: the old message gave it as the bound
+    assert main(["search", "--goal", "62.831854"]) == 2  # just above 20 pi: the bound printed is within it
     assert capsys.readouterr().err == (
-        "trajectotree search: error: --goal = 3.141593 is out of range; valid range: [-pi, pi] rad, pi = 3.14159265\n"
+        "trajectotree search: error: --goal = 62.831854 is out of range; valid range: [-20 pi, 20 pi] rad, "
+        "20 pi = 62.83185307\n"
     )
     assert main(["search", "--goal", "-3.14159265", "--segments", "1", "--config", str(ONE_GRID), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["goal"] == -3.14159265
+    assert main(["search", "--goal-pose", "0", "0", "-62.9"]) == 2  # a pose's orientation: its entry named
+    assert "--goal-pose[2] = -62.9 is out of range; valid range: [-20 pi, 20 pi] rad" in capsys.readouterr().err
 
 
 # ---- config files that are no YAML, or empty --------------------------------------------------------
@@ -324,4 +323,4 @@ def test_help_calls_the_object_a_box_or_any_convex_polygon(capsys):
         with pytest.raises(SystemExit):
             main([command, "--help"])
         text = " ".join(capsys.readouterr().out.split())
-        assert "goal rotation of the object, rad, in [-pi, pi]" in text, command
+        assert "goal orientation of the object, rad in W, any number within +-20 pi" in text, command

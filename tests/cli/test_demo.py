@@ -39,6 +39,6 @@ def test_demo_writes_the_plan_run_figure_playback_and_summary(tmp_path, capsys):
 
 
 def test_demo_rejects_a_goal_out_of_range(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path / "demo"), "--goal", "4"]) == 2
-    assert "--goal = 4.0 is out of range" in capsys.readouterr().err
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--goal", "64"]) == 2
+    assert "--goal = 64.0 is out of range" in capsys.readouterr().err
     assert not (tmp_path / "demo").exists()

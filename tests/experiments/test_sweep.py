@@ -200,7 +200,7 @@ def test_failing_trials_are_recorded_and_the_sweep_goes_on(tmp_path):
     task = small_spec().tasks()[0]
     outcome = execute_trial(dataclasses.replace(task, goal=float("nan")))
     assert outcome.row["error"].endswith(
-        "ConfigError: goal = nan is out of range; valid range: [-pi, pi] rad, pi = 3.14159265"
+        "ConfigError: goal = nan is out of range; valid range: [-20 pi, 20 pi] rad, 20 pi = 62.83185307"
     )
     assert outcome.row["success"] is None
     assert "Traceback" in outcome.files["log.txt"].decode()

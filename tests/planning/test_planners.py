@@ -293,7 +293,9 @@ def test_bad_input_raises_config_errors(scene):
     with pytest.raises(ConfigError, match="goal"):
         plan(scene=scene, goal=float("nan"), method="trajectotree", config=CONFIG)
     with pytest.raises(ConfigError, match="goal"):
-        plan(scene=scene, goal=4.0, method="trajectotree", config=CONFIG)
+        plan(scene=scene, goal=70.0, method="trajectotree", config=CONFIG)  # beyond ten turns
+    with pytest.raises(ConfigError, match="outside the hand's workspace"):
+        plan(scene=scene, goal=(0.25, 0.0, 0.3), method="trajectotree", config=CONFIG)
     with pytest.raises(ConfigError, match="method"):
         plan(scene=scene, goal=0.3, method="rrt", config=CONFIG)
     other = dataclasses.replace(CONFIG, scene=SceneConfig(box_width=0.16))
@@ -320,7 +322,12 @@ def run_cli(*args, cwd):
 
 @pytest.mark.slow
 def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
-    for args in (["--goal", "nan"], ["--goal", "0.3", "--method", "chomp"], ["--goal", "7"]):
+    for args in (
+        ["--goal", "nan"],
+        ["--goal", "0.3", "--method", "chomp"],
+        ["--goal", "70"],
+        ["--goal-pose", "1", "0", "0"],
+    ):
         proc = run_cli(*args, "--out", str(tmp_path / "out"), cwd=tmp_path)
         assert proc.returncode == 2, proc.stderr
         assert "error" in proc.stderr
@@ -339,3 +346,28 @@ def test_cli_non_converged_plan_is_written_with_status(tmp_path):
     assert data["success"] is False and "iteration" in data["status"].lower() and data["iterations"] == 3
     assert json.loads((tmp_path / "p" / "plan.json").read_text())["status"] == data["status"]
     assert npz(tmp_path / "p")["x"].shape == (25, 3)
+
+
+@pytest.mark.slow
+def test_a_translated_goal_plans_to_its_pose_and_is_physical(scene):
+    result = plan(scene=scene, goal=(0.01, -0.005, 0.3), method="trajectotree", config=CONFIG)
+    assert result.success, result.status
+    a = result.trajectory.arrays()
+    np.testing.assert_allclose(a["x"][-1], (0.01, -0.005, 0.3), atol=1e-9)  # the goal node's pose
+    assert np.ptp(a["x"][:, 0]) > 0.009  # the object moves, not only turns
+    check_newton_euler(a, scene.config)
+    assert result.config.goal.position == (0.01, -0.005) and result.contact_plan.goal_position == (0.01, -0.005)
+
+
+@pytest.mark.slow
+def test_a_full_turn_plans_to_the_goal_and_is_physical():
+    # 2 pi with the default settings: 21 segments (config.segments_for), solved in parallel
+    result = plan(goal=2 * np.pi, method="trajectotree")
+    assert result.success, result.status
+    assert len(result.contact_plan.nodes) == 22 and result.config.search.num_nodes == 22
+    a = result.trajectory.arrays()
+    assert a["x"][-1, 2] == pytest.approx(2 * np.pi, abs=1e-9)
+    nodes = a["x"][:: result.config.cito.knots_per_segment]  # the segments' end knots: the search's node poses
+    np.testing.assert_allclose(nodes, result.contact_plan.object_path, atol=1e-9)
+    check_newton_euler(a, result.config.scene)
+    assert result.physics_check.passed

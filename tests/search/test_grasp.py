@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from trajectotree.geometry import ConvexPolygon
-from trajectotree.search.grasp import FormClosure, FormClosureLp, grasp_matrix
+from trajectotree.search.grasp import (
+    MU_CAP,
+    ClosurePolynomials,
+    FormClosure,
+    FormClosureLp,
+    closure_edges_parts,
+    grasp_matrix,
+    in_closure_many,
+)
 
 BOX = ConvexPolygon.box(0.20, 0.10)  # corners at arclength 0, 0.1, 0.3, 0.4; perimeter 0.6
 RIGHT_MID, LEFT_MID = 0.05, 0.35  # (0.1, 0) and (-0.1, 0): an antipodal pair
@@ -162,3 +170,41 @@ def test_required_mu_is_the_lps_threshold():
     # the batch call gives the same numbers as one call per set
     sets = [[0.14, 0.44, 0.52], [0.14, 0.49], [0.12, 0.36, 0.48, 0.54]]
     assert FormClosure(BOX, mu=0.7, min_margin=1e-3).required_mus(sets) == [exact.required_mu(s) for s in sets]
+
+
+def test_closure_polynomials_agree_with_the_edge_test():
+    # required_mu bisects with the cubic side polynomials; they must decide exactly as
+    # in_closure_many does, on grid contacts (corners and repeated contacts included) and random ones
+    rng = np.random.default_rng(2)
+    for k in (2, 3, 4):
+        s = np.r_[rng.choice(np.round(np.arange(0, BOX.perimeter, 0.01), 9), 2000 * k), rng.uniform(0, 0.6, 500 * k)]
+        p, n = BOX.points(s)
+        A, B = closure_edges_parts(p.reshape(-1, k, 2), n.reshape(-1, k, 2))
+        polynomials = ClosurePolynomials(A, B)
+        for mu in (1e-5, 0.05, 0.2, 0.49, 0.7, 1.0, 3.0, MU_CAP):
+            decided = polynomials.in_closure(mu)
+            np.testing.assert_array_equal(decided, in_closure_many(A, B, mu))
+            assert 0 < decided.sum() < len(decided) or mu in (1e-5, MU_CAP) or k == 2
+    rows = np.array([3, 1, 4])
+    np.testing.assert_array_equal(polynomials.subset(rows).in_closure(0.3), polynomials.in_closure(0.3)[rows])
+
+
+def test_the_box_symmetries_share_a_stance_key_and_its_friction():
+    # the table computes required_mu once per key: the half turn and the mirrors of a stance need the
+    # same friction (to the bisection's resolution), and a polygon's stances are only sorted
+    from trajectotree.search.grasp import required_mu_many
+    from trajectotree.search.initial_grasp import symmetric_key
+
+    rng = np.random.default_rng(4)
+    grid = np.round(np.arange(0.0, BOX.perimeter, 0.01), 9)
+    corner_free = grid[[BOX.corner_distance(s) >= 0.015 for s in grid]]  # a corner's normal is either face's
+    stances = rng.choice(corner_free, size=(300, 3))
+    images = [stances, stances + 0.3, 0.4 - stances, 0.7 - stances]  # P/2 = 0.3, 2 h + w = 0.4
+    keys = [symmetric_key(BOX, np.mod(x, BOX.perimeter)) for x in images]
+    for k in keys[1:]:
+        np.testing.assert_array_equal(k, keys[0])
+    mus = [required_mu_many(*(a.reshape(-1, 3, 2) for a in BOX.points(x.ravel()))) for x in images]
+    for m in mus[1:]:
+        np.testing.assert_allclose(m, mus[0], atol=2e-8)
+    triangle = ConvexPolygon.from_points(((0.07, -0.04), (0.0, 0.08), (-0.07, -0.04)))
+    np.testing.assert_array_equal(symmetric_key(triangle, stances[:, ::-1]), np.sort(stances, axis=1))

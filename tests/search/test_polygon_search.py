@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from trajectotree.config import ConfigError, ObjectConfig, SceneConfig, SearchConfig
+from trajectotree.config import ConfigError, GoalPose, ObjectConfig, SceneConfig, SearchConfig, segments_for
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.grasp import FormClosure
@@ -121,7 +121,7 @@ def check_polygon_plan(scene, plan, config: SearchConfig):
     shape, mu = scene.config.shape, config.friction_safety * scene.config.mu
     closure, reach = FormClosure(shape, mu, config.min_closure_margin), Reachability(scene)
     assert plan.success, plan.reason
-    assert len(plan.nodes) == config.num_nodes
+    assert len(plan.nodes) == segments_for(config, scene.config.initial_pose, GoalPose(plan.goal)) + 1
     np.testing.assert_allclose(plan.object_path[-1], np.add(scene.config.initial_pose, (0, 0, plan.goal)))
     for n, node in enumerate(plan.nodes):
         assert closure.check(node.arclengths).in_closure

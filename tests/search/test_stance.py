@@ -60,11 +60,11 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
         return s, s.neighbors(_Node(0, grasp, None, None))
 
     free, children = search(0.0)
-    movers = {child.switching_finger for _, child in children} - {None}
+    movers = {child.switching_finger for *_, child in children} - {None}
     assert movers  # without the cap some finger may switch
     # any stance needs at least m g / sqrt(1 + mu^2) > 0.3 N: every switch is refused
     capped, children = search(0.3)
-    assert {child.switching_finger for _, child in children} <= {None}
+    assert {child.switching_finger for *_, child in children} <= {None}
     for finger in movers:
         heavy = Refusal(RefusalKind.STANCE_TOO_HEAVY, stance=STANCE_FINGERS[finger], mu_plan=capped.mu_plan, limit=0.3)
         assert capped.refused[heavy] >= 1
@@ -75,7 +75,7 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
     # and a cap above every stance's need refuses none of them
     needs = [free.stance.holding_force(tuple(grasp[j] for j in STANCE_FINGERS[f]), d) for f in movers for d in (0, 1)]
     _, children = search(max(needs) + 0.01)
-    assert {child.switching_finger for _, child in children} - {None} == movers
+    assert {child.switching_finger for *_, child in children} - {None} == movers
 
 
 def test_the_cap_changes_the_plan_of_goal_2_246(scene):

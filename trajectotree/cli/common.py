@@ -11,12 +11,31 @@ import sys
 import tempfile
 from pathlib import Path
 
-from trajectotree.config import FORMULATIONS, Config, ConfigError, ObjectConfig, check_integer, load_config, mu_plan
+from trajectotree.config import (
+    FORMULATIONS,
+    MAX_NODES,
+    Config,
+    ConfigError,
+    ObjectConfig,
+    check_integer,
+    load_config,
+    mu_plan,
+)
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
 SEGMENTS_HELP = (
     "transition segments S between the N = S + 1 poses of the contact sequence, each with one "
-    "contact switch at most (default 9, i.e. the paper's N = 10 nodes)"
+    "contact switch at most (default: from the goal's distance, the paper's 9 for a goal within pi, "
+    "one more per pi/12 rad beyond and per 0.01 m: search.min_segments, max_segment_rotation, "
+    "max_segment_translation)"
+)
+GOAL_HELP = (
+    "goal orientation of the object, rad in W, any number within +-20 pi (2 pi is a full turn, -3 pi one "
+    "and a half the other way); the object keeps its position"
+)
+GOAL_POSE_HELP = (
+    "goal pose of the object in W: position X Y (m) and orientation THETA (rad, as --goal), within the "
+    "hand's workspace (`trajectotree scene` reports it)"
 )
 FORMULATION_HELP = (
     f"TrajectoTree's program (cito.formulation; valid: {', '.join(FORMULATIONS)}): keyframes solves "
@@ -102,6 +121,39 @@ def scene_overrides(args: argparse.Namespace) -> dict:
     return scene
 
 
+def add_goal_options(parser: argparse.ArgumentParser) -> None:
+    """--goal RAD and --goal-pose X Y THETA, one of them (or the goal section of --config)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--goal", type=float, metavar="RAD", help=GOAL_HELP)
+    group.add_argument("--goal-pose", type=float, nargs=3, metavar=("X", "Y", "THETA"), help=GOAL_POSE_HELP)
+
+
+def goal_from_args(args: argparse.Namespace, config: Config):
+    """The checked goal (results.check_goal) of --goal or --goal-pose, else of the config file's
+    goal section; ConfigError when none gives one."""
+    from trajectotree.results import check_goal
+
+    if getattr(args, "goal", None) is not None:
+        return check_goal(args.goal, "--goal")
+    if getattr(args, "goal_pose", None) is not None:
+        return check_goal(tuple(args.goal_pose), "--goal-pose")
+    if config.goal.theta is not None:
+        return check_goal(config.goal)
+    raise ConfigError(
+        "no goal: give --goal RAD, --goal-pose X Y THETA, or a goal section in --config (goal: {theta: RAD})"
+    )
+
+
+def check_goal_workspace(scene, config: Config, goal, args: argparse.Namespace, start=None) -> None:
+    """ConfigError (exit 2, before any planning) when the goal's position takes the object where
+    the hand cannot carry it from `start` (a pose; None: scene.initial_pose;
+    trajectotree.search.workspace), naming the option that set it."""
+    from trajectotree.search.workspace import check_goal_position
+
+    name = "--goal-pose X Y" if getattr(args, "goal_pose", None) is not None else "goal.position"
+    check_goal_position(scene, config.search, goal, name, start=start)
+
+
 def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True, formulation: bool = False) -> None:
     group = parser.add_argument_group("scene and planner settings (override --config)")
     add_scene_options(group)
@@ -116,7 +168,7 @@ def config_from_args(args: argparse.Namespace) -> Config:
     config = load_config(args.config) if getattr(args, "config", None) else Config()
     scene, search, cito = scene_overrides(args), {}, {}
     if getattr(args, "segments", None) is not None:
-        check_integer("--segments", args.segments, 1, 99)
+        check_integer("--segments", args.segments, 1, MAX_NODES - 1)
         search["num_nodes"] = args.segments + 1
     if getattr(args, "formulation", None) is not None:
         cito["formulation"] = args.formulation

@@ -43,7 +43,7 @@ def register(subparsers) -> None:
         type=float,
         default=math.pi / 2,
         metavar="RAD",
-        help="goal rotation of the object, rad, in [-pi, pi] (default: pi/2)",
+        help="goal orientation of the object, rad in W, any number within +-20 pi (default: pi/2)",
     )
     p.add_argument("--json", action="store_true", help="print summary.json instead of the text summary")
     add_config_options(p, formulation=True)
@@ -138,7 +138,7 @@ def run(args) -> int:
     if meshcat is not None:
         print(f"Meshcat: {meshcat.web_url()} (open it now; the run plays once the plan is ready)", file=log, flush=True)
 
-    print(f"planning a {goal:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
+    print(f"planning a {goal.theta:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
     result = plan(
         scene=scene, goal=goal, method="trajectotree", config=config, log_observer=ipopt_progress(progress_wanted(args))
     )

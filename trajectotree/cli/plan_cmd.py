@@ -1,7 +1,7 @@
-"""`trajectotree plan --goal RAD`: plan a rotation of the object (the box, or any convex
-polygon: --polygon) with TrajectoTree or a CITO baseline; writes DIR/plan.npz (the
-trajectory at every knot) and DIR/plan.json (the solve report, the contact sequence and
-the config). A plan that does not converge is still written, with "success": false and
+"""`trajectotree plan --goal RAD` (or --goal-pose X Y THETA): plan a rotation of the object (the
+box, or any convex polygon: --polygon), or its move to a pose, with TrajectoTree or a CITO
+baseline; writes DIR/plan.npz (the trajectory at every knot) and DIR/plan.json (the solve
+report, the contact sequence and the config). A plan that does not converge is still written, with "success": false and
 IPOPT's status (exit code 0)."""
 
 from __future__ import annotations
@@ -12,17 +12,20 @@ from pathlib import Path
 from trajectotree.cli.common import (
     HTML_SUFFIXES,
     add_config_options,
+    add_goal_options,
+    check_goal_workspace,
     check_graspable,
     check_output_dir,
     check_output_file,
     config_from_args,
+    goal_from_args,
     print_json,
     reason_lines,
 )
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
-from trajectotree.results import METHODS, check_goal, check_method
+from trajectotree.results import METHODS, check_method
 
 # Files derived from a plan (by `simulate`): stale once a new plan replaces it.
 DERIVED_FILES = (SIM_JSON, SIM_NPZ)
@@ -31,12 +34,11 @@ DERIVED_FILES = (SIM_JSON, SIM_NPZ)
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "plan",
-        help="plan a rotation of the object, a box or any convex polygon (contact search + trajectory optimization)",
+        help="plan a rotation of the object, a box or any convex polygon, or a move to a pose "
+        "(contact search + trajectory optimization)",
         description=__doc__,
     )
-    p.add_argument(
-        "--goal", type=float, required=True, metavar="RAD", help="goal rotation of the object, rad, in [-pi, pi]"
-    )
+    add_goal_options(p)
     p.add_argument(
         "--method",
         default="trajectotree",
@@ -48,7 +50,8 @@ def register(subparsers) -> None:
         "--start",
         metavar="FILE.json",
         help="plan from this measured state (object pose and velocity, joint angles, optional contacts; "
-        "`trajectotree state` writes one from a run); --goal is then the final orientation in W",
+        "`trajectotree state` writes one from a run); --goal is then the final orientation in W, "
+        "--goal-pose the final pose",
     )
     p.add_argument(
         "--segment-workers",
@@ -73,11 +76,11 @@ def run(args) -> int:
     from trajectotree.planning.planners import plan
     from trajectotree.scene.plant import build_scene
 
-    goal = check_goal(args.goal, "--goal")
     method = check_method(args.method)
     config = config_from_args(args)
+    goal = goal_from_args(args, config)
     workers = check_workers(args.segment_workers, "--segment-workers")
-    out = check_output_dir("--out", args.out or f"plan_{method}_{goal:+.3f}", (PLAN_JSON, PLAN_NPZ))
+    out = check_output_dir("--out", args.out or default_out(method, goal), (PLAN_JSON, PLAN_NPZ))
     if args.html:  # it may go into --out, which save_plan creates before the playback is written
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
     start = load_start(args.start) if args.start else None
@@ -88,6 +91,7 @@ def run(args) -> int:
         from trajectotree.planning.start import start_config
 
         start_config(scene, start, config)
+    check_goal_workspace(scene, config, goal, args, start=None if start is None else start.object_pose)
     result = plan(
         scene=scene,
         goal=goal,
@@ -110,8 +114,10 @@ def run(args) -> int:
         return 0
     v = ", ".join(f"{k} {val:.1e}" for k, val in result.violations.items())
     status, details = reason_lines(result.status)
+    where = "" if goal.position is None else f" at ({goal.position[0]:+.4f}, {goal.position[1]:+.4f}) m"
     print(
-        f"{method}: goal {goal:+.3f} rad, {'succeeded' if result.success else 'FAILED'} ({status}), "
+        f"{method}: goal {goal.theta:+.3f} rad{where}, N = {result.config.search.num_nodes}, "
+        f"{'succeeded' if result.success else 'FAILED'} ({status}), "
         f"{result.iterations} iterations, cost {result.cost:.4g}"
     )
     for line in details:
@@ -125,6 +131,12 @@ def run(args) -> int:
         print(f"final pose: x {x[0]:+.4f} m, y {x[1]:+.4f} m, theta {x[2]:+.4f} rad; max violations: {v}")
     print(f"wrote {out}/plan.json and {out}/plan.npz")
     return 0
+
+
+def default_out(method: str, goal) -> str:
+    """plan_<method>_<theta>, and _<x>_<y> for a goal with a position."""
+    where = "" if goal.position is None else f"_{goal.position[0]:+.3f}_{goal.position[1]:+.3f}"
+    return f"plan_{method}_{goal.theta:+.3f}{where}"
 
 
 def remove_derived_files(out: Path) -> list[str]:

@@ -79,6 +79,7 @@ class ObjectReach:
     grasps: object  # initial_grasp.GraspCandidates
     q_best: np.ndarray | None  # (8,) rad, joint angles at the best initial grasp (None without one)
     payload: object  # search.payload.Payload: the heaviest object they carry (None without a grasp)
+    workspace: object  # search.workspace.Workspace: where the hand can move the object (None without a grasp)
 
     def to_json(self, search) -> dict:
         g = self.grasps
@@ -94,6 +95,7 @@ class ObjectReach:
             "reason": "" if g.refusal is None else str(g.refusal),
             "refusal": None if g.refusal is None else g.refusal.to_json(),
             "payload": None if self.payload is None else self.payload.to_json(),
+            "workspace": None if self.workspace is None else self.workspace.to_json(),
         }
 
 
@@ -101,6 +103,7 @@ def object_reach(scene, search) -> ObjectReach:
     from trajectotree.search.initial_grasp import grid_contacts, initial_grasp_candidates
     from trajectotree.search.payload import payload
     from trajectotree.search.reach import Reachability
+    from trajectotree.search.workspace import Graspability, workspace
 
     reach = Reachability(scene)
     grasps = initial_grasp_candidates(scene, search, reach)
@@ -112,7 +115,8 @@ def object_reach(scene, search) -> ObjectReach:
         )
     contacts = grid_contacts(scene, search.initial_grid_step, reach)
     limits = payload(scene, search, grasps) if grasps.candidates else None
-    return ObjectReach(contacts=contacts, grasps=grasps, q_best=q, payload=limits)
+    reachable = workspace(scene, search, Graspability(scene, search, reach)) if grasps.candidates else None
+    return ObjectReach(contacts=contacts, grasps=grasps, q_best=q, payload=limits, workspace=reachable)
 
 
 def reach_line(reach: dict) -> str:
@@ -124,6 +128,27 @@ def reach_line(reach: dict) -> str:
             f"{reach['best_grasp_worst_stance_mu']:.3g} of mu_plan {reach['mu_plan']:.3g}"
         )
     return line + f"the hand CANNOT grasp the object: {reach['reason']}"
+
+
+def workspace_line(reach: dict) -> str:
+    """Where goal poses may take the object (search.workspace)."""
+    w = reach["workspace"]
+
+    def region(r: dict) -> str:
+        if not r["points"]:
+            return "nowhere"
+        x, y = r["x_range_m"], r["y_range_m"]
+        return (
+            f"within {r['radius_m']:.3g} m ({r['points']} grid points, x {x[0]:+.2f}..{x[1]:+.2f}, "
+            f"y {y[0]:+.2f}..{y[1]:+.2f} m)"
+        )
+
+    return (
+        f"workspace: translations of the start (on a {w['grid_step_m']:g} m grid) where the hand has an initial "
+        f"grasp: at every orientation (every {360 / w['orientations']:g} deg of a turn) "
+        f"{region(w['every_orientation'])}; at the start orientation {region(w['start_orientation'])}; "
+        "a goal pose must keep every node of its path graspable (--goal-pose)"
+    )
 
 
 def payload_line(reach: dict, mass: float) -> str:
@@ -207,6 +232,8 @@ def run(args) -> int:
         print(reach_line(summary["reach"]))
         if summary["reach"]["payload"] is not None:
             print(payload_line(summary["reach"], o["mass_kg"]))
+        if summary["reach"]["workspace"] is not None:
+            print(workspace_line(summary["reach"]))
         if args.figure:
             print(f"figure: {args.figure}")
     return 0

@@ -6,25 +6,27 @@ not a plan was found (`"success": false` with a reason), 2 on invalid input.
 
 from __future__ import annotations
 
+import dataclasses
+
 from trajectotree.cli.common import (
     FIGURE_SUFFIXES,
     add_config_options,
+    add_goal_options,
+    check_goal_workspace,
     check_output_file,
     check_payload,
     config_from_args,
+    goal_from_args,
     print_json,
     reason_lines,
 )
-from trajectotree.results import check_goal
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "search", help="find a finger-gaiting contact sequence for a goal rotation", description=__doc__
+        "search", help="find a finger-gaiting contact sequence for a goal rotation or pose", description=__doc__
     )
-    p.add_argument(
-        "--goal", type=float, required=True, metavar="RAD", help="goal rotation of the object, rad, in [-pi, pi]"
-    )
+    add_goal_options(p)
     add_config_options(p)
     p.add_argument(
         "--figure",
@@ -56,15 +58,18 @@ def draw_plan(scene, plan, path: str) -> None:
 
 
 def run(args) -> int:
+    from trajectotree.config import with_segments
     from trajectotree.scene.plant import build_scene
     from trajectotree.search.tree import find_contact_plan
 
-    goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
+    goal = goal_from_args(args, config)
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     scene = build_scene(config.scene)
     check_payload(scene, config, args)
+    check_goal_workspace(scene, config, goal, args)
+    config = dataclasses.replace(config, search=with_segments(config.search, config.scene.initial_pose, goal))
     plan = find_contact_plan(scene, goal, config.search)
     if args.figure and plan.success:
         draw_plan(scene, plan, args.figure)
@@ -73,8 +78,9 @@ def run(args) -> int:
         return 0
     s = plan.stats
     summary, details = reason_lines(plan.reason)
+    where = "" if goal.position is None else f" at ({goal.position[0]:+.4f}, {goal.position[1]:+.4f}) m"
     print(
-        f"goal {goal:+.4f} rad, N = {config.search.num_nodes}: "
+        f"goal {goal.theta:+.4f} rad{where}, N = {config.search.num_nodes}: "
         f"{'plan found' if plan.success else 'no plan: ' + summary}"
     )
     for line in details:
@@ -93,8 +99,9 @@ def run(args) -> int:
         moved = "-" if node.switching_finger is None else str(node.switching_finger)
         contacts = " ".join(f"{v:.3f}" for v in node.arclengths)
         stance = "" if node.stance_required_mu is None else f"  stance required mu {node.stance_required_mu:.3f}"
+        xy = "" if goal.position is None else f"x {node.object_pose[0]:+.4f}  y {node.object_pose[1]:+.4f}  "
         print(
-            f"  node {n}: theta {node.object_pose[2]:+.3f}  switching finger {moved}  "
+            f"  node {n}: {xy}theta {node.object_pose[2]:+.3f}  switching finger {moved}  "
             f"arclengths [{contacts}] m  closure margin {node.closure_margin:.3f}  "
             f"required mu {node.required_mu:.3f}{stance}"
         )

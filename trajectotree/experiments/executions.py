@@ -110,8 +110,12 @@ CONDITIONS = tuple(ConditionSpec().worlds())  # the default spec's condition nam
 
 
 def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
-    """s, the middle of segment floor((N-1)/2) of a plan with N nodes of equal-length segments."""
-    segments = max(config.search.num_nodes - 1, 1)
+    """s, the middle of segment floor((N-1)/2) of a plan with N nodes of equal-length segments
+    (a plan's config holds its N; without one, N - 1 is the duration over a segment's)."""
+    nodes = config.search.num_nodes
+    if nodes is None:
+        nodes = round(plan_duration_s / (config.cito.knots_per_segment * config.cito.dt)) + 1
+    segments = max(nodes - 1, 1)
     length = plan_duration_s / segments
     return (segments // 2 + 0.5) * length
 

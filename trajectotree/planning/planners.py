@@ -23,6 +23,7 @@ summed over the segments' solves, its total is the search plus their wall-clock 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from concurrent.futures import Executor
 
@@ -34,7 +35,7 @@ from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import LogObserver, solve, violations
 from trajectotree.cito.transition import check_plan, transition_spec
-from trajectotree.config import Config, ConfigError, mu_plan
+from trajectotree.config import Config, ConfigError, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
 from trajectotree.planning.keyframes import check_workers, plan_keyframes
@@ -47,12 +48,13 @@ from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
+from trajectotree.search.workspace import check_goal_position
 from trajectotree.start import StartState
 
 
 def plan(
     *,
-    goal: float,
+    goal=None,
     method: str = "trajectotree",
     config: Config | None = None,
     scene: Scene | None = None,
@@ -63,11 +65,16 @@ def plan(
     grasp_tables: GraspTables | None = None,
     log_observer: LogObserver | None = None,
 ) -> PlanResult:
-    """Plans the rotation `goal` (rad, in [-pi, pi]) of the object with `method` ("trajectotree",
-    "cito" or "cito-warm"). `config` defaults to Config() (the paper's scene), `scene` to the plant
+    """Plans `goal` for the object with `method` ("trajectotree", "cito" or "cito-warm"): a
+    rotation (rad in W, any number within +-20 pi: 2 pi is a full turn; the object keeps its
+    position), a pose (x m, y m, theta rad) in W or a config.GoalPose (results.check_goal); None:
+    config.goal. A goal position the hand cannot carry the object to is refused before planning
+    (ConfigError, trajectotree.search.workspace). The path has search.num_nodes nodes, or as many
+    as the goal's distance needs (config.segments_for); the result's config holds the goal and the
+    number. `config` defaults to Config() (the paper's scene), `scene` to the plant
     built from config.scene (pass one to reuse it). With a `start` (a measured StartState) the plan
     begins there: its grasp roots the search, its joint angles are the first knot's, and `goal` is
-    the object's final orientation in W (StartRefused before any planning when the start cannot
+    the object's final pose in W (StartRefused before any planning when the start cannot
     hold the object: trajectotree.planning.start). A `contact_plan` may be given
     for the methods that use one (the search is then skipped; its time counts 0).
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
@@ -77,8 +84,8 @@ def plan(
     initial grasps for the next plan (without it the search ranks them, inside its time);
     `log_observer` watches each IPOPT solve run in this process (cito.solve.solve)."""
     check_method(method)
-    goal = check_goal(goal)
     config = config or Config()
+    goal = check_goal(config.goal if goal is None else goal)
     scene = scene or build_scene(config.scene)
     if start is not None:
         config = start_config(scene, start, config)
@@ -86,17 +93,22 @@ def plan(
     check_workers(segment_workers)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
+    check_goal_position(scene, config.search, goal)
+    search = with_segments(config.search, config.scene.initial_pose, goal)
+    config = dataclasses.replace(config, goal=goal, search=search)
     search_time = 0.0
     if method == "cito":
         contact_plan = initial_grasp_plan(scene, goal, config, grasp_tables)
         if not contact_plan.success:
-            return _unsolved(method, goal, contact_plan.reason, 0.0, contact_plan, config)
+            return _unsolved(method, goal.theta, contact_plan.reason, 0.0, contact_plan, config)
     elif contact_plan is None:
         t0 = time.perf_counter()
         contact_plan = find_contact_plan(scene, goal, config.search, grasp_tables)
         search_time = time.perf_counter() - t0
         if not contact_plan.success:
-            return _unsolved(method, goal, f"search failed: {contact_plan.reason}", search_time, contact_plan, config)
+            return _unsolved(
+                method, goal.theta, f"search failed: {contact_plan.reason}", search_time, contact_plan, config
+            )
     if start is not None:
         contact_plan = begin_at(contact_plan, start)
     check_plan(contact_plan, scene, min_nodes=1 if method == "cito" else 2)
@@ -104,7 +116,7 @@ def plan(
     if method == "trajectotree" and config.cito.formulation == "keyframes":
         return plan_keyframes(
             scene,
-            goal,
+            goal.theta,
             contact_plan,
             config,
             search_time,
@@ -138,7 +150,7 @@ def plan(
     converged = outcome.success and contact_plan.success
     return PlanResult(
         method=method,
-        goal=goal,
+        goal=goal.theta,
         success=converged and check.passed,
         converged=converged,
         status=status,
@@ -157,7 +169,7 @@ def plan(
     )
 
 
-def initial_grasp_plan(scene: Scene, goal: float, config: Config, tables: GraspTables | None = None) -> ContactPlan:
+def initial_grasp_plan(scene: Scene, goal, config: Config, tables: GraspTables | None = None) -> ContactPlan:
     """A one-node ContactPlan with the initial grasp, for `cito` (which has no search):
     config.search.initial_arclengths, or else the search's initial-grasp chooser's first
     choice for this goal (trajectotree.search.tree.choose_initial_grasp: the best-ranked candidate
@@ -166,9 +178,10 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config, tables: GraspT
     c = scene.config
     boundary = c.shape
     mu = mu_plan(c, config.search)
+    goal = check_goal(goal)
     chosen, refusal = choose_initial_grasp(scene, goal, config.search, tables)
     if chosen is None:
-        return ContactPlan(goal=goal, success=False, refusal=refusal, mu_plan=mu)
+        return ContactPlan(goal=goal.theta, goal_position=goal.position, success=False, refusal=refusal, mu_plan=mu)
     arclengths = np.asarray(chosen, dtype=float) % boundary.perimeter
     points = [boundary.point(s) for s in arclengths]
     p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
@@ -176,7 +189,13 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config, tables: GraspT
     x0 = np.asarray(c.initial_pose, dtype=float)
     q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
     if any(qi is None for qi in q):
-        return ContactPlan(goal=goal, success=False, refusal=Refusal(RefusalKind.INITIAL_OUT_OF_REACH), mu_plan=mu)
+        return ContactPlan(
+            goal=goal.theta,
+            goal_position=goal.position,
+            success=False,
+            refusal=Refusal(RefusalKind.INITIAL_OUT_OF_REACH),
+            mu_plan=mu,
+        )
     closure = FormClosure(boundary, mu, config.search.min_closure_margin)
     node = ContactNode(
         object_pose=x0,
@@ -188,7 +207,7 @@ def initial_grasp_plan(scene: Scene, goal: float, config: Config, tables: GraspT
         closure_margin=float(closure.check(arclengths).margin),
         required_mu=closure.required_mu(arclengths),
     )
-    return ContactPlan(goal=goal, success=True, nodes=(node,), mu_plan=closure.mu)
+    return ContactPlan(goal=goal.theta, goal_position=goal.position, success=True, nodes=(node,), mu_plan=closure.mu)
 
 
 def _unsolved(method, goal, status, search_time, contact_plan, config) -> PlanResult:

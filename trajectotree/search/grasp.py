@@ -88,19 +88,96 @@ def in_closure_many(A: np.ndarray, B: np.ndarray, mu, spans: np.ndarray | None =
     return spans & np.all(split | degenerate, axis=1)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis (3), for stacks (np.cross's axis handling costs more than this)."""
+    return np.stack(
+        [
+            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
+        ],
+        axis=-1,
+    )
+
+
+class ClosurePolynomials:
+    """in_closure_many of one stack (M, k, 3) at many friction coefficients, for bisection.
+
+    Edge e is A_e + s_e mu B_e (s_e = +-1), so the normal of the plane through edges a and b is
+    quadratic in mu and each other edge's side of it, det(e_a, e_b, e_c), cubic: their
+    coefficients are computed once and each mu costs one polynomial evaluation instead of the
+    edges' cross products. The test is in_closure_many's, with its tolerances relative to the
+    edges' lengths (side / |e_c| against SIDE_TOLERANCE |e_a x e_b|, the pair degenerate when
+    |e_a x e_b| <= SIDE_TOLERANCE |e_a| |e_b|), and a pair's own two edges left out (their
+    sides are zero)."""
+
+    def __init__(self, A: np.ndarray, B: np.ndarray, spans: np.ndarray | None = None):
+        k = A.shape[1]
+        EA, EB = np.concatenate([A, A], axis=1), np.concatenate([B, -B], axis=1)  # e = EA + mu EB, (M, 2k, 3)
+        j, l = np.triu_indices(2 * k, 1)
+        # each pair's other edges, (P, 2k - 2)
+        others = np.array([[e for e in range(2 * k) if e not in (a, b)] for a, b in zip(j, l)], dtype=int)
+        others = others.reshape(len(j), 2 * k - 2)
+        C0, C1, C2 = (  # plane normals e_a x e_b = C0 + mu C1 + mu^2 C2, (M, P, 3)
+            _cross(EA[:, j], EA[:, l]),
+            _cross(EA[:, j], EB[:, l]) + _cross(EB[:, j], EA[:, l]),
+            _cross(EB[:, j], EB[:, l]),
+        )
+        OA, OB = EA[:, others], EB[:, others]  # (M, P, 2k - 2, 3)
+
+        def side(c, e):
+            return np.einsum("mpc,mpec->mpe", c, e)
+
+        self.D = (side(C0, OA), side(C1, OA) + side(C0, OB), side(C2, OA) + side(C1, OB), side(C2, OB))
+        self.C = (C0, C1, C2)
+        self.E = (  # |e|^2 = E0 + mu E1 + mu^2 E2, (M, 2k)
+            np.einsum("mec,mec->me", EA, EA),
+            2 * np.einsum("mec,mec->me", EA, EB),
+            np.einsum("mec,mec->me", EB, EB),
+        )
+        self.pairs, self.others = (j, l), others
+        self.spans = spans_wrench_space(A, B) if spans is None else spans
+
+    def subset(self, rows: np.ndarray) -> ClosurePolynomials:
+        """The polynomials of the stacks `rows` only."""
+        out = object.__new__(ClosurePolynomials)
+        out.D, out.C, out.E = (tuple(c[rows] for c in group) for group in (self.D, self.C, self.E))
+        out.pairs, out.others, out.spans = self.pairs, self.others, self.spans[rows]
+        return out
+
+    def in_closure(self, mu) -> np.ndarray:
+        """(M,) bool: in_closure_many at friction mu > 0 (scalar or (M,))."""
+        mu = np.broadcast_to(np.asarray(mu, dtype=float), self.spans.shape)
+        m2, m3 = mu[:, None], mu[:, None, None]
+        D0, D1, D2, D3 = self.D
+        C0, C1, C2 = self.C
+        length = np.sqrt(self.E[0] + m2 * (self.E[1] + m2 * self.E[2]))  # (M, 2k)
+        plane = C0 + m3 * (C1 + m3 * C2)  # e_a x e_b (its squared norm as a polynomial loses digits)
+        size = np.sqrt(np.einsum("mpc,mpc->mp", plane, plane))  # (M, P)
+        side = ((D3 * m3 + D2) * m3 + D1) * m3 + D0  # (M, P, 2k - 2): det(e_a, e_b, e_c)
+        bound = SIDE_TOLERANCE * size[..., None] * length[:, self.others]
+        split = np.any(side > bound, axis=2) & np.any(side < -bound, axis=2)
+        j, l = self.pairs
+        degenerate = size <= SIDE_TOLERANCE * length[:, j] * length[:, l]  # two parallel edges: no plane
+        return self.spans & np.all(split | degenerate, axis=1)
+
+
 def required_mu_many(p_BC, n_B, bisections: int = MU_BISECTIONS) -> np.ndarray:
     """(M,) the smallest friction coefficient at which each stack of contacts (M, k, 2) is in
     frictional form closure (an infimum: ~0 for, e.g., an antipodal pair), inf if not even at
     MU_CAP. Accurate to MU_CAP / 2^bisections."""
     A, B = closure_edges_parts(p_BC, n_B)
-    spans = spans_wrench_space(A, B)
-    out = np.where(in_closure_many(A, B, MU_CAP, spans), np.nan, np.inf)
+    polynomials = ClosurePolynomials(A, B)
+    out = np.where(polynomials.in_closure(MU_CAP), np.nan, np.inf)
+    # in closure at the resolution itself: every bisection step would pass, ending at the infimum 0
+    # (closure only grows with mu), so these take no more steps
+    out[polynomials.in_closure(MU_CAP / 2**bisections) & np.isnan(out)] = 0.0
     todo = np.flatnonzero(np.isnan(out))
-    A, B, spans = A[todo], B[todo], spans[todo]
+    polynomials = polynomials.subset(todo)
     lo, hi = np.zeros(len(todo)), np.full(len(todo), MU_CAP)
     for _ in range(bisections):
         mid = 0.5 * (lo + hi)
-        ok = in_closure_many(A, B, mid, spans)
+        ok = polynomials.in_closure(mid)
         hi, lo = np.where(ok, mid, hi), np.where(ok, lo, mid)
     out[todo] = np.where(hi <= MU_CAP / 2**bisections, 0.0, hi)  # the last bracket holds 0: an infimum of 0
     return out
@@ -124,7 +201,11 @@ class FormClosureLp:
         prog = MathematicalProgram()
         x = prog.NewContinuousVariables(2 * k + 1, "x")  # (lambda_n0, lambda_t0, ..., d)
         lam, d = x[: 2 * k], x[2 * k]
-        self.equilibrium = prog.AddLinearEqualityConstraint(np.zeros((WRENCH_DIM, 2 * k)), np.zeros(WRENCH_DIM), lam)
+        # Column-major matrices: pydrake binds them to its dense overload at once; a row-major one
+        # first tries the sparse overload, whose caster imports scipy.sparse (0.2-0.9 s in a fresh process).
+        self.equilibrium = prog.AddLinearEqualityConstraint(
+            np.zeros((WRENCH_DIM, 2 * k), order="F"), np.zeros(WRENCH_DIM), lam
+        )
         # One constraint block (cone facets, lambda_n >= d, normalization): Clp sets up faster.
         A = np.zeros((3 * k + 1, 2 * k + 1))
         for i in range(k):
@@ -132,7 +213,9 @@ class FormClosureLp:
             A[3 * i + 1, [2 * i, 2 * i + 1, 2 * k]] = (mu, 1.0, -1.0)
             A[3 * i + 2, [2 * i, 2 * k]] = (1.0, -1.0)
         A[3 * k, 0 : 2 * k : 2] = 1.0
-        prog.AddLinearConstraint(A, np.r_[np.zeros(3 * k), -np.inf], np.r_[np.full(3 * k, np.inf), k], x)
+        prog.AddLinearConstraint(
+            np.asfortranarray(A), np.r_[np.zeros(3 * k), -np.inf], np.r_[np.full(3 * k, np.inf), k], x
+        )
         prog.AddLinearCost(-d)
         self.prog, self._lam, self._d = prog, lam, d
         self._solver, self._options = ClpSolver(), SolverOptions()

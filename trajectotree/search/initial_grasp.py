@@ -24,6 +24,7 @@ simulation filters finger-finger contact, trajectotree.execution.simulate).
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -47,13 +48,40 @@ class GraspCandidate:
     free_fingers: int  # fingers that may let go at mu_plan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GraspCandidates:
+    """The ranked candidates, kept as arrays: a search reads the few it roots at, and `candidates`
+    makes the thousands of GraspCandidate values only when asked (their allocation alone set off a
+    full garbage collection, 20-80 ms, in a fresh process)."""
+
     mu_plan: float
-    candidates: tuple[GraspCandidate, ...]  # ranked, best first
+    arclengths: np.ndarray  # (K, 4) m, the candidates' contacts, ranked, best first
+    stance_mu: np.ndarray  # (K, 4) GraspCandidate.stance_required_mu of each
+    worst_stance_mu: np.ndarray  # (K,)
+    free_fingers: np.ndarray  # (K,) int
     reachable: tuple[int, ...]  # grid contacts reachable per finger at the initial pose
     assignments: int  # grid assignments before the overlap and closure filters
     refusal: Refusal | None  # why there is no candidate (NO_GRID_CONTACT, NO_INITIAL_GRASP); None when there are
+
+    @functools.cached_property
+    def candidates(self) -> tuple[GraspCandidate, ...]:
+        """Ranked, best first (Python floats and ints, converted one array at a time)."""
+        return tuple(
+            GraspCandidate(arclengths=tuple(s), stance_required_mu=tuple(m), worst_stance_mu=w, free_fingers=f)
+            for s, m, w, f in zip(
+                self.arclengths.tolist(),
+                self.stance_mu.tolist(),
+                self.worst_stance_mu.tolist(),
+                self.free_fingers.tolist(),
+            )
+        )
+
+    def __len__(self) -> int:
+        return len(self.arclengths)
+
+    def root(self, k: int) -> tuple[float, ...]:
+        """Candidate k's contacts as the search's keys (grid values: already canonical)."""
+        return tuple(self.arclengths[k].tolist())
 
 
 class GraspTables:
@@ -92,8 +120,32 @@ def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.nda
 def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps: np.ndarray) -> np.ndarray:
     """sum_i |q2_i - nominal_joint2| of each grasp (M, 4) at the initial pose (closed form)."""
     pose = np.asarray(scene.config.initial_pose, dtype=float)
-    q2 = np.stack([reach.closed_form_many(pose, i, grasps[:, i])[:, 1] for i in range(NUM_FINGERS)], axis=1)
-    return np.abs(q2 - search.nominal_joint2).sum(axis=1)
+    cost = np.zeros(len(grasps))
+    for i in range(NUM_FINGERS):  # each finger holds a few distinct contacts: their IK once each
+        contacts, index = np.unique(grasps[:, i], return_inverse=True)
+        cost = cost + np.abs(reach.closed_form_many(pose, i, contacts)[:, 1] - search.nominal_joint2)[index.ravel()]
+    return cost
+
+
+def symmetric_key(boundary, stances: np.ndarray) -> np.ndarray:
+    """(K, 3) a key per set of contacts (K, 3) (arclengths), equal for sets whose frictional form
+    closure is the same at every mu: their sorted arclengths and, on the box, the least of those
+    of its four images under the box's symmetries (the half turn s + P/2 and the mirror in its y
+    axis 2 h + w - s, the mirror in x being their product), which map contacts, normals and cone
+    edges onto one another and the wrench space linearly onto itself."""
+    if not boundary.is_box:
+        return np.sort(stances, axis=1)
+    per, (a, b) = boundary.perimeter, boundary.box_half
+    mirror = 4 * b + 2 * a  # 2 h + w
+    images = [stances, stances + per / 2, mirror - stances, mirror - stances + per / 2]
+
+    def wrapped(x):  # arclength keys in [0, perimeter) to 1e-9 m, as the search's
+        key = np.round(np.mod(x, per), 9)
+        return np.where(key >= round(per, 9), 0.0, key)
+
+    keys = np.stack([np.sort(wrapped(x), axis=1) for x in images])  # (4, K, 3)
+    best = np.lexsort(keys.transpose(2, 0, 1)[::-1], axis=0)[0]  # the least image of each row
+    return keys[best, np.arange(len(stances))]
 
 
 def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCandidates:
@@ -104,7 +156,17 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     assignments = len(grasps)
     if assignments == 0:
         missing = [i for i, n in enumerate(counts) if n == 0]
-        return GraspCandidates(mu, (), counts, 0, Refusal(RefusalKind.NO_GRID_CONTACT, fingers=tuple(missing)))
+        none = np.zeros((0, NUM_FINGERS))
+        return GraspCandidates(
+            mu,
+            none,
+            none,
+            np.zeros(0),
+            np.zeros(0, dtype=int),
+            counts,
+            0,
+            Refusal(RefusalKind.NO_GRID_CONTACT, fingers=tuple(missing)),
+        )
     p, n = reach.contacts(grasps.ravel())
     p, n = p.reshape(-1, NUM_FINGERS, 2), n.reshape(-1, NUM_FINGERS, 2)
     tips = p + reach.tip_radius * n
@@ -112,13 +174,16 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
     for i, j in itertools.combinations(range(NUM_FINGERS), 2):
         apart &= np.linalg.norm(tips[:, i] - tips[:, j], axis=1) >= 2 * reach.tip_radius
     grasps, p, n = grasps[apart], p[apart], n[apart]
-    stance_mu = np.empty((len(grasps), NUM_FINGERS))
-    for i, others in enumerate(STANCE_FINGERS):  # one required_mu per distinct stance
-        stances, index = np.unique(grasps[:, others], axis=0, return_inverse=True)
-        first = np.array([np.flatnonzero(index.ravel() == k)[0] for k in range(len(stances))], dtype=int)
-        stance_mu[:, i] = required_mu_many(p[first][:, others], n[first][:, others], bisections=RANKING_BISECTIONS)[
-            index.ravel()
-        ]
+    # one required_mu per distinct set of three contacts, whichever fingers hold them (closure
+    # does not depend on their order) and, on the box, up to its symmetries, in one vectorized bisection
+    stances = np.concatenate([grasps[:, others] for others in STANCE_FINGERS])  # (4 M, 3), finger i's first
+    _, first, index = np.unique(
+        symmetric_key(scene.config.shape, stances), axis=0, return_index=True, return_inverse=True
+    )
+    grasp_of, stance_of = first % len(grasps), first // len(grasps)
+    pick = np.array(STANCE_FINGERS)[stance_of]  # (U, 3) the fingers of each distinct stance's first holder
+    mus = required_mu_many(p[grasp_of[:, None], pick], n[grasp_of[:, None], pick], bisections=RANKING_BISECTIONS)
+    stance_mu = mus[index.ravel()].reshape(NUM_FINGERS, len(grasps)).T
     free = stance_mu < mu
     worst = np.where(free, stance_mu, -np.inf).max(axis=1)
     keep = np.flatnonzero(free.any(axis=1))
@@ -129,18 +194,9 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
             (_joint2_cost(scene, search, reach, grasps[keep]), -free[keep].sum(axis=1), np.round(worst[keep], 4))
         )
     ]
-    candidates = tuple(
-        GraspCandidate(
-            arclengths=tuple(float(s) for s in grasps[k]),
-            stance_required_mu=tuple(float(v) for v in stance_mu[k]),
-            worst_stance_mu=float(worst[k]),
-            free_fingers=int(free[k].sum()),
-        )
-        for k in order
-    )
     refusal = (
         None
-        if candidates
+        if len(order)
         else Refusal(
             RefusalKind.NO_INITIAL_GRASP,
             mu_plan=mu,
@@ -149,4 +205,6 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
             subset=int(apart.sum()),
         )
     )
-    return GraspCandidates(mu, candidates, counts, assignments, refusal)
+    return GraspCandidates(
+        mu, grasps[order], stance_mu[order], worst[order], free[order].sum(axis=1), counts, assignments, refusal
+    )

@@ -16,8 +16,8 @@ candidates, or search.initial_arclengths):
 
 Each limit is one LP per grasp or stance (maximize the weight W over the cone-edge
 magnitudes x >= 0: E x = (0, W, 0) the wrench that holds the object, |J_C^T f - tau_g| <=
-tau_max at every joint, sum lambda_n <= cap); all of them are solved as one block-diagonal
-LP (HiGHS), the blocks being independent. J_C is the contact point's Jacobian on the finger's
+tau_max at every joint, sum lambda_n <= cap), each built once and solved per grasp or stance
+(Clp, through Drake). J_C is the contact point's Jacobian on the finger's
 second link; tau_g the links' generalized gravity forces from the plant. The object's mass
 enters neither: the limits are weights, divided by scene.gravity into kg.
 """
@@ -27,8 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.optimize import linprog
+from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
 from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.geometry import rotation_2d
@@ -72,11 +71,9 @@ def payload(
     else:
         if grasps is None:
             grasps = initial_grasp_candidates(scene, search, reach)
-        if not grasps.candidates:
+        if not len(grasps):
             return None
-        chosen = grasps.candidates[:first]
-        arclengths = np.array([c.arclengths for c in chosen])
-        free = np.array([[m < grasps.mu_plan for m in c.stance_required_mu] for c in chosen])
+        arclengths, free = grasps.arclengths[:first], grasps.stance_mu[:first] < grasps.mu_plan
     pose = np.asarray(scene.config.initial_pose, dtype=float)
     q = np.stack([reach.closed_form_many(pose, i, arclengths[:, i]) for i in range(NUM_FINGERS)], axis=1)
     reached = np.all(np.isfinite(q), axis=(1, 2))
@@ -152,8 +149,8 @@ def _gravity_torques(scene: Scene, arclengths: np.ndarray, q: np.ndarray) -> np.
 
 
 def _heaviest(edges, torque, moment, slack, fingers: np.ndarray, cap: float) -> np.ndarray:
-    """N, the most weight each of B contact sets carries (one LP block each): `fingers` (B, k)
-    picks the contacts of each block from the per-grasp terms (B, 4, ...). cap > 0: sum
+    """N, the most weight each of B contact sets carries (one LP each, HeaviestLp): `fingers`
+    (B, k) picks the contacts of each set from the per-grasp terms (B, 4, ...). cap > 0: sum
     lambda_n <= cap as well."""
     B, k = fingers.shape
     rows = np.arange(B)[:, None]
@@ -161,50 +158,51 @@ def _heaviest(edges, torque, moment, slack, fingers: np.ndarray, cap: float) -> 
     T = torque[rows, fingers]  # (B, k, 2 joint, 2 edge)
     M = moment[rows, fingers]  # (B, k, 2 edge)
     room = slack[rows, fingers]  # (B, k, 2 joint, 2 upper/lower)
-    n = 2 * k + 1  # variables per block: the cone-edge magnitudes, then W
-    cols = np.arange(B)[:, None] * n
-    # equalities, 3 per block: sum F_x = 0, sum F_y - W = 0, sum moment = 0
-    eq = np.concatenate([F[..., 0].reshape(B, -1), F[..., 1].reshape(B, -1), M.reshape(B, -1)], axis=1)
-    eq_rows = np.repeat(np.arange(3 * B).reshape(B, 3), 2 * k, axis=1)
-    eq_cols = np.tile(cols + np.arange(2 * k), 3)
-    A_eq = sp.coo_matrix(
-        (
-            np.concatenate([eq.ravel(), -np.ones(B)]),
-            (
-                np.concatenate([eq_rows.ravel(), 3 * np.arange(B) + 1]),
-                np.concatenate([eq_cols.ravel(), cols[:, 0] + 2 * k]),
-            ),
-        ),
-        shape=(3 * B, B * n),
-    )
-    # inequalities, per block: rows 2 (2 a + j) and 2 (2 a + j) + 1 bound joint j of contact a from
-    # above (T x <= tau_max + tau_g) and below (-T x <= tau_max - tau_g); then the cap's row
-    per_block = 4 * k + (1 if cap > 0 else 0)
-    upper_row = (np.arange(B)[:, None, None] * per_block + 2 * (2 * np.arange(k)[:, None] + np.arange(2)))[..., None]
-    edge_col = (cols[:, :, None] + 2 * np.arange(k)[:, None] + np.arange(2))[:, :, None, :]  # (B, k, 1, edge)
-    values = [T.ravel(), -T.ravel()]
-    rows_ub = [np.broadcast_to(upper_row, T.shape).ravel(), np.broadcast_to(upper_row + 1, T.shape).ravel()]
-    cols_ub = [np.broadcast_to(edge_col, T.shape).ravel()] * 2
-    b_ub = [room.reshape(B, -1)]  # (a, j, upper/lower): the rows' order
-    if cap > 0:
-        values.append(np.ones(B * 2 * k))
-        rows_ub.append(np.repeat(np.arange(B) * per_block + 4 * k, 2 * k))
-        cols_ub.append((cols + np.arange(2 * k)).ravel())
-        b_ub.append(np.full((B, 1), cap))
-    A_ub = sp.coo_matrix(
-        (np.concatenate(values), (np.concatenate(rows_ub), np.concatenate(cols_ub))), shape=(B * per_block, B * n)
-    )
-    cost = np.zeros(B * n)
-    cost[cols[:, 0] + 2 * k] = -1.0
-    result = linprog(
-        cost,
-        A_ub=A_ub.tocsr(),
-        b_ub=np.concatenate(b_ub, axis=1).ravel(),
-        A_eq=A_eq.tocsr(),
-        b_eq=np.zeros(3 * B),
-        bounds=(0, None),
-        method="highs",
-    )
-    if result.status != 0:  # x = 0, W = 0 is feasible and W is bounded (J_C has full rank): never
-        raise RuntimeError(f"payload LP failed: {result.message}")
-    return result.x.reshape(B, n)[:, -1]
+    lp = HeaviestLp(k, cap)
+    return np.array([lp.solve(F[b], T[b], M[b], room[b]) for b in range(B)])
+
+
+class HeaviestLp:
+    """maximize W over the cone-edge magnitudes x >= 0 (2k) and W >= 0: sum F_x x = 0, sum F_y x
+    = W, sum moment = 0, each joint's torque within its room from above and below, and sum x <=
+    cap when cap > 0 (the magnitudes' normal components are 1). Built once for k contacts; `solve`
+    only updates the coefficients (Clp, in Drake: no scipy import for the CLI's quick check)."""
+
+    def __init__(self, k: int, cap: float):
+        self.k, self.cap = k, cap
+        prog = MathematicalProgram()
+        z = prog.NewContinuousVariables(2 * k + 1, "z")  # the magnitudes, then W
+        rows = 4 * k + (1 if cap > 0 else 0)
+        # column-major matrices: pydrake's dense overload (grasp.FormClosureLp says why)
+        self.balance = prog.AddLinearEqualityConstraint(np.zeros((3, 2 * k + 1), order="F"), np.zeros(3), z)
+        self.limits = prog.AddLinearConstraint(
+            np.zeros((rows, 2 * k + 1), order="F"), np.full(rows, -np.inf), np.zeros(rows), z
+        )
+        prog.AddBoundingBoxConstraint(0.0, np.inf, z)
+        prog.AddLinearCost(np.r_[np.zeros(2 * k), -1.0], 0.0, z)
+        self.prog, self._solver, self._options = prog, ClpSolver(), SolverOptions()
+
+    def solve(self, F: np.ndarray, T: np.ndarray, M: np.ndarray, room: np.ndarray) -> float:
+        """N, W for one contact set: F (k, 2 edge, 2 xy), T (k, 2 joint, 2 edge), M (k, 2 edge),
+        room (k, 2 joint, 2 upper/lower)."""
+        k = self.k
+        A = np.zeros((3, 2 * k + 1), order="F")
+        A[0, : 2 * k], A[1, : 2 * k], A[2, : 2 * k] = F[..., 0].ravel(), F[..., 1].ravel(), M.ravel()
+        A[1, -1] = -1.0
+        self.balance.evaluator().UpdateCoefficients(A, np.zeros(3))
+        # rows 2 (2 a + j) and 2 (2 a + j) + 1 bound joint j of contact a from above (T x <= tau_max +
+        # tau_g) and below (-T x <= tau_max - tau_g); then the cap's row
+        U = np.zeros((4 * k + (1 if self.cap > 0 else 0), 2 * k + 1), order="F")
+        for a in range(k):
+            for j in range(2):
+                U[2 * (2 * a + j), 2 * a : 2 * a + 2] = T[a, j]
+                U[2 * (2 * a + j) + 1, 2 * a : 2 * a + 2] = -T[a, j]
+        upper = room.ravel()
+        if self.cap > 0:
+            U[-1, : 2 * k] = 1.0
+            upper = np.r_[upper, self.cap]
+        self.limits.evaluator().UpdateCoefficients(U, np.full(len(upper), -np.inf), upper)
+        result = self._solver.Solve(self.prog, None, self._options)
+        if not result.is_success():  # x = 0, W = 0 is feasible and W is bounded (J_C has full rank): never
+            raise RuntimeError(f"payload LP failed: {result.get_solution_result()}")
+        return float(result.GetSolution()[-1])

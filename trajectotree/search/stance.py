@@ -27,6 +27,8 @@ its transition (StanceChecks.too_heavy, the LP of HoldingForceLp).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
@@ -55,8 +57,8 @@ class HoldingForceLp:
     def __init__(self, num_contacts: int):
         prog = MathematicalProgram()
         x = prog.NewContinuousVariables(2 * num_contacts, "x")
-        self.balance = prog.AddLinearEqualityConstraint(
-            np.zeros((WRENCH_DIM, 2 * num_contacts)), np.zeros(WRENCH_DIM), x
+        self.balance = prog.AddLinearEqualityConstraint(  # column-major: see grasp.FormClosureLp
+            np.zeros((WRENCH_DIM, 2 * num_contacts), order="F"), np.zeros(WRENCH_DIM), x
         )
         prog.AddBoundingBoxConstraint(0.0, np.inf, x)
         prog.AddLinearCost(np.ones(2 * num_contacts), 0.0, x)
@@ -83,8 +85,19 @@ def weight_support_B(theta: float, weight: float) -> np.ndarray:
 class StanceChecks:
     """The rolled-stance and holding-force checks of one search (one object path)."""
 
-    def __init__(self, scene: Scene, reach: Reachability, poses: np.ndarray, mu_plan: float, max_force: float):
+    def __init__(
+        self,
+        scene: Scene,
+        reach: Reachability,
+        poses: np.ndarray,
+        mu_plan: float,
+        max_force: float,
+        angles: Callable[[int, int, float], np.ndarray] | None = None,
+    ):
+        """`angles(depth, finger, s)`: a finger's closed-form joint angles at node `depth` with its
+        contact at arclength s (a table of them; None: Reachability.closed_form)."""
         self.scene, self.reach, self.poses, self.mu_plan = scene, reach, poses, mu_plan
+        self.table = angles
         self.boundary: ConvexPolygon = scene.config.shape
         self.max_force = max_force  # N, 0: no cap
         self.weight = scene.config.box_mass * scene.config.gravity  # N
@@ -128,10 +141,13 @@ class StanceChecks:
 
     def link_turn(self, depth: int, finger: int, s: float) -> float:
         """Angle of `finger`'s second link relative to the object at node `depth` with its
-        contact at arclength s (closed-form IK, memoized; the node's Drake IK agrees)."""
-        pose = self.poses[depth]
-        q = self.reach.closed_form(pose, finger, s).q
-        return float(self.scene.fingers[finger].psi + q[0] + q[1] - pose[2])
+        contact at arclength s (closed-form IK; the node's Drake IK agrees)."""
+        q = (
+            self.reach.closed_form(self.poses[depth], finger, s).q
+            if self.table is None
+            else self.table(depth, finger, s)
+        )
+        return float(self.scene.fingers[finger].psi + q[0] + q[1] - self.poses[depth][2])
 
     # -- holding force ------------------------------------------------------------------------
     def too_heavy(self, node, depth: int, finger: int) -> Refusal | None:

@@ -60,7 +60,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from trajectotree.config import SearchConfig, mu_plan
+from trajectotree.config import GoalPose, SearchConfig, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
@@ -72,10 +72,12 @@ from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
 
 
-def object_path(initial_pose, goal: float, num_nodes: int) -> np.ndarray:
-    """(N, 3) poses x*_n from the initial pose to orientation `goal` (rad in W) at the same position."""
+def object_path(initial_pose, goal: GoalPose | float, num_nodes: int) -> np.ndarray:
+    """(N, 3) poses x*_n from the initial pose to `goal`, linearly interpolated in x, y and theta:
+    a GoalPose, or an orientation (rad in W) at the same position."""
     x0 = np.asarray(initial_pose, dtype=float)
-    return x0 + np.outer(np.linspace(0.0, 1.0, num_nodes), [0.0, 0.0, goal - x0[2]])
+    goal = goal if isinstance(goal, GoalPose) else GoalPose(theta=float(goal))
+    return x0 + np.outer(np.linspace(0.0, 1.0, num_nodes), np.asarray(goal.pose(x0)) - x0)
 
 
 @dataclass(frozen=True)
@@ -89,18 +91,23 @@ class _Node:
 class _Search:
     """One run of Algorithm 1; holds the LP and IK caches and the counters."""
 
-    def __init__(self, scene: Scene, goal: float, config: SearchConfig):
+    def __init__(self, scene: Scene, goal, config: SearchConfig):
+        goal = check_goal(goal)
+        config = with_segments(config, scene.config.initial_pose, goal)
         self.scene, self.config = scene, config
         self.boundary = scene.config.shape
         self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
         self.mu_plan = mu_plan(scene.config, config)
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
-        self.stance = StanceChecks(scene, self.reach, self.poses, self.mu_plan, config.max_stance_force)
+        self.bound = SwitchBound(scene, self.reach, self.poses, config)
+        self.stance = StanceChecks(
+            scene, self.reach, self.poses, self.mu_plan, config.max_stance_force, angles=self.bound.angles
+        )
         self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
-        self.expanded = self.generated = 0
-        self.bound = SwitchBound(scene, self.reach, self.poses, config)
+        self.expanded = self.generated = self.backups = 0
+        self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
@@ -125,13 +132,19 @@ class _Search:
 
     def tips_overlap(self, arclengths, finger: int) -> bool:
         """Finger `finger`'s fingertip sphere would overlap another finger's."""
-        r = self.reach.tip_radius
-        p, n = self.reach.contact(arclengths[finger])
-        return any(
-            np.linalg.norm(p + r * n - q - r * m) < 2 * r
-            for i, (q, m) in enumerate(map(self.reach.contact, arclengths))
-            if i != finger
-        )
+        s = arclengths[finger]
+        return any(self.tip_overlaps(s, t) for i, t in enumerate(arclengths) if i != finger)
+
+    def tip_overlaps(self, s: float, t: float) -> bool:
+        """A fingertip sphere touching the object at arclength s overlaps one touching it at t
+        (memoized by the ordered pair: the distance is computed from s's side, as tips that just
+        touch sit at the threshold)."""
+        hit = self.overlaps.get((s, t))
+        if hit is None:
+            r = self.reach.tip_radius
+            (p, n), (q, m) = self.reach.contact(s), self.reach.contact(t)
+            hit = self.overlaps[(s, t)] = bool(np.linalg.norm(p + r * n - q - r * m) < 2 * r)
+        return hit
 
     def infeasibility(self, node: _Node) -> Refusal | None:
         """Why `node` is a dead end (None when it is feasible): closure LP, then Drake IK."""
@@ -151,14 +164,15 @@ class _Search:
     def unreachable(self, node: _Node) -> Refusal | None:
         pose = self.poses[node.depth]
         for i, s in enumerate(node.arclengths):
-            reach = self.reach.solve(pose, i, s)
+            reach = self.reach.solve(pose, i, s, seed=self.bound.tabulated(node.depth, i, s))
             if not reach.reachable:
                 return Refusal(RefusalKind.UNREACHABLE, fingers=(i,), cause=reach.refusal)
         return None
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
-        """(heuristic, child) for each candidate child that passes the cheap exact tests."""
+        """(switches it needs to the goal, heuristic, child) for each candidate child that passes the
+        cheap exact tests."""
         depth = node.depth + 1
         # fingers whose contact is out of reach at the next pose must move now (same children,
         # fewer tests: with two of them there is no child at all)
@@ -186,7 +200,8 @@ class _Search:
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
                 self.refused[Refusal(RefusalKind.NEW_CONTACT_UNREACHABLE, fingers=(finger,))] += 1
                 continue
-            if self.bound.switches_needed(depth, arclengths) > steps_left:  # no completion exists
+            switches = self.bound.switches_needed(depth, arclengths)
+            if switches > steps_left or not self.bound.deadlines_met(depth, arclengths):  # no completion exists
                 self.refused[Refusal(RefusalKind.SWITCH_BOUND)] += 1
                 continue
             if finger is not None and self.tips_overlap(arclengths, finger):
@@ -199,7 +214,7 @@ class _Search:
                     self.refused[stances[finger]] += 1
                     continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
-            out.append((h, _Node(depth, arclengths, finger, node)))
+            out.append((switches, h, _Node(depth, arclengths, finger, node)))
         return out
 
     def stance_refused(self, node: _Node, depth: int, finger: int) -> Refusal | None:
@@ -244,34 +259,66 @@ class _Search:
         dead_end = (self.not_in_closure(start) if candidate else None) or self.unreachable(_Node(0, start, None, None))
         return Refusal(RefusalKind.INITIAL_GRASP, cause=dead_end) if dead_end else None
 
-    def run(self, start: tuple[float, ...], t0: float, budget: int) -> tuple[_Node | None, Refusal | None]:
-        """Algorithm 1 from the root `start` with at most `budget` expansions (precheck passed)."""
-        counter = itertools.count()
-        root = _Node(0, start, None, None)
-        open_set = [(0, 0.0, next(counter), root)]
-        inserted = {(0, start)}
+    def run(self, start: tuple[float, ...], t0: float, budget: int, total: int) -> tuple[_Node | None, Refusal | None]:
+        """Algorithm 1 from the root `start` (precheck passed): one DFS to the goal with at most
+        `budget` expansions when the path has at most search.window_segments segments, else
+        window by window (module doc), each window with at most `budget` expansions and all of
+        them with at most `total`."""
         goal_depth = self.config.num_nodes - 1
+        committed = [_Node(0, start, None, None)]
+        expanded0 = self.expanded
+        why = None
+        while committed:
+            anchor = committed[-1]
+            target = min(anchor.depth + self.config.window_segments, goal_depth)
+            left = total - (self.expanded - expanded0)
+            leaf, why = self.window(anchor, target, t0, min(budget, left), toward_goal=target < goal_depth)
+            if leaf is not None and leaf.depth == goal_depth:
+                return leaf, None
+            if leaf is not None:  # keep the first commit_segments of its path, search on from there
+                while leaf.depth > anchor.depth + self.config.commit_segments:
+                    leaf = leaf.parent
+                committed.append(leaf)
+                continue
+            if why.kind is RefusalKind.TIME_BUDGET or len(committed) == 1 or self.expanded - expanded0 >= total:
+                return None, why
+            # no window from here: back up one commit, this state (dead now) no longer reachable
+            self.dead.add((anchor.depth, anchor.arclengths))
+            committed.pop()
+            self.backups += 1
+        return None, why
+
+    def window(
+        self, anchor: _Node, target: int, t0: float, budget: int, toward_goal: bool
+    ) -> tuple[_Node | None, Refusal | None]:
+        """A node at depth `target` below `anchor` by Algorithm 1's DFS (SelectNode: deepest, then
+        lowest heuristic), with at most `budget` expansions. `toward_goal` (a window short of the
+        goal, which it cannot test): children needing fewer contact switches to the goal
+        (switch_bound) come first, then the heuristic."""
+        counter = itertools.count()
+        open_set = [(-anchor.depth, (0, 0.0), next(counter), anchor)]
+        inserted = {(anchor.depth, anchor.arclengths)}
         expanded0 = self.expanded
         while open_set:
             if self.expanded - expanded0 >= budget:
                 return None, Refusal(RefusalKind.NODE_BUDGET, count=budget)
             if time.perf_counter() - t0 > self.config.time_budget_s:
                 return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
-            *_, node = heapq.heappop(open_set)  # SelectNode: deepest, then lowest heuristic
+            *_, node = heapq.heappop(open_set)  # SelectNode
             self.expanded += 1
             dead_end = self.infeasibility(node)
             if dead_end:
                 self.refused[dead_end.coarse()] += 1
                 continue
-            if node.depth == goal_depth:
+            if node.depth == target:
                 return node, None
-            for h, child in self.neighbors(node):
+            for switches, h, child in self.neighbors(node):
                 state = (child.depth, child.arclengths)
                 if state not in inserted and state not in self.dead:
                     inserted.add(state)
                     self.generated += 1
-                    heapq.heappush(open_set, (-child.depth, h, next(counter), child))
-        self.dead |= inserted  # the whole tree was searched: none of its states leads to the goal
+                    heapq.heappush(open_set, (-child.depth, (switches if toward_goal else 0, h), next(counter), child))
+        self.dead |= inserted  # the whole tree was searched: none of its states reaches `target`, nor the goal
         return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded - expanded0)
 
     def contact_nodes(self, path: list[_Node]) -> tuple[ContactNode, ...]:
@@ -317,18 +364,35 @@ class _Search:
         )
 
 
+class _Roots:
+    """The initial grasps to try, best first, made search keys one by one as the search reaches them."""
+
+    def __init__(self, arclengths: np.ndarray):
+        self.arclengths = np.asarray(arclengths, dtype=float).reshape(-1, NUM_FINGERS)
+
+    def __len__(self) -> int:
+        return len(self.arclengths)
+
+    def __iter__(self):
+        return (tuple(self.arclengths[k].tolist()) for k in range(len(self.arclengths)))
+
+    def per_finger(self) -> list[set[float]]:
+        """Each finger's initial contacts over all roots (the switch-bound tables' starts)."""
+        return [set(self.arclengths[:, i].tolist()) for i in range(NUM_FINGERS)]
+
+
 def _roots(
     scene: Scene, config: SearchConfig, search: _Search, tables: GraspTables | None
-) -> tuple[list[tuple[float, ...]], Refusal | None]:
+) -> tuple[_Roots, Refusal | None]:
     """The initial grasps to try, best first: the user's, or the ranked candidates (from
     `tables` when given, else built here)."""
     if config.initial_arclengths is not None:
-        return [tuple(search.wrap(s) for s in config.initial_arclengths)], None
+        return _Roots([[search.wrap(s) for s in config.initial_arclengths]]), None
     if tables is None:
         table = initial_grasp_candidates(scene, config, search.reach)
     else:
         table = tables.get(scene, config, search.reach)
-    return [c.arclengths for c in table.candidates], table.refusal  # grid values: already canonical keys
+    return _Roots(table.arclengths), table.refusal  # grid values: already canonical keys
 
 
 def grid_levels(config: SearchConfig) -> list[SearchConfig]:
@@ -350,7 +414,7 @@ def grid_levels(config: SearchConfig) -> list[SearchConfig]:
 
 
 def choose_initial_grasp(
-    scene: Scene, goal: float, config: SearchConfig, tables: GraspTables | None = None
+    scene: Scene, goal, config: SearchConfig, tables: GraspTables | None = None
 ) -> tuple[tuple[float, ...] | None, SearchRefusal | None]:
     """The chooser's first choice for `goal` without a tree search: config.initial_arclengths
     if given, else the best-ranked candidate that passes the cheap checks the search applies
@@ -359,6 +423,7 @@ def choose_initial_grasp(
     rooted at a later candidate if this one's tree has no plan. (None, refusal) when no
     candidate passes."""
     goal = check_goal(goal)
+    config = with_segments(config, scene.config.initial_pose, goal)
     refused = []
     for level in grid_levels(config):
         chosen, why = _choose_on_grid(scene, goal, level, tables)
@@ -369,13 +434,13 @@ def choose_initial_grasp(
 
 
 def _choose_on_grid(
-    scene: Scene, goal: float, config: SearchConfig, tables: GraspTables | None
+    scene: Scene, goal: GoalPose, config: SearchConfig, tables: GraspTables | None
 ) -> tuple[tuple[float, ...] | None, Refusal | None]:
     search = _Search(scene, goal, config)
     roots, refusal = _roots(scene, config, search, tables)
     if not roots:
         return None, refusal
-    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+    search.plan_switch_bounds(roots.per_finger())
     first = None
     for root in roots:
         why = search.precheck(root, candidate=config.initial_arclengths is None)
@@ -385,18 +450,18 @@ def _choose_on_grid(
     return None, Refusal(RefusalKind.NO_ROOT_PASSES, count=len(roots), cause=first)
 
 
-def find_contact_plan(
-    scene: Scene, goal: float, config: SearchConfig, tables: GraspTables | None = None
-) -> ContactPlan:
-    """Algorithm 1 for the rotation `goal` (rad, in [-pi, pi]) of scene's object: N nodes from
-    the initial grasp (node 0) to the goal pose, each in frictional form closure at mu_plan and
-    reachable, with at most one finger changing contact between consecutive nodes while the
+def find_contact_plan(scene: Scene, goal, config: SearchConfig, tables: GraspTables | None = None) -> ContactPlan:
+    """Algorithm 1 for `goal` (results.check_goal: a rotation in rad, a pose (x, y, theta) or a
+    GoalPose) of scene's object: N nodes (search.num_nodes, or from the goal's distance:
+    config.segments_for) from the initial grasp (node 0) to the goal pose, each in frictional
+    form closure at mu_plan and reachable, with at most one finger changing contact between consecutive nodes while the
     other three are in closure at mu_plan. Searched on the configured contact grid, then on
     the finer ones of grid_levels until a plan is found; the budgets (time, expansions) hold
     for all grids together. A search that finds no plan returns success=False with the
     refusal of each grid (which stance or reach failed). `tables` keeps the ranked initial
     grasps between searches (without it each search ranks them, inside its time)."""
     goal = check_goal(goal)
+    config = with_segments(config, scene.config.initial_pose, goal)
     t0 = time.perf_counter()
     total, refused = SearchStats(), []
     for level in grid_levels(config):
@@ -424,14 +489,21 @@ def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
 
 
 def _find_on_grid(
-    scene: Scene, goal: float, config: SearchConfig, t0: float, budget: int, tables: GraspTables | None
+    scene: Scene, goal: GoalPose, config: SearchConfig, t0: float, budget: int, tables: GraspTables | None
 ) -> ContactPlan:
     """find_contact_plan on config's contact grid with at most `budget` expansions."""
     search = _Search(scene, goal, config)
     roots, refusal = _roots(scene, config, search, tables)
     if not roots:
-        return ContactPlan(goal=goal, success=False, refusal=refusal, stats=search.stats(t0), mu_plan=search.mu_plan)
-    search.plan_switch_bounds([{r[i] for r in roots} for i in range(NUM_FINGERS)])
+        return ContactPlan(
+            goal=goal.theta,
+            goal_position=goal.position,
+            success=False,
+            refusal=refusal,
+            stats=search.stats(t0),
+            mu_plan=search.mu_plan,
+        )
+    search.plan_switch_bounds(roots.per_finger())
     leaf, searched, skipped, first_skip, last = None, 0, 0, None, None
     for root in roots:
         if (
@@ -446,7 +518,7 @@ def _find_on_grid(
             first_skip = first_skip or AtRoot(root, why)
             continue
         searched += 1
-        leaf, why = search.run(root, t0, min(config.root_expansions, budget - search.expanded))
+        leaf, why = search.run(root, t0, config.root_expansions, budget - search.expanded)
         if leaf is not None:
             break
         last = AtRoot(root, why)
@@ -464,14 +536,22 @@ def _find_on_grid(
                 mu_plan=search.mu_plan,
                 refused=tuple(search.refused.most_common(4)),
             )
-        return ContactPlan(goal=goal, success=False, refusal=refusal, stats=stats, mu_plan=search.mu_plan)
+        return ContactPlan(
+            goal=goal.theta,
+            goal_position=goal.position,
+            success=False,
+            refusal=refusal,
+            stats=stats,
+            mu_plan=search.mu_plan,
+        )
     path = []
     while leaf is not None:
         path.append(leaf)
         leaf = leaf.parent
     nodes = search.contact_nodes(path[::-1])
     return ContactPlan(
-        goal=goal,
+        goal=goal.theta,
+        goal_position=goal.position,
         success=True,
         nodes=nodes,
         stats=search.stats(t0, searched, len(roots)),
