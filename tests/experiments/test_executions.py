@@ -22,7 +22,7 @@ def test_push_starts_in_the_middle_of_the_middle_segment():
 
 @pytest.mark.slow
 def test_sweep_executes_every_plan_per_controller_and_condition(resumed_sweep, tmp_path, capsys):
-    from tests.conftest import SMALL_SWEEP
+    from conftest import SMALL_SWEEP
 
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
