@@ -12,31 +12,10 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import TIMED_OUT_SWEEP, TINY_PLAN
 
 from trajectotree.cli import main
 from trajectotree.experiments.sweep_store import CORRUPT_DIR, LOCK_FILE, TRIALS_DIR, read_rows
-
-# The cheapest plan: one transition segment (13 knots), a small goal.
-TINY_PLAN = ["--goal", "0.1", "--segments", "1"]
-# A sweep whose trials are killed by the time limit long before they plan (an interpreter
-# with Drake takes longer than 0.3 s to start): every trial is an error row, quickly.
-TIMED_OUT_SWEEP = [
-    "--goals",
-    "2",
-    "--seed",
-    "0",
-    "--max-goal",
-    "0.3",
-    "--segments",
-    "1",
-    "--methods",
-    "trajectotree",
-    "--time-limit",
-    "0.3",
-    "--workers",
-    "2",
-    "--no-progress",
-]
 
 
 def listing(folder: Path) -> list[str]:
@@ -79,10 +58,8 @@ def test_bad_output_paths_exit_2_naming_the_path_and_write_nothing(tmp_path, cap
         assert (tmp_path / "a_file.png").read_text() == "keep me"
 
 
-def test_report_into_a_sweep_whose_report_folder_is_a_file(tmp_path, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
-    capsys.readouterr()
+def test_report_into_a_sweep_whose_report_folder_is_a_file(timed_out_sweep, capsys):
+    sweep = timed_out_sweep
     (sweep / "report").write_text("not a folder")
     assert main(["report", str(sweep)]) == 2
     assert f"{str(sweep / 'report')!r} is an existing file" in capsys.readouterr().err
@@ -137,10 +114,8 @@ def test_simulating_an_unconverged_plan_warns_and_records_it(tmp_path, capsys):
 # ---- the sweep's faults ---------------------------------------------------------------
 
 
-def test_corrupt_trial_is_named_moved_aside_and_recomputed(tmp_path, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
-    capsys.readouterr()
+def test_corrupt_trial_is_named_moved_aside_and_recomputed(timed_out_sweep, capsys):
+    sweep = timed_out_sweep
     corrupt = sweep / TRIALS_DIR / "0001_trajectotree" / "trial.json"
     corrupt.write_text('{"key": "0001_traj')  # torn by a full disk, say
     assert main(["report", str(sweep)]) == 2  # the report names the file
@@ -156,9 +131,8 @@ def test_corrupt_trial_is_named_moved_aside_and_recomputed(tmp_path, capsys):
     assert [r["key"] for r in read_rows(sweep)] == ["0000_trajectotree", "0001_trajectotree"]
 
 
-def test_report_names_an_unreadable_manifest_or_sim_npz(tmp_path, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+def test_report_names_an_unreadable_manifest_or_sim_npz(timed_out_sweep, capsys):
+    sweep = timed_out_sweep
     trial = sweep / TRIALS_DIR / "0000_trajectotree"
     row = json.loads((trial / "trial.json").read_text())
     (trial / "trial.json").write_text(json.dumps(dict(row, simulated=True)))  # as if executed ...
@@ -172,9 +146,8 @@ def test_report_names_an_unreadable_manifest_or_sim_npz(tmp_path, capsys):
     assert f"{str(sweep / 'manifest.json')!r} is unreadable (JSONDecodeError" in capsys.readouterr().err
 
 
-def test_retry_errors_may_raise_the_time_limit(tmp_path, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+def test_retry_errors_may_raise_the_time_limit(timed_out_sweep, capsys):
+    sweep = timed_out_sweep
     assert [r["error"] for r in read_rows(sweep)] == ["timeout: exceeded the trial time limit of 0.3 s"] * 2
     raised = TIMED_OUT_SWEEP + ["--time-limit", "0.4"]  # the last one counts
     assert main(["sweep", "--out", str(sweep), *raised]) == 0  # not --retry-errors: both skipped
@@ -344,12 +317,8 @@ def test_ipopt_progress_shows_on_a_terminal_and_not_with_json(tmp_path):
     assert "IPOPT" not in shown
 
 
-def test_recording_a_playback_prints_no_meshcat_server_line(tmp_path, capsys):
-    out = tmp_path / "plan"
-    assert main(["plan", *TINY_PLAN, "--out", str(out), "--html", str(tmp_path / "plan.html")]) == 0
-    captured = capsys.readouterr()
-    assert (tmp_path / "plan.html").stat().st_size > 0
-    assert "listening" not in captured.out + captured.err and "IPOPT iteration" not in captured.err
+# Recording a playback prints no Meshcat server line: checked on the plan --html of
+# test_stops_and_outputs.py::test_plan_html_may_go_into_the_out_folder_it_creates_and_prints_no_meshcat_line.
 
 
 # ---- small things -----------------------------------------------------------------------------

@@ -190,16 +190,7 @@ def test_reason_lines_keep_a_short_reason_and_split_a_long_one_outside_brackets(
     assert all(len(line) <= REASON_WIDTH for line in details) and "".join(details[1:-1]).replace(" ", "") == "x" * 120
 
 
-# ---- a saved plan, simulated ------------------------------------------------------------------------------
-
-TINY_PLAN = ["--goal", "0.1", "--segments", "1"]  # one transition segment: 13 knots, 1.2 s
-
-
-@pytest.fixture(scope="module")
-def tiny_plan(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("plan") / "plan"
-    assert main(["plan", *TINY_PLAN, "--out", str(out)]) == 0
-    return out
+# ---- a saved plan, simulated (tiny_plan: tests/conftest.py's one-segment plan of 0.1 rad) ------------------
 
 
 def copy_plan(plan: Path, to: Path, **config_changes) -> Path:

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import TIMED_OUT_SWEEP, TINY_PLAN
 
 from trajectotree.cli import main
 from trajectotree.experiments.sweep_store import CORRUPT_DIR, TRIALS_DIR
@@ -97,15 +98,6 @@ def test_sigterm_stops_the_segment_workers_exits_143_and_writes_nothing(command,
 
 # ---- output folders: checked before any work, by trying --------------------------------------------
 
-# The cheapest plan: one transition segment, a small goal.
-TINY_PLAN = ["--goal", "0.1", "--segments", "1"]
-# A sweep whose trials hit the time limit before they plan (an interpreter with Drake takes
-# longer than 0.3 s to start): every trial an error row, quickly.
-TIMED_OUT_SWEEP = [
-    *("--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "1", "--methods", "trajectotree"),
-    *("--time-limit", "0.3", "--workers", "2", "--no-progress"),
-]
-
 
 def listing(folder: Path) -> dict[str, bytes | None]:
     """Every path under `folder` with its contents (None: a folder), hidden ones too."""
@@ -143,9 +135,9 @@ def read_only():
         step()
 
 
-def test_simulate_into_a_plan_folder_it_cannot_write_exits_2_before_simulating(tmp_path, read_only, capsys):
+def test_simulate_into_a_plan_folder_it_cannot_write_exits_2_before_simulating(tiny_plan, tmp_path, read_only, capsys):
     plan = tmp_path / "plan"
-    assert main(["plan", *TINY_PLAN, "--out", str(plan)]) == 0
+    shutil.copytree(tiny_plan, plan)
     (plan / "sim.npz").mkdir()  # where simulate saves its arrays: no user can write there
     before = listing(tmp_path)
     capsys.readouterr()
@@ -161,9 +153,8 @@ def test_simulate_into_a_plan_folder_it_cannot_write_exits_2_before_simulating(t
     assert "Traceback" not in err and listing(tmp_path) == before
 
 
-def test_report_of_a_sweep_it_cannot_write_into_exits_2_naming_the_folder(tmp_path, read_only, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+def test_report_of_a_sweep_it_cannot_write_into_exits_2_naming_the_folder(timed_out_sweep, tmp_path, read_only, capsys):
+    sweep = timed_out_sweep
     read_only(sweep)  # SWEEP_DIR/report, the default, cannot be created
     before = listing(tmp_path)
     capsys.readouterr()
@@ -176,7 +167,7 @@ def test_report_of_a_sweep_it_cannot_write_into_exits_2_naming_the_folder(tmp_pa
     assert "Traceback" not in err and listing(tmp_path) == before
 
 
-def test_plan_html_may_go_into_the_out_folder_it_creates(tmp_path, capsys):
+def test_plan_html_may_go_into_the_out_folder_it_creates_and_prints_no_meshcat_line(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["plan", *TINY_PLAN, "--out", str(out), "--html", str(tmp_path / "out" / "sub" / "plan.html")]) == 2
     assert f"the folder {str(out / 'sub')!r} does not exist" in capsys.readouterr().err  # only --out itself is made
@@ -184,14 +175,18 @@ def test_plan_html_may_go_into_the_out_folder_it_creates(tmp_path, capsys):
     assert main(["plan", *TINY_PLAN, "--out", str(out), "--html", str(out / "plan.html")]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["plan.html", "plan.json", "plan.npz"]
     assert "<html" in (out / "plan.html").read_text()[:2000].lower()
+    # recording the playback prints no Meshcat server line (nor, off a terminal, IPOPT's progress)
+    captured = capsys.readouterr()
+    assert "listening" not in captured.out + captured.err and "IPOPT iteration" not in captured.err
 
 
 # ---- a report is written whole or not at all; the sweep recomputes what it cannot read ---------------
 
 
-def test_report_with_a_torn_sim_npz_writes_nothing_and_the_sweep_recomputes_that_trial(tmp_path, capsys):
-    sweep = tmp_path / "sweep"
-    assert main(["sweep", "--out", str(sweep), *TIMED_OUT_SWEEP]) == 0
+def test_report_with_a_torn_sim_npz_writes_nothing_and_the_sweep_recomputes_that_trial(
+    timed_out_sweep, tmp_path, capsys
+):
+    sweep = timed_out_sweep
     assert main(["report", str(sweep), "--out", str(tmp_path / "older")]) == 0  # an earlier report, kept as is
     trial = sweep / TRIALS_DIR / "0001_trajectotree"
     row = json.loads((trial / "trial.json").read_text())
@@ -285,7 +280,7 @@ def test_two_sweeps_started_together_one_runs_the_other_is_refused_by_the_lock(t
 
 @pytest.mark.slow
 def test_a_torn_execution_is_named_by_the_report_and_redone_by_the_sweep(resumed_sweep, tmp_path, capsys):
-    from tests.conftest import SMALL_SWEEP
+    from conftest import SMALL_SWEEP
 
     sweep = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, sweep)
@@ -308,7 +303,7 @@ def test_a_torn_execution_is_named_by_the_report_and_redone_by_the_sweep(resumed
 
 @pytest.mark.slow
 def test_sigterm_stops_a_sweeps_executions_without_running_the_queued_ones(resumed_sweep, tmp_path):
-    from tests.conftest import SMALL_SWEEP
+    from conftest import SMALL_SWEEP
 
     sweep, log = tmp_path / "sweep", tmp_path / "stderr.txt"
     shutil.copytree(resumed_sweep.out, sweep)

@@ -91,7 +91,7 @@ def test_closed_loop_executions_are_their_own_and_never_copied(tmp_path):
 
 @pytest.mark.slow
 def test_sweep_executes_every_plan_per_controller_and_condition(resumed_sweep, tmp_path, capsys):
-    from tests.conftest import SMALL_SWEEP
+    from conftest import SMALL_SWEEP
 
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
