@@ -96,7 +96,8 @@ def main() -> None:
         row |= {"goal": goal, "nodes": nodes, "wall_s": time.perf_counter() - t0}
         if args.compare:
             rate = args.old_segment_rotation
-            row["old"] = old_search(args.compare, goal, nodes if rate is None else max(round(abs(goal) / rate), 1) + 1)
+            old_nodes = nodes if rate is None else max(round(abs(goal) / rate), 1) + 1
+            row["old"] = old_search(args.compare, goal, old_nodes) | {"nodes": old_nodes}
         rows.append(row)
         old = row.get("old")
         print(
@@ -106,7 +107,8 @@ def main() -> None:
             + (
                 ""
                 if old is None
-                else f"; old search {old['time_s']:.2f} s, found {old['success']} ({old['expanded']} expansions)"
+                else f"; old search (N = {old['nodes']}) {old['time_s']:.2f} s, found {old['success']} "
+                f"({old['expanded']} expansions)"
             ),
             flush=True,
         )
