@@ -8,8 +8,8 @@ the longest goal's time to the shortest's beside the ratio of their distances.
 
 --search-only skips CITO. --compare OLD_TREE also runs the old code's search (a checkout, e.g.
 `git worktree add /tmp/old main`; PYTHONPATH=OLD_TREE in a subprocess) on the same goals and node
-counts, its goal check lifted for the purpose (the old check allows |theta| <= pi only), within
-its own search budgets.
+counts (or --old-segment-rotation's), its goal check lifted for the purpose (the old check allows
+|theta| <= pi only), within its own search budgets.
 """
 
 from __future__ import annotations
@@ -66,6 +66,13 @@ def main() -> None:
     parser.add_argument("--sign", type=float, default=1.0, help="+1 or -1: the direction of every goal")
     parser.add_argument("--search-only", action="store_true")
     parser.add_argument("--compare", metavar="OLD_TREE", help="also time the old code's search on the same paths")
+    parser.add_argument(
+        "--old-segment-rotation",
+        type=float,
+        metavar="RAD",
+        help="--compare: the old search's paths turn this much per segment (e.g. 0.349, pi/9) instead of "
+        "having the new node counts",
+    )
     parser.add_argument("--json", metavar="FILE", help="write the rows")
     args = parser.parse_args()
     config = Config()
@@ -88,7 +95,9 @@ def main() -> None:
             row |= {"expanded": result.contact_plan.stats.expanded, "status": result.status[:200]}
         row |= {"goal": goal, "nodes": nodes, "wall_s": time.perf_counter() - t0}
         if args.compare:
-            row["old"] = old_search(args.compare, goal, nodes)
+            rate = args.old_segment_rotation
+            old_nodes = nodes if rate is None else max(round(abs(goal) / rate), 1) + 1
+            row["old"] = old_search(args.compare, goal, old_nodes) | {"nodes": old_nodes}
         rows.append(row)
         old = row.get("old")
         print(
@@ -98,7 +107,8 @@ def main() -> None:
             + (
                 ""
                 if old is None
-                else f"; old search {old['time_s']:.2f} s, found {old['success']} ({old['expanded']} expansions)"
+                else f"; old search (N = {old['nodes']}) {old['time_s']:.2f} s, found {old['success']} "
+                f"({old['expanded']} expansions)"
             ),
             flush=True,
         )

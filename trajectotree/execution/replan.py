@@ -169,7 +169,7 @@ def simulate_replanning(
         t0 = time.perf_counter()
         try:
             new = make_plan(
-                goal=plan.goal,
+                goal=plan.goal if plan.config.goal.theta is None else plan.config.goal,  # with its position
                 start=start,
                 config=dataclasses.replace(config, scene=assumed),
                 segment_workers=segment_workers,
