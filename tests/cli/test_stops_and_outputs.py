@@ -67,6 +67,7 @@ def forked_workers(pid: int) -> list[int]:
     return [p for p in children(pid) if command and cmdline(p) == command]
 
 
+@pytest.mark.slow  # a command's process and its two segment workers, seconds each
 @pytest.mark.parametrize("command", ["plan", "demo"])
 def test_sigterm_stops_the_segment_workers_exits_143_and_writes_nothing(command, tmp_path):
     config, out, log = tmp_path / "stalling.yaml", tmp_path / "out", tmp_path / "stderr.txt"
@@ -245,6 +246,7 @@ def test_a_sweep_meeting_another_one_starting_reports_its_lock(tmp_path, capsys)
         holder.stdout.close()
 
 
+@pytest.mark.slow  # two sweep processes and their trials
 def test_two_sweeps_started_together_one_runs_the_other_is_refused_by_the_lock(tmp_path):
     """Both started at once, the same arguments; trials that stall (killed by SIGTERM at the end)
     keep the first sweep holding the lock until the second has been refused."""

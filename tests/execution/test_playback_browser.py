@@ -25,7 +25,7 @@ from trajectotree.execution.simulate import simulate_reference
 from trajectotree.figures.run import arrow_newtons_per_cm, arrow_scale_text, force_arrow
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
-pytestmark = pytest.mark.slow  # a headless browser per test (seconds each)
+pytestmark = pytest.mark.slow  # a headless browser (seconds per test)
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
     "--headless",
@@ -152,8 +152,40 @@ def browser():
         browser.close()
 
 
-def test_html_playback_renders_offline_and_animates(browser, drop_html):
-    page = Page(browser, drop_html)
+class Pages:
+    """The module's one open page: a test asks for a file in a window size, and consecutive tests on
+    the same file and size share its page (loading the viewer takes seconds; the tests below are
+    grouped by page). Each test seeks the animation itself. The page it replaces is closed: an
+    open page keeps animating, rendering in software on the CPU, and would slow every later test."""
+
+    def __init__(self, browser):
+        self.browser, self.key, self.page = browser, None, None
+
+    def open(self, html: Path, viewport=VIEWPORT) -> Page:
+        key = (html.resolve(), viewport["width"], viewport["height"])
+        if key != self.key:
+            self.close()
+            self.key, self.page = key, Page(self.browser, html, viewport)
+        return self.page
+
+    def close(self) -> None:
+        if self.page is not None:
+            self.page.page.context.close()
+        self.key, self.page = None, None
+
+
+@pytest.fixture(scope="module")
+def pages(browser):
+    opened = Pages(browser)
+    yield opened
+    opened.close()
+
+
+# ---- the simulated run that drops the box (drop.html) -------------------------------------------
+
+
+def test_html_playback_renders_offline_and_animates(pages, drop_html):
+    page = pages.open(drop_html)
     duration = page.page.evaluate("() => viewer.animator.duration")
     assert duration == pytest.approx(0.3, abs=0.05)
     start, later = page.frame_at(0.0), page.frame_at(0.25)
@@ -171,22 +203,46 @@ def test_html_playback_renders_offline_and_animates(browser, drop_html):
     assert rows1.mean() - rows0.mean() > 30
 
 
-def test_plan_playback_shows_the_planned_motion(browser, plan_html):
-    page = Page(browser, plan_html)
-    assert page.page.evaluate("() => viewer.animator.duration") == pytest.approx(1.0, abs=0.05)
-    start, end = box_pixels(page.frame_at(0.0)), box_pixels(page.frame_at(1.0))
-    assert page.requests == [plan_html.resolve().as_uri()] and page.errors == []
-    rows0, _ = np.nonzero(start)
-    rows1, _ = np.nonzero(end)
-    pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
-    assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)  # lifted 4 cm (+y up)
+def test_simulated_playback_draws_the_simulated_forces_as_arrows(pages, drop_run):
+    """At t = 0.25 s (a frame of the playback and a sample of the log): each finger pushing 0.02 N
+    or more has its arrow shown from its fingertip along its logged force at the stated scale, the
+    others hidden; the frame has both kinds."""
+    page = pages.open(drop_run.path)
+    page.frame_at(0.25)
+    arrows = page.page.evaluate(
+        """() => [0, 1, 2, 3].map((i) => {
+             const find = (path) => viewer.scene_tree.find(["forces", "finger" + i, ...path]).object;
+             const group = find([]), shaft = find(["shaft", "<object>"]);
+             return {visible: group.visible, position: group.position.toArray(), angle: group.rotation.z,
+                     shaft: shaft.scale.x};
+           })"""
+    )
+    result, scale = drop_run.result, arrow_newtons_per_cm(drop_run.reference.f_W)
+    k = int(np.argmin(abs(result.t - 0.25)))
+    assert result.t[k] == pytest.approx(0.25)
+    scene = build_scene(drop_run.config.scene)
+    tips = scene.fingertip_positions(result.q[k])
+    shown = []
+    for i, arrow in enumerate(arrows):
+        expected = force_arrow(tips[i], result.f_W[k, i], scene.tip_radius, scale)
+        shown.append(arrow["visible"])
+        if expected is None:
+            assert not arrow["visible"], f"finger {i} pushes nothing: no arrow"
+            continue
+        start, end = expected
+        length = np.linalg.norm(end - start)
+        assert arrow["visible"], f"finger {i}"
+        np.testing.assert_allclose(arrow["position"], [*start, ARROW_Z], atol=1e-6)
+        assert arrow["angle"] == pytest.approx(np.arctan2(end[1] - start[1], end[0] - start[0]), abs=1e-6)
+        assert arrow["shaft"] == pytest.approx(length - min(ARROW_HEAD, length / 2), abs=1e-6)
+    assert any(shown) and not all(shown)
 
 
-def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(browser, drop_run):
+def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(pages, drop_run):
     """On a wide window: the tab title, the time readout (with the drop marked), the legend,
     read from the page and found in its screenshot, and the hand centred (not in the left half)."""
     drop_html = drop_run.path
-    page = Page(browser, drop_html, viewport=WIDE)
+    page = pages.open(drop_html, viewport=WIDE)
     assert page.page.title() == "TrajectoTree: simulated run"
     duration = page.page.evaluate("() => viewer.animator.duration")
     drop = drop_run.result.drop_time_s
@@ -227,13 +283,70 @@ def test_page_shows_title_time_readout_drop_and_legend_and_centres_the_view(brow
     assert abs(cols.mean() - WIDE["width"] / 2) < 25 and abs(rows.mean() - WIDE["height"] / 2) < 25
 
 
-def test_plan_page_is_titled_and_has_no_drop_marker(browser, plan_html):
-    page = Page(browser, plan_html)
+# ---- the planned motion (plan.html): fingers coloured, numbered, their forces drawn as arrows ------
+
+
+def test_plan_playback_shows_the_planned_motion(pages, plan_html):
+    page = pages.open(plan_html)
+    assert page.page.evaluate("() => viewer.animator.duration") == pytest.approx(1.0, abs=0.05)
+    start, end = box_pixels(page.frame_at(0.0)), box_pixels(page.frame_at(1.0))
+    assert page.requests == [plan_html.resolve().as_uri()] and page.errors == []
+    rows0, _ = np.nonzero(start)
+    rows1, _ = np.nonzero(end)
+    pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
+    assert rows0.mean() - rows1.mean() == pytest.approx(0.04 * pixels_per_m, abs=8)  # lifted 4 cm (+y up)
+
+
+def test_plan_page_is_titled_and_has_no_drop_marker(pages, plan_html):
+    page = pages.open(plan_html)
     assert page.page.title() == "TrajectoTree: planned trajectory"
     page.frame_at(0.5)
     assert page.page.inner_text("#tt-time") == "t = 0.50 s of 1.00 s"
     assert page.page.locator("#tt-drop").count() == 0
     assert page.page.inner_text("#tt-legend").splitlines()[1] == "box (planned pose)"
+
+
+def test_plan_playback_colours_each_fingertip_and_draws_its_planned_force(pages, plan_html, plan_reference):
+    """At t = 0: each fingertip sphere in its finger's colour (figures.run.FINGER_COLORS), each
+    finger's planned force (1 N or more) as an arrow in that colour from the fingertip along the
+    force, as long as the stated scale says: its colour at the arrow's middle, not past its end."""
+    page = pages.open(plan_html)
+    rgb = page.frame_at(0.0)
+    scale = arrow_newtons_per_cm(plan_reference.f_W)
+    legend = page.page.inner_text("#tt-legend").splitlines()
+    assert legend[-1] == f"arrow: planned force of each finger on the box, {arrow_scale_text(scale)}"
+    tip_radius = build_scene().tip_radius
+    for i in range(NUM_FINGERS):
+        tip, f = plan_reference.p_WF[0, i], plan_reference.f_W[0, i]
+        side = np.array([-f[1], f[0]]) / np.hypot(*f)  # beside the arrow, on the sphere
+        assert nearest_color(rgb, *to_pixel(tip + 0.6 * tip_radius * side)) == i, f"finger {i}'s tip"
+        start, end = force_arrow(tip, f, tip_radius, scale)
+        direction = (end - start) / np.linalg.norm(end - start)
+        assert np.linalg.norm(end - start) > 0.02  # long enough to sample beyond the fingertip
+        assert nearest_color(rgb, *to_pixel(start + 0.6 * (end - start))) == i, f"finger {i}'s arrow"
+        assert nearest_color(rgb, *to_pixel(end + 0.006 * direction)) != i, f"finger {i}'s arrow ends there"
+    dots = page.page.locator(".tt-dot").evaluate_all("(dots) => dots.map((d) => getComputedStyle(d).backgroundColor)")
+    assert dots == [finger_css(i) for i in range(NUM_FINGERS)]
+
+
+@pytest.mark.parametrize("viewport", [VIEWPORT, WIDE])
+def test_finger_numbers_sit_outside_the_bases_in_the_fingers_colours(pages, plan_html, viewport):
+    page = pages.open(plan_html, viewport=viewport)
+    page.frame_at(0.5)
+    scene = build_scene()
+    for k, (text, color, x, y) in enumerate(finger_labels(scene.plant, scene.hand)):
+        label = page.page.locator(f"#tt-label-{k}")
+        assert label.inner_text() == text == str(k)
+        assert label.evaluate("(e) => getComputedStyle(e).color") == color == finger_css(k)
+        box = label.bounding_box()
+        row, col = to_pixel((x, y), viewport)
+        assert abs(box["x"] + box["width"] / 2 - col) < 2 and abs(box["y"] + box["height"] / 2 - row) < 2
+        base = scene.fingers[k].p_W_base
+        assert np.hypot(x, y) == pytest.approx(np.hypot(*base) + 0.03)
+        assert base[0] * y - base[1] * x == pytest.approx(0.0, abs=1e-12)  # radially outside the base
+
+
+# ---- a polygon ----------------------------------------------------------------------------------
 
 
 @pytest.fixture(scope="module")
@@ -258,11 +371,11 @@ def triangle_html(tmp_path_factory):
     return path, side, result.drop_time_s
 
 
-def test_polygon_playback_draws_the_polygon(browser, triangle_html):
+def test_polygon_playback_draws_the_polygon(pages, triangle_html):
     """The triangle's prism is drawn as a triangle: its area in pixels, centred, apex up (more of
     it below its centroid than above: 5/9), and the page calls it the object."""
     path, side, drop = triangle_html
-    page = Page(browser, path)
+    page = pages.open(path)
     mask = box_pixels(page.frame_at(0.0))
     assert page.requests == [path.resolve().as_uri()] and page.errors == []
     pixels_per_m = VIEWPORT["height"] / (2 * VIEW_HALF_WIDTH)
@@ -275,81 +388,3 @@ def test_polygon_playback_draws_the_polygon(browser, triangle_html):
     assert page.page.inner_text("#tt-legend").splitlines()[1:3] == ["object", "planned object pose (outline)"]
     page.frame_at(0.25)
     assert page.page.inner_text("#tt-drop-note") == f"object dropped at {drop:.2f} s"
-
-
-# ---- fingers and forces: coloured, numbered, drawn as arrows ----------------------------------
-
-
-def test_plan_playback_colours_each_fingertip_and_draws_its_planned_force(browser, plan_html, plan_reference):
-    """At t = 0: each fingertip sphere in its finger's colour (figures.run.FINGER_COLORS), each
-    finger's planned force (1 N or more) as an arrow in that colour from the fingertip along the
-    force, as long as the stated scale says: its colour at the arrow's middle, not past its end."""
-    page = Page(browser, plan_html)
-    rgb = page.frame_at(0.0)
-    scale = arrow_newtons_per_cm(plan_reference.f_W)
-    legend = page.page.inner_text("#tt-legend").splitlines()
-    assert legend[-1] == f"arrow: planned force of each finger on the box, {arrow_scale_text(scale)}"
-    tip_radius = build_scene().tip_radius
-    for i in range(NUM_FINGERS):
-        tip, f = plan_reference.p_WF[0, i], plan_reference.f_W[0, i]
-        side = np.array([-f[1], f[0]]) / np.hypot(*f)  # beside the arrow, on the sphere
-        assert nearest_color(rgb, *to_pixel(tip + 0.6 * tip_radius * side)) == i, f"finger {i}'s tip"
-        start, end = force_arrow(tip, f, tip_radius, scale)
-        direction = (end - start) / np.linalg.norm(end - start)
-        assert np.linalg.norm(end - start) > 0.02  # long enough to sample beyond the fingertip
-        assert nearest_color(rgb, *to_pixel(start + 0.6 * (end - start))) == i, f"finger {i}'s arrow"
-        assert nearest_color(rgb, *to_pixel(end + 0.006 * direction)) != i, f"finger {i}'s arrow ends there"
-    dots = page.page.locator(".tt-dot").evaluate_all("(dots) => dots.map((d) => getComputedStyle(d).backgroundColor)")
-    assert dots == [finger_css(i) for i in range(NUM_FINGERS)]
-
-
-@pytest.mark.parametrize("viewport", [VIEWPORT, WIDE])
-def test_finger_numbers_sit_outside_the_bases_in_the_fingers_colours(browser, plan_html, viewport):
-    page = Page(browser, plan_html, viewport=viewport)
-    page.frame_at(0.5)
-    scene = build_scene()
-    for k, (text, color, x, y) in enumerate(finger_labels(scene.plant, scene.hand)):
-        label = page.page.locator(f"#tt-label-{k}")
-        assert label.inner_text() == text == str(k)
-        assert label.evaluate("(e) => getComputedStyle(e).color") == color == finger_css(k)
-        box = label.bounding_box()
-        row, col = to_pixel((x, y), viewport)
-        assert abs(box["x"] + box["width"] / 2 - col) < 2 and abs(box["y"] + box["height"] / 2 - row) < 2
-        base = scene.fingers[k].p_W_base
-        assert np.hypot(x, y) == pytest.approx(np.hypot(*base) + 0.03)
-        assert base[0] * y - base[1] * x == pytest.approx(0.0, abs=1e-12)  # radially outside the base
-
-
-def test_simulated_playback_draws_the_simulated_forces_as_arrows(browser, drop_run):
-    """At t = 0.25 s (a frame of the playback and a sample of the log): each finger pushing 0.02 N
-    or more has its arrow shown from its fingertip along its logged force at the stated scale, the
-    others hidden; the frame has both kinds."""
-    page = Page(browser, drop_run.path)
-    page.frame_at(0.25)
-    arrows = page.page.evaluate(
-        """() => [0, 1, 2, 3].map((i) => {
-             const find = (path) => viewer.scene_tree.find(["forces", "finger" + i, ...path]).object;
-             const group = find([]), shaft = find(["shaft", "<object>"]);
-             return {visible: group.visible, position: group.position.toArray(), angle: group.rotation.z,
-                     shaft: shaft.scale.x};
-           })"""
-    )
-    result, scale = drop_run.result, arrow_newtons_per_cm(drop_run.reference.f_W)
-    k = int(np.argmin(abs(result.t - 0.25)))
-    assert result.t[k] == pytest.approx(0.25)
-    scene = build_scene(drop_run.config.scene)
-    tips = scene.fingertip_positions(result.q[k])
-    shown = []
-    for i, arrow in enumerate(arrows):
-        expected = force_arrow(tips[i], result.f_W[k, i], scene.tip_radius, scale)
-        shown.append(arrow["visible"])
-        if expected is None:
-            assert not arrow["visible"], f"finger {i} pushes nothing: no arrow"
-            continue
-        start, end = expected
-        length = np.linalg.norm(end - start)
-        assert arrow["visible"], f"finger {i}"
-        np.testing.assert_allclose(arrow["position"], [*start, ARROW_Z], atol=1e-6)
-        assert arrow["angle"] == pytest.approx(np.arctan2(end[1] - start[1], end[0] - start[0]), abs=1e-6)
-        assert arrow["shaft"] == pytest.approx(length - min(ARROW_HEAD, length / 2), abs=1e-6)
-    assert any(shown) and not all(shown)

@@ -54,7 +54,7 @@ def test_importing_the_sweep_loads_no_drake():
         (["--workers", "-1"], "--workers = -1"),
         (["--methods", "trajectotree", "rrt"], "unknown method 'rrt'"),
         (["--time-limit", "0"], "--time-limit = 0"),
-        (["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "1"], "cannot reach the Dask scheduler"),
+        (["--scheduler", "tcp://127.0.0.1:1", "--scheduler-timeout", "0.2"], "cannot reach the Dask scheduler"),
     ],
 )
 def test_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):

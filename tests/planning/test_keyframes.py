@@ -218,6 +218,7 @@ def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
         assert record["attempts"][0]["status"] == "Max iteration exceeded"
 
 
+@pytest.mark.slow  # a plan whose joint retry converges (seconds; the quick suite runs the retries to their end above)
 def test_a_segment_failing_the_physics_check_is_retried_with_its_neighbours(scene, contact_plan):
     # Node 1's finger 2 turned 0.1 rad off its grasp (a keyframe the search would not make): segment
     # 1-2 converges but its fingertip pushes from a distance, so (no restart: it converged) the joint
