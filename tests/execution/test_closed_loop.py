@@ -162,6 +162,7 @@ def test_the_push_reflex_squeezes_while_a_push_acts_and_lets_go_after(scene):
     assert np.all(watch.reflex[t > 0.4 + gains.reflex_hold + gains.reflex_release + 0.01] == 0.0)
     quiet = (t > 0.05) & ((t < 0.3) | (t > 0.41))
     assert np.abs(watch.disturbance[quiet]).max() < 0.05  # the contacts and gravity explain the rest
+    assert np.all(watch.mu_estimate == 0.7)  # a pushed grasp's slides are no evidence of the friction
 
 
 def test_open_loop_runs_are_unchanged_bit_for_bit(scene):

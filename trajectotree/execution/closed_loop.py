@@ -202,18 +202,19 @@ class ObjectMonitor(PeriodicSystem):
 
 class FrictionEstimator(PeriodicSystem):
     """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (4 each,
-    ContactMonitor's).
-    Output port `mu_estimate` (1): the plan's friction `mu_plan` until a contact has slid
-    steadily for gains.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
-    slide's last slip_confirm_time, never below gains.friction_floor and never raised.
-    A slide sample counts when the plan loads the finger fully (`schedule.force_scale` 1), it
-    pushes with at least gains.friction_evidence_force, its normal force changed by at most
-    STEADY_NORMAL_FORCE since the last sample and its contact neither opens nor closes faster
-    than STEADY_APPROACH_SPEED: in Drake's lagged contact model (friction bounded by the
-    previous step's elastic normal force) a light contact, or one whose penetration changes
-    (a landing, a finger letting go, a sphere pressed over a corner), slides at a ratio down to
-    half the world's friction (a nominal run at mu 0.7 read 0.38 and 0.51 from such slides). The median, not
-    the mean: single steady ratios still lie up to 0.05 below or 0.02 above it."""
+    ContactMonitor's) and `reflex` (1, PushReflex's). Output port `mu_estimate` (1): the
+    plan's friction `mu_plan` until a contact has slid steadily for gains.slip_confirm_time,
+    then the least median ratio |f_t| / f_n over such a slide's last slip_confirm_time, never
+    below gains.friction_floor and never raised.
+    A slide sample counts when no reflex is on, the plan loads the finger fully
+    (`schedule.force_scale` 1), it pushes with at least gains.friction_evidence_force, its
+    normal force changed by at most STEADY_NORMAL_FORCE since the last sample and its contact
+    neither opens nor closes faster than STEADY_APPROACH_SPEED: in Drake's lagged contact
+    model (friction bounded by the previous step's elastic normal force) a light contact, or
+    one whose penetration changes (a landing, a finger letting go, a sphere pressed over a
+    corner), slides at a ratio down to half the world's friction (a nominal run at mu 0.7
+    read 0.38 and 0.51 from such slides). The median, not the mean: single steady ratios
+    still lie up to 0.05 below or 0.02 above it."""
 
     def __init__(self, mu_plan: float, schedule: GraspSchedule, gains: ControllerGains):
         period = 1.0 / gains.rate_hz
@@ -227,6 +228,7 @@ class FrictionEstimator(PeriodicSystem):
         self.force_ratio_port = self.DeclareVectorInputPort("force_ratio", NUM_FINGERS)
         self.normal_force_port = self.DeclareVectorInputPort("normal_force", NUM_FINGERS)
         self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", NUM_FINGERS)
+        self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
 
     def update(self, context) -> dict:
         normal = self.normal_force_port.Eval(context)
@@ -234,7 +236,9 @@ class FrictionEstimator(PeriodicSystem):
         steady &= self.approach_speed_port.Eval(context) <= STEADY_APPROACH_SPEED
         loaded = self.schedule.force_scale[self.schedule.index(context.get_time())] >= 1.0
         pushing = normal >= self.gains.friction_evidence_force
-        valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing
+        # Nothing while the box is pushed: 6 N pushes let slides read 0.65 in a world of 0.7.
+        pushed = self.reflex_port.Eval(context)[0] > 0.0
+        valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing & (not pushed)
         samples = np.where(valid, self.state(context, "slide_samples") + 1.0, 0.0)  # a slide ends: reset
         ratios = self.state(context, "slide_ratios").reshape(NUM_FINGERS, self._window)
         ratios = np.column_stack([ratios[:, 1:], self.force_ratio_port.Eval(context)])  # the last window, oldest first

@@ -276,6 +276,7 @@ def add_closed_loop(builder, plant, hand, box, controller: GraspController, conf
         (monitor, friction, "force_ratio"),
         (monitor, friction, "normal_force"),
         (monitor, friction, "approach_speed"),
+        (reflex, friction, "reflex"),
         (motion, mass, "contact_force"),
         (motion, mass, "acceleration"),
         (motion, reflex, "acceleration"),
