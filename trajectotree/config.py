@@ -495,6 +495,9 @@ class ControllerGains:
     # N, and push at least this hard: in Drake's lagged contact model lighter contacts slide below the world's
     # friction (8 nominal runs at mu 0.7: steady slides under 0.4 N read 0.32-0.68, above it 0.71)
     friction_evidence_force: float = 0.4
+    # m, and only while the box is this close to the plan (position, and theta error x the box's circumradius): slides
+    # of a box already off the plan read 0.26-0.38 in worlds of 0.3-0.4 (8 plans), the first ones 0.30-0.40
+    friction_evidence_error: float = 0.005
     friction_floor: float = 0.2  # 1, the friction estimate (only ever lowered, by slides) never goes below this
     mass_accel_max: float = 0.5  # m/s^2, the fingers' vertical force measures the mass while |box accel| < this
     mass_time_constant: float = 0.2  # s, low-pass time constant of the mass estimate
@@ -521,6 +524,7 @@ class ControllerGains:
         check_range("controller.slip_min_force", self.slip_min_force, 0.0, self.max_normal_force)
         check_range("controller.slip_confirm_time", self.slip_confirm_time, 0.0, 1.0)
         check_range("controller.friction_evidence_force", self.friction_evidence_force, 0.0, self.max_normal_force)
+        check_range("controller.friction_evidence_error", self.friction_evidence_error, 0.0, 1.0, low_open=True)
         check_range("controller.friction_floor", self.friction_floor, 0.0, 1.0, low_open=True)
         check_range("controller.mass_accel_max", self.mass_accel_max, 0.0, 100.0, low_open=True)
         check_range("controller.mass_time_constant", self.mass_time_constant, 0.0, 100.0, low_open=True)

@@ -202,21 +202,24 @@ class ObjectMonitor(PeriodicSystem):
 
 class FrictionEstimator(PeriodicSystem):
     """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (4 each,
-    ContactMonitor's) and `reflex` (1, PushReflex's). Output port `mu_estimate` (1): the
-    plan's friction `mu_plan` until a contact has slid steadily for gains.slip_confirm_time,
-    then the least median ratio |f_t| / f_n over such a slide's last slip_confirm_time, never
-    below gains.friction_floor and never raised.
-    A slide sample counts when no reflex is on, the plan loads the finger fully
-    (`schedule.force_scale` 1), it pushes with at least gains.friction_evidence_force, its
-    normal force changed by at most STEADY_NORMAL_FORCE since the last sample and its contact
-    neither opens nor closes faster than STEADY_APPROACH_SPEED: in Drake's lagged contact
-    model (friction bounded by the previous step's elastic normal force) a light contact, or
-    one whose penetration changes (a landing, a finger letting go, a sphere pressed over a
-    corner), slides at a ratio down to half the world's friction (a nominal run at mu 0.7
-    read 0.38 and 0.51 from such slides). The median, not the mean: single steady ratios
-    still lie up to 0.05 below or 0.02 above it."""
+    ContactMonitor's), `tracking_error` (3, ContactMonitor's) and `reflex` (1, PushReflex's).
+    Output port `mu_estimate` (1): the plan's friction `mu_plan` until a contact has slid
+    steadily for gains.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
+    slide's last slip_confirm_time, never below gains.friction_floor and never raised.
+    A slide sample counts while no reflex is on and the box is within
+    gains.friction_evidence_error of the plan (its position, and its angle times
+    `torque_length`), when the plan loads the finger fully (`schedule.force_scale` 1), it
+    pushes with at least gains.friction_evidence_force, its normal force changed by at most
+    STEADY_NORMAL_FORCE since the last sample and its contact neither opens nor closes faster
+    than STEADY_APPROACH_SPEED: in Drake's lagged contact model (friction bounded by the
+    previous step's elastic normal force) a light contact, or one whose penetration changes (a
+    landing, a finger letting go, a sphere pressed over a corner), slides at a ratio down to
+    half the world's friction (a nominal run at mu 0.7 read 0.38 and 0.51 from such slides),
+    and so do the contacts of a pushed box or one already off the plan (0.52-0.65 after 6 N
+    pushes at 0.7, 0.26-0.38 at 0.3-0.4). The median, not the mean: single steady ratios still
+    lie up to 0.05 below or 0.02 above it."""
 
-    def __init__(self, mu_plan: float, schedule: GraspSchedule, gains: ControllerGains):
+    def __init__(self, mu_plan: float, torque_length: float, schedule: GraspSchedule, gains: ControllerGains):
         period = 1.0 / gains.rate_hz
         # Samples in slip_confirm_time (at least one); a period's rounding must not drop one.
         self._window = max(int(np.floor(gains.slip_confirm_time / period + 1e-9)), 1)
@@ -229,6 +232,8 @@ class FrictionEstimator(PeriodicSystem):
         self.normal_force_port = self.DeclareVectorInputPort("normal_force", NUM_FINGERS)
         self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", NUM_FINGERS)
         self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
+        self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", 3)
+        self._scale = np.array([1.0, 1.0, torque_length])  # rad -> m at the box's rim
 
     def update(self, context) -> dict:
         normal = self.normal_force_port.Eval(context)
@@ -236,9 +241,9 @@ class FrictionEstimator(PeriodicSystem):
         steady &= self.approach_speed_port.Eval(context) <= STEADY_APPROACH_SPEED
         loaded = self.schedule.force_scale[self.schedule.index(context.get_time())] >= 1.0
         pushing = normal >= self.gains.friction_evidence_force
-        # Nothing while the box is pushed: 6 N pushes let slides read 0.65 in a world of 0.7.
         pushed = self.reflex_port.Eval(context)[0] > 0.0
-        valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing & (not pushed)
+        off = np.abs(self.tracking_error_port.Eval(context) * self._scale).max() > self.gains.friction_evidence_error
+        valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing & (not pushed) & (not off)
         samples = np.where(valid, self.state(context, "slide_samples") + 1.0, 0.0)  # a slide ends: reset
         ratios = self.state(context, "slide_ratios").reshape(NUM_FINGERS, self._window)
         ratios = np.column_stack([ratios[:, 1:], self.force_ratio_port.Eval(context)])  # the last window, oldest first

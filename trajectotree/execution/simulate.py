@@ -267,7 +267,8 @@ def add_closed_loop(builder, plant, hand, box, controller: GraspController, conf
     builder.Connect(plant.get_state_output_port(box), motion.box_state_port)
     builder.Connect(plant.get_generalized_contact_forces_output_port(box), motion.box_contact_forces_port)
     friction = builder.AddNamedSystem(
-        "friction_estimator", closed_loop.FrictionEstimator(scene.mu, controller.schedule, gains)
+        "friction_estimator",
+        closed_loop.FrictionEstimator(scene.mu, scene.shape.circumradius, controller.schedule, gains),
     )
     mass = builder.AddNamedSystem("mass_estimator", closed_loop.MassEstimator(scene.box_mass, scene.gravity, gains))
     reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene.gravity, gains))
@@ -277,6 +278,7 @@ def add_closed_loop(builder, plant, hand, box, controller: GraspController, conf
         (monitor, friction, "normal_force"),
         (monitor, friction, "approach_speed"),
         (reflex, friction, "reflex"),
+        (monitor, friction, "tracking_error"),
         (motion, mass, "contact_force"),
         (motion, mass, "acceleration"),
         (motion, reflex, "acceleration"),
