@@ -1,7 +1,7 @@
 """Shared fixtures. `resumed_sweep`: one small real sweep, killed mid-way and rerun,
 which the sweep tests (resume, seeds, Dask) and the report tests all read. `tiny_plan` and
 `timed_out_sweep`: the cheapest plan folder and sweep folder, made once for the tests that start
-from one. `shared_grasp_tables`: each scene's ranked initial-grasp table built once per session.
+from one. `shared_computations`: each scene's initial-grasp table and reach report, once per session.
 Test modules import the argument lists from here as `from conftest import ...` (tests/ is on
 sys.path under `pytest` and `python -m pytest` alike; the package `tests` is not)."""
 
@@ -16,58 +16,83 @@ from types import SimpleNamespace
 
 import pytest
 
-# Every command and search ranks the candidate initial grasps of its scene (trajectotree.search.initial_grasp,
-# ~0.2 s for the box's 2583), most of them of the default box: ~100 times in the quick suite. The table is a
-# pure function of the scene's config and three search settings, the key trajectotree.search.initial_grasp.GraspTables
-# shares one table by across goals; the tests share it likewise, across the session: each distinct table is
-# still built by the real code, once, and every caller (check_graspable, the search, payload, scene) still runs.
-# The tables are frozen values, so no test can change another's. A test of the ranking itself is marked
-# fresh_grasp_tables and builds its own; TRAJECTOTREE_TEST_FRESH_GRASP_TABLES=1 builds every table afresh.
-FRESH_GRASP_TABLES = bool(os.environ.get("TRAJECTOTREE_TEST_FRESH_GRASP_TABLES"))
-_grasp_tables = {"fresh": FRESH_GRASP_TABLES, "tables": {}}
+# Pure computations the tests share across the session. Every command and search ranks the candidate
+# initial grasps of its scene (trajectotree.search.initial_grasp, ~0.2 s for the box's 2583), most of them of
+# the default box: ~100 times in the quick suite; every `trajectotree scene` computes its report of the
+# object's reach (cli.scene_cmd.object_reach: the table, the payload LP over every grasp, the workspace over
+# 961 translations x 36 turns: ~1 s). Each is a function of the scene's config and the search settings alone:
+# the table of the key trajectotree.search.initial_grasp.GraspTables shares it by across goals, the report of
+# both configs whole. The tests share them likewise: each distinct one is still computed by the real code,
+# once, and every caller still runs; the values are frozen (the report's arrays only read), so no test can
+# change another's. A test of the ranking itself is marked fresh and computes its own;
+# TRAJECTOTREE_TEST_FRESH=1 makes every test do so.
+FRESH = bool(os.environ.get("TRAJECTOTREE_TEST_FRESH"))
+_shared = {"fresh": FRESH, "values": {}}
+
+
+def _share(module, name: str, key):
+    """module.name, its values shared by key(*args) (None or an unhashable key: not shared)."""
+    compute = getattr(module, name)
+
+    def shared(*args, **kwargs):
+        if kwargs:  # the callers pass positional arguments; anything else is not shared
+            return compute(*args, **kwargs)
+        k = key(*args)
+        try:
+            value = None if _shared["fresh"] or k is None else _shared["values"].get((name, k))
+        except TypeError:
+            k = None
+        if value is None:
+            value = compute(*args)
+            if not _shared["fresh"] and k is not None:
+                _shared["values"][name, k] = value
+        return value
+
+    setattr(module, name, shared)
+    return lambda: setattr(module, name, compute)
 
 
 @pytest.fixture(scope="session", autouse=True)
-def shared_grasp_tables():
+def shared_computations():
+    from trajectotree.cli import scene_cmd
     from trajectotree.search import initial_grasp
 
-    build = initial_grasp._build
-
-    def shared_build(scene, search, reach):
-        key = (scene.config, search.friction_safety, search.initial_grid_step, search.nominal_joint2)
-        try:
-            table = None if _grasp_tables["fresh"] else _grasp_tables["tables"].get(key)
-        except TypeError:  # an unhashable config value: no sharing
-            return build(scene, search, reach)
-        if table is None:
-            table = build(scene, search, reach)
-            if not _grasp_tables["fresh"]:
-                _grasp_tables["tables"][key] = table
-        return table
-
-    initial_grasp._build = shared_build
-    yield _grasp_tables["tables"]
-    initial_grasp._build = build
+    undo = [
+        _share(
+            initial_grasp,
+            "_build",
+            lambda scene, search, reach: (
+                scene.config,
+                search.friction_safety,
+                search.initial_grid_step,
+                search.nominal_joint2,
+            ),
+        ),
+        _share(scene_cmd, "object_reach", lambda scene, search: (scene.config, search)),
+    ]
+    yield _shared["values"]
+    for step in undo:
+        step()
 
 
 @pytest.fixture(autouse=True)
-def _fresh_grasp_tables(request):
-    """A test marked fresh_grasp_tables builds every table it asks for itself."""
-    if request.node.get_closest_marker("fresh_grasp_tables") is None:
+def _fresh(request):
+    """A test marked fresh computes every shared value it asks for itself."""
+    if request.node.get_closest_marker("fresh") is None:
         yield
         return
-    _grasp_tables["fresh"] = True
+    _shared["fresh"] = True
     yield
-    _grasp_tables["fresh"] = FRESH_GRASP_TABLES
+    _shared["fresh"] = FRESH
 
 
 # The cheapest plan: one transition segment (13 knots, 1.2 s), a small goal.
 TINY_PLAN = ["--goal", "0.1", "--segments", "1"]
 # A sweep whose trials hit the time limit before they plan (an interpreter with Drake takes
-# longer than 0.3 s to start): every trial an error row, quickly.
+# longer than 0.1 s to start): every trial an error row, quickly.
 TIMED_OUT_SWEEP = [
     *("--goals", "2", "--seed", "0", "--max-goal", "0.3", "--segments", "1", "--methods", "trajectotree"),
-    *("--time-limit", "0.3", "--workers", "2", "--no-progress"),
+    *("--time-limit", "0.1", "--workers", "2", "--no-progress"),
 ]
 
 

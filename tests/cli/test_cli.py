@@ -148,14 +148,14 @@ def test_report_names_an_unreadable_manifest_or_sim_npz(timed_out_sweep, capsys)
 
 def test_retry_errors_may_raise_the_time_limit(timed_out_sweep, capsys):
     sweep = timed_out_sweep
-    assert [r["error"] for r in read_rows(sweep)] == ["timeout: exceeded the trial time limit of 0.3 s"] * 2
-    raised = TIMED_OUT_SWEEP + ["--time-limit", "0.4"]  # the last one counts
+    assert [r["error"] for r in read_rows(sweep)] == ["timeout: exceeded the trial time limit of 0.1 s"] * 2
+    raised = TIMED_OUT_SWEEP + ["--time-limit", "0.2"]  # the last one counts
     assert main(["sweep", "--out", str(sweep), *raised]) == 0  # not --retry-errors: both skipped
     assert "0 now, 2 before" in capsys.readouterr().out
     assert main(["sweep", "--out", str(sweep), *raised, "--retry-errors"]) == 0
     assert "2 now, 0 before" in capsys.readouterr().out
-    assert [r["error"] for r in read_rows(sweep)] == ["timeout: exceeded the trial time limit of 0.4 s"] * 2
-    assert json.loads((sweep / "manifest.json").read_text())["time_limit_s"] == 0.4
+    assert [r["error"] for r in read_rows(sweep)] == ["timeout: exceeded the trial time limit of 0.2 s"] * 2
+    assert json.loads((sweep / "manifest.json").read_text())["time_limit_s"] == 0.2
 
 
 HOLD_LOCK = """

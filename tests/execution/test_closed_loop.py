@@ -232,7 +232,7 @@ def test_a_friction_floor_outside_0_1_is_refused(floor):
 def test_simulate_command_closed_loop(scene, tmp_path, capsys):
     """`simulate --closed-loop` records what the loop saw (sim.json's closed_loop, the arrays in
     sim.npz) and says it; without the option sim.json's closed_loop is null."""
-    from tests.execution.test_simulate import hold_plan_arrays, write_plan_dir
+    from test_simulate import hold_plan_arrays, write_plan_dir
 
     config = hold_config()
     plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), config)
@@ -261,7 +261,7 @@ def test_simulate_command_closed_loop(scene, tmp_path, capsys):
     ],
 )
 def test_simulate_command_refuses_bad_closed_loop_options(scene, tmp_path, capsys, options, named):
-    from tests.execution.test_simulate import hold_plan_arrays, write_plan_dir
+    from test_simulate import hold_plan_arrays, write_plan_dir
 
     plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(scene, 0.3), hold_config())
     assert main(["simulate", str(plan_dir), *options]) == 2

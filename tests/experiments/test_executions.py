@@ -144,7 +144,7 @@ def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
 @pytest.mark.slow
 def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path, capsys):
     """The same plans executed open and closed loop under a hard push: the report lists both."""
-    from tests.conftest import SMALL_SWEEP
+    from conftest import SMALL_SWEEP
 
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)

@@ -128,10 +128,21 @@ class _Piece:
     last: int = 1
 
 
+def assert_same_plan(other, serial):
+    for name in TRAJECTORY_ARRAYS:
+        np.testing.assert_array_equal(getattr(other.trajectory, name), getattr(serial.trajectory, name))
+    assert other.iterations == serial.iterations and other.cost == serial.cost
+
+
 def test_parallel_and_serial_solves_give_identical_arrays(scene, contact_plan, serial):
     parallel = plan(
         scene=scene, goal=GOAL, method="trajectotree", config=CONFIG, contact_plan=contact_plan, segment_workers=2
     )
+    assert_same_plan(parallel, serial)
+
+
+@pytest.mark.slow  # two more plans in worker processes (the quick suite solves in parallel above)
+def test_a_given_executor_reused_across_plans_gives_identical_arrays(scene, contact_plan, serial):
     with local_pool(2) as pool:  # a given executor, reused across plans
         given = [
             plan(
@@ -144,10 +155,8 @@ def test_parallel_and_serial_solves_give_identical_arrays(scene, contact_plan, s
             )
             for _ in range(2)
         ]
-    for other in (parallel, *given):
-        for name in TRAJECTORY_ARRAYS:
-            np.testing.assert_array_equal(getattr(other.trajectory, name), getattr(serial.trajectory, name))
-        assert other.iterations == serial.iterations and other.cost == serial.cost
+    for other in given:
+        assert_same_plan(other, serial)
 
 
 @pytest.mark.slow

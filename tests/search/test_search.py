@@ -112,7 +112,7 @@ def test_non_default_box_and_friction(small_slippery_scene, goal):
     check_plan(small_slippery_scene, plan, config)
 
 
-@pytest.mark.fresh_grasp_tables
+@pytest.mark.fresh
 def test_initial_grasp_candidates(scene):
     config = SearchConfig()
     table = initial_grasp_candidates(scene, config)
