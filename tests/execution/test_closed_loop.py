@@ -77,14 +77,20 @@ def tip_travel_along_the_box(scene, result) -> np.ndarray:
     return np.abs(p_B[-1] - p_B[0]).max(axis=1)
 
 
-def test_a_three_finger_hold_at_lowered_friction_reports_the_slipping_finger(scene):
-    """Fingers 0, 2, 3 hold the box at friction 0.45 while the controller keeps the plan's cones
-    (the friction estimate's floor at the plan's 0.7, so the estimate cannot act): finger 2's
-    contact slides along the top face, the watch says so, and only for finger 2."""
+@pytest.fixture(scope="module")
+def slipping_run(scene):
+    """0.6 s of fingers 0, 2, 3 holding the box at friction 0.45 while the controller keeps the
+    plan's cones (the friction estimate's floor at the plan's 0.7, so the estimate cannot act)."""
     reference = three_finger_hold(scene, lifted=1)
-    result = simulate_reference(
+    return simulate_reference(
         reference, hold_config(friction_floor=0.7), conditions=Conditions(mu=0.45), closed_loop=True
     )
+
+
+def test_a_three_finger_hold_at_lowered_friction_reports_the_slipping_finger(scene, slipping_run):
+    """slipping_run: finger 2's contact slides along the top face, the watch says so, and only
+    for finger 2."""
+    result = slipping_run
     watch = result.closed_loop
     assert watch is not None and not result.dropped
     dt = result.t[1] - result.t[0]
@@ -185,15 +191,10 @@ def test_open_loop_runs_are_unchanged_bit_for_bit(scene):
     assert not names & {"contact_monitor", "object_monitor", "friction_estimator", "mass_estimator", "push_reflex"}
 
 
-def test_closed_loop_files_round_trip_and_the_forces_figure_marks_slips(scene, tmp_path):
+def test_closed_loop_files_round_trip_and_the_forces_figure_marks_slips(slipping_run, tmp_path):
     from trajectotree.figures.run import figure_finger_forces, slip_intervals
 
-    result = simulate_reference(
-        three_finger_hold(scene, 1, duration=0.3),
-        hold_config(friction_floor=0.7),
-        conditions=Conditions(mu=0.45),
-        closed_loop=True,
-    )
+    result = slipping_run
     save_sim(result, tmp_path)
     with np.load(tmp_path / "sim.npz") as data:
         assert set(CLOSED_LOOP_ARRAYS) <= set(data.files)
