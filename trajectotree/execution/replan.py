@@ -56,9 +56,7 @@ def node_times(plan: PlanResult, start_s: float) -> np.ndarray:
 def replan_reason(execution, context, plan: PlanResult, config: Config) -> ReplanReason | None:
     """Why the plan no longer holds, from the closed loop's outputs at this moment (None: it holds)."""
     value = {
-        name: execution.diagram.GetSubsystemByName(system)
-        .GetOutputPort(name)
-        .Eval(execution.diagram.GetSubsystemByName(system).GetMyContextFromRoot(context))
+        name: closed_loop_output(execution, context, system, name)
         for system, name in (
             ("friction_estimator", "mu_estimate"),
             ("mass_estimator", "mass_estimate"),
@@ -80,13 +78,18 @@ def replan_reason(execution, context, plan: PlanResult, config: Config) -> Repla
     return None
 
 
+def closed_loop_output(execution, context, system: str, port: str) -> np.ndarray:
+    """The value of the closed-loop `system`'s output `port` (trajectotree.execution.closed_loop) now."""
+    sub = execution.diagram.GetSubsystemByName(system)
+    return sub.GetOutputPort(port).Eval(sub.GetMyContextFromRoot(context))
+
+
 def estimates(execution, context) -> tuple[float, float]:
     """(friction, mass kg) as the closed loop estimates them now."""
-    out = []
-    for system, name in (("friction_estimator", "mu_estimate"), ("mass_estimator", "mass_estimate")):
-        sub = execution.diagram.GetSubsystemByName(system)
-        out.append(float(sub.GetOutputPort(name).Eval(sub.GetMyContextFromRoot(context))[0]))
-    return out[0], out[1]
+    return (
+        float(closed_loop_output(execution, context, "friction_estimator", "mu_estimate")[0]),
+        float(closed_loop_output(execution, context, "mass_estimator", "mass_estimate")[0]),
+    )
 
 
 def measured_start(execution, context) -> StartState:
@@ -191,10 +194,8 @@ def simulate_replanning(
 
 def _joined(logs: list[SimLog], reference: Reference, sim_time_s: float) -> SimLog:
     """The phases' logs as one run: each phase's samples before the next one begins."""
-    pieces = []
-    for k, log in enumerate(logs):
-        end = logs[k + 1].t[0] if k + 1 < len(logs) else np.inf
-        pieces.append(log.t < end - 1e-9 if k + 1 < len(logs) else np.ones(len(log.t), bool))
+    ends = [nxt.t[0] - 1e-9 for nxt in logs[1:]] + [np.inf]
+    pieces = [log.t < end for log, end in zip(logs, ends)]
     t = np.concatenate([log.t[keep] for log, keep in zip(logs, pieces)])
     closed = None
     if logs[0].closed_loop is not None:
