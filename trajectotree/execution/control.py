@@ -327,7 +327,7 @@ class GraspController(LeafSystem):
         the face as the box turns, and with the planned points instead, 2 mm of rolling
         under 1 N grips left a slow in-grasp turn 0.03 rad behind. The normals too are
         the object's at those points (the box's: its faces'), not the planned contacts':
-        on a disc, spheres that rolled 20-30 deg around it from their planned contacts
+        on a disc, spheres that rolled 15-30 deg around it from their planned contacts
         left the planned normals that far off, the QP credited the squeeze with a torque
         a disc's normals cannot make, squeezed to 3 N and let go (4 of 12 disc goals
         dropped). In closed loop (`estimates`), `joints` = (J_WF (4, 2, 2), the other
