@@ -510,6 +510,13 @@ class ControllerGains:
     reflex_gain: float = 4.0  # 1, object_kp x this during the reflex (object_kd x its square root)
     reflex_hold: float = 0.2  # s, the reflex stays on this long after its trigger ends
     reflex_release: float = 0.2  # s, then fades back to the plan's gains and squeeze over this
+    # 1, the fraction of the measured disturbance (PushReflex's) that the desired box wrench cancels, at once
+    disturbance_feedforward: float = 1.0
+    # 1, the grasp QP's weight on the box torque residual x this during the reflex: a grasp that cannot oppose a push
+    # gives way along it rather than turn the box
+    reflex_torque_weight: float = 10.0
+    # 1, the grasp QP's cones at max(friction_safety, this) x the friction estimate during the reflex
+    reflex_friction_safety: float = 1.0
 
     def __post_init__(self):
         check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
@@ -538,6 +545,9 @@ class ControllerGains:
         check_range("controller.reflex_gain", self.reflex_gain, 1.0, 100.0)
         check_range("controller.reflex_hold", self.reflex_hold, 0.0, 10.0)
         check_range("controller.reflex_release", self.reflex_release, 0.0, 10.0)
+        check_range("controller.disturbance_feedforward", self.disturbance_feedforward, 0.0, 1.0)
+        check_range("controller.reflex_torque_weight", self.reflex_torque_weight, 1.0, 1e4)
+        check_range("controller.reflex_friction_safety", self.reflex_friction_safety, 0.0, 1.0, low_open=True)
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20

@@ -30,7 +30,7 @@ measured box inject tangential force as the spheres roll and lose the grasp.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
@@ -176,13 +176,14 @@ class GraspForceQp:
             )
             self._mu = mu
 
-    def solve(self, G, wrench, lambda_plan, lo, hi, torque=None) -> np.ndarray:
+    def solve(self, G, wrench, lambda_plan, lo, hi, torque=None, torque_weight: float = 1.0) -> np.ndarray:
         """lambda (4, 2) for the grasp matrix G (3, 8), the wrench w (3,), the plan's
         lambda (4, 2) and the normal-force bounds lo, hi (4,); `torque` (A (8, 8), lower (8,),
-        upper (8,)): lower <= A lambda <= upper (a QP built with torque_rows). Falls back to
+        upper (8,)): lower <= A lambda <= upper (a QP built with torque_rows); `torque_weight`
+        multiplies the weight of the torque residual. Falls back to
         the plan's forces, clipped to the bounds, if OSQP fails."""
         z_plan = lambda_plan.ravel()
-        GtW = G.T @ self._W
+        GtW = G.T @ (self._W if torque_weight == 1.0 else self._W @ np.diag([1.0, 1.0, torque_weight]))
         self._cost.evaluator().UpdateCoefficients(
             2.0 * (GtW @ G + self._identity), -2.0 * (GtW @ wrench + z_plan), 0.0, True
         )
@@ -213,6 +214,8 @@ class Estimates:
     mu: float  # the friction coefficient estimate (the QP's cones: this x the controller's safety factor)
     mass: float  # kg, the box mass estimate (the desired wrench's gravity and inertia)
     reflex: float  # 0..1, the push reflex (squeeze and object gains raised in proportion)
+    # (2,) N in W, the force on the box that its contacts and gravity do not explain (the desired wrench cancels it)
+    disturbance: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 def torque_rows(
@@ -277,6 +280,7 @@ class GraspController(LeafSystem):
             self.mu_estimate_port = self.DeclareVectorInputPort("mu_estimate", 1)
             self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
             self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
+            self.disturbance_port = self.DeclareVectorInputPort("disturbance", 2)
         state = self.DeclareDiscreteState(B.shape[1])
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
@@ -290,6 +294,7 @@ class GraspController(LeafSystem):
             mu=float(self.mu_estimate_port.Eval(context)[0]),
             mass=float(self.mass_estimate_port.Eval(context)[0]),
             reflex=float(self.reflex_port.Eval(context)[0]),
+            disturbance=np.array(self.disturbance_port.Eval(context)),
         )
 
     def UpdateActuation(self, context, discrete_state):
@@ -316,7 +321,10 @@ class GraspController(LeafSystem):
             mass, inertia = estimates.mass, self._shape.inertia(estimates.mass)
             kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
         a = s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
-        return np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
+        wrench = np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
+        if estimates is not None:
+            wrench[:2] -= g.disturbance_feedforward * estimates.disturbance
+        return wrench
 
     def finger_forces(
         self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None
@@ -350,7 +358,8 @@ class GraspController(LeafSystem):
             A, lower, upper, room = torque_rows(J_WF, n_W, t_W, self._tip_radius, rest, self._tau_max)
             squeeze = g.min_normal_force + estimates.reflex * max(g.reflex_squeeze - g.min_normal_force, 0.0)
             hi = scale * g.max_normal_force
-            self._qp.set_friction(self._friction_safety * estimates.mu)
+            safety = self._friction_safety + estimates.reflex * max(g.reflex_friction_safety - self._friction_safety, 0.0)
+            self._qp.set_friction(safety * estimates.mu)
             lam = self._qp.solve(
                 G,
                 self.desired_wrench(n, box_state, estimates),
@@ -358,6 +367,7 @@ class GraspController(LeafSystem):
                 np.minimum(scale * squeeze, np.minimum(room, hi)),  # a squeeze the motors can make
                 hi,
                 torque=(A, lower, upper),
+                torque_weight=1.0 + estimates.reflex * (g.reflex_torque_weight - 1.0),
             )
         return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
 

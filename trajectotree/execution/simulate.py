@@ -287,6 +287,7 @@ def add_closed_loop(builder, plant, hand, box, controller: GraspController, conf
         (friction, controller, "mu_estimate"),
         (mass, controller, "mass_estimate"),
         (reflex, controller, "reflex"),
+        (reflex, controller, "disturbance"),
     ):
         builder.Connect(source.GetOutputPort(name), target.GetInputPort(name))
     logged = {name: monitor.GetOutputPort(name) for name in ClosedLoopLog.MONITOR_ARRAYS}
