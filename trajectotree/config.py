@@ -506,7 +506,10 @@ class ControllerGains:
     # the reflex when it lasts reflex_confirm_time
     reflex_force: float = 1.0
     reflex_confirm_time: float = 0.004  # s
-    reflex_squeeze: float = 2.0  # N, least push of each holding finger during the reflex (<= max_normal_force)
+    # N, during the reflex the grasp QP's target push of each holding finger rises to this (<= max_normal_force): a
+    # target, not a bound, for a finger whose face turns along the push would push the box with it (a bound of 2 N
+    # cost a 3-finger grasp 1.3 N of its 3.6 N against a +x push, and the box)
+    reflex_squeeze: float = 2.0
     reflex_gain: float = 4.0  # 1, object_kp x this during the reflex (object_kd x its square root)
     reflex_hold: float = 0.2  # s, the reflex stays on this long after its trigger ends
     reflex_release: float = 0.2  # s, then fades back to the plan's gains and squeeze over this

@@ -360,11 +360,14 @@ class GraspController(LeafSystem):
             hi = scale * g.max_normal_force
             safety = self._friction_safety + estimates.reflex * max(g.reflex_friction_safety - self._friction_safety, 0.0)
             self._qp.set_friction(safety * estimates.mu)
+            # The squeeze the motors can make is the QP's target push, its least the plan's.
+            target = s.lambda_plan[n].copy()
+            target[:, 0] = np.maximum(target[:, 0], np.minimum(scale * squeeze, np.minimum(room, hi)))
             lam = self._qp.solve(
                 G,
                 self.desired_wrench(n, box_state, estimates),
-                s.lambda_plan[n],
-                np.minimum(scale * squeeze, np.minimum(room, hi)),  # a squeeze the motors can make
+                target,
+                np.minimum(scale * g.min_normal_force, np.minimum(room, hi)),
                 hi,
                 torque=(A, lower, upper),
                 torque_weight=1.0 + estimates.reflex * (g.reflex_torque_weight - 1.0),
