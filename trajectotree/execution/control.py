@@ -358,7 +358,9 @@ class GraspController(LeafSystem):
             A, lower, upper, room = torque_rows(J_WF, n_W, t_W, self._tip_radius, rest, self._tau_max)
             squeeze = g.min_normal_force + estimates.reflex * max(g.reflex_squeeze - g.min_normal_force, 0.0)
             hi = scale * g.max_normal_force
-            safety = self._friction_safety + estimates.reflex * max(g.reflex_friction_safety - self._friction_safety, 0.0)
+            safety = self._friction_safety + estimates.reflex * max(
+                g.reflex_friction_safety - self._friction_safety, 0.0
+            )
             self._qp.set_friction(safety * estimates.mu)
             # The squeeze the motors can make is the QP's target push, its least the plan's.
             target = s.lambda_plan[n].copy()
