@@ -187,6 +187,27 @@ def test_the_reflex_holds_a_three_finger_grasp_against_a_push_it_would_give_way_
     assert error(gave_way)[0] > 0.005, error(gave_way)
 
 
+@pytest.mark.slow
+def test_a_planned_goal_pushed_mid_segment_with_3_n_is_held_closed_loop():
+    """Goal 2.2 pushed along +x with 3 N for 0.2 s in the middle of its middle segment (finger 1
+    mid-swing, the three others holding), as the sweep's push-3N condition does: the closed loop
+    holds it and ends on the goal (main's reflex, squeeze and gains alone, lost the box)."""
+    from trajectotree.experiments.executions import middle_of_middle_segment
+    from trajectotree.planning.planners import plan
+
+    result = plan(goal=2.2)
+    assert result.success, result.status
+    config = result.config
+    start = middle_of_middle_segment(config, float(result.trajectory.t[-1]))
+    push = Push(force=(3.0, 0.0), time_s=start, duration_s=config.sim.push_duration)
+    run = run_simulation(plan=result, push=push, closed_loop=True)
+    assert not run.dropped
+    assert run.closed_loop.reflex[(run.t > start + 0.01) & (run.t < start + push.duration_s)].min() == 1.0
+    assert run.final_error[2] < np.radians(3.0)
+    pushed = (run.t >= start) & (run.t < start + 0.5)
+    assert np.abs(run.x - run.x_plan)[pushed, 0].max() < 0.01  # it gives way by millimetres, not centimetres
+
+
 def test_open_loop_runs_are_unchanged_bit_for_bit(scene):
     """With the closed loop off, a run is the one main made before the closed loop existed
     (tests/execution/data/open_loop_hold.npz: main at 816ba79, a three-finger hold at friction
