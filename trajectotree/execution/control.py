@@ -248,13 +248,19 @@ class GraspController(LeafSystem):
     """Object-level grasp control of a planned box motion (see the module doc).
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
     joint) and `hand_state` (16: the hand's [q; v]); with closed_loop also `mu_estimate`,
-    `mass_estimate` and `reflex` (1 each, trajectotree.execution.closed_loop). Output port:
+    `mass_estimate`, `reflex` (1 each) and `disturbance` (2, N in W; all
+    trajectotree.execution.closed_loop). Output port:
     `actuation` (8, the plant's actuation order), updated every 1 / gains.rate_hz s and held
     in between. In open loop `mass` is the plan's and `mu` the friction its QP's cones allow
     (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated
     plant's; in closed loop the cones are at mu x mu_estimate / scene.mu (the same safety
-    factor on the estimate), the wrench uses the estimated mass, the reflex raises the
-    squeeze and the object gains, and the QP keeps the joint torques within the motors'."""
+    factor on the estimate), the wrench uses the estimated mass and cancels the measured
+    disturbance at once, and the QP keeps the joint torques within the motors'. The reflex
+    raises the object gains and the QP's target squeeze (a target, not a bound), puts its
+    cones at reflex_friction_safety x the estimate and weights its torque residual by
+    reflex_torque_weight: a three-finger grasp that barely opposes a push then spends what it
+    has on the push without turning the box (each turn of the box is a grasp the plan never
+    checked)."""
 
     def __init__(
         self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float, closed_loop: bool = False
