@@ -372,15 +372,15 @@ class GraspController(LeafSystem):
         else:
             J_WF, rest = joints
             A, lower, upper, room = torque_rows(J_WF, n_W, t_W, self._tip_radius, rest, self._tau_max)
-            squeeze = g.min_normal_force + estimates.reflex * max(g.reflex_squeeze - g.min_normal_force, 0.0)
             hi = scale * g.max_normal_force
             safety = self._friction_safety + estimates.reflex * max(
                 g.reflex_friction_safety - self._friction_safety, 0.0
             )
             self._qp.set_friction(safety * estimates.mu)
-            # The squeeze the motors can make is the QP's target push, its least the plan's.
+            # During the reflex the squeeze the motors can make is the QP's target push, its least the plan's.
             target = s.lambda_plan[n].copy()
-            target[:, 0] = np.maximum(target[:, 0], np.minimum(scale * squeeze, np.minimum(room, hi)))
+            squeeze = estimates.reflex * np.minimum(scale * g.reflex_squeeze, np.minimum(room, hi))
+            target[:, 0] = np.maximum(target[:, 0], squeeze)
             lam = self._qp.solve(
                 G,
                 self.desired_wrench(n, box_state, estimates),
