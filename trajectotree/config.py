@@ -564,6 +564,9 @@ class ReplanConfig:
     friction_drop: float = 0.05  # the friction estimate this far below the plan's scene.mu: its stances may slip
     mass_change: float = 0.2  # 1, a mass estimate this far (relative) from the plan's: its forces are wrong
     max_replans: int = 4  # per run, so a task the hand cannot do ends rather than replans forever
+    # s, wall-clock budget of a replan's contact search (its search.time_budget_s): the hand holds while it
+    # runs, and a search without a plan by then is refused (the old plan goes on)
+    search_deadline_s: float = 0.5
 
     def __post_init__(self):
         check_range("sim.replan.theta_error", self.theta_error, 0.0, math.pi, low_open=True)
@@ -571,6 +574,7 @@ class ReplanConfig:
         check_range("sim.replan.friction_drop", self.friction_drop, 0.0, 1.0, low_open=True)
         check_range("sim.replan.mass_change", self.mass_change, 0.0, 10.0, low_open=True)
         check_integer("sim.replan.max_replans", self.max_replans, 0, 100)
+        check_range("sim.replan.search_deadline_s", self.search_deadline_s, 0.0, 60.0, low_open=True)
 
 
 @dataclass(frozen=True)

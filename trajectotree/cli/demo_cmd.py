@@ -122,7 +122,7 @@ def run(args) -> int:
     from trajectotree.cli.search_cmd import draw_plan
     from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
     from trajectotree.execution.playback import object_noun, start_meshcat
-    from trajectotree.execution.simulate import run_simulation
+    from trajectotree.execution.run import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
     from trajectotree.io import save_plan, save_sim, write_json_atomic
     from trajectotree.planning.planners import plan

@@ -167,7 +167,7 @@ class ExecutionTask:
 def execute(task: ExecutionTask) -> dict:
     """Loads the trial's plan, executes it, writes sim.json + sim.npz into its execution
     folder; returns sim.json's content (with the trial folder, controller and condition)."""
-    from trajectotree.execution.simulate import run_simulation
+    from trajectotree.execution.run import run_simulation
     from trajectotree.io import load_plan, save_sim
 
     plan = load_plan(task.trial_dir)

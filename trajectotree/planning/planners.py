@@ -64,6 +64,7 @@ def plan(
     segment_workers: int | None = None,
     grasp_tables: GraspTables | None = None,
     log_observer: LogObserver | None = None,
+    first_segment_first: bool = False,
 ) -> PlanResult:
     """Plans `goal` for the object with `method` ("trajectotree", "cito" or "cito-warm"): a
     rotation (rad in W, any number within +-20 pi: 2 pi is a full turn; the object keeps its
@@ -82,9 +83,21 @@ def plan(
     `segment_workers` local processes (1: serially in this process, as a sweep's trial
     does; None: one per segment, at most one per core). `grasp_tables` keeps the ranked
     initial grasps for the next plan (without it the search ranks them, inside its time);
-    `log_observer` watches each IPOPT solve run in this process (cito.solve.solve)."""
+    `log_observer` watches each IPOPT solve run in this process (cito.solve.solve).
+    `first_segment_first` (TrajectoTree's keyframes formulation only; a plan executed while it is
+    solved, as replanning does) solves segment 0 before the others and records in the result's
+    segment_ready_s when each segment was ready, counted from this call
+    (keyframes.solve_first_segment_first)."""
+    called = time.perf_counter()
     check_method(method)
     config = config or Config()
+    if first_segment_first and (method != "trajectotree" or config.cito.formulation != "keyframes"):
+        raise ConfigError(
+            field="cito.formulation",
+            value=config.cito.formulation if method == "trajectotree" else method,
+            problem=": a first-segment-first plan is TrajectoTree's keyframes formulation's",
+            choices=("keyframes",),
+        )
     goal = check_goal(config.goal if goal is None else goal)
     scene = scene or build_scene(config.scene)
     if start is not None:
@@ -123,6 +136,8 @@ def plan(
             executor=segment_executor,
             workers=segment_workers,
             log_observer=log_observer,
+            first_segment_first=first_segment_first,
+            since=called,
         )
     t0 = time.perf_counter()
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
