@@ -51,7 +51,8 @@ def replanning(results: list, sim_mu: float) -> None:
                     f"{r:.2f}" for r in e.segment_ready_s
                 )
             print(
-                f"  t {e.time_s:5.2f} s {e.reason.name.lower():9s} mu {e.mu:.3f} latency {e.latency_s:5.3f} s: "
+                f"  t {e.time_s:5.2f} s {e.reason.name.lower():9s} mu {e.mu:.3f} latency {e.latency_s:5.3f} s "
+                f"(search {e.search_s:.3f} s): "
                 f"{e.outcome.name.lower()}{holds}" + ("" if e.planned else f" ({e.status[:80]})")
             )
     print(f"{drops} of {len(results)} dropped at sim mu {sim_mu:g}")

@@ -273,6 +273,7 @@ class ReplanEvent:
     # earlier); () when no plan came back
     segment_ready_s: tuple[float, ...] = ()
     compute_s: float = float("nan")  # s, wall-clock time of the whole replan (every segment of a new plan)
+    search_s: float = float("nan")  # s, of latency_s, the contact search's (nan: none ran)
 
     @property
     def planned(self) -> bool:
@@ -293,6 +294,7 @@ class ReplanEvent:
             "refusal": None if self.refusal is None else self.refusal.to_json(),
             "segment_ready_s": [t if math.isfinite(t) else None for t in self.segment_ready_s],
             "compute_s": self.compute_s if math.isfinite(self.compute_s) else None,
+            "search_s": self.search_s if math.isfinite(self.search_s) else None,
         }
 
 

@@ -2,15 +2,19 @@
 estimates decide whether to plan again from the measured state; the run is one continuous log."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 
-from trajectotree.config import Config, ReplanConfig
-from trajectotree.execution.replan import simulate_replanning
+from trajectotree.config import Config, ConfigError, ReplanConfig
+from trajectotree.execution.reference import Reference
+from trajectotree.execution.replan import Phase, delayed, out_of_time, scheduled, simulate_replanning
 from trajectotree.execution.simulate import Conditions
 from trajectotree.planning.planners import plan
-from trajectotree.results import ReplanReason
+from trajectotree.refusal import AtRoot, NoPlan, OnGrids, Refusal, RefusalKind
+from trajectotree.results import ReplanEvent, ReplanOutcome, ReplanReason
+from trajectotree.start import StartProblem, StartRefusal
 
 
 @pytest.mark.slow
@@ -29,3 +33,72 @@ def test_a_world_with_less_friction_replans_from_the_measured_state_with_the_est
     assert event.time_s / 1.2 == pytest.approx(round(event.time_s / 1.2))
     assert np.all(np.diff(run.t) > 0) and run.t[-1] >= result.trajectory.t[-1]  # one log over the whole run
     assert run.to_json()["replans"][0]["reason"] == "friction"
+
+
+def line_reference(segments: int, knots_per_segment: int = 3, dt: float = 0.1) -> Reference:
+    """A reference whose object x is its knot index (fingertips and forces likewise), at rest at the nodes."""
+    k = np.arange(segments * knots_per_segment + 1, dtype=float)
+    zeros4 = np.zeros((len(k), 4, 2))
+    return Reference(
+        t=k * dt,
+        x=np.column_stack([k, np.zeros_like(k), np.zeros_like(k)]),
+        q=np.tile(k[:, None], (1, 8)),
+        p_WF=zeros4 + k[:, None, None],
+        v_WF=zeros4,
+        f_W=zeros4 + 1.0,
+        xdot=np.zeros((len(k), 3)),
+    )
+
+
+def test_a_segment_begins_no_earlier_than_it_is_ready_the_hand_holding_its_node():
+    new = line_reference(3)  # segments of 0.3 s: nodes at knots 0, 3, 6, 9
+    held, arrivals = scheduled(new, 3, [0.0, 0.1, 1.0])  # segment 2 ready 0.4 s after node 2 is reached
+    np.testing.assert_allclose(arrivals, [0.0, 0.3, 0.6, 1.3])
+    i = np.searchsorted(held.t, 0.6)
+    np.testing.assert_allclose(held.t[i : i + 2], [0.6, 1.0])  # node 2 (knot 6) held from 0.6 s to 1.0 s
+    np.testing.assert_array_equal(held.x[i : i + 2, 0], [6.0, 6.0])
+    np.testing.assert_allclose(held.object_pose_at([0.8])[0], [6.0, 0.0, 0.0])
+    np.testing.assert_allclose(held.object_pose_at([1.15])[0, 0], 7.5)  # then segment 2 as planned, 0.4 s late
+    assert np.all(np.diff(held.t) > 0)
+
+
+def test_a_plan_is_executed_up_to_its_first_segment_that_never_is_ready():
+    held, arrivals = scheduled(line_reference(3), 3, [0.0, 0.2, np.inf])
+    np.testing.assert_allclose(arrivals, [0.0, 0.3, 0.6])
+    assert held.x[-1, 0] == 6.0 and held.t[-1] == pytest.approx(0.6)
+
+
+def test_the_old_plan_resumes_after_the_hold_while_the_planner_ran():
+    old = line_reference(3)
+    later = delayed(old, 0.3, 0.25)  # held at node 1 while a replan that gave nothing ran 0.25 s
+    np.testing.assert_allclose(later.object_pose_at([0.2, 0.3, 0.45, 0.55, 0.65])[:, 0], [2, 3, 3, 3, 4])
+    assert later.duration == pytest.approx(old.duration + 0.25)
+    assert Phase((0.3, 0.6), 0.9).after(0.3, 0.25) == Phase((0.85,), 1.15)
+
+
+def test_a_replan_without_a_plan_says_why_as_a_type_and_as_text():
+    deadline = Refusal(RefusalKind.TIME_BUDGET, limit=0.5)
+    grid = NoPlan(1, 1, 0, None, AtRoot((0.0, 0.1, 0.2, 0.3), deadline), 0.27, ())
+    assert out_of_time(deadline) and out_of_time(grid) and out_of_time(OnGrids(((0.02, grid),)))
+    assert not out_of_time(Refusal(RefusalKind.TREE_EXHAUSTED, count=10))
+    event = ReplanEvent(2.4, ReplanReason.FRICTION, 0.39, 0.05, 0.5, 2.9, ReplanOutcome.SEARCH_DEADLINE, str(grid))
+    event = dataclasses.replace(event, refusal=grid)
+    saved = event.to_json()
+    assert not event.planned and saved["planned"] is False and saved["outcome"] == "search_deadline"
+    assert saved["refusal"]["kind"] == "no_plan" and "time budget exhausted (0.5 s)" in saved["status"]
+    start = StartRefusal(StartProblem.MOVING, value=0.98, limit=0.1)
+    assert dataclasses.replace(event, refusal=start).to_json()["refusal"] == {
+        "kind": "start",
+        "problem": "moving",
+        "value": 0.98,
+        "limit": 0.1,
+    }
+    json.dumps(saved, allow_nan=False)  # sim.json has no NaN
+
+
+@pytest.mark.parametrize(
+    "field, value", [("theta_error", 0.0), ("position_error", -0.001), ("friction_drop", 0.0), ("search_deadline_s", 0)]
+)
+def test_a_replan_threshold_at_or_below_zero_is_refused(field, value):
+    with pytest.raises(ConfigError, match=rf"sim.replan.{field} = .* is out of range; valid range: \(0"):
+        ReplanConfig(**{field: value})

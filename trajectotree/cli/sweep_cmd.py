@@ -62,6 +62,12 @@ def register(subparsers) -> None:
         "grasp executions, so run the sweep with and without this option to compare",
     )
     p.add_argument(
+        "--replan",
+        action="store_true",
+        help="run those executions with the closed loop replanning from the measured state when the plan no "
+        "longer holds (sim.replan; implies --closed-loop); listed as grasp-replan",
+    )
+    p.add_argument(
         "--out",
         default="sweep",
         metavar="DIR",
@@ -118,9 +124,9 @@ def run(args) -> int:
     check_graspable(build_scene(spec.config.scene), spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
-    if (conditions or args.closed_loop) and not controllers:
+    if (conditions or args.closed_loop or args.replan) and not controllers:
         controllers = [spec.config.sim.controller]
-    check_closed_loop_controllers(controllers, args.closed_loop)
+    check_closed_loop_controllers(controllers, args.closed_loop, args.replan)
     summary = run_sweep(
         spec,
         args.out,
@@ -138,6 +144,7 @@ def run(args) -> int:
             gains=spec.config.controller,
             sim=spec.config.sim,
             closed_loop=args.closed_loop,
+            replan=args.replan,
             workers=args.workers,
             progress=not args.no_progress,
         )
@@ -149,8 +156,9 @@ def run(args) -> int:
     else:
         print(summary.line())
         if ran is not None:
+            loop = " closed loop, replanning" if args.replan else " closed loop" if args.closed_loop else ""
             print(
-                f"executions: {ran} run ({' '.join(controllers)}{' closed loop' if args.closed_loop else ''} x "
+                f"executions: {ran} run ({' '.join(controllers)}{loop} x "
                 f"{' '.join(conditions or ['nominal'])}); "
                 "the report tabulates them in executions.md"
             )

@@ -321,17 +321,17 @@ def replan(
         late = new.search_time_s >= rules.search_deadline_s or out_of_time(searched.refusal)
         outcome = ReplanOutcome.SEARCH_DEADLINE if late else ReplanOutcome.NO_PLAN
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
-        return dataclasses.replace(event, refusal=searched.refusal, compute_s=total), None
+        return dataclasses.replace(event, refusal=searched.refusal, compute_s=total, search_s=new.search_time_s), None
     ready = new.segment_ready_s if first_first else (total,) * (len(searched.nodes) - 1)
     # the joint formulation is one program: none of a failed one is executed
     if new.trajectory is None or not np.isfinite(ready[0]) or not (first_first or new.success):
         event = ReplanEvent(
             t_switch, reason, mu, mass, total, t_switch + total, ReplanOutcome.FIRST_SEGMENT_FAILED, new.status
         )
-        return dataclasses.replace(event, compute_s=total), None
+        return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None
     outcome = ReplanOutcome.PLANNED if new.success else ReplanOutcome.PARTIAL
     event = ReplanEvent(t_switch, reason, mu, mass, ready[0], t_switch + ready[0], outcome, new.status)
-    return dataclasses.replace(event, segment_ready_s=tuple(ready), compute_s=total), new
+    return dataclasses.replace(event, segment_ready_s=tuple(ready), compute_s=total, search_s=new.search_time_s), new
 
 
 def out_of_time(refusal) -> bool:
