@@ -102,3 +102,85 @@ def test_a_replan_without_a_plan_says_why_as_a_type_and_as_text():
 def test_a_replan_threshold_at_or_below_zero_is_refused(field, value):
     with pytest.raises(ConfigError, match=rf"sim.replan.{field} = .* is out of range; valid range: \(0"):
         ReplanConfig(**{field: value})
+
+
+@pytest.fixture(scope="module")
+def moved_start():
+    """Node 4 of the search's plan for 0.9 rad, the object 5 mm right and 0.1 rad further turned and the
+    fingers re-solved onto the same contacts: a state measured off the plan."""
+    from trajectotree.cito.hand import HandModel
+    from trajectotree.geometry import box_to_world, rotation_2d
+    from trajectotree.scene.plant import build_scene
+    from trajectotree.search.tree import find_contact_plan
+    from trajectotree.start import StartState
+
+    config = Config()
+    scene = build_scene(config.scene)
+    node = find_contact_plan(scene, 0.9, config.search).nodes[4]
+    pose = node.object_pose + np.array([0.005, 0.0, 0.1])
+    hand = HandModel.from_scene(scene)
+    tips = [box_to_world(pose, node.p_BC[i]) + scene.tip_radius * rotation_2d(pose[2]) @ node.n_B[i] for i in range(4)]
+    q = np.concatenate([hand.ik(i, tips[i]) for i in range(4)])
+    return scene, StartState(object_pose=tuple(pose), q=tuple(q))
+
+
+@pytest.mark.slow
+def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_first(moved_start):
+    from trajectotree.execution.replan import replan
+
+    scene, start = moved_start
+    config = Config()
+    old = plan(goal=1.2, config=config, segment_workers=1)  # the plan whose goal the replan keeps
+    event, new = replan(old, old.config, start, 4.8, ReplanReason.TRACKING, 0.6, 0.05, scene, segment_workers=1)
+    assert event.outcome is ReplanOutcome.PLANNED and event.planned, event.status
+    np.testing.assert_allclose(new.trajectory.x[0], start.object_pose, atol=1e-9)  # the measured state
+    np.testing.assert_allclose(new.trajectory.q[0], start.q, atol=1e-9)
+    assert new.trajectory.x[-1, 2] == pytest.approx(1.2, abs=1e-9)  # the old plan's goal
+    assert new.config.scene.mu == 0.6 and new.config.search.time_budget_s == old.config.sim.replan.search_deadline_s
+    ready = np.array(event.segment_ready_s)
+    assert len(ready) == len(new.contact_plan.nodes) - 1 and np.all(np.isfinite(ready))
+    assert event.latency_s == ready[0] and np.all(ready[1:] > ready[0]) and event.compute_s >= ready.max()
+    assert event.search_s < event.latency_s
+    # Solved first segment first, it is the plan solved at once from the same contacts (independent segments).
+    at_once = plan(goal=old.config.goal, start=start, config=new.config, contact_plan=new.contact_plan)
+    assert at_once.segment_ready_s == ()
+    for name in ("x", "q", "f_W"):
+        np.testing.assert_allclose(getattr(new.trajectory, name), getattr(at_once.trajectory, name), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
+    from trajectotree.execution.run import run_simulation
+
+    result = plan(goal=-2.61)  # a goal none of the defaults were tuned on
+    assert result.success, result.status
+    run = run_simulation(plan=result, sim_mu=0.4, replan=True)
+    assert not run.dropped, [e.to_json() for e in run.replans]
+    assert abs(run.final_error[2]) < np.radians(3)
+    assert all(e.latency_s <= e.compute_s + 1e-9 for e in run.replans)
+
+
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["--config", "THRESHOLD"], "sim.replan.theta_error = 0.0 is out of range; valid range: (0, 3.14"),
+        (["--friction-floor", "0"], "controller.friction_floor = 0.0 is out of range; valid range: (0, 1]"),
+        (["--html", "run.html"], "--replan records no playback (--html)"),
+        (["--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
+    ],
+)
+def test_simulate_replan_refuses_bad_options_naming_the_value_and_writes_nothing(tmp_path, capsys, options, named):
+    from test_simulate import hold_plan_arrays, write_plan_dir
+
+    from trajectotree.cli import main
+    from trajectotree.scene.plant import build_scene
+
+    config = Config()
+    plan_dir = write_plan_dir(tmp_path / "plan", hold_plan_arrays(build_scene(config.scene), 0.3), config)
+    bad = tmp_path / "threshold.yaml"
+    bad.write_text("sim:\n  replan:\n    theta_error: 0\n")
+    options = [{"THRESHOLD": str(bad), "run.html": str(tmp_path / "run.html")}.get(o, o) for o in options]
+    assert main(["simulate", str(plan_dir), "--replan", *options]) == 2
+    assert named in capsys.readouterr().err
+    assert sorted(p.name for p in plan_dir.iterdir()) == ["plan.json", "plan.npz"]
+    assert not (tmp_path / "run.html").exists()

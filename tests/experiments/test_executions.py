@@ -246,3 +246,15 @@ def test_the_report_sets_open_loop_closed_loop_and_replanning_side_by_side_with_
         "| trajectotree | +2.200 | friction-0.4 | 2.40 | 0.392 | no plan | "
         "search failed: tree exhausted after 12 expansions |" in refused_markdown([row], {})
     )
+
+
+def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_runs(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    replan = ["sweep", "--out", str(out), "--goals", "1", "--no-progress", "--replan"]
+    assert main(replan + ["--controllers", "paper"]) == 2
+    assert "controller = 'paper': the closed loop (--replan) runs around the grasp controller only" in (
+        capsys.readouterr().err
+    )
+    assert main(replan + ["--conditions", "friction-0.2"]) == 2
+    assert "condition = 'friction-0.2' is unknown" in capsys.readouterr().err
+    assert not out.exists()

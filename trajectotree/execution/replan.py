@@ -305,7 +305,7 @@ def replan(
             goal=plan.goal if plan.config.goal.theta is None else plan.config.goal,  # with its position
             start=start,
             config=assumed,
-            scene=scene if scene.config == assumed.scene else None,
+            scene=scene,  # the executed object's geometry, for the start's contacts (plan() rebuilds it from the start)
             segment_workers=segment_workers,
             first_segment_first=first_first,
         )
