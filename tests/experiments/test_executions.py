@@ -258,3 +258,28 @@ def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_ru
     assert main(replan + ["--conditions", "friction-0.2"]) == 2
     assert "condition = 'friction-0.2' is unknown" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path, capsys):
+    """The same plans at friction 0.4 open loop and replanning: executions.md lists both per condition,
+    with the replans, and sim.json records each replan's typed outcome."""
+    from conftest import SMALL_SWEEP
+
+    out = tmp_path / "sweep"
+    shutil.copytree(resumed_sweep.out, out)
+    args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2", "--conditions", "friction-0.4"]
+    assert main(args + ["--methods", "trajectotree"]) == 0
+    assert main(args + ["--methods", "trajectotree", "--replan"]) == 0
+    assert "executions: 2 run (grasp closed loop, replanning x friction-0.4)" in capsys.readouterr().out
+    trial = next(p for p in (out / "trials").iterdir() if p.is_dir() and p.name.endswith("_trajectotree"))
+    replanned = json.loads((execution_dir(trial, "grasp", "friction-0.4", replan=True) / "sim.json").read_text())
+    assert replanned["closed_loop"] is not None and replanned["conditions"]["sim_mu"] == 0.4
+    for event in replanned["replans"]:
+        assert event["outcome"] in ("planned", "partial", "start_refused", "search_deadline", "no_plan")
+        assert event["latency_s"] > 0 and event["takes_effect_s"] == pytest.approx(event["time_s"] + event["latency_s"])
+    report = tmp_path / "report"
+    assert main(["report", str(out), "--out", str(report)]) == 0
+    table = (report / "executions.md").read_text()
+    rows = [line for line in table.splitlines() if line.startswith("| TrajectoTree |") and "friction-0.4" in line]
+    assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-replan"], table
