@@ -269,9 +269,9 @@ def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2", "--conditions", "friction-0.4"]
-    assert main(args + ["--methods", "trajectotree"]) == 0
-    assert main(args + ["--methods", "trajectotree", "--replan"]) == 0
-    assert "executions: 2 run (grasp closed loop, replanning x friction-0.4)" in capsys.readouterr().out
+    assert main(args) == 0
+    assert main(args + ["--replan"]) == 0  # the cito-warm plans replanned by TrajectoTree too
+    assert "executions: 4 run (grasp closed loop, replanning x friction-0.4)" in capsys.readouterr().out
     trial = next(p for p in (out / "trials").iterdir() if p.is_dir() and p.name.endswith("_trajectotree"))
     replanned = json.loads((execution_dir(trial, "grasp", "friction-0.4", replan=True) / "sim.json").read_text())
     assert replanned["closed_loop"] is not None and replanned["conditions"]["sim_mu"] == 0.4
@@ -280,6 +280,8 @@ def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path
         assert event["latency_s"] > 0 and event["takes_effect_s"] == pytest.approx(event["time_s"] + event["latency_s"])
     report = tmp_path / "report"
     assert main(["report", str(out), "--out", str(report)]) == 0
-    table = (report / "executions.md").read_text()
+    table, _, refused = (report / "executions.md").read_text().partition("## Replans without a plan")
     rows = [line for line in table.splitlines() if line.startswith("| TrajectoTree |") and "friction-0.4" in line]
     assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-replan"], table
+    without = [e for e in replanned["replans"] if not e["planned"]]
+    assert all(e["status"].replace("|", "/") in refused for e in without), refused  # each one's reason, per goal
