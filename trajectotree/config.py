@@ -567,6 +567,9 @@ class ReplanConfig:
     # s, wall-clock budget of a replan's contact search (its search.time_budget_s): the hand holds while it
     # runs, and a search without a plan by then is refused (the old plan goes on)
     search_deadline_s: float = 0.5
+    # s, wall-clock budget of the new plan's first segment (all its attempts), after the search: a first
+    # segment not solved by then is refused too, so the hand holds at most about both deadlines together
+    first_segment_deadline_s: float = 1.0
 
     def __post_init__(self):
         check_range("sim.replan.theta_error", self.theta_error, 0.0, math.pi, low_open=True)
@@ -575,6 +578,7 @@ class ReplanConfig:
         check_range("sim.replan.mass_change", self.mass_change, 0.0, 10.0, low_open=True)
         check_integer("sim.replan.max_replans", self.max_replans, 0, 100)
         check_range("sim.replan.search_deadline_s", self.search_deadline_s, 0.0, 60.0, low_open=True)
+        check_range("sim.replan.first_segment_deadline_s", self.first_segment_deadline_s, 0.0, 600.0, low_open=True)
 
 
 @dataclass(frozen=True)

@@ -252,6 +252,10 @@ class ReplanOutcome(enum.Enum):
     )
     NO_PLAN = "the search found no plan at the estimated friction and mass: the old plan goes on"
     FIRST_SEGMENT_FAILED = "the new plan's first segment failed: the old plan goes on"
+    FIRST_SEGMENT_LATE = (
+        "the new plan's first segment was not solved within its deadline (sim.replan.first_segment_deadline_s): "
+        "the old plan goes on"
+    )
 
 
 @dataclass(frozen=True)

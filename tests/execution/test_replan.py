@@ -3,6 +3,7 @@ estimates decide whether to plan again from the measured state; the run is one c
 
 import dataclasses
 import json
+import time
 
 import numpy as np
 import pytest
@@ -97,7 +98,14 @@ def test_a_replan_without_a_plan_says_why_as_a_type_and_as_text():
 
 
 @pytest.mark.parametrize(
-    "field, value", [("theta_error", 0.0), ("position_error", -0.001), ("friction_drop", 0.0), ("search_deadline_s", 0)]
+    "field, value",
+    [
+        ("theta_error", 0.0),
+        ("position_error", -0.001),
+        ("friction_drop", 0.0),
+        ("search_deadline_s", 0),
+        ("first_segment_deadline_s", -1.0),
+    ],
 )
 def test_a_replan_threshold_at_or_below_zero_is_refused(field, value):
     with pytest.raises(ConfigError, match=rf"sim.replan.{field} = .* is out of range; valid range: \(0"):
@@ -184,3 +192,20 @@ def test_simulate_replan_refuses_bad_options_naming_the_value_and_writes_nothing
     assert named in capsys.readouterr().err
     assert sorted(p.name for p in plan_dir.iterdir()) == ["plan.json", "plan.npz"]
     assert not (tmp_path / "run.html").exists()
+
+
+def test_a_first_segment_past_its_deadline_is_not_retried_and_nothing_after_it_is_solved():
+    from trajectotree.planning.keyframes import solve_first_segment_first
+    from trajectotree.scene.plant import build_scene
+    from trajectotree.search.tree import find_contact_plan
+
+    config = Config()
+    config = dataclasses.replace(config, search=dataclasses.replace(config.search, num_nodes=3))
+    scene = build_scene(config.scene)
+    contact_plan = find_contact_plan(scene, 0.3, config.search)
+    since = time.perf_counter()
+    pieces, attempts, ready = solve_first_segment_first(
+        contact_plan, config, scene=scene, since=since, first_deadline_s=1e-3
+    )
+    assert [p.success for p in pieces] == [False] and len(attempts[0]) == 1  # IPOPT stopped, no retry after
+    assert 0 < ready[0] < time.perf_counter() - since and ready[1:] == (np.inf,)

@@ -70,10 +70,15 @@ LogObserver = Callable[[str], AbstractContextManager]
 
 
 def solve(
-    program: CitoProgram, guess: CitoVariables, config: CitoConfig, log_observer: LogObserver | None = None
+    program: CitoProgram,
+    guess: CitoVariables,
+    config: CitoConfig,
+    log_observer: LogObserver | None = None,
+    max_wall_time_s: float | None = None,
 ) -> SolveOutcome:
     """IPOPT from `guess`; with a `log_observer` the log also holds IPOPT's iteration lines
-    (file_print_level 5) while it runs, and the solve itself is unchanged."""
+    (file_print_level 5) while it runs, and the solve itself is unchanged. `max_wall_time_s` stops
+    IPOPT after that long (IPOPT's max_wall_time; unsuccessful then), for a solve with a deadline."""
     prog, v = program.prog, program.variables
     v.set_initial_guess(prog, guess)
     fd, log_path = tempfile.mkstemp(prefix="trajectotree_ipopt_", suffix=".txt")
@@ -82,6 +87,8 @@ def solve(
         options = ipopt_options(config, log_path)
         if log_observer is not None:
             options.SetOption(IpoptSolver.id(), "file_print_level", 5)
+        if max_wall_time_s is not None:
+            options.SetOption(IpoptSolver.id(), "max_wall_time", max(float(max_wall_time_s), 1e-3))
         with log_observer(log_path) if log_observer is not None else contextlib.nullcontext():
             t0 = time.perf_counter()
             result = IpoptSolver().Solve(prog, None, options)

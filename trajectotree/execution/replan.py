@@ -14,8 +14,9 @@ plan's first segment before the others (keyframes.solve_first_segment_first) and
 effect once that segment's measured wall-clock compute time has passed in simulated time; each later
 segment begins no earlier than its own measured readiness (the last attempt of it and of its two
 neighbours, whose joint retries could replace it), so the hand holds at a node while a segment is not
-ready. The search gets sim.replan.search_deadline_s. A start the planner refuses, a search without a
-plan (in time or at all) or a first segment that fails is recorded with its typed reason
+ready. The search gets sim.replan.search_deadline_s, the first segment first_segment_deadline_s. A
+start the planner refuses, a search without a plan (in time or at all) or a first segment that fails
+(or is not solved in time) is recorded with its typed reason
 (results.ReplanOutcome, the refusal) and the old plan resumes after the same hold; a plan whose later
 segment failed is executed up to that segment and planned again from there. Each phase is the same
 execution Diagram built around the spliced reference, continued from the previous phase's full state
@@ -308,6 +309,7 @@ def replan(
             scene=scene,  # the executed object's geometry, for the start's contacts (plan() rebuilds it from the start)
             segment_workers=segment_workers,
             first_segment_first=first_first,
+            first_segment_deadline_s=rules.first_segment_deadline_s if first_first else None,
         )
     except StartRefused as refused:  # the old plan goes on
         latency = time.perf_counter() - t0
@@ -325,9 +327,10 @@ def replan(
     ready = new.segment_ready_s if first_first else (total,) * (len(searched.nodes) - 1)
     # the joint formulation is one program: none of a failed one is executed
     if new.trajectory is None or not np.isfinite(ready[0]) or not (first_first or new.success):
-        event = ReplanEvent(
-            t_switch, reason, mu, mass, total, t_switch + total, ReplanOutcome.FIRST_SEGMENT_FAILED, new.status
-        )
+        # ran out of time: segment 0's attempts came back no sooner than its deadline after the search
+        late = first_first and ready[0] >= new.search_time_s + rules.first_segment_deadline_s
+        outcome = ReplanOutcome.FIRST_SEGMENT_LATE if late else ReplanOutcome.FIRST_SEGMENT_FAILED
+        event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
         return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None
     outcome = ReplanOutcome.PLANNED if new.success else ReplanOutcome.PARTIAL
     event = ReplanEvent(t_switch, reason, mu, mass, ready[0], t_switch + ready[0], outcome, new.status)

@@ -81,6 +81,7 @@ class PieceTask:
     #                                   "joint" (with the neighbours)
     #                                   or "strict" (a joint one, pinned fingers STRICT_PINNING times harder)
     guess: np.ndarray | None = None  # (K, KNOT_SIZE) initial guess (None: the plan's guess)
+    max_wall_time_s: float | None = None  # s, IPOPT stops after this long (a solve with a deadline); None: never
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,7 @@ def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogOb
     sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
     build_time = time.perf_counter() - t0
-    outcome = solve(program, guess, task.cito, log_observer)
+    outcome = solve(program, guess, task.cito, log_observer, task.max_wall_time_s)
     arrays = trajectory(program, outcome.solution, scene)
     check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
     return PieceResult(
@@ -280,9 +281,11 @@ def solve_segments(
     *,
     scene: Scene | None = None,
     log_observer: LogObserver | None = None,
+    deadline: float | None = None,
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
     """(the pieces to stitch, in order; every attempt per segment), with the retries; pieces
-    solved in this process use `scene` when given (run_pieces)."""
+    solved in this process use `scene` when given (run_pieces). With a `deadline` (a
+    time.perf_counter() value) each solve stops there and no retry starts after it."""
     n = len(plan.nodes) - 1
     mu = mu_plan(config.scene, config.search)
 
@@ -295,10 +298,16 @@ def solve_segments(
     configs["restart"] = configs["keyframes"]
 
     def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
-        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess)
+        left = None if deadline is None else deadline - time.perf_counter()
+        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess, left)
+
+    def late() -> bool:
+        return deadline is not None and time.perf_counter() >= deadline
 
     def retry(segments: list[int], kind: str, from_last_iterate: bool) -> None:
         """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
+        if late():
+            return
         guesses = [best[s].solution if from_last_iterate else None for s in segments]
         for s, r in zip(
             segments,
@@ -320,6 +329,8 @@ def solve_segments(
         )
     pieces = {s: best[s] for s in range(n)}  # keyed by each piece's first node
     for kind in ("joint", "strict"):
+        if late():
+            break
         failed = [s for s, p in sorted(pieces.items()) if not p.success]  # single segments: a joint piece passed
         ranges = _neighbour_ranges(failed, n, min_segments=2 if kind == "joint" else 1)
         joint = run_pieces([task(a, b, kind) for a, b in ranges], executor, workers, scene, log_observer)
@@ -380,10 +391,12 @@ def plan_keyframes(
     log_observer: LogObserver | None = None,
     first_segment_first: bool = False,
     since: float | None = None,
+    first_segment_deadline_s: float | None = None,
 ) -> PlanResult:
     """The trajectotree PlanResult of the keyframes formulation for a successful contact plan;
     first_segment_first solves it as solve_first_segment_first does, its segment_ready_s counted
-    from `since` (a time.perf_counter() value; default: now).
+    from `since` (a time.perf_counter() value; default: now), segment 0 within
+    `first_segment_deadline_s` (None: unbounded).
     Times: build_time_s and solve_time_s summed over every attempt (process time in the
     workers); total_time_s = search_time + the wall-clock time of all segment solves. cost: the
     stitched pieces' costs summed (a shared knot's effort terms count in both); iterations: every
@@ -393,7 +406,14 @@ def plan_keyframes(
     ready = ()
     if first_segment_first:
         pieces, attempts, ready = solve_first_segment_first(
-            contact_plan, config, executor, workers, scene=scene, log_observer=log_observer, since=since
+            contact_plan,
+            config,
+            executor,
+            workers,
+            scene=scene,
+            log_observer=log_observer,
+            since=since,
+            first_deadline_s=first_segment_deadline_s,
         )
         if not pieces[0].success:  # the rest is not solved: nothing of this plan can be executed
             return _first_segment_failed(scene, goal, contact_plan, config, search_time, pieces[0], ready, t0)
@@ -478,6 +498,7 @@ def solve_first_segment_first(
     scene: Scene | None = None,
     log_observer: LogObserver | None = None,
     since: float,
+    first_deadline_s: float | None = None,
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]], tuple[float, ...]]:
     """solve_segments for a plan that is executed while it is being solved (replanning): segment 0
     first, alone, in this process (its retries too: restart, links, strict), then, if it passed,
@@ -486,9 +507,17 @@ def solve_first_segment_first(
     `since` (a time.perf_counter() value), inf for one that cannot be executed: segment 0 when its
     last attempt came back; segment s >= 1 when the last attempt of segments s-1, s and s+1 (of the
     rest) came back, since a joint retry of a failed neighbour replaces it; after the first segment
-    that failed, none (an executor cannot skip a segment)."""
+    that failed, none (an executor cannot skip a segment). `first_deadline_s` bounds segment 0's
+    attempts together (solve_segments' deadline), so the hand does not hold for long."""
+    deadline = None if first_deadline_s is None else time.perf_counter() + first_deadline_s
     first, first_attempts = solve_segments(
-        dataclasses.replace(plan, nodes=plan.nodes[:2]), config, None, 1, scene=scene, log_observer=log_observer
+        dataclasses.replace(plan, nodes=plan.nodes[:2]),
+        config,
+        None,
+        1,
+        scene=scene,
+        log_observer=log_observer,
+        deadline=deadline,
     )
     n = len(plan.nodes) - 1
     ready = [max(r.finished_s for r in first_attempts[0]) - since]

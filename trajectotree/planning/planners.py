@@ -65,6 +65,7 @@ def plan(
     grasp_tables: GraspTables | None = None,
     log_observer: LogObserver | None = None,
     first_segment_first: bool = False,
+    first_segment_deadline_s: float | None = None,
 ) -> PlanResult:
     """Plans `goal` for the object with `method` ("trajectotree", "cito" or "cito-warm"): a
     rotation (rad in W, any number within +-20 pi: 2 pi is a full turn; the object keeps its
@@ -87,7 +88,8 @@ def plan(
     `first_segment_first` (TrajectoTree's keyframes formulation only; a plan executed while it is
     solved, as replanning does) solves segment 0 before the others and records in the result's
     segment_ready_s when each segment was ready, counted from this call
-    (keyframes.solve_first_segment_first)."""
+    (keyframes.solve_first_segment_first), segment 0's solves stopped after `first_segment_deadline_s`
+    together (None: unbounded)."""
     called = time.perf_counter()
     check_method(method)
     config = config or Config()
@@ -138,6 +140,7 @@ def plan(
             log_observer=log_observer,
             first_segment_first=first_segment_first,
             since=called,
+            first_segment_deadline_s=first_segment_deadline_s,
         )
     t0 = time.perf_counter()
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
