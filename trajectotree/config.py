@@ -567,8 +567,9 @@ class ReplanConfig:
     # s, wall-clock budget of a replan's contact search (its search.time_budget_s): the hand holds while it
     # runs, and a search without a plan by then is refused (the old plan goes on)
     search_deadline_s: float = 0.5
-    # s, wall-clock budget of the new plan's first segment (all its attempts), after the search: a first
-    # segment not solved by then is refused too, so the hand holds at most about both deadlines together
+    # s, the new plan's first segment must be solved (all its attempts) this long after the state was
+    # measured, the search included, or it is refused too: the hand holds no longer than about this, less
+    # than a segment lasts (cito.knots_per_segment x cito.dt, 1.2 s)
     first_segment_deadline_s: float = 1.0
 
     def __post_init__(self):

@@ -14,7 +14,8 @@ plan's first segment before the others (keyframes.solve_first_segment_first) and
 effect once that segment's measured wall-clock compute time has passed in simulated time; each later
 segment begins no earlier than its own measured readiness (the last attempt of it and of its two
 neighbours, whose joint retries could replace it), so the hand holds at a node while a segment is not
-ready. The search gets sim.replan.search_deadline_s, the first segment first_segment_deadline_s. A
+ready. The search gets sim.replan.search_deadline_s, and the first segment must be ready within
+first_segment_deadline_s of the measured state. A
 start the planner refuses, a search without a plan (in time or at all) or a first segment that fails
 (or is not solved in time) is recorded with its typed reason
 (results.ReplanOutcome, the refusal) and the old plan resumes after the same hold; a plan whose later
@@ -327,8 +328,8 @@ def replan(
     ready = new.segment_ready_s if first_first else (total,) * (len(searched.nodes) - 1)
     # the joint formulation is one program: none of a failed one is executed
     if new.trajectory is None or not np.isfinite(ready[0]) or not (first_first or new.success):
-        # ran out of time: segment 0's attempts came back no sooner than its deadline after the search
-        late = first_first and ready[0] >= new.search_time_s + rules.first_segment_deadline_s
+        # ran out of time: segment 0's attempts came back no sooner than its deadline
+        late = first_first and ready[0] >= rules.first_segment_deadline_s
         outcome = ReplanOutcome.FIRST_SEGMENT_LATE if late else ReplanOutcome.FIRST_SEGMENT_FAILED
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
         return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None

@@ -81,7 +81,9 @@ class PieceTask:
     #                                   "joint" (with the neighbours)
     #                                   or "strict" (a joint one, pinned fingers STRICT_PINNING times harder)
     guess: np.ndarray | None = None  # (K, KNOT_SIZE) initial guess (None: the plan's guess)
-    max_wall_time_s: float | None = None  # s, IPOPT stops after this long (a solve with a deadline); None: never
+    # s, a time.perf_counter() value on this machine (the process that made the task, or a worker beside it)
+    # at which IPOPT stops, for a solve with a deadline; None: never
+    deadline: float | None = None
 
 
 @dataclass(frozen=True)
@@ -160,7 +162,8 @@ def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogOb
     sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
     build_time = time.perf_counter() - t0
-    outcome = solve(program, guess, task.cito, log_observer, task.max_wall_time_s)
+    left = None if task.deadline is None else task.deadline - time.perf_counter()  # after the build
+    outcome = solve(program, guess, task.cito, log_observer, left)
     arrays = trajectory(program, outcome.solution, scene)
     check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
     return PieceResult(
@@ -298,8 +301,7 @@ def solve_segments(
     configs["restart"] = configs["keyframes"]
 
     def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
-        left = None if deadline is None else deadline - time.perf_counter()
-        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess, left)
+        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess, deadline)
 
     def late() -> bool:
         return deadline is not None and time.perf_counter() >= deadline
@@ -395,8 +397,8 @@ def plan_keyframes(
 ) -> PlanResult:
     """The trajectotree PlanResult of the keyframes formulation for a successful contact plan;
     first_segment_first solves it as solve_first_segment_first does, its segment_ready_s counted
-    from `since` (a time.perf_counter() value; default: now), segment 0 within
-    `first_segment_deadline_s` (None: unbounded).
+    from `since` (a time.perf_counter() value; default: now), segment 0 ready within
+    `first_segment_deadline_s` of it (None: unbounded).
     Times: build_time_s and solve_time_s summed over every attempt (process time in the
     workers); total_time_s = search_time + the wall-clock time of all segment solves. cost: the
     stitched pieces' costs summed (a shared knot's effort terms count in both); iterations: every
@@ -507,9 +509,10 @@ def solve_first_segment_first(
     `since` (a time.perf_counter() value), inf for one that cannot be executed: segment 0 when its
     last attempt came back; segment s >= 1 when the last attempt of segments s-1, s and s+1 (of the
     rest) came back, since a joint retry of a failed neighbour replaces it; after the first segment
-    that failed, none (an executor cannot skip a segment). `first_deadline_s` bounds segment 0's
-    attempts together (solve_segments' deadline), so the hand does not hold for long."""
-    deadline = None if first_deadline_s is None else time.perf_counter() + first_deadline_s
+    that failed, none (an executor cannot skip a segment). Segment 0 must be ready within
+    `first_deadline_s` of `since` (solve_segments' deadline: its attempts stop there), so the hand
+    does not hold for long."""
+    deadline = None if first_deadline_s is None else since + first_deadline_s
     first, first_attempts = solve_segments(
         dataclasses.replace(plan, nodes=plan.nodes[:2]),
         config,

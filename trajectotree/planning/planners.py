@@ -88,8 +88,8 @@ def plan(
     `first_segment_first` (TrajectoTree's keyframes formulation only; a plan executed while it is
     solved, as replanning does) solves segment 0 before the others and records in the result's
     segment_ready_s when each segment was ready, counted from this call
-    (keyframes.solve_first_segment_first), segment 0's solves stopped after `first_segment_deadline_s`
-    together (None: unbounded)."""
+    (keyframes.solve_first_segment_first), segment 0's solves stopped `first_segment_deadline_s` after
+    this call began (None: unbounded)."""
     called = time.perf_counter()
     check_method(method)
     config = config or Config()
