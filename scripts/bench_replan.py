@@ -88,11 +88,13 @@ def main() -> None:
     parser.add_argument("--goals", type=float, nargs="+", default=GOALS, metavar="RAD")
     parser.add_argument("--plan-dirs", nargs="+", metavar="DIR", help="saved plans to execute instead of --goals")
     parser.add_argument("--open-loop-only", action="store_true", help="only the open-loop part (public API)")
+    parser.add_argument("--replan-only", action="store_true", help="only the replanning part")
     parser.add_argument("--repeats", type=int, default=1, help="open-loop plans per goal")
     args = parser.parse_args()
     if not args.open_loop_only:
         replanning(plans(args), args.sim_mu)
-    open_loop(args.goals, args.repeats)
+    if not args.replan_only:
+        open_loop(args.goals, args.repeats)
 
 
 if __name__ == "__main__":
