@@ -12,7 +12,9 @@ import tempfile
 from pathlib import Path
 
 from trajectotree.config import (
+    DEFAULT_HAND,
     FORMULATIONS,
+    HAND_NAMES,
     MAX_NODES,
     Config,
     ConfigError,
@@ -71,6 +73,12 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
     )
     group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+    group.add_argument(
+        "--hand",
+        metavar="NAME|FILE",
+        help=f"the hand: {', '.join(HAND_NAMES)} (default {DEFAULT_HAND}), or a hand description FILE.yaml, or a "
+        "model FILE.sdf / FILE.urdf with FILE.yaml beside it naming each finger's joints and tip (docs/design.md)",
+    )
 
 
 def parse_polygon(text: str) -> tuple[tuple[float, float], ...]:
@@ -118,6 +126,8 @@ def scene_overrides(args: argparse.Namespace) -> dict:
         scene["box_mass"] = args.mass
     if getattr(args, "mu", None) is not None:
         scene["mu"] = args.mu
+    if getattr(args, "hand", None) is not None:
+        scene["hand"] = args.hand
     return scene
 
 
@@ -275,6 +285,7 @@ OPTION_FIELDS = {
     "scene.box_height": ("box_size", "--box-size H"),
     "scene.box_mass": ("mass", "--mass"),
     "scene.mu": ("mu", "--mu"),
+    "scene.hand": ("hand", "--hand"),
     "scene.object.vertices": ("polygon", "--polygon"),
     "scene.object.circle_radius": ("circle", "--circle"),
     "scene.object.ellipse_semi_axes": ("ellipse", "--ellipse"),
