@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, segments_for
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import required_mu_many
-from trajectotree.search.initial_grasp import RANKING_BISECTIONS, STANCE_FINGERS
+from trajectotree.search.initial_grasp import RANKING_BISECTIONS, stance_fingers
 from trajectotree.search.reach import Reachability
 from trajectotree.search.tree import object_path
 
@@ -41,6 +41,9 @@ class Graspability:
 
     def __init__(self, scene: Scene, search: SearchConfig, reach: Reachability | None = None):
         c = scene.config
+        if scene.num_fingers != 4:  # its tables are of three-contact stances
+            raise NotImplementedError(f"the workspace is tabulated for four fingers, not {scene.num_fingers}")
+        self.num_fingers = scene.num_fingers
         self.reach = reach or Reachability(scene)
         boundary = c.shape
         grid = np.round(np.arange(0.0, boundary.perimeter - 1e-9, search.initial_grid_step), 9)
@@ -63,9 +66,9 @@ class Graspability:
         """(P, 4, G) bool: which grid contacts each finger reaches at each pose (P, 3)."""
         poses = np.atleast_2d(np.asarray(poses, dtype=float))
         G = len(self.grid)
-        out = np.empty((len(poses), NUM_FINGERS, G), dtype=bool)
+        out = np.empty((len(poses), self.num_fingers, G), dtype=bool)
         every_pose, every_contact = np.repeat(poses, G, axis=0), np.tile(self.grid, len(poses))
-        for i in range(NUM_FINGERS):
+        for i in range(self.num_fingers):
             q = self.reach.closed_form_many(every_pose, i, every_contact)
             out[:, i] = np.isfinite(q[:, 0]).reshape(len(poses), G)
         return out
@@ -79,7 +82,7 @@ class Graspability:
         lists = [np.flatnonzero(r) for r in reachable]
         if any(len(s) == 0 for s in lists):
             return False
-        for i, (a, b, c) in enumerate(STANCE_FINGERS):
+        for i, (a, b, c) in enumerate(stance_fingers(self.num_fingers)):
             held = np.argwhere(self.holds[np.ix_(lists[a], lists[b], lists[c])])
             if not len(held):
                 continue
