@@ -1,0 +1,53 @@
+"""--hand through the command line: Drake's planar gripper's scene report, and descriptions that
+must be refused (a missing joint, a finger with one joint, fewer than three fingers): exit 2,
+the message naming the finger, the joint or the file, nothing written."""
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from trajectotree.cli import main
+from trajectotree.scene.hand import hand_file
+
+BRICK = ["--box-size", "0.1", "0.1", "--mass", "0.028"]  # Drake's planar_brick.sdf: 0.1 x 0.1 m in its plane, 28 g
+
+
+def test_the_scene_command_reports_drakes_gripper(capsys):
+    assert main(["scene", "--hand", "drake_planar_gripper", *BRICK, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert len(report["fingers"]) == 3 and report["num_actuators"] == 6 and report["tip_radius_m"] == 0.015
+    assert [f["tau_max"] for f in report["fingers"]] == [[75.0, 75.0]] * 3
+    reach = report["reach"]
+    assert reach["graspable"] and reach["initial_grasps"] > 0 and len(reach["best_grasp_arclengths_m"]) == 3
+    assert reach["workspace"]["every_orientation"]["points"] > 0
+
+
+def gripper_yaml(tmp_path: Path, old: str, new: str) -> Path:
+    text = Path(hand_file("drake_planar_gripper").source).read_text()
+    assert old in text
+    path = tmp_path / "hand.yaml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+THIRD = "  - {joints: [finger3_BaseJoint, finger3_MidJoint], tip: finger3_tip_link, tip_xyz: [0, 0, -0.0263]}\n"
+
+
+@pytest.mark.parametrize(
+    "old, new, expected",
+    [
+        ("finger2_MidJoint]", "finger2_Knee]", "finger 1: its model .* has no joint 'finger2_Knee'"),
+        ("[finger2_BaseJoint, finger2_MidJoint]", "[finger2_BaseJoint]", r"finger 1 has 1 joint\(s\)"),
+        (THIRD, "", r"names 2 finger\(s\); a hand needs at least 3"),
+    ],
+)
+def test_bad_hands_exit_2_naming_the_finger_and_write_nothing(tmp_path, capsys, old, new, expected):
+    path = gripper_yaml(tmp_path, old, new)
+    out = tmp_path / "plan"
+    for args in (["scene", "--hand", str(path)], ["plan", "--goal", "0.3", "--hand", str(path), "--out", str(out)]):
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert f"hand {path}: " in err and re.search(expected, err), err
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["hand.yaml"]
