@@ -22,7 +22,6 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
-from scipy import stats
 
 from trajectotree.results import SimLog, SimResult
 
@@ -104,5 +103,7 @@ def mean_confidence_interval(samples, confidence: float = 0.95, axis: int = 0) -
     mean = np.mean(data, axis=axis)
     if n == 1:
         return ConfidenceInterval(mean=mean, lower=mean.copy(), upper=mean.copy(), count=1)
+    from scipy import stats  # here: importing scipy.stats takes 1.7 s, and only the figures need it
+
     half = stats.t.ppf((1.0 + confidence) / 2.0, n - 1) * np.std(data, axis=axis, ddof=1) / math.sqrt(n)
     return ConfidenceInterval(mean=mean, lower=mean - half, upper=mean + half, count=n)
