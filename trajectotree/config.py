@@ -26,7 +26,7 @@ _NO_VALUE = object()  # a ConfigError about a field whose value its message does
 MAX_GOAL_ROTATION = 20 * math.pi  # rad, the largest goal rotation either way: ten turns
 DEFAULT_HAND = "planar_hand"
 # built-in hands, models/NAME.yaml (trajectotree.scene.hand); any other is a PATH.yaml, PATH.sdf or PATH.urdf
-HAND_NAMES = ("planar_hand", "drake_planar_gripper")
+HAND_NAMES = ("planar_hand", "drake_planar_gripper", "planar_hand5")
 HAND_SUFFIXES = (".yaml", ".yml", ".sdf", ".urdf")
 MAX_NODES = 400  # search.num_nodes at most: a ten-turn goal takes 238 with the default segment rotations
 

@@ -6,10 +6,12 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.scene.hand import hand_file
+from trajectotree.scene.hand import hand_file, load_hand
+from trajectotree.scene.kinematics import TwoLinkFinger
 
 BRICK = ["--box-size", "0.1", "0.1", "--mass", "0.028"]  # Drake's planar_brick.sdf: 0.1 x 0.1 m in its plane, 28 g
 
@@ -51,3 +53,39 @@ def test_bad_hands_exit_2_naming_the_finger_and_write_nothing(tmp_path, capsys, 
         err = capsys.readouterr().err
         assert f"hand {path}: " in err and re.search(expected, err), err
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["hand.yaml"]
+
+
+@pytest.mark.parametrize(
+    "hand, options, goal, fingers",
+    [("drake_planar_gripper", BRICK, "0.3", 3), ("planar_hand5", [], "1.5", 5)],
+)
+def test_the_search_finds_contact_sequences_for_three_and_five_fingers(capsys, hand, options, goal, fingers):
+    """The search's nodes touch the object where they say: each finger's joint angles put its
+    fingertip sphere on its contact (FK of the hand's description), and at most one finger moves."""
+    assert main(["search", "--hand", hand, *options, "--goal", goal, "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["success"], result["reason"]
+    description = load_hand(hand)
+    stack = TwoLinkFinger.stack(description.fingers)
+    previous = None
+    for node in result["contact_sequence"]:
+        x, y, theta = node["object_pose"]
+        R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        tips = stack.fingertip(np.reshape(node["q"], (fingers, 2)))
+        for tip, contact in zip(tips, node["contacts"], strict=True):
+            target = np.array([x, y]) + R @ (
+                np.array(contact["p_B"]) + description.tip_radius * np.array(contact["n_B"])
+            )
+            np.testing.assert_allclose(tip, target, atol=1e-5)  # Drake IK's 1e-6 m tolerance per axis
+        arclengths = [c["arclength"] for c in node["contacts"]]
+        if previous is not None:
+            assert sum(a != b for a, b in zip(arclengths, previous)) <= 1
+        previous = arclengths
+
+
+@pytest.mark.parametrize("hand", ["drake_planar_gripper", "planar_hand5"])
+def test_planning_a_hand_cito_does_not_take_yet_exits_2_writing_nothing(tmp_path, capsys, hand):
+    out = tmp_path / "plan"
+    assert main(["plan", "--hand", hand, "--goal", "0.3", "--out", str(out)]) == 2
+    assert f"scene.hand = '{hand}' has" in capsys.readouterr().err
+    assert not out.exists()

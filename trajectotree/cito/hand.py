@@ -12,8 +12,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trajectotree.config import ConfigError
 from trajectotree.scene.kinematics import TwoLinkFinger
 from trajectotree.scene.plant import NUM_FINGERS, Scene
+
+
+def check_cito_hand(scene: Scene) -> None:
+    """ConfigError (CLI exit 2, before any planning) unless CITO's knot layout (variables.py, for
+    NUM_FINGERS fingers) and its link rows (links.py: a box on every link) fit scene's hand; the
+    scene and search stages take any hand description."""
+    hand = scene.hand_description
+    problem = None
+    if hand.num_fingers != NUM_FINGERS:
+        problem = f"has {hand.num_fingers} fingers; CITO, execution and the figures take {NUM_FINGERS} yet"
+    elif any(box is None for f in hand.fingers for box in f.link_boxes):
+        i = next(i for i, f in enumerate(hand.fingers) if None in f.link_boxes)
+        problem = f"has a link without a collision box (finger {i}); CITO's link rows need one on every link yet"
+    if problem:
+        raise ConfigError(
+            field="scene.hand",
+            value=scene.config.hand,
+            problem=problem,
+            valid=f"a hand of {NUM_FINGERS} two-link fingers with link boxes (`trajectotree scene` and `trajectotree "
+            "search` take any hand)",
+            label="valid",
+        )
 
 
 def _per_finger(q: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from concurrent.futures import Executor
 import numpy as np
 
 from trajectotree.cito.guess import plan_guess, static_guess
-from trajectotree.cito.hand import HandModel
+from trajectotree.cito.hand import HandModel, check_cito_hand
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import LogObserver, solve, violations
@@ -91,6 +91,7 @@ def plan(
         config = start_config(scene, start, config)
         scene = build_scene(config.scene)
     check_workers(segment_workers)
+    check_cito_hand(scene)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
     check_goal_position(scene, config.search, goal)
