@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydrake.common import FindResourceOrThrow
 
 from trajectotree.cli import main
 from trajectotree.scene.hand import hand_file, load_hand
@@ -83,9 +84,38 @@ def test_the_search_finds_contact_sequences_for_three_and_five_fingers(capsys, h
         previous = arclengths
 
 
-@pytest.mark.parametrize("hand", ["drake_planar_gripper", "planar_hand5"])
-def test_planning_a_hand_cito_does_not_take_yet_exits_2_writing_nothing(tmp_path, capsys, hand):
+@pytest.mark.slow  # two plans (CITO, keyframes), ~5-10 s each
+@pytest.mark.parametrize("hand, options, fingers", [("drake_planar_gripper", BRICK, 3), ("planar_hand5", [], 5)])
+def test_three_and_five_finger_hands_plan_and_pass_the_physics_check(tmp_path, capsys, hand, options, fingers):
     out = tmp_path / "plan"
-    assert main(["plan", "--hand", hand, "--goal", "0.3", "--out", str(out)]) == 2
-    assert f"scene.hand = '{hand}' has" in capsys.readouterr().err
+    assert main(["plan", "--hand", hand, *options, "--goal", "0.3", "--segment-workers", "1", "--out", str(out)]) == 0
+    result = json.loads((out / "plan.json").read_text())
+    assert result["success"] and result["physics_check"]["passed"], result["physics_check"]["reason"]
+    arrays = np.load(out / "plan.npz")
+    assert arrays["q"].shape[1] == 2 * fingers and arrays["f_W"].shape[1:] == (fingers, 2)
+    np.testing.assert_allclose(arrays["x"][-1], [0.0, 0.0, 0.3], atol=1e-6)
+
+
+def test_a_hand_without_a_link_2_box_is_refused_before_planning(tmp_path, capsys):
+    model = tmp_path / "gripper.sdf"
+    text = Path(FindResourceOrThrow("drake/examples/planar_gripper/planar_gripper.sdf")).read_text()
+    model.write_text(re.sub(r'<collision name="link2_collision">.*?</collision>', "", text, flags=re.S))
+    yaml_text = Path(hand_file("drake_planar_gripper").source).read_text()
+    (tmp_path / "gripper.yaml").write_text(
+        yaml_text.replace("package://drake/examples/planar_gripper/planar_gripper.sdf", "gripper.sdf")
+    )
+    out = tmp_path / "plan"
+    assert main(["plan", "--hand", str(model), *BRICK, "--goal", "0.3", "--out", str(out)]) == 2
+    assert "has no collision box on finger 0's link 2" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_running_a_hand_execution_does_not_take_yet_exits_2_writing_nothing(tmp_path, capsys):
+    for args in (
+        ["demo", "--out", str(tmp_path / "demo")],
+        ["plan", "--goal", "0.3", "--html", str(tmp_path / "p.html"), "--out", str(tmp_path / "plan")],
+        ["sweep", "--goals", "1", "--simulate", "--out", str(tmp_path / "sweep")],
+    ):
+        assert main([*args, "--hand", "planar_hand5"]) == 2, args
+        assert "scene.hand = 'planar_hand5' has 5 fingers; " in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -193,6 +193,21 @@ def config_from_args(args: argparse.Namespace) -> Config:
         raise in_option_terms(e, args) from None
 
 
+def check_executable_hand(scene, use: str) -> None:
+    """ConfigError (exit 2, before any work) when `use` (a simulation or a playback) needs the
+    execution stage, which takes the four-finger layout yet (scene.plant.NUM_FINGERS), and the
+    scene's hand has another finger count; planning and the search take any hand."""
+    from trajectotree.scene.plant import NUM_FINGERS
+
+    if scene.num_fingers != NUM_FINGERS:
+        raise ConfigError(
+            field="scene.hand",
+            value=scene.config.hand,
+            problem=f"has {scene.num_fingers} fingers; {use} uses the execution stage, which takes {NUM_FINGERS} yet "
+            "(plan and search take any hand)",
+        )
+
+
 def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     """ConfigError (exit 2, before any planning) when the hand has no initial grasp of the object
     at scene.initial_pose (trajectotree.search.initial_grasp: a finger reaches no corner-free contact,

@@ -44,7 +44,7 @@ from trajectotree.planning.physics import ObjectModel, check_physics
 from trajectotree.planning.start import begin_at, start_config
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
-from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
+from trajectotree.scene.plant import Scene, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
@@ -188,7 +188,7 @@ def initial_grasp_plan(scene: Scene, goal, config: Config, tables: GraspTables |
     p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
     hand = HandModel.from_scene(scene)
     x0 = np.asarray(c.initial_pose, dtype=float)
-    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
+    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(scene.num_fingers)]
     if any(qi is None for qi in q):
         return ContactPlan(
             goal=goal.theta,
