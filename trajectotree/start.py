@@ -19,7 +19,7 @@ NUM_JOINTS = 8  # the hand's joints, finger-major (finger i: joints 2i, 2i + 1)
 
 @dataclass(frozen=True)
 class StartState:
-    """A measured state to plan from; the object must be (nearly) at rest in a four-finger grasp."""
+    """A measured state to plan from; the object must be (nearly) at rest in a grasp of every finger."""
 
     object_pose: tuple[float, float, float]  # (x m, y m, theta rad) in W
     q: tuple[float, ...]  # (8,) rad, joint angles, finger-major

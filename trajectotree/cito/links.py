@@ -52,7 +52,7 @@ def _centreline(box, fractions) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LinkPoints:
-    """The sampled points of the four fingers, P per finger (finger-major rows i P + j)."""
+    """The sampled points of the fingers, P per finger (finger-major rows i P + j)."""
 
     link: np.ndarray  # (P,) int, 0: on link 1 (moved by joint 1), 1: on link 2 (both joints)
     p_JL: np.ndarray  # (4, P, 2) m, point in the frame of the joint that moves its link

@@ -8,7 +8,7 @@ admits -3.0..+1.5 but not +2.0..+3.0; the two together cover the 12 goals tried.
 search is rooted at several candidates, best first, until one yields a plan.
 
 Candidates: every assignment of grid contacts (arclength multiples of
-search.initial_grid_step) to the four fingers such that each contact is at least
+search.initial_grid_step) to the fingers such that each contact is at least
 scene.corner_margin from a corner and reachable at the initial pose (closed-form IK with
 the link collision test, trajectotree.search.reach), no two fingertip spheres overlap, and at least
 one finger may let go (the other three are in frictional form closure at mu_plan, which

@@ -5,14 +5,14 @@ torque within its actuator's effort limit (1 N m on this hand) after carrying it
 weight, and both maximised over the grasps the search may be rooted at (initial_grasp's
 candidates, or search.initial_arclengths):
 
-  - hold: the most weight the four fingers of a grasp carry at rest. A heavier object cannot
+  - hold: the most weight all fingers of a grasp carry at rest. A heavier object cannot
     be held where every plan and every run starts, so no plan exists (what the motors cannot
     carry);
   - switch: the most weight three fingers of a grasp carry while the fourth lets go (a stance
     in closure at mu_plan, as the search requires), within search.max_stance_force in total
     normal force as well when that cap is set. The search refuses every switch of a heavier
     object at its first node, so only a plan that never switches a finger (a small rotation
-    the four fingers roll the object through) can exist.
+    all fingers roll the object through) can exist.
 
 Each limit is one LP per grasp or stance (maximize the weight W over the cone-edge
 magnitudes x >= 0: E x = (0, W, 0) the wrench that holds the object, |J_C^T f - tau_g| <=
@@ -41,7 +41,7 @@ from trajectotree.search.reach import Reachability
 class Payload:
     """The heaviest object (kg) the hand carries from its initial grasps (module docstring)."""
 
-    hold_kg: float  # four fingers at rest at the initial pose, within the torque limits
+    hold_kg: float  # all fingers at rest at the initial pose, within the torque limits
     switch_kg: float  # three fingers while the fourth lets go, within the torque limits and the force cap
     max_stance_force: float  # N, the search's cap the switch limit obeys (0: none)
     tau_max: float  # N m, the largest joint effort limit of the hand
