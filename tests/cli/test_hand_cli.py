@@ -119,3 +119,16 @@ def test_running_a_hand_execution_does_not_take_yet_exits_2_writing_nothing(tmp_
         assert main([*args, "--hand", "planar_hand5"]) == 2, args
         assert "scene.hand = 'planar_hand5' has 5 fingers; " in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_hand_that_cannot_reach_the_object_is_refused_naming_the_finger(tmp_path, capsys):
+    """Drake's gripper and a 0.28 m box: finger 2 (below it) reaches no corner-free contact."""
+    out = tmp_path / "plan"
+    assert (
+        main(
+            ["plan", "--hand", "drake_planar_gripper", "--box-size", "0.28", "0.28", "--goal", "0.3", "--out", str(out)]
+        )
+        == 2
+    )
+    assert "finger(s) [2] reach no corner-free contact at the initial pose" in capsys.readouterr().err
+    assert not out.exists()
