@@ -6,7 +6,11 @@ processes: total - search) and the total, with whether the plan passed the physi
 a least-squares line time = a + b |theta| for each of the three and its R^2, and the ratio of
 the longest goal's time to the shortest's beside the ratio of their distances.
 
---search-only skips CITO. --compare OLD_TREE also runs the old code's search (a checkout, e.g.
+--search-only skips CITO. --simulate also executes each plan with the default grasp controller and
+prints whether it dropped the object and how far its last simulated pose is from the goal; --out DIR
+keeps each goal's plan and run (DIR/<goal>/plan.json, plan.npz, sim.json, sim.npz).
+
+--compare OLD_TREE also runs the old code's search (a checkout, e.g.
 `git worktree add /tmp/old main`; PYTHONPATH=OLD_TREE in a subprocess) on the same goals and node
 counts (or --old-segment-rotation's), its goal check lifted for the purpose (the old check allows
 |theta| <= pi only), within its own search budgets.
@@ -25,6 +29,8 @@ import time
 import numpy as np
 
 from trajectotree.config import Config, GoalPose, segments_for
+from trajectotree.execution.simulate import run_simulation
+from trajectotree.io import save_plan, save_sim
 from trajectotree.planning.planners import plan
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan
@@ -60,6 +66,23 @@ def old_search(tree: str, goal: float, nodes: int) -> dict:
     return json.loads(out.stdout)
 
 
+def execute(result, goal: float, folder: str | None) -> dict:
+    """Runs `result` with the default grasp controller: dropped, the last simulated pose's distance and
+    turn from the goal (unwrapped: a turn short is 2 pi off), the simulation's wall time."""
+    t0 = time.perf_counter()
+    sim = run_simulation(plan=result)
+    if folder is not None:
+        save_sim(sim, folder)
+    final = np.asarray(sim.x[-1], dtype=float)
+    start = np.asarray(result.config.scene.initial_pose, dtype=float)
+    return {
+        "dropped": bool(sim.dropped),
+        "position_error_m": float(np.hypot(*(final[:2] - start[:2]))),
+        "angle_error_rad": float(final[2] - goal),
+        "sim_wall_s": time.perf_counter() - t0,
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--turns", type=float, nargs="+", default=(0.5, 1, 2, 4, 8), help="goals as multiples of pi")
@@ -73,6 +96,8 @@ def main() -> None:
         help="--compare: the old search's paths turn this much per segment (e.g. 0.349, pi/9) instead of "
         "having the new node counts",
     )
+    parser.add_argument("--simulate", action="store_true", help="execute each plan (default grasp controller)")
+    parser.add_argument("--out", metavar="DIR", help="keep each goal's plan (and run) in DIR/<goal>/")
     parser.add_argument("--json", metavar="FILE", help="write the rows")
     args = parser.parse_args()
     config = Config()
@@ -93,6 +118,11 @@ def main() -> None:
             row |= {"cito_s": result.total_time_s - result.search_time_s, "success": result.success}
             row |= {"passed": None if result.physics_check is None else result.physics_check.passed}
             row |= {"expanded": result.contact_plan.stats.expanded, "status": result.status[:200]}
+            folder = None if args.out is None else os.path.join(args.out, f"{goal:+.4f}")
+            if folder is not None:
+                save_plan(result, folder)
+            if args.simulate and result.trajectory is not None:
+                row |= execute(result, goal, folder)
         row |= {"goal": goal, "nodes": nodes, "wall_s": time.perf_counter() - t0}
         if args.compare:
             rate = args.old_segment_rotation
@@ -104,6 +134,12 @@ def main() -> None:
             f"goal {goal:+8.3f} rad ({k:g} pi), N = {nodes:3d}: search {row['search_s']:7.3f} s "
             f"({row['expanded']} expansions), CITO {row['cito_s']:7.2f} s, total {row['total_s']:7.2f} s, "
             f"success {row['success']}, physics check {row['passed']}"
+            + (
+                ""
+                if "dropped" not in row
+                else f"; executed: dropped {row['dropped']}, final error {row['position_error_m'] * 1e3:.2f} mm "
+                f"{math.degrees(row['angle_error_rad']):+.2f} deg ({row['sim_wall_s']:.0f} s)"
+            )
             + (
                 ""
                 if old is None

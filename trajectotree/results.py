@@ -99,15 +99,15 @@ class Trajectory:
     t: np.ndarray  # (K,) s
     x: np.ndarray  # (K, 3) object pose (x m, y m, theta rad)
     xdot: np.ndarray  # (K, 3)
-    q: np.ndarray  # (K, 8) rad, finger-major
-    qdot: np.ndarray  # (K, 8) rad/s
-    tau: np.ndarray  # (K, 8) N m
-    lambda_n: np.ndarray  # (K, 4) N, normal force of each finger on the box
-    lambda_t: np.ndarray  # (K, 4) N, tangential force (along t_B = z x n_B)
-    f_W: np.ndarray  # (K, 4, 2) N, force of each finger ON the box, in W
-    p_W_tip: np.ndarray  # (K, 4, 2) m, fingertip positions in W: the sphere centres
-    #                        (finger{i}_tip frames)
-    p_W_C: np.ndarray  # (K, 4, 2) m, where each finger's force acts on the box surface, in W: the
+    q: np.ndarray  # (K, 2F) rad, finger-major (F fingers: 4 for the default hand)
+    qdot: np.ndarray  # (K, 2F) rad/s
+    tau: np.ndarray  # (K, 2F) N m
+    lambda_n: np.ndarray  # (K, F) N, normal force of each finger on the box
+    lambda_t: np.ndarray  # (K, F) N, tangential force (along t_B = z x n_B)
+    f_W: np.ndarray  # (K, F, 2) N, force of each finger ON the box, in W
+    p_W_tip: np.ndarray  # (K, F, 2) m, fingertip positions in W: the sphere centres
+    #                        (the hand description's tip frames)
+    p_W_C: np.ndarray  # (K, F, 2) m, where each finger's force acts on the box surface, in W: the
     #                        planned contact of a pinned finger, else the box point nearest the tip
 
     def arrays(self) -> dict[str, np.ndarray]:

@@ -66,7 +66,7 @@ class StartRefusal:
 
 @dataclass(frozen=True)
 class StartState:
-    """A measured state to plan from; the object must be (nearly) at rest in a four-finger grasp."""
+    """A measured state to plan from; the object must be (nearly) at rest in a grasp of every finger."""
 
     object_pose: tuple[float, float, float]  # (x m, y m, theta rad) in W
     q: tuple[float, ...]  # (8,) rad, joint angles, finger-major

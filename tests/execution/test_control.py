@@ -286,3 +286,43 @@ def test_vectorized_hand_kinematics_match_each_finger(scene):
             np.testing.assert_allclose(
                 g[i], closed_form_gravity_compensation(finger, q_i, scene.config.gravity), atol=1e-12
             )
+
+
+def test_grasp_controller_pushes_along_the_normal_where_a_disc_is_touched_now():
+    """A disc turned 0.1 rad under fingertips that stayed where the plan put them: every normal of
+    a disc passes through its centre, so the normals at the touched points are still the planned
+    ones in W (radial, up to the polygonized outline's facets), and the QP must use those. The
+    planned contact normals turned with the disc lean 0.1 rad off, and a QP built on them credits
+    the squeeze with a torque that a disc's normals cannot make."""
+    from trajectotree.config import ObjectConfig, SceneConfig
+    from trajectotree.execution.control import GraspController
+    from trajectotree.execution.reference import grasp_schedule
+
+    disc = build_scene(SceneConfig(object=ObjectConfig(circle_radius=0.06)))
+    shape = disc.config.shape
+    angles = np.radians([-60.0, 60.0, 120.0, -120.0])  # a finger on each quarter, nearest its base
+    arclengths = [shape.arclength(0.06 * np.array([np.cos(a), np.sin(a)])) for a in angles]
+    reference = static_hold_reference(disc, arclengths, min_normal_force=0.5, duration=1.0)
+    assert reference is not None
+    gains = ControllerGains()
+    schedule = grasp_schedule(
+        reference,
+        shape=shape,
+        tip_radius=disc.tip_radius,
+        period=1.0 / gains.rate_hz,
+        duration=1.0,
+        ramp_time=gains.ramp_time,
+        swing_lift=gains.swing_lift,
+        contact_distance=gains.contact_distance,
+    )
+    controller = GraspController(disc, schedule, gains, mu=0.56)
+    p_WF = reference.p_WF[0]
+    radial = p_WF / np.linalg.norm(p_WF, axis=1, keepdims=True)  # the disc's centre at the origin
+    for turn in (0.0, 0.1):
+        f_W, n_W = controller.finger_forces(0, np.array([0.0, 0.0, turn, 0.0, 0.0, 0.0]), p_WF)
+        lean = np.arcsin(
+            radial[:, 0] * n_W[:, 1] - radial[:, 1] * n_W[:, 0]
+        )  # rad; the outline's facets (1 cm at most) leave ~0.01
+        assert np.all(np.abs(lean) < 0.02), (turn, lean)
+        pushes = -np.sum(f_W * n_W, axis=1)
+        assert np.all(pushes >= gains.min_normal_force - 1e-6)

@@ -105,5 +105,10 @@ def test_start_files_round_trip_and_bad_ones_exit_2_writing_nothing(moved_node, 
     lifted = dict(start.to_json(), q=[v + (0.3 if i == 1 else 0.0) for i, v in enumerate(start.q)])
     (tmp_path / "lifted.json").write_text(json.dumps(lifted))
     assert main(["plan", "--goal", "0.5", "--start", str(tmp_path / "lifted.json"), "--out", str(out)]) == 2
-    assert "fingertip 0 is" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "fingertip 0 is" in err and "every finger must touch it (within " in err  # the value and the limit
+    # a grasp that holds at mu 0.7 but not at 0.05: the friction it needs, beside mu_plan's 0.035
+    assert main(["plan", "--goal", "0.5", "--start", str(path), "--mu", "0.05", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "not in frictional form closure at mu_plan 0.035; it needs mu " in err, err
     assert not out.exists()

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.solvers import IpoptSolver, SolverOptions
 
-from trajectotree.cito.layout import NUM_BODY_ROWS
 from trajectotree.cito.program import CitoProgram
 from trajectotree.cito.variables import CitoVariables
 from trajectotree.config import CitoConfig
@@ -160,7 +159,7 @@ def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
     boundary = scene.config.shape
     exact = np.array([[boundary.signed_distance(p) for p in knot] for knot in kin.p_BF]) - rows.body.radius
     return {
-        "dynamics": float(max(np.abs(val[:, :NUM_BODY_ROWS]).max(), *col)),
+        "dynamics": float(max(np.abs(val[:, : rows.layout.num_body_rows]).max(), *col)),
         "friction_cone": float(max(0.0, (np.abs(lt) - mu * ln).max(), (-ln).max())),
         "complementarity": float(comp[free].max()) if free.any() else 0.0,
         "contact_point": float(np.linalg.norm(kin.e, axis=-1)[rows.pinned].max()) if rows.pinned.any() else 0.0,

@@ -15,6 +15,7 @@ from trajectotree.cli.common import (
     FIGURE_SUFFIXES,
     HTML_SUFFIXES,
     add_scene_options,
+    check_executable_hand,
     check_output_dir,
     check_output_file,
     print_json,
@@ -258,6 +259,7 @@ def run(args) -> int:
     arrays = trajectory_arrays(files)
     check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)
+    check_executable_hand(build_scene(config.scene), "the simulation")
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
     if args.closed_loop or args.replan:
         from trajectotree.execution.simulate import check_closed_loop

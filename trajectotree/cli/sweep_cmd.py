@@ -12,7 +12,14 @@ from __future__ import annotations
 
 import math
 
-from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
+from trajectotree.cli.common import (
+    add_config_options,
+    check_executable_hand,
+    check_graspable,
+    check_output_dir,
+    config_from_args,
+    print_json,
+)
 from trajectotree.config import CONTROLLERS, check_controller
 from trajectotree.experiments.executions import (
     CONDITIONS,
@@ -121,9 +128,12 @@ def run(args) -> int:
     from trajectotree.scene.plant import build_scene
 
     # refused here, before any trial, if the hand cannot grasp the object or carry its weight
-    check_graspable(build_scene(spec.config.scene), spec.config, args)
+    scene = build_scene(spec.config.scene)
+    check_graspable(scene, spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
+    if args.simulate or conditions or controllers or args.closed_loop or args.replan:
+        check_executable_hand(scene, "the sweep's simulations")
     if (conditions or args.closed_loop or args.replan) and not controllers:
         controllers = [spec.config.sim.controller]
     check_closed_loop_controllers(controllers, args.closed_loop, args.replan)

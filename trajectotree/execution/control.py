@@ -329,11 +329,17 @@ class GraspController(LeafSystem):
         and n_W (4, 2), the outward normals of the faces it pushes on. The forces act
         where the measured fingertips p_WF (4, 2) touch the faces: a sphere rolls along
         the face as the box turns, and with the planned points instead, 2 mm of rolling
-        under 1 N grips left a slow in-grasp turn 0.03 rad behind. In closed loop
-        (`estimates`), `joints` = (J_WF (4, 2, 2), the other joint torques (4, 2)) bound
-        the torques the forces add."""
+        under 1 N grips left a slow in-grasp turn 0.03 rad behind. The normals too are
+        the object's at those points (the box's: its faces'), not the planned contacts':
+        on a disc, spheres that rolled 15-30 deg around it from their planned contacts
+        left the planned normals that far off, the QP credited the squeeze with a torque
+        a disc's normals cannot make, squeezed to 3 N and let go (4 of 12 disc goals
+        dropped). In closed loop (`estimates`), `joints` = (J_WF (4, 2, 2), the other
+        joint torques (4, 2)) bound the torques the forces add."""
         s, g = self.schedule, self.gains
-        n_W = s.n_B[n] @ rotation_2d(box_state[2]).T
+        R = rotation_2d(box_state[2])
+        p_BF = (p_WF - box_state[:2]) @ R  # R^T (p_WF - p): the measured fingertips in B
+        n_W = self._shape.face_normals(self._shape.nearest_points(p_BF)) @ R.T
         t_W = perp(n_W)
         r_W = p_WF - self._tip_radius * n_W - box_state[:2]  # contact points, from the box origin
         G = np.empty((3, 2 * NUM_FINGERS))

@@ -30,7 +30,7 @@ from concurrent.futures import Executor
 import numpy as np
 
 from trajectotree.cito.guess import plan_guess, static_guess
-from trajectotree.cito.hand import HandModel
+from trajectotree.cito.hand import HandModel, check_cito_hand
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import LogObserver, solve, violations
@@ -44,7 +44,7 @@ from trajectotree.planning.physics import ObjectModel, check_physics
 from trajectotree.planning.start import begin_at, start_config
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
-from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
+from trajectotree.scene.plant import Scene, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
@@ -106,6 +106,7 @@ def plan(
         config = start_config(scene, start, config)
         scene = build_scene(config.scene)
     check_workers(segment_workers)
+    check_cito_hand(scene)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
     check_goal_position(scene, config.search, goal)
@@ -205,7 +206,7 @@ def initial_grasp_plan(scene: Scene, goal, config: Config, tables: GraspTables |
     p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
     hand = HandModel.from_scene(scene)
     x0 = np.asarray(c.initial_pose, dtype=float)
-    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
+    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(scene.num_fingers)]
     if any(qi is None for qi in q):
         return ContactPlan(
             goal=goal.theta,

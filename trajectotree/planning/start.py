@@ -16,7 +16,7 @@ import numpy as np
 from trajectotree.config import Config, ConfigError, mu_plan
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import world_to_box
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.start import StartProblem, StartRefusal, StartState
 
@@ -39,14 +39,14 @@ class StartRefused(ConfigError):
 
 
 def start_contacts(scene: Scene, start: StartState) -> np.ndarray:
-    """(4,) m, each finger's contact arclength: the boundary point nearest its fingertip sphere,
+    """(F,) m, each finger's contact arclength: the boundary point nearest its fingertip sphere,
     which must touch the surface (StartRefused otherwise); the start's own arclengths, when given,
     must agree with it."""
     shape = scene.config.shape
-    p_WF = scene.fingertip_positions(np.asarray(start.q))  # (4, 2)
+    p_WF = scene.fingertip_positions(np.asarray(start.q))  # (F, 2)
     p_BF = np.array([world_to_box(start.object_pose, p) for p in p_WF])
     gaps = shape.signed_distances(p_BF) - scene.tip_radius
-    for i in range(NUM_FINGERS):
+    for i in range(scene.num_fingers):
         if abs(gaps[i]) > TOUCH_DISTANCE:
             raise StartRefused(StartRefusal(StartProblem.FINGER_OFF, i, float(abs(gaps[i])), TOUCH_DISTANCE))
     arclengths = np.array([shape.arclength(p) for p in p_BF])
@@ -54,7 +54,7 @@ def start_contacts(scene: Scene, start: StartState) -> np.ndarray:
         given = np.mod(np.asarray(start.arclengths, dtype=float), shape.perimeter)
         p_given, _ = shape.points(given)
         p_tips = shape.nearest_points(p_BF)
-        for i in range(NUM_FINGERS):
+        for i in range(scene.num_fingers):
             off = float(np.linalg.norm(p_given[i] - p_tips[i]))
             if off > TOUCH_DISTANCE:
                 raise StartRefused(StartRefusal(StartProblem.CONTACT_MISMATCH, i, off, TOUCH_DISTANCE))
