@@ -11,7 +11,8 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, ControllerGains
 from trajectotree.execution.reference import static_hold_reference
-from trajectotree.execution.simulate import Conditions, Push, run_simulation, simulate_reference
+from trajectotree.execution.run import run_simulation
+from trajectotree.execution.simulate import Conditions, Push, simulate_reference
 from trajectotree.io import load_sim, save_sim
 from trajectotree.results import CLOSED_LOOP_ARRAYS
 from trajectotree.scene.plant import build_scene
