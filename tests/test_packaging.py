@@ -21,7 +21,7 @@ from trajectotree.scene.plant import MODELS_DIR, build_scene
 site = Path(sys.argv[1]).resolve()
 assert Path(trajectotree.__file__).resolve().is_relative_to(site), trajectotree.__file__
 assert Path(str(MODELS_DIR)).resolve() == site / "trajectotree" / "models", MODELS_DIR
-print(build_scene(SceneConfig()).plant.num_positions())
+print(build_scene(SceneConfig()).plant.num_positions(), build_scene(SceneConfig(hand="planar_hand5")).num_fingers)
 """
 
 
@@ -55,4 +55,5 @@ def test_an_installed_wheel_ships_the_models_and_finds_them(tmp_path):
         env={"PYTHONPATH": str(site), "PATH": "/usr/bin:/bin"},
     )
     assert result.returncode == 0, result.stderr
-    assert result.stdout.split()[-1] == "11"  # box (x, y, theta) + 8 hand joints, parsed from the shipped SDFs
+    # box (x, y, theta) + 8 hand joints, parsed from the shipped SDFs; and a built-in hand's YAML found beside its SDF
+    assert result.stdout.split()[-2:] == ["11", "5"]

@@ -48,7 +48,7 @@ _EXPORTS = {
     "find_contact_plan": "search.tree",
     "plan": "planning.planners",
     "check_physics": "planning.physics",
-    "run_simulation": "execution.simulate",
+    "run_simulation": "execution.run",
     "write_plan_html": "execution.playback",
 }
 __all__ = ["__version__", *_EXPORTS]

@@ -24,6 +24,10 @@ from trajectotree.typed_yaml import DRAKE_ERRORS, drake_yaml, freeze, load_typed
 
 _NO_VALUE = object()  # a ConfigError about a field whose value its message does not repeat
 MAX_GOAL_ROTATION = 20 * math.pi  # rad, the largest goal rotation either way: ten turns
+DEFAULT_HAND = "planar_hand"
+# built-in hands, models/NAME.yaml (trajectotree.scene.hand); any other is a PATH.yaml, PATH.sdf or PATH.urdf
+HAND_NAMES = ("planar_hand", "drake_planar_gripper", "planar_hand5")
+HAND_SUFFIXES = (".yaml", ".yml", ".sdf", ".urdf")
 MAX_NODES = 400  # search.num_nodes at most: a ten-turn goal takes 238 with the default segment rotations
 
 
@@ -140,6 +144,23 @@ def check_length(name: str, value, length: int, entries: str) -> None:
         raise ConfigError(field=name, value=value, problem=f"has {len(value)} entries", valid=f"{length}: {entries}")
 
 
+def check_hand(value) -> None:
+    """Raises ConfigError unless `value` names a built-in hand or an existing hand file (its
+    contents are checked when the scene reads it: trajectotree.scene.hand)."""
+    valid = f"{', '.join(HAND_NAMES)}, or an existing PATH.yaml, PATH.sdf or PATH.urdf"
+    problem = None
+    if not isinstance(value, str) or not value:
+        problem = "is not a hand name or file"
+    elif value in HAND_NAMES:
+        return
+    elif Path(value).suffix.lower() not in HAND_SUFFIXES:
+        problem = "is not a hand name or file"
+    elif not Path(value).is_file():
+        problem = "does not exist"
+    if problem:
+        raise ConfigError(field="scene.hand", value=value, problem=problem, valid=valid, label="valid")
+
+
 @dataclass(frozen=True)
 class ObjectConfig:
     """The object's outline when it is not the box (SceneConfig.shape): one of a polygon's
@@ -217,6 +238,8 @@ class SceneConfig:
     initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m, m, rad) object pose x_0 in W
     corner_margin: float = 0.015  # m, contacts closer than this (arclength) to a corner are not allowed
     object: ObjectConfig = field(default_factory=ObjectConfig)  # a convex polygon instead of the box
+    # the hand: a built-in name (HAND_NAMES) or a file, PATH.yaml or PATH.sdf / PATH.urdf with PATH.yaml beside it
+    hand: str = DEFAULT_HAND
 
     @functools.cached_property
     def shape(self) -> ConvexPolygon:
@@ -236,6 +259,7 @@ class SceneConfig:
             check_range("scene.initial_pose", v, -1.0, 1.0, index=(i,))
         check_range("scene.initial_pose", self.initial_pose[2], -100.0, 100.0, index=(2,))  # rad: many turns
         check_range("scene.corner_margin", self.corner_margin, 0.0, None)
+        check_hand(self.hand)
         if self.object.is_box:
             shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
             if min(self.box_width, self.box_height) <= shortest:
@@ -506,10 +530,22 @@ class ControllerGains:
     # the reflex when it lasts reflex_confirm_time
     reflex_force: float = 1.0
     reflex_confirm_time: float = 0.004  # s
-    reflex_squeeze: float = 2.0  # N, least push of each holding finger during the reflex (<= max_normal_force)
+    # N, during the reflex the grasp QP's target push of each holding finger rises to this (<= max_normal_force): a
+    # target, not a bound, for a finger whose face turns along the push would push the box with it (a bound of 2 N
+    # cost a 3-finger grasp 1.3 N of its 3.6 N against a +x push, and the box)
+    reflex_squeeze: float = 2.0
     reflex_gain: float = 4.0  # 1, object_kp x this during the reflex (object_kd x its square root)
     reflex_hold: float = 0.2  # s, the reflex stays on this long after its trigger ends
     reflex_release: float = 0.2  # s, then fades back to the plan's gains and squeeze over this
+    # 1, the fraction of the measured disturbance (PushReflex's) that the desired box wrench cancels at once: the
+    # feedback alone answered a 3 N push only after the box had moved and turned
+    disturbance_feedforward: float = 1.0
+    # 1, the grasp QP's weight on the box torque residual x this during the reflex: a grasp short of force spends it
+    # along the push rather than let the box turn
+    reflex_torque_weight: float = 10.0
+    # 1, the grasp QP's cones at max(friction_safety, this) x the friction estimate during the reflex: at 0.8 a
+    # three-finger grasp held at most 2.9 N against +x (3.8 N at 1.0), short of a 3 N push
+    reflex_friction_safety: float = 1.0
 
     def __post_init__(self):
         check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
@@ -538,6 +574,9 @@ class ControllerGains:
         check_range("controller.reflex_gain", self.reflex_gain, 1.0, 100.0)
         check_range("controller.reflex_hold", self.reflex_hold, 0.0, 10.0)
         check_range("controller.reflex_release", self.reflex_release, 0.0, 10.0)
+        check_range("controller.disturbance_feedforward", self.disturbance_feedforward, 0.0, 1.0)
+        check_range("controller.reflex_torque_weight", self.reflex_torque_weight, 1.0, 1e4)
+        check_range("controller.reflex_friction_safety", self.reflex_friction_safety, 0.0, 1.0, low_open=True)
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20
@@ -564,6 +603,13 @@ class ReplanConfig:
     friction_drop: float = 0.05  # the friction estimate this far below the plan's scene.mu: its stances may slip
     mass_change: float = 0.2  # 1, a mass estimate this far (relative) from the plan's: its forces are wrong
     max_replans: int = 4  # per run, so a task the hand cannot do ends rather than replans forever
+    # s, wall-clock budget of a replan's contact search (its search.time_budget_s): the hand holds while it
+    # runs, and a search without a plan by then is refused (the old plan goes on)
+    search_deadline_s: float = 0.5
+    # s, the new plan's first segment must be solved (all its attempts) this long after the state was
+    # measured, the search included, or it is refused too: the hand holds no longer than about this, less
+    # than a segment lasts (cito.knots_per_segment x cito.dt, 1.2 s)
+    first_segment_deadline_s: float = 1.0
 
     def __post_init__(self):
         check_range("sim.replan.theta_error", self.theta_error, 0.0, math.pi, low_open=True)
@@ -571,6 +617,8 @@ class ReplanConfig:
         check_range("sim.replan.friction_drop", self.friction_drop, 0.0, 1.0, low_open=True)
         check_range("sim.replan.mass_change", self.mass_change, 0.0, 10.0, low_open=True)
         check_integer("sim.replan.max_replans", self.max_replans, 0, 100)
+        check_range("sim.replan.search_deadline_s", self.search_deadline_s, 0.0, 60.0, low_open=True)
+        check_range("sim.replan.first_segment_deadline_s", self.first_segment_deadline_s, 0.0, 600.0, low_open=True)
 
 
 @dataclass(frozen=True)

@@ -99,15 +99,15 @@ class Trajectory:
     t: np.ndarray  # (K,) s
     x: np.ndarray  # (K, 3) object pose (x m, y m, theta rad)
     xdot: np.ndarray  # (K, 3)
-    q: np.ndarray  # (K, 8) rad, finger-major
-    qdot: np.ndarray  # (K, 8) rad/s
-    tau: np.ndarray  # (K, 8) N m
-    lambda_n: np.ndarray  # (K, 4) N, normal force of each finger on the box
-    lambda_t: np.ndarray  # (K, 4) N, tangential force (along t_B = z x n_B)
-    f_W: np.ndarray  # (K, 4, 2) N, force of each finger ON the box, in W
-    p_W_tip: np.ndarray  # (K, 4, 2) m, fingertip positions in W: the sphere centres
-    #                        (finger{i}_tip frames)
-    p_W_C: np.ndarray  # (K, 4, 2) m, where each finger's force acts on the box surface, in W: the
+    q: np.ndarray  # (K, 2F) rad, finger-major (F fingers: 4 for the default hand)
+    qdot: np.ndarray  # (K, 2F) rad/s
+    tau: np.ndarray  # (K, 2F) N m
+    lambda_n: np.ndarray  # (K, F) N, normal force of each finger on the box
+    lambda_t: np.ndarray  # (K, F) N, tangential force (along t_B = z x n_B)
+    f_W: np.ndarray  # (K, F, 2) N, force of each finger ON the box, in W
+    p_W_tip: np.ndarray  # (K, F, 2) m, fingertip positions in W: the sphere centres
+    #                        (the hand description's tip frames)
+    p_W_C: np.ndarray  # (K, F, 2) m, where each finger's force acts on the box surface, in W: the
     #                        planned contact of a pinned finger, else the box point nearest the tip
 
     def arrays(self) -> dict[str, np.ndarray]:
@@ -180,6 +180,10 @@ class PlanResult:
     # keyframes: per segment (plan.json "segments"): nodes, success, status, iterations, time_s,
     # retries and every attempt (trajectotree.planning.keyframes.segment_records); () for the joint program
     segments: tuple = ()
+    # s after planning began, when each segment's trajectory was final (a first-segment-first plan, as
+    # replanning makes: trajectotree.planning.keyframes.solve_first_segment_first; inf: not executable); ()
+    # for a plan solved at once
+    segment_ready_s: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -236,6 +240,22 @@ class ReplanReason(enum.Enum):
     MASS = "the mass estimate is off the plan's"
     TRACKING = "the object is off its planned pose"
     CONTACT_LOST = "a holding finger lost its contact"
+    PLAN_ENDS_SHORT = "the plan in effect ends short of the goal (a later segment of it failed)"
+
+
+class ReplanOutcome(enum.Enum):
+    PLANNED = "a new plan took effect"
+    PARTIAL = "a new plan took effect, but one of its later segments failed: the hand holds before it"
+    START_REFUSED = "the planner refused the measured start: the old plan goes on"
+    SEARCH_DEADLINE = (
+        "the search found no plan within its deadline (sim.replan.search_deadline_s): the old plan goes on"
+    )
+    NO_PLAN = "the search found no plan at the estimated friction and mass: the old plan goes on"
+    FIRST_SEGMENT_FAILED = "the new plan's first segment failed: the old plan goes on"
+    FIRST_SEGMENT_LATE = (
+        "the new plan's first segment was not solved within its deadline (sim.replan.first_segment_deadline_s): "
+        "the old plan goes on"
+    )
 
 
 @dataclass(frozen=True)
@@ -246,13 +266,40 @@ class ReplanEvent:
     reason: ReplanReason
     mu: float  # the friction coefficient the new plan assumes (the estimate)
     mass: float  # kg, the mass it assumes (the estimate)
-    latency_s: float  # s, wall-clock time from the measured state to the new plan
-    takes_effect_s: float  # s, simulated time the new plan starts (time_s + latency_s)
-    planned: bool  # a plan came back and was handed to the controller
-    status: str  # the planner's status, or why the start was refused
+    latency_s: float  # s, wall-clock time from the measured state to the new plan's first segment (or the refusal)
+    takes_effect_s: float  # s, simulated time the new plan starts, or the old one resumes (time_s + latency_s)
+    outcome: ReplanOutcome
+    status: str  # what a person reads: the planner's status, or why the start or the search was refused
+    # why: the search's refusal (trajectotree.refusal; SEARCH_DEADLINE, NO_PLAN) or the start's
+    # (trajectotree.start.StartRefusal; START_REFUSED); None otherwise
+    refusal: object | None = None
+    # s after time_s, when each of the new plan's segments was ready (inf: never; a segment begins no
+    # earlier); () when no plan came back
+    segment_ready_s: tuple[float, ...] = ()
+    compute_s: float = float("nan")  # s, wall-clock time of the whole replan (every segment of a new plan)
+    search_s: float = float("nan")  # s, of latency_s, the contact search's (nan: none ran)
+
+    @property
+    def planned(self) -> bool:
+        """A new plan (at least its first segment) was handed to the controller."""
+        return self.outcome in (ReplanOutcome.PLANNED, ReplanOutcome.PARTIAL)
 
     def to_json(self) -> dict:
-        return asdict(self) | {"reason": self.reason.name.lower()}
+        return {
+            "time_s": self.time_s,
+            "reason": self.reason.name.lower(),
+            "mu": self.mu,
+            "mass": self.mass,
+            "latency_s": self.latency_s,
+            "takes_effect_s": self.takes_effect_s,
+            "planned": self.planned,
+            "outcome": self.outcome.name.lower(),
+            "status": self.status,
+            "refusal": None if self.refusal is None else self.refusal.to_json(),
+            "segment_ready_s": [t if math.isfinite(t) else None for t in self.segment_ready_s],
+            "compute_s": self.compute_s if math.isfinite(self.compute_s) else None,
+            "search_s": self.search_s if math.isfinite(self.search_s) else None,
+        }
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ that state (trajectotree.planning.start checks it first). Units: m, rad, m/s, ra
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
@@ -17,9 +18,55 @@ from trajectotree.config import ConfigError
 NUM_JOINTS = 8  # the hand's joints, finger-major (finger i: joints 2i, 2i + 1)
 
 
+class StartProblem(enum.Enum):
+    MOVING = "the object is moving"
+    SPINNING = "the object is turning"
+    FINGER_OFF = "a fingertip does not touch the object"
+    CONTACT_MISMATCH = "a given contact is not where the fingertip is"
+    NOT_IN_CLOSURE = "the grasp cannot hold the object"
+
+
+@dataclass(frozen=True)
+class StartRefusal:
+    """Why a start state cannot be planned from, with its numbers."""
+
+    problem: StartProblem
+    finger: int | None = None
+    value: float = float("nan")  # the measured quantity (m, m/s or the friction the grasp needs)
+    limit: float = float("nan")  # what it may be at most
+
+    def to_json(self) -> dict:
+        numbers = {k: float(v) for k, v in (("value", self.value), ("limit", self.limit)) if math.isfinite(v)}
+        return {"kind": "start", "problem": self.problem.name.lower(), **numbers} | (
+            {} if self.finger is None else {"finger": int(self.finger)}
+        )
+
+    def __str__(self) -> str:
+        if self.problem is StartProblem.MOVING:
+            return (
+                f"start: the object moves at {self.value:.3g} m/s; a plan starts at rest (at most {self.limit:g} m/s)"
+            )
+        if self.problem is StartProblem.SPINNING:
+            return f"start: the object turns at {self.value:.3g} rad/s; a plan starts at rest (at most {self.limit:g})"
+        if self.problem is StartProblem.FINGER_OFF:
+            return (
+                f"start: fingertip {self.finger} is {self.value * 1e3:.2f} mm from the object's surface; every "
+                f"finger must touch it (within {self.limit * 1e3:g} mm) to start a plan"
+            )
+        if self.problem is StartProblem.CONTACT_MISMATCH:
+            return (
+                f"start: finger {self.finger}'s given contact is {self.value * 1e3:.2f} mm from its fingertip's "
+                f"contact point; at most {self.limit * 1e3:g} mm"
+            )
+        return (
+            f"start: the grasp of fingers (0, 1, 2, 3) is not in frictional form closure at mu_plan "
+            f"{self.limit:.3g}; it needs mu {self.value:.3g}"
+        )
+
+
 @dataclass(frozen=True)
 class StartState:
-    """A measured state to plan from; the object must be (nearly) at rest in a four-finger grasp."""
+    """A measured state to plan from; the object must be (nearly) at rest in a grasp of every finger."""
 
     object_pose: tuple[float, float, float]  # (x m, y m, theta rad) in W
     q: tuple[float, ...]  # (8,) rad, joint angles, finger-major

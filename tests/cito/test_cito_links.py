@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trajectotree.cito.knot import BodyParams
-from trajectotree.cito.links import LINK_FRACTIONS, LINK_SIZE, LinkRows
+from trajectotree.cito.links import LINK_FRACTIONS, LinkRows
 from trajectotree.cito.program import build_program, link_knots
 from trajectotree.cito.transition import piece_spec, transition_spec
 from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig, mu_plan
@@ -31,30 +31,34 @@ def scene():
     return build_scene()
 
 
-@pytest.fixture(scope="module", params=["box", "triangle"])
+@pytest.fixture(scope="module", params=["box", "triangle", "five"])
 def rows(request, scene):
+    """The box's and the triangle's link rows, and the five-finger hand's (3 + 10 columns)."""
     if request.param == "triangle":
         scene = build_scene(SceneConfig(object=ObjectConfig(vertices=TRIANGLE)))
+    elif request.param == "five":
+        scene = build_scene(SceneConfig(hand="planar_hand5"))
     return LinkRows(BodyParams(scene, 1000.0, mu=0.5), 4)
 
 
-def random_knots(n, seed):
+def random_knots(rows, n, seed):
     """(x, q) blocks: the object within 5 cm of the origin, joints anywhere in [-1, 1] rad (links
     inside and outside the object)."""
     rng = np.random.default_rng(seed)
-    Z = rng.uniform(-1, 1, (n, LINK_SIZE))
+    Z = rng.uniform(-1, 1, (n, rows.link_size))
     Z[:, :2] *= 0.05
     return Z
 
 
 def test_link_jacobian_matches_finite_differences(rows):
-    Z = random_knots(4, seed=3)
+    Z = random_knots(rows, 4, seed=3)
+    assert Z.shape[1] == 3 + 2 * rows.num_fingers
     val, jac = rows.evaluate(Z, True)
     assert val.min() < 0 < val.max()  # some rows violated, some not
     h = 1e-6
     for k in range(4):
         fd = np.zeros_like(jac[k])
-        for j in range(LINK_SIZE):
+        for j in range(Z.shape[1]):
             dZ = np.zeros_like(Z)
             dZ[k, j] = h
             fd[:, j] = (rows.evaluate(Z + dZ, False)[0][k] - rows.evaluate(Z - dZ, False)[0][k]) / (2 * h)
@@ -64,9 +68,9 @@ def test_link_jacobian_matches_finite_differences(rows):
 def test_declared_sparsity_is_the_support_of_the_derivative(rows):
     h = 1e-6
     support = set()
-    for z in random_knots(3, seed=11):
-        for j in range(LINK_SIZE):
-            dz = np.zeros(LINK_SIZE)
+    for z in random_knots(rows, 3, seed=11):
+        for j in range(len(z)):
+            dz = np.zeros(len(z))
             dz[j] = h
             fd = (rows.values_one(z + dz) - rows.values_one(z - dz)) / (2 * h)
             support |= {(int(i), j) for i in np.flatnonzero(np.abs(fd) > 1e-9)}
@@ -76,7 +80,7 @@ def test_declared_sparsity_is_the_support_of_the_derivative(rows):
 def test_one_knot_paths_agree_with_the_batch(rows):
     """program._KnotCache serves a knot from a batch or alone: the same numbers (the scalar
     values_one to rounding: math's exp and log against numpy's)."""
-    Z = random_knots(4, seed=4)
+    Z = random_knots(rows, 4, seed=4)
     val, jac = rows.evaluate(Z, True)
     for k in range(4):
         np.testing.assert_allclose(rows.values_one(Z[k]), val[k], rtol=0, atol=1e-15)
@@ -92,7 +96,7 @@ def test_rows_against_the_searchs_link_boxes(scene):
     for the link-2 box's four face distances at that object vertex."""
     rows, reach, shape = LinkRows(BodyParams(scene, 1000.0, mu=0.5), 1), Reachability(scene), scene.config.shape
     P, V = rows.points.per_finger, len(shape.vertices)
-    for z in random_knots(5, seed=5):
+    for z in random_knots(rows, 5, seed=5):
         pose, q, val = z[:3], z[3:], rows.values_one(z)
         point_rows, vertex_rows = (
             val[: NUM_FINGERS * P].reshape(NUM_FINGERS, P),

@@ -9,7 +9,7 @@ import pytest
 from trajectotree.cito.contact import smooth_distance, smooth_normal
 from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams, KnotRows, _smooth_contact
-from trajectotree.cito.variables import KNOT_SIZE, SLICES
+from trajectotree.cito.variables import knot_block
 from trajectotree.config import CitoConfig, ObjectConfig, SceneConfig
 from trajectotree.geometry import ConvexPolygon
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
@@ -182,14 +182,27 @@ def triangle_scene():
     return build_scene(SceneConfig(object=ObjectConfig(vertices=TRIANGLE_POINTS)))
 
 
-@pytest.fixture(scope="module", params=["box", "triangle"])
+@pytest.fixture(scope="module")
+def other_hand_scenes():
+    """Drake's three-finger gripper with its brick, and the five-finger hand with the box."""
+    brick = SceneConfig(hand="drake_planar_gripper", box_width=0.1, box_height=0.1, box_mass=0.028)
+    return {"gripper": build_scene(brick), "five": build_scene(SceneConfig(hand="planar_hand5"))}
+
+
+@pytest.fixture(scope="module", params=["box", "triangle", "gripper", "five"])
 def rows(request, scene):
-    """Knots of the box's scene and of the triangle's (3 faces: its own smooth distance and inertia)."""
-    scene = scene if request.param == "box" else request.getfixturevalue("triangle_scene")
+    """Knots of the box's scene and of the triangle's (3 faces: its own smooth distance and inertia),
+    and of the three- and five-finger hands (their knot layouts: 9 + 11 F columns)."""
+    if request.param == "triangle":
+        scene = request.getfixturevalue("triangle_scene")
+    elif request.param in ("gripper", "five"):
+        scene = request.getfixturevalue("other_hand_scenes")[request.param]
+    F = scene.num_fingers
     rng = np.random.default_rng(2)
-    pinned = np.array([[1, 1, 1, 1], [0, 0, 0, 0], [1, 0, 1, 0], [0, 1, 1, 1]], bool)
-    normals = np.tile(np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]]), (4, 1, 1))
-    return KnotRows(BodyParams(scene, 200.0, mu=scene.config.mu), pinned, rng.uniform(-0.1, 0.1, (4, 4, 2)), normals)
+    fingers = [i % 4 for i in range(F)]  # the four-finger pattern, cut or repeated
+    pinned = np.array([[1, 1, 1, 1], [0, 0, 0, 0], [1, 0, 1, 0], [0, 1, 1, 1]], bool)[:, fingers]
+    normals = np.tile(np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])[fingers], (4, 1, 1))
+    return KnotRows(BodyParams(scene, 200.0, mu=scene.config.mu), pinned, rng.uniform(-0.1, 0.1, (4, F, 2)), normals)
 
 
 def test_body_params_take_the_object_shape(rows):
@@ -198,26 +211,28 @@ def test_body_params_take_the_object_shape(rows):
     np.testing.assert_array_equal(body.normals, body.shape.normals)
     assert body.inertia == body.shape.inertia(body.mass)
     if body.shape.is_box:  # bit for bit the box's closed form
-        w, h = 0.20, 0.10
+        w, h = (2 * a for a in body.shape.box_half)
         assert body.inertia == body.mass * (w**2 + h**2) / 12.0
     else:  # an equilateral triangle plate: m a^2 / 12
         assert body.inertia == pytest.approx(body.mass * 0.14**2 / 12, rel=1e-12)
 
 
-def random_knots(n, seed=3):
+def random_knots(rows, n, seed=3):
+    block = rows.layout.block
     rng = np.random.default_rng(seed)
-    Z = rng.uniform(-1, 1, (n, KNOT_SIZE))
-    Z[:, SLICES["x"]][:, :2] *= 0.05  # object positions within 5 cm
+    Z = rng.uniform(-1, 1, (n, block.size))
+    Z[:, block.slices["x"]][:, :2] *= 0.05  # object positions within 5 cm
     return Z
 
 
 def test_knot_jacobian_matches_finite_differences(rows):
-    Z = random_knots(4)
+    Z = random_knots(rows, 4)
     val, jac = rows.evaluate(Z, True)
     h = 1e-6
+    assert Z.shape[1] == 9 + 11 * rows.layout.num_fingers
     for k in range(4):
-        fd = np.zeros((val.shape[1], KNOT_SIZE))
-        for j in range(KNOT_SIZE):
+        fd = np.zeros((val.shape[1], Z.shape[1]))
+        for j in range(Z.shape[1]):
             dZ = np.zeros_like(Z)
             dZ[k, j] = h
             fd[:, j] = (rows.evaluate(Z + dZ, False)[0][k] - rows.evaluate(Z - dZ, False)[0][k]) / (2 * h)
@@ -226,7 +241,7 @@ def test_knot_jacobian_matches_finite_differences(rows):
 
 
 def test_one_knot_paths_agree_with_the_batch(rows):
-    Z = random_knots(4, seed=4)
+    Z = random_knots(rows, 4, seed=4)
     val, jac = rows.evaluate(Z, True)
     for k in range(4):
         one = rows.knot(k)
@@ -245,9 +260,9 @@ def test_declared_sparsity_is_the_support_of_an_independent_derivative(rows):
     for k in range(4):
         one = rows.knot(k)
         support = set()
-        for z in random_knots(3, seed=11):
-            for j in range(KNOT_SIZE):
-                dz = np.zeros(KNOT_SIZE)
+        for z in random_knots(rows, 3, seed=11):
+            for j in range(len(z)):
+                dz = np.zeros(len(z))
                 dz[j] = h
                 fd = (one.values_one(z + dz) - one.values_one(z - dz)) / (2 * h)
                 support |= {(int(i), j) for i in np.flatnonzero(np.abs(fd) > 1e-6)}
@@ -265,11 +280,12 @@ def test_knots_with_the_same_definition_share_a_pattern(rows):
 
 def test_static_object_rows_balance_gravity(scene, rows):
     """Fingers pushing straight up with total m g hold the object: the object rows vanish."""
-    body = rows.body
-    one = KnotRows(body, np.ones((1, 4), bool), np.zeros((1, 4, 2)), np.tile([0.0, -1.0], (1, 4, 1)))
-    z = np.zeros(KNOT_SIZE)
-    z[SLICES["q"]] = np.tile([0.3, 1.2], 4)
-    z[SLICES["lambda_n"]] = body.mass * 9.81 / 4  # normal (0, -1): force +y on the box
+    body, F = rows.body, rows.layout.num_fingers
+    one = KnotRows(body, np.ones((1, F), bool), np.zeros((1, F, 2)), np.tile([0.0, -1.0], (1, F, 1)))
+    block = knot_block(F)
+    z = np.zeros(block.size)
+    z[block.slices["q"]] = np.tile([0.3, 1.2], F)
+    z[block.slices["lambda_n"]] = body.mass * 9.81 / F  # normal (0, -1): force +y on the box
     kin = one.kinematics(z[None])
     # Symmetric lever arms cancel only if the tips are symmetric; check the force rows.
     np.testing.assert_allclose(one.evaluate(z[None], False)[0][0, 0:2], 0.0, atol=1e-12)

@@ -14,8 +14,13 @@ from trajectotree.experiments.executions import (
     ConditionSpec,
     check_condition,
     execution_dir,
+    execution_markdown,
+    execution_summary,
     middle_of_middle_segment,
     pending_executions,
+    refused_markdown,
+    refused_replans,
+    torn_executions,
 )
 
 
@@ -163,3 +168,120 @@ def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path, c
     for method in ("TrajectoTree", "CITO, warm-start"):
         rows = [line for line in table.splitlines() if line.startswith(f"| {method} |") and "push-3N" in line]
         assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-closed-loop"], table
+
+
+def test_a_closed_loop_execution_beside_a_finished_open_loop_one_is_not_called_torn(tmp_path):
+    """Pending closed-loop (and replanning) executions are judged by their own folders: a finished
+    open-loop execution of the same condition is no torn one of theirs."""
+    config = Config()
+    trial = write_trial(tmp_path, "t0", config, None)
+    done = execution_dir(trial, "grasp", "push-3N")
+    done.mkdir(parents=True)
+    (done / "sim.json").write_text(json.dumps({"dropped": False}))
+    np.savez(done / "sim.npz", t=np.zeros(2))
+    spec = ConditionSpec()
+    assert pending_executions(tmp_path, ["grasp"], ["push-3N"], spec) == []
+    for loop in ({"closed_loop": True}, {"replan": True}):
+        tasks = pending_executions(tmp_path, ["grasp"], ["push-3N"], spec, **loop)
+        assert [t.folder.name for t in tasks] == [
+            "grasp-replan_push-3N" if "replan" in loop else "grasp-closed-loop_push-3N"
+        ]
+        assert torn_executions(tasks) == []
+    torn = execution_dir(trial, "grasp", "push-3N", closed_loop=True)
+    torn.mkdir()
+    (torn / "sim.json").write_text("{")
+    tasks = pending_executions(tmp_path, ["grasp"], ["push-3N"], spec, closed_loop=True)
+    (line,) = torn_executions(tasks)
+    assert str(torn) in line and "unreadable" in line and line.endswith("it is recomputed")
+
+
+def replan_record(goal: float, executor: str, dropped: bool, replans: list[dict]) -> dict:
+    return {
+        "method": "trajectotree",
+        "goal": goal,
+        "controller": executor,
+        "condition": "friction-0.4",
+        "dropped": dropped,
+        "mae_x": 1e-3,
+        "mae_y": 2e-3,
+        "mae_theta": 0.01,
+        "final_error": [1e-3, -2e-3, 0.1],
+        "replans": replans,
+    }
+
+
+def test_the_report_sets_open_loop_closed_loop_and_replanning_side_by_side_with_the_refusals():
+    refused = {
+        "time_s": 2.4,
+        "mu": 0.392,
+        "latency_s": 0.15,
+        "planned": False,
+        "outcome": "no_plan",
+        "status": "search failed: tree exhausted after 12 expansions",
+    }
+    planned = {"time_s": 3.6, "mu": 0.399, "latency_s": 0.61, "planned": True, "outcome": "planned", "status": "ok"}
+    records = [
+        replan_record(2.2, "grasp-replan", True, [refused]),
+        replan_record(-2.61, "grasp-replan", False, [planned]),
+        replan_record(2.2, "grasp", True, []),
+        replan_record(2.2, "grasp-closed-loop", False, []),
+    ]
+    table = execution_summary(records, ["trajectotree"])
+    assert [row["controller"] for row in table] == ["grasp", "grasp-closed-loop", "grasp-replan"]
+    replanning = table[-1]
+    assert (replanning["executed"], replanning["dropped"], replanning["replans"], replanning["new_plans"]) == (
+        2,
+        1,
+        2,
+        1,
+    )
+    assert replanning["latency_median_s"] == pytest.approx(0.38)
+    assert replanning["latency_p95_s"] == pytest.approx(0.15 + 0.95 * 0.46)
+    text = execution_markdown(table, {})
+    assert "| trajectotree | grasp-replan | friction-0.4 | 2 | 1 (50%) |" in text
+    assert "| 1.00 / 2.00, 0.100 | 0/2 | 2 (1) | 0.380 / 0.587 |" in text
+    (row,) = refused_replans(records)
+    assert (row["goal"], row["outcome"]) == (2.2, "no_plan")
+    assert (
+        "| trajectotree | +2.200 | friction-0.4 | 2.40 | 0.392 | no plan | "
+        "search failed: tree exhausted after 12 expansions |" in refused_markdown([row], {})
+    )
+
+
+def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_runs(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    replan = ["sweep", "--out", str(out), "--goals", "1", "--no-progress", "--replan"]
+    assert main(replan + ["--controllers", "paper"]) == 2
+    assert "controller = 'paper': the closed loop (--replan) runs around the grasp controller only" in (
+        capsys.readouterr().err
+    )
+    assert main(replan + ["--conditions", "friction-0.2"]) == 2
+    assert "condition = 'friction-0.2' is unknown" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path, capsys):
+    """The same plans at friction 0.4 open loop and replanning: executions.md lists both per condition,
+    with the replans, and sim.json records each replan's typed outcome."""
+    from conftest import SMALL_SWEEP
+
+    out = tmp_path / "sweep"
+    shutil.copytree(resumed_sweep.out, out)
+    args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2", "--conditions", "friction-0.4"]
+    assert main(args) == 0
+    assert main(args + ["--replan"]) == 0  # the cito-warm plans replanned by TrajectoTree too
+    assert "executions: 4 run (grasp closed loop, replanning x friction-0.4)" in capsys.readouterr().out
+    trial = next(p for p in (out / "trials").iterdir() if p.is_dir() and p.name.endswith("_trajectotree"))
+    replanned = json.loads((execution_dir(trial, "grasp", "friction-0.4", replan=True) / "sim.json").read_text())
+    assert replanned["closed_loop"] is not None and replanned["conditions"]["sim_mu"] == 0.4
+    for event in replanned["replans"]:
+        assert event["outcome"] in ("planned", "partial", "start_refused", "search_deadline", "no_plan")
+        assert event["latency_s"] > 0 and event["takes_effect_s"] == pytest.approx(event["time_s"] + event["latency_s"])
+    report = tmp_path / "report"
+    assert main(["report", str(out), "--out", str(report)]) == 0
+    table, _, refused = (report / "executions.md").read_text().partition("## Replans without a plan")
+    rows = [line for line in table.splitlines() if line.startswith("| TrajectoTree |") and "friction-0.4" in line]
+    assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-replan"], table
+    without = [e for e in replanned["replans"] if not e["planned"]]
+    assert all(e["status"].replace("|", "/") in refused for e in without), refused  # each one's reason, per goal

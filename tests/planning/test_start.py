@@ -49,7 +49,7 @@ def test_contacts_are_derived_from_the_fingertips(scene, moved_node):
 
 @pytest.mark.slow
 def test_a_plan_from_a_moved_node_begins_at_it_reaches_the_goal_and_executes(scene, moved_node):
-    from trajectotree.execution.simulate import run_simulation
+    from trajectotree.execution.run import run_simulation
 
     node, start = moved_node
     result = plan(goal=1.2, start=start, scene=scene, config=CONFIG)

@@ -11,7 +11,7 @@ from scipy.optimize import linprog
 
 from trajectotree.config import ObjectConfig, SceneConfig, SearchConfig
 from trajectotree.scene.plant import build_scene
-from trajectotree.search.initial_grasp import STANCE_FINGERS, initial_grasp_candidates
+from trajectotree.search.initial_grasp import initial_grasp_candidates, stance_fingers
 from trajectotree.search.payload import payload
 from trajectotree.search.reach import Reachability
 
@@ -72,7 +72,9 @@ def test_the_block_lp_matches_one_drake_lp_per_grasp(scene_config):
     hold = max(heaviest_by_drake(scene, search, c.arclengths, range(4), 0.0) for c in first) / g
     switch = (
         max(
-            heaviest_by_drake(scene, search, c.arclengths, STANCE_FINGERS[i], search.max_stance_force)
+            heaviest_by_drake(
+                scene, search, c.arclengths, stance_fingers(scene.num_fingers)[i], search.max_stance_force
+            )
             for c in first
             for i in range(4)
             if c.stance_required_mu[i] < grasps.mu_plan

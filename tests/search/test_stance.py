@@ -12,7 +12,7 @@ from trajectotree.config import ConfigError, SearchConfig
 from trajectotree.experiments.sweep import sample_goals
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.plant import build_scene
-from trajectotree.search.initial_grasp import STANCE_FINGERS
+from trajectotree.search.initial_grasp import stance_fingers
 from trajectotree.search.stance import HoldingForceLp, weight_support_B
 from trajectotree.search.tree import _Node, _Search, find_contact_plan
 
@@ -65,15 +65,22 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
     # any stance needs at least m g / sqrt(1 + mu^2) > 0.3 N: every switch is refused
     capped, children = search(0.3)
     assert {child.switching_finger for *_, child in children} <= {None}
+    stances = stance_fingers(scene.num_fingers)
     for finger in movers:
-        heavy = Refusal(RefusalKind.STANCE_TOO_HEAVY, stance=STANCE_FINGERS[finger], mu_plan=capped.mu_plan, limit=0.3)
-        assert capped.refused[heavy] >= 1
-        assert (
-            str(heavy)
-            == f"stance of fingers {STANCE_FINGERS[finger]} needs more than 0.3 N to hold the object's weight"
+        heavy = Refusal(
+            RefusalKind.STANCE_TOO_HEAVY,
+            stance=stance_fingers(scene.num_fingers)[finger],
+            mu_plan=capped.mu_plan,
+            limit=0.3,
         )
+        assert capped.refused[heavy] >= 1
+        assert str(heavy) == f"stance of fingers {stances[finger]} needs more than 0.3 N to hold the object's weight"
     # and a cap above every stance's need refuses none of them
-    needs = [free.stance.holding_force(tuple(grasp[j] for j in STANCE_FINGERS[f]), d) for f in movers for d in (0, 1)]
+    needs = [
+        free.stance.holding_force(tuple(grasp[j] for j in stance_fingers(scene.num_fingers)[f]), d)
+        for f in movers
+        for d in (0, 1)
+    ]
     _, children = search(max(needs) + 0.01)
     assert {child.switching_finger for *_, child in children} - {None} == movers
 
@@ -88,7 +95,9 @@ def test_the_cap_changes_the_plan_of_goal_2_246(scene):
 
     def worst(plan, search):
         return max(
-            search.stance.holding_force(tuple(a.arclengths[j] for j in STANCE_FINGERS[b.switching_finger]), d)
+            search.stance.holding_force(
+                tuple(a.arclengths[j] for j in stance_fingers(scene.num_fingers)[b.switching_finger]), d
+            )
             for n, (a, b) in enumerate(zip(plan.nodes[:-1], plan.nodes[1:]))
             if b.switching_finger is not None
             for d in (n, n + 1)

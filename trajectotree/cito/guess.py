@@ -15,10 +15,9 @@ import numpy as np
 
 from trajectotree.cito.knot import KnotRows
 from trajectotree.cito.program import ProgramSpec
-from trajectotree.cito.variables import GROUPS, CitoVariables
+from trajectotree.cito.variables import CitoVariables
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import ConvexPolygon, rotation_2d
-from trajectotree.scene.plant import NUM_FINGERS
 
 # Height (m) the switching finger is lifted off the surface halfway through its
 # move in the plan-based guess, so the guessed path does not cut through the object.
@@ -48,13 +47,13 @@ def plan_guess(rows: KnotRows, spec: ProgramSpec, plan: ContactPlan) -> CitoVari
         ]
         + [plan.nodes[-1].object_pose[None]]
     )
-    hand, r = rows.body.hand, rows.body.radius
+    hand, r, F = rows.body.hand, rows.body.radius, rows.layout.num_fingers
     boundary = rows.body.shape
-    q = np.empty((spec.num_knots, 2 * NUM_FINGERS))
+    q = np.empty((spec.num_knots, 2 * F))
     for s in range(len(plan.nodes) - 1):
         old, new = plan.nodes[s], plan.nodes[s + 1]
         ks = s * M + np.arange(M + 1)
-        for i in range(NUM_FINGERS):
+        for i in range(F):
             if i == new.switching_finger:
                 c_B = [_lifted(boundary, old.arclengths[i], new.arclengths[i], u, r) for u in progress]
             else:
@@ -84,12 +83,12 @@ def _lifted(boundary: ConvexPolygon, s_old: float, s_new: float, tau: float, rad
 
 
 def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *, moving: bool) -> CitoVariables:
-    K = spec.num_knots
+    K, F = spec.num_knots, rows.layout.num_fingers
     x[0], q[0] = spec.x0, spec.q0
     if spec.x_end is not None:  # keyframes: the last knot is fixed too
         x[-1], q[-1] = spec.x_end, spec.q_end
-    zeros = {name: np.zeros((K, w)) for name, w in GROUPS}
-    zeros.update(x=x, q=q, slack=np.full((K, NUM_FINGERS), SLACK_GUESS))
+    zeros = {name: np.zeros((K, w)) for name, w in rows.layout.block.groups}
+    zeros.update(x=x, q=q, slack=np.full((K, F), SLACK_GUESS))
     if moving:
         for pos, vel, acc in (("x", "xd", "xdd"), ("q", "qd", "qdd")):
             zeros[vel] = np.gradient(zeros[pos], spec.dt, axis=0)
@@ -102,13 +101,13 @@ def _complete(rows: KnotRows, spec: ProgramSpec, x: np.ndarray, q: np.ndarray, *
     kin = rows.kinematics(guess.stacked())
     hand, r = rows.body.hand, rows.body.radius
     JTf = np.einsum("kiab,kia->kib", kin.J, kin.f_W) - r * lt[..., None]
-    Mqdd = np.einsum("kiab,kib->kia", hand.mass_matrices(q), guess.qdd.reshape(K, NUM_FINGERS, 2))
+    Mqdd = np.einsum("kiab,kib->kia", hand.mass_matrices(q), guess.qdd.reshape(K, F, 2))
     tau = np.clip((Mqdd + JTf - hand.gravity_forces(q)).reshape(K, -1), -hand.tau_max, hand.tau_max)
     return CitoVariables(**{**zeros, "lambda_n": ln, "lambda_t": lt, "tau": tau})
 
 
 def _static_forces(rows: KnotRows, guess: CitoVariables, touch_tol: float = 1e-3):
-    """(lambda_n, lambda_t) (K, 4) giving the object its guessed acceleration with the
+    """(lambda_n, lambda_t) (K, F) giving the object its guessed acceleration with the
     fingers that are pinned or within touch_tol of the surface."""
     b = rows.body
     kin = rows.kinematics(guess.stacked())
@@ -120,8 +119,9 @@ def _static_forces(rows: KnotRows, guess: CitoVariables, touch_tol: float = 1e-3
     w = np.concatenate([b.mass * (guess.xdd[:, :2] - b.gravity), b.inertia * guess.xdd[:, 2:]], axis=1)
     pref = np.concatenate([weight * touching, np.zeros(touching.shape)], axis=1)
     lam = pref + np.einsum("kij,kj->ki", np.linalg.pinv(G), w - np.einsum("kij,kj->ki", G, pref))
-    ln = np.maximum(lam[:, :NUM_FINGERS], 0.0)
-    return ln, np.clip(lam[:, NUM_FINGERS:], -b.mu * ln, b.mu * ln)
+    F = rows.layout.num_fingers
+    ln = np.maximum(lam[:, :F], 0.0)
+    return ln, np.clip(lam[:, F:], -b.mu * ln, b.mu * ln)
 
 
 def _cross(a, f):

@@ -1,4 +1,4 @@
-"""The four two-link fingers in closed form, vectorized over fingers.
+"""The hand's two-link fingers in closed form, vectorized over fingers.
 
 Everything here is read from the plant through `scene.FingerGeometry`, so the
 SDF stays the single source of truth; tests compare these against the plant
@@ -12,27 +12,49 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trajectotree.config import ConfigError
 from trajectotree.scene.kinematics import TwoLinkFinger
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
+
+
+def check_cito_hand(scene: Scene) -> None:
+    """ConfigError (CLI exit 2, before any planning) unless CITO's link rows (links.py) fit scene's
+    hand: a box on every finger's link 2 and the same links boxed on every finger (a link 1
+    without one, as on Drake's gripper, has no rows). Any number of fingers plans."""
+    boxed = [tuple(box is not None for box in f.link_boxes) for f in scene.hand_description.fingers]
+    problem = None
+    if any(not b[1] for b in boxed):
+        i = next(i for i, b in enumerate(boxed) if not b[1])
+        problem = f"has no collision box on finger {i}'s link 2; CITO's link rows need one"
+    elif len(set(boxed)) > 1:
+        problem = "boxes different links on different fingers; CITO's link rows need the same on every finger"
+    if problem:
+        raise ConfigError(
+            field="scene.hand",
+            value=scene.config.hand,
+            problem=problem,
+            valid="two-link fingers with a collision box on link 2 (`trajectotree scene` and `search` take any hand)",
+            label="valid",
+        )
 
 
 def _per_finger(q: np.ndarray) -> np.ndarray:
-    """(..., 8) joint angles as (..., 4, 2)."""
-    return q.reshape(q.shape[:-1] + (NUM_FINGERS, 2))
+    """(..., 2F) joint angles as (..., F, 2)."""
+    return q.reshape(q.shape[:-1] + (-1, 2))
 
 
 @dataclass(frozen=True)
 class HandModel:
-    """Per-finger parameters as arrays with a leading finger axis (4, ...); the
-    kinematics are the four fingers' `TwoLinkFinger` stack."""
+    """Per-finger parameters as arrays with a leading finger axis (F, ...); the
+    kinematics are the fingers' `TwoLinkFinger` stack."""
 
-    fingers: TwoLinkFinger  # (4, ...) p_W_base, psi, l1, l2, joint limits
-    mass_a: np.ndarray  # (4,) kg m^2, M11 = a + 2 b cos q2
-    mass_b: np.ndarray  # (4,) kg m^2, M12 = c + b cos q2
-    mass_c: np.ndarray  # (4,) kg m^2, M22 = c
-    grav_1: np.ndarray  # (4,) N m, g (m1 c1 + m2 l1): gravity moment of link 1 terms
-    grav_2: np.ndarray  # (4,) N m, g m2 c2
-    tau_max: np.ndarray  # (8,) N m
+    fingers: TwoLinkFinger  # (F, ...) p_W_base, psi, l1, l2, joint limits
+    mass_a: np.ndarray  # (F,) kg m^2, M11 = a + 2 b cos q2
+    mass_b: np.ndarray  # (F,) kg m^2, M12 = c + b cos q2
+    mass_c: np.ndarray  # (F,) kg m^2, M22 = c
+    grav_1: np.ndarray  # (F,) N m, g (m1 c1 + m2 l1): gravity moment of link 1 terms
+    grav_2: np.ndarray  # (F,) N m, g m2 c2
+    tau_max: np.ndarray  # (2F,) N m
 
     @staticmethod
     def from_scene(scene: Scene) -> HandModel:
@@ -54,12 +76,12 @@ class HandModel:
 
     @property
     def q_lower(self) -> np.ndarray:
-        """(8,) rad, finger-major."""
+        """(2F,) rad, finger-major."""
         return self.fingers.q_lower.ravel()
 
     @property
     def q_upper(self) -> np.ndarray:
-        """(8,) rad, finger-major."""
+        """(2F,) rad, finger-major."""
         return self.fingers.q_upper.ravel()
 
     def angles(self, q: np.ndarray):

@@ -8,9 +8,9 @@ contact frame is the planned one), or *free* (general CITO: the contact frame co
 from the smooth distance to the object (any convex polygon) at the fingertip, with non-penetration and the
 relaxed complementarity rows of eqs. 5-6).
 
-Rows of knot k (on its KNOT_SIZE variables, see variables.GROUPS; named in layout.py):
+Rows of knot k (on its variables, see variables.knot_block; named in layout.py):
   object (3):  m p_dd - sum f_W - m g = 0;  I theta_dd - sum (p_WC - p_WB) x f_W = 0
-  hand (8):    M(q) q_dd - tau - tau_g(q) + J_C^T f_W = 0, J_C the Jacobian of the
+  hand (2F):    M(q) q_dd - tau - tau_g(q) + J_C^T f_W = 0, J_C the Jacobian of the
                contact point p_WC = p_WF - r n_W on link 2 (J_C^T f = J_F^T f - r lambda_t [1, 1])
   pinned (4):  gamma -/+ (p_WF - p_WB - R c_B) >= 0
   free (6):    phi(p_BF) - r >= 0;  gamma - (phi - r) lambda_n >= 0;
@@ -42,18 +42,15 @@ from trajectotree.cito.layout import (
     FREE_PHI,
     FREE_ROWS,
     FREE_SLIP,
-    NUM_BODY_ROWS,
     PIN_MINUS,
     PIN_PLUS,
     PINNED_ROWS,
     ROW_FORCE,
-    ROW_HAND,
     ROW_MOMENT,
     TWO,
+    knot_layout,
 )
-from trajectotree.cito.variables import KNOT_SIZE, SLICES
 from trajectotree.scene.kinematics import K90, jacobian_from_links
-from trajectotree.scene.plant import NUM_FINGERS
 
 
 class BodyParams:
@@ -75,6 +72,7 @@ class BodyParams:
         self.offsets = self.shape.offsets  # (V,) m, face j: normals[j] . p_B = offsets[j]
         self.sharpness = sharpness
         self.link_boxes = tuple(f.link_boxes for f in self.fingers)  # per finger, its links' collision boxes (links.py)
+        self.layout = knot_layout(len(self.fingers))  # the knot block's columns and rows for this hand
 
 
 def _rot(th):
@@ -152,17 +150,18 @@ def _scalar_constants(rows: KnotRows):
 
 
 class KnotRows:
-    """The rows of a batch of knots. pinned (K, 4) selects each finger's mode;
-    c_B, n_B (K, 4, 2) are the pinned fingertip-centre targets and normals in B."""
+    """The rows of a batch of knots. pinned (K, F) selects each finger's mode;
+    c_B, n_B (K, F, 2) are the pinned fingertip-centre targets and normals in B."""
 
     def __init__(self, body: BodyParams, pinned, c_B, n_B):
         self.body = body
-        self.pinned = np.asarray(pinned, dtype=bool).reshape(-1, NUM_FINGERS)
-        self.c_B = np.asarray(c_B, dtype=float).reshape(-1, NUM_FINGERS, 2)
-        self.n_B = np.asarray(n_B, dtype=float).reshape(-1, NUM_FINGERS, 2)
+        L = self.layout = body.layout
+        self.pinned = np.asarray(pinned, dtype=bool).reshape(-1, L.num_fingers)
+        self.c_B = np.asarray(c_B, dtype=float).reshape(-1, L.num_fingers, 2)
+        self.n_B = np.asarray(n_B, dtype=float).reshape(-1, L.num_fingers, 2)
         sizes = np.where(self.pinned, PINNED_ROWS, FREE_ROWS)
-        self.row_start = NUM_BODY_ROWS + np.cumsum(sizes, axis=1) - sizes
-        self.num_rows = NUM_BODY_ROWS + sizes.sum(axis=1)  # (K,)
+        self.row_start = L.num_body_rows + np.cumsum(sizes, axis=1) - sizes
+        self.num_rows = L.num_body_rows + sizes.sum(axis=1)  # (K,)
         self.kP, self.iP = np.nonzero(self.pinned)
         self.kF, self.iF = np.nonzero(~self.pinned)
         self._scalars = None  # values_one's constants, made on its first call
@@ -174,19 +173,19 @@ class KnotRows:
     def bounds(self, k: int, clearance):
         """(lower, upper) of knot k's rows; `clearance` (4,) m is the lower bound of each
         free finger's non-penetration row phi - r >= clearance."""
-        n = self.num_rows[k]
+        n, L = self.num_rows[k], self.layout
         lower = np.zeros(n)
         free = ~self.pinned[k]
         lower[self.row_start[k, free] + FREE_PHI] = np.asarray(clearance, dtype=float)[free]
-        return lower, np.concatenate([np.zeros(NUM_BODY_ROWS), np.full(n - NUM_BODY_ROWS, np.inf)])
+        return lower, np.concatenate([np.zeros(L.num_body_rows), np.full(n - L.num_body_rows, np.inf)])
 
     def kinematics(self, Z: np.ndarray) -> KnotKinematics:
-        """The per-finger quantities of knots Z (K, KNOT_SIZE)."""
-        b, hand, r = self.body, self.body.hand, self.body.radius
+        """The per-finger quantities of knots Z (K, knot size)."""
+        b, hand, r, L = self.body, self.body.hand, self.body.radius, self.layout
         nK = Z.shape[0]
         p, th, pd, thd = Z[:, COL_P], Z[:, COL_TH], Z[:, COL_PD], Z[:, COL_THD]
-        q, qd = Z[:, SLICES["q"]], Z[:, SLICES["qd"]].reshape(nK, NUM_FINGERS, 2)
-        ln, lt = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]]
+        q, qd = Z[:, L.block.slices["q"]], Z[:, L.block.slices["qd"]].reshape(nK, L.num_fingers, 2)
+        ln, lt = Z[:, L.block.slices["lambda_n"]], Z[:, L.block.slices["lambda_t"]]
         R = _rot(th)
         RT = R.transpose(0, 2, 1)
         r1, r2 = hand.links(q)  # (K, 4, 2)
@@ -196,7 +195,7 @@ class KnotRows:
         p_BF = rel @ R  # R^T rel
         phi, grad, hess = smooth_distance(p_BF.reshape(-1, 2), b.normals, b.offsets, b.sharpness)
         n_s, dn_s = smooth_normal(grad, hess)
-        n_B = np.where(self.pinned[..., None], self.n_B, n_s.reshape(nK, NUM_FINGERS, 2))
+        n_B = np.where(self.pinned[..., None], self.n_B, n_s.reshape(nK, L.num_fingers, 2))
         n_W = n_B @ RT
         t_W = n_W @ K90.T
         f_W = -ln[..., None] * n_W + lt[..., None] * t_W
@@ -209,38 +208,38 @@ class KnotRows:
             p_WF=p_WF,
             rel=rel,
             p_BF=p_BF,
-            grad=grad.reshape(nK, NUM_FINGERS, 2),
-            dn_s=dn_s.reshape(nK, NUM_FINGERS, 2, 2),
+            grad=grad.reshape(nK, L.num_fingers, 2),
+            dn_s=dn_s.reshape(nK, L.num_fingers, 2, 2),
             n_W=n_W,
             t_W=t_W,
             f_W=f_W,
             arm=rel - r * n_W,
             p_WC=p_WF - r * n_W,
-            phi_tip=phi.reshape(nK, NUM_FINGERS) - r,
+            phi_tip=phi.reshape(nK, L.num_fingers) - r,
             e=rel - self.c_B @ RT,
             v=np.einsum("kiab,kib->kia", J, qd) - pd[:, None] - thd[:, None, None] * (rel @ K90.T),
         )
 
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
-        """(values (K, R), Jacobians (K, R, KNOT_SIZE) or None), R = max rows; knot k
+        """(values (K, R), Jacobians (K, R, knot size) or None), R = max rows; knot k
         uses its first num_rows[k] rows. The Jacobian is analytic (knot_jacobian.py)."""
         kin = self.kinematics(Z)
         val = self._values(Z, kin)
         return val, (knot_jacobian(self, Z, kin) if with_jacobian else None)
 
     def _values(self, Z: np.ndarray, kin: KnotKinematics) -> np.ndarray:
-        b, hand, r = self.body, self.body.hand, self.body.radius
+        b, hand, r, L = self.body, self.body.hand, self.body.radius, self.layout
         nK = Z.shape[0]
-        q = Z[:, SLICES["q"]]
-        qdd, tau = (Z[:, SLICES[n]].reshape(nK, NUM_FINGERS, 2) for n in ("qdd", "tau"))
-        ln, lt, gam = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]], Z[:, SLICES["slack"]]
+        q = Z[:, L.block.slices["q"]]
+        qdd, tau = (Z[:, L.block.slices[n]].reshape(nK, L.num_fingers, 2) for n in ("qdd", "tau"))
+        ln, lt, gam = Z[:, L.block.slices["lambda_n"]], Z[:, L.block.slices["lambda_t"]], Z[:, L.block.slices["slack"]]
         f_W, arm, e, v, phi_tip = kin.f_W, kin.arm, kin.e, kin.v, kin.phi_tip
         val = np.zeros((nK, int(self.num_rows.max())))
         val[:, ROW_FORCE] = b.mass * Z[:, COL_PDD] - f_W.sum(1) - b.mass * b.gravity
         val[:, ROW_MOMENT] = b.inertia * Z[:, COL_THDD] - np.sum(
             arm[..., 0] * f_W[..., 1] - arm[..., 1] * f_W[..., 0], axis=1
         )
-        val[:, ROW_HAND] = (
+        val[:, L.row_hand] = (
             np.einsum("kiab,kib->kia", hand.mass_matrices(q), qdd)
             - tau
             - hand.gravity_forces(q)
@@ -260,7 +259,7 @@ class KnotRows:
         return val
 
     def values_one(self, z: np.ndarray) -> np.ndarray:
-        """The rows of a one-knot batch at z (KNOT_SIZE,), several times faster than
+        """The rows of a one-knot batch at z (knot size,), several times faster than
         `evaluate` for one knot (IPOPT asks for the values at each trial point knot by
         knot). Scalar on purpose, the same rows as `_values` in the same order: numpy's
         exp, log, norm and matmul round differently from math's in the last bit, and IPOPT
@@ -272,10 +271,11 @@ class KnotRows:
         if self._scalars is None:
             self._scalars = _scalar_constants(self)
         (m, gx, gy, inertia, r, k, faces), fingers = self._scalars
+        L = self.layout
         z = z.tolist()
         (px, py), th, (pdx, pdy), thd = z[COL_P], z[COL_TH], z[COL_PD], z[COL_THD]
-        q, qd, qdd, tau = (z[SLICES[n]] for n in ("q", "qd", "qdd", "tau"))
-        lns, lts, gams = (z[SLICES[n]] for n in ("lambda_n", "lambda_t", "slack"))
+        q, qd, qdd, tau = (z[L.block.slices[n]] for n in ("q", "qd", "qdd", "tau"))
+        lns, lts, gams = (z[L.block.slices[n]] for n in ("lambda_n", "lambda_t", "slack"))
         c, s = math.cos(th), math.sin(th)
         fx_sum = fy_sum = torque = 0.0
         hand_rows, contact_rows = [], []
@@ -341,12 +341,12 @@ class KnotRows:
         first = {}  # each distinct key's first knot, in order
         for k, key in enumerate(keys):
             first.setdefault(key, k)
-        distinct = np.array(list(first.values()))
+        distinct, L = np.array(list(first.values())), self.layout
         rows = KnotRows(self.body, self.pinned[distinct], self.c_B[distinct], self.n_B[distinct])
         rng = np.random.default_rng(0)
-        mask = np.zeros((len(distinct), int(rows.num_rows.max()), KNOT_SIZE), dtype=bool)
+        mask = np.zeros((len(distinct), int(rows.num_rows.max()), L.block.size), dtype=bool)
         for _ in range(3):
-            z = rng.uniform(-1, 1, (1, KNOT_SIZE))
+            z = rng.uniform(-1, 1, (1, L.block.size))
             mask |= rows.evaluate(np.repeat(z, len(distinct), axis=0), True)[1] != 0.0
         patterns = [
             [(int(i), int(j)) for i, j in zip(*np.nonzero(mask[u, : rows.num_rows[u]]))] for u in range(len(distinct))

@@ -14,17 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.cito.layout import (
-    COL_G,
-    COL_LN,
-    COL_LT,
     COL_P,
     COL_P_IDX,
     COL_PD_IDX,
     COL_PDD,
-    COL_Q,
-    COL_QD,
-    COL_QDD,
-    COL_TAU,
     COL_TH,
     COL_THD,
     COL_THDD,
@@ -34,14 +27,10 @@ from trajectotree.cito.layout import (
     PIN_MINUS,
     PIN_PLUS,
     ROW_FORCE,
-    ROW_HAND,
-    ROW_HAND_IDX,
     ROW_MOMENT,
     TWO,
 )
-from trajectotree.cito.variables import KNOT_SIZE, SLICES
 from trajectotree.scene.kinematics import K90
-from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS
 
 _I2 = np.eye(2)
 # Free-finger slip rows FREE_SLIP + s, s = 0..3: gamma + SLIP_SIGN[s] v_a lambda_n, a = SLIP_A[s].
@@ -75,8 +64,9 @@ class _Partials:
 
 
 def _partials(rows, Z: np.ndarray, kin) -> _Partials:
+    L = rows.layout
     r = rows.body.radius
-    ln, lt = Z[:, SLICES["lambda_n"]], Z[:, SLICES["lambda_t"]]
+    ln, lt = Z[:, L.block.slices["lambda_n"]], Z[:, L.block.slices["lambda_t"]]
     R, RT, J, n_W = kin.R, kin.RT, kin.J, kin.n_W
     # Derivatives of p_BF = R^T (p_WF - p): wrt p (-R^T), theta (-K p_BF), q_i (R^T J_i).
     dpB_dth = -(kin.p_BF @ K90.T)
@@ -100,9 +90,10 @@ def _partials(rows, Z: np.ndarray, kin) -> _Partials:
 
 
 def knot_jacobian(rows, Z: np.ndarray, kin) -> np.ndarray:
-    """(K, R, KNOT_SIZE): the Jacobian of `rows.evaluate`'s values at knots Z, with
+    """(K, R, knot size): the Jacobian of `rows.evaluate`'s values at knots Z, with
     kin = rows.kinematics(Z)."""
-    jac = np.zeros((Z.shape[0], int(rows.num_rows.max()), KNOT_SIZE))
+    L = rows.layout
+    jac = np.zeros((Z.shape[0], int(rows.num_rows.max()), L.block.size))
     d = _partials(rows, Z, kin)
     _object_rows(jac, rows, kin, d)
     _hand_rows(jac, rows, Z, kin, d)
@@ -112,31 +103,33 @@ def knot_jacobian(rows, Z: np.ndarray, kin) -> np.ndarray:
 
 
 def _object_rows(jac, rows, kin, d: _Partials) -> None:
+    L = rows.layout
     b, nK = rows.body, jac.shape[0]
     n_W, t_W, f_W, arm = kin.n_W, kin.t_W, kin.f_W, kin.arm
     # Translation rows.
     jac[:, ROW_FORCE, COL_P] = -d.df_dp.sum(1)
     jac[:, ROW_FORCE, COL_TH] = -d.df_dth.sum(1)
     jac[:, ROW_FORCE, COL_PDD] = b.mass * _I2
-    jac[:, ROW_FORCE, SLICES["q"]] = -d.df_dq.transpose(0, 2, 1, 3).reshape(nK, 2, -1)
-    jac[:, ROW_FORCE, COL_LN] = n_W.transpose(0, 2, 1)
-    jac[:, ROW_FORCE, COL_LT] = -t_W.transpose(0, 2, 1)
+    jac[:, ROW_FORCE, L.block.slices["q"]] = -d.df_dq.transpose(0, 2, 1, 3).reshape(nK, 2, -1)
+    jac[:, ROW_FORCE, L.col_ln] = n_W.transpose(0, 2, 1)
+    jac[:, ROW_FORCE, L.col_lt] = -t_W.transpose(0, 2, 1)
     # Rotation row: d cross(arm, f) = -(K f).d arm + (K arm).d f.
     Kf, Ka = f_W @ K90.T, arm @ K90.T
     jac[:, ROW_MOMENT, COL_P] = np.einsum("kia,kiab->kb", Kf, d.darm_dp) - np.einsum("kia,kiab->kb", Ka, d.df_dp)
     jac[:, ROW_MOMENT, COL_TH] = np.sum(Kf * d.darm_dth, axis=(1, 2)) - np.sum(Ka * d.df_dth, axis=(1, 2))
     jac[:, ROW_MOMENT, COL_THDD] = b.inertia
-    jac[:, ROW_MOMENT, SLICES["q"]] = (
+    jac[:, ROW_MOMENT, L.block.slices["q"]] = (
         np.einsum("kia,kiab->kib", Kf, d.darm_dq) - np.einsum("kia,kiab->kib", Ka, d.df_dq)
     ).reshape(nK, -1)
-    jac[:, ROW_MOMENT, COL_LN] = np.sum(Ka * n_W, axis=2)
-    jac[:, ROW_MOMENT, COL_LT] = -np.sum(Ka * t_W, axis=2)
+    jac[:, ROW_MOMENT, L.col_ln] = np.sum(Ka * n_W, axis=2)
+    jac[:, ROW_MOMENT, L.col_lt] = -np.sum(Ka * t_W, axis=2)
 
 
 def _hand_rows(jac, rows, Z, kin, d: _Partials) -> None:
     """d(J^T f)/dq = [[-(r1+r2).f, -r2.f], [-r2.f, -r2.f]] + J^T df/dq, plus M, tau, gravity."""
+    L = rows.layout
     hand, r, nK = rows.body.hand, rows.body.radius, jac.shape[0]
-    q, qdd = Z[:, SLICES["q"]], Z[:, SLICES["qdd"]].reshape(nK, NUM_FINGERS, 2)
+    q, qdd = Z[:, L.block.slices["q"]], Z[:, L.block.slices["qdd"]].reshape(nK, L.num_fingers, 2)
     JT = kin.J.swapaxes(-1, -2)
     a12, a2 = np.sum((kin.r1 + kin.r2) * kin.f_W, -1), np.sum(kin.r2 * kin.f_W, -1)
     H_q = JT @ d.df_dq - hand.gravity_derivatives(q)
@@ -145,30 +138,31 @@ def _hand_rows(jac, rows, Z, kin, d: _Partials) -> None:
     H_q[..., 1, :] -= a2[..., None]
     H_q[..., :, 1] += np.einsum("kiab,kib->kia", hand.mass_derivatives(q), qdd)
     kk = np.arange(nK)[:, None, None]
-    rows_h = ROW_HAND_IDX[None, :, :, None]
-    _put(jac, rows, "hand_q", lambda: (kk[..., None], rows_h, COL_Q[None, :, None, :]), H_q)
-    _put(jac, rows, "hand_qdd", lambda: (kk[..., None], rows_h, COL_QDD[None, :, None, :]), hand.mass_matrices(q))
-    _put(jac, rows, "hand_tau", lambda: (kk[..., None], rows_h, COL_TAU[None, :, None, :]), -_I2)
-    jac[:, ROW_HAND, COL_P] = (JT @ d.df_dp).reshape(nK, NUM_HAND_JOINTS, 2)
-    jac[:, ROW_HAND, COL_TH] = np.einsum("kiab,kib->kia", JT, d.df_dth).reshape(nK, -1)
+    rows_h = L.row_hand_idx[None, :, :, None]
+    _put(jac, rows, "hand_q", lambda: (kk[..., None], rows_h, L.col_q[None, :, None, :]), H_q)
+    _put(jac, rows, "hand_qdd", lambda: (kk[..., None], rows_h, L.col_qdd[None, :, None, :]), hand.mass_matrices(q))
+    _put(jac, rows, "hand_tau", lambda: (kk[..., None], rows_h, L.col_tau[None, :, None, :]), -_I2)
+    jac[:, L.row_hand, COL_P] = (JT @ d.df_dp).reshape(nK, 2 * L.num_fingers, 2)
+    jac[:, L.row_hand, COL_TH] = np.einsum("kiab,kib->kia", JT, d.df_dth).reshape(nK, -1)
     _put(
         jac,
         rows,
         "hand_ln",
-        lambda: (kk, ROW_HAND_IDX[None], COL_LN[None, :, None]),
+        lambda: (kk, L.row_hand_idx[None], L.col_ln[None, :, None]),
         -np.einsum("kiab,kib->kia", JT, kin.n_W),
     )
     _put(
         jac,
         rows,
         "hand_lt",
-        lambda: (kk, ROW_HAND_IDX[None], COL_LT[None, :, None]),
+        lambda: (kk, L.row_hand_idx[None], L.col_lt[None, :, None]),
         np.einsum("kiab,kib->kia", JT, kin.t_W) - r,
     )
 
 
 def _pinned_rows(jac, rows, kin) -> None:
     """gamma -/+ e, e = p_WF - p - R c_B."""
+    L = rows.layout
     kP, iP = rows.kP, rows.iP
     rp = rows.row_start[kP, iP]
     de_dth = -(rows.c_B[kP, iP][:, None, :] @ kin.RT[kP])[:, 0] @ K90.T
@@ -176,25 +170,26 @@ def _pinned_rows(jac, rows, kin) -> None:
     J = kin.J[kP, iP]
     for sign, off in ((-1.0, PIN_MINUS), (1.0, PIN_PLUS)):
         rws = rp[:, None] + off + TWO  # (nP, 2)
-        _put(jac, rows, f"pin_g{off}", lambda rws=rws: (kP2, rws, COL_G[iP, None]), 1.0)
-        _put(jac, rows, f"pin_q{off}", lambda rws=rws: (kP3, rws[:, :, None], COL_Q[iP][:, None, :]), sign * J)
+        _put(jac, rows, f"pin_g{off}", lambda rws=rws: (kP2, rws, L.col_g[iP, None]), 1.0)
+        _put(jac, rows, f"pin_q{off}", lambda rws=rws: (kP3, rws[:, :, None], L.col_q[iP][:, None, :]), sign * J)
         _put(jac, rows, f"pin_p{off}", lambda rws=rws: (kP3, rws[:, :, None], COL_P_IDX), -sign * _I2)
         _put(jac, rows, f"pin_th{off}", lambda rws=rws: (kP2, rws, COL_TH), sign * de_dth)
 
 
 def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
     """phi - r, gamma - (phi - r) lambda_n, gamma -/+ v_a lambda_n."""
+    L = rows.layout
     nK = Z.shape[0]
     kF, iF = rows.kF, rows.iF
     rf = rows.row_start[kF, iF]
-    lnF = Z[:, SLICES["lambda_n"]][kF, iF]
-    thd, qd = Z[:, COL_THD], Z[:, SLICES["qd"]].reshape(nK, NUM_FINGERS, 2)
+    lnF = Z[:, L.block.slices["lambda_n"]][kF, iF]
+    thd, qd = Z[:, COL_THD], Z[:, L.block.slices["qd"]].reshape(nK, L.num_fingers, 2)
     gF = kin.grad[kF, iF]
     dphi_dp = -(gF[:, None, :] @ kin.RT[kF])[:, 0]
     dphi_dth = np.sum(gF * d.dpB_dth[kF, iF], 1)
     dphi_dq = np.einsum("na,naj->nj", gF, d.dpB_dq[kF, iF])
     kF2 = kF[:, None]
-    colqF = COL_Q[iF]
+    colqF = L.col_q[iF]
     for off, scale in ((FREE_PHI, None), (FREE_COMP, -lnF)):
         row = rf + off
         _put(
@@ -218,8 +213,8 @@ def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
             lambda row=row: (kF2, row[:, None], colqF),
             dphi_dq if scale is None else scale[:, None] * dphi_dq,
         )
-    _put(jac, rows, "free_comp_ln", lambda: (kF, rf + FREE_COMP, COL_LN[iF]), -kin.phi_tip[kF, iF])
-    _put(jac, rows, "free_comp_g", lambda: (kF, rf + FREE_COMP, COL_G[iF]), 1.0)
+    _put(jac, rows, "free_comp_ln", lambda: (kF, rf + FREE_COMP, L.col_ln[iF]), -kin.phi_tip[kF, iF])
+    _put(jac, rows, "free_comp_g", lambda: (kF, rf + FREE_COMP, L.col_g[iF]), 1.0)
     qdF, r1F, r2F, JF = qd[kF, iF], kin.r1[kF, iF], kin.r2[kF, iF], kin.J[kF, iF]
     dv_dq = -np.stack([(r1F + r2F) * qdF[:, :1] + r2F * qdF[:, 1:], r2F * (qdF[:, :1] + qdF[:, 1:])], axis=2)
     dv_dq -= thd[kF, None, None] * (K90 @ JF)  # (nF, comp, joint)
@@ -229,9 +224,11 @@ def _free_rows(jac, rows, Z, kin, d: _Partials) -> None:
     vF = kin.v[kF, iF]
     sl = SLIP_SIGN[:, None] * lnF  # (4, nF)
     rws = rf + (FREE_SLIP + np.arange(4))[:, None]
-    _put(jac, rows, "slip_g", lambda: (kF, rws, COL_G[iF]), 1.0)
-    _put(jac, rows, "slip_ln", lambda: (kF, rws, COL_LN[iF]), SLIP_SIGN[:, None] * vF.T[SLIP_A])
-    _put(jac, rows, "slip_qd", lambda: (kF2, rws[..., None], COL_QD[iF]), sl[..., None] * JF[:, SLIP_A].swapaxes(0, 1))
+    _put(jac, rows, "slip_g", lambda: (kF, rws, L.col_g[iF]), 1.0)
+    _put(jac, rows, "slip_ln", lambda: (kF, rws, L.col_ln[iF]), SLIP_SIGN[:, None] * vF.T[SLIP_A])
+    _put(
+        jac, rows, "slip_qd", lambda: (kF2, rws[..., None], L.col_qd[iF]), sl[..., None] * JF[:, SLIP_A].swapaxes(0, 1)
+    )
     _put(jac, rows, "slip_pd", lambda: (kF, rws, COL_PD_IDX[SLIP_A][:, None]), -sl)
     _put(jac, rows, "slip_thd", lambda: (kF, rws, COL_THD), sl * dv_dthd.T[SLIP_A])
     _put(jac, rows, "slip_q", lambda: (kF2, rws[..., None], colqF), sl[..., None] * dv_dq[:, SLIP_A].swapaxes(0, 1))

@@ -39,8 +39,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trajectotree.scene.plant import NUM_FINGERS
-
 # Per link (1, 2), the sampled fractions of its collision box's length from the joint end.
 LINK_FRACTIONS = ((0.5, 1.0), (0.25, 0.5, 0.75))
 
@@ -54,7 +52,7 @@ def _centreline(box, fractions) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LinkPoints:
-    """The sampled points of the four fingers, P per finger (finger-major rows i P + j)."""
+    """The sampled points of the fingers, P per finger (finger-major rows i P + j)."""
 
     link: np.ndarray  # (P,) int, 0: on link 1 (moved by joint 1), 1: on link 2 (both joints)
     p_JL: np.ndarray  # (4, P, 2) m, point in the frame of the joint that moves its link
@@ -62,10 +60,14 @@ class LinkPoints:
 
     @staticmethod
     def from_boxes(link_boxes) -> LinkPoints:
-        """From each finger's `FingerGeometry.link_boxes` (link 1's and link 2's LinkRectangle)."""
-        link = np.concatenate([np.full(len(f), j) for j, f in enumerate(LINK_FRACTIONS)])
+        """From each finger's `FingerGeometry.link_boxes` (link 1's and link 2's LinkRectangle; a
+        link without a box, None on every finger, has no points: Drake's gripper's link 1)."""
+        boxed = [j for j in range(len(LINK_FRACTIONS)) if link_boxes[0][j] is not None]
+        if any([j for j in range(len(LINK_FRACTIONS)) if boxes[j] is not None] != boxed for boxes in link_boxes):
+            raise ValueError("the link rows need the same links boxed on every finger")
+        link = np.concatenate([np.full(len(LINK_FRACTIONS[j]), j) for j in boxed])
         p_JL = np.array(
-            [np.concatenate([_centreline(box, f) for box, f in zip(boxes, LINK_FRACTIONS)]) for boxes in link_boxes]
+            [np.concatenate([_centreline(boxes[j], LINK_FRACTIONS[j]) for j in boxed]) for boxes in link_boxes]
         )
         half_width = np.array([[boxes[j].half_width for j in link] for boxes in link_boxes])
         return LinkPoints(link=link, p_JL=p_JL, half_width=half_width)
@@ -118,10 +120,13 @@ def _weighted(weights: list, normals: list):
     return gx, gy
 
 
-# A link block's variables (its binding's, per knot): the object's pose x (3), then the joints q (8).
-LINK_SIZE = 3 + 2 * NUM_FINGERS
+# A link block's variables (its binding's, per knot): the object's pose x (3), then the joints q (2F).
 COL_P, COL_TH = (0, 1), 2
-COL_Q = 3 + 2 * np.arange(NUM_FINGERS)[:, None] + np.arange(2)  # (4, 2)
+
+
+def link_columns(num_fingers: int) -> tuple[int, np.ndarray]:
+    """(size of a link block, (F, 2) columns of each finger's joints in it)."""
+    return 3 + 2 * num_fingers, 3 + 2 * np.arange(num_fingers)[:, None] + np.arange(2)
 
 
 class LinkRows:
@@ -131,10 +136,12 @@ class LinkRows:
 
     def __init__(self, body, num_knots: int):
         self.body = body
+        self.num_fingers = len(body.fingers)
+        self.link_size, self.col_q = link_columns(self.num_fingers)
         self.points = LinkPoints.from_boxes(body.link_boxes)
         self._box2 = _Box2.from_boxes(body.link_boxes)
         self._vertices = np.asarray(body.shape.vertices, dtype=float)  # (V, 2) m, in B
-        self.num_rows = np.full(num_knots, NUM_FINGERS * (self.points.per_finger + len(self._vertices)))
+        self.num_rows = np.full(num_knots, self.num_fingers * (self.points.per_finger + len(self._vertices)))
         f = body.hand.fingers
         self._p_W_base, self._psi, self._l1 = f.p_W_base, f.psi, f.l1  # (4, 2), (4,), (4,)
         # per face (n_x, n_y, offset) as floats: the sums over faces run elementwise, left to right
@@ -157,7 +164,7 @@ class LinkRows:
                     float(self._box2.half_width[i]),
                 ),
             )
-            for i in range(NUM_FINGERS)
+            for i in range(self.num_fingers)
         )
 
     def knot(self, k: int) -> LinkRows:
@@ -166,7 +173,7 @@ class LinkRows:
 
     @staticmethod
     def block(x, q) -> np.ndarray:
-        """A knot's (x, q) block (LINK_SIZE,) from its pose and joint angles."""
+        """A knot's (x, q) block (link size,) from its pose and joint angles."""
         return np.concatenate([np.asarray(x, dtype=float), np.asarray(q, dtype=float)])
 
     def bounds(self, clearance: float, fixed_states=()):
@@ -184,12 +191,16 @@ class LinkRows:
         """(row, col) entries of one knot's Jacobian that can be nonzero: the object's pose,
         the finger's joint 1, and its joint 2 for points on link 2."""
         out, P, V = [], self.points.per_finger, len(self._vertices)
-        for i in range(NUM_FINGERS):
+        for i in range(self.num_fingers):
             for j, link in enumerate(self.points.link):
-                cols = [*COL_P, COL_TH, int(COL_Q[i, 0])] + ([int(COL_Q[i, 1])] if link else [])
+                cols = [*COL_P, COL_TH, int(self.col_q[i, 0])] + ([int(self.col_q[i, 1])] if link else [])
                 out += [(i * P + j, c) for c in cols]
-        for i in range(NUM_FINGERS):
-            out += [(NUM_FINGERS * P + i * V + j, c) for j in range(V) for c in (*COL_P, COL_TH, *map(int, COL_Q[i]))]
+        for i in range(self.num_fingers):
+            out += [
+                (self.num_fingers * P + i * V + j, c)
+                for j in range(V)
+                for c in (*COL_P, COL_TH, *map(int, self.col_q[i]))
+            ]
         return out
 
     def _lse(self, d: list):
@@ -206,9 +217,9 @@ class LinkRows:
         return dmax + np.log(total) / k, [ej / total for ej in e]
 
     def evaluate(self, Z: np.ndarray, with_jacobian: bool):
-        """(values (K, R), Jacobians (K, R, LINK_SIZE) or None) at the (x, q) blocks Z (K, LINK_SIZE):
+        """(values (K, R), Jacobians (K, R, link size) or None) at the (x, q) blocks Z (K, link size):
         the point rows (finger-major), then the vertex rows (finger-major)."""
-        q = Z[:, COL_Q]  # (K, 4, 2)
+        q = Z[:, self.col_q]  # (K, F, 2)
         a1 = self._psi + q[..., 0]  # (K, 4)
         a12 = a1 + q[..., 1]
         th = Z[:, COL_TH, None, None]
@@ -228,10 +239,10 @@ class LinkRows:
         return val, (np.concatenate([j for _, j in parts], axis=1) if with_jacobian else None)
 
     def _joint_columns(self, jac, d_q1, d_q2) -> None:
-        """jac (K, 4, n, LINK_SIZE)[..., COL_Q[i]] = d_q1, d_q2 (K, 4, n) of each finger i."""
-        fingers = np.arange(NUM_FINGERS)
-        jac[:, fingers, :, COL_Q[:, 0]] = d_q1.transpose(1, 0, 2)
-        jac[:, fingers, :, COL_Q[:, 1]] = d_q2.transpose(1, 0, 2)
+        """jac (K, F, n, link size)[..., col_q[i]] = d_q1, d_q2 (K, F, n) of each finger i."""
+        fingers = np.arange(self.num_fingers)
+        jac[:, fingers, :, self.col_q[:, 0]] = d_q1.transpose(1, 0, 2)
+        jac[:, fingers, :, self.col_q[:, 1]] = d_q2.transpose(1, 0, 2)
 
     def _point_rows(self, Z, kin, with_jacobian: bool):
         pts, nK = self.points, Z.shape[0]
@@ -252,14 +263,14 @@ class LinkRows:
             return val, None
         gx, gy = _weighted(w, [(nx, ny) for nx, ny, _ in self._faces])
         gwx, gwy = ct * gx - st * gy, st * gx + ct * gy  # R g = d phi / d p_WL
-        jac = np.zeros((nK, NUM_FINGERS, pts.per_finger, LINK_SIZE))
+        jac = np.zeros((nK, self.num_fingers, pts.per_finger, self.link_size))
         jac[..., COL_P[0]], jac[..., COL_P[1]] = -gwx, -gwy
         jac[..., COL_TH] = gwx * ry - gwy * rx  # d p_BL / d theta = -R^T K (p_WL - p)
         # joint 1 turns every point about the base, joint 2 the link-2 points about the elbow
         d_q1 = gwy * (wx - self._p_W_base[:, 0, None]) - gwx * (wy - self._p_W_base[:, 1, None])
         d_q2 = np.where(on2, gwy * (wx - kin.elbow_x[..., None]) - gwx * (wy - kin.elbow_y[..., None]), 0.0)
         self._joint_columns(jac, d_q1, d_q2)
-        return val, jac.reshape(nK, -1, LINK_SIZE)
+        return val, jac.reshape(nK, -1, self.link_size)
 
     def _vertex_rows(self, Z, kin, a12, with_jacobian: bool):
         """Each object vertex's smooth distance to each finger's link-2 box, in the box's frame G."""
@@ -281,17 +292,17 @@ class LinkRows:
             return val, None
         gx, gy = w[0] - w[1], w[2] - w[3]  # gradient in G
         gwx, gwy = cA * gx - sA * gy, sA * gx + cA * gy  # in W
-        jac = np.zeros((nK, NUM_FINGERS, len(vx), LINK_SIZE))
+        jac = np.zeros((nK, self.num_fingers, len(vx), self.link_size))
         jac[..., COL_P[0]], jac[..., COL_P[1]] = gwx, gwy
         jac[..., COL_TH] = gwy * (wx - Z[:, 0, None, None]) - gwx * (wy - Z[:, 1, None, None])
         # the box turns about the base (joint 1) and the elbow (joint 2): p_GV moves the other way
         d_q1 = gwx * (wy - self._p_W_base[:, 1, None]) - gwy * (wx - self._p_W_base[:, 0, None])
         d_q2 = gwx * (wy - kin.elbow_y[..., None]) - gwy * (wx - kin.elbow_x[..., None])
         self._joint_columns(jac, d_q1, d_q2)
-        return val, jac.reshape(nK, -1, LINK_SIZE)
+        return val, jac.reshape(nK, -1, self.link_size)
 
     def values_one(self, z: np.ndarray) -> np.ndarray:
-        """The rows at one block z (LINK_SIZE,): `evaluate`'s arithmetic in Python floats, 2.5x
+        """The rows at one block z (link size,): `evaluate`'s arithmetic in Python floats, 2.5x
         faster for one knot (IPOPT asks for values at each trial point knot by knot); math's
         exp and log may differ from numpy's in the last bit (tests compare them to 1e-15)."""
         px, py, th, *q = z.tolist()

@@ -32,10 +32,9 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 from pydrake.solvers import MathematicalProgram
 
 from trajectotree.cito.knot import BodyParams, KnotRows
-from trajectotree.cito.links import LINK_SIZE, LinkRows
-from trajectotree.cito.variables import KNOT_SIZE, CitoVariables, width
+from trajectotree.cito.links import LinkRows
+from trajectotree.cito.variables import CitoVariables, knot_block
 from trajectotree.config import CitoConfig
-from trajectotree.scene.plant import NUM_FINGERS
 
 
 @dataclass(frozen=True)
@@ -88,8 +87,8 @@ class _KnotCache:
     equal one-knot evaluations bit for bit (LinkRows' to rounding: its values_one uses math's exp
     and log), so which vector served a knot never matters."""
 
-    def __init__(self, rows, num_knots: int, width: int = KNOT_SIZE):
-        self.rows, self.num_knots, self.width = rows, num_knots, width  # rows: KnotRows, or LinkRows (width LINK_SIZE)
+    def __init__(self, rows, num_knots: int, width: int):
+        self.rows, self.num_knots, self.width = rows, num_knots, width  # rows: KnotRows (its knot size), or LinkRows
         self.Z = self.val = self.jac = None
         self.primed = None
         self.seen = np.full((num_knots, width), np.nan)
@@ -203,7 +202,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     t0 = time.perf_counter()
     prog = MathematicalProgram()
     K = spec.num_knots
-    v = CitoVariables.from_prog(prog, K)
+    v = CitoVariables.from_prog(prog, K, body.layout.num_fingers)
     rows = KnotRows(body, spec.pinned, spec.c_B, spec.n_B)
 
     # Dynamics: linear collocation; the nonlinear rows per knot below.
@@ -211,7 +210,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         _collocation(prog, getattr(v, a), getattr(v, b), spec.dt)
     # Friction cone, linear: mu lambda_n - lambda_t >= 0 and mu lambda_n + lambda_t >= 0, with the
     # planning friction mu_plan (body.mu), below the scene's mu by search.friction_safety.
-    mu, n = body.mu, K * NUM_FINGERS
+    mu, n = body.mu, K * body.layout.num_fingers
     i = np.arange(n)  # [[mu I, -I], [mu I, I]], built directly (as for _collocation)
     A = sp.csc_matrix(
         (
@@ -227,7 +226,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     for name in lo:
         prog.AddBoundingBoxConstraint(lo[name].ravel(), hi[name].ravel(), getattr(v, name).ravel())
 
-    cache = _KnotCache(rows, K)
+    cache = _KnotCache(rows, K, body.layout.block.size)
     prog.AddVisualizationCallback(cache.prime, v.stacked().ravel())
     bindings = []
     for k, pattern in enumerate(rows.sparsities()):
@@ -259,8 +258,8 @@ def link_knots(spec: ProgramSpec) -> list[int]:
 def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, clearance: float) -> list:
     """links.py's rows, one binding per knot of `link_knots` on its pose and joints, served by
     a cache of their own (primed by a second visualization callback over every knot's x, q)."""
-    blocks = np.concatenate([v.x, v.q], axis=1)  # (K, LINK_SIZE)
-    cache = _KnotCache(rows, spec.num_knots, LINK_SIZE)
+    blocks = np.concatenate([v.x, v.q], axis=1)  # (K, link size)
+    cache = _KnotCache(rows, spec.num_knots, rows.link_size)
     prog.AddVisualizationCallback(cache.prime, blocks.ravel())
     fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.last_knot_fixed else [])
     lower, upper = rows.bounds(clearance, fixed)
@@ -278,7 +277,8 @@ def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) ->
     (weight_contact_slack for pinned fingers' contact-point slacks, weight_slack for the
     complementarity slacks), plus the acceleration regularization (weight_acceleration)."""
     Q = np.diag(config.weight_pose)
-    n_tau, n_force, n_acc = width("tau"), width("lambda_n", "lambda_t"), width("xdd", "qdd")
+    block = knot_block(v.num_fingers)
+    n_tau, n_force, n_acc = block.width("tau"), block.width("lambda_n", "lambda_t"), block.width("xdd", "qdd")
     for k in range(spec.num_knots):
         goals = np.asarray(spec.goal_poses[k], dtype=float).reshape(-1, 3)
         if len(goals):
@@ -316,16 +316,17 @@ def general_spec(*, x0, q0, object_path, config: CitoConfig, dt: float | None = 
     M = config.knots_per_segment
     path = np.asarray(object_path, dtype=float)
     K = (len(path) - 1) * M + 1
+    F = len(q0) // 2  # two joints per finger
     goals = [[] for _ in range(K)]
     for s in range(len(path) - 1):
         for k in range(s * M, (s + 1) * M + 1):
             goals[k].append(path[s + 1])
     return ProgramSpec(
         dt=dt or config.dt,
-        pinned=np.zeros((K, NUM_FINGERS), bool),
-        c_B=np.zeros((K, NUM_FINGERS, 2)),
-        n_B=np.tile([1.0, 0.0], (K, NUM_FINGERS, 1)),
-        clearance=np.zeros((K, NUM_FINGERS)),
+        pinned=np.zeros((K, F), bool),
+        c_B=np.zeros((K, F, 2)),
+        n_B=np.tile([1.0, 0.0], (K, F, 1)),
+        clearance=np.zeros((K, F)),
         x0=np.asarray(x0, float),
         q0=np.asarray(q0, float),
         rest_knots=np.array([0, K - 1]),

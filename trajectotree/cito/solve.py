@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.solvers import IpoptSolver, SolverOptions
 
-from trajectotree.cito.layout import NUM_BODY_ROWS
 from trajectotree.cito.program import CitoProgram
 from trajectotree.cito.variables import CitoVariables
 from trajectotree.config import CitoConfig
@@ -70,10 +69,15 @@ LogObserver = Callable[[str], AbstractContextManager]
 
 
 def solve(
-    program: CitoProgram, guess: CitoVariables, config: CitoConfig, log_observer: LogObserver | None = None
+    program: CitoProgram,
+    guess: CitoVariables,
+    config: CitoConfig,
+    log_observer: LogObserver | None = None,
+    max_wall_time_s: float | None = None,
 ) -> SolveOutcome:
     """IPOPT from `guess`; with a `log_observer` the log also holds IPOPT's iteration lines
-    (file_print_level 5) while it runs, and the solve itself is unchanged."""
+    (file_print_level 5) while it runs, and the solve itself is unchanged. `max_wall_time_s` stops
+    IPOPT after that long (IPOPT's max_wall_time; unsuccessful then), for a solve with a deadline."""
     prog, v = program.prog, program.variables
     v.set_initial_guess(prog, guess)
     fd, log_path = tempfile.mkstemp(prefix="trajectotree_ipopt_", suffix=".txt")
@@ -82,6 +86,8 @@ def solve(
         options = ipopt_options(config, log_path)
         if log_observer is not None:
             options.SetOption(IpoptSolver.id(), "file_print_level", 5)
+        if max_wall_time_s is not None:
+            options.SetOption(IpoptSolver.id(), "max_wall_time", max(float(max_wall_time_s), 1e-3))
         with log_observer(log_path) if log_observer is not None else contextlib.nullcontext():
             t0 = time.perf_counter()
             result = IpoptSolver().Solve(prog, None, options)
@@ -153,7 +159,7 @@ def violations(program: CitoProgram, sol: CitoVariables, scene) -> dict:
     boundary = scene.config.shape
     exact = np.array([[boundary.signed_distance(p) for p in knot] for knot in kin.p_BF]) - rows.body.radius
     return {
-        "dynamics": float(max(np.abs(val[:, :NUM_BODY_ROWS]).max(), *col)),
+        "dynamics": float(max(np.abs(val[:, : rows.layout.num_body_rows]).max(), *col)),
         "friction_cone": float(max(0.0, (np.abs(lt) - mu * ln).max(), (-ln).max())),
         "complementarity": float(comp[free].max()) if free.any() else 0.0,
         "contact_point": float(np.linalg.norm(kin.e, axis=-1)[rows.pinned].max()) if rows.pinned.any() else 0.0,

@@ -27,7 +27,6 @@ import numpy as np
 from trajectotree.cito.program import ProgramSpec
 from trajectotree.config import CitoConfig, ConfigError
 from trajectotree.contact_plan import ContactPlan
-from trajectotree.scene.plant import NUM_FINGERS
 
 
 def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
@@ -39,11 +38,12 @@ def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
         raise ConfigError(
             f"contact plan starts at pose {list(plan.nodes[0].object_pose)}, the scene at {list(c.initial_pose)}"
         )
+    F = scene.num_fingers
     for n, node in enumerate(plan.nodes):
-        if np.shape(node.q) != (2 * NUM_FINGERS,) or np.shape(node.p_BC) != (NUM_FINGERS, 2):
+        if np.shape(node.q) != (2 * F,) or np.shape(node.p_BC) != (F, 2):
             raise ConfigError(
                 f"contact plan node {n} has q shape {np.shape(node.q)} and p_BC shape "
-                f"{np.shape(node.p_BC)}; expected (8,) and (4, 2)"
+                f"{np.shape(node.p_BC)}; expected ({2 * F},) and ({F}, 2)"
             )
         # Every contact must lie on this scene's object boundary (the box's or the polygon's).
         if np.any(np.abs(c.shape.signed_distances(node.p_BC)) > 1e-6):
@@ -51,8 +51,10 @@ def check_plan(plan: ContactPlan, scene, min_nodes: int = 2) -> None:
                 f"contact plan node {n} has contacts {node.p_BC.tolist()} off the boundary of the "
                 f"scene's object {_describe(c)}"
             )
-        if node.switching_finger is not None and node.switching_finger not in range(NUM_FINGERS):
-            raise ConfigError(f"contact plan node {n} has switching_finger {node.switching_finger}; valid: 0-3 or null")
+        if node.switching_finger is not None and node.switching_finger not in range(F):
+            raise ConfigError(
+                f"contact plan node {n} has switching_finger {node.switching_finger}; valid: 0-{F - 1} or null"
+            )
 
 
 def _describe(c) -> str:
@@ -66,10 +68,11 @@ def transition_spec(plan: ContactPlan, *, radius: float, config: CitoConfig) -> 
     M = config.knots_per_segment
     N = len(plan.nodes)
     K = (N - 1) * M + 1
-    pinned = np.ones((K, NUM_FINGERS), bool)
-    c_B = np.zeros((K, NUM_FINGERS, 2))
-    n_B = np.zeros((K, NUM_FINGERS, 2))
-    clearance = np.zeros((K, NUM_FINGERS))
+    F = len(plan.nodes[0].p_BC)
+    pinned = np.ones((K, F), bool)
+    c_B = np.zeros((K, F, 2))
+    n_B = np.zeros((K, F, 2))
+    clearance = np.zeros((K, F))
     lift = config.switch_clearance * np.sin(np.pi * np.arange(M + 1) / M)
     goals = [[] for _ in range(K)]
     for s in range(N - 1):

@@ -12,7 +12,9 @@ import tempfile
 from pathlib import Path
 
 from trajectotree.config import (
+    DEFAULT_HAND,
     FORMULATIONS,
+    HAND_NAMES,
     MAX_NODES,
     Config,
     ConfigError,
@@ -71,6 +73,12 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
     )
     group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
     group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+    group.add_argument(
+        "--hand",
+        metavar="NAME|FILE",
+        help=f"the hand: {', '.join(HAND_NAMES)} (default {DEFAULT_HAND}), or a hand description FILE.yaml, or a "
+        "model FILE.sdf / FILE.urdf with FILE.yaml beside it naming each finger's joints and tip (docs/design.md)",
+    )
 
 
 def parse_polygon(text: str) -> tuple[tuple[float, float], ...]:
@@ -118,6 +126,8 @@ def scene_overrides(args: argparse.Namespace) -> dict:
         scene["box_mass"] = args.mass
     if getattr(args, "mu", None) is not None:
         scene["mu"] = args.mu
+    if getattr(args, "hand", None) is not None:
+        scene["hand"] = args.hand
     return scene
 
 
@@ -181,6 +191,21 @@ def config_from_args(args: argparse.Namespace) -> Config:
         )
     except ConfigError as e:
         raise in_option_terms(e, args) from None
+
+
+def check_executable_hand(scene, use: str) -> None:
+    """ConfigError (exit 2, before any work) when `use` (a simulation or a playback) needs the
+    execution stage, which takes the four-finger layout yet (scene.plant.NUM_FINGERS), and the
+    scene's hand has another finger count; planning and the search take any hand."""
+    from trajectotree.scene.plant import NUM_FINGERS
+
+    if scene.num_fingers != NUM_FINGERS:
+        raise ConfigError(
+            field="scene.hand",
+            value=scene.config.hand,
+            problem=f"has {scene.num_fingers} fingers; {use} uses the execution stage, which takes {NUM_FINGERS} yet "
+            "(plan and search take any hand)",
+        )
 
 
 def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
@@ -275,6 +300,7 @@ OPTION_FIELDS = {
     "scene.box_height": ("box_size", "--box-size H"),
     "scene.box_mass": ("mass", "--mass"),
     "scene.mu": ("mu", "--mu"),
+    "scene.hand": ("hand", "--hand"),
     "scene.object.vertices": ("polygon", "--polygon"),
     "scene.object.circle_radius": ("circle", "--circle"),
     "scene.object.ellipse_semi_axes": ("ellipse", "--ellipse"),

@@ -17,7 +17,14 @@ import math
 import sys
 from pathlib import Path
 
-from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
+from trajectotree.cli.common import (
+    add_config_options,
+    check_executable_hand,
+    check_graspable,
+    check_output_dir,
+    config_from_args,
+    print_json,
+)
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
@@ -122,7 +129,7 @@ def run(args) -> int:
     from trajectotree.cli.search_cmd import draw_plan
     from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
     from trajectotree.execution.playback import object_noun, start_meshcat
-    from trajectotree.execution.simulate import run_simulation
+    from trajectotree.execution.run import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
     from trajectotree.io import save_plan, save_sim, write_json_atomic
     from trajectotree.planning.planners import plan
@@ -132,6 +139,7 @@ def run(args) -> int:
     config = config_from_args(args)
     out = check_output_dir("--out", args.out, (PLAN_JSON, PLAN_NPZ, *DERIVED_FILES))
     scene = build_scene(config.scene)
+    check_executable_hand(scene, "the demo's simulation")
     check_graspable(scene, config, args)
     meshcat = start_meshcat() if args.meshcat else None
     log = sys.stderr if args.json else sys.stdout

@@ -13,6 +13,7 @@ from trajectotree.cli.common import (
     HTML_SUFFIXES,
     add_config_options,
     add_goal_options,
+    check_executable_hand,
     check_goal_workspace,
     check_graspable,
     check_output_dir,
@@ -85,6 +86,8 @@ def run(args) -> int:
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
     start = load_start(args.start) if args.start else None
     scene = build_scene(config.scene)
+    if args.html:
+        check_executable_hand(scene, "--html's playback")
     if start is None:
         check_graspable(scene, config, args)
     else:  # refused here, before any planning, when the start cannot hold the object

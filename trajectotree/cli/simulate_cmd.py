@@ -15,6 +15,7 @@ from trajectotree.cli.common import (
     FIGURE_SUFFIXES,
     HTML_SUFFIXES,
     add_scene_options,
+    check_executable_hand,
     check_output_dir,
     check_output_file,
     print_json,
@@ -241,7 +242,7 @@ def final_error_line(summary: dict) -> str:
 def run(args) -> int:
     from trajectotree.execution.playback import object_noun, start_meshcat
     from trajectotree.execution.reference import reference_from_arrays
-    from trajectotree.execution.simulate import run_simulation
+    from trajectotree.execution.run import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure
     from trajectotree.io import save_sim
     from trajectotree.scene.plant import build_scene
@@ -258,11 +259,15 @@ def run(args) -> int:
     arrays = trajectory_arrays(files)
     check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)
+    check_executable_hand(build_scene(config.scene), "the simulation")
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
     if args.closed_loop or args.replan:
         from trajectotree.execution.simulate import check_closed_loop
 
         check_closed_loop(config.sim.controller, True)
+    playback = [o for o, given in (("--html", args.html), ("--gif", args.gif), ("--meshcat", args.meshcat)) if given]
+    if args.replan and playback:
+        raise ConfigError(f"--replan records no playback ({', '.join(playback)}): run it without, or without --replan")
     plan_success = bool(files.data.get("success"))
     if not plan_success:
         print(
@@ -275,12 +280,9 @@ def run(args) -> int:
         meshcat = start_meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
     if args.replan:  # the planner needs the plan itself (its goal and config), not only its arrays
-        from trajectotree.execution.replan import simulate_replanning
-        from trajectotree.execution.simulate import Conditions
         from trajectotree.io import load_plan
 
-        world = Conditions(mu=conditions["sim_mu"], mass=conditions["sim_mass"], push=conditions["push"])
-        result = simulate_replanning(load_plan(args.plan_dir), config, conditions=world)
+        result = run_simulation(plan=load_plan(args.plan_dir), config=config, replan=True, **conditions)
     else:
         reference = reference_from_arrays(arrays, build_scene(config.scene))
         result = run_simulation(
@@ -314,6 +316,11 @@ def run(args) -> int:
                 f"{1e3 * loop['mass_estimate']:.1f} g (plan {1e3 * config.scene.box_mass:g}), slipping "
                 + ", ".join(f"{s:.2f}" for s in loop["slipping_s"])
                 + f" s per finger, reflex on {loop['reflex_s']:.2f} s"
+            )
+        for e in result.replans:
+            print(
+                f"replan at {e.time_s:.2f} s ({e.reason.value}; friction {e.mu:.3f}, mass {1e3 * e.mass:.1f} g): "
+                f"{e.outcome.value}, after {e.latency_s:.3f} s" + ("" if e.planned else f" ({e.status})")
             )
         print(
             f"wrote {Path(args.plan_dir) / 'sim.json'}"

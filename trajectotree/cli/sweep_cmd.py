@@ -12,7 +12,14 @@ from __future__ import annotations
 
 import math
 
-from trajectotree.cli.common import add_config_options, check_graspable, check_output_dir, config_from_args, print_json
+from trajectotree.cli.common import (
+    add_config_options,
+    check_executable_hand,
+    check_graspable,
+    check_output_dir,
+    config_from_args,
+    print_json,
+)
 from trajectotree.config import CONTROLLERS, check_controller
 from trajectotree.experiments.executions import (
     CONDITIONS,
@@ -60,6 +67,12 @@ def register(subparsers) -> None:
         help="run those executions with the closed loop (grasp controller only: contact watch, friction "
         "and mass estimates, push reflex); the report lists them as grasp-closed-loop beside the open-loop "
         "grasp executions, so run the sweep with and without this option to compare",
+    )
+    p.add_argument(
+        "--replan",
+        action="store_true",
+        help="run those executions with the closed loop replanning from the measured state when the plan no "
+        "longer holds (sim.replan; implies --closed-loop); listed as grasp-replan",
     )
     p.add_argument(
         "--out",
@@ -115,12 +128,15 @@ def run(args) -> int:
     from trajectotree.scene.plant import build_scene
 
     # refused here, before any trial, if the hand cannot grasp the object or carry its weight
-    check_graspable(build_scene(spec.config.scene), spec.config, args)
+    scene = build_scene(spec.config.scene)
+    check_graspable(scene, spec.config, args)
     conditions = [check_condition(c) for c in args.conditions or ()]
     controllers = [check_controller(c) for c in args.controllers or ()]
-    if (conditions or args.closed_loop) and not controllers:
+    if args.simulate or conditions or controllers or args.closed_loop or args.replan:
+        check_executable_hand(scene, "the sweep's simulations")
+    if (conditions or args.closed_loop or args.replan) and not controllers:
         controllers = [spec.config.sim.controller]
-    check_closed_loop_controllers(controllers, args.closed_loop)
+    check_closed_loop_controllers(controllers, args.closed_loop, args.replan)
     summary = run_sweep(
         spec,
         args.out,
@@ -138,6 +154,7 @@ def run(args) -> int:
             gains=spec.config.controller,
             sim=spec.config.sim,
             closed_loop=args.closed_loop,
+            replan=args.replan,
             workers=args.workers,
             progress=not args.no_progress,
         )
@@ -149,8 +166,9 @@ def run(args) -> int:
     else:
         print(summary.line())
         if ran is not None:
+            loop = " closed loop, replanning" if args.replan else " closed loop" if args.closed_loop else ""
             print(
-                f"executions: {ran} run ({' '.join(controllers)}{' closed loop' if args.closed_loop else ''} x "
+                f"executions: {ran} run ({' '.join(controllers)}{loop} x "
                 f"{' '.join(conditions or ['nominal'])}); "
                 "the report tabulates them in executions.md"
             )

@@ -30,7 +30,7 @@ measured box inject tangential force as the spheres roll and lose the grasp.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
@@ -180,13 +180,14 @@ class GraspForceQp:
             )
             self._mu = mu
 
-    def solve(self, G, wrench, lambda_plan, lo, hi, torque=None) -> np.ndarray:
+    def solve(self, G, wrench, lambda_plan, lo, hi, torque=None, torque_weight: float = 1.0) -> np.ndarray:
         """lambda (4, 2) for the grasp matrix G (3, 8), the wrench w (3,), the plan's
         lambda (4, 2) and the normal-force bounds lo, hi (4,); `torque` (A (8, 8), lower (8,),
-        upper (8,)): lower <= A lambda <= upper (a QP built with torque_rows). Falls back to
+        upper (8,)): lower <= A lambda <= upper (a QP built with torque_rows); `torque_weight`
+        multiplies the weight of the torque residual. Falls back to
         the plan's forces, clipped to the bounds, if the solver fails."""
         z_plan = lambda_plan.ravel()
-        GtW = G.T @ self._W
+        GtW = G.T @ (self._W if torque_weight == 1.0 else self._W @ np.diag([1.0, 1.0, torque_weight]))
         self._cost.evaluator().UpdateCoefficients(
             2.0 * (GtW @ G + self._identity), -2.0 * (GtW @ wrench + z_plan), 0.0, True
         )
@@ -217,6 +218,8 @@ class Estimates:
     mu: float  # the friction coefficient estimate (the QP's cones: this x the controller's safety factor)
     mass: float  # kg, the box mass estimate (the desired wrench's gravity and inertia)
     reflex: float  # 0..1, the push reflex (squeeze and object gains raised in proportion)
+    # (2,) N in W, the force on the box that its contacts and gravity do not explain (the desired wrench cancels it)
+    disturbance: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
 
 def torque_rows(
@@ -249,13 +252,19 @@ class GraspController(LeafSystem):
     """Object-level grasp control of a planned box motion (see the module doc).
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
     joint) and `hand_state` (16: the hand's [q; v]); with closed_loop also `mu_estimate`,
-    `mass_estimate` and `reflex` (1 each, trajectotree.execution.closed_loop). Output port:
+    `mass_estimate`, `reflex` (1 each) and `disturbance` (2, N in W; all
+    trajectotree.execution.closed_loop). Output port:
     `actuation` (8, the plant's actuation order), updated every 1 / gains.rate_hz s and held
     in between. In open loop `mass` is the plan's and `mu` the friction its QP's cones allow
     (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated
     plant's; in closed loop the cones are at mu x mu_estimate / scene.mu (the same safety
-    factor on the estimate), the wrench uses the estimated mass, the reflex raises the
-    squeeze and the object gains, and the QP keeps the joint torques within the motors'."""
+    factor on the estimate), the wrench uses the estimated mass and cancels the measured
+    disturbance at once, and the QP keeps the joint torques within the motors'. The reflex
+    raises the object gains and the QP's target squeeze (a target, not a bound), puts its
+    cones at reflex_friction_safety x the estimate and weights its torque residual by
+    reflex_torque_weight: a three-finger grasp that barely opposes a push then spends what it
+    has on the push without turning the box (each turn of the box is a grasp the plan never
+    checked)."""
 
     def __init__(
         self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float, closed_loop: bool = False
@@ -281,6 +290,7 @@ class GraspController(LeafSystem):
             self.mu_estimate_port = self.DeclareVectorInputPort("mu_estimate", 1)
             self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
             self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
+            self.disturbance_port = self.DeclareVectorInputPort("disturbance", 2)
         state = self.DeclareDiscreteState(B.shape[1])
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
@@ -294,6 +304,7 @@ class GraspController(LeafSystem):
             mu=float(self.mu_estimate_port.Eval(context)[0]),
             mass=float(self.mass_estimate_port.Eval(context)[0]),
             reflex=float(self.reflex_port.Eval(context)[0]),
+            disturbance=np.array(self.disturbance_port.Eval(context)),
         )
 
     def UpdateActuation(self, context, discrete_state):
@@ -320,7 +331,10 @@ class GraspController(LeafSystem):
             mass, inertia = estimates.mass, self._shape.inertia(estimates.mass)
             kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
         a = s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
-        return np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
+        wrench = np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
+        if estimates is not None:
+            wrench[:2] -= g.disturbance_feedforward * estimates.disturbance
+        return wrench
 
     def finger_forces(
         self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None
@@ -358,16 +372,23 @@ class GraspController(LeafSystem):
         else:
             J_WF, rest = joints
             A, lower, upper, room = torque_rows(J_WF, n_W, t_W, self._tip_radius, rest, self._tau_max)
-            squeeze = g.min_normal_force + estimates.reflex * max(g.reflex_squeeze - g.min_normal_force, 0.0)
             hi = scale * g.max_normal_force
-            self._qp.set_friction(self._friction_safety * estimates.mu)
+            safety = self._friction_safety + estimates.reflex * max(
+                g.reflex_friction_safety - self._friction_safety, 0.0
+            )
+            self._qp.set_friction(safety * estimates.mu)
+            # During the reflex the squeeze the motors can make is the QP's target push, its least the plan's.
+            target = s.lambda_plan[n].copy()
+            squeeze = estimates.reflex * np.minimum(scale * g.reflex_squeeze, np.minimum(room, hi))
+            target[:, 0] = np.maximum(target[:, 0], squeeze)
             lam = self._qp.solve(
                 G,
                 self.desired_wrench(n, box_state, estimates),
-                s.lambda_plan[n],
-                np.minimum(scale * squeeze, np.minimum(room, hi)),  # a squeeze the motors can make
+                target,
+                np.minimum(scale * g.min_normal_force, np.minimum(room, hi)),
                 hi,
                 torque=(A, lower, upper),
+                torque_weight=1.0 + estimates.reflex * (g.reflex_torque_weight - 1.0),
             )
         return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
 

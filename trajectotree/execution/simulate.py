@@ -45,9 +45,9 @@ from pydrake.trajectories import PiecewisePolynomial
 from trajectotree.config import Config, ConfigError, check_controller, check_length, check_range
 from trajectotree.execution import closed_loop, metrics, playback
 from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
-from trajectotree.execution.reference import Reference, grasp_schedule, reference_from_plan
-from trajectotree.figures.run import arrow_newtons_per_cm, controller_text
-from trajectotree.results import ClosedLoopLog, PlanResult, SimLog, SimResult
+from trajectotree.execution.reference import Reference, grasp_schedule
+from trajectotree.figures.run import arrow_newtons_per_cm
+from trajectotree.results import ClosedLoopLog, SimLog, SimResult
 from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
 
 
@@ -287,6 +287,7 @@ def add_closed_loop(builder, plant, hand, box, controller: GraspController, conf
         (friction, controller, "mu_estimate"),
         (mass, controller, "mass_estimate"),
         (reflex, controller, "reflex"),
+        (reflex, controller, "disturbance"),
     ):
         builder.Connect(source.GetOutputPort(name), target.GetInputPort(name))
     logged = {name: monitor.GetOutputPort(name) for name in ClosedLoopLog.MONITOR_ARRAYS}
@@ -490,61 +491,4 @@ def simulate_reference(
         else:
             execution.visualizer.StopRecording()
             execution.visualizer.PublishRecording()
-    return result
-
-
-def run_simulation(
-    *,
-    plan,
-    config: Config | None = None,
-    meshcat: Meshcat | None = None,
-    html_path: str | Path | None = None,
-    gif_path: str | Path | None = None,
-    controller: str | None = None,
-    sim_mu: float | None = None,
-    sim_mass: float | None = None,
-    push: Push | str | None = None,
-    closed_loop: bool = False,
-) -> SimResult:
-    """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
-    "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
-    `sim_mass` (kg; None: the plan's) and an optional `push` (a Push or "FX,FY@T": N, N, s); the
-    controller keeps the plan's values. closed_loop (grasp controller only) watches the
-    contacts, estimates the friction and the mass for the controller and adds the push
-    reflex (trajectotree.execution.closed_loop; the result's closed_loop holds what they saw);
-    off, the run is the open-loop one. `config` defaults to the plan's own (a PlanResult's
-    config). ConfigError on bad values. A live `meshcat` runs in real time; `html_path` writes
-    the recorded playback, `gif_path` a GIF of the run."""
-    if config is None:
-        if not isinstance(plan, PlanResult):
-            raise ConfigError("run_simulation: give config= with a Reference (only a PlanResult carries its own)")
-        config = plan.config
-    if isinstance(push, str):
-        push = parse_push(push, config.sim.push_duration)
-    conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
-    check_closed_loop(check_controller(controller or config.sim.controller), closed_loop)
-    scene = build_scene(config.scene)
-    reference = reference_from_plan(plan, scene)
-    result = simulate_reference(
-        reference,
-        config,
-        meshcat=meshcat,
-        html_path=html_path,
-        realtime_rate=1.0 if meshcat is not None else 0.0,
-        controller=controller,
-        conditions=conditions,
-        closed_loop=closed_loop,
-    )
-    if gif_path is not None:
-        playback.write_gif(
-            scene,
-            result.t,
-            result.x,
-            result.q,
-            gif_path,
-            planned_poses=result.x_plan,
-            forces=result.f_W,
-            newtons_per_cm=arrow_scale(reference),
-            title=f"simulated run, {controller_text(result.controller)}",
-        )
     return result

@@ -20,7 +20,8 @@ The conditions (`ConditionSpec`):
 
 Executions with the closed loop (`closed_loop`: the grasp controller with the contact watch,
 the estimates and the push reflex, trajectotree.execution.closed_loop) are kept and listed
-apart, as the executor `grasp-closed-loop`, beside the open-loop `grasp`.
+apart, as the executor `grasp-closed-loop`, beside the open-loop `grasp`; those that also replan
+from the measured state (`replan`, trajectotree.execution.replan) as `grasp-replan`.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_byt
 
 EXEC_DIR = "exec"
 CLOSED_LOOP_SUFFIX = "-closed-loop"  # the executor label of closed-loop executions: grasp-closed-loop
+REPLAN_SUFFIX = "-replan"  # the executor label of closed-loop executions with replanning: grasp-replan
 
 
 @dataclass(frozen=True)
@@ -128,28 +130,34 @@ def check_condition(condition: str, spec: ConditionSpec | None = None) -> str:
     return condition
 
 
-def check_closed_loop_controllers(controllers, closed_loop: bool) -> None:
-    """ConfigError when the closed loop is asked for around another than the grasp controller."""
+def check_closed_loop_controllers(controllers, closed_loop: bool, replan: bool = False) -> None:
+    """ConfigError when the closed loop (or replanning) is asked for around another than the grasp controller."""
     others = [c for c in controllers if c != "grasp"]
-    if closed_loop and others:
+    if (closed_loop or replan) and others:
         raise ConfigError(
             field="controller",
             value=others[0],
-            problem=": the closed loop (--closed-loop) runs around the grasp controller only",
+            problem=f": the closed loop ({'--replan' if replan else '--closed-loop'}) runs around the grasp "
+            "controller only",
             choices=("grasp",),
         )
 
 
-def executor_label(controller: str, closed_loop: bool = False) -> str:
-    """The executor's name in the execution folders and tables: the controller, + -closed-loop."""
+def executor_label(controller: str, closed_loop: bool = False, replan: bool = False) -> str:
+    """The executor's name in the execution folders and tables: the controller, + -closed-loop, or
+    + -replan for the closed loop with replanning."""
+    if replan:
+        return controller + REPLAN_SUFFIX
     return controller + CLOSED_LOOP_SUFFIX if closed_loop else controller
 
 
-EXECUTORS = tuple(executor_label(c, loop) for c in CONTROLLERS for loop in (False, True) if c == "grasp" or not loop)
+EXECUTORS = ("grasp", "grasp-closed-loop", "grasp-replan", "paper")  # executor_label's, in the tables' order
 
 
-def execution_dir(trial_dir: str | Path, controller: str, condition: str, closed_loop: bool = False) -> Path:
-    return Path(trial_dir) / EXEC_DIR / f"{executor_label(controller, closed_loop)}_{condition}"
+def execution_dir(
+    trial_dir: str | Path, controller: str, condition: str, closed_loop: bool = False, replan: bool = False
+) -> Path:
+    return Path(trial_dir) / EXEC_DIR / f"{executor_label(controller, closed_loop, replan)}_{condition}"
 
 
 @dataclass(frozen=True)
@@ -162,12 +170,17 @@ class ExecutionTask:
     gains: ControllerGains | None = None
     sim: SimConfig | None = None
     closed_loop: bool = False  # the grasp controller with the closed loop (run_simulation's closed_loop)
+    replan: bool = False  # the closed loop replanning too (run_simulation's replan; its segments in this process)
+
+    @property
+    def folder(self) -> Path:
+        return execution_dir(self.trial_dir, self.controller, self.condition, self.closed_loop, self.replan)
 
 
 def execute(task: ExecutionTask) -> dict:
     """Loads the trial's plan, executes it, writes sim.json + sim.npz into its execution
     folder; returns sim.json's content (with the trial folder, controller and condition)."""
-    from trajectotree.execution.simulate import run_simulation
+    from trajectotree.execution.run import run_simulation
     from trajectotree.io import load_plan, save_sim
 
     plan = load_plan(task.trial_dir)
@@ -177,14 +190,17 @@ def execute(task: ExecutionTask) -> dict:
         sim=replace(task.sim or plan.config.sim, controller=task.controller),
     )
     duration = float(plan.trajectory.t[-1] - plan.trajectory.t[0])
+    # a replan's later segments in this process: the sweep runs one execution per core already
+    replanning = {"replan": True, "segment_workers": 1} if task.replan else {}
     result = run_simulation(
         plan=plan,
         config=config,
         controller=task.controller,
         closed_loop=task.closed_loop,
+        **replanning,
         **task.spec.simulation_kwargs(task.condition, config, duration),
     )
-    out = execution_dir(task.trial_dir, task.controller, task.condition, task.closed_loop)
+    out = task.folder
     save_sim(result, out)
     return read_execution(out)
 
@@ -224,14 +240,16 @@ def pending_executions(
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
     closed_loop: bool = False,
+    replan: bool = False,
 ) -> list[ExecutionTask]:
     """Every (trial with a trajectory, of `methods` (None: all), controller, condition)
-    without a finished execution (with the closed loop, or without).
+    without a finished execution (with the closed loop, or without; replanning, or not).
     A nominal open-loop execution the sweep's own --simulate already ran (the trial's
     sim.json, same controller) is copied instead of rerun."""
     controllers = [check_controller(c) for c in controllers]
     conditions = [check_condition(c, spec) for c in conditions]
-    check_closed_loop_controllers(controllers, closed_loop)
+    check_closed_loop_controllers(controllers, closed_loop, replan)
+    closed_loop = closed_loop or replan
     tasks = []
     for trial_dir in sorted(p for p in (Path(sweep_dir) / TRIALS_DIR).iterdir() if p.is_dir()):
         try:
@@ -248,12 +266,14 @@ def pending_executions(
         )
         for controller in controllers:
             for condition in conditions:
-                out = execution_dir(trial_dir, controller, condition, closed_loop)
-                if execution_problem(out) is None or (
-                    same_settings and not closed_loop and _reuse_sweep_simulation(trial_dir, controller, condition, out)
+                task = ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim, closed_loop, replan)
+                if execution_problem(task.folder) is None or (
+                    same_settings
+                    and not closed_loop
+                    and _reuse_sweep_simulation(trial_dir, controller, condition, task.folder)
                 ):
                     continue
-                tasks.append(ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim, closed_loop))
+                tasks.append(task)
     return tasks
 
 
@@ -296,25 +316,24 @@ def run_executions(
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
     closed_loop: bool = False,
+    replan: bool = False,
     workers: int | None = None,
     progress: bool = True,
 ) -> int:
     """Runs the pending executions of a sweep's plans (of `methods`, None: all) with the
     controller `gains` and `sim` settings (None: those saved with each plan), with the closed
-    loop or without, on `workers` local processes, holding the
+    loop or without (replanning, or not), on `workers` local processes, holding the
     sweep's lock; returns how many ran. A failed execution is reported on stderr and left
     pending (rerun to retry); the others go on."""
     sweep_dir = Path(sweep_dir)
     if not (sweep_dir / TRIALS_DIR).is_dir():
         raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {TRIALS_DIR}/)")
     with sweep_lock(sweep_dir):
-        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim, closed_loop)
+        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim, closed_loop, replan)
         if not tasks:
             return 0
-        for task in tasks:
-            out = execution_dir(task.trial_dir, task.controller, task.condition)
-            if out.is_dir() and any(out.iterdir()):  # a finished one is not pending: its files are torn
-                print(f"execution {out}: {execution_problem(out)}; it is recomputed", file=sys.stderr)
+        for line in torn_executions(tasks):
+            print(line, file=sys.stderr)
         bar = None
         if progress and sys.stderr.isatty():
             from tqdm import tqdm
@@ -348,6 +367,16 @@ def run_executions(
         if bar is not None:
             bar.close()
         return done
+
+
+def torn_executions(tasks: list[ExecutionTask]) -> list[str]:
+    """What to say of each pending task whose own folder (this executor's) holds files: a finished
+    execution is not pending, so those files are torn, and the execution is recomputed."""
+    return [
+        f"execution {task.folder}: {execution_problem(task.folder)}; it is recomputed"
+        for task in tasks
+        if task.folder.is_dir() and any(task.folder.iterdir())
+    ]
 
 
 def _kill_pool(pool: ProcessPoolExecutor) -> None:
@@ -393,24 +422,27 @@ FINAL_THETA_TOLERANCE = np.deg2rad(3.0)  # rad, "final orientation held" in the 
 
 
 def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
-    """One row per (method, executor, condition), in the order of `methods`, EXECUTORS (each
-    controller, its closed loop beside it) and CONDITIONS: executions, drops, mean absolute
-    errors and how many ended within 3 deg of the planned final orientation."""
+    """One row per (method, condition, executor), in the order of `methods`, CONDITIONS and EXECUTORS
+    (so a condition's open loop, closed loop and replanning rows stand together): executions, drops,
+    mean absolute errors, the mean final error and how many ended within 3 deg of the planned final
+    orientation; replans, how many gave a new plan, and their latency's median and 95th percentile."""
 
     def order(names, name) -> int:
         return names.index(name) if name in names else len(names)
 
     keys = sorted(
         {(r["method"], r["controller"], r["condition"]) for r in records},
-        key=lambda k: (order(methods, k[0]), order(EXECUTORS, k[1]), order(CONDITIONS, k[2]), k[2]),
+        key=lambda k: (order(methods, k[0]), order(CONDITIONS, k[2]), k[2], order(EXECUTORS, k[1])),
     )
     table = []
     for method, controller, condition in keys:
         mine = [r for r in records if (r["method"], r["controller"], r["condition"]) == (method, controller, condition)]
 
-        def mean(field: str, mine=mine) -> float:
-            return float(np.mean([r[field] for r in mine]))
+        def mean(values) -> float:
+            return float(np.mean(values))
 
+        replans = [e for r in mine for e in r.get("replans") or ()]
+        latency = [e["latency_s"] for e in replans]
         table.append(
             {
                 "method": method,
@@ -418,10 +450,17 @@ def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
                 "condition": condition,
                 "executed": len(mine),
                 "dropped": sum(bool(r["dropped"]) for r in mine),
-                "mae_x": mean("mae_x"),
-                "mae_y": mean("mae_y"),
-                "mae_theta": mean("mae_theta"),
+                "mae_x": mean([r["mae_x"] for r in mine]),
+                "mae_y": mean([r["mae_y"] for r in mine]),
+                "mae_theta": mean([r["mae_theta"] for r in mine]),
+                "final_x": mean([abs(r["final_error"][0]) for r in mine]),
+                "final_y": mean([abs(r["final_error"][1]) for r in mine]),
+                "final_theta": mean([abs(r["final_error"][2]) for r in mine]),
                 "final_theta_within_3deg": sum(abs(r["final_error"][2]) <= FINAL_THETA_TOLERANCE for r in mine),
+                "replans": len(replans),
+                "new_plans": sum(bool(e.get("planned")) for e in replans),
+                "latency_median_s": float(np.median(latency)) if latency else None,
+                "latency_p95_s": float(np.percentile(latency, 95)) if latency else None,
             }
         )
     return table
@@ -430,14 +469,66 @@ def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
 def execution_markdown(table: list[dict], labels: dict[str, str]) -> str:
     lines = [
         "| method | controller | condition | executed | dropped | MAE x [mm] | MAE y [mm] | MAE theta [rad] "
-        "| final theta within 3 deg |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| final error x / y [mm], theta [rad] | final theta within 3 deg | replans (new plans) "
+        "| latency median / p95 [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for s in table:
+        latency = "-"
+        if s["latency_median_s"] is not None:
+            latency = f"{s['latency_median_s']:.3f} / {s['latency_p95_s']:.3f}"
         lines.append(
             f"| {labels.get(s['method'], s['method'])} | {s['controller']} | {s['condition']} | "
             f"{s['executed']} | {s['dropped']} ({s['dropped'] / s['executed']:.0%}) | "
             f"{1e3 * s['mae_x']:.2f} | {1e3 * s['mae_y']:.2f} | {s['mae_theta']:.3f} | "
-            f"{s['final_theta_within_3deg']}/{s['executed']} |"
+            f"{1e3 * s['final_x']:.2f} / {1e3 * s['final_y']:.2f}, {s['final_theta']:.3f} | "
+            f"{s['final_theta_within_3deg']}/{s['executed']} | "
+            + (f"{s['replans']} ({s['new_plans']})" if s["replans"] else "-")
+            + f" | {latency} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def refused_replans(records: list[dict]) -> list[dict]:
+    """Every replan that gave no plan, per execution (method, goal, condition): when, the outcome
+    (sim.json's replans' outcome: no_plan, search_deadline, start_refused, first_segment_failed) and the
+    planner's reason, ordered by method, condition and goal."""
+    rows = [
+        {
+            "method": r["method"],
+            "goal": r["goal"],
+            "controller": r["controller"],
+            "condition": r["condition"],
+            "time_s": e["time_s"],
+            "mu": e["mu"],
+            "outcome": e.get("outcome", "unknown"),
+            "status": e.get("status", ""),
+        }
+        for r in records
+        for e in r.get("replans") or ()
+        if not e.get("planned")
+    ]
+    return sorted(
+        rows,
+        key=lambda row: (
+            row["method"],
+            CONDITIONS.index(row["condition"]) if row["condition"] in CONDITIONS else len(CONDITIONS),
+            row["goal"],
+            row["time_s"],
+        ),
+    )
+
+
+def refused_markdown(rows: list[dict], labels: dict[str, str]) -> str:
+    """The replans without a plan, per goal: the search's (or the start's) reason, as a person reads it."""
+    lines = [
+        "| method | goal [rad] | condition | at [s] | friction estimate | outcome | reason |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        reason = row["status"].replace("|", "/")
+        lines.append(
+            f"| {labels.get(row['method'], row['method'])} | {row['goal']:+.3f} | {row['condition']} | "
+            f"{row['time_s']:.2f} | {row['mu']:.3f} | {row['outcome'].replace('_', ' ')} | {reason} |"
         )
     return "\n".join(lines) + "\n"

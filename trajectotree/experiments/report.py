@@ -392,13 +392,23 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
 def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out: Path) -> tuple[str | None, dict]:
     """executions.md / .csv (drops and errors per method, controller and condition) and one
     Fig. 3 per controller from its nominal executions, when the sweep has executions."""
-    from trajectotree.experiments.executions import collect_executions, execution_markdown, execution_summary
+    from trajectotree.experiments.executions import (
+        collect_executions,
+        execution_markdown,
+        execution_summary,
+        refused_markdown,
+        refused_replans,
+    )
 
     records = collect_executions(sweep_dir, rows)
     if not records:
         return None, {}
     table = execution_summary(records, methods)
-    write_bytes_atomic(out / "executions.md", (execution_markdown(table, METHOD_LABELS) + EXECUTION_NOTES).encode())
+    text = execution_markdown(table, METHOD_LABELS) + EXECUTION_NOTES
+    refused = refused_replans(records)
+    if refused:
+        text += REFUSED_NOTES + "\n" + refused_markdown(refused, METHOD_LABELS)
+    write_bytes_atomic(out / "executions.md", text.encode())
     write_bytes_atomic(out / "executions.csv", table_csv(table).encode())
     figures = {}
     for controller in sorted({r["controller"] for r in records}):
@@ -413,9 +423,21 @@ def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out
 EXECUTION_NOTES = """
 Each plan executed again per controller (`grasp`: object-level grasp controller, the default;
 `grasp-closed-loop`: the same with the contact watch, the friction and mass estimates and the push
-reflex; `paper`: eq. 20) and condition (`nominal`: the plan's world; `mismatch`: friction 0.55 and box
+reflex; `grasp-replan`: that closed loop planning again from the measured state when the plan no longer
+holds; `paper`: eq. 20) and condition (`nominal`: the plan's world; `mismatch`: friction 0.55 and box
 mass +20 % in the simulated plant only; `push`: 0.2 N along +x on the box for 0.2 s in the middle
 of the middle segment; `friction-MU`: friction MU; `mass-xF`: the box mass times F; `push-FN`: F N
 along +x, timed like `push`). MAE: time means of |simulated - planned| box pose (held at its drop-time
-value after a drop), then means over executions. Final theta: |error| at the end of the run.
+value after a drop), then means over executions. Final error: mean |error| at the end of the run.
+Replans: how often the closed loop planned again (in parentheses: how often a plan came back and took
+effect); latency: wall-clock time from the measured state to the new plan's first segment (or to the
+refusal), while the hand holds, median and 95th percentile over those replans.
+"""
+
+REFUSED_NOTES = """
+## Replans without a plan
+
+Each replan that gave no new plan, per goal: the search refused at the estimated friction (no plan,
+or none within sim.replan.search_deadline_s), the planner refused the measured start (moving, a finger
+off, not in closure), or the new plan's first segment failed; the old plan went on.
 """

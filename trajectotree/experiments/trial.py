@@ -144,7 +144,7 @@ def run_trial(task: TrialTask, out_dir: Path) -> dict:
     result = plan(scene=scene, goal=task.goal, method=task.method, config=config, segment_workers=1)
     save_plan(result, out_dir)
     if task.simulate and result.trajectory is not None:
-        from trajectotree.execution.simulate import run_simulation
+        from trajectotree.execution.run import run_simulation
 
         save_sim(run_simulation(plan=result, config=config), out_dir)
     return row_from_files(task, out_dir)

@@ -17,10 +17,12 @@ from pathlib import Path
 import numpy as np
 from matplotlib.patches import Circle, Polygon
 
+from trajectotree.config import DEFAULT_HAND
 from trajectotree.geometry import ConvexPolygon, box_to_world
 from trajectotree.io import write_bytes_atomic
 
-FINGER_COLORS = ("tab:red", "tab:green", "tab:purple", "tab:orange")
+# a colour per finger, the four-finger hand's first (a hand of more fingers takes the next ones)
+FINGER_COLORS = ("tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 ARROW_TARGET_LENGTH = 0.05  # m, the largest force that sets an arrow scale is drawn at most this long
 ARROW_MAX_LENGTH = 0.12  # m, longer arrows are capped (a dropped box squeezed between the fingers)
 ARROW_MIN_FORCE = 0.02  # N, a smaller force (a finger off the box) draws no arrow
@@ -141,7 +143,7 @@ def plot_finger(ax, finger, q, tip_radius: float, *, color="0.3", tip_color="tab
 
 
 def plot_hand(ax, scene, q, *, colors=FINGER_COLORS, **kwargs):
-    """All four fingers of `scene` at joint angles q (8,)."""
+    """All fingers of `scene` at joint angles q (2F,)."""
     artists = []
     for i, finger in enumerate(scene.fingers):
         artists += plot_finger(ax, finger, q[2 * i : 2 * i + 2], scene.tip_radius, tip_color=colors[i], **kwargs)
@@ -205,7 +207,12 @@ def figure_model(scene, q=None, reachable=None, note: str | None = None):
     ax.set_ylim(-0.3, 0.3)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(f"Planar four-finger hand and {describe_object(c)}" + (f"\n{note}" if note else ""), fontsize=10)
+    hand = (
+        "Planar four-finger hand"
+        if c.hand == DEFAULT_HAND
+        else f"Hand {scene.hand_description.name} ({scene.num_fingers} fingers)"
+    )
+    ax.set_title(f"{hand} and {describe_object(c)}" + (f"\n{note}" if note else ""), fontsize=10)
     fig.tight_layout()
     return fig
 

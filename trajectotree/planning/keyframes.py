@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import multiprocessing
 import os
 import resource
@@ -80,6 +81,9 @@ class PieceTask:
     #                                   "joint" (with the neighbours)
     #                                   or "strict" (a joint one, pinned fingers STRICT_PINNING times harder)
     guess: np.ndarray | None = None  # (K, KNOT_SIZE) initial guess (None: the plan's guess)
+    # s, a time.perf_counter() value on this machine (the process that made the task, or a worker beside it)
+    # at which IPOPT stops, for a solve with a deadline; None: never
+    deadline: float | None = None
 
 
 @dataclass(frozen=True)
@@ -101,6 +105,9 @@ class PieceResult:
     solution: np.ndarray  # (K, KNOT_SIZE) the last iterate, for a restart
     max_rss_mb: float  # MB, peak resident memory of the process that solved it
     pid: int
+    # s (time.perf_counter in the planning process), when the planning process had this result (run_pieces):
+    # a first-segment-first plan times each segment's readiness from it
+    finished_s: float = float("nan")
 
     def record(self) -> dict:
         return {
@@ -155,7 +162,8 @@ def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogOb
     sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
     build_time = time.perf_counter() - t0
-    outcome = solve(program, guess, task.cito, log_observer)
+    left = None if task.deadline is None else task.deadline - time.perf_counter()  # after the build
+    outcome = solve(program, guess, task.cito, log_observer, left)
     arrays = trajectory(program, outcome.solution, scene)
     check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
     return PieceResult(
@@ -216,15 +224,15 @@ def run_pieces(
     task; in `scene`, watched by `log_observer`), else on a pool of local processes started
     for these tasks. Progress is shown only in this process: a terminal has one progress line."""
     if executor is not None:
-        return list(executor.map(solve_piece, tasks))
+        return [_received(r) for r in executor.map(solve_piece, tasks)]
     workers = min(len(tasks), os.cpu_count() or 1) if workers is None else min(workers, len(tasks))
     if workers <= 1:
-        return [solve_piece(t, scene, log_observer) for t in tasks]
+        return [_received(solve_piece(t, scene, log_observer)) for t in tasks]
     for t in tasks:  # a forked worker inherits the scene built here
         worker_scene(t.scene)
     pool = local_pool(workers)
     try:
-        results = list(pool.map(solve_piece, tasks))
+        results = [_received(r) for r in pool.map(solve_piece, tasks)]  # map yields in order, each once it is done
     except BaseException:
         # Interrupted (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the CLI) or failed:
         # shutdown() alone would wait for the running solves, minutes deep in IPOPT, and a
@@ -233,6 +241,11 @@ def run_pieces(
         raise
     pool.shutdown()
     return results
+
+
+def _received(result: PieceResult) -> PieceResult:
+    """`result` stamped with the time this process has it (no earlier than its solve ended)."""
+    return dataclasses.replace(result, finished_s=time.perf_counter())
 
 
 def kill_workers(pool: ProcessPoolExecutor) -> None:
@@ -271,9 +284,11 @@ def solve_segments(
     *,
     scene: Scene | None = None,
     log_observer: LogObserver | None = None,
+    deadline: float | None = None,
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
     """(the pieces to stitch, in order; every attempt per segment), with the retries; pieces
-    solved in this process use `scene` when given (run_pieces)."""
+    solved in this process use `scene` when given (run_pieces). With a `deadline` (a
+    time.perf_counter() value) each solve stops there and no retry starts after it."""
     n = len(plan.nodes) - 1
     mu = mu_plan(config.scene, config.search)
 
@@ -286,10 +301,15 @@ def solve_segments(
     configs["restart"] = configs["keyframes"]
 
     def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
-        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess)
+        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess, deadline)
+
+    def late() -> bool:
+        return deadline is not None and time.perf_counter() >= deadline
 
     def retry(segments: list[int], kind: str, from_last_iterate: bool) -> None:
         """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
+        if late():
+            return
         guesses = [best[s].solution if from_last_iterate else None for s in segments]
         for s, r in zip(
             segments,
@@ -311,6 +331,8 @@ def solve_segments(
         )
     pieces = {s: best[s] for s in range(n)}  # keyed by each piece's first node
     for kind in ("joint", "strict"):
+        if late():
+            break
         failed = [s for s, p in sorted(pieces.items()) if not p.success]  # single segments: a joint piece passed
         ranges = _neighbour_ranges(failed, n, min_segments=2 if kind == "joint" else 1)
         joint = run_pieces([task(a, b, kind) for a, b in ranges], executor, workers, scene, log_observer)
@@ -369,14 +391,38 @@ def plan_keyframes(
     executor: Executor | None = None,
     workers: int | None = None,
     log_observer: LogObserver | None = None,
+    first_segment_first: bool = False,
+    since: float | None = None,
+    first_segment_deadline_s: float | None = None,
 ) -> PlanResult:
-    """The trajectotree PlanResult of the keyframes formulation for a successful contact plan.
+    """The trajectotree PlanResult of the keyframes formulation for a successful contact plan;
+    first_segment_first solves it as solve_first_segment_first does, its segment_ready_s counted
+    from `since` (a time.perf_counter() value; default: now), segment 0 ready within
+    `first_segment_deadline_s` of it (None: unbounded).
     Times: build_time_s and solve_time_s summed over every attempt (process time in the
     workers); total_time_s = search_time + the wall-clock time of all segment solves. cost: the
     stitched pieces' costs summed (a shared knot's effort terms count in both); iterations: every
     attempt's; violations: each group's largest over the pieces."""
     t0 = time.perf_counter()
-    pieces, attempts = solve_segments(contact_plan, config, executor, workers, scene=scene, log_observer=log_observer)
+    since = t0 if since is None else since
+    ready = ()
+    if first_segment_first:
+        pieces, attempts, ready = solve_first_segment_first(
+            contact_plan,
+            config,
+            executor,
+            workers,
+            scene=scene,
+            log_observer=log_observer,
+            since=since,
+            first_deadline_s=first_segment_deadline_s,
+        )
+        if not pieces[0].success:  # the rest is not solved: nothing of this plan can be executed
+            return _first_segment_failed(scene, goal, contact_plan, config, search_time, pieces[0], ready, t0)
+    else:
+        pieces, attempts = solve_segments(
+            contact_plan, config, executor, workers, scene=scene, log_observer=log_observer
+        )
     wall = time.perf_counter() - t0
     distinct = list({id(r): r for tried in attempts.values() for r in tried}.values())
     arrays = stitch(pieces)
@@ -417,4 +463,87 @@ def plan_keyframes(
         physics_check=check,
         formulation="keyframes",
         segments=segment_records(attempts, pieces),
+        segment_ready_s=ready,
     )
+
+
+def _first_segment_failed(scene, goal, contact_plan, config, search_time, first, ready, t0) -> PlanResult:
+    """The PlanResult of a first-segment-first plan whose first segment failed after its retries."""
+    why = first.status if not first.converged else f"physics check failed: {first.check.reason}"
+    return PlanResult(
+        method="trajectotree",
+        goal=goal,
+        success=False,
+        converged=first.converged,
+        status=f"the first segment failed after retries ({first.kind}): {why}",
+        search_time_s=search_time,
+        build_time_s=first.build_time_s,
+        solve_time_s=first.solve_time_s,
+        total_time_s=search_time + time.perf_counter() - t0,
+        cost=float("nan"),
+        iterations=first.iterations,
+        contact_plan=contact_plan,
+        trajectory=None,
+        violations=first.violations,
+        config=config,
+        formulation="keyframes",
+        segment_ready_s=ready,
+    )
+
+
+def solve_first_segment_first(
+    plan: ContactPlan,
+    config: Config,
+    executor: Executor | None = None,
+    workers: int | None = None,
+    *,
+    scene: Scene | None = None,
+    log_observer: LogObserver | None = None,
+    since: float,
+    first_deadline_s: float | None = None,
+) -> tuple[list[PieceResult], dict[int, list[PieceResult]], tuple[float, ...]]:
+    """solve_segments for a plan that is executed while it is being solved (replanning): segment 0
+    first, alone, in this process (its retries too: restart, links, strict), then, if it passed,
+    segments 1.. as a plan of their own (so that no joint retry reaches back into segment 0, which is
+    executing by then) on `executor` / `workers`. Also returns when each segment was ready, in s after
+    `since` (a time.perf_counter() value), inf for one that cannot be executed: segment 0 when its
+    last attempt came back; segment s >= 1 when the last attempt of segments s-1, s and s+1 (of the
+    rest) came back, since a joint retry of a failed neighbour replaces it; after the first segment
+    that failed, none (an executor cannot skip a segment). Segment 0 must be ready within
+    `first_deadline_s` of `since` (solve_segments' deadline: its attempts stop there), so the hand
+    does not hold for long."""
+    deadline = None if first_deadline_s is None else since + first_deadline_s
+    first, first_attempts = solve_segments(
+        dataclasses.replace(plan, nodes=plan.nodes[:2]),
+        config,
+        None,
+        1,
+        scene=scene,
+        log_observer=log_observer,
+        deadline=deadline,
+    )
+    n = len(plan.nodes) - 1
+    ready = [max(r.finished_s for r in first_attempts[0]) - since]
+    if not first[0].success or n == 1:
+        return first, first_attempts, tuple(ready + [math.inf] * (n - 1))
+    rest, rest_attempts = solve_segments(
+        dataclasses.replace(plan, nodes=plan.nodes[1:]),
+        config,
+        executor,
+        workers,
+        scene=scene,
+        log_observer=log_observer,
+    )
+    failed = False
+    for s in range(n - 1):  # the rest's segment s is the plan's s + 1
+        final = next(p for p in rest if p.first <= s < p.last)
+        failed = failed or not final.success
+        settled = [r.finished_s for j in (s - 1, s, s + 1) for r in rest_attempts.get(j, ())]
+        ready.append(math.inf if failed else max(settled) - since)
+    shifted = {}  # id -> the attempt with the plan's node numbers (a joint attempt is listed under each segment)
+
+    def moved(r: PieceResult) -> PieceResult:
+        return shifted.setdefault(id(r), dataclasses.replace(r, first=r.first + 1, last=r.last + 1))
+
+    attempts = {0: first_attempts[0]} | {s + 1: [moved(r) for r in tried] for s, tried in rest_attempts.items()}
+    return first + [moved(p) for p in rest], attempts, tuple(ready)

@@ -66,8 +66,9 @@ class ObjectModel:
 
 
 def link_penetrations(x, q, fingers, shape: ConvexPolygon) -> np.ndarray:
-    """(K, 4, 2) m: how deep each finger's link 1 and link 2 collision boxes overlap the object
-    at object poses x (K, 3) and joint angles q (K, 8, finger-major)."""
+    """(K, F, 2) m: how deep each finger's link 1 and link 2 collision boxes overlap the object
+    at object poses x (K, 3) and joint angles q (K, 2F, finger-major); 0 for a link without a box
+    (it passes through the object in simulation too)."""
     depths = []
     for i, finger in enumerate(fingers):
         q_i = np.asarray(q, dtype=float)[:, 2 * i : 2 * i + 2]
@@ -75,7 +76,9 @@ def link_penetrations(x, q, fingers, shape: ConvexPolygon) -> np.ndarray:
         frames = ((np.broadcast_to(finger.p_W_base, (len(q_i), 2)), a1), (finger.elbow(q_i), a12))
         depths.append(
             [
-                shape.penetration_depths(poses_world_to_box(x, box.corners(p_WJ, angle_WJ)))
+                np.zeros(len(q_i))
+                if box is None
+                else shape.penetration_depths(poses_world_to_box(x, box.corners(p_WJ, angle_WJ)))
                 for box, (p_WJ, angle_WJ) in zip(finger.link_boxes, frames)
             ]
         )

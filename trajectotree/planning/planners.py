@@ -30,7 +30,7 @@ from concurrent.futures import Executor
 import numpy as np
 
 from trajectotree.cito.guess import plan_guess, static_guess
-from trajectotree.cito.hand import HandModel
+from trajectotree.cito.hand import HandModel, check_cito_hand
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import LogObserver, solve, violations
@@ -44,7 +44,7 @@ from trajectotree.planning.physics import ObjectModel, check_physics
 from trajectotree.planning.start import begin_at, start_config
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
-from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
+from trajectotree.scene.plant import Scene, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
@@ -64,6 +64,8 @@ def plan(
     segment_workers: int | None = None,
     grasp_tables: GraspTables | None = None,
     log_observer: LogObserver | None = None,
+    first_segment_first: bool = False,
+    first_segment_deadline_s: float | None = None,
 ) -> PlanResult:
     """Plans `goal` for the object with `method` ("trajectotree", "cito" or "cito-warm"): a
     rotation (rad in W, any number within +-20 pi: 2 pi is a full turn; the object keeps its
@@ -82,15 +84,29 @@ def plan(
     `segment_workers` local processes (1: serially in this process, as a sweep's trial
     does; None: one per segment, at most one per core). `grasp_tables` keeps the ranked
     initial grasps for the next plan (without it the search ranks them, inside its time);
-    `log_observer` watches each IPOPT solve run in this process (cito.solve.solve)."""
+    `log_observer` watches each IPOPT solve run in this process (cito.solve.solve).
+    `first_segment_first` (TrajectoTree's keyframes formulation only; a plan executed while it is
+    solved, as replanning does) solves segment 0 before the others and records in the result's
+    segment_ready_s when each segment was ready, counted from this call
+    (keyframes.solve_first_segment_first), segment 0's solves stopped `first_segment_deadline_s` after
+    this call began (None: unbounded)."""
+    called = time.perf_counter()
     check_method(method)
     config = config or Config()
+    if first_segment_first and (method != "trajectotree" or config.cito.formulation != "keyframes"):
+        raise ConfigError(
+            field="cito.formulation",
+            value=config.cito.formulation if method == "trajectotree" else method,
+            problem=": a first-segment-first plan is TrajectoTree's keyframes formulation's",
+            choices=("keyframes",),
+        )
     goal = check_goal(config.goal if goal is None else goal)
     scene = scene or build_scene(config.scene)
     if start is not None:
         config = start_config(scene, start, config)
         scene = build_scene(config.scene)
     check_workers(segment_workers)
+    check_cito_hand(scene)
     if scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
     check_goal_position(scene, config.search, goal)
@@ -123,6 +139,9 @@ def plan(
             executor=segment_executor,
             workers=segment_workers,
             log_observer=log_observer,
+            first_segment_first=first_segment_first,
+            since=called,
+            first_segment_deadline_s=first_segment_deadline_s,
         )
     t0 = time.perf_counter()
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
@@ -187,7 +206,7 @@ def initial_grasp_plan(scene: Scene, goal, config: Config, tables: GraspTables |
     p_BC, n_B = np.array([p for p, _ in points]), np.array([n for _, n in points])
     hand = HandModel.from_scene(scene)
     x0 = np.asarray(c.initial_pose, dtype=float)
-    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(NUM_FINGERS)]
+    q = [hand.ik(i, box_to_world(x0, p_BC[i] + scene.tip_radius * n_B[i])) for i in range(scene.num_fingers)]
     if any(qi is None for qi in q):
         return ContactPlan(
             goal=goal.theta,

@@ -10,17 +10,15 @@ else is refused before planning, with a `StartRefusal` that names the finger, th
 from __future__ import annotations
 
 import dataclasses
-import enum
-from dataclasses import dataclass
 
 import numpy as np
 
 from trajectotree.config import Config, ConfigError, mu_plan
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import world_to_box
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
-from trajectotree.start import StartState
+from trajectotree.start import StartProblem, StartRefusal, StartState
 
 # The plan's nodes are static grasps (CITO holds every node's velocities at zero), so a start must be
 # nearly at rest; a closed loop measures 0.02-0.05 m/s at nodes where contacts slide, a falling box
@@ -32,46 +30,6 @@ START_SPIN_LIMIT = 1.0  # rad/s
 TOUCH_DISTANCE = 2e-3
 
 
-class StartProblem(enum.Enum):
-    MOVING = "the object is moving"
-    SPINNING = "the object is turning"
-    FINGER_OFF = "a fingertip does not touch the object"
-    CONTACT_MISMATCH = "a given contact is not where the fingertip is"
-    NOT_IN_CLOSURE = "the grasp cannot hold the object"
-
-
-@dataclass(frozen=True)
-class StartRefusal:
-    """Why a start state cannot be planned from, with its numbers."""
-
-    problem: StartProblem
-    finger: int | None = None
-    value: float = float("nan")  # the measured quantity (m, m/s or the friction the grasp needs)
-    limit: float = float("nan")  # what it may be at most
-
-    def __str__(self) -> str:
-        if self.problem is StartProblem.MOVING:
-            return (
-                f"start: the object moves at {self.value:.3g} m/s; a plan starts at rest (at most {self.limit:g} m/s)"
-            )
-        if self.problem is StartProblem.SPINNING:
-            return f"start: the object turns at {self.value:.3g} rad/s; a plan starts at rest (at most {self.limit:g})"
-        if self.problem is StartProblem.FINGER_OFF:
-            return (
-                f"start: fingertip {self.finger} is {self.value * 1e3:.2f} mm from the object's surface; every "
-                f"finger must touch it (within {self.limit * 1e3:g} mm) to start a plan"
-            )
-        if self.problem is StartProblem.CONTACT_MISMATCH:
-            return (
-                f"start: finger {self.finger}'s given contact is {self.value * 1e3:.2f} mm from its fingertip's "
-                f"contact point; at most {self.limit * 1e3:g} mm"
-            )
-        return (
-            f"start: the grasp of fingers (0, 1, 2, 3) is not in frictional form closure at mu_plan "
-            f"{self.limit:.3g}; it needs mu {self.value:.3g}"
-        )
-
-
 class StartRefused(ConfigError):
     """A start state that cannot be planned from (the CLI exits 2); `refusal` says why."""
 
@@ -81,14 +39,14 @@ class StartRefused(ConfigError):
 
 
 def start_contacts(scene: Scene, start: StartState) -> np.ndarray:
-    """(4,) m, each finger's contact arclength: the boundary point nearest its fingertip sphere,
+    """(F,) m, each finger's contact arclength: the boundary point nearest its fingertip sphere,
     which must touch the surface (StartRefused otherwise); the start's own arclengths, when given,
     must agree with it."""
     shape = scene.config.shape
-    p_WF = scene.fingertip_positions(np.asarray(start.q))  # (4, 2)
+    p_WF = scene.fingertip_positions(np.asarray(start.q))  # (F, 2)
     p_BF = np.array([world_to_box(start.object_pose, p) for p in p_WF])
     gaps = shape.signed_distances(p_BF) - scene.tip_radius
-    for i in range(NUM_FINGERS):
+    for i in range(scene.num_fingers):
         if abs(gaps[i]) > TOUCH_DISTANCE:
             raise StartRefused(StartRefusal(StartProblem.FINGER_OFF, i, float(abs(gaps[i])), TOUCH_DISTANCE))
     arclengths = np.array([shape.arclength(p) for p in p_BF])
@@ -96,7 +54,7 @@ def start_contacts(scene: Scene, start: StartState) -> np.ndarray:
         given = np.mod(np.asarray(start.arclengths, dtype=float), shape.perimeter)
         p_given, _ = shape.points(given)
         p_tips = shape.nearest_points(p_BF)
-        for i in range(NUM_FINGERS):
+        for i in range(scene.num_fingers):
             off = float(np.linalg.norm(p_given[i] - p_tips[i]))
             if off > TOUCH_DISTANCE:
                 raise StartRefused(StartRefusal(StartProblem.CONTACT_MISMATCH, i, off, TOUCH_DISTANCE))

@@ -15,11 +15,9 @@ q_2i, q_2i+1 are the two joints of finger i (see `Scene.hand_q_indices`).
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 from functools import cached_property
-from importlib import resources
 
 import numpy as np
 from pydrake.geometry import AddContactMaterial, Convex, ProximityProperties, SceneGraph
@@ -30,13 +28,21 @@ from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint, RotationalI
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import SceneConfig
-from trajectotree.geometry import ConvexPolygon, rotation_2d
-from trajectotree.scene.kinematics import TwoLinkFinger
+from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.hand import (  # noqa: F401 (FingerGeometry, LinkRectangle: their old home)
+    JOINTS_PER_FINGER,
+    MODELS_DIR,
+    FingerGeometry,
+    HandDescription,
+    LinkRectangle,
+    add_hand,
+    hand_file,
+    read_hand,
+)
 
+# The default hand's finger count, for the stages that do not yet take it from scene.hand_description.
 NUM_FINGERS = 4
-JOINTS_PER_FINGER = 2
 NUM_HAND_JOINTS = NUM_FINGERS * JOINTS_PER_FINGER
-MODELS_DIR = resources.files("trajectotree.models")  # models/, installed as trajectotree/models (pyproject.toml)
 
 
 def _sub(text: str, pattern: str, value: str) -> str:
@@ -64,12 +70,6 @@ def box_sdf(config: SceneConfig) -> str:
     text = _sub(text, r"<iyy>[^<]*</iyy>", f"<iyy>{iyy!r}</iyy>")
     text = _sub(text, r"<izz>[^<]*</izz>", f"<izz>{izz!r}</izz>")
     return _set_friction(text, config.mu)
-
-
-def hand_sdf(config: SceneConfig) -> str:
-    """planar_hand.sdf with the fingertip friction of `config` (Drake combines
-    the two friction coefficients of a contact pair; equal values keep mu)."""
-    return _set_friction((MODELS_DIR / "planar_hand.sdf").read_text(), config.mu)
 
 
 # The object's colour and opacity (box.sdf's diffuse), for the polygon model too.
@@ -116,14 +116,15 @@ def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: Convex
     return instance
 
 
-def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig):
-    """Adds the hand (joints to W) and the object (planar joint in the x-y plane)
-    to an unfinalized plant, sets gravity. Returns (hand, box) model instances. The box
-    (or a polygon that is an axis-aligned rectangle) comes from box.sdf, any other polygon
-    from add_polygon_object."""
+def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig, scene_graph: SceneGraph | None = None):
+    """Adds the hand `config.hand` (trajectotree.scene.hand: its model, welds and plane) and the
+    object (planar joint in the x-y plane) to an unfinalized plant, sets gravity. Returns (hand,
+    box) model instances. The box (or a polygon that is an axis-aligned rectangle) comes from
+    box.sdf, any other polygon from add_polygon_object. `scene_graph` (the plant's) is needed for
+    a hand model whose friction is not written in its SDF text (hand.add_hand)."""
+    hand = add_hand(plant, hand_file(config.hand), config.mu, scene_graph)
     parser = Parser(plant)
     parser.package_map().Add("trajectotree", str(MODELS_DIR))
-    (hand,) = parser.AddModelsFromString(hand_sdf(config), "sdf")
     if config.shape.is_box:
         (box,) = parser.AddModelsFromString(box_sdf(config), "sdf")
     else:
@@ -131,41 +132,6 @@ def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig):
     plant.AddJoint(PlanarJoint("box_planar", plant.world_frame(), plant.GetFrameByName("box", box)))
     plant.mutable_gravity_field().set_gravity_vector([0.0, -config.gravity, 0.0])
     return hand, box
-
-
-@dataclass(frozen=True)
-class LinkRectangle:
-    """A link's collision box in the plane, in the frame J of the joint that moves the link
-    (all collision geometry is centred on z = 0, so planar overlap is 3D overlap)."""
-
-    p_JG: np.ndarray  # (2,) m, box centre
-    angle_JG: float  # rad, box x axis relative to J's x axis
-    half_length: float  # m, half extent along the box x axis
-    half_width: float  # m, half extent along the box y axis (in the plane)
-
-    def corners(self, p_WJ, angle_WJ) -> np.ndarray:
-        """(..., 4, 2) corners in W, counter-clockwise, when frame J is at p_WJ (..., 2) with
-        angle angle_WJ (...)."""
-        hl, hw = self.half_length, self.half_width
-        local = np.array([[hl, -hw], [hl, hw], [-hl, hw], [-hl, -hw]]) @ rotation_2d(self.angle_JG).T + self.p_JG
-        c, s = np.cos(angle_WJ)[..., None], np.sin(angle_WJ)[..., None]
-        return np.asarray(p_WJ)[..., None, :] + np.stack(
-            [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]], axis=-1
-        )
-
-
-@dataclass(frozen=True)
-class FingerGeometry(TwoLinkFinger):
-    """One finger as the closed-form kinematics (`TwoLinkFinger`: p_W_base, psi, l1, l2,
-    q_lower, q_upper) and dynamics see it, read from the plant."""
-
-    tau_max: np.ndarray  # (2,) N m, torque limits
-    masses: np.ndarray  # (2,) kg, link masses
-    coms: np.ndarray  # (2,) m, link centre of mass along the link's x axis
-    inertias: np.ndarray  # (2,) kg m^2, link rotational inertia about z at its COM
-    link_boxes: (
-        tuple  # (LinkRectangle, LinkRectangle): link 1's collision box in joint 1's frame, link 2's in joint 2's
-    )
 
 
 @dataclass
@@ -180,24 +146,29 @@ class Scene:
     box: object  # ModelInstanceIndex
 
     @cached_property
+    def hand_description(self) -> HandDescription:
+        """The hand as data (scene.hand), read from this plant."""
+        return read_hand(self.plant, self.scene_graph, self.hand, hand_file(self.config.hand))
+
+    @property
+    def num_fingers(self) -> int:
+        return self.hand_description.num_fingers
+
+    @property
+    def num_hand_joints(self) -> int:
+        return self.hand_description.num_joints
+
+    @cached_property
     def hand_q_indices(self) -> np.ndarray:
-        """Indices of the 8 hand joints (finger-major) in the plant's positions."""
+        """Indices of the hand joints (finger-major, each finger's from its base out) in the plant's positions."""
         return np.array(
-            [
-                self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).position_start()
-                for i in range(NUM_FINGERS)
-                for j in (1, 2)
-            ]
+            [self.plant.GetJointByName(n, self.hand).position_start() for n in self.hand_description.joint_names]
         )
 
     @cached_property
     def hand_v_indices(self) -> np.ndarray:
         return np.array(
-            [
-                self.plant.GetJointByName(f"finger{i}_joint{j}", self.hand).velocity_start()
-                for i in range(NUM_FINGERS)
-                for j in (1, 2)
-            ]
+            [self.plant.GetJointByName(n, self.hand).velocity_start() for n in self.hand_description.joint_names]
         )
 
     @cached_property
@@ -206,94 +177,37 @@ class Scene:
         return np.arange(joint.position_start(), joint.position_start() + 3)
 
     def tip_frame(self, i: int):
-        return self.plant.GetFrameByName(f"finger{i}_tip", self.hand)
+        """Finger i's frame at its fingertip sphere's centre."""
+        return self.plant.GetFrameByName(self.hand_description.fingers[i].tip_frame, self.hand)
 
-    @cached_property
+    @property
     def tip_radius(self) -> float:
-        inspector = self.scene_graph.model_inspector()
-        body = self.plant.GetBodyByName("finger0_link2", self.hand)
-        for gid in self.plant.GetCollisionGeometriesForBody(body):
-            shape = inspector.GetShape(gid)
-            if type(shape).__name__ == "Sphere":
-                return float(shape.radius())
-        raise RuntimeError("finger0_link2 has no sphere collision geometry")
+        return self.hand_description.tip_radius
 
-    @cached_property
+    @property
     def fingers(self) -> tuple[FingerGeometry, ...]:
-        return tuple(self._read_finger(i) for i in range(NUM_FINGERS))
-
-    def _read_finger(self, i: int) -> FingerGeometry:
-        plant, ctx = self.plant, self.plant.CreateDefaultContext()
-        plant.SetPositions(ctx, self.hand, np.zeros(NUM_HAND_JOINTS))
-        joints = [plant.GetJointByName(f"finger{i}_joint{j}", self.hand) for j in (1, 2)]
-        links = [plant.GetBodyByName(f"finger{i}_link{j}", self.hand) for j in (1, 2)]
-        X_W1 = joints[0].frame_on_child().CalcPoseInWorld(ctx)
-        X_W2 = joints[1].frame_on_child().CalcPoseInWorld(ctx)
-        p_WF = self.tip_frame(i).CalcPoseInWorld(ctx).translation()
-        x_axis = X_W1.rotation().matrix()[:2, 0]
-        inertia = [b.default_spatial_inertia() for b in links]
-        return FingerGeometry(
-            p_W_base=X_W1.translation()[:2].copy(),
-            psi=float(np.arctan2(x_axis[1], x_axis[0])),
-            l1=float(np.linalg.norm(X_W2.translation() - X_W1.translation())),
-            l2=float(np.linalg.norm(p_WF - X_W2.translation())),
-            q_lower=np.array([j.position_lower_limits()[0] for j in joints]),
-            q_upper=np.array([j.position_upper_limits()[0] for j in joints]),
-            tau_max=np.array([plant.get_joint_actuator(a).effort_limit() for a in self._actuators(i)]),
-            masses=np.array([s.get_mass() for s in inertia]),
-            coms=np.array([s.get_com()[0] for s in inertia]),
-            inertias=np.array([s.Shift(s.get_com()).CalcRotationalInertia()[2, 2] for s in inertia]),
-            link_boxes=tuple(self._read_link_rectangle(ctx, joint, body) for joint, body in zip(joints, links)),
-        )
-
-    def _read_link_rectangle(self, ctx, joint, body) -> LinkRectangle:
-        """The link's box collision geometry from SceneGraph, in the frame of `joint` (which moves it)."""
-        inspector = self.scene_graph.model_inspector()
-        boxes = [
-            g for g in self.plant.GetCollisionGeometriesForBody(body) if type(inspector.GetShape(g)).__name__ == "Box"
-        ]
-        if len(boxes) != 1:
-            raise RuntimeError(f"{body.name()} must have exactly one box collision geometry, has {len(boxes)}")
-        shape = inspector.GetShape(boxes[0])
-        X_WG = body.EvalPoseInWorld(ctx) @ inspector.GetPoseInFrame(boxes[0])
-        X_JG = joint.frame_on_child().CalcPoseInWorld(ctx).inverse() @ X_WG
-        R_JG = X_JG.rotation().matrix()
-        return LinkRectangle(
-            p_JG=X_JG.translation()[:2].copy(),
-            angle_JG=math.atan2(R_JG[1, 0], R_JG[0, 0]),
-            half_length=shape.width() / 2,
-            half_width=shape.depth() / 2,
-        )
-
-    def _actuators(self, i: int):
-        names = {f"finger{i}_joint1": 0, f"finger{i}_joint2": 1}
-        found = [None, None]
-        for a in self.plant.GetJointActuatorIndices(self.hand):
-            joint_name = self.plant.get_joint_actuator(a).joint().name()
-            if joint_name in names:
-                found[names[joint_name]] = a
-        return found
+        return self.hand_description.fingers
 
     def positions(self, object_pose, q) -> np.ndarray:
-        """The plant's position vector for an object pose (x, y, theta) and 8 joint angles."""
+        """The plant's position vector for an object pose (x, y, theta) and the hand's joint angles."""
         positions = np.zeros(self.plant.num_positions())
         positions[self.box_q_indices] = object_pose
         positions[self.hand_q_indices] = q
         return positions
 
     def fingertip_positions(self, q, context=None) -> np.ndarray:
-        """p_WF of the 4 fingertip centres (4, 2), from the plant."""
+        """p_WF of the fingertip centres (F, 2), from the plant."""
         context = context or self.plant.CreateDefaultContext()
         self.plant.SetPositions(context, self.positions(self.config.initial_pose, q))
-        return np.array([self.tip_frame(i).CalcPoseInWorld(context).translation()[:2] for i in range(NUM_FINGERS)])
+        return np.array([self.tip_frame(i).CalcPoseInWorld(context).translation()[:2] for i in range(self.num_fingers)])
 
     def fingertip_jacobians(self, q, context=None) -> np.ndarray:
-        """J_WF (4, 2, 8): d p_WF_i / d q_hand, from the plant."""
+        """J_WF (F, 2, 2F): d p_WF_i / d q_hand, from the plant."""
         plant = self.plant
         context = context or plant.CreateDefaultContext()
         plant.SetPositions(context, self.positions(self.config.initial_pose, q))
-        out = np.zeros((NUM_FINGERS, 2, NUM_HAND_JOINTS))
-        for i in range(NUM_FINGERS):
+        out = np.zeros((self.num_fingers, 2, self.num_hand_joints))
+        for i in range(self.num_fingers):
             J = plant.CalcJacobianTranslationalVelocity(
                 context,
                 JacobianWrtVariable.kV,
@@ -311,7 +225,7 @@ def build_scene(config: SceneConfig | None = None) -> Scene:
     config = config or SceneConfig()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
-    hand, box = add_hand_and_box(plant, config)
+    hand, box = add_hand_and_box(plant, config, scene_graph)
     plant.Finalize()
     diagram = builder.Build()
     return Scene(config=config, diagram=diagram, plant=plant, scene_graph=scene_graph, hand=hand, box=box)

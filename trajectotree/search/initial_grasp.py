@@ -8,7 +8,7 @@ admits -3.0..+1.5 but not +2.0..+3.0; the two together cover the 12 goals tried.
 search is rooted at several candidates, best first, until one yields a plan.
 
 Candidates: every assignment of grid contacts (arclength multiples of
-search.initial_grid_step) to the four fingers such that each contact is at least
+search.initial_grid_step) to the fingers such that each contact is at least
 scene.corner_margin from a corner and reachable at the initial pose (closed-form IK with
 the link collision test, trajectotree.search.reach), no two fingertip spheres overlap, and at least
 one finger may let go (the other three are in frictional form closure at mu_plan, which
@@ -32,18 +32,22 @@ import numpy as np
 
 from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.refusal import Refusal, RefusalKind
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import required_mu_many
 from trajectotree.search.reach import Reachability
 
 RANKING_BISECTIONS = 20  # required_mu to MU_CAP / 2^20 ~ 1e-5 for ranking (ranked to 1e-4)
-STANCE_FINGERS = tuple(tuple(j for j in range(NUM_FINGERS) if j != i) for i in range(NUM_FINGERS))
+
+
+def stance_fingers(num_fingers: int) -> tuple[tuple[int, ...], ...]:
+    """The holding fingers of each stance: all but finger i, for each finger i."""
+    return tuple(tuple(j for j in range(num_fingers) if j != i) for i in range(num_fingers))
 
 
 @dataclass(frozen=True)
 class GraspCandidate:
-    arclengths: tuple[float, float, float, float]  # m, each finger's contact along the boundary, in [0, perimeter)
-    stance_required_mu: tuple[float, ...]  # (4,) required mu of the other three when finger i lets go
+    arclengths: tuple[float, ...]  # (F,) m, each finger's contact along the boundary, in [0, perimeter)
+    stance_required_mu: tuple[float, ...]  # (F,) required mu of the others when finger i lets go
     worst_stance_mu: float  # the largest of those at most mu_plan (the ranking key)
     free_fingers: int  # fingers that may let go at mu_plan
 
@@ -55,8 +59,8 @@ class GraspCandidates:
     full garbage collection, 20-80 ms, in a fresh process)."""
 
     mu_plan: float
-    arclengths: np.ndarray  # (K, 4) m, the candidates' contacts, ranked, best first
-    stance_mu: np.ndarray  # (K, 4) GraspCandidate.stance_required_mu of each
+    arclengths: np.ndarray  # (K, F) m, the candidates' contacts, ranked, best first
+    stance_mu: np.ndarray  # (K, F) GraspCandidate.stance_required_mu of each
     worst_stance_mu: np.ndarray  # (K,)
     free_fingers: np.ndarray  # (K,) int
     reachable: tuple[int, ...]  # grid contacts reachable per finger at the initial pose
@@ -111,17 +115,17 @@ def grid_contacts(scene: Scene, step: float, reach: Reachability) -> list[np.nda
     grid = np.round(np.arange(0.0, boundary.perimeter - 1e-9, step), 9)
     grid = grid[boundary.corner_free(grid, c.corner_margin)]
     out = []
-    for finger in range(NUM_FINGERS):
+    for finger in range(scene.num_fingers):
         q = reach.closed_form_many(np.asarray(c.initial_pose, dtype=float), finger, grid)
         out.append(grid[np.isfinite(q[:, 0])])
     return out
 
 
 def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps: np.ndarray) -> np.ndarray:
-    """sum_i |q2_i - nominal_joint2| of each grasp (M, 4) at the initial pose (closed form)."""
+    """sum_i |q2_i - nominal_joint2| of each grasp (M, F) at the initial pose (closed form)."""
     pose = np.asarray(scene.config.initial_pose, dtype=float)
     cost = np.zeros(len(grasps))
-    for i in range(NUM_FINGERS):  # each finger holds a few distinct contacts: their IK once each
+    for i in range(scene.num_fingers):  # each finger holds a few distinct contacts: their IK once each
         contacts, index = np.unique(grasps[:, i], return_inverse=True)
         cost = cost + np.abs(reach.closed_form_many(pose, i, contacts)[:, 1] - search.nominal_joint2)[index.ravel()]
     return cost
@@ -150,13 +154,15 @@ def symmetric_key(boundary, stances: np.ndarray) -> np.ndarray:
 
 def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCandidates:
     mu = mu_plan(scene.config, search)
+    num_fingers = scene.num_fingers
+    stances_of = stance_fingers(num_fingers)
     per_finger = grid_contacts(scene, search.initial_grid_step, reach)
     counts = tuple(len(s) for s in per_finger)
-    grasps = np.array(list(itertools.product(*per_finger))).reshape(-1, NUM_FINGERS)
+    grasps = np.array(list(itertools.product(*per_finger))).reshape(-1, num_fingers)
     assignments = len(grasps)
     if assignments == 0:
         missing = [i for i, n in enumerate(counts) if n == 0]
-        none = np.zeros((0, NUM_FINGERS))
+        none = np.zeros((0, num_fingers))
         return GraspCandidates(
             mu,
             none,
@@ -168,22 +174,22 @@ def _build(scene: Scene, search: SearchConfig, reach: Reachability) -> GraspCand
             Refusal(RefusalKind.NO_GRID_CONTACT, fingers=tuple(missing)),
         )
     p, n = reach.contacts(grasps.ravel())
-    p, n = p.reshape(-1, NUM_FINGERS, 2), n.reshape(-1, NUM_FINGERS, 2)
+    p, n = p.reshape(-1, num_fingers, 2), n.reshape(-1, num_fingers, 2)
     tips = p + reach.tip_radius * n
     apart = np.ones(len(grasps), dtype=bool)
-    for i, j in itertools.combinations(range(NUM_FINGERS), 2):
+    for i, j in itertools.combinations(range(num_fingers), 2):
         apart &= np.linalg.norm(tips[:, i] - tips[:, j], axis=1) >= 2 * reach.tip_radius
     grasps, p, n = grasps[apart], p[apart], n[apart]
-    # one required_mu per distinct set of three contacts, whichever fingers hold them (closure
+    # one required_mu per distinct set of F - 1 contacts, whichever fingers hold them (closure
     # does not depend on their order) and, on the box, up to its symmetries, in one vectorized bisection
-    stances = np.concatenate([grasps[:, others] for others in STANCE_FINGERS])  # (4 M, 3), finger i's first
+    stances = np.concatenate([grasps[:, others] for others in stances_of])  # (F M, F - 1), finger i's first
     _, first, index = np.unique(
         symmetric_key(scene.config.shape, stances), axis=0, return_index=True, return_inverse=True
     )
     grasp_of, stance_of = first % len(grasps), first // len(grasps)
-    pick = np.array(STANCE_FINGERS)[stance_of]  # (U, 3) the fingers of each distinct stance's first holder
+    pick = np.array(stances_of)[stance_of]  # (U, F - 1) the fingers of each distinct stance's first holder
     mus = required_mu_many(p[grasp_of[:, None], pick], n[grasp_of[:, None], pick], bisections=RANKING_BISECTIONS)
-    stance_mu = mus[index.ravel()].reshape(NUM_FINGERS, len(grasps)).T
+    stance_mu = mus[index.ravel()].reshape(num_fingers, len(grasps)).T
     free = stance_mu < mu
     worst = np.where(free, stance_mu, -np.inf).max(axis=1)
     keep = np.flatnonzero(free.any(axis=1))

@@ -5,14 +5,14 @@ torque within its actuator's effort limit (1 N m on this hand) after carrying it
 weight, and both maximised over the grasps the search may be rooted at (initial_grasp's
 candidates, or search.initial_arclengths):
 
-  - hold: the most weight the four fingers of a grasp carry at rest. A heavier object cannot
+  - hold: the most weight all fingers of a grasp carry at rest. A heavier object cannot
     be held where every plan and every run starts, so no plan exists (what the motors cannot
     carry);
   - switch: the most weight three fingers of a grasp carry while the fourth lets go (a stance
     in closure at mu_plan, as the search requires), within search.max_stance_force in total
     normal force as well when that cap is set. The search refuses every switch of a heavier
     object at its first node, so only a plan that never switches a finger (a small rotation
-    the four fingers roll the object through) can exist.
+    all fingers roll the object through) can exist.
 
 Each limit is one LP per grasp or stance (maximize the weight W over the cone-edge
 magnitudes x >= 0: E x = (0, W, 0) the wrench that holds the object, |J_C^T f - tau_g| <=
@@ -32,8 +32,8 @@ from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import K90
-from trajectotree.scene.plant import NUM_FINGERS, Scene
-from trajectotree.search.initial_grasp import STANCE_FINGERS, GraspCandidates, initial_grasp_candidates
+from trajectotree.scene.plant import Scene
+from trajectotree.search.initial_grasp import GraspCandidates, initial_grasp_candidates, stance_fingers
 from trajectotree.search.reach import Reachability
 
 
@@ -41,7 +41,7 @@ from trajectotree.search.reach import Reachability
 class Payload:
     """The heaviest object (kg) the hand carries from its initial grasps (module docstring)."""
 
-    hold_kg: float  # four fingers at rest at the initial pose, within the torque limits
+    hold_kg: float  # all fingers at rest at the initial pose, within the torque limits
     switch_kg: float  # three fingers while the fourth lets go, within the torque limits and the force cap
     max_stance_force: float  # N, the search's cap the switch limit obeys (0: none)
     tau_max: float  # N m, the largest joint effort limit of the hand
@@ -65,9 +65,10 @@ def payload(
     candidates (a quick lower bound: the LP over all of them takes ~1 s on the box's 2583)."""
     reach = Reachability(scene)
     mu = mu_plan(scene.config, search)
+    num_fingers, stances_of = scene.num_fingers, stance_fingers(scene.num_fingers)
     if search.initial_arclengths is not None:
         arclengths = np.array([search.initial_arclengths], dtype=float)
-        free = np.ones((1, NUM_FINGERS), dtype=bool)  # the search checks this grasp's stances itself
+        free = np.ones((1, num_fingers), dtype=bool)  # the search checks this grasp's stances itself
     else:
         if grasps is None:
             grasps = initial_grasp_candidates(scene, search, reach)
@@ -75,26 +76,26 @@ def payload(
             return None
         arclengths, free = grasps.arclengths[:first], grasps.stance_mu[:first] < grasps.mu_plan
     pose = np.asarray(scene.config.initial_pose, dtype=float)
-    q = np.stack([reach.closed_form_many(pose, i, arclengths[:, i]) for i in range(NUM_FINGERS)], axis=1)
+    q = np.stack([reach.closed_form_many(pose, i, arclengths[:, i]) for i in range(num_fingers)], axis=1)
     reached = np.all(np.isfinite(q), axis=(1, 2))
     if not reached.any():
         return None
     arclengths, free, q = arclengths[reached], free[reached], q[reached]
     edges, torque, moment, slack = _contact_terms(scene, pose, arclengths, q, mu)
-    everyone = np.arange(NUM_FINGERS)
-    hold = _heaviest(edges, torque, moment, slack, np.broadcast_to(everyone, (len(q), NUM_FINGERS)), 0.0)
-    # each distinct stance once: (grasp, stance) pairs sharing the three contacts share the LP
-    pairs = [(g, i) for g in range(len(q)) for i in range(NUM_FINGERS) if free[g, i]]
+    everyone = np.arange(num_fingers)
+    hold = _heaviest(edges, torque, moment, slack, np.broadcast_to(everyone, (len(q), num_fingers)), 0.0)
+    # each distinct stance once: (grasp, stance) pairs sharing the stance's contacts share the LP
+    pairs = [(g, i) for g in range(len(q)) for i in range(num_fingers) if free[g, i]]
     keys = {}
     for g, i in pairs:
-        keys.setdefault((i, *arclengths[g, list(STANCE_FINGERS[i])]), (g, i))
+        keys.setdefault((i, *arclengths[g, list(stances_of[i])]), (g, i))
     stances = list(keys.values())
     switch = _heaviest(
         edges[[g for g, _ in stances]],
         torque[[g for g, _ in stances]],
         moment[[g for g, _ in stances]],
         slack[[g for g, _ in stances]],
-        np.array([STANCE_FINGERS[i] for _, i in stances]),
+        np.array([stances_of[i] for _, i in stances]),
         search.max_stance_force,
     )
     g = scene.config.gravity
@@ -138,7 +139,7 @@ def _gravity_torques(scene: Scene, arclengths: np.ndarray, q: np.ndarray) -> np.
     plant, context = scene.plant, scene.plant.CreateDefaultContext()
     out = np.empty(q.shape)
     v = scene.hand_v_indices
-    for i in range(NUM_FINGERS):
+    for i in range(scene.num_fingers):
         contacts, where, index = np.unique(arclengths[:, i], return_index=True, return_inverse=True)
         values = np.empty((len(contacts), 2))
         for k, g in enumerate(where):

@@ -31,7 +31,7 @@ from pydrake.solvers import SnoptSolver
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.kinematics import first_solution
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 
 IK_TOLERANCE = 1e-6  # m, fingertip position tolerance of the IK constraint
 KEY_DIGITS = 9  # poses and arclengths equal to 1e-9 share a cache entry
@@ -90,7 +90,7 @@ class Reachability:
         self.boundary = scene.config.shape
         self.tip_radius = scene.tip_radius
         self.fingers = scene.fingers
-        self._iks = [self._make_ik(i) for i in range(NUM_FINGERS)]
+        self._iks = [self._make_ik(i) for i in range(scene.num_fingers)]
         self._solver = SnoptSolver()
         self._cache: dict[tuple, FingerReach] = {}
         self._closed_form_cache: dict[tuple, FingerReach] = {}
@@ -121,12 +121,15 @@ class Reachability:
         return [
             rect.corners(p_WJ, angle)
             for rect, (p_WJ, angle) in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q))
+            if rect is not None
         ]
 
     def links_penetrate(self, pose, finger: int, q) -> bool:
         """True when a link collision box of `finger` at q overlaps the object at `pose`."""
         R_BW, p_WB = rotation_2d(-pose[2]), np.asarray(pose[:2], dtype=float)
         for rect, (p_WJ, angle_WJ) in zip(self.fingers[finger].link_boxes, self._joint_frames(finger, q)):
+            if rect is None:  # a link without collision geometry
+                continue
             p_WG = p_WJ + rotation_2d(angle_WJ) @ rect.p_JG
             if rectangles_overlap_polygon(
                 self.boundary,
@@ -166,6 +169,8 @@ class Reachability:
         ct, st = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         hit = np.zeros(len(q), dtype=bool)
         for rect, origin, angle in zip(self.fingers[finger].link_boxes, (f.p_W_base, elbow), (a1, a12)):
+            if rect is None:
+                continue
             c, s = np.cos(angle), np.sin(angle)
             rel = (
                 origin
@@ -185,10 +190,10 @@ class Reachability:
         diagram_context = scene.diagram.CreateDefaultContext()
         context = plant.GetMyMutableContextFromRoot(diagram_context)
         plant.GetJointByName("box_planar").Lock(context)
-        for k in range(NUM_FINGERS):
+        for k, finger in enumerate(scene.hand_description.fingers):
             if k != i:
-                for j in (1, 2):
-                    plant.GetJointByName(f"finger{k}_joint{j}", scene.hand).Lock(context)
+                for name in finger.joints:
+                    plant.GetJointByName(name, scene.hand).Lock(context)
         ik = InverseKinematics(plant, context, with_joint_limits=True)
         position = ik.AddPositionConstraint(
             scene.tip_frame(i), np.zeros(3), plant.world_frame(), np.zeros(3), np.zeros(3)

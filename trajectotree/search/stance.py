@@ -36,7 +36,7 @@ from trajectotree.geometry import ConvexPolygon
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
-from trajectotree.search.initial_grasp import STANCE_FINGERS
+from trajectotree.search.initial_grasp import stance_fingers
 from trajectotree.search.reach import Reachability
 
 
@@ -101,7 +101,8 @@ class StanceChecks:
         self.boundary: ConvexPolygon = scene.config.shape
         self.max_force = max_force  # N, 0: no cap
         self.weight = scene.config.box_mass * scene.config.gravity  # N
-        self.lp = HoldingForceLp(3)
+        self.stances = stance_fingers(scene.num_fingers)  # the holders while finger i switches
+        self.lp = HoldingForceLp(scene.num_fingers - 1)
         self._force: dict[tuple, float] = {}  # (depth, stance arclengths) -> N
 
     # -- rolling contacts ---------------------------------------------------------------------
@@ -111,13 +112,13 @@ class StanceChecks:
         every contact still on its face (the rolling law holds along one face) and the three in
         frictional form closure at mu_plan (grasp.in_closure_many, the exact test behind
         required_mu; the LP's 1e-3 N margin is not applied here)."""
-        stance = STANCE_FINGERS[finger]
+        stance = self.stances[finger]
         rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
         landed = self.boundary.sides([node.arclengths[j] for j in stance])
         if any(np.any(self.boundary.sides(row) != landed) for row in rolled):
             return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance)
         p_BC, n_B = self.boundary.points(np.ravel(rolled))
-        A, B = closure_edges_parts(p_BC.reshape(2, 3, 2), n_B.reshape(2, 3, 2))
+        A, B = closure_edges_parts(p_BC.reshape(2, len(stance), 2), n_B.reshape(2, len(stance), 2))
         if not np.all(in_closure_many(A, B, self.mu_plan)):
             return Refusal(RefusalKind.STANCE_ROLLED_OPEN, stance=stance, mu_plan=self.mu_plan)
         return None
@@ -157,7 +158,7 @@ class StanceChecks:
         to carry the object's weight at node.depth or at `depth`."""
         if not self.max_force:
             return None
-        stance = STANCE_FINGERS[finger]
+        stance = self.stances[finger]
         planned = tuple(node.arclengths[j] for j in stance)
         if any(self.holding_force(planned, d) > self.max_force for d in (node.depth, depth)):
             return Refusal(RefusalKind.STANCE_TOO_HEAVY, stance=stance, mu_plan=self.mu_plan, limit=self.max_force)

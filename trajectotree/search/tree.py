@@ -64,9 +64,9 @@ from trajectotree.config import GoalPose, SearchConfig, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
-from trajectotree.search.initial_grasp import STANCE_FINGERS, GraspTables, initial_grasp_candidates
+from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
 from trajectotree.search.reach import Reachability
 from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
@@ -126,7 +126,7 @@ class _Search:
         margin = self.scene.config.corner_margin
         if not np.all(self.boundary.corner_free(arclengths, margin)):
             return Refusal(RefusalKind.CORNER, limit=margin)
-        if any(self.tips_overlap(arclengths, i) for i in range(NUM_FINGERS)):
+        if any(self.tips_overlap(arclengths, i) for i in range(self.scene.num_fingers)):
             return Refusal(RefusalKind.TIPS_OVERLAP)
         return None
 
@@ -180,11 +180,13 @@ class _Search:
         if len(stuck) > 1:
             self.refused[Refusal(RefusalKind.CONTACTS_LOST, fingers=tuple(stuck))] += 1
             return []
-        movers = stuck or list(range(NUM_FINGERS))
+        movers = stuck or list(range(self.scene.num_fingers))
         free = [i for i in movers if self.closure.is_free(node.arclengths, i)]
         held = RefusalKind.STUCK_FINGER_HELD if stuck else RefusalKind.FINGER_HELD
         for i in sorted(set(movers) - set(free)):
-            self.refused[Refusal(held, fingers=(i,), stance=STANCE_FINGERS[i], mu_plan=self.mu_plan)] += 1
+            self.refused[
+                Refusal(held, fingers=(i,), stance=stance_fingers(self.scene.num_fingers)[i], mu_plan=self.mu_plan)
+            ] += 1
         if not free:
             return []
         candidates = {} if stuck else {node.arclengths: None}  # the zero displacement: no finger moves
@@ -367,8 +369,8 @@ class _Search:
 class _Roots:
     """The initial grasps to try, best first, made search keys one by one as the search reaches them."""
 
-    def __init__(self, arclengths: np.ndarray):
-        self.arclengths = np.asarray(arclengths, dtype=float).reshape(-1, NUM_FINGERS)
+    def __init__(self, arclengths: np.ndarray, num_fingers: int):
+        self.arclengths = np.asarray(arclengths, dtype=float).reshape(-1, num_fingers)
 
     def __len__(self) -> int:
         return len(self.arclengths)
@@ -378,7 +380,7 @@ class _Roots:
 
     def per_finger(self) -> list[set[float]]:
         """Each finger's initial contacts over all roots (the switch-bound tables' starts)."""
-        return [set(self.arclengths[:, i].tolist()) for i in range(NUM_FINGERS)]
+        return [set(self.arclengths[:, i].tolist()) for i in range(self.arclengths.shape[1])]
 
 
 def _roots(
@@ -387,12 +389,12 @@ def _roots(
     """The initial grasps to try, best first: the user's, or the ranked candidates (from
     `tables` when given, else built here)."""
     if config.initial_arclengths is not None:
-        return _Roots([[search.wrap(s) for s in config.initial_arclengths]]), None
+        return _Roots([[search.wrap(s) for s in config.initial_arclengths]], scene.num_fingers), None
     if tables is None:
         table = initial_grasp_candidates(scene, config, search.reach)
     else:
         table = tables.get(scene, config, search.reach)
-    return _Roots(table.arclengths), table.refusal  # grid values: already canonical keys
+    return _Roots(table.arclengths, scene.num_fingers), table.refusal  # grid values: already canonical keys
 
 
 def grid_levels(config: SearchConfig) -> list[SearchConfig]:

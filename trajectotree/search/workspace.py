@@ -1,9 +1,9 @@
 """Where the hand can hold the object: the poses at which it has an initial grasp.
 
 A pose is graspable when the hand has an initial grasp there as trajectotree.search.initial_grasp
-defines one: four grid contacts (every search.initial_grid_step of arclength, each at least
+defines one: one grid contact per finger (every search.initial_grid_step of arclength, each at least
 scene.corner_margin from a corner), each reachable by its finger at that pose (closed-form IK with
-the link collision test), no two fingertip spheres overlapping, and the three contacts of some
+the link collision test), no two fingertip spheres overlapping, and the other contacts of some
 finger that may let go needing less friction than mu_plan (their required_mu, bisected as the
 table's ranking does). Closure and overlap depend on the contacts alone, so they are tabulated once
 for every triple of grid contacts; each pose then costs one reach test per finger.
@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, segments_for
-from trajectotree.scene.plant import NUM_FINGERS, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import required_mu_many
-from trajectotree.search.initial_grasp import RANKING_BISECTIONS, STANCE_FINGERS
+from trajectotree.search.initial_grasp import RANKING_BISECTIONS, stance_fingers
 from trajectotree.search.reach import Reachability
 from trajectotree.search.tree import object_path
 
@@ -41,6 +41,8 @@ class Graspability:
 
     def __init__(self, scene: Scene, search: SearchConfig, reach: Reachability | None = None):
         c = scene.config
+        self.num_fingers = scene.num_fingers
+        k = self.num_fingers - 1  # contacts of a stance: all fingers but the one that lets go
         self.reach = reach or Reachability(scene)
         boundary = c.shape
         grid = np.round(np.arange(0.0, boundary.perimeter - 1e-9, search.initial_grid_step), 9)
@@ -50,22 +52,22 @@ class Graspability:
         gap = np.linalg.norm(tips[:, None] - tips[None, :], axis=2)
         self.apart = gap >= 2 * self.reach.tip_radius  # (G, G), as initial_grasp's overlap filter
         G = len(self.grid)
-        triples = np.array(list(itertools.combinations(range(G), 3)), dtype=int).reshape(-1, 3)
-        triples = triples[self.apart[triples[:, 0], triples[:, 1]] & self.apart[triples[:, 0], triples[:, 2]]]
-        triples = triples[self.apart[triples[:, 1], triples[:, 2]]]
-        mus = required_mu_many(p[triples], n[triples], bisections=RANKING_BISECTIONS) if len(triples) else []
-        self.holds = np.zeros((G, G, G), dtype=bool)  # three contacts that hold the object at mu_plan
-        for perm in itertools.permutations(range(3)):
-            held = triples[np.asarray(mus) < mu_plan(c, search)]
-            self.holds[held[:, perm[0]], held[:, perm[1]], held[:, perm[2]]] = True
+        sets = np.array(list(itertools.combinations(range(G), k)), dtype=int).reshape(-1, k)
+        for a, b in itertools.combinations(range(k), 2):
+            sets = sets[self.apart[sets[:, a], sets[:, b]]]
+        mus = required_mu_many(p[sets], n[sets], bisections=RANKING_BISECTIONS) if len(sets) else []
+        self.holds = np.zeros((G,) * k, dtype=bool)  # k contacts that hold the object at mu_plan, in any order
+        held = sets[np.asarray(mus) < mu_plan(c, search)]
+        for perm in itertools.permutations(range(k)):
+            self.holds[tuple(held[:, m] for m in perm)] = True
 
     def reachable(self, poses: np.ndarray) -> np.ndarray:
-        """(P, 4, G) bool: which grid contacts each finger reaches at each pose (P, 3)."""
+        """(P, F, G) bool: which grid contacts each finger reaches at each pose (P, 3)."""
         poses = np.atleast_2d(np.asarray(poses, dtype=float))
         G = len(self.grid)
-        out = np.empty((len(poses), NUM_FINGERS, G), dtype=bool)
+        out = np.empty((len(poses), self.num_fingers, G), dtype=bool)
         every_pose, every_contact = np.repeat(poses, G, axis=0), np.tile(self.grid, len(poses))
-        for i in range(NUM_FINGERS):
+        for i in range(self.num_fingers):
             q = self.reach.closed_form_many(every_pose, i, every_contact)
             out[:, i] = np.isfinite(q[:, 0]).reshape(len(poses), G)
         return out
@@ -75,17 +77,17 @@ class Graspability:
         return np.array([self._grasp_exists(r) for r in self.reachable(poses)], dtype=bool)
 
     def _grasp_exists(self, reachable: np.ndarray) -> bool:
-        """Some finger may let go of some grasp of the reachable contacts (4, G)."""
+        """Some finger may let go of some grasp of the reachable contacts (F, G)."""
         lists = [np.flatnonzero(r) for r in reachable]
         if any(len(s) == 0 for s in lists):
             return False
-        for i, (a, b, c) in enumerate(STANCE_FINGERS):
-            held = np.argwhere(self.holds[np.ix_(lists[a], lists[b], lists[c])])
+        for i, others in enumerate(stance_fingers(self.num_fingers)):
+            held = np.argwhere(self.holds[np.ix_(*(lists[j] for j in others))])
             if not len(held):
                 continue
-            stance = np.stack([lists[a][held[:, 0]], lists[b][held[:, 1]], lists[c][held[:, 2]]], axis=1)  # (k, 3)
-            fourth = self.apart[lists[i]][:, stance]  # (len, k, 3): the free finger's contact apart from each
-            if np.any(fourth.all(axis=2)):
+            stance = np.stack([lists[j][held[:, m]] for m, j in enumerate(others)], axis=1)  # (h, F - 1)
+            free = self.apart[lists[i]][:, stance]  # (len, h, F - 1): the free finger's contact apart from each
+            if np.any(free.all(axis=2)):
                 return True
         return False
 

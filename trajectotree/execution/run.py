@@ -1,0 +1,113 @@
+"""The public entry to execution: `run_simulation` executes a plan open loop, closed loop
+(trajectotree.execution.closed_loop) or closed loop with replanning (trajectotree.execution.replan).
+Its own module, since replanning builds on the execution Diagram of trajectotree.execution.simulate."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from pydrake.geometry import Meshcat
+
+from trajectotree.config import Config, ConfigError, ReplanConfig, check_controller
+from trajectotree.execution import playback
+from trajectotree.execution.reference import reference_from_plan
+from trajectotree.execution.replan import simulate_replanning
+from trajectotree.execution.simulate import (
+    Conditions,
+    Push,
+    arrow_scale,
+    check_closed_loop,
+    parse_push,
+    simulate_reference,
+)
+from trajectotree.figures.run import controller_text
+from trajectotree.results import PlanResult, SimResult
+from trajectotree.scene.plant import build_scene
+
+
+def run_simulation(
+    *,
+    plan,
+    config: Config | None = None,
+    meshcat: Meshcat | None = None,
+    html_path: str | Path | None = None,
+    gif_path: str | Path | None = None,
+    controller: str | None = None,
+    sim_mu: float | None = None,
+    sim_mass: float | None = None,
+    push: Push | str | None = None,
+    closed_loop: bool = False,
+    replan: bool | ReplanConfig = False,
+    segment_workers: int | None = None,
+) -> SimResult:
+    """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
+    "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
+    `sim_mass` (kg; None: the plan's) and an optional `push` (a Push or "FX,FY@T": N, N, s); the
+    controller keeps the plan's values. closed_loop (grasp controller only) watches the
+    contacts, estimates the friction and the mass for the controller and adds the push
+    reflex (trajectotree.execution.closed_loop; the result's closed_loop holds what they saw);
+    off, the run is the open-loop one. `replan` (True: config.sim.replan's rules, or a ReplanConfig;
+    a PlanResult only, since the planner needs its goal and config) runs the closed loop and plans
+    again from the measured state when the plan no longer holds (trajectotree.execution.replan; the
+    result's replans list each time; the later segments of a new plan on `segment_workers` local
+    processes, None: as planning.planners.plan); it records no playback. `config` defaults to the
+    plan's own (a PlanResult's config). ConfigError on bad values. A live `meshcat` runs in real
+    time; `html_path` writes the recorded playback, `gif_path` a GIF of the run."""
+    if config is None:
+        if not isinstance(plan, PlanResult):
+            raise ConfigError("run_simulation: give config= with a Reference (only a PlanResult carries its own)")
+        config = plan.config
+    if isinstance(push, str):
+        push = parse_push(push, config.sim.push_duration)
+    conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
+    check_closed_loop(check_controller(controller or config.sim.controller), closed_loop or replan is not False)
+    if replan is not False:
+        return _replanning(
+            plan, config, replan, conditions, controller, (meshcat, html_path, gif_path), segment_workers
+        )
+    scene = build_scene(config.scene)
+    reference = reference_from_plan(plan, scene)
+    result = simulate_reference(
+        reference,
+        config,
+        meshcat=meshcat,
+        html_path=html_path,
+        realtime_rate=1.0 if meshcat is not None else 0.0,
+        controller=controller,
+        conditions=conditions,
+        closed_loop=closed_loop,
+    )
+    if gif_path is not None:
+        playback.write_gif(
+            scene,
+            result.t,
+            result.x,
+            result.q,
+            gif_path,
+            planned_poses=result.x_plan,
+            forces=result.f_W,
+            newtons_per_cm=arrow_scale(reference),
+            title=f"simulated run, {controller_text(result.controller)}",
+        )
+    return result
+
+
+def _replanning(plan, config: Config, replan, conditions, controller, outputs, segment_workers) -> SimResult:
+    """run_simulation's replanning run; ConfigError for what it cannot do."""
+    if not isinstance(plan, PlanResult):
+        raise ConfigError("run_simulation(replan=...): give the PlanResult (the planner needs its goal and config)")
+    if any(out is not None for out in outputs):
+        raise ConfigError("run_simulation(replan=...) records no Meshcat, HTML or GIF playback; run without them")
+    if replan is not True:
+        if not isinstance(replan, ReplanConfig):
+            raise ConfigError(
+                field="replan",
+                value=replan,
+                problem="is neither a bool nor a ReplanConfig",
+                valid="True, False or a ReplanConfig",
+            )
+        config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, replan=replan))
+    if controller is not None:
+        config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, controller=controller))
+    return simulate_replanning(plan, config, conditions=conditions, segment_workers=segment_workers)
