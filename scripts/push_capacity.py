@@ -37,8 +37,8 @@ def push_capacity(G, torque, holding, mu: float, max_normal: float, weight: floa
     bounds = [b for h in holding for b in ((0.0, max_normal if h else 0.0), (None, None))]
     result = linprog(
         -(along @ G[:2]),
-        A_ub=np.vstack([cone_rows(mu), A, -A]),
-        b_ub=np.concatenate([np.zeros(8), upper, -lower]),
+        A_ub=np.vstack([cone_rows(mu, len(holding)), A, -A]),
+        b_ub=np.concatenate([np.zeros(2 * len(holding)), upper, -lower]),
         A_eq=equality,
         b_eq=[across @ np.array([0.0, weight]), 0.0],
         bounds=bounds,

@@ -197,7 +197,7 @@ def test_grasp_force_qp_meets_a_feasible_wrench_within_the_cones():
     from trajectotree.execution.control import GraspForceQp
 
     mu = 0.5
-    qp = GraspForceQp(mu, torque_length=0.1, wrench_weight=1e4)
+    qp = GraspForceQp(mu, torque_length=0.1, wrench_weight=1e4, num_fingers=4)
     n_W = np.array([[0.0, -1.0], [0.0, 1.0], [0.0, 1.0], [0.0, -1.0]])
     r_W = np.array([[0.06, -0.05], [0.06, 0.05], [-0.06, 0.05], [-0.06, -0.05]])
     t_W = np.stack([-n_W[:, 1], n_W[:, 0]], axis=1)
@@ -236,7 +236,9 @@ def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
     lo, hi = np.array([0.1, 0.1, 0.1, 0.0]), np.array([8.0, 8.0, 8.0, 0.0])  # finger 3 lifted
 
     def solve(mu):
-        lam = GraspForceQp(mu, torque_length=0.112, wrench_weight=1e4).solve(G, weight, np.zeros((4, 2)), lo, hi)
+        lam = GraspForceQp(mu, torque_length=0.112, wrench_weight=1e4, num_fingers=4).solve(
+            G, weight, np.zeros((4, 2)), lo, hi
+        )
         return lam, np.linalg.norm((G @ lam.ravel() - weight)[:2])
 
     mu_control = max(config.search.friction_safety, config.controller.friction_safety) * config.scene.mu

@@ -334,7 +334,7 @@ def test_finger_numbers_sit_outside_the_bases_in_the_fingers_colours(pages, plan
     page = pages.open(plan_html, viewport=viewport)
     page.frame_at(0.5)
     scene = build_scene()
-    for k, (text, color, x, y) in enumerate(finger_labels(scene.plant, scene.hand)):
+    for k, (text, color, x, y) in enumerate(finger_labels(scene.plant, scene.hand, scene.hand_description)):
         label = page.page.locator(f"#tt-label-{k}")
         assert label.inner_text() == text == str(k)
         assert label.evaluate("(e) => getComputedStyle(e).color") == color == finger_css(k)

@@ -96,6 +96,9 @@ def test_reference_velocities_are_the_fingertip_velocities(scene):
 def test_plan_arrays_are_checked(scene):
     arrays = hold_plan_arrays(scene, 1.0)
     check_plan_arrays(arrays)
+    check_plan_arrays(arrays, scene.num_fingers)
+    with pytest.raises(ValueError, match="'q' has shape"):  # a four-finger plan for a five-finger hand
+        check_plan_arrays(arrays, 5)
     with pytest.raises(ValueError, match="lack"):
         check_plan_arrays({k: v for k, v in arrays.items() if k != "f_W"})
     with pytest.raises(ValueError, match="p_W_tip"):

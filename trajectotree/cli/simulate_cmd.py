@@ -259,7 +259,12 @@ def run(args) -> int:
     arrays = trajectory_arrays(files)
     check_arrays_fit_plan(files, arrays)
     config = execution_config(args, files.config)
-    check_executable_hand(build_scene(config.scene), "the simulation")
+    scene = build_scene(config.scene)
+    check_executable_hand(scene, "the simulation")
+    with reading(files.npz_path):  # the plan's finger count is its hand's
+        from trajectotree.execution.reference import check_plan_arrays
+
+        check_plan_arrays(arrays, scene.num_fingers)
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
     if args.closed_loop or args.replan:
         from trajectotree.execution.simulate import check_closed_loop

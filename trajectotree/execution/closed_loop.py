@@ -40,7 +40,7 @@ from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
 from trajectotree.execution.reference import GraspSchedule
-from trajectotree.scene.plant import NUM_FINGERS
+from trajectotree.scene.hand import HandDescription
 
 # N, a finger pushing less is out of contact: a contact that opens leaves forces of 1e-18 N, whose
 # ratio |f_t| / f_n means nothing.
@@ -60,12 +60,12 @@ def wrap_angle(a):
 
 @dataclass(frozen=True)
 class FingerContacts:
-    """What the point contacts between the hand and the box say, per finger (4,) and in total."""
+    """What the point contacts between the hand and the box say, per finger (F,) and in total."""
 
-    normal_force: np.ndarray  # (4,) N, each finger's push along the box's inward normals
-    tangential_force: np.ndarray  # (4, 2) N, its force on the box along the faces, in W
-    slip_speed: np.ndarray  # (4,) m/s, the fastest relative tangential velocity at its contact points
-    approach_speed: np.ndarray  # (4,) m/s, the fastest rate at which one of them opens or closes (|separation speed|)
+    normal_force: np.ndarray  # (F,) N, each finger's push along the box's inward normals
+    tangential_force: np.ndarray  # (F, 2) N, its force on the box along the faces, in W
+    slip_speed: np.ndarray  # (F,) m/s, the fastest relative tangential velocity at its contact points
+    approach_speed: np.ndarray  # (F,) m/s, the fastest rate at which one of them opens or closes (|separation speed|)
 
     @property
     def in_contact(self) -> np.ndarray:
@@ -73,18 +73,18 @@ class FingerContacts:
 
     @property
     def force_ratio(self) -> np.ndarray:
-        """(4,) |f_t| / f_n (0 out of contact)."""
+        """(F,) |f_t| / f_n (0 out of contact)."""
         tangential = np.linalg.norm(self.tangential_force, axis=1)
-        return np.divide(tangential, self.normal_force, out=np.zeros(NUM_FINGERS), where=self.in_contact)
+        return np.divide(tangential, self.normal_force, out=np.zeros(len(tangential)), where=self.in_contact)
 
 
-def finger_contacts(results: ContactResults, finger_of_body: dict, box_body) -> FingerContacts:
-    """FingerContacts from the plant's point-pair contact results; `finger_of_body` maps the
-    body index of each finger link to its finger."""
-    normal = np.zeros(NUM_FINGERS)
-    tangential = np.zeros((NUM_FINGERS, 2))
-    slip = np.zeros(NUM_FINGERS)
-    approach = np.zeros(NUM_FINGERS)
+def finger_contacts(results: ContactResults, finger_of_body: dict, box_body, num_fingers: int) -> FingerContacts:
+    """FingerContacts of `num_fingers` fingers from the plant's point-pair contact results;
+    `finger_of_body` maps the body index of each finger link to its finger."""
+    normal = np.zeros(num_fingers)
+    tangential = np.zeros((num_fingers, 2))
+    slip = np.zeros(num_fingers)
+    approach = np.zeros(num_fingers)
     for k in range(results.num_point_pair_contacts()):
         info = results.point_pair_contact_info(k)
         a, b = info.bodyA_index(), info.bodyB_index()
@@ -134,19 +134,22 @@ class PeriodicSystem(LeafSystem):
 
 class ContactMonitor(PeriodicSystem):
     """Input ports `contact_results` (the plant's) and `box_state` (6: x, y, theta and their
-    rates). Output ports, per finger (4 each): `in_contact` (1/0), `slipping` (1/0),
+    rates). Output ports, per finger (F each): `in_contact` (1/0), `slipping` (1/0),
     `force_ratio`, `normal_force` (N), `slip_speed` and `approach_speed` (m/s: how fast a
     contact point slides, and opens or closes); and the box's `tracking_error` (3: measured -
     planned pose, theta wrapped)."""
 
-    def __init__(self, plant, hand, box, schedule: GraspSchedule, gains: ControllerGains):
-        four = np.zeros(NUM_FINGERS)
+    def __init__(self, plant, hand, box, description: HandDescription, schedule: GraspSchedule, gains: ControllerGains):
+        self._num_fingers = description.num_fingers
+        four = np.zeros(self._num_fingers)
         outputs = {"in_contact": four, "slipping": four, "force_ratio": four, "normal_force": four}
         outputs |= {"slip_speed": four, "approach_speed": four}
         super().__init__(1.0 / gains.rate_hz, outputs | {"tracking_error": np.zeros(3)})
         self.schedule, self.gains = schedule, gains
         self._finger_of_body = {
-            plant.GetBodyByName(f"finger{i}_link{j}", hand).index(): i for i in range(NUM_FINGERS) for j in (1, 2)
+            plant.GetBodyByName(name, hand).index(): i
+            for i, f in enumerate(description.fingers)
+            for name in f.link_bodies
         }
         self._box_body = plant.GetBodyByName("box", box).index()
         self.contact_results_port = self.DeclareAbstractInputPort(
@@ -156,7 +159,9 @@ class ContactMonitor(PeriodicSystem):
 
     def update(self, context) -> dict:
         s, g = self.schedule, self.gains
-        contacts = finger_contacts(self.contact_results_port.Eval(context), self._finger_of_body, self._box_body)
+        contacts = finger_contacts(
+            self.contact_results_port.Eval(context), self._finger_of_body, self._box_body, self._num_fingers
+        )
         error = self.box_state_port.Eval(context)[:3] - s.X[s.index(context.get_time())]
         error[2] = wrap_angle(error[2])
         return {
@@ -224,14 +229,19 @@ class FrictionEstimator(PeriodicSystem):
         period = 1.0 / gains.rate_hz
         # Samples in slip_confirm_time (at least one); a period's rounding must not drop one.
         self._window = max(int(np.floor(gains.slip_confirm_time / period + 1e-9)), 1)
-        four = np.zeros(NUM_FINGERS)
-        internal = {"slide_samples": four, "slide_ratios": np.zeros(NUM_FINGERS * self._window), "normal_force": four}
+        self._num_fingers = schedule.force_scale.shape[1]
+        four = np.zeros(self._num_fingers)
+        internal = {
+            "slide_samples": four,
+            "slide_ratios": np.zeros(self._num_fingers * self._window),
+            "normal_force": four,
+        }
         super().__init__(period, {"mu_estimate": max(mu_plan, gains.friction_floor)}, internal)
         self.gains, self.schedule = gains, schedule
-        self.slipping_port = self.DeclareVectorInputPort("slipping", NUM_FINGERS)
-        self.force_ratio_port = self.DeclareVectorInputPort("force_ratio", NUM_FINGERS)
-        self.normal_force_port = self.DeclareVectorInputPort("normal_force", NUM_FINGERS)
-        self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", NUM_FINGERS)
+        self.slipping_port = self.DeclareVectorInputPort("slipping", self._num_fingers)
+        self.force_ratio_port = self.DeclareVectorInputPort("force_ratio", self._num_fingers)
+        self.normal_force_port = self.DeclareVectorInputPort("normal_force", self._num_fingers)
+        self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", self._num_fingers)
         self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
         self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", 3)
         self._scale = np.array([1.0, 1.0, torque_length])  # rad -> m at the box's rim
@@ -246,7 +256,7 @@ class FrictionEstimator(PeriodicSystem):
         off = np.abs(self.tracking_error_port.Eval(context) * self._scale).max() > self.gains.friction_evidence_error
         valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing & (not pushed) & (not off)
         samples = np.where(valid, self.state(context, "slide_samples") + 1.0, 0.0)  # a slide ends: reset
-        ratios = self.state(context, "slide_ratios").reshape(NUM_FINGERS, self._window)
+        ratios = self.state(context, "slide_ratios").reshape(self._num_fingers, self._window)
         ratios = np.column_stack([ratios[:, 1:], self.force_ratio_port.Eval(context)])  # the last window, oldest first
         mu = self.state(context, "mu_estimate")[0]
         confirmed = samples >= self._window

@@ -33,7 +33,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, OsqpSolver, SolverOptions
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
@@ -42,42 +41,51 @@ from trajectotree.config import ControllerGains, SceneConfig
 from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
-from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS, FingerGeometry, Scene, add_hand_and_box
+from trajectotree.scene.plant import FingerGeometry, Scene, build_scene
 
-FINGERTIP_VECTOR_SIZE = 2 * NUM_FINGERS  # (x, y) of each finger, finger-major
+
+def check_finger_major(scene: Scene) -> None:
+    """ValueError unless the hand instance's positions are the description's joints in order
+    (finger-major, each finger's from its base out): the controllers read the instance's state
+    port as the planner's q."""
+    if not np.all(np.diff(scene.hand_q_indices) == 1) or not np.all(np.diff(scene.hand_v_indices) == 1):
+        raise ValueError(
+            f"hand {scene.config.hand}: its model's joints are not in the description's (finger-major) order"
+        )
 
 
 class ImpedanceController(LeafSystem):
-    """Input ports: `hand_state` (the hand model instance's [q; v], 16), `p_WF_ref`,
-    `v_WF_ref`, `f_W_ref` (8 each: finger-major (x, y) in W). Output port:
-    `actuation` (8, the plant's actuation input order)."""
+    """Input ports: `hand_state` (the hand model instance's [q; v], 4F for F fingers), `p_WF_ref`,
+    `v_WF_ref`, `f_W_ref` (2F each: finger-major (x, y) in W). Output port:
+    `actuation` (2F, the plant's actuation input order)."""
 
     def __init__(self, scene_config: SceneConfig, gains: ControllerGains):
         super().__init__()
         self.gains = gains
         # Its own plant and context: the controller sees only the measured hand state.
-        self._plant = MultibodyPlant(0.0)
-        self._hand, _ = add_hand_and_box(self._plant, scene_config)
-        self._plant.Finalize()
+        self._scene = build_scene(scene_config)
+        check_finger_major(self._scene)
+        self._plant, self._hand = self._scene.plant, self._scene.hand
         self._plant_context = self._plant.CreateDefaultContext()
-        self._tip_frames = [self._plant.GetFrameByName(f"finger{i}_tip", self._hand) for i in range(NUM_FINGERS)]
+        self._num_fingers = self._scene.num_fingers
+        self._tip_frames = [self._scene.tip_frame(i) for i in range(self._num_fingers)]
         # u = B^T tau_v maps generalized forces to actuators (B is a selection: one actuator per joint).
         self._B = self._plant.MakeActuationMatrix()
-        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
-        self.p_ref_port = self.DeclareVectorInputPort("p_WF_ref", FINGERTIP_VECTOR_SIZE)
-        self.v_ref_port = self.DeclareVectorInputPort("v_WF_ref", FINGERTIP_VECTOR_SIZE)
-        self.f_ref_port = self.DeclareVectorInputPort("f_W_ref", FINGERTIP_VECTOR_SIZE)
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * self._scene.num_hand_joints)
+        self.p_ref_port = self.DeclareVectorInputPort("p_WF_ref", 2 * self._num_fingers)
+        self.v_ref_port = self.DeclareVectorInputPort("v_WF_ref", 2 * self._num_fingers)
+        self.f_ref_port = self.DeclareVectorInputPort("f_W_ref", 2 * self._num_fingers)
         self.actuation_port = self.DeclareVectorOutputPort(
             "actuation", BasicVector(self._plant.num_actuators()), self.CalcActuation
         )
 
     def fingertip_kinematics(self, hand_state) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """p_WF (4, 2), v_WF (4, 2) and J_WF (4, 2, nv) at a hand state."""
+        """p_WF (F, 2), v_WF (F, 2) and J_WF (F, 2, nv) at a hand state."""
         plant, ctx = self._plant, self._plant_context
         plant.SetPositionsAndVelocities(ctx, self._hand, hand_state)
         v = plant.GetVelocities(ctx)
-        p_WF = np.empty((NUM_FINGERS, 2))
-        J_WF = np.empty((NUM_FINGERS, 2, plant.num_velocities()))
+        p_WF = np.empty((self._num_fingers, 2))
+        J_WF = np.empty((self._num_fingers, 2, plant.num_velocities()))
         for i, frame in enumerate(self._tip_frames):
             p_WF[i] = frame.CalcPoseInWorld(ctx).translation()[:2]
             J_WF[i] = plant.CalcJacobianTranslationalVelocity(
@@ -86,9 +94,9 @@ class ImpedanceController(LeafSystem):
         return p_WF, J_WF @ v, J_WF
 
     def compute_actuation(self, hand_state, p_ref, v_ref, f_ref) -> np.ndarray:
-        """Eq. 20 for one hand state and references (each (4, 2) or flat (8,))."""
+        """Eq. 20 for one hand state and references (each (F, 2) or flat (2F,))."""
         p_WF, v_WF, J_WF = self.fingertip_kinematics(hand_state)
-        shape = (NUM_FINGERS, 2)
+        shape = (self._num_fingers, 2)
         F = (
             self.gains.kp * (np.reshape(p_ref, shape) - p_WF)
             + self.gains.kv * (np.reshape(v_ref, shape) - v_WF)
@@ -109,7 +117,7 @@ class ImpedanceController(LeafSystem):
 
 
 class HandKinematics:
-    """Closed-form kinematics (kinematics.TwoLinkFinger) and gravity torques of the four
+    """Closed-form kinematics (kinematics.TwoLinkFinger) and gravity torques of all the
     two-link fingers at once (the controller's hot path)."""
 
     def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
@@ -120,8 +128,8 @@ class HandKinematics:
         self._k2 = gravity * m[:, 1] * c[:, 1]
 
     def __call__(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """At joint angles q (8, finger-major): fingertip centres p_WF (4, 2), Jacobians
-        J_WF (4, 2, 2) and the joint torques that hold the fingers up, g (4, 2)."""
+        """At joint angles q (2F, finger-major): fingertip centres p_WF (F, 2), Jacobians
+        J_WF (F, 2, 2) and the joint torques that hold the fingers up, g (F, 2)."""
         q = np.reshape(q, (-1, 2))
         r1, r2 = self.fingers.links(q)
         p = self.fingers.tip_from_links(r1, r2)
@@ -139,30 +147,30 @@ def perp(v) -> np.ndarray:
 
 class GraspForceQp:
     """min wrench_weight |G lambda - w|^2_W + |lambda - lambda_plan|^2 over lambda = (lambda_n,
-    lambda_t) of the 4 fingers, lambda_n in [lo, hi], |lambda_t| <= mu lambda_n. Built once;
+    lambda_t) of the `num_fingers` fingers, lambda_n in [lo, hi], |lambda_t| <= mu lambda_n. Built once;
     each solve updates the cost and the bounds (OSQP). With `torque_rows` (the closed loop)
     it also has 2 rows per finger that bound the joint torques lambda makes (`solve`'s
     `torque`), and is solved by Clarabel: OSQP's ADMM needed a median of 825 iterations on those
     rows and ended inaccurate or at its 4000-iteration limit on 42 of 5651 solves of one run."""
 
-    def __init__(self, mu: float, torque_length: float, wrench_weight: float, *, torque_rows: bool = False):
+    def __init__(
+        self, mu: float, torque_length: float, wrench_weight: float, *, num_fingers: int, torque_rows: bool = False
+    ):
+        n = 2 * num_fingers
+        self._num_fingers = num_fingers
         self._prog = MathematicalProgram()
-        self._z = self._prog.NewContinuousVariables(2 * NUM_FINGERS, "lambda")  # finger-major (n, t)
-        self._cost = self._prog.AddQuadraticCost(
-            np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z, is_convex=True
-        )
-        self._bounds = self._prog.AddBoundingBoxConstraint(
-            np.zeros(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), self._z
-        )
+        self._z = self._prog.NewContinuousVariables(n, "lambda")  # finger-major (n, t)
+        self._cost = self._prog.AddQuadraticCost(np.eye(n), np.zeros(n), self._z, is_convex=True)
+        self._bounds = self._prog.AddBoundingBoxConstraint(np.zeros(n), np.zeros(n), self._z)
         self._cone = self._prog.AddLinearConstraint(
-            cone_rows(mu), np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS), self._z
+            cone_rows(mu, num_fingers), np.full(n, -np.inf), np.zeros(n), self._z
         )
         self._torque = None
         if torque_rows:
-            unbounded = np.full(2 * NUM_FINGERS, np.inf)
-            self._torque = self._prog.AddLinearConstraint(np.eye(2 * NUM_FINGERS), -unbounded, unbounded, self._z)
+            unbounded = np.full(n, np.inf)
+            self._torque = self._prog.AddLinearConstraint(np.eye(n), -unbounded, unbounded, self._z)
         self._mu = mu
-        self._identity = np.eye(2 * NUM_FINGERS)
+        self._identity = np.eye(n)
         self._W = wrench_weight * np.diag([1.0, 1.0, 1.0 / torque_length**2])
         self._options = SolverOptions()
         if torque_rows:
@@ -175,15 +183,16 @@ class GraspForceQp:
     def set_friction(self, mu: float) -> None:
         """The cones' friction coefficient from the next solve on."""
         if mu != self._mu:
+            n = 2 * self._num_fingers
             self._cone.evaluator().UpdateCoefficients(
-                cone_rows(mu), np.full(2 * NUM_FINGERS, -np.inf), np.zeros(2 * NUM_FINGERS)
+                cone_rows(mu, self._num_fingers), np.full(n, -np.inf), np.zeros(n)
             )
             self._mu = mu
 
     def solve(self, G, wrench, lambda_plan, lo, hi, torque=None, torque_weight: float = 1.0) -> np.ndarray:
-        """lambda (4, 2) for the grasp matrix G (3, 8), the wrench w (3,), the plan's
-        lambda (4, 2) and the normal-force bounds lo, hi (4,); `torque` (A (8, 8), lower (8,),
-        upper (8,)): lower <= A lambda <= upper (a QP built with torque_rows); `torque_weight`
+        """lambda (F, 2) for the grasp matrix G (3, 2F), the wrench w (3,), the plan's
+        lambda (F, 2) and the normal-force bounds lo, hi (F,); `torque` (A (2F, 2F), lower (2F,),
+        upper (2F,)): lower <= A lambda <= upper (a QP built with torque_rows); `torque_weight`
         multiplies the weight of the torque residual. Falls back to
         the plan's forces, clipped to the bounds, if the solver fails."""
         z_plan = lambda_plan.ravel()
@@ -199,13 +208,13 @@ class GraspForceQp:
         if not result.is_success():
             n = np.clip(lambda_plan[:, 0], lo, hi)
             return np.column_stack([n, np.clip(lambda_plan[:, 1], -self._mu * n, self._mu * n)])
-        return result.get_x_val().reshape(NUM_FINGERS, 2)  # z is the program's only variable
+        return result.get_x_val().reshape(self._num_fingers, 2)  # z is the program's only variable
 
 
-def cone_rows(mu: float) -> np.ndarray:
-    """(8, 8): lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0 for each finger."""
-    cone = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
-    for i in range(NUM_FINGERS):
+def cone_rows(mu: float, num_fingers: int) -> np.ndarray:
+    """(2F, 2F): lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0 for each finger."""
+    cone = np.zeros((2 * num_fingers, 2 * num_fingers))
+    for i in range(num_fingers):
         cone[2 * i, 2 * i : 2 * i + 2] = (-mu, 1.0)
         cone[2 * i + 1, 2 * i : 2 * i + 2] = (-mu, -1.0)
     return cone
@@ -225,18 +234,19 @@ class Estimates:
 def torque_rows(
     J_WF, n_W, t_W, tip_radius: float, rest, tau_max
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The joint torques that the finger forces lambda add to `rest` (4, 2: springs and
-    gravity), bounded by the motors' tau_max (4, 2): (A (8, 8) block-diagonal, lower (8,),
-    upper (8,)) for GraspForceQp.solve, and the most normal force (4,) each finger can push
+    """The joint torques that the finger forces lambda add to `rest` (F, 2: springs and
+    gravity), bounded by the motors' tau_max (F, 2): (A (2F, 2F) block-diagonal, lower (2F,),
+    upper (2F,)) for GraspForceQp.solve, and the most normal force (F,) each finger can push
     with without tangential force. The force -lambda_n n + lambda_t t acts tip_radius from the
     sphere centre along -n: its lever adds -tip_radius lambda_t to both joints. The bounds
     are widened to admit lambda = 0 where `rest` alone is beyond the motors, so that the QP
     stays feasible (the plant clips what is left)."""
-    A = np.zeros((2 * NUM_FINGERS, 2 * NUM_FINGERS))
-    Jt = np.swapaxes(J_WF, 1, 2)  # (4, 2 joints, 2)
+    num_fingers = len(J_WF)
+    A = np.zeros((2 * num_fingers, 2 * num_fingers))
+    Jt = np.swapaxes(J_WF, 1, 2)  # (F, 2 joints, 2)
     normal = np.einsum("fji,fi->fj", Jt, -n_W)
     tangential = np.einsum("fji,fi->fj", Jt, t_W) - tip_radius
-    for i in range(NUM_FINGERS):
+    for i in range(num_fingers):
         A[2 * i : 2 * i + 2, 2 * i] = normal[i]
         A[2 * i : 2 * i + 2, 2 * i + 1] = tangential[i]
     lower = np.minimum(-tau_max - rest, 0.0).ravel()
@@ -251,10 +261,10 @@ def torque_rows(
 class GraspController(LeafSystem):
     """Object-level grasp control of a planned box motion (see the module doc).
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
-    joint) and `hand_state` (16: the hand's [q; v]); with closed_loop also `mu_estimate`,
+    joint) and `hand_state` (4F for F fingers: the hand's [q; v]); with closed_loop also `mu_estimate`,
     `mass_estimate`, `reflex` (1 each) and `disturbance` (2, N in W; all
     trajectotree.execution.closed_loop). Output port:
-    `actuation` (8, the plant's actuation order), updated every 1 / gains.rate_hz s and held
+    `actuation` (2F, the plant's actuation order), updated every 1 / gains.rate_hz s and held
     in between. In open loop `mass` is the plan's and `mu` the friction its QP's cones allow
     (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated
     plant's; in closed loop the cones are at mu x mu_estimate / scene.mu (the same safety
@@ -278,13 +288,17 @@ class GraspController(LeafSystem):
         self._mass = c.box_mass
         self._inertia = c.shape.inertia(c.box_mass)  # a uniform plate (the box: m (w^2 + h^2) / 12)
         self._friction_safety = mu / c.mu
-        self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (4, 2) N m
+        self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (F, 2) N m
+        check_finger_major(scene)
+        self._num_fingers, self._num_joints = scene.num_fingers, scene.num_hand_joints
         # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
-        self._qp = GraspForceQp(mu, c.shape.circumradius, gains.wrench_weight, torque_rows=closed_loop)
+        self._qp = GraspForceQp(
+            mu, c.shape.circumradius, gains.wrench_weight, num_fingers=scene.num_fingers, torque_rows=closed_loop
+        )
         B = scene.plant.MakeActuationMatrix()  # (nv, nu), a selection
         self._u_from_tau = B[scene.hand_v_indices].T  # hand-joint torques -> actuation
         self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
-        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * NUM_HAND_JOINTS)
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * scene.num_hand_joints)
         self.closed_loop = closed_loop
         if closed_loop:
             self.mu_estimate_port = self.DeclareVectorInputPort("mu_estimate", 1)
@@ -356,7 +370,7 @@ class GraspController(LeafSystem):
         n_W = self._shape.face_normals(self._shape.nearest_points(p_BF)) @ R.T
         t_W = perp(n_W)
         r_W = p_WF - self._tip_radius * n_W - box_state[:2]  # contact points, from the box origin
-        G = np.empty((3, 2 * NUM_FINGERS))
+        G = np.empty((3, 2 * self._num_fingers))
         G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
         G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
         G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
@@ -395,9 +409,9 @@ class GraspController(LeafSystem):
     def compute_actuation(self, t: float, box_state, hand_state, estimates: Estimates | None = None) -> np.ndarray:
         s, g = self.schedule, self.gains
         n = s.index(t)
-        q, v = hand_state[:NUM_HAND_JOINTS], hand_state[NUM_HAND_JOINTS:]
+        q, v = hand_state[: self._num_joints], hand_state[self._num_joints :]
         p_WF, J_WF, g_hand = self._kinematics(q)
-        v_WF = np.einsum("fij,fj->fi", J_WF, v.reshape(NUM_FINGERS, 2))
+        v_WF = np.einsum("fij,fj->fi", J_WF, v.reshape(self._num_fingers, 2))
         R = rotation_2d(box_state[2])
         r_W = s.p_BF[n] @ R.T
         p_target = box_state[:2] + r_W

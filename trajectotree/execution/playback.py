@@ -31,6 +31,7 @@ from pydrake.geometry import (
     MeshcatVisualizerParams,
     Rgba,
     Role,
+    Sphere,
 )
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
@@ -39,7 +40,8 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from trajectotree.config import Config, SceneConfig
 from trajectotree.figures.run import FINGER_COLORS, arrow_newtons_per_cm, arrow_scale_text, force_arrow
 from trajectotree.io import write_bytes_atomic
-from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box
+from trajectotree.scene.hand import HandDescription, hand_file, read_hand
+from trajectotree.scene.plant import add_hand_and_box
 
 VIEW_HALF_WIDTH = 0.32  # m, the planar view shows [-0.32, 0.32]^2: the hand's full reach
 PUBLISH_PERIOD = 1 / 32  # s, recorded frame period of the playback
@@ -80,24 +82,28 @@ def finger_css(i: int) -> str:
     return "rgb({}, {}, {})".format(*(round(255 * c) for c in finger_rgb(i)))
 
 
-def fingertip_visuals(plant, scene_graph, hand) -> list:
-    """The GeometryId of each finger's fingertip sphere (visual "tip_visual" on finger{i}_link2)."""
+def fingertip_visuals(plant, scene_graph, hand, description: HandDescription) -> list:
+    """The GeometryId of each finger's fingertip sphere on its second link (the description's
+    link_bodies[1]): its visual named "tip_visual", else its only sphere visual; None for a
+    finger that has neither (a model whose fingertip is drawn by a mesh)."""
     inspector = scene_graph.model_inspector()
     tips = []
-    for i in range(NUM_FINGERS):
-        body = plant.GetBodyByName(f"finger{i}_link2", hand)
-        found = [g for g in plant.GetVisualGeometriesForBody(body) if inspector.GetName(g).endswith("tip_visual")]
-        if len(found) != 1:
-            raise RuntimeError(f"finger{i}_link2 has {len(found)} visuals named tip_visual; the hand model changed")
-        tips += found
+    for f in description.fingers:
+        visuals = plant.GetVisualGeometriesForBody(plant.GetBodyByName(f.link_bodies[1], hand))
+        found = [g for g in visuals if inspector.GetName(g).endswith("tip_visual")]
+        if not found:
+            found = [g for g in visuals if isinstance(inspector.GetShape(g), Sphere)]
+        tips.append(found[0] if len(found) == 1 else None)
     return tips
 
 
-def color_fingertips(plant, scene_graph, hand) -> None:
+def color_fingertips(plant, scene_graph, hand, description: HandDescription) -> None:
     """Gives each fingertip sphere its finger's colour in every illustration (Meshcat) of this
     SceneGraph: the SDF's are one orange, the figures' one colour per finger."""
     inspector = scene_graph.model_inspector()
-    for i, geometry in enumerate(fingertip_visuals(plant, scene_graph, hand)):
+    for i, geometry in enumerate(fingertip_visuals(plant, scene_graph, hand, description)):
+        if geometry is None:
+            continue
         properties = IllustrationProperties(inspector.GetIllustrationProperties(geometry))
         properties.UpdateProperty("phong", "diffuse", Rgba(*finger_rgb(i), 1.0))
         # removed and assigned anew: kReplace logs a warning meant for visualizers already running
@@ -105,9 +111,11 @@ def color_fingertips(plant, scene_graph, hand) -> None:
         scene_graph.AssignRole(plant.get_source_id(), geometry, properties)
 
 
-def add_visualizer(builder: DiagramBuilder, plant, scene_graph, hand, meshcat: Meshcat) -> MeshcatVisualizer:
+def add_visualizer(
+    builder: DiagramBuilder, plant, scene_graph, hand, description: HandDescription, meshcat: Meshcat
+) -> MeshcatVisualizer:
     """A MeshcatVisualizer of `scene_graph` with each fingertip in its finger's colour (color_fingertips)."""
-    color_fingertips(plant, scene_graph, hand)
+    color_fingertips(plant, scene_graph, hand, description)
     params = MeshcatVisualizerParams(publish_period=PUBLISH_PERIOD)
     return MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
 
@@ -118,11 +126,11 @@ ARROW_SHAFT_WIDTH = 0.004  # m
 ARROW_HEAD = 0.014  # m, head length and width; a shorter arrow's head shrinks to half its length
 
 
-def add_force_arrows(meshcat: Meshcat) -> None:
+def add_force_arrows(meshcat: Meshcat, num_fingers: int) -> None:
     """One hidden arrow per finger in its colour at FORCE_ARROWS_PATH/finger{i}: a unit shaft
     along +x (scaled to length by set_force_arrows) and a flat head whose tip is its origin."""
     head = np.array([[0.0, -ARROW_HEAD, -ARROW_HEAD], [0.0, ARROW_HEAD / 2, -ARROW_HEAD / 2], [0.0, 0.0, 0.0]])
-    for i in range(NUM_FINGERS):
+    for i in range(num_fingers):
         path, rgba = f"{FORCE_ARROWS_PATH}/finger{i}", Rgba(*finger_rgb(i), 1.0)
         meshcat.SetObject(f"{path}/shaft", Box(1.0, ARROW_SHAFT_WIDTH, 1e-3), rgba)
         meshcat.SetTriangleMesh(f"{path}/head", head, np.array([[0], [1], [2]], dtype=np.int32), rgba)
@@ -132,8 +140,8 @@ def add_force_arrows(meshcat: Meshcat) -> None:
 def set_force_arrows(
     meshcat: Meshcat, tips, forces, tip_radius: float, newtons_per_cm: float, time: float | None = None
 ) -> None:
-    """Points each finger's arrow (add_force_arrows) along its force on the object (forces (4, 2), N)
-    from its fingertip (tips (4, 2), sphere centres), |f| / newtons_per_cm cm long (figures.run.force_arrow),
+    """Points each finger's arrow (add_force_arrows) along its force on the object (forces (F, 2), N)
+    from its fingertip (tips (F, 2), sphere centres), |f| / newtons_per_cm cm long (figures.run.force_arrow),
     hidden while the finger pushes less than ARROW_MIN_FORCE; recorded at `time` while Meshcat records."""
     for i, (tip, f) in enumerate(zip(tips, forces)):
         path = f"{FORCE_ARROWS_PATH}/finger{i}"
@@ -154,34 +162,42 @@ def set_force_arrows(
 
 
 class ForceArrows(LeafSystem):
-    """Draws each finger's force on the object (input "forces", 8: the fingers' (f_x, f_y) in W,
+    """Draws each finger's force on the object (input "forces", 2F: the fingers' (f_x, f_y) in W,
     finger-major) as Meshcat arrows (set_force_arrows) every PUBLISH_PERIOD, at the fingertips of
     the plant's body poses (input "body_poses"): live, and into Meshcat's recording while it records."""
 
-    def __init__(self, meshcat: Meshcat, plant, scene_graph, hand, newtons_per_cm: float):
+    def __init__(self, meshcat: Meshcat, plant, hand, description: HandDescription, newtons_per_cm: float):
         super().__init__()
         self._meshcat, self._newtons_per_cm = meshcat, newtons_per_cm
-        inspector = scene_graph.model_inspector()
-        self._tip_radius = inspector.GetShape(fingertip_visuals(plant, scene_graph, hand)[0]).radius()
-        frames = [plant.GetFrameByName(f"finger{i}_tip", hand) for i in range(NUM_FINGERS)]
+        self._tip_radius, self._num_fingers = description.tip_radius, description.num_fingers
+        frames = [plant.GetFrameByName(f.tip_frame, hand) for f in description.fingers]
         self._tips = [(int(f.body().index()), f.GetFixedPoseInBodyFrame().translation()) for f in frames]
-        self.forces_port = self.DeclareVectorInputPort("forces", 2 * NUM_FINGERS)
+        self.forces_port = self.DeclareVectorInputPort("forces", 2 * self._num_fingers)
         self.body_poses_port = self.DeclareAbstractInputPort("body_poses", AbstractValue.Make([RigidTransform()]))
         self.DeclarePeriodicPublishEvent(PUBLISH_PERIOD, 0.0, self._publish)
         self.DeclareForcedPublishEvent(self._publish)
-        add_force_arrows(meshcat)
+        add_force_arrows(meshcat, self._num_fingers)
 
     def _publish(self, context) -> None:
         poses = self.body_poses_port.Eval(context)
         tips = [poses[body].multiply(p_BF)[:2] for body, p_BF in self._tips]
-        forces = np.asarray(self.forces_port.Eval(context)).reshape(NUM_FINGERS, 2)
+        forces = np.asarray(self.forces_port.Eval(context)).reshape(self._num_fingers, 2)
         set_force_arrows(self._meshcat, tips, forces, self._tip_radius, self._newtons_per_cm, context.get_time())
 
 
-def add_force_arrows_system(builder, plant, scene_graph, hand, meshcat: Meshcat, forces_port, newtons_per_cm: float):
-    """A ForceArrows in `builder` reading `forces_port` (the fingers' forces on the object, 8) and
+def add_force_arrows_system(
+    builder,
+    plant,
+    scene_graph,
+    hand,
+    description: HandDescription,
+    meshcat: Meshcat,
+    forces_port,
+    newtons_per_cm: float,
+):
+    """A ForceArrows in `builder` reading `forces_port` (the fingers' forces on the object, 2F) and
     the plant's body poses."""
-    arrows = builder.AddNamedSystem("force_arrows", ForceArrows(meshcat, plant, scene_graph, hand, newtons_per_cm))
+    arrows = builder.AddNamedSystem("force_arrows", ForceArrows(meshcat, plant, hand, description, newtons_per_cm))
     builder.Connect(forces_port, arrows.forces_port)
     builder.Connect(plant.get_body_poses_output_port(), arrows.body_poses_port)
     return arrows
@@ -217,35 +233,41 @@ def object_noun(config: SceneConfig) -> str:
     return "box" if config.shape.is_box else "object"
 
 
-def arrows_swatch() -> str:
-    """A legend swatch of the force arrows: a bar in the four fingers' colours."""
-    stops = ", ".join(f"{finger_css(i)} {25 * i}% {25 * (i + 1)}%" for i in range(NUM_FINGERS))
+def arrows_swatch(num_fingers: int) -> str:
+    """A legend swatch of the force arrows: a bar in the fingers' colours."""
+    width = 100 / num_fingers
+    stops = ", ".join(f"{finger_css(i)} {width * i:g}% {width * (i + 1):g}%" for i in range(num_fingers))
     return f"background: linear-gradient(90deg, {stops}); height: 4px"
 
 
-def arrows_legend(newtons_per_cm: float, which: str, noun: str = "box"):
-    """The legend entry of the force arrows: `which` forces ("simulated", "planned") at the stated scale."""
-    return (arrows_swatch(), f"arrow: {which} force of each finger on the {noun}, {arrow_scale_text(newtons_per_cm)}")
+def arrows_legend(newtons_per_cm: float, which: str, num_fingers: int, noun: str = "box"):
+    """The legend entry of the force arrows of `num_fingers` fingers: `which` forces ("simulated",
+    "planned") at the stated scale."""
+    return (
+        arrows_swatch(num_fingers),
+        f"arrow: {which} force of each finger on the {noun}, {arrow_scale_text(newtons_per_cm)}",
+    )
 
 
-def simulated_legend(config: SceneConfig, newtons_per_cm: float | None = None):
-    """The simulated run's legend, naming the object by object_noun; with the arrows' scale, their entry."""
+def simulated_legend(config: SceneConfig, newtons_per_cm: float | None = None, num_fingers: int = 0):
+    """The simulated run's legend, naming the object by object_noun; with the arrows' scale, their
+    entry (for `num_fingers` fingers)."""
     noun = object_noun(config)
     entries = [(LEGEND_BOX[0], noun), (LEGEND_PLANNED[0], f"planned {noun} pose (outline)"), LEGEND_LINKS]
     if newtons_per_cm is not None:
-        entries.append(arrows_legend(newtons_per_cm, "simulated", noun))
+        entries.append(arrows_legend(newtons_per_cm, "simulated", num_fingers, noun))
     return tuple(entries)
 
 
 SIMULATED_LEGEND = simulated_legend(SceneConfig())
 
 
-def finger_labels(plant, hand, *, offset: float = 0.03):
+def finger_labels(plant, hand, description: HandDescription, *, offset: float = 0.03):
     """(text, CSS colour, x, y) of each finger's number, `offset` m outside its base (radially from W's origin)."""
     context = plant.CreateDefaultContext()
     labels = []
-    for i in range(NUM_FINGERS):
-        joint = plant.GetJointByName(f"finger{i}_joint1", hand)
+    for i, f in enumerate(description.fingers):
+        joint = plant.GetJointByName(f.joints[0], hand)
         base = joint.frame_on_child().CalcPoseInWorld(context).translation()[:2]
         x, y = base * (1 + offset / max(float(np.hypot(*base)), 1e-9))
         labels.append((str(i), finger_css(i), float(x), float(y)))
@@ -323,9 +345,9 @@ PAGE_CSS = """
 """
 
 
-def fingers_line() -> str:
+def fingers_line(num_fingers: int) -> str:
     """The legend's line of fingertip colours, e.g. "fingertips ● 0 ● 1 ● 2 ● 3 (numbered at their bases)"."""
-    dots = "".join(f' <span class="tt-dot" style="background: {finger_css(i)}"></span>{i}' for i in range(NUM_FINGERS))
+    dots = "".join(f' <span class="tt-dot" style="background: {finger_css(i)}"></span>{i}' for i in range(num_fingers))
     return f'<div id="tt-fingers">fingertips{dots} (numbered at their bases)</div>'
 
 
@@ -334,12 +356,12 @@ def decorate_page(
 ) -> str:
     """Meshcat's static page with `title` (tab and overlay), a time readout and bar (the
     drop, if any, marked in red), a legend of (CSS swatch, text) entries after the line of
-    fingertip colours, the `labels` (text, CSS colour, x, y) at their points of the plane
+    fingertip colours (one per label), the `labels` (text, CSS colour, x, y) at their points of the plane
     (finger_labels), and the planar view kept centred in any window shape."""
     drop = "null" if drop_time_s is None else f"{float(drop_time_s):.6f}"
     marker = "" if drop_time_s is None else '<div id="tt-drop"></div>'
     note = "" if drop_time_s is None else '<div id="tt-drop-note"></div>'
-    items = fingers_line() + "".join(
+    items = fingers_line(len(labels)) + "".join(
         f'<div><span class="tt-swatch" style="{escape(style)}"></span>{escape(text)}</div>' for style, text in legend
     )
     marks = "".join(
@@ -404,9 +426,10 @@ def write_pose_html(
     meshcat = meshcat or start_meshcat()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
-    hand, box = add_hand_and_box(plant, config.scene)
+    hand, box = add_hand_and_box(plant, config.scene, scene_graph)
     plant.Finalize()
-    visualizer = add_visualizer(builder, plant, scene_graph, hand, meshcat)
+    description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
+    visualizer = add_visualizer(builder, plant, scene_graph, hand, description, meshcat)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)
@@ -415,10 +438,10 @@ def write_pose_html(
     legend = [(LEGEND_BOX[0], f"{noun} (planned pose)"), LEGEND_LINKS]
     if forces is not None:
         newtons_per_cm = newtons_per_cm or arrow_newtons_per_cm(forces)
-        tip_radius = scene_graph.model_inspector().GetShape(fingertip_visuals(plant, scene_graph, hand)[0]).radius()
-        tip_frames = [plant.GetFrameByName(f"finger{i}_tip", hand) for i in range(NUM_FINGERS)]
-        add_force_arrows(meshcat)
-        legend.append(arrows_legend(newtons_per_cm, "planned", noun))
+        tip_radius = description.tip_radius
+        tip_frames = [plant.GetFrameByName(f.tip_frame, hand) for f in description.fingers]
+        add_force_arrows(meshcat, description.num_fingers)
+        legend.append(arrows_legend(newtons_per_cm, "planned", description.num_fingers, noun))
     visualizer.StartRecording(set_transforms_while_recording=False)
     for k, (t, pose, q) in enumerate(zip(times, object_poses, joint_angles)):
         context.SetTime(float(t))
@@ -435,7 +458,7 @@ def write_pose_html(
         title="TrajectoTree: planned trajectory",
         legend=tuple(legend),
         noun=noun,
-        labels=finger_labels(plant, hand),
+        labels=finger_labels(plant, hand, description),
     )
 
 

@@ -4,8 +4,8 @@ A `Reference` is built from a plan's arrays (the `plan.npz` names that
 `trajectotree.io.save_plan` writes) or, for controller tests, from a static grasp (`static_hold_reference`),
 so the simulation depends on the plan's data, not on the planner's code.
 
-Fingertip positions are the centres of the fingertip spheres (the plant's
-`finger{i}_tip` frames); forces are those of each finger ON the box, in W.
+Fingertip positions are the centres of the fingertip spheres (the hand description's
+tip frames); forces are those of each finger ON the box, in W.
 """
 
 from __future__ import annotations
@@ -17,19 +17,19 @@ from pydrake.solvers import MathematicalProgram, Solve
 
 from trajectotree.geometry import ConvexPolygon, box_to_world, poses_world_to_box, rotation_2d, rotations_2d
 from trajectotree.results import TRAJECTORY_ARRAYS as PLAN_ARRAYS
-from trajectotree.scene.plant import NUM_FINGERS, NUM_HAND_JOINTS, Scene
+from trajectotree.scene.plant import JOINTS_PER_FINGER, Scene
 
 
 @dataclass(frozen=True)
 class Reference:
     t: np.ndarray  # (K,) s, knot times, increasing, t[0] = 0
     x: np.ndarray  # (K, 3) planned object pose (x m, y m, theta rad)
-    q: np.ndarray  # (K, 8) rad, planned joint angles (finger-major)
-    p_WF: np.ndarray  # (K, 4, 2) m, fingertip sphere centres in W
-    v_WF: np.ndarray  # (K, 4, 2) m/s, fingertip velocities in W
-    f_W: np.ndarray  # (K, 4, 2) N, force of each finger on the box, in W
+    q: np.ndarray  # (K, 2F) rad, planned joint angles (finger-major) of the F fingers
+    p_WF: np.ndarray  # (K, F, 2) m, fingertip sphere centres in W
+    v_WF: np.ndarray  # (K, F, 2) m/s, fingertip velocities in W
+    f_W: np.ndarray  # (K, F, 2) N, force of each finger on the box, in W
     xdot: np.ndarray | None = None  # (K, 3) planned object velocity (m/s, m/s, rad/s); None: finite differences of x
-    p_WC: np.ndarray | None = None  # (K, 4, 2) m, where each finger's force acts; None: nearest box point to p_WF
+    p_WC: np.ndarray | None = None  # (K, F, 2) m, where each finger's force acts; None: nearest box point to p_WF
 
     @property
     def duration(self) -> float:
@@ -40,7 +40,7 @@ class Reference:
         return self._at(self.x, times)
 
     def forces_at(self, times) -> np.ndarray:
-        """(T, 4, 2) planned finger forces on the box, linearly interpolated, held after the end."""
+        """(T, F, 2) planned finger forces on the box, linearly interpolated, held after the end."""
         return self._at(self.f_W, times)
 
     def _at(self, values: np.ndarray, times) -> np.ndarray:
@@ -51,29 +51,33 @@ class Reference:
         return np.stack(columns, axis=1).reshape((len(times),) + values.shape[1:])
 
 
-def check_plan_arrays(arrays) -> dict[str, np.ndarray]:
-    """The plan.npz arrays as float arrays with consistent shapes; raises ValueError
-    naming the first missing or malformed array (callers map it to their input error)."""
+def check_plan_arrays(arrays, num_fingers: int | None = None) -> dict[str, np.ndarray]:
+    """The plan.npz arrays as float arrays with consistent shapes for a hand of `num_fingers`
+    fingers (None: as many as lambda_n has columns); raises ValueError naming the first missing
+    or malformed array (callers map it to their input error)."""
     missing = [name for name in PLAN_ARRAYS if name not in arrays]
     if missing:
         raise ValueError(f"plan arrays lack {missing}")
     out = {name: np.asarray(arrays[name], dtype=float) for name in PLAN_ARRAYS}
     K = out["t"].shape[0] if out["t"].ndim == 1 else -1
+    if num_fingers is None:
+        num_fingers = out["lambda_n"].shape[1] if out["lambda_n"].ndim == 2 else -1
+    F, J = num_fingers, JOINTS_PER_FINGER * num_fingers
     shapes = {
         "t": (K,),
         "x": (K, 3),
         "xdot": (K, 3),
-        "q": (K, 8),
-        "qdot": (K, 8),
-        "tau": (K, 8),
-        "lambda_n": (K, 4),
-        "lambda_t": (K, 4),
-        "f_W": (K, 4, 2),
-        "p_W_tip": (K, 4, 2),
-        "p_W_C": (K, 4, 2),
+        "q": (K, J),
+        "qdot": (K, J),
+        "tau": (K, J),
+        "lambda_n": (K, F),
+        "lambda_t": (K, F),
+        "f_W": (K, F, 2),
+        "p_W_tip": (K, F, 2),
+        "p_W_C": (K, F, 2),
     }
     for name, shape in shapes.items():
-        if K < 2 or out[name].shape != shape:
+        if K < 2 or F < 1 or out[name].shape != shape:
             raise ValueError(f"plan array {name!r} has shape {out[name].shape}, expected {shape} with K >= 2 knots")
         if not np.all(np.isfinite(out[name])):
             raise ValueError(f"plan array {name!r} holds non-finite values")
@@ -85,8 +89,8 @@ def check_plan_arrays(arrays) -> dict[str, np.ndarray]:
 def reference_from_arrays(arrays, scene: Scene) -> Reference:
     """The reference of a plan from its plan.npz arrays. Fingertip velocities are
     J_WF(q) qdot, consistent with the planned joint motion."""
-    a = check_plan_arrays(arrays)
-    J = np.array([scene.fingertip_jacobians(q) for q in a["q"]])  # (K, 4, 2, 8)
+    a = check_plan_arrays(arrays, scene.num_fingers)
+    J = np.array([scene.fingertip_jacobians(q) for q in a["q"]])  # (K, F, 2, 2F)
     v_WF = np.einsum("kfij,kj->kfi", J, a["qdot"])
     return Reference(
         t=a["t"] - a["t"][0],
@@ -127,7 +131,7 @@ def static_grasp_forces(
     friction_margin: float = 0.8,
     lifted: int | None = None,
 ) -> np.ndarray | None:
-    """Finger forces on the box (4, 2) in W that hold it still against gravity:
+    """Finger forces on the box (F, 2) in W, one row per contact of p_BC (F, 2) that hold it still against gravity:
     the least-squares forces with every normal force >= min_normal_force (the
     squeeze) inside a friction cone shrunk by friction_margin; finger `lifted`
     (if any) pushes with none. None if infeasible."""
@@ -136,22 +140,23 @@ def static_grasp_forces(
     t_W = np.stack([-n_W[:, 1], n_W[:, 0]], axis=1)
     r_W = (R_WB @ np.asarray(p_BC, dtype=float).T).T  # contact points relative to the box origin
     prog = MathematicalProgram()
-    lam_n = prog.NewContinuousVariables(NUM_FINGERS, "lambda_n")
-    lam_t = prog.NewContinuousVariables(NUM_FINGERS, "lambda_t")
+    F = len(n_W)
+    lam_n = prog.NewContinuousVariables(F, "lambda_n")
+    lam_t = prog.NewContinuousVariables(F, "lambda_t")
     # force of finger i on the box: pushes along the inward normal, slides along the tangent
-    fx = [-lam_n[i] * n_W[i, 0] + lam_t[i] * t_W[i, 0] for i in range(NUM_FINGERS)]
-    fy = [-lam_n[i] * n_W[i, 1] + lam_t[i] * t_W[i, 1] for i in range(NUM_FINGERS)]
+    fx = [-lam_n[i] * n_W[i, 0] + lam_t[i] * t_W[i, 0] for i in range(F)]
+    fy = [-lam_n[i] * n_W[i, 1] + lam_t[i] * t_W[i, 1] for i in range(F)]
     prog.AddLinearEqualityConstraint(sum(fx) == 0.0)
     prog.AddLinearEqualityConstraint(sum(fy) - mass * gravity == 0.0)
-    prog.AddLinearEqualityConstraint(sum(r_W[i, 0] * fy[i] - r_W[i, 1] * fx[i] for i in range(NUM_FINGERS)) == 0.0)
+    prog.AddLinearEqualityConstraint(sum(r_W[i, 0] * fy[i] - r_W[i, 1] * fx[i] for i in range(F)) == 0.0)
     mu_eff = friction_margin * mu
-    for i in range(NUM_FINGERS):
+    for i in range(F):
         if i == lifted:
             prog.AddLinearEqualityConstraint(lam_n[i] == 0.0)
         prog.AddLinearConstraint(lam_n[i] >= (0.0 if i == lifted else min_normal_force))
         prog.AddLinearConstraint(lam_t[i] <= mu_eff * lam_n[i])
         prog.AddLinearConstraint(-lam_t[i] <= mu_eff * lam_n[i])
-    prog.AddQuadraticCost(2 * np.eye(2 * NUM_FINGERS), np.zeros(2 * NUM_FINGERS), np.r_[lam_n, lam_t], is_convex=True)
+    prog.AddQuadraticCost(2 * np.eye(2 * F), np.zeros(2 * F), np.r_[lam_n, lam_t], is_convex=True)
     result = Solve(prog)
     if not result.is_success():
         return None
@@ -180,9 +185,9 @@ def static_hold_reference(
     points = [boundary.point(s) for s in arclengths]
     p_BC = np.array([p for p, _ in points])
     n_B = np.array([n for _, n in points])
-    gaps = [lift if i == lifted else 0.0 for i in range(NUM_FINGERS)]
+    gaps = [lift if i == lifted else 0.0 for i in range(scene.num_fingers)]
     p_WF = np.array([box_to_world(pose, p + (scene.tip_radius + g) * n) for p, n, g in zip(p_BC, n_B, gaps)])
-    q = np.zeros(NUM_HAND_JOINTS)
+    q = np.zeros(scene.num_hand_joints)
     for i, finger in enumerate(scene.fingers):
         q_i = finger.ik_one(p_WF[i], elbow=1)  # the model's elbow side
         if q_i is None:
@@ -199,7 +204,7 @@ def static_hold_reference(
         x=np.tile(pose, (K, 1)),
         q=np.tile(q, (K, 1)),
         p_WF=np.tile(p_WF, (K, 1, 1)),
-        v_WF=np.zeros((K, NUM_FINGERS, 2)),
+        v_WF=np.zeros((K, scene.num_fingers, 2)),
         f_W=np.tile(f_W, (K, 1, 1)),
     )
 
@@ -215,12 +220,12 @@ class GraspSchedule:
     X: np.ndarray  # (N, 3) planned object pose: cubic Hermite through the plan's x, xdot
     V: np.ndarray  # (N, 3) its velocity (m/s, m/s, rad/s)
     A: np.ndarray  # (N, 3) its acceleration
-    p_BF: np.ndarray  # (N, 4, 2) m, fingertip targets in B (a swinging finger lifted to >= swing_lift)
-    v_BF: np.ndarray  # (N, 4, 2) m/s, their rates in B
-    p_BC: np.ndarray  # (N, 4, 2) m, contact points in B
-    n_B: np.ndarray  # (N, 4, 2) outward unit normals of the faces at p_BC
-    lambda_plan: np.ndarray  # (N, 4, 2) N, planned (normal, tangential) force along (-n_B, t_B), times force_scale
-    force_scale: np.ndarray  # (N, 4) 1 holding, 0 swinging, ramped over ramp_time around lift-off and landing
+    p_BF: np.ndarray  # (N, F, 2) m, fingertip targets in B (a swinging finger lifted to >= swing_lift)
+    v_BF: np.ndarray  # (N, F, 2) m/s, their rates in B
+    p_BC: np.ndarray  # (N, F, 2) m, contact points in B
+    n_B: np.ndarray  # (N, F, 2) outward unit normals of the faces at p_BC
+    lambda_plan: np.ndarray  # (N, F, 2) N, planned (normal, tangential) force along (-n_B, t_B), times force_scale
+    force_scale: np.ndarray  # (N, F) 1 holding, 0 swinging, ramped over ramp_time around lift-off and landing
 
     def index(self, t: float) -> int:
         return min(int(round(t / self.period)), len(self.X) - 1)
@@ -300,7 +305,7 @@ def grasp_schedule(
     xdot = reference.xdot if reference.xdot is not None else np.gradient(x, t, axis=0)
     X, V, A = hermite(t, x, xdot, times)
     p_BF_knots = poses_world_to_box(x, reference.p_WF)
-    gap_knots = shape.signed_distances(p_BF_knots) - tip_radius  # (K, 4)
+    gap_knots = shape.signed_distances(p_BF_knots) - tip_radius  # (K, F)
     if reference.p_WC is not None:
         p_BC_knots = poses_world_to_box(x, reference.p_WC)
     else:  # the nearest box point: the fingertip centre minus its radius along the outward direction
@@ -313,8 +318,9 @@ def grasp_schedule(
     p_BF, p_BC, f_B, gap = at(p_BF_knots), at(p_BC_knots), at(f_B_knots), at(gap_knots)
     n_B = shape.face_normals(p_BC)
     t_B = np.stack([-n_B[..., 1], n_B[..., 0]], axis=-1)
-    scale, phase = np.ones((len(times), NUM_FINGERS)), np.full((len(times), NUM_FINGERS), np.nan)
-    for i in range(NUM_FINGERS):
+    F = reference.p_WF.shape[1]
+    scale, phase = np.ones((len(times), F)), np.full((len(times), F), np.nan)
+    for i in range(F):
         intervals = swing_intervals(t, gap_knots[:, i] <= contact_distance)
         scale[:, i], phase[:, i] = swing_profile(times, intervals, ramp_time)
     # Lift a swinging fingertip to at least swing_lift sin(pi phase), away from the nearest box point.

@@ -49,7 +49,7 @@ from trajectotree.results import (
     SimLog,
     SimResult,
 )
-from trajectotree.scene.plant import NUM_FINGERS, Scene, build_scene
+from trajectotree.scene.plant import Scene, build_scene
 from trajectotree.start import StartState
 
 # s, over which the reference moves from the old plan's node to the measured state while the planner runs
@@ -198,12 +198,13 @@ def spliced(
     hold_t = [t_switch, t_switch + min(HOLD_RAMP, 0.5 * (t_new - t_switch))]
     hold_x = [at, np.asarray(start.object_pose)]
     hold_q = [np.interp(t_switch, old.t, old.q[:, j]) for j in range(old.q.shape[1])]
-    p_WF_at = np.stack([np.interp(t_switch, old.t, old.p_WF[:, i, a]) for i in range(NUM_FINGERS) for a in (0, 1)])
+    F = old.p_WF.shape[1]
+    p_WF_at = np.stack([np.interp(t_switch, old.t, old.p_WF[:, i, a]) for i in range(F) for a in (0, 1)])
     t = np.concatenate([old.t[keep], hold_t, t_new + new.t])
     x = np.concatenate([old.x[keep], hold_x, new.x])
     q = np.concatenate([old.q[keep], [hold_q, q0], new.q])
-    p = np.concatenate([old.p_WF[keep], [p_WF_at.reshape(NUM_FINGERS, 2), p_WF], new.p_WF])
-    v = np.concatenate([old.v_WF[keep], np.zeros((2, NUM_FINGERS, 2)), new.v_WF])
+    p = np.concatenate([old.p_WF[keep], [p_WF_at.reshape(F, 2), p_WF], new.p_WF])
+    v = np.concatenate([old.v_WF[keep], np.zeros((2, F, 2)), new.v_WF])
     f = np.concatenate([old.f_W[keep], [f_at, f_at], new.f_W])
     xdot = np.concatenate([_xdot(old)[keep], np.zeros((2, 3)), _xdot(new)])
     return Reference(t=t, x=x, q=q, p_WF=p, v_WF=v, f_W=f, xdot=xdot)

@@ -44,11 +44,12 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from trajectotree.config import Config, ConfigError, check_controller, check_length, check_range
 from trajectotree.execution import closed_loop, metrics, playback
-from trajectotree.execution.control import FINGERTIP_VECTOR_SIZE, GraspController, ImpedanceController
+from trajectotree.execution.control import GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule
 from trajectotree.figures.run import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
-from trajectotree.scene.plant import NUM_FINGERS, add_hand_and_box, build_scene
+from trajectotree.scene.hand import HandDescription, hand_file, read_hand
+from trajectotree.scene.plant import add_hand_and_box, build_scene
 
 
 @dataclass(frozen=True)
@@ -141,22 +142,25 @@ class PushSource(LeafSystem):
 
 
 class FingertipForces(LeafSystem):
-    """Input port `contact_results` (the plant's); output port `f_W` (8, finger-major
+    """Input port `contact_results` (the plant's); output port `f_W` (2F, finger-major
     (x, y)): the force of each finger's second link (fingertip sphere and link) on the
     box, in W, summed over its point contacts."""
 
-    def __init__(self, plant, hand, box):
+    def __init__(self, plant, hand, box, description: HandDescription):
         super().__init__()
-        self._finger_of_body = {plant.GetBodyByName(f"finger{i}_link2", hand).index(): i for i in range(NUM_FINGERS)}
+        self._num_fingers = description.num_fingers
+        self._finger_of_body = {
+            plant.GetBodyByName(f.link_bodies[1], hand).index(): i for i, f in enumerate(description.fingers)
+        }
         self._box_body = plant.GetBodyByName("box", box).index()
         self.contact_results_port = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults())
         )
-        self.DeclareVectorOutputPort("f_W", FINGERTIP_VECTOR_SIZE, self.CalcForces)
+        self.DeclareVectorOutputPort("f_W", 2 * self._num_fingers, self.CalcForces)
 
     def CalcForces(self, context, output):
         results = self.contact_results_port.Eval(context)
-        f_W = np.zeros((NUM_FINGERS, 2))
+        f_W = np.zeros((self._num_fingers, 2))
         for k in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(k)
             a, b = info.bodyA_index(), info.bodyB_index()
@@ -174,8 +178,9 @@ class ExecutionDiagram:
     plant: object
     hand: object  # ModelInstanceIndex
     box: object  # ModelInstanceIndex
+    hand_description: HandDescription  # the hand as data, read from this plant
     state_logger: object  # VectorLogSink of the plant's full state
-    force_logger: object  # VectorLogSink of FingertipForces (8)
+    force_logger: object  # VectorLogSink of FingertipForces (2F)
     visualizer: object | None  # MeshcatVisualizer or None
     duration: float  # s, plan length + settle time
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
@@ -199,15 +204,15 @@ def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
     return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
 
 
-def exclude_finger_finger_collisions(plant, scene_graph, hand) -> None:
+def exclude_finger_finger_collisions(plant, scene_graph, hand, description: HandDescription) -> None:
     """Filters contact between different fingers (each finger's own links are adjacent)."""
     fingers = []
-    for i in range(NUM_FINGERS):
-        bodies = [plant.GetBodyByName(f"finger{i}_link{j}", hand) for j in (1, 2)]
+    for f in description.fingers:
+        bodies = [plant.GetBodyByName(name, hand) for name in f.link_bodies]
         fingers.append(plant.CollectRegisteredGeometries(bodies))
     manager = scene_graph.collision_filter_manager()
-    for a in range(NUM_FINGERS):
-        for b in range(a + 1, NUM_FINGERS):
+    for a in range(len(fingers)):
+        for b in range(a + 1, len(fingers)):
             manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
 
 
@@ -216,7 +221,7 @@ def add_paper_controller(builder, plant, hand, reference: Reference, config: Con
     controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
 
     def flat(a):
-        return a.reshape(len(reference.t), -1)  # (K, 4, 2) -> (K, 8), finger-major
+        return a.reshape(len(reference.t), -1)  # (K, F, 2) -> (K, 2F), finger-major
 
     hold = config.sim.settle_time
     for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
@@ -253,13 +258,15 @@ def add_grasp_controller(
     return controller
 
 
-def add_closed_loop(builder, plant, hand, box, controller: GraspController, config: Config) -> dict:
+def add_closed_loop(
+    builder, plant, hand, box, description: HandDescription, controller: GraspController, config: Config
+) -> dict:
     """The contact and object monitors, the friction and mass estimators and the push reflex
     (trajectotree.execution.closed_loop), wired to the plant and into `controller`'s estimate
     ports; returns {output name: output port} of every quantity a ClosedLoopLog records."""
     gains, scene = config.controller, config.scene
     monitor = builder.AddNamedSystem(
-        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, controller.schedule, gains)
+        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, controller.schedule, gains)
     )
     builder.Connect(plant.get_contact_results_output_port(), monitor.contact_results_port)
     builder.Connect(plant.get_state_output_port(box), monitor.box_state_port)
@@ -316,9 +323,10 @@ def build_execution_diagram(
     kind = check_closed_loop(check_controller(controller or config.sim.controller), closed_loop and controlled)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
-    hand, box = add_hand_and_box(plant, conditions.scene(config.scene))
+    hand, box = add_hand_and_box(plant, conditions.scene(config.scene), scene_graph)
     plant.Finalize()
-    exclude_finger_finger_collisions(plant, scene_graph, hand)
+    description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
+    exclude_finger_finger_collisions(plant, scene_graph, hand, description)
     hold = config.sim.settle_time
     if not controlled:
         system = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
@@ -334,26 +342,27 @@ def build_execution_diagram(
         builder.Connect(push.spatial_forces_port, plant.get_applied_spatial_force_input_port())
     triggers = {TriggerType.kPeriodic, TriggerType.kForced}
     state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
-    forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box))
+    forces = builder.AddNamedSystem("fingertip_forces", FingertipForces(plant, hand, box, description))
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     closed_loop_loggers = None
     if closed_loop and controlled:
-        ports = add_closed_loop(builder, plant, hand, box, grasp, config)
+        ports = add_closed_loop(builder, plant, hand, box, description, grasp, config)
         closed_loop_loggers = {
             name: LogVectorOutput(port, builder, triggers, config.sim.log_period) for name, port in ports.items()
         }
     visualizer = None
     if meshcat is not None:
-        visualizer = playback.add_visualizer(builder, plant, scene_graph, hand, meshcat)
+        visualizer = playback.add_visualizer(builder, plant, scene_graph, hand, description, meshcat)
         playback.add_force_arrows_system(
-            builder, plant, scene_graph, hand, meshcat, forces.get_output_port(), arrow_scale(reference)
+            builder, plant, scene_graph, hand, description, meshcat, forces.get_output_port(), arrow_scale(reference)
         )
     return ExecutionDiagram(
         diagram=builder.Build(),
         plant=plant,
         hand=hand,
         box=box,
+        hand_description=description,
         state_logger=state_logger,
         force_logger=force_logger,
         visualizer=visualizer,
@@ -382,13 +391,11 @@ def check_closed_loop(controller: str, closed_loop: bool) -> str:
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t (T,), object pose (T, 3), joint angles (T, 8)) from the plant-state log."""
+    """(t (T,), object pose (T, 3), joint angles (T, 2F), finger-major) from the plant-state log."""
     plant = execution.plant
     box_start = plant.GetJointByName("box_planar").position_start()
     hand_q = [
-        plant.GetJointByName(f"finger{i}_joint{j}", execution.hand).position_start()
-        for i in range(NUM_FINGERS)
-        for j in (1, 2)
+        plant.GetJointByName(name, execution.hand).position_start() for name in execution.hand_description.joint_names
     ]
     data = log.data()
     return log.sample_times().copy(), data[box_start : box_start + 3].T.copy(), data[hand_q].T.copy()
@@ -407,7 +414,7 @@ def collected_log(
     """What `simulator` logged so far (to the execution's end), beside `reference` at the same times."""
     logs = [finished_log(execution, simulator, logger) for logger in (execution.state_logger, execution.force_logger)]
     t, x, q = split_state_log(execution, logs[0])
-    f_W = logs[1].data().T.reshape(len(t), NUM_FINGERS, 2).copy()
+    f_W = logs[1].data().T.reshape(len(t), execution.hand_description.num_fingers, 2).copy()
     closed = None
     if execution.closed_loop_loggers is not None:
         data = {
@@ -484,9 +491,11 @@ def simulate_reference(
                 execution.visualizer,
                 html_path,
                 drop_time_s=result.drop_time_s,
-                legend=playback.simulated_legend(config.scene, arrow_scale(reference)),
+                legend=playback.simulated_legend(
+                    config.scene, arrow_scale(reference), execution.hand_description.num_fingers
+                ),
                 noun=playback.object_noun(config.scene),
-                labels=playback.finger_labels(execution.plant, execution.hand),
+                labels=playback.finger_labels(execution.plant, execution.hand, execution.hand_description),
             )
         else:
             execution.visualizer.StopRecording()
