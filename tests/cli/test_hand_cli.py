@@ -110,15 +110,21 @@ def test_a_hand_without_a_link_2_box_is_refused_before_planning(tmp_path, capsys
     assert not out.exists()
 
 
-def test_running_a_hand_execution_does_not_take_yet_exits_2_writing_nothing(tmp_path, capsys):
+FIRST = "  - {joints: [finger1_BaseJoint, finger1_MidJoint], tip: finger1_tip_link, tip_xyz: [0, 0, -0.0263]}\n"
+
+
+def test_a_hand_whose_joints_are_out_of_the_models_order_is_refused_execution(tmp_path, capsys):
+    """The gripper with its first finger named last: it plans, but execution reads the plant's hand
+    state as the planner's q, so demo and plan --html exit 2 before any work, writing nothing."""
+    path = gripper_yaml(tmp_path, FIRST, "")
+    path.write_text(path.read_text() + FIRST)
     for args in (
-        ["demo", "--out", str(tmp_path / "demo")],
-        ["plan", "--goal", "0.3", "--html", str(tmp_path / "p.html"), "--out", str(tmp_path / "plan")],
-        ["sweep", "--goals", "1", "--simulate", "--out", str(tmp_path / "sweep")],
+        ["demo", *BRICK, "--out", str(tmp_path / "demo")],
+        ["plan", *BRICK, "--goal", "0.3", "--html", str(tmp_path / "p.html"), "--out", str(tmp_path / "plan")],
     ):
-        assert main([*args, "--hand", "planar_hand5"]) == 2, args
-        assert "scene.hand = 'planar_hand5' has 5 fingers; " in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []
+        assert main([*args, "--hand", str(path)]) == 2, args
+        assert "needs the model's finger joints in the description's order" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hand.yaml"]
 
 
 def test_a_hand_that_cannot_reach_the_object_is_refused_naming_the_finger(tmp_path, capsys):

@@ -195,16 +195,15 @@ def config_from_args(args: argparse.Namespace) -> Config:
 
 def check_executable_hand(scene, use: str) -> None:
     """ConfigError (exit 2, before any work) when `use` (a simulation or a playback) needs the
-    execution stage, which takes the four-finger layout yet (scene.plant.NUM_FINGERS), and the
-    scene's hand has another finger count; planning and the search take any hand."""
-    from trajectotree.scene.plant import NUM_FINGERS
-
-    if scene.num_fingers != NUM_FINGERS:
+    execution stage, which reads the plant's hand state port as the planner's q, and the hand
+    model's joints are not in its description's finger-major order; planning and the search
+    take any hand."""
+    if not scene.hand_state_is_finger_major:
         raise ConfigError(
             field="scene.hand",
             value=scene.config.hand,
-            problem=f"has {scene.num_fingers} fingers; {use} uses the execution stage, which takes {NUM_FINGERS} yet "
-            "(plan and search take any hand)",
+            problem=f": {use} uses the execution stage, which needs the model's finger joints in the "
+            "description's order (finger-major, each finger's from its base out); plan and search take any order",
         )
 
 

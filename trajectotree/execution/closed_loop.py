@@ -40,7 +40,7 @@ from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
 from trajectotree.execution.reference import GraspSchedule
-from trajectotree.scene.hand import HandDescription
+from trajectotree.scene.hand import HandDescription, finger_bodies
 
 # N, a finger pushing less is out of contact: a contact that opens leaves forces of 1e-18 N, whose
 # ratio |f_t| / f_n means nothing.
@@ -147,9 +147,7 @@ class ContactMonitor(PeriodicSystem):
         super().__init__(1.0 / gains.rate_hz, outputs | {"tracking_error": np.zeros(3)})
         self.schedule, self.gains = schedule, gains
         self._finger_of_body = {
-            plant.GetBodyByName(name, hand).index(): i
-            for i, f in enumerate(description.fingers)
-            for name in f.link_bodies
+            body.index(): i for i, f in enumerate(description.fingers) for body in finger_bodies(plant, hand, f)
         }
         self._box_body = plant.GetBodyByName("box", box).index()
         self.contact_results_port = self.DeclareAbstractInputPort(

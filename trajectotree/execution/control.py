@@ -48,7 +48,7 @@ def check_finger_major(scene: Scene) -> None:
     """ValueError unless the hand instance's positions are the description's joints in order
     (finger-major, each finger's from its base out): the controllers read the instance's state
     port as the planner's q."""
-    if not np.all(np.diff(scene.hand_q_indices) == 1) or not np.all(np.diff(scene.hand_v_indices) == 1):
+    if not scene.hand_state_is_finger_major:
         raise ValueError(
             f"hand {scene.config.hand}: its model's joints are not in the description's (finger-major) order"
         )

@@ -40,7 +40,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from trajectotree.config import Config, SceneConfig
 from trajectotree.figures.run import FINGER_COLORS, arrow_newtons_per_cm, arrow_scale_text, force_arrow
 from trajectotree.io import write_bytes_atomic
-from trajectotree.scene.hand import HandDescription, hand_file, read_hand
+from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
 from trajectotree.scene.plant import add_hand_and_box
 
 VIEW_HALF_WIDTH = 0.32  # m, the planar view shows [-0.32, 0.32]^2: the hand's full reach
@@ -83,13 +83,13 @@ def finger_css(i: int) -> str:
 
 
 def fingertip_visuals(plant, scene_graph, hand, description: HandDescription) -> list:
-    """The GeometryId of each finger's fingertip sphere on its second link (the description's
-    link_bodies[1]): its visual named "tip_visual", else its only sphere visual; None for a
-    finger that has neither (a model whose fingertip is drawn by a mesh)."""
+    """The GeometryId of each finger's fingertip sphere on the body of its tip frame: its visual
+    named "tip_visual", else its only sphere visual; None for a finger that has neither (a model
+    whose fingertip is drawn by a mesh)."""
     inspector = scene_graph.model_inspector()
     tips = []
     for f in description.fingers:
-        visuals = plant.GetVisualGeometriesForBody(plant.GetBodyByName(f.link_bodies[1], hand))
+        visuals = plant.GetVisualGeometriesForBody(finger_bodies(plant, hand, f)[-1])
         found = [g for g in visuals if inspector.GetName(g).endswith("tip_visual")]
         if not found:
             found = [g for g in visuals if isinstance(inspector.GetShape(g), Sphere)]

@@ -48,7 +48,7 @@ from trajectotree.execution.control import GraspController, ImpedanceController
 from trajectotree.execution.reference import Reference, grasp_schedule
 from trajectotree.figures.run import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
-from trajectotree.scene.hand import HandDescription, hand_file, read_hand
+from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
 from trajectotree.scene.plant import add_hand_and_box, build_scene
 
 
@@ -143,14 +143,14 @@ class PushSource(LeafSystem):
 
 class FingertipForces(LeafSystem):
     """Input port `contact_results` (the plant's); output port `f_W` (2F, finger-major
-    (x, y)): the force of each finger's second link (fingertip sphere and link) on the
-    box, in W, summed over its point contacts."""
+    (x, y)): the force of each finger's second link (fingertip sphere and link, with a tip body
+    welded to it: hand.finger_bodies) on the box, in W, summed over its point contacts."""
 
     def __init__(self, plant, hand, box, description: HandDescription):
         super().__init__()
         self._num_fingers = description.num_fingers
         self._finger_of_body = {
-            plant.GetBodyByName(f.link_bodies[1], hand).index(): i for i, f in enumerate(description.fingers)
+            body.index(): i for i, f in enumerate(description.fingers) for body in finger_bodies(plant, hand, f)[1:]
         }
         self._box_body = plant.GetBodyByName("box", box).index()
         self.contact_results_port = self.DeclareAbstractInputPort(
@@ -208,7 +208,7 @@ def exclude_finger_finger_collisions(plant, scene_graph, hand, description: Hand
     """Filters contact between different fingers (each finger's own links are adjacent)."""
     fingers = []
     for f in description.fingers:
-        bodies = [plant.GetBodyByName(name, hand) for name in f.link_bodies]
+        bodies = list(finger_bodies(plant, hand, f))
         fingers.append(plant.CollectRegisteredGeometries(bodies))
     manager = scene_graph.collision_filter_manager()
     for a in range(len(fingers)):

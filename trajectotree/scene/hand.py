@@ -178,6 +178,17 @@ class HandDescription:
         return self.fingers[0].tip_radius
 
 
+def finger_bodies(plant: MultibodyPlant, instance, finger: FingerDescription) -> tuple:
+    """The bodies of `finger` in a plant with the hand's model: its two links and, where its tip
+    frame sits on another body (Drake's gripper: a tip link welded to link 2, which carries the
+    fingertip sphere), that body too, from the base out."""
+    bodies = [plant.GetBodyByName(name, instance) for name in finger.link_bodies]
+    tip = plant.GetFrameByName(finger.tip_frame, instance).body()
+    if tip.index() not in [b.index() for b in bodies]:
+        bodies.append(tip)
+    return tuple(bodies)
+
+
 # -- the YAML ---------------------------------------------------------------------------------
 def hand_yaml_path(spec: str) -> tuple[str, Path]:
     """(name, the YAML's path) for a hand name, PATH.yaml or PATH.sdf / PATH.urdf (PATH.yaml beside it)."""

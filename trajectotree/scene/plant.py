@@ -40,7 +40,7 @@ from trajectotree.scene.hand import (  # noqa: F401 (FingerGeometry, LinkRectang
     read_hand,
 )
 
-# The default hand's finger count, for the stages that do not yet take it from scene.hand_description.
+# The default hand's finger count (tests of the default hand); every stage takes its own from scene.hand_description.
 NUM_FINGERS = 4
 NUM_HAND_JOINTS = NUM_FINGERS * JOINTS_PER_FINGER
 
@@ -170,6 +170,12 @@ class Scene:
         return np.array(
             [self.plant.GetJointByName(n, self.hand).velocity_start() for n in self.hand_description.joint_names]
         )
+
+    @property
+    def hand_state_is_finger_major(self) -> bool:
+        """Whether the hand instance's positions and velocities are the description's joints in
+        order (finger-major), as the execution stage reads the plant's hand state port."""
+        return bool(np.all(np.diff(self.hand_q_indices) == 1) and np.all(np.diff(self.hand_v_indices) == 1))
 
     @cached_property
     def box_q_indices(self) -> np.ndarray:
