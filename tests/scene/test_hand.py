@@ -18,7 +18,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import HAND_NAMES, ConfigError, SceneConfig
-from trajectotree.scene.hand import HandError, hand_file, load_hand
+from trajectotree.scene.hand import HandError, finger_bodies, hand_file, load_hand
 from trajectotree.scene.kinematics import TwoLinkFinger
 from trajectotree.scene.plant import build_scene
 
@@ -95,6 +95,22 @@ def test_tip_spheres_and_link_boxes_are_the_plants_geometry(scene):
             if type(inspector.GetShape(g)).__name__ == "Sphere"
         ]
         assert spheres == [f.tip_radius] == [scene.tip_radius]
+
+
+def test_a_fingers_bodies_end_with_the_one_that_carries_its_fingertip_sphere(scene):
+    """finger_bodies: the two links, and Drake's gripper's tip link (welded to link 2) after them;
+    the last body holds the fingertip sphere's collision geometry, of the description's radius."""
+    plant, inspector = scene.plant, scene.scene_graph.model_inspector()
+    for f in scene.fingers:
+        bodies = finger_bodies(plant, scene.hand, f)
+        assert [b.name() for b in bodies[:2]] == list(f.link_bodies)
+        assert len(bodies) == (3 if scene.config.hand == "drake_planar_gripper" else 2)
+        spheres = [
+            inspector.GetShape(g).radius()
+            for g in plant.GetCollisionGeometriesForBody(bodies[-1])
+            if type(inspector.GetShape(g)).__name__ == "Sphere"
+        ]
+        assert spheres == [f.tip_radius]
 
 
 def test_each_hand_collision_has_the_scenes_friction():
