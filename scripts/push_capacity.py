@@ -20,7 +20,8 @@ import numpy as np
 from scipy.optimize import linprog
 
 from trajectotree.execution.control import HandKinematics, cone_rows, perp, torque_rows
-from trajectotree.execution.reference import grasp_schedule, reference_from_plan
+from trajectotree.execution.reference import reference_from_plan
+from trajectotree.execution.simulate import execution_schedule
 from trajectotree.experiments.executions import middle_of_middle_segment
 from trajectotree.geometry import rotation_2d
 from trajectotree.io import load_plan
@@ -57,16 +58,7 @@ def main() -> None:
         config = plan.config
         scene, gains = build_scene(config.scene), config.controller
         reference = reference_from_plan(plan, scene)
-        schedule = grasp_schedule(
-            reference,
-            shape=config.scene.shape,
-            tip_radius=scene.tip_radius,
-            period=1.0 / gains.rate_hz,
-            duration=reference.duration + config.sim.settle_time,
-            ramp_time=gains.ramp_time,
-            swing_lift=gains.swing_lift,
-            contact_distance=gains.contact_distance,
-        )
+        schedule = execution_schedule(reference, config, scene)
         t = middle_of_middle_segment(config, float(plan.trajectory.t[-1]))
         n = schedule.index(t)
         q = np.array([np.interp(t, reference.t, reference.q[:, j]) for j in range(reference.q.shape[1])])

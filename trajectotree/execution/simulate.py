@@ -45,11 +45,11 @@ from pydrake.trajectories import PiecewisePolynomial
 from trajectotree.config import Config, ConfigError, check_controller, check_length, check_range
 from trajectotree.execution import closed_loop, metrics, playback
 from trajectotree.execution.control import GraspController, ImpedanceController
-from trajectotree.execution.reference import Reference, grasp_schedule
+from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule
 from trajectotree.figures.run import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
-from trajectotree.scene.plant import add_hand_and_box, build_scene
+from trajectotree.scene.plant import Scene, add_hand_and_box, build_scene
 
 
 @dataclass(frozen=True)
@@ -231,15 +231,11 @@ def add_paper_controller(builder, plant, hand, reference: Reference, config: Con
     return controller
 
 
-def add_grasp_controller(
-    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False
-) -> GraspController:
-    """The GraspController with the plan's scene (mass, size) and friction cones at
-    max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
-    the plan assumed), reading the box and hand state; with closed_loop, its estimate and
-    reflex ports are left for add_closed_loop to connect."""
-    scene, gains = build_scene(config.scene), config.controller
-    schedule = grasp_schedule(
+def execution_schedule(reference: Reference, config: Config, scene: Scene) -> GraspSchedule:
+    """The grasp controller's schedule of `reference`, sampled at its rate, to the run's end
+    (the plan, then config.sim.settle_time of hold)."""
+    gains = config.controller
+    return grasp_schedule(
         reference,
         shape=config.scene.shape,
         tip_radius=scene.tip_radius,
@@ -249,6 +245,17 @@ def add_grasp_controller(
         swing_lift=gains.swing_lift,
         contact_distance=gains.contact_distance,
     )
+
+
+def add_grasp_controller(
+    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False
+) -> GraspController:
+    """The GraspController with the plan's scene (mass, size) and friction cones at
+    max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
+    the plan assumed), reading the box and hand state; with closed_loop, its estimate and
+    reflex ports are left for add_closed_loop to connect."""
+    scene, gains = build_scene(config.scene), config.controller
+    schedule = execution_schedule(reference, config, scene)
     mu_control = max(config.search.friction_safety, gains.friction_safety) * config.scene.mu
     controller = builder.AddNamedSystem(
         "grasp_controller", GraspController(scene, schedule, gains, mu=mu_control, closed_loop=closed_loop)
