@@ -196,7 +196,7 @@ class GraspForceQp:
         multiplies the weight of the torque residual. Falls back to
         the plan's forces, clipped to the bounds, if the solver fails."""
         z_plan = lambda_plan.ravel()
-        GtW = G.T @ (self._W if torque_weight == 1.0 else self._W @ np.diag([1.0, 1.0, torque_weight]))
+        GtW = G.T @ (self._W * [1.0, 1.0, torque_weight])  # W diagonal: its torque column scaled
         self._cost.evaluator().UpdateCoefficients(
             2.0 * (GtW @ G + self._identity), -2.0 * (GtW @ wrench + z_plan), 0.0, True
         )
@@ -353,17 +353,17 @@ class GraspController(LeafSystem):
     def finger_forces(
         self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """f_W (4, 2), the force each finger should apply to the box at sample n (QP),
-        and n_W (4, 2), the outward normals of the faces it pushes on. The forces act
-        where the measured fingertips p_WF (4, 2) touch the faces: a sphere rolls along
+        """f_W (F, 2), the force each finger should apply to the box at sample n (QP),
+        and n_W (F, 2), the outward normals of the faces it pushes on. The forces act
+        where the measured fingertips p_WF (F, 2) touch the faces: a sphere rolls along
         the face as the box turns, and with the planned points instead, 2 mm of rolling
         under 1 N grips left a slow in-grasp turn 0.03 rad behind. The normals too are
         the object's at those points (the box's: its faces'), not the planned contacts':
         on a disc, spheres that rolled 15-30 deg around it from their planned contacts
         left the planned normals that far off, the QP credited the squeeze with a torque
         a disc's normals cannot make, squeezed to 3 N and let go (4 of 12 disc goals
-        dropped). In closed loop (`estimates`), `joints` = (J_WF (4, 2, 2), the other
-        joint torques (4, 2)) bound the torques the forces add."""
+        dropped). In closed loop (`estimates`), `joints` = (J_WF (F, 2, 2), the other
+        joint torques (F, 2)) bound the torques the forces add."""
         s, g = self.schedule, self.gains
         R = rotation_2d(box_state[2])
         p_BF = (p_WF - box_state[:2]) @ R  # R^T (p_WF - p): the measured fingertips in B
