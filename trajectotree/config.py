@@ -330,6 +330,10 @@ class SearchConfig:
     # bool: every three-finger stance must also be in closure at mu_plan (and off the corners) at
     # the contacts its sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
     rolled_stances: bool = True
+    # m, how far short of a corner (a vertex ending a side) a stance's rolled contacts must stay: a sphere
+    # that rolls onto a corner pivots over it, its normal turning by the corner's angle; about twice the
+    # rolling prediction's error in simulation (trajectotree.search.stance). Used with rolled_stances only.
+    rolled_corner_gap: float = 0.002
     # N, a switch is refused when its three holding fingers need more than this total normal force
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
     # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
@@ -380,6 +384,7 @@ class SearchConfig:
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_bool("search.rolled_stances", self.rolled_stances)
+        check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
         check_integer("search.window_segments", self.window_segments, 1, 100)

@@ -261,10 +261,19 @@ class ConvexPolygon:
 
     def corner_free(self, arclengths, margin: float) -> np.ndarray:
         """(k,) bool, whether each arclength keeps corner_margins(margin) from every vertex."""
+        return np.all(self._vertex_gaps(arclengths) >= self.corner_margins(margin), axis=-1)
+
+    def clear_of_sides_ends(self, arclengths, gap: float) -> np.ndarray:
+        """(k,) bool, whether each arclength keeps `gap` m from every vertex that ends a side (one a
+        rolling fingertip pivots over: it turns SMOOTH_VERTEX_ANGLE or more; see `sides`)."""
+        ends = self.exterior_angles >= SMOOTH_VERTEX_ANGLE
+        return np.all(self._vertex_gaps(arclengths)[..., ends] >= gap, axis=-1)
+
+    def _vertex_gaps(self, arclengths) -> np.ndarray:
+        """(k, V) m, the arclength from each of `arclengths` to each vertex, either way round."""
         s = np.mod(np.asarray(arclengths, dtype=float), self.perimeter)
         gap = np.abs(s[..., None] - self._corners)
-        gap = np.minimum(gap, self.perimeter - gap)
-        return np.all(gap >= self.corner_margins(margin), axis=-1)
+        return np.minimum(gap, self.perimeter - gap)
 
     def signed_distance(self, p_B) -> float:
         """Exact signed distance from p_B to the polygon (negative inside)."""

@@ -102,7 +102,13 @@ class _Search:
         self.reach = Reachability(scene)
         self.bound = SwitchBound(scene, self.reach, self.poses, config)
         self.stance = StanceChecks(
-            scene, self.reach, self.poses, self.mu_plan, config.max_stance_force, angles=self.bound.angles
+            scene,
+            self.reach,
+            self.poses,
+            self.mu_plan,
+            config.max_stance_force,
+            angles=self.bound.angles,
+            corner_gap=config.rolled_corner_gap,
         )
         self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
@@ -209,22 +215,23 @@ class _Search:
             if finger is not None and self.tips_overlap(arclengths, finger):
                 self.refused[Refusal(RefusalKind.TIPS_OVERLAP)] += 1
                 continue
-            if finger is not None:
-                if finger not in stances:  # the stance depends on the finger, not on where it moves
-                    stances[finger] = self.stance_refused(node, depth, finger)
-                if stances[finger]:
-                    self.refused[stances[finger]] += 1
-                    continue
+            if finger not in stances:  # the stance depends on the finger (None: all hold), not on where it moves
+                stances[finger] = self.stance_refused(node, depth, finger)
+            if stances[finger]:
+                self.refused[stances[finger]] += 1
+                continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
             out.append((switches, h, _Node(depth, arclengths, finger, node)))
         return out
 
-    def stance_refused(self, node: _Node, depth: int, finger: int) -> Refusal | None:
+    def stance_refused(self, node: _Node, depth: int, finger: int | None) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
         `depth` is refused (None when it is not): its rolled contacts (search.rolled_stances),
-        then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance)."""
+        then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance).
+        finger None: no finger moves and all hold, checked at their rolled contacts only (they roll
+        as far in a segment without a switch)."""
         rolled = self.stance.rolled(node, depth, finger) if self.config.rolled_stances else None
-        return rolled or self.stance.too_heavy(node, depth, finger)
+        return rolled or (None if finger is None else self.stance.too_heavy(node, depth, finger))
 
     # -- Algorithm 1 ----------------------------------------------------------------------
     def precheck(self, start: tuple[float, ...], candidate: bool = False) -> Refusal | None:
