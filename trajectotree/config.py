@@ -327,8 +327,9 @@ class SearchConfig:
     # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
-    # bool: every three-finger stance must also be in closure at mu_plan (and off the corners) at
-    # the contacts its sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
+    # bool: every three-finger stance (all four fingers in a segment without a switch) must also be in
+    # closure at mu_plan, on its faces and rolled_corner_gap short of their corners, at the contacts its
+    # sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
     rolled_stances: bool = True
     # m, how far short of a corner (a vertex ending a side) a stance's rolled contacts must stay: a sphere
     # that rolls onto a corner pivots over it, its normal turning by the corner's angle; about twice the

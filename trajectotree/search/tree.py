@@ -31,9 +31,10 @@ with friction to spare. Each plan node reports `required_mu` (its grasp) and
 `stance_required_mu` (the three fingers that held the box while it was reached).
 
 Stance checks (trajectotree.search.stance; not in the paper): each three-finger stance that holds the
-object while a finger switches must also be in closure at mu_plan where its sticking fingertips
-roll to (search.rolled_stances), and must carry the object's weight with at most
-search.max_stance_force newtons of total normal force at its planned contacts.
+object while a finger switches (all four when none does) must also be in closure at mu_plan, and
+short of the corners, where its sticking fingertips roll to (search.rolled_stances), and must
+carry the object's weight with at most search.max_stance_force newtons of total normal force at
+its planned contacts.
 
 Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
 ranked candidates of trajectotree.search.initial_grasp, best first; a candidate whose fingers
