@@ -318,7 +318,7 @@ class SearchConfig:
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
     # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
     # roots the search at the best ones in turn (trajectotree.search.initial_grasp).
-    initial_arclengths: tuple[float, float, float, float] | None = None
+    initial_arclengths: tuple[float, ...] | None = None
     # bool: initial_arclengths are where a measured start's fingers are (trajectotree.planning.start): the
     # root keeps them even near a corner or with two fingertips closer than their diameter, as they are
     measured_start: bool = False
@@ -373,7 +373,14 @@ class SearchConfig:
             )
         check_range("search.displacement_step", self.displacement_step, 0.0, 0.2, low_open=True)
         if self.initial_arclengths is not None:
-            check_length("search.initial_arclengths", self.initial_arclengths, 4, "one arclength (m) per finger")
+            # the count must be the hand's finger count, which only the scene knows (search.tree checks it)
+            if len(self.initial_arclengths) < 3:
+                raise ConfigError(
+                    field="search.initial_arclengths",
+                    value=self.initial_arclengths,
+                    problem=f"has {len(self.initial_arclengths)} entries",
+                    valid="one arclength (m) per finger of the hand (at least 3)",
+                )
             for i, s in enumerate(self.initial_arclengths):
                 check_range("search.initial_arclengths", s, 0.0, 10.0, index=(i,))
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
