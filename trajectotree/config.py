@@ -233,6 +233,8 @@ class SceneConfig:
     box_height: float = 0.10  # m, object extent along its y axis
     box_depth: float = 0.05  # m, extent along z (only for 3D geometry; the task is planar)
     box_mass: float = 0.05  # kg, the object's mass (box or polygon)
+    # kg m^2, the object's moment of inertia about z at its centroid; None: a uniform plate's (shape.inertia)
+    object_inertia: float | None = None
     mu: float = 0.7  # friction coefficient between fingertips and object
     gravity: float = 9.81  # m/s^2, magnitude; gravity points along -y in W
     initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m, m, rad) object pose x_0 in W
@@ -248,11 +250,21 @@ class SceneConfig:
             return ConvexPolygon.box(self.box_width, self.box_height)
         return ConvexPolygon.from_points(self.object.outline(), smooth=self.object.vertices is None)
 
+    def inertia_zz(self, mass: float | None = None) -> float:
+        """kg m^2, the object's moment of inertia about z at its centroid for `mass` kg (None:
+        box_mass): object_inertia scaled by mass / box_mass, else a uniform plate's."""
+        mass = self.box_mass if mass is None else mass
+        if self.object_inertia is None:
+            return self.shape.inertia(mass)
+        return self.object_inertia if mass == self.box_mass else self.object_inertia * mass / self.box_mass
+
     def __post_init__(self):
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
         check_range("scene.box_height", self.box_height, 0.0, 0.30, low_open=True)
         for name in ("box_depth", "box_mass", "gravity"):
             check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
+        if self.object_inertia is not None:
+            check_range("scene.object_inertia", self.object_inertia, 0.0, 1.0, low_open=True)
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
         check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
         for i, v in enumerate(self.initial_pose[:2]):
