@@ -359,7 +359,8 @@ def with_hand_object(scene: SceneConfig, given=()) -> SceneConfig:
     """`scene` with the object of its hand's YAML (HandObject) where the user did not choose:
     `given` names the SceneConfig fields the user set (options, a config file). The size applies
     unless a shape was given (box_width, box_height, object), the mass and friction unless given,
-    the inertia only with the hand's own size and mass. Unchanged for a hand without an object."""
+    the inertia with the hand's own size (scaled by a given mass: the same body, denser). Unchanged
+    for a hand without an object."""
     own = hand_file(scene.hand).object
     if own is None:
         return scene
@@ -371,8 +372,9 @@ def with_hand_object(scene: SceneConfig, given=()) -> SceneConfig:
         changes["box_mass"] = own.mass
     if own.mu is not None and "mu" not in given:
         changes["mu"] = own.mu
-    if own.inertia is not None and not (shape_given or given & {"box_mass", "object_inertia"}):
-        changes["object_inertia"] = own.inertia
+    if own.inertia is not None and not shape_given and "object_inertia" not in given:
+        mass = changes.get("box_mass", scene.box_mass)
+        changes["object_inertia"] = own.inertia if own.mass is None else own.inertia * mass / own.mass
     return dataclasses.replace(scene, **changes)
 
 
