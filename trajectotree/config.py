@@ -258,6 +258,24 @@ class SceneConfig:
             return self.shape.inertia(mass)
         return self.object_inertia if mass == self.box_mass else self.object_inertia * mass / self.box_mass
 
+    def _check_inertia_is_physical(self) -> None:
+        """ConfigError unless object_inertia and the prism's other moments (uniform, box_depth deep)
+        satisfy the triangle inequality, without which Drake's parser replaces the whole inertia."""
+        if self.object.is_box:
+            Sxx, Syy, Sxy = self.box_width**2 / 12, self.box_height**2 / 12, 0.0
+        else:
+            Sxx, Syy, Sxy = self.shape.second_moments()
+        low = self.box_mass * math.hypot(Sxx - Syy, 2 * Sxy)  # the in-plane principal moments' difference
+        high = self.box_mass * (Sxx + Syy + self.box_depth**2 / 6)
+        if not low <= self.object_inertia <= high:
+            raise ConfigError(
+                field="scene.object_inertia",
+                value=self.object_inertia,
+                problem=f"cannot be the object's: with its other moments (a uniform {self.box_depth:g} m deep prism of "
+                f"{self.box_mass:g} kg) it breaks the triangle inequality",
+                valid=f"[{low:.3g}, {high:.3g}] kg m^2",
+            )
+
     def __post_init__(self):
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
         check_range("scene.box_height", self.box_height, 0.0, 0.30, low_open=True)
@@ -265,6 +283,7 @@ class SceneConfig:
             check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
         if self.object_inertia is not None:
             check_range("scene.object_inertia", self.object_inertia, 0.0, 1.0, low_open=True)
+            self._check_inertia_is_physical()
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
         check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
         for i, v in enumerate(self.initial_pose[:2]):

@@ -82,14 +82,7 @@ def prism_inertia(shape: ConvexPolygon, mass: float, depth: float, izz: float | 
     """M_BBo_B of a uniform prism: `shape` (about its area centroid Bo) extruded `depth` m
     along z, symmetric about z = 0. I_zz is `izz`, else the plate's (shape.inertia, as the planners
     and the controller use); I_xx, I_yy and I_xy from the polygon's second moments of area."""
-    v = shape.vertices
-    x0, y0 = v[:, 0], v[:, 1]
-    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
-    cross = x0 * y1 - x1 * y0
-    area = cross.sum() / 2
-    Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area  # m^2, (1/A) int x^2 dA
-    Syy = np.sum(cross * (y0 * y0 + y0 * y1 + y1 * y1)) / 12 / area
-    Sxy = np.sum(cross * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)) / 24 / area
+    Sxx, Syy, Sxy = shape.second_moments()
     dz = depth * depth / 12
     izz = shape.inertia(mass) if izz is None else izz
     I = RotationalInertia(mass * (Syy + dz), mass * (Sxx + dz), izz, -mass * Sxy, 0.0, 0.0)
