@@ -163,6 +163,18 @@ class ConvexPolygon:
         """kg m^2, the moment of inertia about z through the centroid of a uniform plate of `mass` kg."""
         return mass * self._inertia_sum / 12.0
 
+    def second_moments(self) -> tuple[float, float, float]:
+        """(Sxx, Syy, Sxy) m^2: (1/A) int x^2, y^2 and x y dA over the polygon, about its centroid."""
+        v = self.vertices
+        x0, y0 = v[:, 0], v[:, 1]
+        x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+        cross = x0 * y1 - x1 * y0
+        area = cross.sum() / 2
+        Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area
+        Syy = np.sum(cross * (y0 * y0 + y0 * y1 + y1 * y1)) / 12 / area
+        Sxy = np.sum(cross * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)) / 24 / area
+        return float(Sxx), float(Syy), float(Sxy)
+
     def corner_arclengths(self) -> np.ndarray:
         """Arclengths (V,) of the vertices (for the box 0, h, h + w, 2h + w)."""
         return self._corners.copy()

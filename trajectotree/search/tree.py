@@ -61,7 +61,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from trajectotree.config import GoalPose, SearchConfig, mu_plan, with_segments
+from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
@@ -397,6 +397,13 @@ def _roots(
     """The initial grasps to try, best first: the user's, or the ranked candidates (from
     `tables` when given, else built here)."""
     if config.initial_arclengths is not None:
+        if len(config.initial_arclengths) != scene.num_fingers:
+            raise ConfigError(
+                field="search.initial_arclengths",
+                value=config.initial_arclengths,
+                problem=f"has {len(config.initial_arclengths)} entries",
+                valid=f"{scene.num_fingers}: one arclength (m) per finger of the hand",
+            )
         return _Roots([[search.wrap(s) for s in config.initial_arclengths]], scene.num_fingers), None
     if tables is None:
         table = initial_grasp_candidates(scene, config, search.reach)
