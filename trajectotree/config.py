@@ -555,6 +555,10 @@ class ControllerGains:
     ramp_time: float = 0.1  # s, a switching finger's force budget ramps to 0 after lift-off (back before landing)
     swing_lift: float = 0.008  # m, least fingertip gap mid-swing (its planned path, lifted where lower)
     contact_distance: float = 1e-3  # m, a planned fingertip this close to the planned box is in contact
+    # GraspController: the motors also drive the fingers' own links (mass matrix, Coriolis, joint damping). Off by
+    # default: on Drake's gripper (with min_normal_force 1.5 N) it ends 10 of 12 goals within 3e-4 rad but drops the
+    # other 2 (docs/results.md).
+    hand_dynamics: bool = False
     # The closed loop (simulate --closed-loop, trajectotree.execution.closed_loop): the contact watch, the
     # friction and mass estimates the grasp QP then uses, and the push reflex. Unused in open loop.
     slip_speed: float = 0.005  # m/s, a contact whose tangential velocity at the contact point exceeds this slides

@@ -328,3 +328,39 @@ def test_grasp_controller_pushes_along_the_normal_where_a_disc_is_touched_now():
         assert np.all(np.abs(lean) < 0.02), (turn, lean)
         pushes = -np.sum(f_W * n_W, axis=1)
         assert np.all(pushes >= gains.min_normal_force - 1e-6)
+
+
+@pytest.mark.parametrize("hand", ["planar_hand", "drake_planar_gripper"])
+def test_hand_dynamics_match_drakes_mass_matrix_and_bias_term(hand):
+    """The grasp controller's closed-form link dynamics (gains.hand_dynamics) against the plant's own:
+    each finger's mass matrix is the diagonal block of CalcMassMatrix, and its Coriolis torques the
+    bias term's rows (the joint damping is returned with them, at the model's coefficients)."""
+    from trajectotree.config import SceneConfig
+    from trajectotree.execution.control import HandKinematics
+
+    scene = build_scene(SceneConfig(hand=hand))
+    plant, context = scene.plant, scene.plant.CreateDefaultContext()
+    kinematics = HandKinematics(scene.fingers, scene.config.gravity)
+    rng = np.random.default_rng(2)
+    index = np.asarray(scene.hand_v_indices)
+    for _ in range(3):
+        q, v = rng.uniform(-1.0, 1.5, scene.num_hand_joints), rng.uniform(-2.0, 2.0, scene.num_hand_joints)
+        plant.SetPositions(context, scene.hand, q)
+        plant.SetVelocities(context, scene.hand, v)
+        M_drake = plant.CalcMassMatrix(context)[np.ix_(index, index)]
+        bias_drake = plant.CalcBiasTerm(context)[index]
+        M, motion = kinematics.dynamics(q, v)
+        damping = np.array([f.damping for f in scene.fingers])
+        for i in range(scene.num_fingers):
+            block = slice(2 * i, 2 * i + 2)
+            np.testing.assert_allclose(M[i], M_drake[block, block], rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(M_drake[block, : 2 * i], 0.0, atol=1e-12)  # no coupling between fingers
+            np.testing.assert_allclose(motion[i] - damping[i] * v[block], bias_drake[block], rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(
+            damping.ravel(),
+            [
+                plant.get_joint(j).default_damping_vector()[0]
+                for j in plant.GetJointIndices(scene.hand)
+                if plant.get_joint(j).num_velocities() == 1
+            ],
+        )

@@ -23,7 +23,9 @@ the box and the hand (the plant's; there is no estimator) and
   3. commands tau = J^T ((1 - s) K_t (p_target - p) + D (v_target - v)) + J_C^T f + g_hand,
      with fingertip targets the planned box-frame fingertip positions mapped through the
      MEASURED box pose (a switching finger follows its box-frame path, lifted): a finger
-     in contact is force-controlled, a free one position-controlled.
+     in contact is force-controlled, a free one position-controlled;
+  4. with gains.hand_dynamics, also M(q) J^+ (a_target - Jdot qdot) + Coriolis + joint damping, the torques
+     that move the links themselves (a touching finger with its box point, a swinging one along its path).
 Soft fingertip springs with strong object gains: stiff springs anchored to the
 measured box inject tangential force as the spheres roll and lose the grasp.
 """
@@ -42,6 +44,9 @@ from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
 from trajectotree.scene.plant import FingerGeometry, Scene, build_scene
+
+ACCEL_LIMIT = np.array([0.0, 0.0, 5.0])  # m/s^2, m/s^2, rad/s^2: the box feedback the fingers' own inertia follows
+SINGULAR_DAMPING = 0.01  # m, of the fingers' damped least-squares accelerations (a tenth of Drake's gripper's links)
 
 
 def check_finger_major(scene: Scene) -> None:
@@ -123,9 +128,28 @@ class HandKinematics:
     def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
         self.fingers = TwoLinkFinger.stack(fingers)
         m, c = np.array([f.masses for f in fingers]), np.array([f.coms for f in fingers])
+        inertia, l1 = np.array([f.inertias for f in fingers]), self.fingers.l1
         # dV/dq = [k1 cos a1 + k2 cos a12, k2 cos a12]
-        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * self.fingers.l1)
+        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * l1)
         self._k2 = gravity * m[:, 1] * c[:, 1]
+        # the mass matrix M(q) = [[d1 + 2 h cos q2, d2 + h cos q2], [d2 + h cos q2, d2]] of each finger
+        self._d2 = inertia[:, 1] + m[:, 1] * c[:, 1] ** 2
+        self._d1 = inertia[:, 0] + m[:, 0] * c[:, 0] ** 2 + self._d2 + m[:, 1] * l1**2
+        self._h = m[:, 1] * l1 * c[:, 1]
+        self.damping = np.array([f.damping for f in fingers])  # (F, 2) N m s/rad
+
+    def dynamics(self, q, v) -> tuple[np.ndarray, np.ndarray]:
+        """At joint angles q and rates v (2F each): each finger's mass matrix M (F, 2, 2) and the
+        torques its motion costs besides M qdd, Coriolis and joint damping, (F, 2)."""
+        q, v = np.reshape(q, (-1, 2)), np.reshape(v, (-1, 2))
+        c2, s2 = np.cos(q[:, 1]), np.sin(q[:, 1])
+        M = np.empty((len(q), 2, 2))
+        M[:, 0, 0] = self._d1 + 2 * self._h * c2
+        M[:, 0, 1] = M[:, 1, 0] = self._d2 + self._h * c2
+        M[:, 1, 1] = self._d2
+        hs = self._h * s2
+        coriolis = np.column_stack([-hs * (2 * v[:, 0] * v[:, 1] + v[:, 1] ** 2), hs * v[:, 0] ** 2])
+        return M, coriolis + self.damping * v
 
     def __call__(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At joint angles q (2F, finger-major): fingertip centres p_WF (F, 2), Jacobians
@@ -333,19 +357,26 @@ class GraspController(LeafSystem):
         )
         return EventStatus.Succeeded()
 
-    def desired_wrench(self, n: int, box_state, estimates: Estimates | None = None) -> np.ndarray:
-        """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n."""
+    def desired_acceleration(self, n: int, box_state, estimates: Estimates | None = None) -> np.ndarray:
+        """(3,) the box's desired acceleration at sample n: the plan's, with pose and velocity feedback."""
         s, g = self.schedule, self.gains
         error = s.X[n] - box_state[:3]
         error[2] = (error[2] + np.pi) % (2 * np.pi) - np.pi
-        if estimates is None:
-            mass, inertia, kp, kd = self._mass, self._inertia, g.object_kp, g.object_kd
-        else:
+        kp, kd = g.object_kp, g.object_kd
+        if estimates is not None:
             # kd grows with the square root of kp: the same damping ratio, a faster response.
             boost = 1.0 + estimates.reflex * (g.reflex_gain - 1.0)
-            mass, inertia = estimates.mass, self._scene_config.inertia_zz(estimates.mass)
             kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
-        a = s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
+        return s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
+
+    def desired_wrench(self, n: int, box_state, estimates: Estimates | None = None) -> np.ndarray:
+        """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n."""
+        g = self.gains
+        if estimates is None:
+            mass, inertia = self._mass, self._inertia
+        else:
+            mass, inertia = estimates.mass, self._scene_config.inertia_zz(estimates.mass)
+        a = self.desired_acceleration(n, box_state, estimates)
         wrench = np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
         if estimates is not None:
             wrench[:2] -= g.disturbance_feedforward * estimates.disturbance
@@ -432,4 +463,33 @@ class GraspController(LeafSystem):
         # tangential force also turns the second link (without it a static hold settled 0.035 rad off).
         lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)  # perp(r_FC) . f
         tau = np.einsum("fij,fi->fj", J_WF, spring + f_W) + lever[:, None] + g_hand
+        if g.hand_dynamics:
+            tau = tau + self.link_torques(n, q, box_state, r_W, v_target, J_WF, estimates)
         return self._u_from_tau @ tau.ravel()
+
+    def link_torques(self, n, q, box_state, r_W, v_target, J_WF, estimates) -> np.ndarray:
+        """(F, 2) the joint torques that move the fingers' own links (gains.hand_dynamics)."""
+        s = self.schedule
+        R = rotation_2d(box_state[2])
+        # The motors also move the links: a finger in contact accelerates with the box point it touches
+        # (the box at its desired acceleration), so that its own inertia and damping do not eat the QP's
+        # forces (Drake's gripper: 0.0083 kg m^2 links, reflected ~20 kg along a face it pushes).
+        w = box_state[5]
+        feedback = np.clip(self.desired_acceleration(n, box_state, estimates) - s.A[n], -ACCEL_LIMIT, ACCEL_LIMIT)
+        accel = s.A[n] + feedback
+        a_BF = (s.v_BF[min(n + 1, len(s.X) - 1)] - s.v_BF[max(n - 1, 0)]) / (2 * s.period)
+        swinging = (1.0 - s.force_scale[n])[:, None]
+        a_target = (
+            accel[:2] + accel[2] * perp(r_W) - w**2 * r_W + swinging * (a_BF @ R.T + 2 * w * perp(s.v_BF[n] @ R.T))
+        )
+        # damped least squares: near a straight finger (q2 ~ 0) the exact inverse asks for unbounded torques
+        JJt = J_WF @ np.swapaxes(J_WF, 1, 2) + SINGULAR_DAMPING**2 * np.eye(2)
+
+        def inverse(x):
+            return np.einsum("fji,fj->fi", J_WF, np.linalg.solve(JJt, x[..., None])[..., 0])
+
+        vd = inverse(v_target)  # the joint rates that follow the targets
+        M, motion = self._kinematics.dynamics(q, vd)
+        r1, r2 = self._kinematics.fingers.links(q.reshape(-1, 2))
+        bias = -(vd[:, :1] ** 2) * r1 - ((vd[:, 0] + vd[:, 1]) ** 2)[:, None] * r2  # Jdot qdot
+        return motion + np.einsum("fij,fj->fi", M, inverse(a_target - bias))

@@ -147,6 +147,7 @@ class FingerGeometry(TwoLinkFinger):
     masses: np.ndarray  # (2,) kg, link masses (with the bodies welded to them)
     coms: np.ndarray  # (2,) m, link centre of mass along the link's x axis
     inertias: np.ndarray  # (2,) kg m^2, link rotational inertia about the plane's normal at its COM
+    damping: np.ndarray  # (2,) N m s/rad, the joints' viscous damping in the model
     # (LinkRectangle | None, LinkRectangle | None): link 1's collision box in joint 1's link frame, link 2's
     # in joint 2's; None for a link without collision geometry (it passes through the object in simulation too)
     link_boxes: tuple
@@ -686,6 +687,7 @@ def read_hand(plant: MultibodyPlant, scene_graph: SceneGraph, instance, hand: Ha
                 masses=np.array([m for m, _, _ in inertia]),
                 coms=np.array([com_L[0] for _, com_L, _ in inertia]),
                 inertias=np.array([I for _, _, I in inertia]),
+                damping=np.array([j.default_damping_vector()[0] for j in joints]),
                 link_boxes=tuple(boxes),
                 joints=tuple(entry.joints),
                 link_bodies=tuple(b.name() for b in links),
