@@ -553,7 +553,7 @@ class ControllerGains:
     land_friction_drop: float = 0.05  # 1
     land_approach_time: float = 0.1  # s of the plan, the end of the path to the landing, run land_approach_speedup x
     land_approach_speedup: float = 4.0  # 1
-    land_lag: float = 0.003  # m, the path's sample waits while the fingertip is farther than this from its target
+    land_lag: float = 0.02  # m, the path's sample waits while the fingertip is farther than this from its target
     land_tip_kp: float = 400.0  # N/m
     land_tip_kd: float = 5.0  # N s/m
 
