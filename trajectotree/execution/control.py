@@ -366,6 +366,7 @@ class GraspController(LeafSystem):
         """(F,) m, how far each measured fingertip is from its target at its schedule sample `clocks`."""
         p_WF = self._kinematics(hand_state[: self._num_joints])[0]
         R = rotation_2d(box_state[2])
+        clocks = np.minimum(clocks, len(self.schedule.X) - 1)
         p_target = box_state[:2] + self.schedule.p_BF[clocks, np.arange(self._num_fingers)] @ R.T
         return np.linalg.norm(p_target - p_WF, axis=1)
 
@@ -377,7 +378,8 @@ class GraspController(LeafSystem):
         path lifted as planned, so that it lands where the plan lands it, only sooner. Its sample waits
         while the fingertip lags its target by more than gains.land_lag (`lag` (F,) m, path_lag; None:
         none lags): a target run far ahead drew the finger after it at 3 m/s into the box."""
-        clocks = np.maximum(previous, n)
+        # within this schedule: a replanning phase's controller takes the last phase's state
+        clocks = np.minimum(np.maximum(previous, n), len(self.schedule.X) - 1)
         if self.gains.land_speedup <= 1.0:
             return np.full(self._num_fingers, n)
         g = self.gains
