@@ -286,7 +286,9 @@ class GraspController(LeafSystem):
     cones at reflex_friction_safety x the estimate and weights its torque residual by
     reflex_torque_weight: a three-finger grasp that barely opposes a push then spends what it
     has on the push without turning the box (each turn of the box is a grasp the plan never
-    checked)."""
+    checked). The landing reflex (closed loop, landing_clocks): while the reflex is on or the
+    friction estimate has fallen, a swinging finger runs its planned swing ahead to its next
+    landing, so that the grasp has all its fingers again within tens of milliseconds."""
 
     def __init__(
         self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float, closed_loop: bool = False
