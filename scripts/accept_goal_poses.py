@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import Config, ConfigError, GoalPose
-from trajectotree.execution.simulate import run_simulation
+from trajectotree.execution.run import run_simulation
 from trajectotree.io import load_plan, load_sim, save_plan, save_sim
 from trajectotree.planning.planners import plan
 from trajectotree.scene.plant import build_scene

@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from trajectotree.config import Config, GoalPose, segments_for
-from trajectotree.execution.simulate import run_simulation
+from trajectotree.execution.run import run_simulation
 from trajectotree.io import save_plan, save_sim
 from trajectotree.planning.planners import plan
 from trajectotree.scene.plant import build_scene

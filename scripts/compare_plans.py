@@ -43,7 +43,9 @@ for k, goal in enumerate(sample_goals(60, seed)[:goals]):
 def plan_all(tree: Path, out: Path, goals: int, seed: int) -> None:
     out.mkdir()
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    subprocess.run([sys.executable, "-c", CHILD, str(out), str(goals), str(seed)], env=env, check=True)
+    # run in `tree`: `python -c` puts the working directory first on sys.path, so run from this checkout's
+    # root both children would import this tree and compare it with itself
+    subprocess.run([sys.executable, "-c", CHILD, str(out), str(goals), str(seed)], env=env, cwd=tree, check=True)
 
 
 def main() -> None:

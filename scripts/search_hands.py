@@ -4,9 +4,9 @@ sequence for, and the median search time, in one run (docs/measurements.md, "Han
 
     python scripts/search_hands.py [--goals 12] [--seed 0] [--plan] [--hands NAME ...]
 
-Drake's planar gripper holds Drake's planar brick (0.1 x 0.1 m, 28 g) with goals in [-pi/2, pi/2];
-the four- and five-finger hands the default box with goals in [-pi, pi]. Execution takes four
-fingers yet, so nothing here is simulated.
+Drake's planar gripper holds Drake's planar brick (its YAML's object: 0.1 x 0.1 m, 28 g, friction 1.0)
+with goals in [-pi/2, pi/2]; the four- and five-finger hands the default box with goals in [-pi, pi].
+Nothing here is simulated.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import time
 from trajectotree.config import Config, SceneConfig, SearchConfig
 from trajectotree.experiments.sweep import sample_goals
 from trajectotree.planning.planners import plan as plan_goal
+from trajectotree.scene.hand import with_hand_object
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import find_contact_plan
@@ -26,11 +27,7 @@ from trajectotree.search.tree import find_contact_plan
 HANDS = (
     ("planar_hand", SceneConfig(), math.pi),
     ("planar_hand5", SceneConfig(hand="planar_hand5"), math.pi),
-    (
-        "drake_planar_gripper",
-        SceneConfig(hand="drake_planar_gripper", box_width=0.1, box_height=0.1, box_mass=0.028),
-        math.pi / 2,
-    ),
+    ("drake_planar_gripper", with_hand_object(SceneConfig(hand="drake_planar_gripper")), math.pi / 2),
 )
 
 

@@ -233,6 +233,8 @@ class SceneConfig:
     box_height: float = 0.10  # m, object extent along its y axis
     box_depth: float = 0.05  # m, extent along z (only for 3D geometry; the task is planar)
     box_mass: float = 0.05  # kg, the object's mass (box or polygon)
+    # kg m^2, the object's moment of inertia about z at its centroid; None: a uniform plate's (shape.inertia)
+    object_inertia: float | None = None
     mu: float = 0.7  # friction coefficient between fingertips and object
     gravity: float = 9.81  # m/s^2, magnitude; gravity points along -y in W
     initial_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m, m, rad) object pose x_0 in W
@@ -248,11 +250,40 @@ class SceneConfig:
             return ConvexPolygon.box(self.box_width, self.box_height)
         return ConvexPolygon.from_points(self.object.outline(), smooth=self.object.vertices is None)
 
+    def inertia_zz(self, mass: float | None = None) -> float:
+        """kg m^2, the object's moment of inertia about z at its centroid for `mass` kg (None:
+        box_mass): object_inertia scaled by mass / box_mass, else a uniform plate's."""
+        mass = self.box_mass if mass is None else mass
+        if self.object_inertia is None:
+            return self.shape.inertia(mass)
+        return self.object_inertia if mass == self.box_mass else self.object_inertia * mass / self.box_mass
+
+    def _check_inertia_is_physical(self) -> None:
+        """ConfigError unless object_inertia and the prism's other moments (uniform, box_depth deep)
+        satisfy the triangle inequality, without which Drake's parser replaces the whole inertia."""
+        if self.object.is_box:
+            Sxx, Syy, Sxy = self.box_width**2 / 12, self.box_height**2 / 12, 0.0
+        else:
+            Sxx, Syy, Sxy = self.shape.second_moments()
+        low = self.box_mass * math.hypot(Sxx - Syy, 2 * Sxy)  # the in-plane principal moments' difference
+        high = self.box_mass * (Sxx + Syy + self.box_depth**2 / 6)
+        if not low <= self.object_inertia <= high:
+            raise ConfigError(
+                field="scene.object_inertia",
+                value=self.object_inertia,
+                problem=f"cannot be the object's: with its other moments (a uniform {self.box_depth:g} m deep prism of "
+                f"{self.box_mass:g} kg) it breaks the triangle inequality",
+                valid=f"[{low:.3g}, {high:.3g}] kg m^2",
+            )
+
     def __post_init__(self):
         check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
         check_range("scene.box_height", self.box_height, 0.0, 0.30, low_open=True)
         for name in ("box_depth", "box_mass", "gravity"):
             check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
+        if self.object_inertia is not None:
+            check_range("scene.object_inertia", self.object_inertia, 0.0, 1.0, low_open=True)
+            self._check_inertia_is_physical()
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
         check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
         for i, v in enumerate(self.initial_pose[:2]):
@@ -318,7 +349,7 @@ class SearchConfig:
     # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
     # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
     # roots the search at the best ones in turn (trajectotree.search.initial_grasp).
-    initial_arclengths: tuple[float, float, float, float] | None = None
+    initial_arclengths: tuple[float, ...] | None = None
     # bool: initial_arclengths are where a measured start's fingers are (trajectotree.planning.start): the
     # root keeps them even near a corner or with two fingertips closer than their diameter, as they are
     measured_start: bool = False
@@ -327,9 +358,14 @@ class SearchConfig:
     # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
     # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
     friction_safety: float = 0.7
-    # bool: every three-finger stance must also be in closure at mu_plan (and off the corners) at
-    # the contacts its sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
+    # bool: every three-finger stance (all four fingers in a segment without a switch) must also be in
+    # closure at mu_plan, on its faces and rolled_corner_gap short of their corners, at the contacts its
+    # sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
     rolled_stances: bool = True
+    # m, how far short of a corner (a vertex ending a side) a stance's rolled contacts must stay: a sphere
+    # that rolls onto a corner pivots over it, its normal turning by the corner's angle; about twice the
+    # rolling prediction's error in simulation (trajectotree.search.stance). Used with rolled_stances only.
+    rolled_corner_gap: float = 0.002
     # N, a switch is refused when its three holding fingers need more than this total normal force
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
     # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
@@ -373,13 +409,21 @@ class SearchConfig:
             )
         check_range("search.displacement_step", self.displacement_step, 0.0, 0.2, low_open=True)
         if self.initial_arclengths is not None:
-            check_length("search.initial_arclengths", self.initial_arclengths, 4, "one arclength (m) per finger")
+            # the count must be the hand's finger count, which only the scene knows (search.tree checks it)
+            if len(self.initial_arclengths) < 3:
+                raise ConfigError(
+                    field="search.initial_arclengths",
+                    value=self.initial_arclengths,
+                    problem=f"has {len(self.initial_arclengths)} entries",
+                    valid="one arclength (m) per finger of the hand (at least 3)",
+                )
             for i, s in enumerate(self.initial_arclengths):
                 check_range("search.initial_arclengths", s, 0.0, 10.0, index=(i,))
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
         check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_bool("search.rolled_stances", self.rolled_stances)
+        check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
         check_integer("search.window_segments", self.window_segments, 1, 100)

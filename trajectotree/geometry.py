@@ -163,6 +163,18 @@ class ConvexPolygon:
         """kg m^2, the moment of inertia about z through the centroid of a uniform plate of `mass` kg."""
         return mass * self._inertia_sum / 12.0
 
+    def second_moments(self) -> tuple[float, float, float]:
+        """(Sxx, Syy, Sxy) m^2: (1/A) int x^2, y^2 and x y dA over the polygon, about its centroid."""
+        v = self.vertices
+        x0, y0 = v[:, 0], v[:, 1]
+        x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+        cross = x0 * y1 - x1 * y0
+        area = cross.sum() / 2
+        Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area
+        Syy = np.sum(cross * (y0 * y0 + y0 * y1 + y1 * y1)) / 12 / area
+        Sxy = np.sum(cross * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)) / 24 / area
+        return float(Sxx), float(Syy), float(Sxy)
+
     def corner_arclengths(self) -> np.ndarray:
         """Arclengths (V,) of the vertices (for the box 0, h, h + w, 2h + w)."""
         return self._corners.copy()
@@ -261,10 +273,19 @@ class ConvexPolygon:
 
     def corner_free(self, arclengths, margin: float) -> np.ndarray:
         """(k,) bool, whether each arclength keeps corner_margins(margin) from every vertex."""
+        return np.all(self._vertex_gaps(arclengths) >= self.corner_margins(margin), axis=-1)
+
+    def clear_of_sides_ends(self, arclengths, gap: float) -> np.ndarray:
+        """(k,) bool, whether each arclength keeps `gap` m from every vertex that ends a side (one a
+        rolling fingertip pivots over: it turns SMOOTH_VERTEX_ANGLE or more; see `sides`)."""
+        ends = self.exterior_angles >= SMOOTH_VERTEX_ANGLE
+        return np.all(self._vertex_gaps(arclengths)[..., ends] >= gap, axis=-1)
+
+    def _vertex_gaps(self, arclengths) -> np.ndarray:
+        """(k, V) m, the arclength from each of `arclengths` to each vertex, either way round."""
         s = np.mod(np.asarray(arclengths, dtype=float), self.perimeter)
         gap = np.abs(s[..., None] - self._corners)
-        gap = np.minimum(gap, self.perimeter - gap)
-        return np.all(gap >= self.corner_margins(margin), axis=-1)
+        return np.minimum(gap, self.perimeter - gap)
 
     def signed_distance(self, p_B) -> float:
         """Exact signed distance from p_B to the polygon (negative inside)."""

@@ -31,7 +31,8 @@ class RefusalKind(enum.Enum):
     STUCK_FINGER_HELD = "stuck_finger_held"  # the same for a finger that must move (its contact leaves reach)
     NEW_CONTACT_UNREACHABLE = "new_contact_unreachable"  # `fingers[0]`'s new contact: out of reach or at a corner
     SWITCH_BOUND = "switch_bound"  # more contact switches left than steps (search.switch_bound)
-    STANCE_ROLLS_OFF = "stance_rolls_off"  # a holding fingertip of `stance` rolls off its face
+    STANCE_ROLLS_OFF = "stance_rolls_off"  # a holding fingertip of `stance` rolls off its face or within `limit` m
+    # (search.rolled_corner_gap) of a corner
     STANCE_ROLLED_OPEN = "stance_rolled_open"  # `stance` not in closure at mu_plan where its tips roll to
     STANCE_TOO_HEAVY = "stance_too_heavy"  # `stance` needs more than `limit` N to hold the weight
     # an initial grasp is skipped before its tree is searched
@@ -135,7 +136,9 @@ _TEXT = {
     ),
     RefusalKind.NEW_CONTACT_UNREACHABLE: lambda r: f"{_finger(r)} new contact out of reach or at a corner",
     RefusalKind.SWITCH_BOUND: lambda r: "too many switches left (bound)",
-    RefusalKind.STANCE_ROLLS_OFF: lambda r: f"{_stance(r)} rolls off a face",
+    RefusalKind.STANCE_ROLLS_OFF: lambda r: (
+        f"{_stance(r)} rolls off a face" + ("" if r.limit is None else f" or to within {r.limit:g} m of a corner")
+    ),
     RefusalKind.STANCE_ROLLED_OPEN: lambda r: f"{_stance(r)} not in closure at mu_plan at its rolled contacts",
     RefusalKind.STANCE_TOO_HEAVY: lambda r: f"{_stance(r)} needs more than {r.limit:g} N to hold the object's weight",
     RefusalKind.INITIAL_GRASP: lambda r: _caused(

@@ -138,3 +138,20 @@ def test_a_hand_that_cannot_reach_the_object_is_refused_naming_the_finger(tmp_pa
     )
     assert "finger(s) [2] reach no corner-free contact at the initial pose" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_gripper_holds_drakes_brick_unless_the_options_or_config_say_otherwise(tmp_path, capsys):
+    def scene_object(*args):
+        assert main(["scene", "--hand", "drake_planar_gripper", *args, "--json"]) == 0
+        return json.loads(capsys.readouterr().out)["object"]
+
+    brick = scene_object()
+    assert (brick["size_m"], brick["mass_kg"], brick["mu"]) == ([0.1, 0.1], 0.028, 1.0)
+    assert brick["inertia_zz_kg_m2"] == pytest.approx(1.17e-5)
+    told = scene_object("--mass", "0.05", "--mu", "0.8")
+    assert (told["size_m"], told["mass_kg"], told["mu"]) == ([0.1, 0.1], 0.05, 0.8)
+    config = tmp_path / "c.yaml"
+    config.write_text("scene: {mu: 0.6, box_width: 0.12}\n")
+    filed = scene_object("--config", str(config))
+    assert (filed["size_m"], filed["mass_kg"], filed["mu"]) == ([0.12, 0.1], 0.028, 0.6)
+    assert filed["inertia_zz_kg_m2"] == pytest.approx(0.028 * (0.12**2 + 0.1**2) / 12)  # a uniform plate's

@@ -1,6 +1,7 @@
 """Executing a sweep's plans again per controller and robustness condition (trajectotree.experiments.executions)."""
 
 import dataclasses
+import functools
 import json
 import shutil
 
@@ -20,6 +21,7 @@ from trajectotree.experiments.executions import (
     pending_executions,
     refused_markdown,
     refused_replans,
+    run_executions,
     torn_executions,
 )
 
@@ -147,27 +149,25 @@ def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path, capsys):
+def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path):
     """The same plans executed open and closed loop under a hard push: the report lists both."""
-    from conftest import SMALL_SWEEP
-
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
-    args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2", "--conditions", "push-3N"]
-    assert main(args) == 0
-    assert "executions: 4 run (grasp x push-3N)" in capsys.readouterr().out
-    assert main(args + ["--closed-loop"]) == 0
-    assert "executions: 4 run (grasp closed loop x push-3N)" in capsys.readouterr().out
-    trial = next(p for p in (out / "trials").iterdir() if p.is_dir() and not p.name.startswith("."))
+    # TrajectoTree's plans only (the command would execute every method's; the simulations are the cost)
+    run = functools.partial(
+        run_executions, out, controllers=["grasp"], conditions=["push-3N"], methods=["trajectotree"], progress=False
+    )
+    assert run(workers=2) == 2 and run(workers=2, closed_loop=True) == 2
+    trial = out / "trials" / "0000_trajectotree"
     closed = json.loads((execution_dir(trial, "grasp", "push-3N", closed_loop=True) / "sim.json").read_text())
     assert closed["controller"] == "grasp" and closed["closed_loop"] is not None
     assert closed["conditions"]["push"]["force"] == [3.0, 0.0]
     report = tmp_path / "report"
     assert main(["report", str(out), "--out", str(report)]) == 0
     table = (report / "executions.md").read_text()
-    for method in ("TrajectoTree", "CITO, warm-start"):
-        rows = [line for line in table.splitlines() if line.startswith(f"| {method} |") and "push-3N" in line]
-        assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-closed-loop"], table
+    rows = [line for line in table.splitlines() if line.startswith("| TrajectoTree |") and "push-3N" in line]
+    assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-closed-loop"], table
+    assert "| CITO, warm-start | grasp | push-3N |" not in table  # not executed
 
 
 def test_a_closed_loop_execution_beside_a_finished_open_loop_one_is_not_called_torn(tmp_path):
@@ -261,27 +261,28 @@ def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_ru
 
 
 @pytest.mark.slow
-def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path, capsys):
+def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path):
     """The same plans at friction 0.4 open loop and replanning: executions.md lists both per condition,
     with the replans, and sim.json records each replan's typed outcome."""
-    from conftest import SMALL_SWEEP
-
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
-    args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2", "--conditions", "friction-0.4"]
-    assert main(args) == 0
-    assert main(args + ["--replan"]) == 0  # the cito-warm plans replanned by TrajectoTree too
-    assert "executions: 4 run (grasp closed loop, replanning x friction-0.4)" in capsys.readouterr().out
-    trial = next(p for p in (out / "trials").iterdir() if p.is_dir() and p.name.endswith("_trajectotree"))
-    replanned = json.loads((execution_dir(trial, "grasp", "friction-0.4", replan=True) / "sim.json").read_text())
-    assert replanned["closed_loop"] is not None and replanned["conditions"]["sim_mu"] == 0.4
-    for event in replanned["replans"]:
+    # The cito-warm plans only, replanned by TrajectoTree (the command would execute every method's)
+    run = functools.partial(
+        run_executions, out, controllers=["grasp"], conditions=["friction-0.4"], methods=["cito-warm"], progress=False
+    )
+    assert run(workers=2) == 2 and run(workers=2, replan=True) == 2
+    runs = [execution_dir(out / "trials" / f"{i:04d}_cito-warm", "grasp", "friction-0.4", replan=True) for i in (0, 1)]
+    replanned = [json.loads((folder / "sim.json").read_text()) for folder in runs]
+    assert all(run["closed_loop"] is not None and run["conditions"]["sim_mu"] == 0.4 for run in replanned)
+    events = [event for run in replanned for event in run["replans"]]
+    assert events  # at friction 0.4 a plan made for 0.7 no longer holds somewhere
+    for event in events:
         assert event["outcome"] in ("planned", "partial", "start_refused", "search_deadline", "no_plan")
         assert event["latency_s"] > 0 and event["takes_effect_s"] == pytest.approx(event["time_s"] + event["latency_s"])
     report = tmp_path / "report"
     assert main(["report", str(out), "--out", str(report)]) == 0
     table, _, refused = (report / "executions.md").read_text().partition("## Replans without a plan")
-    rows = [line for line in table.splitlines() if line.startswith("| TrajectoTree |") and "friction-0.4" in line]
+    rows = [line for line in table.splitlines() if line.startswith("| CITO, warm-start |") and "friction-0.4" in line]
     assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-replan"], table
-    without = [e for e in replanned["replans"] if not e["planned"]]
+    without = [e for e in events if not e["planned"]]
     assert all(e["status"].replace("|", "/") in refused for e in without), refused  # each one's reason, per goal

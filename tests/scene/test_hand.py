@@ -18,7 +18,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import HAND_NAMES, ConfigError, SceneConfig
-from trajectotree.scene.hand import HandError, finger_bodies, hand_file, load_hand
+from trajectotree.scene.hand import HandError, finger_bodies, hand_file, load_hand, with_hand_object
 from trajectotree.scene.kinematics import TwoLinkFinger
 from trajectotree.scene.plant import build_scene
 
@@ -271,3 +271,44 @@ def test_a_model_without_its_yaml_and_unknown_names_are_refused(tmp_path):
     with pytest.raises(HandError, match="finger 0: its base 'finger1_base' .* is free in the model; weld it"):
         load_hand(str(model))
     assert dataclasses.replace(SceneConfig(), hand=str(model)).hand == str(model)
+
+
+def test_the_gripper_yamls_object_is_drakes_brick_as_its_sdf_reads():
+    """The brick the gripper's YAML names (with_hand_object's defaults) against planar_brick.sdf
+    parsed by Drake: its collision box in the hand's plane, its mass, its inertia about the axis
+    normal to the plane, and the friction Drake's parser gives it (the SDF names none)."""
+    own = hand_file("drake_planar_gripper").object
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
+    Parser(plant).AddModels(FindResourceOrThrow("drake/examples/planar_gripper/planar_brick.sdf"))
+    plant.Finalize()
+    body = plant.GetBodyByName("brick_link")
+    R_WM = hand_file("drake_planar_gripper").R_WM
+    inspector = scene_graph.model_inspector()
+    boxes = [g for g in plant.GetCollisionGeometriesForBody(body) if inspector.GetShape(g).__class__.__name__ == "Box"]
+    assert len(boxes) == 1
+    size_W = np.abs(R_WM @ inspector.GetShape(boxes[0]).size())
+    np.testing.assert_allclose(own.size, size_W[:2])
+    assert own.mass == body.default_mass()
+    I_W = R_WM @ body.default_rotational_inertia().CopyToFullMatrix3() @ R_WM.T
+    assert own.inertia == pytest.approx(I_W[2, 2], rel=1e-12)
+    friction = inspector.GetProximityProperties(boxes[0]).GetProperty("material", "coulomb_friction")
+    assert own.mu == friction.static_friction() == friction.dynamic_friction()
+
+
+def test_the_hands_object_fills_only_what_the_user_left_unset():
+    """with_hand_object: the brick for a bare SceneConfig, a given shape keeps the brick's mass and
+    friction but not its inertia, a given mass scales it; a hand without an object is unchanged."""
+    bare = with_hand_object(SceneConfig(hand="drake_planar_gripper"))
+    assert (bare.box_width, bare.box_height, bare.box_mass, bare.mu, bare.object_inertia) == (
+        0.1,
+        0.1,
+        0.028,
+        1.0,
+        1.17e-5,
+    )
+    box = with_hand_object(SceneConfig(hand="drake_planar_gripper", box_width=0.12), {"box_width"})
+    assert (box.box_width, box.box_height, box.box_mass, box.object_inertia) == (0.12, 0.1, 0.028, None)
+    heavy = with_hand_object(SceneConfig(hand="drake_planar_gripper", box_mass=0.056, mu=0.5), {"box_mass", "mu"})
+    assert (heavy.box_mass, heavy.mu) == (0.056, 0.5) and heavy.object_inertia == pytest.approx(2.34e-5)
+    assert with_hand_object(SceneConfig()) == SceneConfig()

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from trajectotree.config import SceneConfig
+from trajectotree.config import ConfigError, ObjectConfig, SceneConfig
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
 
@@ -92,3 +92,31 @@ def test_planar_joint_moves_box_in_plane(scene):
     X_WB = scene.plant.GetBodyByName("box", scene.box).EvalPoseInWorld(ctx)
     np.testing.assert_allclose(X_WB.translation(), [0.01, -0.02, 0.0], atol=1e-12)
     np.testing.assert_allclose(X_WB.rotation().ToRollPitchYaw().vector(), [0, 0, 0.3], atol=1e-12)
+
+
+HEXAGON = ObjectConfig(vertices=tuple((0.06 * np.cos(a), 0.06 * np.sin(a)) for a in np.arange(6) * np.pi / 3))
+
+
+@pytest.mark.parametrize("object_config", [ObjectConfig(), HEXAGON])
+def test_an_object_inertia_reaches_the_plant_the_check_the_cito_model_and_the_controller(object_config):
+    """scene.object_inertia (Drake's brick's 1.17e-5 kg m^2, not a uniform plate's) is the plant body's
+    I_zz, the physics check's and CITO's inertia, and the grasp controller's (scaled by an estimated mass)."""
+    from trajectotree.cito.knot import BodyParams
+    from trajectotree.planning.physics import ObjectModel
+
+    config = SceneConfig(box_width=0.1, box_height=0.1, box_mass=0.028, object_inertia=1.17e-5, object=object_config)
+    scene = build_scene(config)
+    body = scene.plant.GetBodyByName("box", scene.box)
+    izz = body.default_spatial_inertia().CalcRotationalInertia().CopyToFullMatrix3()[2, 2]
+    assert izz == pytest.approx(1.17e-5, rel=1e-12)
+    assert ObjectModel.from_scene(scene).inertia == 1.17e-5
+    assert BodyParams(scene, 100.0, mu=0.7).inertia == 1.17e-5
+    assert config.inertia_zz(0.056) == pytest.approx(2.34e-5)
+    assert SceneConfig().inertia_zz() == SceneConfig().shape.inertia(0.05)
+
+
+def test_an_object_inertia_no_body_can_have_is_refused():
+    """I_zz must satisfy the triangle inequality with the prism's other moments (Drake's parser would
+    replace the whole inertia): Drake's brick's 1.17e-5 is fine for its 0.1 x 0.1 m, not for a 0.2 x 0.1 m box."""
+    with pytest.raises(ConfigError, match=r"scene.object_inertia = 1.17e-05 .*triangle inequality.*\[7e-05, "):
+        SceneConfig(box_mass=0.028, object_inertia=1.17e-5)

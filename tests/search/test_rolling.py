@@ -11,8 +11,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trajectotree.config import Config, ConfigError, SearchConfig
+from trajectotree.config import Config, ConfigError, ObjectConfig, SceneConfig, SearchConfig
 from trajectotree.experiments.sweep import sample_goals
+from trajectotree.geometry import SMOOTH_VERTEX_ANGLE
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.grasp import required_mu_many
 from trajectotree.search.tree import find_contact_plan
@@ -81,6 +82,48 @@ def test_goal_1804_stances_hold_at_their_rolled_contacts(scene):
     # the rolling-aware search's plan: every stance in closure at mu_plan at both ends, rolled
     assert all(max(mus) <= mu_plan + 1e-6 for _, *mus in rolled_stance_mus(scene, rolling))
     assert [tuple(n.arclengths) for n in rolling.nodes] != [tuple(n.arclengths) for n in fixed.nodes]
+
+
+def rolled_corner_gaps(scene, plan) -> list[float]:
+    """m, for every segment's holding fingers (all but the switching one, all four when none
+    switches) at both its ends: each rolled contact's arclength to the nearest vertex that ends
+    a side (one turning SMOOTH_VERTEX_ANGLE or more)."""
+    shape, r, nodes = scene.config.shape, scene.tip_radius, plan.nodes
+    ends = shape.corner_arclengths()[shape.exterior_angles >= SMOOTH_VERTEX_ANGLE]
+    turn = [link2_angles(scene, n.q) - n.object_pose[2] for n in nodes]
+    gaps = []
+    for n in range(1, len(nodes)):
+        stance = [j for j in range(NUM_FINGERS) if j != nodes[n].switching_finger]
+        for m in (n - 1, n):
+            for j in stance:
+                landed = max([k for k in range(1, m + 1) if nodes[k].switching_finger == j], default=0)
+                delta = np.angle(np.exp(1j * (turn[m][j] - turn[landed][j])))
+                s = (nodes[m].arclengths[j] + r * delta) % shape.perimeter
+                d = np.abs(s - ends)
+                gaps.append(float(np.min(np.minimum(d, shape.perimeter - d))))
+    return gaps
+
+
+def test_rolled_contacts_stay_short_of_corners():
+    """The polygon gallery's quadrilateral, goal -1.446 (seed-0 goal 1 of 12): without the corner gap
+    the plan's finger 1, planned 13.5 mm from a 56 deg corner, rolls to within 0.1 mm of it (in
+    simulation it pivoted over the corner and the object dropped); with it, no rolled contact of the
+    plan comes closer than search.rolled_corner_gap to a corner."""
+    vertices = ((-0.09, -0.05), (0.08, -0.06), (0.06, 0.06), (-0.05, 0.04))
+    config = Config(scene=SceneConfig(object=ObjectConfig(vertices=vertices)))
+    scene = build_scene(config.scene)
+    goal = float(sample_goals(12, 0)[1])
+    assert goal == pytest.approx(-1.4465, abs=1e-4)
+    gapless = find_contact_plan(scene, goal, dataclasses.replace(config.search, rolled_corner_gap=0.0))
+    kept = find_contact_plan(scene, goal, config.search)
+    assert gapless.success and kept.success
+    assert min(rolled_corner_gaps(scene, gapless)) < 1e-4
+    assert min(rolled_corner_gaps(scene, kept)) >= config.search.rolled_corner_gap - 2e-4  # closed-form IK vs Drake's
+
+
+def test_rolled_corner_gap_is_checked():
+    with pytest.raises(ConfigError, match="search.rolled_corner_gap"):
+        SearchConfig(rolled_corner_gap=-0.001)
 
 
 def test_rolled_stances_must_be_a_bool():

@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from trajectotree.config import SceneConfig, SearchConfig
+from trajectotree.scene.hand import with_hand_object
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.grasp import MU_CAP
 from trajectotree.search.initial_grasp import RANKING_BISECTIONS, initial_grasp_candidates, stance_fingers
+from trajectotree.search.workspace import rotation_range
 
 
 @pytest.fixture(scope="module")
@@ -36,3 +38,13 @@ def test_two_finger_stances_match_the_antipodal_closed_form(brick_scene):
     assert checked > 0
     free = grasps.stance_mu < grasps.mu_plan
     assert np.all(free.any(axis=1)) and np.array_equal(free.sum(axis=1), grasps.free_fingers)
+
+
+@pytest.mark.slow  # ten contact searches, two of them without a plan (~5 s)
+def test_the_gripper_turns_its_brick_in_place_only_so_far():
+    """rotation_range on a coarse grid: the contact search turns Drake's brick (with_hand_object's)
+    1.2 rad either way but not 1.5: each switch needs the other two fingers on opposite faces, and
+    near a quarter turn no such pair is left while the fingers must still move on."""
+    scene = build_scene(with_hand_object(SceneConfig(hand="drake_planar_gripper")))
+    turns = rotation_range(scene, SearchConfig(), step=0.3, limit=1.5)
+    assert (turns.ccw, turns.cw, turns.refused) == (pytest.approx(1.2), pytest.approx(1.2), (1.5, -1.5))

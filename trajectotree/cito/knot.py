@@ -65,7 +65,7 @@ class BodyParams:
         self.mass = c.box_mass
         self.mu = float(mu)
         self.shape = c.shape  # the object's outline (geometry.ConvexPolygon)
-        self.inertia = self.shape.inertia(c.box_mass)  # for the box bit for bit m (w^2 + h^2) / 12
+        self.inertia = c.inertia_zz()  # for the box bit for bit m (w^2 + h^2) / 12, unless scene.object_inertia
         self.gravity = np.array([0.0, -c.gravity])
         self.radius = scene.tip_radius
         self.normals = self.shape.normals  # (V, 2) outward face normals in B

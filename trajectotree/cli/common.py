@@ -11,6 +11,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import yaml
+
 from trajectotree.config import (
     DEFAULT_HAND,
     FORMULATIONS,
@@ -174,23 +176,36 @@ def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True
 
 
 def config_from_args(args: argparse.Namespace) -> Config:
-    """The Config from --config, then the individual options on top."""
+    """The Config from --config, then the individual options on top, then the object of the
+    hand's YAML (scene.hand.with_hand_object) for what neither of them chose."""
     config = load_config(args.config) if getattr(args, "config", None) else Config()
     scene, search, cito = scene_overrides(args), {}, {}
+    given = set(scene) | config_file_scene_fields(args)
     if getattr(args, "segments", None) is not None:
         check_integer("--segments", args.segments, 1, MAX_NODES - 1)
         search["num_nodes"] = args.segments + 1
     if getattr(args, "formulation", None) is not None:
         cito["formulation"] = args.formulation
+    from trajectotree.scene.hand import with_hand_object
+
     try:
         return dataclasses.replace(
             config,
-            scene=dataclasses.replace(config.scene, **scene),
+            scene=with_hand_object(dataclasses.replace(config.scene, **scene), given),
             search=dataclasses.replace(config.search, **search),
             cito=dataclasses.replace(config.cito, **cito),
         )
     except ConfigError as e:
         raise in_option_terms(e, args) from None
+
+
+def config_file_scene_fields(args: argparse.Namespace) -> set[str]:
+    """The scene fields --config's file sets (load_config has checked the file)."""
+    if not getattr(args, "config", None):
+        return set()
+    data = yaml.safe_load(Path(args.config).read_text()) or {}
+    scene = data.get("scene") if isinstance(data, dict) else None
+    return set(scene) if isinstance(scene, dict) else set()
 
 
 def check_executable_hand(scene, use: str) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +23,12 @@ def register(subparsers) -> None:
         metavar="FILE.png",
         help="draw the model (hand at the best initial grasp, object, "
         "reach circles, each finger's reachable contacts); .png, .pdf or .svg",
+    )
+    p.add_argument(
+        "--rotations",
+        action="store_true",
+        help="also run the contact search for goal rotations every 5 deg outwards from the start, up to "
+        "180 deg each way, and report how far it finds contact sequences (seconds to a minute)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(run=run)
@@ -151,6 +158,22 @@ def workspace_line(reach: dict) -> str:
     )
 
 
+def rotations_line(r: dict) -> str:
+    """How far the contact search turns the object in place (search.workspace.rotation_range)."""
+    step, (ccw, cw) = math.degrees(r["step_rad"]), r["first_refused_rad"]
+
+    def deg(v: float) -> str:
+        return f"{math.degrees(v):+.0f} deg"
+
+    misses = [deg(v) for v in (cw, ccw) if v is not None]
+    return (
+        f"rotations: the contact search finds a sequence for every goal every {step:g} deg in "
+        f"[{deg(-r['cw_rad'])}, {deg(r['ccw_rad'])}] ([{-r['cw_rad']:+.4f}, {r['ccw_rad']:+.4f}] rad; "
+        f"tested up to {math.degrees(r['limit_rad']):g} deg each way); "
+        + (f"none at {' and '.join(misses)}" if misses else "every tested goal planned")
+    )
+
+
 def payload_line(reach: dict, mass: float) -> str:
     """What the hand can carry (search.payload) against the object's mass."""
     from trajectotree.cli.common import floor_digits
@@ -207,6 +230,10 @@ def run(args) -> int:
     scene = build_scene(config.scene)
     reach = object_reach(scene, config.search)
     summary = summarize(scene, reach.to_json(config.search))
+    if args.rotations and reach.grasps.candidates:
+        from trajectotree.search.workspace import rotation_range
+
+        summary["reach"]["rotations"] = rotation_range(scene, config.search).to_json()
     if args.figure:
         draw_model(scene, args.figure, reach)
         summary["figure"] = args.figure
@@ -234,6 +261,8 @@ def run(args) -> int:
             print(payload_line(summary["reach"], o["mass_kg"]))
         if summary["reach"]["workspace"] is not None:
             print(workspace_line(summary["reach"]))
+        if "rotations" in summary["reach"]:
+            print(rotations_line(summary["reach"]["rotations"]))
         if args.figure:
             print(f"figure: {args.figure}")
     return 0

@@ -300,7 +300,8 @@ class GraspController(LeafSystem):
         self._gravity = c.gravity
         self._shape = c.shape
         self._mass = c.box_mass
-        self._inertia = c.shape.inertia(c.box_mass)  # a uniform plate (the box: m (w^2 + h^2) / 12)
+        self._scene_config = c
+        self._inertia = c.inertia_zz()  # a uniform plate (the box: m (w^2 + h^2) / 12) unless scene.object_inertia
         self._friction_safety = mu / c.mu
         self._plan_mu = c.mu
         self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (F, 2) N m
@@ -408,7 +409,7 @@ class GraspController(LeafSystem):
         else:
             # kd grows with the square root of kp: the same damping ratio, a faster response.
             boost = 1.0 + estimates.reflex * (g.reflex_gain - 1.0)
-            mass, inertia = estimates.mass, self._shape.inertia(estimates.mass)
+            mass, inertia = estimates.mass, self._scene_config.inertia_zz(estimates.mass)
             kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
         a = s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
         wrench = np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])

@@ -298,7 +298,12 @@ def replan(
     rules = config.sim.replan
     assumed = dataclasses.replace(
         config,
-        scene=dataclasses.replace(config.scene, mu=mu, box_mass=mass),
+        scene=dataclasses.replace(
+            config.scene,
+            mu=mu,
+            box_mass=mass,
+            object_inertia=None if config.scene.object_inertia is None else config.scene.inertia_zz(mass),
+        ),
         search=dataclasses.replace(config.search, time_budget_s=rules.search_deadline_s),
     )
     first_first = config.cito.formulation == "keyframes"

@@ -99,6 +99,8 @@ class Conditions:
     def scene(self, scene_config):
         """The simulated plant's SceneConfig."""
         changes = {k: v for k, v in (("mu", self.mu), ("box_mass", self.mass)) if v is not None}
+        if self.mass is not None and scene_config.object_inertia is not None:  # the same body, heavier
+            changes["object_inertia"] = scene_config.inertia_zz(self.mass)
         return dataclasses.replace(scene_config, **changes)
 
     def to_json(self, scene_config) -> dict:

@@ -26,10 +26,13 @@ from the measured state (`replan`, trajectotree.execution.replan) as `grasp-repl
 
 from __future__ import annotations
 
+import contextlib
 import json
 import multiprocessing
 import os
+import signal
 import sys
+import threading
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, replace
@@ -344,7 +347,8 @@ def run_executions(
         context = multiprocessing.get_context("spawn")
         pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context)
         try:
-            futures = {pool.submit(execute, t): t for t in tasks}
+            with _stop_signals_deferred():  # the pool spawns its workers while the tasks are submitted
+                futures = {pool.submit(execute, t): t for t in tasks}
             for future in as_completed(futures):
                 task = futures[future]
                 try:
@@ -377,6 +381,29 @@ def torn_executions(tasks: list[ExecutionTask]) -> list[str]:
         for task in tasks
         if task.folder.is_dir() and any(task.folder.iterdir())
     ]
+
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextlib.contextmanager
+def _stop_signals_deferred():
+    """Defers Ctrl-C and SIGTERM to the end of the block, where they act as usual: one that
+    interrupted a spawn between starting a worker and sending it its start-up data would leave that
+    worker out of the pool, to die later with a traceback on the sweep's stderr. (Masking the
+    signals would not do: numpy's threads would take them.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # Python runs signal handlers in the main thread only: nothing here to defer
+        return
+    received: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum)) for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        if received:
+            signal.raise_signal(received[0])
 
 
 def _kill_pool(pool: ProcessPoolExecutor) -> None:

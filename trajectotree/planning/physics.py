@@ -51,17 +51,23 @@ class ObjectModel:
     gravity: float  # m/s^2, magnitude, along -y in W
     tip_radius: float  # m, fingertip sphere radius
     fingers: tuple[FingerGeometry, ...] | None = None  # the hand's kinematics and link boxes (None: links unchecked)
+    moment: float | None = None  # kg m^2, I_zz about the centroid (scene.object_inertia); None: a uniform plate's
 
     @property
     def inertia(self) -> float:
-        """kg m^2, about the centroid (a uniform plate)."""
-        return self.shape.inertia(self.mass)
+        """kg m^2, about the centroid: `moment`, else a uniform plate's."""
+        return self.shape.inertia(self.mass) if self.moment is None else self.moment
 
     @staticmethod
     def from_scene(scene) -> ObjectModel:
         c = scene.config
         return ObjectModel(
-            mass=c.box_mass, shape=c.shape, gravity=c.gravity, tip_radius=scene.tip_radius, fingers=scene.fingers
+            mass=c.box_mass,
+            shape=c.shape,
+            gravity=c.gravity,
+            tip_radius=scene.tip_radius,
+            fingers=scene.fingers,
+            moment=c.object_inertia,
         )
 
 

@@ -23,6 +23,7 @@ joint and the file.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -38,7 +39,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
-from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError
+from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError, SceneConfig
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger
 
@@ -81,6 +82,18 @@ class FingerEntry:
 
 
 @dataclass(frozen=True)
+class HandObject:
+    """The object a hand's YAML names as its own (`object:`, e.g. the brick of Drake's gripper
+    example): what planning with that hand uses unless the scene options or a config file say
+    otherwise (with_hand_object). Each field None: the scene's default."""
+
+    size: tuple[float, float] | None = None  # m, a box's width and height (SceneConfig.box_width, box_height)
+    mass: float | None = None  # kg
+    mu: float | None = None  # friction coefficient between fingertips and object
+    inertia: float | None = None  # kg m^2, about z at the centroid (SceneConfig.object_inertia)
+
+
+@dataclass(frozen=True)
 class HandFile:
     """A hand's YAML, read and checked (not yet its model)."""
 
@@ -91,6 +104,7 @@ class HandFile:
     y_axis: tuple[float, float, float]  # ... the planner's y (up)
     welds: tuple[Weld, ...]
     fingers: tuple[FingerEntry, ...]
+    object: HandObject | None = None
 
     @property
     def R_WM(self) -> np.ndarray:
@@ -241,7 +255,7 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         data = yaml.safe_load(path.read_text())
     except (UnicodeDecodeError, yaml.YAMLError) as e:
         raise HandError(source, f"is not a YAML text file: {e}") from None
-    data = _mapping(source, "the file", data, ("model", "plane", "welds", "fingers"), ("fingers",))
+    data = _mapping(source, "the file", data, ("model", "plane", "welds", "fingers", "object"), ("fingers",))
     model = data.get("model")
     if model is None:
         if Path(spec).suffix.lower() not in MODEL_SUFFIXES:
@@ -313,7 +327,55 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         y_axis=y_axis,
         welds=tuple(welds),
         fingers=tuple(fingers),
+        object=None if data.get("object") is None else _hand_object(source, data["object"]),
     )
+
+
+def _hand_object(source: str, value) -> HandObject:
+    """The YAML's `object` entry, checked (SceneConfig checks the values' ranges)."""
+    data = _mapping(source, "object", value, ("size", "mass", "mu", "inertia"), ())
+
+    def number(key: str) -> float | None:
+        v = data.get(key)
+        if v is None:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise HandError(source, f"object.{key} = {v!r} is not a positive number")
+        return float(v)
+
+    size = data.get("size")
+    return HandObject(
+        size=None if size is None else _vector(source, "object.size", size, 2),
+        mass=number("mass"),
+        mu=number("mu"),
+        inertia=number("inertia"),
+    )
+
+
+SHAPE_FIELDS = frozenset({"box_width", "box_height", "object"})  # the SceneConfig fields that say the object's shape
+
+
+def with_hand_object(scene: SceneConfig, given=()) -> SceneConfig:
+    """`scene` with the object of its hand's YAML (HandObject) where the user did not choose:
+    `given` names the SceneConfig fields the user set (options, a config file). The size applies
+    unless a shape was given (box_width, box_height, object), the mass and friction unless given,
+    the inertia with the hand's own size (scaled by a given mass: the same body, denser). Unchanged
+    for a hand without an object."""
+    own = hand_file(scene.hand).object
+    if own is None:
+        return scene
+    given = set(given)
+    shape_given, changes = bool(given & SHAPE_FIELDS), {}
+    if own.size is not None and not shape_given:
+        changes["box_width"], changes["box_height"] = own.size
+    if own.mass is not None and "box_mass" not in given:
+        changes["box_mass"] = own.mass
+    if own.mu is not None and "mu" not in given:
+        changes["mu"] = own.mu
+    if own.inertia is not None and not shape_given and "object_inertia" not in given:
+        mass = changes.get("box_mass", scene.box_mass)
+        changes["object_inertia"] = own.inertia if own.mass is None else own.inertia * mass / own.mass
+    return dataclasses.replace(scene, **changes)
 
 
 # -- the model in a plant -----------------------------------------------------------------------

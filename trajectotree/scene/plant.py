@@ -63,6 +63,8 @@ def box_sdf(config: SceneConfig) -> str:
     a, b = config.shape.box_half  # (w/2, h/2): of box_width x box_height, or of the rectangle given as a polygon
     w, h, d, m = 2 * a, 2 * b, config.box_depth, config.box_mass
     ixx, iyy, izz = m * (h * h + d * d) / 12, m * (w * w + d * d) / 12, m * (w * w + h * h) / 12
+    if config.object_inertia is not None:
+        izz = config.object_inertia
     text = (MODELS_DIR / "box.sdf").read_text()
     text = _sub(text, r"<size>[^<]*</size>", f"<size>{w!r} {h!r} {d!r}</size>")
     text = _sub(text, r"<mass>[^<]*</mass>", f"<mass>{m!r}</mass>")
@@ -76,20 +78,14 @@ def box_sdf(config: SceneConfig) -> str:
 OBJECT_RGBA = np.array([0.20, 0.45, 0.80, 0.9])
 
 
-def prism_inertia(shape: ConvexPolygon, mass: float, depth: float) -> SpatialInertia:
+def prism_inertia(shape: ConvexPolygon, mass: float, depth: float, izz: float | None = None) -> SpatialInertia:
     """M_BBo_B of a uniform prism: `shape` (about its area centroid Bo) extruded `depth` m
-    along z, symmetric about z = 0. I_zz is the plate's (shape.inertia, as the planners and
-    the controller use); I_xx, I_yy and I_xy from the polygon's second moments of area."""
-    v = shape.vertices
-    x0, y0 = v[:, 0], v[:, 1]
-    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
-    cross = x0 * y1 - x1 * y0
-    area = cross.sum() / 2
-    Sxx = np.sum(cross * (x0 * x0 + x0 * x1 + x1 * x1)) / 12 / area  # m^2, (1/A) int x^2 dA
-    Syy = np.sum(cross * (y0 * y0 + y0 * y1 + y1 * y1)) / 12 / area
-    Sxy = np.sum(cross * (x0 * y1 + 2 * x0 * y0 + 2 * x1 * y1 + x1 * y0)) / 24 / area
+    along z, symmetric about z = 0. I_zz is `izz`, else the plate's (shape.inertia, as the planners
+    and the controller use); I_xx, I_yy and I_xy from the polygon's second moments of area."""
+    Sxx, Syy, Sxy = shape.second_moments()
     dz = depth * depth / 12
-    I = RotationalInertia(mass * (Syy + dz), mass * (Sxx + dz), shape.inertia(mass), -mass * Sxy, 0.0, 0.0)
+    izz = shape.inertia(mass) if izz is None else izz
+    I = RotationalInertia(mass * (Syy + dz), mass * (Sxx + dz), izz, -mass * Sxy, 0.0, 0.0)
     return SpatialInertia.MakeFromCentralInertia(mass, np.zeros(3), I)
 
 
@@ -103,11 +99,12 @@ def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: Convex
     """Adds the object `shape` (default config.shape) as model instance and body "box" (the
     names every caller looks up): a convex prism of depth scene.box_depth (drake Convex from
     the corners, in memory: its visual mesh travels in Meshcat's messages), mass
-    scene.box_mass, uniform density (prism_inertia), friction scene.mu on its collision
-    geometry (box.sdf's proximity properties). Returns its ModelInstanceIndex."""
+    scene.box_mass, uniform density (prism_inertia; I_zz scene.object_inertia when set), friction
+    scene.mu on its collision geometry (box.sdf's proximity properties). Returns its ModelInstanceIndex."""
     shape = config.shape if shape is None else shape
     instance = plant.AddModelInstance("box")
-    body = plant.AddRigidBody("box", instance, prism_inertia(shape, config.box_mass, config.box_depth))
+    inertia = prism_inertia(shape, config.box_mass, config.box_depth, config.object_inertia)
+    body = plant.AddRigidBody("box", instance, inertia)
     prism = Convex(prism_points(shape, config.box_depth), "object polygon")
     proximity = ProximityProperties()
     AddContactMaterial(friction=CoulombFriction(config.mu, config.mu), properties=proximity)

@@ -9,10 +9,15 @@ holds (a12 the link's absolute angle, theta the object's). Executed, the contact
 by r times the link's turn since the finger landed (goal 1.804 of seed 0: 8 mm and 4 mm after
 4 s, as predicted to 0.3 mm), and a stance in closure at its planned contacts may not be at the
 contacts it really has (there: needs mu 0.40 planned, 0.57 rolled). So each three-finger stance
-must also be in closure at mu_plan, and off the corners, at its rolled contacts at both ends of
-its transition (StanceChecks.rolled). The rolling depends on when each finger landed (the node's
-path); the search still merges states by their contacts, so a state first reached by a worse
-history can hide a plan another would allow (incomplete, never unsafe).
+must also be in closure at mu_plan, and search.rolled_corner_gap (2 mm) short of its face's corners,
+at its rolled contacts at both ends of its transition (StanceChecks.rolled). The polygon gallery's
+quadrilateral, goal -1.446: a contact planned 13.5 mm from a 56 deg corner was predicted to roll to
+0.02 mm from it; in simulation it got there 0.8 s early (1-1.4 mm beyond the prediction, most of
+it from where the sphere landed), pivoted over the corner, and the object dropped. A segment in
+which no finger switches is checked the same way, all fingers holding. The rolling depends on
+when each finger landed (the node's path); the search still merges states by their contacts, so
+a state first reached by a worse history can hide a plan another would allow (incomplete, never
+unsafe).
 
 Holding force (search.max_stance_force): closure says the stance can resist any wrench, not at
 what cost. Some three-finger stances on polygons (two fingers nearly antipodal, the third barely
@@ -93,10 +98,13 @@ class StanceChecks:
         mu_plan: float,
         max_force: float,
         angles: Callable[[int, int, float], np.ndarray] | None = None,
+        corner_gap: float = 0.0,
     ):
         """`angles(depth, finger, s)`: a finger's closed-form joint angles at node `depth` with its
-        contact at arclength s (a table of them; None: Reachability.closed_form)."""
+        contact at arclength s (a table of them; None: Reachability.closed_form); `corner_gap` (m,
+        search.rolled_corner_gap): how far short of a corner rolled contacts stay."""
         self.scene, self.reach, self.poses, self.mu_plan = scene, reach, poses, mu_plan
+        self.corner_gap = corner_gap
         self.table = angles
         self.boundary: ConvexPolygon = scene.config.shape
         self.max_force = max_force  # N, 0: no cap
@@ -106,17 +114,22 @@ class StanceChecks:
         self._force: dict[tuple, float] = {}  # (depth, stance arclengths) -> N
 
     # -- rolling contacts ---------------------------------------------------------------------
-    def rolled(self, node, depth: int, finger: int) -> Refusal | None:
-        """Why the stance holding the object while `finger` moves from `node` to the child at
-        `depth` fails at its rolled contacts (None when it holds): at node.depth and at `depth`,
-        every contact still on its face (the rolling law holds along one face) and the three in
-        frictional form closure at mu_plan (grasp.in_closure_many, the exact test behind
-        required_mu; the LP's 1e-3 N margin is not applied here)."""
-        stance = self.stances[finger]
+    def rolled(self, node, depth: int, finger: int | None) -> Refusal | None:
+        """Why the stance holding the object while `finger` (None: no finger, all hold) moves from
+        `node` to the child at `depth` fails at its rolled contacts (None when it holds): at node.depth and at `depth`,
+        every contact still on its face (the rolling law holds along one face) and `corner_gap`
+        short of the corners that end it (a sphere that rolls onto a corner pivots over it and its
+        normal turns by the corner's angle), and the three in frictional form closure at mu_plan
+        (grasp.in_closure_many, the exact test behind required_mu; the LP's 1e-3 N margin is not
+        applied here)."""
+        stance = tuple(range(self.scene.num_fingers)) if finger is None else self.stances[finger]
         rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
         landed = self.boundary.sides([node.arclengths[j] for j in stance])
-        if any(np.any(self.boundary.sides(row) != landed) for row in rolled):
-            return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance)
+        for row in rolled:
+            if np.any(self.boundary.sides(row) != landed) or not np.all(
+                self.boundary.clear_of_sides_ends(row, self.corner_gap)
+            ):
+                return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance, limit=self.corner_gap)
         p_BC, n_B = self.boundary.points(np.ravel(rolled))
         A, B = closure_edges_parts(p_BC.reshape(2, len(stance), 2), n_B.reshape(2, len(stance), 2))
         if not np.all(in_closure_many(A, B, self.mu_plan)):

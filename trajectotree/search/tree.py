@@ -31,9 +31,10 @@ with friction to spare. Each plan node reports `required_mu` (its grasp) and
 `stance_required_mu` (the three fingers that held the box while it was reached).
 
 Stance checks (trajectotree.search.stance; not in the paper): each three-finger stance that holds the
-object while a finger switches must also be in closure at mu_plan where its sticking fingertips
-roll to (search.rolled_stances), and must carry the object's weight with at most
-search.max_stance_force newtons of total normal force at its planned contacts.
+object while a finger switches (all four when none does) must also be in closure at mu_plan, and
+short of the corners, where its sticking fingertips roll to (search.rolled_stances), and must
+carry the object's weight with at most search.max_stance_force newtons of total normal force at
+its planned contacts.
 
 Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
 ranked candidates of trajectotree.search.initial_grasp, best first; a candidate whose fingers
@@ -60,7 +61,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from trajectotree.config import GoalPose, SearchConfig, mu_plan, with_segments
+from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
@@ -102,7 +103,13 @@ class _Search:
         self.reach = Reachability(scene)
         self.bound = SwitchBound(scene, self.reach, self.poses, config)
         self.stance = StanceChecks(
-            scene, self.reach, self.poses, self.mu_plan, config.max_stance_force, angles=self.bound.angles
+            scene,
+            self.reach,
+            self.poses,
+            self.mu_plan,
+            config.max_stance_force,
+            angles=self.bound.angles,
+            corner_gap=config.rolled_corner_gap,
         )
         self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
@@ -209,22 +216,23 @@ class _Search:
             if finger is not None and self.tips_overlap(arclengths, finger):
                 self.refused[Refusal(RefusalKind.TIPS_OVERLAP)] += 1
                 continue
-            if finger is not None:
-                if finger not in stances:  # the stance depends on the finger, not on where it moves
-                    stances[finger] = self.stance_refused(node, depth, finger)
-                if stances[finger]:
-                    self.refused[stances[finger]] += 1
-                    continue
+            if finger not in stances:  # the stance depends on the finger (None: all hold), not on where it moves
+                stances[finger] = self.stance_refused(node, depth, finger)
+            if stances[finger]:
+                self.refused[stances[finger]] += 1
+                continue
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
             out.append((switches, h, _Node(depth, arclengths, finger, node)))
         return out
 
-    def stance_refused(self, node: _Node, depth: int, finger: int) -> Refusal | None:
+    def stance_refused(self, node: _Node, depth: int, finger: int | None) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
         `depth` is refused (None when it is not): its rolled contacts (search.rolled_stances),
-        then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance)."""
+        then the force it needs to hold the object (search.max_stance_force; trajectotree.search.stance).
+        finger None: no finger moves and all hold, checked at their rolled contacts only (they roll
+        as far in a segment without a switch)."""
         rolled = self.stance.rolled(node, depth, finger) if self.config.rolled_stances else None
-        return rolled or self.stance.too_heavy(node, depth, finger)
+        return rolled or (None if finger is None else self.stance.too_heavy(node, depth, finger))
 
     # -- Algorithm 1 ----------------------------------------------------------------------
     def precheck(self, start: tuple[float, ...], candidate: bool = False) -> Refusal | None:
@@ -389,6 +397,13 @@ def _roots(
     """The initial grasps to try, best first: the user's, or the ranked candidates (from
     `tables` when given, else built here)."""
     if config.initial_arclengths is not None:
+        if len(config.initial_arclengths) != scene.num_fingers:
+            raise ConfigError(
+                field="search.initial_arclengths",
+                value=config.initial_arclengths,
+                problem=f"has {len(config.initial_arclengths)} entries",
+                valid=f"{scene.num_fingers}: one arclength (m) per finger of the hand",
+            )
         return _Roots([[search.wrap(s) for s in config.initial_arclengths]], scene.num_fingers), None
     if tables is None:
         table = initial_grasp_candidates(scene, config, search.reach)

@@ -13,6 +13,10 @@ object path (trajectotree.search.tree.object_path) must be graspable, since the 
 at each. `trajectotree scene` reports the translations of the start, on a grid, that are graspable at
 every orientation (sampled every WORKSPACE_ORIENTATION_STEP over a full turn), so any rotation, however
 many turns, may be combined with them, and those graspable at the start orientation.
+
+Graspable is not turnable: a hand whose fingers reach little of the object may hold it at every
+orientation yet not gait it round. `rotation_range` (`trajectotree scene --rotations`) runs the
+contact search itself for goal rotations every ROTATION_STEP outwards from the start, each way.
 """
 
 from __future__ import annotations
@@ -26,9 +30,9 @@ import numpy as np
 from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, segments_for
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import required_mu_many
-from trajectotree.search.initial_grasp import RANKING_BISECTIONS, stance_fingers
+from trajectotree.search.initial_grasp import RANKING_BISECTIONS, GraspTables, stance_fingers
 from trajectotree.search.reach import Reachability
-from trajectotree.search.tree import object_path
+from trajectotree.search.tree import find_contact_plan, object_path
 
 WORKSPACE_STEP = 0.01  # m, spacing of the translations the scene report tests
 WORKSPACE_REACH = 0.15  # m, the farthest translation it tests along x and y (the fingers reach ~0.2 m)
@@ -204,3 +208,55 @@ def check_goal_position(
         valid=f"at most {limit:.3g} m from the start ({x0[0]:g}, {x0[1]:g}) m in this direction with this rotation",
         label="valid",
     )
+
+
+ROTATION_STEP = math.pi / 36  # rad, the goal rotations rotation_range tests: every 5 degrees
+ROTATION_LIMIT = math.pi  # rad, the farthest it tests each way (a hand that gaits turns further: --goal takes 20 pi)
+
+
+@dataclass(frozen=True)
+class RotationRange:
+    """The goal rotations (of the object in place, from scene.initial_pose) for which the contact
+    search finds a contact sequence, tested outwards from 0 every `step` rad each way until the
+    first that has none or `limit`."""
+
+    step: float  # rad
+    limit: float  # rad, the farthest tested each way
+    ccw: float  # rad >= 0, every tested rotation in (0, ccw] has a contact sequence
+    cw: float  # rad >= 0, every tested rotation in [-cw, 0) has one
+    refused: tuple[float | None, float | None]  # rad, the first counter-clockwise / clockwise without one (None: none)
+
+    @property
+    def symmetric(self) -> float:
+        """rad, the largest R with every tested rotation in [-R, R] planned: min(ccw, cw)."""
+        return min(self.ccw, self.cw)
+
+    def to_json(self) -> dict:
+        return {
+            "step_rad": self.step,
+            "limit_rad": self.limit,
+            "ccw_rad": self.ccw,
+            "cw_rad": self.cw,
+            "symmetric_rad": self.symmetric,
+            "first_refused_rad": list(self.refused),
+        }
+
+
+def rotation_range(
+    scene: Scene, search: SearchConfig, step: float = ROTATION_STEP, limit: float = ROTATION_LIMIT
+) -> RotationRange:
+    """scene's RotationRange: the contact search (tree.find_contact_plan, search's settings) for
+    goals +-step, +-2 step, ... outwards, each way until the first without a contact sequence."""
+    tables, theta0 = GraspTables(), float(scene.config.initial_pose[2])
+    reach, refused = [], []
+    for sign in (1.0, -1.0):
+        last, first_refused = 0.0, None
+        for k in range(1, int(round(limit / step)) + 1):
+            turn = min(k * step, limit)
+            if not find_contact_plan(scene, theta0 + sign * turn, search, tables).success:
+                first_refused = sign * turn
+                break
+            last = turn
+        reach.append(last)
+        refused.append(first_refused)
+    return RotationRange(step=step, limit=limit, ccw=reach[0], cw=reach[1], refused=(refused[0], refused[1]))
