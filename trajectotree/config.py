@@ -594,6 +594,16 @@ class ControllerGains:
     # 1, the grasp QP's cones at max(friction_safety, this) x the friction estimate during the reflex: at 0.8 a
     # three-finger grasp held at most 2.9 N against +x (3.8 N at 1.0), short of a 3 N push
     reflex_friction_safety: float = 1.0
+    # The landing reflex (closed loop): while a push is on or the friction estimate is land_friction_drop below the
+    # plan's, a swinging finger runs its planned box-frame path land_speedup x as fast to its next planned landing
+    # (tip spring land_tip_kp, land_tip_kd), and holds there until the plan gets there: the grasp gets all its fingers
+    land_speedup: float = 20.0  # 1, how much faster a swing runs (1: no landing reflex)
+    land_friction_drop: float = 0.05  # 1
+    land_approach_time: float = 0.1  # s of the plan, the end of the path to the landing, run land_approach_speedup x
+    land_approach_speedup: float = 4.0  # 1
+    land_lag: float = 0.02  # m, the path's sample waits while the fingertip is farther than this from its target
+    land_tip_kp: float = 400.0  # N/m
+    land_tip_kd: float = 5.0  # N s/m
 
     def __post_init__(self):
         check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
@@ -625,6 +635,13 @@ class ControllerGains:
         check_range("controller.disturbance_feedforward", self.disturbance_feedforward, 0.0, 1.0)
         check_range("controller.reflex_torque_weight", self.reflex_torque_weight, 1.0, 1e4)
         check_range("controller.reflex_friction_safety", self.reflex_friction_safety, 0.0, 1.0, low_open=True)
+        check_range("controller.land_speedup", self.land_speedup, 1.0, 100.0)
+        check_range("controller.land_friction_drop", self.land_friction_drop, 0.0, 1.0, low_open=True)
+        check_range("controller.land_approach_time", self.land_approach_time, 0.0, 2.0)
+        check_range("controller.land_lag", self.land_lag, 0.0, 0.1, low_open=True)
+        check_range("controller.land_approach_speedup", self.land_approach_speedup, 1.0, 100.0)
+        for name in ("land_tip_kp", "land_tip_kd"):
+            check_range(f"controller.{name}", getattr(self, name), 0.0, None)
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20

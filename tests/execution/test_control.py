@@ -364,3 +364,65 @@ def test_hand_dynamics_match_drakes_mass_matrix_and_bias_term(hand):
                 if plant.get_joint(j).num_velocities() == 1
             ],
         )
+
+
+def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene):
+    """A finger that swings while a push is on (or the friction estimate has fallen) follows its
+    planned swing land_speedup x as fast up to its next planned landing and holds there until
+    the plan gets there; without a trigger every finger follows the plan's sample."""
+    from trajectotree.execution.control import Estimates, GraspController
+    from trajectotree.execution.reference import Reference, grasp_schedule
+
+    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
+    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
+    # finger 0 holds at t = 0 and 0.5 s, is lifted at 1.0 s and lands again at 1.5 s
+    order = [0, 0, 1, 0, 0]
+    refs = [held, lifted]
+    reference = Reference(
+        t=np.array([0.0, 0.5, 1.0, 1.5, 2.0]),
+        **{name: np.stack([getattr(refs[k], name)[0] for k in order]) for name in ("x", "q", "p_WF", "v_WF", "f_W")},
+    )
+    gains = ControllerGains()
+    schedule = grasp_schedule(
+        reference,
+        shape=ConvexPolygon.box(0.2, 0.1),
+        tip_radius=scene.tip_radius,
+        period=1.0 / gains.rate_hz,
+        duration=2.0,
+        ramp_time=gains.ramp_time,
+        swing_lift=gains.swing_lift,
+        contact_distance=gains.contact_distance,
+    )
+    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
+    landing = int(np.argmax(schedule.force_scale[schedule.index(1.0) :, 0] >= 1.0)) + schedule.index(1.0)
+    assert schedule.index(1.4) < landing <= schedule.index(1.5)
+    calm, pushed = Estimates(mu=0.7, mass=0.05, reflex=0.0), Estimates(mu=0.7, mass=0.05, reflex=1.0)
+    slipped = Estimates(mu=0.4, mass=0.05, reflex=0.0)
+    n = schedule.index(1.0)  # the swing's core: finger 0 has no force budget
+    assert schedule.force_scale[n, 0] == 0.0
+    np.testing.assert_array_equal(controller.landing_clocks(n, np.full(4, n - 1), calm), [n] * 4)
+    speedup = int(gains.land_speedup)
+    for estimates in (pushed, slipped):
+        clocks = controller.landing_clocks(n, np.full(4, n - 1), estimates)
+        np.testing.assert_array_equal(clocks, [n - 1 + speedup, n, n, n])
+    # once begun, the landing goes on without the trigger, stops at the landing and waits there
+    clocks, steps = np.full(4, n - 1), 0
+    for k in range(n, landing + 5):
+        clocks = controller.landing_clocks(k, clocks, pushed if k == n else calm)
+        steps += 1
+        if clocks[0] == landing:
+            break
+    # land_speedup x as fast, the last land_approach_time land_approach_speedup x
+    approach = round(gains.land_approach_time * gains.rate_hz)
+    slow = int(gains.land_approach_speedup)
+    assert clocks[0] == landing and steps <= (landing - n - approach) / (speedup - 1) + approach / (slow - 1) + 2
+    # a fingertip that lags its target holds its sample
+    lagging = controller.landing_clocks(n, np.full(4, n - 1), pushed, lag=np.full(4, 2 * gains.land_lag))
+    np.testing.assert_array_equal(lagging, [n] * 4)
+    assert controller.landing_clocks(n + steps + 1, clocks, calm)[0] == landing
+    assert controller.landing_clocks(landing + 3, clocks, calm)[0] == landing + 3
+    # land_speedup 1: no reflex
+    off = GraspController(
+        scene, schedule, dataclasses.replace(gains, land_speedup=1.0), mu=0.56, closed_loop=True
+    ).landing_clocks(n, np.full(4, n - 1), pushed)
+    np.testing.assert_array_equal(off, [n] * 4)
