@@ -315,7 +315,14 @@ class GraspController(LeafSystem):
     landing, so that the grasp has all its fingers again within tens of milliseconds."""
 
     def __init__(
-        self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float, closed_loop: bool = False
+        self,
+        scene: Scene,
+        schedule: GraspSchedule,
+        gains: ControllerGains,
+        *,
+        mu: float,
+        closed_loop: bool = False,
+        plan_mu: float | None = None,
     ):
         super().__init__()
         c = scene.config
@@ -327,7 +334,7 @@ class GraspController(LeafSystem):
         self._scene_config = c
         self._inertia = c.inertia_zz()  # a uniform plate (the box: m (w^2 + h^2) / 12) unless scene.object_inertia
         self._friction_safety = mu / c.mu
-        self._plan_mu = c.mu
+        self._plan_mu = c.mu if plan_mu is None else plan_mu  # the friction the plan in effect assumes
         self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (F, 2) N m
         check_finger_major(scene)
         self._num_fingers, self._num_joints = scene.num_fingers, scene.num_hand_joints
@@ -351,7 +358,7 @@ class GraspController(LeafSystem):
             self._clock_state = self.DeclareDiscreteState(np.zeros(scene.num_fingers))
             self._landing = next_landing(schedule.force_scale)
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
-        self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
+        self.DeclareInitializationDiscreteUpdateEvent(self.InitializeActuation)
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
 
     def estimates(self, context) -> Estimates | None:
@@ -365,7 +372,13 @@ class GraspController(LeafSystem):
             disturbance=np.array(self.disturbance_port.Eval(context)),
         )
 
-    def UpdateActuation(self, context, discrete_state):
+    def InitializeActuation(self, context, discrete_state):
+        """As UpdateActuation, with every finger on the schedule's own sample: a replanned phase
+        carries the last phase's state over, but a landing it ran ahead belonged to the old plan
+        (its samples ahead are the new plan's now; followed, they drew a finger along the wrong path)."""
+        return self.UpdateActuation(context, discrete_state, restart=True)
+
+    def UpdateActuation(self, context, discrete_state, restart: bool = False):
         estimates = self.estimates(context)
         t = context.get_time()
         if estimates is None:
@@ -374,6 +387,8 @@ class GraspController(LeafSystem):
             )
             return EventStatus.Succeeded()
         previous = context.get_discrete_state(self._clock_state).get_value().astype(int)
+        if restart:
+            previous = np.full_like(previous, self.schedule.index(t))
         box_state, hand_state = self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
         lag = self.path_lag(previous, box_state, hand_state)
         clocks = self.landing_clocks(self.schedule.index(t), previous, estimates, lag)

@@ -230,7 +230,9 @@ def simulate_replanning(
     conditions_json = conditions.to_json(config.scene)
     assumed = plan.config.scene  # what the plan in effect assumes (the last new plan's estimates)
     while True:
-        execution = build_execution_diagram(reference, config, conditions=conditions, closed_loop=True)
+        execution = build_execution_diagram(
+            reference, config, conditions=conditions, closed_loop=True, plan_mu=assumed.mu
+        )
         simulator = Simulator(execution.diagram, execution.initial_context(reference))
         if context is not None:  # the same systems: the state carries over (SceneGraph's geometry ids do not)
             simulator.get_mutable_context().SetTime(context.get_time())
