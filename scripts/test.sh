@@ -24,9 +24,10 @@ python3 -m venv "$venv"
 source "$venv/bin/activate"
 python -m pip install --quiet --upgrade pip
 python -m pip install --quiet -e ".[test]"
-python -m pip list 2>/dev/null | grep -E -i '^(drake|numpy|matplotlib|scipy|pytest|playwright|import-linter|ruff) '
+python -m pip list 2>/dev/null | grep -E -i '^(drake|numpy|matplotlib|scipy|pytest|pytest-xdist|playwright|import-linter|ruff) '
 
 ruff format --check .
 ruff check .
 lint-imports
-python -m pytest -q "$@"
+# Two or more worker processes (pytest-xdist), a test file each at a time: a file's shared fixtures stay in one.
+python -m pytest -q -n auto --dist loadfile "$@"

@@ -10,30 +10,11 @@ import pytest
 
 from trajectotree.config import Config, ConfigError, ReplanConfig
 from trajectotree.execution.reference import Reference
-from trajectotree.execution.replan import Phase, delayed, out_of_time, scheduled, simulate_replanning
-from trajectotree.execution.simulate import Conditions
+from trajectotree.execution.replan import Phase, delayed, out_of_time, scheduled
 from trajectotree.planning.planners import plan
 from trajectotree.refusal import AtRoot, NoPlan, OnGrids, Refusal, RefusalKind
 from trajectotree.results import ReplanEvent, ReplanOutcome, ReplanReason
 from trajectotree.start import StartProblem, StartRefusal
-
-
-@pytest.mark.slow
-def test_a_world_with_less_friction_replans_from_the_measured_state_with_the_estimate():
-    config = Config()
-    config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, replan=ReplanConfig(max_replans=1)))
-    result = plan(goal=2.2, config=config)
-    assert result.success, result.status
-    run = simulate_replanning(result, config, conditions=Conditions(mu=0.4))
-    assert len(run.replans) == 1
-    event = run.replans[0]
-    assert event.reason is ReplanReason.FRICTION  # the estimate fell below the plan's 0.7
-    assert 0.3 <= event.mu <= 0.45 and event.mass == pytest.approx(0.05, rel=0.05)
-    assert event.takes_effect_s == pytest.approx(event.time_s + event.latency_s)
-    # the node the state was measured at is a node of the plan (1.2 s segments)
-    assert event.time_s / 1.2 == pytest.approx(round(event.time_s / 1.2))
-    assert np.all(np.diff(run.t) > 0) and run.t[-1] >= result.trajectory.t[-1]  # one log over the whole run
-    assert run.to_json()["replans"][0]["reason"] == "friction"
 
 
 def line_reference(segments: int, knots_per_segment: int = 3, dt: float = 0.1) -> Reference:
@@ -161,6 +142,8 @@ def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_f
 
 @pytest.mark.slow
 def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
+    """A world with less friction than planned: the closed loop replans from the measured state at a node
+    with the estimate, and the run (one continuous log) holds the box to the goal."""
     from trajectotree.execution.run import run_simulation
 
     result = plan(goal=-2.61)  # a goal none of the defaults were tuned on
@@ -169,6 +152,14 @@ def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
     assert not run.dropped, [e.to_json() for e in run.replans]
     assert abs(run.final_error[2]) < np.radians(3)
     assert all(e.latency_s <= e.compute_s + 1e-9 for e in run.replans)
+    event = run.replans[0]
+    assert event.reason is ReplanReason.FRICTION  # the estimate fell below the plan's 0.7
+    assert 0.3 <= event.mu <= 0.45 and event.mass == pytest.approx(0.05, rel=0.05)
+    assert event.takes_effect_s == pytest.approx(event.time_s + event.latency_s)
+    # the node the state was measured at is a node of the plan (1.2 s segments)
+    assert event.time_s / 1.2 == pytest.approx(round(event.time_s / 1.2))
+    assert np.all(np.diff(run.t) > 0) and run.t[-1] >= result.trajectory.t[-1]  # one log over the whole run
+    assert run.to_json()["replans"][0]["reason"] == "friction"
 
 
 @pytest.mark.parametrize(
