@@ -58,12 +58,15 @@ class HandModel:
 
     @staticmethod
     def from_scene(scene: Scene) -> HandModel:
-        f = scene.fingers
+        return HandModel.from_fingers(scene.fingers, scene.config.gravity)
+
+    @staticmethod
+    def from_fingers(f, g: float) -> HandModel:
+        """The model of the fingers' geometries `f` (scene.fingers) under gravity g m/s^2."""
         m1, m2 = (np.array([fi.masses[j] for fi in f]) for j in (0, 1))
         c1, c2 = (np.array([fi.coms[j] for fi in f]) for j in (0, 1))
         i1, i2 = (np.array([fi.inertias[j] for fi in f]) for j in (0, 1))
         l1 = np.array([fi.l1 for fi in f])
-        g = scene.config.gravity
         return HandModel(
             fingers=TwoLinkFinger.stack(f),
             mass_a=i1 + i2 + m1 * c1**2 + m2 * (l1**2 + c2**2),

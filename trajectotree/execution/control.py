@@ -39,6 +39,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, OsqpSolver, SolverOptions
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
+from trajectotree.cito.hand import HandModel
 from trajectotree.config import ControllerGains, SceneConfig
 from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
@@ -127,27 +128,17 @@ class HandKinematics:
 
     def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
         self.fingers = TwoLinkFinger.stack(fingers)
-        m, c = np.array([f.masses for f in fingers]), np.array([f.coms for f in fingers])
-        inertia, l1 = np.array([f.inertias for f in fingers]), self.fingers.l1
+        self._model = HandModel.from_fingers(fingers, gravity)  # CITO's hand dynamics: the same closed forms
         # dV/dq = [k1 cos a1 + k2 cos a12, k2 cos a12]
-        self._k1 = gravity * (m[:, 0] * c[:, 0] + m[:, 1] * l1)
-        self._k2 = gravity * m[:, 1] * c[:, 1]
-        # the mass matrix M(q) = [[d1 + 2 h cos q2, d2 + h cos q2], [d2 + h cos q2, d2]] of each finger
-        self._d2 = inertia[:, 1] + m[:, 1] * c[:, 1] ** 2
-        self._d1 = inertia[:, 0] + m[:, 0] * c[:, 0] ** 2 + self._d2 + m[:, 1] * l1**2
-        self._h = m[:, 1] * l1 * c[:, 1]
+        self._k1, self._k2 = self._model.grav_1, self._model.grav_2
         self.damping = np.array([f.damping for f in fingers])  # (F, 2) N m s/rad
 
     def dynamics(self, q, v) -> tuple[np.ndarray, np.ndarray]:
         """At joint angles q and rates v (2F each): each finger's mass matrix M (F, 2, 2) and the
         torques its motion costs besides M qdd, Coriolis and joint damping, (F, 2)."""
+        M = self._model.mass_matrices(np.ravel(q))
         q, v = np.reshape(q, (-1, 2)), np.reshape(v, (-1, 2))
-        c2, s2 = np.cos(q[:, 1]), np.sin(q[:, 1])
-        M = np.empty((len(q), 2, 2))
-        M[:, 0, 0] = self._d1 + 2 * self._h * c2
-        M[:, 0, 1] = M[:, 1, 0] = self._d2 + self._h * c2
-        M[:, 1, 1] = self._d2
-        hs = self._h * s2
+        hs = self._model.mass_b * np.sin(q[:, 1])  # M12 = c + b cos q2: the Coriolis terms' b sin q2
         coriolis = np.column_stack([-hs * (2 * v[:, 0] * v[:, 1] + v[:, 1] ** 2), hs * v[:, 0] ** 2])
         return M, coriolis + self.damping * v
 
