@@ -366,33 +366,46 @@ def test_hand_dynamics_match_drakes_mass_matrix_and_bias_term(hand):
         )
 
 
+def schedule_of(reference, scene, gains: ControllerGains, duration: float):
+    """The GraspSchedule the controller of `gains` tracks for `reference` on the 0.2 x 0.1 m box."""
+    from trajectotree.execution.reference import grasp_schedule
+
+    return grasp_schedule(
+        reference,
+        shape=ConvexPolygon.box(0.2, 0.1),
+        tip_radius=scene.tip_radius,
+        period=1.0 / gains.rate_hz,
+        duration=duration,
+        ramp_time=gains.ramp_time,
+        swing_lift=gains.swing_lift,
+        contact_distance=gains.contact_distance,
+    )
+
+
+def swing_reference(scene):
+    """Finger 0 holds at t = 0 and 0.5 s, is lifted at 1.0 s and lands again at 1.5 s (2 s in all)."""
+    from trajectotree.execution.reference import Reference
+
+    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
+    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
+    refs = [held, lifted]
+    return Reference(
+        t=np.array([0.0, 0.5, 1.0, 1.5, 2.0]),
+        **{
+            name: np.stack([getattr(refs[k], name)[0] for k in [0, 0, 1, 0, 0]])
+            for name in ("x", "q", "p_WF", "v_WF", "f_W")
+        },
+    )
+
+
 def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene):
     """A finger that swings while a push is on (or the friction estimate has fallen) follows its
     planned swing land_speedup x as fast up to its next planned landing and holds there until
     the plan gets there; without a trigger every finger follows the plan's sample."""
     from trajectotree.execution.control import Estimates, GraspController
-    from trajectotree.execution.reference import Reference, grasp_schedule
 
-    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
-    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
-    # finger 0 holds at t = 0 and 0.5 s, is lifted at 1.0 s and lands again at 1.5 s
-    order = [0, 0, 1, 0, 0]
-    refs = [held, lifted]
-    reference = Reference(
-        t=np.array([0.0, 0.5, 1.0, 1.5, 2.0]),
-        **{name: np.stack([getattr(refs[k], name)[0] for k in order]) for name in ("x", "q", "p_WF", "v_WF", "f_W")},
-    )
     gains = ControllerGains()
-    schedule = grasp_schedule(
-        reference,
-        shape=ConvexPolygon.box(0.2, 0.1),
-        tip_radius=scene.tip_radius,
-        period=1.0 / gains.rate_hz,
-        duration=2.0,
-        ramp_time=gains.ramp_time,
-        swing_lift=gains.swing_lift,
-        contact_distance=gains.contact_distance,
-    )
+    schedule = schedule_of(swing_reference(scene), scene, gains, 2.0)
     controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
     landing = int(np.argmax(schedule.force_scale[schedule.index(1.0) :, 0] >= 1.0)) + schedule.index(1.0)
     assert schedule.index(1.4) < landing <= schedule.index(1.5)
@@ -426,3 +439,72 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
         scene, schedule, dataclasses.replace(gains, land_speedup=1.0), mu=0.56, closed_loop=True
     ).landing_clocks(n, np.full(4, n - 1), pushed)
     np.testing.assert_array_equal(off, [n] * 4)
+
+
+def test_closed_loop_counts_a_finger_only_while_it_touches_the_box(scene):
+    """The schedule says all four fingers hold; with finger 0 lifted off the measured box the
+    closed loop gives it no force budget (it is spring-driven to its target), the open loop
+    keeps the schedule's."""
+    from trajectotree.execution.control import GraspController
+
+    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
+    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
+    gains = ControllerGains()
+    schedule = schedule_of(held, scene, gains, 1.0)
+    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
+    box_state = np.concatenate([held.x[0], np.zeros(3)])
+    at = (schedule.index(0.5), slice(None))
+    np.testing.assert_array_equal(schedule.force_scale[at], np.ones(4))
+    for q, touching in ((held.q[0], [1, 1, 1, 1]), (lifted.q[0], [0, 1, 1, 1])):
+        p_WF = scene.fingertip_positions(q)
+        np.testing.assert_array_equal(controller.force_budget(at, box_state, p_WF, closed_loop=True), touching)
+        np.testing.assert_array_equal(controller.force_budget(at, box_state, p_WF, closed_loop=False), np.ones(4))
+
+
+@pytest.mark.parametrize("tau", [0.1, 0.0])
+def test_closed_loop_cones_follow_the_friction_estimate_over_their_time_constant(scene, tau):
+    """When the estimate falls from 0.7 to 0.3 the QP's cone friction falls as a first-order lag
+    (about 63 % of the way after cone_time_constant, never past the estimate); 0: at once."""
+    from trajectotree.execution.control import GraspController
+
+    gains = dataclasses.replace(ControllerGains(), cone_time_constant=tau)
+    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.5)
+    schedule = schedule_of(held, scene, gains, 0.5)
+    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
+    cone, cones = 0.7, []
+    for _ in range(int(round(0.1 * gains.rate_hz))):  # 0.1 s of control periods
+        cone = controller.cone_friction(cone, 0.3)
+        cones.append(cone)
+    assert np.all(np.diff(cones) <= 0.0) and min(cones) >= 0.3
+    if tau > 0:
+        assert cones[0] == pytest.approx(0.7 - 0.4 / (gains.rate_hz * tau))
+        assert cones[-1] == pytest.approx(0.3 + 0.4 * np.exp(-0.1 / tau), abs=0.005)
+    else:
+        assert cones == [0.3] * len(cones)
+
+
+def test_the_push_reflex_touches_a_swinging_finger_down_where_it_is(scene):
+    """While the push reflex is on, a finger mid-swing lands at once on the box point nearest to
+    it (touchdown_press into the face); without a push, or with touchdown off, it swings on."""
+    from trajectotree.execution.control import Estimates, GraspController
+
+    gains = ControllerGains()
+    reference = swing_reference(scene)
+    schedule = schedule_of(reference, scene, gains, 2.0)
+    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
+    calm, pushed = Estimates(mu=0.7, mass=0.05, reflex=0.0), Estimates(mu=0.7, mass=0.05, reflex=1.0)
+    at = (np.full(4, schedule.index(1.0)), np.arange(4))  # finger 0 mid-swing
+    np.testing.assert_array_equal(controller.touching_down(at, pushed), [True, False, False, False])
+    assert not controller.touching_down(at, calm).any()
+    off = GraspController(scene, schedule, dataclasses.replace(gains, touchdown=False), mu=0.56, closed_loop=True)
+    assert not off.touching_down(at, pushed).any()
+    assert not controller.touching_down(at, None).any()  # open loop
+    # finger 0's lifted tip comes down onto the face below it (the box's top, 0.2 x 0.1 m at the origin)
+    box_state = np.concatenate([reference.x[2], np.zeros(3)])
+    p_WF = scene.fingertip_positions(reference.q[2])
+    r_W = controller.touchdown_points(box_state, p_WF)
+    lifted_gap = ConvexPolygon.box(0.2, 0.1).signed_distances(p_WF[:1] - box_state[:2])[0] - scene.tip_radius
+    assert lifted_gap > 0.005
+    gap = ConvexPolygon.box(0.2, 0.1).signed_distances(r_W) - scene.tip_radius
+    np.testing.assert_allclose(gap, -gains.touchdown_press, atol=1e-9)
+    assert np.linalg.norm(r_W[0] - (p_WF[0] - box_state[:2])) == pytest.approx(lifted_gap + gains.touchdown_press)

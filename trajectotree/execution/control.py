@@ -32,7 +32,7 @@ measured box inject tangential force as the spheres roll and lose the grasp.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
@@ -295,8 +295,9 @@ class GraspController(LeafSystem):
     in between. In open loop `mass` is the plan's and `mu` the friction its QP's cones allow
     (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated
     plant's; in closed loop the cones are at mu x mu_estimate / scene.mu (the same safety
-    factor on the estimate), the wrench uses the estimated mass and cancels the measured
-    disturbance at once, and the QP keeps the joint torques within the motors'. The reflex
+    factor on the estimate, which they follow over cone_time_constant), the wrench uses the
+    estimated mass and cancels the measured disturbance at once, the QP keeps the joint torques
+    within the motors' and counts a finger only while it touches the measured box. The reflex
     raises the object gains and the QP's target squeeze (a target, not a bound), puts its
     cones at reflex_friction_safety x the estimate and weights its torque residual by
     reflex_torque_weight: a three-finger grasp that barely opposes a push then spends what it
@@ -348,6 +349,8 @@ class GraspController(LeafSystem):
             # Each finger's sample of the schedule (the landing reflex runs a swing ahead of the plan's clock).
             self._clock_state = self.DeclareDiscreteState(np.zeros(scene.num_fingers))
             self._landing = next_landing(schedule.force_scale)
+            # The friction the QP's cones use: the estimate, low-pass filtered (cone_friction).
+            self._cone_state = self.DeclareDiscreteState(np.array([self._plan_mu]))
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.InitializeActuation)
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
@@ -383,11 +386,23 @@ class GraspController(LeafSystem):
         box_state, hand_state = self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
         lag = self.path_lag(previous, box_state, hand_state)
         clocks = self.landing_clocks(self.schedule.index(t), previous, estimates, lag)
+        cone = self.cone_friction(context.get_discrete_state(self._cone_state).get_value()[0], estimates.mu)
+        discrete_state.get_mutable_vector(self._cone_state).SetFromVector([cone])
+        estimates = replace(estimates, mu=cone)
         discrete_state.get_mutable_vector(self._clock_state).SetFromVector(clocks.astype(float))
         discrete_state.get_mutable_vector(self._actuation_state).SetFromVector(
             self.compute_actuation(t, box_state, hand_state, estimates, clocks)
         )
         return EventStatus.Succeeded()
+
+    def cone_friction(self, previous: float, estimate: float) -> float:
+        """The friction of the QP's cones one control period after `previous`: a first-order lag
+        (gains.cone_time_constant) towards the friction `estimate`, so that the grasp forces move
+        over tens of milliseconds when the estimate falls, not in one step."""
+        tau = self.gains.cone_time_constant
+        if tau <= 0.0:
+            return estimate
+        return previous + (estimate - previous) * min(1.0 / (self.gains.rate_hz * tau), 1.0)
 
     def landing_triggered(self, estimates: Estimates) -> bool:
         """The landing reflex is wanted: a push is on, or the friction estimate fell
@@ -458,6 +473,31 @@ class GraspController(LeafSystem):
         """(F,) each measured fingertip sphere is within gains.contact_distance of the measured box."""
         p_BF = (p_WF - box_state[:2]) @ rotation_2d(box_state[2])
         return self._shape.signed_distances(p_BF) - self._tip_radius <= self.gains.contact_distance
+
+    def force_budget(self, at, box_state, p_WF, closed_loop: bool) -> np.ndarray:
+        """(F,) each finger's force budget at its schedule sample `at` (schedule.force_scale). In
+        closed loop a finger counts only while its measured fingertip touches the measured box: one
+        that lands late, early or bounces off is spring-driven to its target instead (pushed by the
+        QP's force in free air, a late finger reached the box at speed and spun it off the grasp)."""
+        scale = self.schedule.force_scale[at]
+        return np.where(self.touching(box_state, p_WF), scale, 0.0) if closed_loop else scale
+
+    def touching_down(self, at, estimates: Estimates | None) -> np.ndarray:
+        """(F,) the fingers the push reflex lands at once (gains.touchdown): those swinging at their
+        sample `at` while the reflex is on. Run ahead to its planned landing, a finger 25-40 mm out
+        landed in 30-40 ms, after the box had turned 0.2 rad under a 6 N push."""
+        if estimates is None or not self.gains.touchdown or estimates.reflex <= 0.0:
+            return np.zeros(self._num_fingers, dtype=bool)
+        return self.schedule.force_scale[at] < 1.0
+
+    def touchdown_points(self, box_state, p_WF) -> np.ndarray:
+        """(F, 2) W, from the box origin: where each fingertip centre touches down, on the measured
+        box point nearest to it, gains.touchdown_press into the face."""
+        R = rotation_2d(box_state[2])
+        p_BF = (p_WF - box_state[:2]) @ R
+        nearest = self._shape.nearest_points(p_BF)
+        n_B = self._shape.face_normals(nearest)
+        return (nearest + (self._tip_radius - self.gains.touchdown_press) * n_B) @ R.T
 
     def finger_forces(
         self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None, *, at=None, scale=None
@@ -538,17 +578,20 @@ class GraspController(LeafSystem):
         else:
             rate = np.ones((self._num_fingers, 1))
         v_target = box_state[3:5] + box_state[5] * perp(r_W) + rate * (s.v_BF[at] @ R.T)
-        scale = s.force_scale[at]
-        if ahead.any():
-            # A finger landing early is counted on only once it touches the measured box.
-            scale = np.where(ahead & ~self.touching(box_state, p_WF), 0.0, scale)
+        scale = self.force_budget(at, box_state, p_WF, closed_loop=clocks is not None)
+        down = self.touching_down(at, estimates)
+        if down.any():  # a push: a swinging finger lands where it is, on the box point nearest to it
+            r_W[down] = self.touchdown_points(box_state, p_WF)[down]
+            p_target[down] = box_state[:2] + r_W[down]
+            v_target[down] = box_state[3:5] + box_state[5] * perp(r_W[down])
+            scale[down] = estimates.reflex * self.touching(box_state, p_WF)[down]
         # A finger the QP may use is force-controlled: its spring fades with its force budget, so
         # that what it applies to the box is the QP's force. A tangential spring to a box-fixed
         # target fights the friction force as the sphere rolls (a slow in-grasp turn ran 0.05 rad
         # ahead); a lifting finger's normal spring pulled it off while the QP still counted on it.
         error = (1.0 - scale)[:, None] * (p_target - p_WF)
-        kp = np.where(ahead, g.land_tip_kp, g.tip_kp)[:, None]
-        kd = np.where(ahead, g.land_tip_kd, g.tip_kd)[:, None]
+        kp = np.where(ahead | down, g.land_tip_kp, g.tip_kp)[:, None]
+        kd = np.where(ahead | down, g.land_tip_kd, g.tip_kd)[:, None]
         spring = kp * error + kd * (v_target - v_WF)
         joints = None
         if estimates is not None:
