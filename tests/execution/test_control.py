@@ -441,26 +441,6 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     np.testing.assert_array_equal(off, [n] * 4)
 
 
-def test_closed_loop_counts_a_finger_only_while_it_touches_the_box(scene):
-    """The schedule says all four fingers hold; with finger 0 lifted off the measured box the
-    closed loop gives it no force budget (it is spring-driven to its target), the open loop
-    keeps the schedule's."""
-    from trajectotree.execution.control import GraspController
-
-    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
-    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
-    gains = ControllerGains()
-    schedule = schedule_of(held, scene, gains, 1.0)
-    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
-    box_state = np.concatenate([held.x[0], np.zeros(3)])
-    at = (schedule.index(0.5), slice(None))
-    np.testing.assert_array_equal(schedule.force_scale[at], np.ones(4))
-    for q, touching in ((held.q[0], [1, 1, 1, 1]), (lifted.q[0], [0, 1, 1, 1])):
-        p_WF = scene.fingertip_positions(q)
-        np.testing.assert_array_equal(controller.force_budget(at, box_state, p_WF, closed_loop=True), touching)
-        np.testing.assert_array_equal(controller.force_budget(at, box_state, p_WF, closed_loop=False), np.ones(4))
-
-
 @pytest.mark.parametrize("tau", [0.1, 0.0])
 def test_closed_loop_cones_follow_the_friction_estimate_over_their_time_constant(scene, tau):
     """When the estimate falls from 0.7 to 0.3 the QP's cone friction falls as a first-order lag

@@ -296,8 +296,8 @@ class GraspController(LeafSystem):
     (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated
     plant's; in closed loop the cones are at mu x mu_estimate / scene.mu (the same safety
     factor on the estimate, which they follow over cone_time_constant), the wrench uses the
-    estimated mass and cancels the measured disturbance at once, the QP keeps the joint torques
-    within the motors' and counts a finger only while it touches the measured box. The reflex
+    estimated mass and cancels the measured disturbance at once, and the QP keeps the joint
+    torques within the motors'. The reflex
     raises the object gains and the QP's target squeeze (a target, not a bound), puts its
     cones at reflex_friction_safety x the estimate and weights its torque residual by
     reflex_torque_weight: a three-finger grasp that barely opposes a push then spends what it
@@ -474,14 +474,6 @@ class GraspController(LeafSystem):
         p_BF = (p_WF - box_state[:2]) @ rotation_2d(box_state[2])
         return self._shape.signed_distances(p_BF) - self._tip_radius <= self.gains.contact_distance
 
-    def force_budget(self, at, box_state, p_WF, closed_loop: bool) -> np.ndarray:
-        """(F,) each finger's force budget at its schedule sample `at` (schedule.force_scale). In
-        closed loop a finger counts only while its measured fingertip touches the measured box: one
-        that lands late, early or bounces off is spring-driven to its target instead (pushed by the
-        QP's force in free air, a late finger reached the box at speed and spun it off the grasp)."""
-        scale = self.schedule.force_scale[at]
-        return np.where(self.touching(box_state, p_WF), scale, 0.0) if closed_loop else scale
-
     def touching_down(self, at, estimates: Estimates | None) -> np.ndarray:
         """(F,) the fingers the push reflex lands at once (gains.touchdown): those swinging at their
         sample `at` while the reflex is on. Run ahead to its planned landing, a finger 25-40 mm out
@@ -578,7 +570,7 @@ class GraspController(LeafSystem):
         else:
             rate = np.ones((self._num_fingers, 1))
         v_target = box_state[3:5] + box_state[5] * perp(r_W) + rate * (s.v_BF[at] @ R.T)
-        scale = self.force_budget(at, box_state, p_WF, closed_loop=clocks is not None)
+        scale = s.force_scale[at].copy()
         down = self.touching_down(at, estimates)
         if down.any():  # a push: a swinging finger lands where it is, on the box point nearest to it
             r_W[down] = self.touchdown_points(box_state, p_WF)[down]
