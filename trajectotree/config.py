@@ -605,11 +605,6 @@ class ControllerGains:
     land_approach_time: float = 0.1  # s of the plan, the end of the path to the landing, run land_approach_speedup x
     land_approach_speedup: float = 4.0  # 1
     land_lag: float = 0.02  # m, the path's sample waits while the fingertip is farther than this from its target
-    # The push reflex's touch-down: while it is on, a swinging finger lands at once on the box point nearest to it,
-    # touchdown_press into the face (tip spring land_tip_kp, land_tip_kd), counted on with the reflex's level once it
-    # touches; it resumes its swing when the reflex has faded.
-    touchdown: bool = True
-    touchdown_press: float = 0.001  # m
     land_tip_kp: float = 400.0  # N/m
     land_tip_kd: float = 5.0  # N s/m
 
@@ -629,7 +624,6 @@ class ControllerGains:
         check_range("controller.friction_evidence_error", self.friction_evidence_error, 0.0, 1.0, low_open=True)
         check_range("controller.friction_floor", self.friction_floor, 0.0, 1.0, low_open=True)
         check_range("controller.cone_time_constant", self.cone_time_constant, 0.0, 10.0)
-        check_range("controller.touchdown_press", self.touchdown_press, 0.0, 0.01)
         check_range("controller.mass_accel_max", self.mass_accel_max, 0.0, 100.0, low_open=True)
         check_range("controller.mass_time_constant", self.mass_time_constant, 0.0, 100.0, low_open=True)
         check_length("controller.mass_estimate_range", self.mass_estimate_range, 2, "low, high")

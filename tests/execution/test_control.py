@@ -461,30 +461,3 @@ def test_closed_loop_cones_follow_the_friction_estimate_over_their_time_constant
         assert cones[-1] == pytest.approx(0.3 + 0.4 * np.exp(-0.1 / tau), abs=0.005)
     else:
         assert cones == [0.3] * len(cones)
-
-
-def test_the_push_reflex_touches_a_swinging_finger_down_where_it_is(scene):
-    """While the push reflex is on, a finger mid-swing lands at once on the box point nearest to
-    it (touchdown_press into the face); without a push, or with touchdown off, it swings on."""
-    from trajectotree.execution.control import Estimates, GraspController
-
-    gains = ControllerGains()
-    reference = swing_reference(scene)
-    schedule = schedule_of(reference, scene, gains, 2.0)
-    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
-    calm, pushed = Estimates(mu=0.7, mass=0.05, reflex=0.0), Estimates(mu=0.7, mass=0.05, reflex=1.0)
-    at = (np.full(4, schedule.index(1.0)), np.arange(4))  # finger 0 mid-swing
-    np.testing.assert_array_equal(controller.touching_down(at, pushed), [True, False, False, False])
-    assert not controller.touching_down(at, calm).any()
-    off = GraspController(scene, schedule, dataclasses.replace(gains, touchdown=False), mu=0.56, closed_loop=True)
-    assert not off.touching_down(at, pushed).any()
-    assert not controller.touching_down(at, None).any()  # open loop
-    # finger 0's lifted tip comes down onto the face below it (the box's top, 0.2 x 0.1 m at the origin)
-    box_state = np.concatenate([reference.x[2], np.zeros(3)])
-    p_WF = scene.fingertip_positions(reference.q[2])
-    r_W = controller.touchdown_points(box_state, p_WF)
-    lifted_gap = ConvexPolygon.box(0.2, 0.1).signed_distances(p_WF[:1] - box_state[:2])[0] - scene.tip_radius
-    assert lifted_gap > 0.005
-    gap = ConvexPolygon.box(0.2, 0.1).signed_distances(r_W) - scene.tip_radius
-    np.testing.assert_allclose(gap, -gains.touchdown_press, atol=1e-9)
-    assert np.linalg.norm(r_W[0] - (p_WF[0] - box_state[:2])) == pytest.approx(lifted_gap + gains.touchdown_press)

@@ -474,23 +474,6 @@ class GraspController(LeafSystem):
         p_BF = (p_WF - box_state[:2]) @ rotation_2d(box_state[2])
         return self._shape.signed_distances(p_BF) - self._tip_radius <= self.gains.contact_distance
 
-    def touching_down(self, at, estimates: Estimates | None) -> np.ndarray:
-        """(F,) the fingers the push reflex lands at once (gains.touchdown): those swinging at their
-        sample `at` while the reflex is on. Run ahead to its planned landing, a finger 25-40 mm out
-        landed in 30-40 ms, after the box had turned 0.2 rad under a 6 N push."""
-        if estimates is None or not self.gains.touchdown or estimates.reflex <= 0.0:
-            return np.zeros(self._num_fingers, dtype=bool)
-        return self.schedule.force_scale[at] < 1.0
-
-    def touchdown_points(self, box_state, p_WF) -> np.ndarray:
-        """(F, 2) W, from the box origin: where each fingertip centre touches down, on the measured
-        box point nearest to it, gains.touchdown_press into the face."""
-        R = rotation_2d(box_state[2])
-        p_BF = (p_WF - box_state[:2]) @ R
-        nearest = self._shape.nearest_points(p_BF)
-        n_B = self._shape.face_normals(nearest)
-        return (nearest + (self._tip_radius - self.gains.touchdown_press) * n_B) @ R.T
-
     def finger_forces(
         self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None, *, at=None, scale=None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -570,20 +553,14 @@ class GraspController(LeafSystem):
         else:
             rate = np.ones((self._num_fingers, 1))
         v_target = box_state[3:5] + box_state[5] * perp(r_W) + rate * (s.v_BF[at] @ R.T)
-        scale = s.force_scale[at].copy()
-        down = self.touching_down(at, estimates)
-        if down.any():  # a push: a swinging finger lands where it is, on the box point nearest to it
-            r_W[down] = self.touchdown_points(box_state, p_WF)[down]
-            p_target[down] = box_state[:2] + r_W[down]
-            v_target[down] = box_state[3:5] + box_state[5] * perp(r_W[down])
-            scale[down] = estimates.reflex * self.touching(box_state, p_WF)[down]
+        scale = s.force_scale[at]
         # A finger the QP may use is force-controlled: its spring fades with its force budget, so
         # that what it applies to the box is the QP's force. A tangential spring to a box-fixed
         # target fights the friction force as the sphere rolls (a slow in-grasp turn ran 0.05 rad
         # ahead); a lifting finger's normal spring pulled it off while the QP still counted on it.
         error = (1.0 - scale)[:, None] * (p_target - p_WF)
-        kp = np.where(ahead | down, g.land_tip_kp, g.tip_kp)[:, None]
-        kd = np.where(ahead | down, g.land_tip_kd, g.tip_kd)[:, None]
+        kp = np.where(ahead, g.land_tip_kp, g.tip_kp)[:, None]
+        kd = np.where(ahead, g.land_tip_kd, g.tip_kd)[:, None]
         spring = kp * error + kd * (v_target - v_WF)
         joints = None
         if estimates is not None:
