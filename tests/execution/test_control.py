@@ -382,30 +382,24 @@ def schedule_of(reference, scene, gains: ControllerGains, duration: float):
     )
 
 
-def swing_reference(scene):
-    """Finger 0 holds at t = 0 and 0.5 s, is lifted at 1.0 s and lands again at 1.5 s (2 s in all)."""
-    from trajectotree.execution.reference import Reference
-
-    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
-    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
-    refs = [held, lifted]
-    return Reference(
-        t=np.array([0.0, 0.5, 1.0, 1.5, 2.0]),
-        **{
-            name: np.stack([getattr(refs[k], name)[0] for k in [0, 0, 1, 0, 0]])
-            for name in ("x", "q", "p_WF", "v_WF", "f_W")
-        },
-    )
-
-
 def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene):
     """A finger that swings while a push is on (or the friction estimate has fallen) follows its
     planned swing land_speedup x as fast up to its next planned landing and holds there until
     the plan gets there; without a trigger every finger follows the plan's sample."""
     from trajectotree.execution.control import Estimates, GraspController
+    from trajectotree.execution.reference import Reference
 
+    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
+    lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
+    # finger 0 holds at t = 0 and 0.5 s, is lifted at 1.0 s and lands again at 1.5 s
+    order = [0, 0, 1, 0, 0]
+    refs = [held, lifted]
+    reference = Reference(
+        t=np.array([0.0, 0.5, 1.0, 1.5, 2.0]),
+        **{name: np.stack([getattr(refs[k], name)[0] for k in order]) for name in ("x", "q", "p_WF", "v_WF", "f_W")},
+    )
     gains = ControllerGains()
-    schedule = schedule_of(swing_reference(scene), scene, gains, 2.0)
+    schedule = schedule_of(reference, scene, gains, 2.0)
     controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
     landing = int(np.argmax(schedule.force_scale[schedule.index(1.0) :, 0] >= 1.0)) + schedule.index(1.0)
     assert schedule.index(1.4) < landing <= schedule.index(1.5)

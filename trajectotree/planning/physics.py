@@ -51,7 +51,7 @@ class ObjectModel:
     gravity: float  # m/s^2, magnitude, along -y in W
     tip_radius: float  # m, fingertip sphere radius
     fingers: tuple[FingerGeometry, ...] | None = None  # the hand's kinematics and link boxes (None: links unchecked)
-    moment: float | None = None  # kg m^2, I_zz about the centroid (scene.object_inertia); None: a uniform plate's
+    moment: float | None = None  # kg m^2, I_zz about the centroid (SceneConfig.inertia_zz); None: a uniform plate's
 
     @property
     def inertia(self) -> float:
@@ -67,7 +67,7 @@ class ObjectModel:
             gravity=c.gravity,
             tip_radius=scene.tip_radius,
             fingers=scene.fingers,
-            moment=c.object_inertia,
+            moment=c.inertia_zz(),  # the scene's rule: its object_inertia, else the plate's
         )
 
 
