@@ -19,13 +19,14 @@ import argparse
 import numpy as np
 from scipy.optimize import linprog
 
-from trajectotree.execution.control import HandKinematics, cone_rows, perp, torque_rows
+from trajectotree.execution.control import HandKinematics
 from trajectotree.execution.reference import reference_from_plan
 from trajectotree.execution.simulate import execution_schedule
 from trajectotree.experiments.executions import middle_of_middle_segment
 from trajectotree.geometry import rotation_2d
 from trajectotree.io import load_plan
 from trajectotree.scene.plant import build_scene
+from trajectotree.scene.statics import cone_rows, perp, torque_rows
 
 
 def push_capacity(G, torque, holding, mu: float, max_normal: float, weight: float, direction) -> float:

@@ -370,6 +370,12 @@ class SearchConfig:
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
     # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
     max_stance_force: float = 10.0
+    # N, the push a three-finger stance should resist: a node's children whose holding fingers resist a
+    # push of this much along each of +-x and +-y in W (trajectotree.search.stance.PushCapacityLp at mu_plan,
+    # each finger within push_normal_force and its motors) are tried first, the others by how far short
+    # they fall, and only then by the paper's heuristic. An order, not a test: no plan is lost. 0: the paper's order.
+    push_capacity: float = 6.0
+    push_normal_force: float = 8.0  # N, each finger's normal-force bound in the push capacity (the grasp controller's)
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
     # (trajectotree.search.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
     initial_grid_step: float = 0.02
@@ -425,6 +431,8 @@ class SearchConfig:
         check_bool("search.rolled_stances", self.rolled_stances)
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
+        check_range("search.push_capacity", self.push_capacity, 0.0, 100.0)
+        check_range("search.push_normal_force", self.push_normal_force, 0.0, 1000.0, low_open=True)
         check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
         check_integer("search.window_segments", self.window_segments, 1, 100)
         check_integer("search.commit_segments", self.commit_segments, 1, self.window_segments)

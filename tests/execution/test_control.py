@@ -220,8 +220,9 @@ def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
     leans 25 deg off the normal (needs mu 0.47; 0.40 at the planned points). With the plan's cone
     (0.49) the QP squeezes hard and still misses the weight; with the controller's default cone
     (max(search 0.7, controller 0.8) x 0.7 = 0.56) it holds the box with less than half of that."""
-    from trajectotree.execution.control import GraspForceQp, perp
+    from trajectotree.execution.control import GraspForceQp
     from trajectotree.geometry import rotation_2d
+    from trajectotree.scene.statics import perp
 
     config = Config()
     R = rotation_2d(0.63)

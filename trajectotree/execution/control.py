@@ -45,6 +45,7 @@ from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
 from trajectotree.scene.plant import FingerGeometry, Scene, build_scene
+from trajectotree.scene.statics import cone_rows, perp, torque_rows
 
 ACCEL_LIMIT = np.array([0.0, 0.0, 5.0])  # m/s^2, m/s^2, rad/s^2: the box feedback the fingers' own inertia follows
 SINGULAR_DAMPING = 0.01  # m, of the fingers' damped least-squares accelerations (a tenth of Drake's gripper's links)
@@ -153,13 +154,6 @@ class HandKinematics:
         return p, jacobian_from_links(r1, r2), g
 
 
-def perp(v) -> np.ndarray:
-    """z x v for planar vectors (..., 2)."""
-    out = np.empty_like(v)
-    out[..., 0], out[..., 1] = -v[..., 1], v[..., 0]
-    return out
-
-
 class GraspForceQp:
     """min wrench_weight |G lambda - w|^2_W + |lambda - lambda_plan|^2 over lambda = (lambda_n,
     lambda_t) of the `num_fingers` fingers, lambda_n in [lo, hi], |lambda_t| <= mu lambda_n. Built once;
@@ -238,15 +232,6 @@ def next_landing(force_scale: np.ndarray) -> np.ndarray:
     return out
 
 
-def cone_rows(mu: float, num_fingers: int) -> np.ndarray:
-    """(2F, 2F): lambda_t - mu lambda_n <= 0 and -lambda_t - mu lambda_n <= 0 for each finger."""
-    cone = np.zeros((2 * num_fingers, 2 * num_fingers))
-    for i in range(num_fingers):
-        cone[2 * i, 2 * i : 2 * i + 2] = (-mu, 1.0)
-        cone[2 * i + 1, 2 * i : 2 * i + 2] = (-mu, -1.0)
-    return cone
-
-
 @dataclass(frozen=True)
 class Estimates:
     """What the closed loop (trajectotree.execution.closed_loop) tells the GraspController."""
@@ -256,33 +241,6 @@ class Estimates:
     reflex: float  # 0..1, the push reflex (squeeze and object gains raised in proportion)
     # (2,) N in W, the force on the box that its contacts and gravity do not explain (the desired wrench cancels it)
     disturbance: np.ndarray = field(default_factory=lambda: np.zeros(2))
-
-
-def torque_rows(
-    J_WF, n_W, t_W, tip_radius: float, rest, tau_max
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The joint torques that the finger forces lambda add to `rest` (F, 2: springs and
-    gravity), bounded by the motors' tau_max (F, 2): (A (2F, 2F) block-diagonal, lower (2F,),
-    upper (2F,)) for GraspForceQp.solve, and the most normal force (F,) each finger can push
-    with without tangential force. The force -lambda_n n + lambda_t t acts tip_radius from the
-    sphere centre along -n: its lever adds -tip_radius lambda_t to both joints. The bounds
-    are widened to admit lambda = 0 where `rest` alone is beyond the motors, so that the QP
-    stays feasible (the plant clips what is left)."""
-    num_fingers = len(J_WF)
-    A = np.zeros((2 * num_fingers, 2 * num_fingers))
-    Jt = np.swapaxes(J_WF, 1, 2)  # (F, 2 joints, 2)
-    normal = np.einsum("fji,fi->fj", Jt, -n_W)
-    tangential = np.einsum("fji,fi->fj", Jt, t_W) - tip_radius
-    for i in range(num_fingers):
-        A[2 * i : 2 * i + 2, 2 * i] = normal[i]
-        A[2 * i : 2 * i + 2, 2 * i + 1] = tangential[i]
-    lower = np.minimum(-tau_max - rest, 0.0).ravel()
-    upper = np.maximum(tau_max - rest, 0.0).ravel()
-    with np.errstate(divide="ignore", invalid="ignore"):
-        room = np.where(
-            normal > 0, upper.reshape(-1, 2) / normal, np.where(normal < 0, lower.reshape(-1, 2) / normal, np.inf)
-        )
-    return A, lower, upper, room.min(axis=1)
 
 
 class GraspController(LeafSystem):

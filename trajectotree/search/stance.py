@@ -37,9 +37,11 @@ from collections.abc import Callable
 import numpy as np
 from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
-from trajectotree.geometry import ConvexPolygon
+from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
-from trajectotree.scene.plant import Scene
+from trajectotree.scene.kinematics import jacobian_from_links
+from trajectotree.scene.plant import FingerGeometry, Scene
+from trajectotree.scene.statics import cone_rows, perp, torque_rows
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
 from trajectotree.search.initial_grasp import stance_fingers
 from trajectotree.search.reach import Reachability
@@ -81,6 +83,73 @@ class HoldingForceLp:
         return float(result.get_optimal_cost()) if result.is_success() else np.inf
 
 
+PUSH_DIRECTIONS = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))  # the pushes push_capacity resists, in W
+
+
+class PushCapacityLp:
+    """The hardest push P = t u (u a unit direction in W) that k holding fingers resist while
+    they also hold the object's weight, each within a normal-force bound and its joints'
+    torque limits:
+
+        maximize t  s.t.  G lambda = w_hold - t (u, 0),  |lambda_t| <= mu lambda_n,
+                          0 <= lambda_n <= f_max,  tau_lower <= A lambda <= tau_upper,
+
+    lambda = (lambda_n, lambda_t) per finger, G their grasp matrix in W about the object's
+    centroid, w_hold the weight's opposite, and A, tau_lower, tau_upper the joint torques of
+    the contact forces beside gravity on the links (statics.torque_rows). It is the static
+    limit of any controller that keeps the stance: a harder push moves the object for as
+    long as it lasts. Built once; `solve` only updates the coefficients (like HoldingForceLp)."""
+
+    def __init__(self, num_contacts: int, mu: float, max_normal_force: float):
+        n = 2 * num_contacts
+        prog = MathematicalProgram()
+        z = prog.NewContinuousVariables(n + 1, "z")  # finger-major (lambda_n, lambda_t), then t
+        self.balance = prog.AddLinearEqualityConstraint(np.zeros((3, n + 1), order="F"), np.zeros(3), z)
+        cone = np.asfortranarray(np.hstack([cone_rows(mu, num_contacts), np.zeros((n, 1))]))
+        prog.AddLinearConstraint(cone, np.full(n, -np.inf), np.zeros(n), z)
+        self.torque = prog.AddLinearConstraint(np.zeros((n, n + 1), order="F"), np.zeros(n), np.zeros(n), z)
+        lower = np.tile([0.0, -np.inf], num_contacts)
+        upper = np.tile([max_normal_force, np.inf], num_contacts)
+        prog.AddBoundingBoxConstraint(np.append(lower, -np.inf), np.append(upper, np.inf), z)
+        prog.AddLinearCost(np.append(np.zeros(n), -1.0), 0.0, z)
+        self.prog, self.lp_calls = prog, 0
+        self._solver, self._options = ClpSolver(), SolverOptions()
+
+    def solve(self, G, torque, w_hold, u) -> float:
+        """N, the hardest push along u (2,) in W resisted with the grasp matrix G (3, 2k),
+        `torque` = (A, lower, upper) from statics.torque_rows and the holding wrench w_hold (3,);
+        -inf when the fingers cannot even hold the weight."""
+        A, lower, upper = torque
+        # column-major, as the other LPs of the search (grasp.FormClosureLp says why)
+        self.balance.evaluator().UpdateCoefficients(np.asfortranarray(np.column_stack([G, [u[0], u[1], 0.0]])), w_hold)
+        self.torque.evaluator().UpdateCoefficients(
+            np.asfortranarray(np.column_stack([A, np.zeros(len(A))])), lower, upper
+        )
+        self.lp_calls += 1
+        result = self._solver.Solve(self.prog, None, self._options)
+        return float(-result.get_optimal_cost()) if result.is_success() else -np.inf
+
+
+def grasp_matrix_W(p_WC, n_W) -> np.ndarray:
+    """(3, 2k): the wrench in W, about the object's centroid, of contact forces -lambda_n n +
+    lambda_t t (t = z x n, the outward normal n) at contacts p_WC (k, 2) relative to the centroid."""
+    t_W = perp(n_W)
+    G = np.empty((3, 2 * len(p_WC)))
+    G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
+    G[2, 0::2] = p_WC[:, 0] * -n_W[:, 1] + p_WC[:, 1] * n_W[:, 0]
+    G[2, 1::2] = p_WC[:, 0] * t_W[:, 1] - p_WC[:, 1] * t_W[:, 0]
+    return G
+
+
+def link_gravity_torques(finger: FingerGeometry, q, gravity: float) -> np.ndarray:
+    """(2,) N m, the joint torques that hold `finger`'s links up at joint angles q (gravity -y in W):
+    dV/dq = g (m1 c1 + m2 l1) cos a1 + g m2 c2 cos a12, g m2 c2 cos a12."""
+    a1, a12 = finger.angles(np.asarray(q, dtype=float))
+    k1 = gravity * (finger.masses[0] * finger.coms[0] + finger.masses[1] * finger.l1)
+    k2 = gravity * finger.masses[1] * finger.coms[1]
+    return np.array([k1 * np.cos(a1) + k2 * np.cos(a12), k2 * np.cos(a12)])
+
+
 def weight_support_B(theta: float, weight: float) -> np.ndarray:
     """(3,) the wrench the fingers must apply to hold the object still at orientation theta:
     the weight's opposite R(theta)^T (0, m g) in B, no moment about the centroid."""
@@ -99,11 +168,17 @@ class StanceChecks:
         max_force: float,
         angles: Callable[[int, int, float], np.ndarray] | None = None,
         corner_gap: float = 0.0,
+        push_normal_force: float = 8.0,
     ):
         """`angles(depth, finger, s)`: a finger's closed-form joint angles at node `depth` with its
         contact at arclength s (a table of them; None: Reachability.closed_form); `corner_gap` (m,
-        search.rolled_corner_gap): how far short of a corner rolled contacts stay."""
+        search.rolled_corner_gap): how far short of a corner rolled contacts stay;
+        `push_normal_force` (N, search.push_normal_force): each finger's bound in push_capacity."""
         self.scene, self.reach, self.poses, self.mu_plan = scene, reach, poses, mu_plan
+        self.push_lps = {
+            k: PushCapacityLp(k, mu_plan, push_normal_force) for k in (scene.num_fingers - 1, scene.num_fingers)
+        }
+        self._push: dict[tuple, float] = {}  # (depth, ((finger, arclength), ...)) -> N
         self.corner_gap = corner_gap
         self.table = angles
         self.boundary: ConvexPolygon = scene.config.shape
@@ -156,12 +231,49 @@ class StanceChecks:
     def link_turn(self, depth: int, finger: int, s: float) -> float:
         """Angle of `finger`'s second link relative to the object at node `depth` with its
         contact at arclength s (closed-form IK; the node's Drake IK agrees)."""
-        q = (
+        q = self.joint_angles(depth, finger, s)
+        return float(self.scene.fingers[finger].psi + q[0] + q[1] - self.poses[depth][2])
+
+    def joint_angles(self, depth: int, finger: int, s: float) -> np.ndarray:
+        """(2,) `finger`'s closed-form joint angles at node `depth` with its contact at arclength s."""
+        return (
             self.reach.closed_form(self.poses[depth], finger, s).q
             if self.table is None
             else self.table(depth, finger, s)
         )
-        return float(self.scene.fingers[finger].psi + q[0] + q[1] - self.poses[depth][2])
+
+    # -- push capacity ------------------------------------------------------------------------
+    def push_capacity(self, node, depth: int, finger: int | None) -> float:
+        """N, the hardest push along +-x and +-y in W that the stance holding the object while
+        `finger` (None: none, all hold) moves from `node` to the child at `depth` resists at both
+        ends of its transition, at its planned contacts (PushCapacityLp at mu_plan)."""
+        stance = tuple(range(self.scene.num_fingers)) if finger is None else self.stances[finger]
+        held = tuple((j, node.arclengths[j]) for j in stance)
+        return min(self.stance_push_capacity(held, d) for d in (node.depth, depth))
+
+    def stance_push_capacity(self, held: tuple[tuple[int, float], ...], depth: int) -> float:
+        """N, push_capacity of fingers `held` ((finger, arclength), ...) at pose x*_depth; memoized."""
+        key = (depth, held)
+        if key not in self._push:
+            fingers = [j for j, _ in held]
+            R = rotation_2d(self.poses[depth][2])
+            p_BC, n_B = self.boundary.points(np.array([s for _, s in held]))
+            n_W = n_B @ R.T
+            q = np.array([self.joint_angles(depth, j, s) for j, s in held])
+            J_WF = np.array([jacobian_from_links(*self.scene.fingers[j].links(qj)) for j, qj in zip(fingers, q)])
+            gravity = np.array(
+                [
+                    link_gravity_torques(self.scene.fingers[j], qj, self.scene.config.gravity)
+                    for j, qj in zip(fingers, q)
+                ]
+            )
+            tau_max = np.array([self.scene.fingers[j].tau_max for j in fingers])
+            A, lower, upper, _ = torque_rows(J_WF, n_W, perp(n_W), self.reach.tip_radius, gravity, tau_max)
+            G = grasp_matrix_W(p_BC @ R.T, n_W)
+            w_hold = np.array([0.0, self.weight, 0.0])
+            lp = self.push_lps[len(held)]
+            self._push[key] = min(lp.solve(G, (A, lower, upper), w_hold, u) for u in PUSH_DIRECTIONS)
+        return self._push[key]
 
     # -- holding force ------------------------------------------------------------------------
     def too_heavy(self, node, depth: int, finger: int) -> Refusal | None:

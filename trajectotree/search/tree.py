@@ -110,6 +110,7 @@ class _Search:
             config.max_stance_force,
             angles=self.bound.angles,
             corner_gap=config.rolled_corner_gap,
+            push_normal_force=config.push_normal_force,
         )
         self.refused: Counter[Refusal] = Counter()  # why moves were not generated (coarse), for NoPlan
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
@@ -178,8 +179,8 @@ class _Search:
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
-        """(switches it needs to the goal, heuristic, child) for each candidate child that passes the
-        cheap exact tests."""
+        """(switches it needs to the goal, (push shortfall, heuristic), child) for each candidate child
+        that passes the cheap exact tests."""
         depth = node.depth + 1
         # fingers whose contact is out of reach at the next pose must move now (same children,
         # fewer tests: with two of them there is no child at all)
@@ -203,7 +204,7 @@ class _Search:
                     moved = list(node.arclengths)
                     moved[i] = s
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left, stances = [], self.config.num_nodes - 2 - node.depth, {}
+        out, steps_left, stances, shortfalls = [], self.config.num_nodes - 2 - node.depth, {}, {}
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
@@ -221,9 +222,18 @@ class _Search:
             if stances[finger]:
                 self.refused[stances[finger]] += 1
                 continue
+            if finger not in shortfalls:
+                shortfalls[finger] = self.push_shortfall(node, depth, finger)
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
-            out.append((switches, h, _Node(depth, arclengths, finger, node)))
+            out.append((switches, (shortfalls[finger], h), _Node(depth, arclengths, finger, node)))
         return out
+
+    def push_shortfall(self, node: _Node, depth: int, finger: int | None) -> float:
+        """N by which the stance holding the object while `finger` moves from `node` to the child
+        at `depth` falls short of resisting search.push_capacity (0 when it does, or when it is 0)."""
+        if not self.config.push_capacity:
+            return 0.0
+        return max(0.0, self.config.push_capacity - self.stance.push_capacity(node, depth, finger))
 
     def stance_refused(self, node: _Node, depth: int, finger: int | None) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
@@ -306,7 +316,7 @@ class _Search:
         goal, which it cannot test): children needing fewer contact switches to the goal
         (switch_bound) come first, then the heuristic."""
         counter = itertools.count()
-        open_set = [(-anchor.depth, (0, 0.0), next(counter), anchor)]
+        open_set = [(-anchor.depth, (0, (0.0, 0.0)), next(counter), anchor)]
         inserted = {(anchor.depth, anchor.arclengths)}
         expanded0 = self.expanded
         while open_set:
@@ -322,12 +332,14 @@ class _Search:
                 continue
             if node.depth == target:
                 return node, None
-            for switches, h, child in self.neighbors(node):
+            for switches, order, child in self.neighbors(node):
                 state = (child.depth, child.arclengths)
                 if state not in inserted and state not in self.dead:
                     inserted.add(state)
                     self.generated += 1
-                    heapq.heappush(open_set, (-child.depth, (switches if toward_goal else 0, h), next(counter), child))
+                    heapq.heappush(
+                        open_set, (-child.depth, (switches if toward_goal else 0, order), next(counter), child)
+                    )
         self.dead |= inserted  # the whole tree was searched: none of its states reaches `target`, nor the goal
         return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded - expanded0)
 
