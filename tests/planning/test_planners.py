@@ -243,7 +243,7 @@ def test_paper_config_loads_with_the_papers_formulation():
     default = Config()
     assert dataclasses.replace(config, search=default.search, cito=default.cito) == default  # nothing else differs
     assert not config.search.rolled_stances and config.search.grid_refinements == 0
-    assert config.search.max_stance_force == 0.0
+    assert config.search.max_stance_force == 0.0 and config.search.push_capacity == 0.0
     assert (
         dataclasses.replace(
             config.search,
@@ -251,6 +251,7 @@ def test_paper_config_loads_with_the_papers_formulation():
             rolled_stances=default.search.rolled_stances,
             grid_refinements=default.search.grid_refinements,
             max_stance_force=default.search.max_stance_force,
+            push_capacity=default.search.push_capacity,
         )
         == default.search
     )

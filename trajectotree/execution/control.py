@@ -45,7 +45,7 @@ from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
 from trajectotree.scene.plant import FingerGeometry, Scene, build_scene
-from trajectotree.scene.statics import cone_rows, perp, torque_rows
+from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows
 
 ACCEL_LIMIT = np.array([0.0, 0.0, 5.0])  # m/s^2, m/s^2, rad/s^2: the box feedback the fingers' own inertia follows
 SINGULAR_DAMPING = 0.01  # m, of the fingers' damped least-squares accelerations (a tenth of Drake's gripper's links)
@@ -452,10 +452,7 @@ class GraspController(LeafSystem):
         n_W = self._shape.face_normals(self._shape.nearest_points(p_BF)) @ R.T
         t_W = perp(n_W)
         r_W = p_WF - self._tip_radius * n_W - box_state[:2]  # contact points, from the box origin
-        G = np.empty((3, 2 * self._num_fingers))
-        G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
-        G[2, 0::2] = r_W[:, 0] * -n_W[:, 1] + r_W[:, 1] * n_W[:, 0]
-        G[2, 1::2] = r_W[:, 0] * t_W[:, 1] - r_W[:, 1] * t_W[:, 0]
+        G = grasp_matrix_W(r_W, n_W)
         at = (n, slice(None)) if at is None else at  # each finger's sample (all n but a finger landing early)
         scale = s.force_scale[at] if scale is None else scale
         if estimates is None:

@@ -1,6 +1,6 @@
 """Finger statics shared by the search and the controllers: the rows that keep planar contact
-forces lambda = (lambda_n, lambda_t) per finger inside their friction cones, and the joint
-torques those forces cost the motors (through the fingertip Jacobians)."""
+forces lambda = (lambda_n, lambda_t) per finger inside their friction cones, the wrench those forces
+apply to the object, and the joint torques they cost the motors (through the fingertip Jacobians)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,17 @@ def perp(v) -> np.ndarray:
     out = np.empty_like(v)
     out[..., 0], out[..., 1] = -v[..., 1], v[..., 0]
     return out
+
+
+def grasp_matrix_W(p_WC, n_W) -> np.ndarray:
+    """(3, 2k): the wrench in W, about the object's centroid, of contact forces -lambda_n n +
+    lambda_t t (t = z x n, the outward normal n) at contacts p_WC (k, 2) relative to the centroid."""
+    t_W = perp(n_W)
+    G = np.empty((3, 2 * len(p_WC)))
+    G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
+    G[2, 0::2] = p_WC[:, 0] * -n_W[:, 1] + p_WC[:, 1] * n_W[:, 0]
+    G[2, 1::2] = p_WC[:, 0] * t_W[:, 1] - p_WC[:, 1] * t_W[:, 0]
+    return G
 
 
 def cone_rows(mu: float, num_fingers: int) -> np.ndarray:

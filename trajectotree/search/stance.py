@@ -41,7 +41,7 @@ from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.kinematics import jacobian_from_links
 from trajectotree.scene.plant import FingerGeometry, Scene
-from trajectotree.scene.statics import cone_rows, perp, torque_rows
+from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
 from trajectotree.search.initial_grasp import stance_fingers
 from trajectotree.search.reach import Reachability
@@ -128,17 +128,6 @@ class PushCapacityLp:
         self.lp_calls += 1
         result = self._solver.Solve(self.prog, None, self._options)
         return float(-result.get_optimal_cost()) if result.is_success() else -np.inf
-
-
-def grasp_matrix_W(p_WC, n_W) -> np.ndarray:
-    """(3, 2k): the wrench in W, about the object's centroid, of contact forces -lambda_n n +
-    lambda_t t (t = z x n, the outward normal n) at contacts p_WC (k, 2) relative to the centroid."""
-    t_W = perp(n_W)
-    G = np.empty((3, 2 * len(p_WC)))
-    G[:2, 0::2], G[:2, 1::2] = -n_W.T, t_W.T
-    G[2, 0::2] = p_WC[:, 0] * -n_W[:, 1] + p_WC[:, 1] * n_W[:, 0]
-    G[2, 1::2] = p_WC[:, 0] * t_W[:, 1] - p_WC[:, 1] * t_W[:, 0]
-    return G
 
 
 def link_gravity_torques(finger: FingerGeometry, q, gravity: float) -> np.ndarray:

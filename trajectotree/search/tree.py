@@ -36,6 +36,12 @@ short of the corners, where its sticking fingertips roll to (search.rolled_stanc
 carry the object's weight with at most search.max_stance_force newtons of total normal force at
 its planned contacts.
 
+Push order (trajectotree.search.stance; not in the paper): among the children of a node, SelectNode
+takes first those whose holding fingers resist a push of search.push_capacity newtons along each of
++-x and +-y (an LP at mu_plan within each finger's force bound and its motors), the others by how
+far short they fall, and only then by the paper's heuristic. It orders the same tree, so it finds a
+plan wherever the paper's order does (within the same budgets), but not the same plan.
+
 Initial grasp: unless search.initial_arclengths is given, the search is rooted at the
 ranked candidates of trajectotree.search.initial_grasp, best first; a candidate whose fingers
 cannot reach the goal with one switch per step (the bound above) is skipped without a
@@ -312,9 +318,9 @@ class _Search:
         self, anchor: _Node, target: int, t0: float, budget: int, toward_goal: bool
     ) -> tuple[_Node | None, Refusal | None]:
         """A node at depth `target` below `anchor` by Algorithm 1's DFS (SelectNode: deepest, then
-        lowest heuristic), with at most `budget` expansions. `toward_goal` (a window short of the
-        goal, which it cannot test): children needing fewer contact switches to the goal
-        (switch_bound) come first, then the heuristic."""
+        least push shortfall, then lowest heuristic), with at most `budget` expansions.
+        `toward_goal` (a window short of the goal, which it cannot test): children needing fewer
+        contact switches to the goal (switch_bound) come first, then the same order."""
         counter = itertools.count()
         open_set = [(-anchor.depth, (0, (0.0, 0.0)), next(counter), anchor)]
         inserted = {(anchor.depth, anchor.arclengths)}
