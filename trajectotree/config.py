@@ -370,10 +370,11 @@ class SearchConfig:
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
     # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
     max_stance_force: float = 10.0
-    # N, the push a three-finger stance should resist: a node's children whose holding fingers resist a
-    # push of this much along each of +-x and +-y in W (trajectotree.search.stance.PushCapacityLp at mu_plan,
-    # each finger within push_normal_force and its motors) are tried first, the others by how far short
-    # they fall, and only then by the paper's heuristic. An order, not a test: no plan is lost. 0: the paper's order.
+    # N, the push a stance (the fingers holding while one switches) should resist: a node's children whose
+    # holding fingers resist a push of this much along each of +-x and +-y in W (trajectotree.search.stance.
+    # PushCapacityLp at mu_plan, each finger within push_normal_force and its motors) are tried first, the others
+    # by how far short they fall, and only then by the paper's heuristic. An order, not a test: the same tree,
+    # within the same budgets. 0: the paper's order.
     push_capacity: float = 6.0
     push_normal_force: float = 8.0  # N, each finger's normal-force bound in the push capacity (the grasp controller's)
     # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
