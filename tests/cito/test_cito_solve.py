@@ -26,9 +26,10 @@ MU_PLAN = 0.49
 
 @pytest.fixture(scope="module")
 def setup():
-    """A 0.2 rad plan of one segment (one finger switches), its program, guess and converged solve."""
+    """A 0.2 rad plan of one segment (one finger switches), its program, guess and converged solve
+    (the paper's order of the search's children: the push order turns 0.2 rad with all four holding)."""
     scene = build_scene()
-    plan = find_contact_plan(scene, 0.2, SearchConfig(num_nodes=2))
+    plan = find_contact_plan(scene, 0.2, SearchConfig(num_nodes=2, push_capacity=0.0))
     assert plan.success and plan.nodes[1].switching_finger is not None
     spec = transition_spec(plan, radius=scene.tip_radius, config=CONFIG)
     program = build_program(CONFIG, spec, BodyParams(scene, CONFIG.sdf_sharpness, mu=MU_PLAN))

@@ -208,8 +208,8 @@ def copy_plan(plan: Path, to: Path, **config_changes) -> Path:
 def test_simulate_refuses_a_plan_npz_beside_another_plans_plan_json(tiny_plan, tmp_path, capsys):
     cases = [
         (
-            {"scene": {"box_width": 0.15}},
-            "its contact points lie up to 25.00 mm off the 0.15 x 0.10 m box plan.json records (finger ",
+            {"scene": {"box_height": 0.08}},
+            "its contact points lie up to 10.00 mm off the 0.20 x 0.08 m box plan.json records (finger ",
         ),
         (
             {"scene": {"initial_pose": [0.01, 0.0, 0.0]}},
@@ -226,9 +226,9 @@ def test_simulate_refuses_a_plan_npz_beside_another_plans_plan_json(tiny_plan, t
         assert message in err, err
         assert sorted(p.name for p in folder.iterdir()) == ["plan.json", "plan.npz"]  # no sim.json, no sim.npz
     assert not list(tmp_path.glob("*.html"))
-    wider = copy_plan(tiny_plan, tmp_path / "wider", scene={"box_width": 0.25})  # the other way round
-    assert main(["simulate", str(wider)]) == 2
-    assert "its contact points lie up to 25.00 mm off the 0.25 x 0.10 m box" in capsys.readouterr().err
+    taller = copy_plan(tiny_plan, tmp_path / "taller", scene={"box_height": 0.12})  # the other way round
+    assert main(["simulate", str(taller)]) == 2
+    assert "its contact points lie up to 10.00 mm off the 0.20 x 0.12 m box" in capsys.readouterr().err
 
 
 @pytest.mark.slow

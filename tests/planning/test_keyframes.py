@@ -262,11 +262,11 @@ def test_joint_retries_take_the_neighbours_and_merge_overlaps():
 @pytest.mark.slow
 def test_the_demo_goal_plans_physically_through_the_strict_retry():
     """The demo's goal pi/2 (9 segments, ~7 s) on the paper-like search's plan (search.rolled_stances
-    false, search.max_stance_force 0; the default search's plan of pi/2 needs no retry): with the
-    default drift penalty a fixed finger of segment 5-6 pushes from 0.19 mm, and so does the
+    false, search.max_stance_force 0, search.push_capacity 0; the default search's plan of pi/2 needs
+    no retry): with the default drift penalty a fixed finger of segment 5-6 pushes from 0.19 mm, and so does the
     joint retry of nodes 4-7; the strict retry of those nodes passes. If a later change makes an
     earlier attempt pass, update the kinds."""
-    config = Config(search=SearchConfig(rolled_stances=False, max_stance_force=0.0))
+    config = Config(search=SearchConfig(rolled_stances=False, max_stance_force=0.0, push_capacity=0.0))
     result = plan(
         scene=build_scene(config.scene), goal=np.pi / 2, method="trajectotree", config=config, segment_workers=1
     )
