@@ -29,6 +29,10 @@ class ContactNode:
     # the same for the three fingers that held the box while switching_finger moved to this node
     # (segment n-1 -> n); None when no finger moved (and for node 0)
     stance_required_mu: float | None = None
+    # N, the hardest push along each of +-x and +-y in W that the fingers holding during segment n-1 -> n (all
+    # of them when none moved) resist at both of its ends (trajectotree.search.stance.PushCapacityLp at mu_plan);
+    # None for node 0, in older files, and when they cannot hold the weight within their bounds at all
+    stance_push_capacity: float | None = None
 
     def to_json(self) -> dict:
         return {
@@ -38,6 +42,7 @@ class ContactNode:
             "closure_margin": float(self.closure_margin),
             "required_mu": _finite_or_none(self.required_mu),
             "stance_required_mu": _finite_or_none(self.stance_required_mu),
+            "stance_push_capacity": _finite_or_none(self.stance_push_capacity),
             "contacts": [
                 {"arclength": float(s), "p_B": [float(v) for v in p], "n_B": [float(v) for v in n]}
                 for s, p, n in zip(self.arclengths, self.p_BC, self.n_B)
@@ -56,13 +61,18 @@ class ContactNode:
             switching_finger=data["switching_finger"],
             closure_margin=float(data.get("closure_margin", np.nan)),
             required_mu=_float_or_nan(data.get("required_mu")),  # older files lack both keys
-            stance_required_mu=None if data.get("stance_required_mu") is None else float(data["stance_required_mu"]),
+            stance_required_mu=_float_or_none(data.get("stance_required_mu")),
+            stance_push_capacity=_float_or_none(data.get("stance_push_capacity")),
         )
 
 
 def _finite_or_none(value) -> float | None:
     """JSON has no nan/inf: unknown or unbounded values are written as null."""
     return None if value is None or not np.isfinite(value) else float(value)
+
+
+def _float_or_none(value) -> float | None:
+    return None if value is None else float(value)
 
 
 def _float_or_nan(value) -> float:

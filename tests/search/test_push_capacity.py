@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from trajectotree.config import ConfigError, SearchConfig
+from trajectotree.contact_plan import ContactNode
 from trajectotree.experiments.sweep import sample_goals
 from trajectotree.scene.plant import build_scene
 from trajectotree.scene.statics import grasp_matrix_W
@@ -70,25 +71,25 @@ def test_children_come_in_order_of_their_stances_push_shortfall(scene):
         assert max(shortfalls) > 0.0 if target else max(shortfalls) == 0.0  # this grasp's stances resist < 6 N
 
 
-def weakest_stance(scene, plan, search) -> float:
-    """N, the least push capacity over a plan's switching stances (at both ends of each)."""
-    return min(
-        search.stance.push_capacity(_Node(n, tuple(a.arclengths), None, None), n + 1, b.switching_finger)
-        for n, (a, b) in enumerate(zip(plan.nodes[:-1], plan.nodes[1:]))
-        if b.switching_finger is not None
-    )
-
-
 def test_the_push_order_strengthens_the_weakest_stance_of_goal_0_861(scene):
     """Seed 0's first goal: in the paper's order its plan switches over a stance that resists
-    less than 3 N along one of +-x, +-y; in the push order every stance resists more than that."""
+    less than 3 N along one of +-x, +-y; in the push order every stance resists more than that.
+    Each node reports its stance's capacity (the search's LP, in plan.json too)."""
     goal = float(sample_goals(60, 0)[0])
     assert goal == pytest.approx(0.861, abs=1e-3)
     default = SearchConfig()
     paper = dataclasses.replace(default, push_capacity=0.0)
-    plans = {c: find_contact_plan(scene, goal, c) for c in (paper, default)}
-    assert all(p.success for p in plans.values())
-    weakest = {c: weakest_stance(scene, plans[c], _Search(scene, goal, c)) for c in plans}
+    weakest = {}
+    for config in (paper, default):
+        plan = find_contact_plan(scene, goal, config)
+        assert plan.success and plan.nodes[0].stance_push_capacity is None
+        search = _Search(scene, goal, config)
+        for n, (a, b) in enumerate(zip(plan.nodes[:-1], plan.nodes[1:])):
+            parent = _Node(n, tuple(a.arclengths), None, None)
+            resisted = search.stance.push_capacity(parent, n + 1, b.switching_finger)  # closed-form IK, not its table
+            assert b.stance_push_capacity == pytest.approx(resisted, rel=1e-9)
+            assert ContactNode.from_json(b.to_json()).stance_push_capacity == b.stance_push_capacity
+        weakest[config] = min(b.stance_push_capacity for b in plan.nodes[1:] if b.switching_finger is not None)
     assert weakest[paper] < 3.0 < weakest[default]
 
 

@@ -93,12 +93,16 @@ def run(args) -> int:
     print(
         f"friction: scene mu {config.scene.mu:g}, planned with mu_plan {plan.mu_plan:.3g} "
         f"(search.friction_safety {config.search.friction_safety:g}); required mu = the least friction at "
-        f"which the grasp / the three fingers holding during the switch are in form closure"
+        f"which the grasp / the three fingers holding during the switch are in form closure; a stance resists the "
+        f"hardest push along +-x and +-y that it holds against ({config.search.push_normal_force:g} N a finger, "
+        f"the motors' torques)"
     )
     for n, node in enumerate(plan.nodes):
         moved = "-" if node.switching_finger is None else str(node.switching_finger)
         contacts = " ".join(f"{v:.3f}" for v in node.arclengths)
         stance = "" if node.stance_required_mu is None else f"  stance required mu {node.stance_required_mu:.3f}"
+        if node.stance_push_capacity is not None:
+            stance += f"  stance resists a {node.stance_push_capacity:.1f} N push"
         xy = "" if goal.position is None else f"x {node.object_pose[0]:+.4f}  y {node.object_pose[1]:+.4f}  "
         print(
             f"  node {n}: {xy}theta {node.object_pose[2]:+.3f}  switching finger {moved}  "

@@ -359,12 +359,15 @@ class _Search:
         ]
         grasp_mu = self.closure.required_mus([n.arclengths for n in path])
         stance_mu = iter(self.closure.required_mus(stances))
+        pushes = [None] + [self.stance.push_capacity(a, b.depth, b.switching_finger) for a, b in zip(path, path[1:])]
         return tuple(
-            self.contact_node(n, mu, None if n.switching_finger is None else next(stance_mu))
-            for n, mu in zip(path, grasp_mu)
+            self.contact_node(n, mu, None if n.switching_finger is None else next(stance_mu), push)
+            for n, mu, push in zip(path, grasp_mu, pushes)
         )
 
-    def contact_node(self, node: _Node, required_mu: float, stance_required_mu: float | None) -> ContactNode:
+    def contact_node(
+        self, node: _Node, required_mu: float, stance_required_mu: float | None, stance_push_capacity: float | None
+    ) -> ContactNode:
         pose = self.poses[node.depth]
         points = [self.reach.contact(s) for s in node.arclengths]
         q = np.concatenate([self.reach.solve(pose, i, s).q for i, s in enumerate(node.arclengths)])
@@ -378,6 +381,9 @@ class _Search:
             closure_margin=self.closure.check(node.arclengths).margin,
             required_mu=required_mu,
             stance_required_mu=stance_required_mu,
+            stance_push_capacity=None
+            if stance_push_capacity is None or stance_push_capacity == -np.inf
+            else stance_push_capacity,
         )
 
     def stats(self, t0: float, roots: int = 0, candidates: int = 0) -> SearchStats:
