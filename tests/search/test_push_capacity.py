@@ -12,7 +12,7 @@ from trajectotree.contact_plan import ContactNode
 from trajectotree.experiments.sweep import sample_goals
 from trajectotree.scene.plant import build_scene
 from trajectotree.scene.statics import grasp_matrix_W
-from trajectotree.search.stance import PushCapacityLp, link_gravity_torques
+from trajectotree.search.stance import PushCapacityLp
 from trajectotree.search.tree import _Node, _Search, find_contact_plan
 
 W, H, MU, F_MAX, WEIGHT = 0.2, 0.1, 0.5, 8.0, 0.05 * 9.81
@@ -101,11 +101,11 @@ def test_push_capacity_settings_out_of_range(field, value):
         SearchConfig(**{field: value})
 
 
-def test_link_gravity_torques_are_the_controllers(scene):
+def test_a_fingers_gravity_torques_are_the_controllers(scene):
     # the grasp controller's gravity compensation (closed forms checked against the plant in its tests)
     from trajectotree.execution.control import HandKinematics
 
     q = np.random.default_rng(0).uniform(-1.5, 1.5, (scene.num_fingers, 2))
     g_hand = HandKinematics(scene.fingers, scene.config.gravity)(q.ravel())[2]
     for i, finger in enumerate(scene.fingers):
-        np.testing.assert_allclose(link_gravity_torques(finger, q[i], scene.config.gravity), g_hand[i], rtol=1e-12)
+        np.testing.assert_allclose(finger.gravity_torques(q[i], scene.config.gravity), g_hand[i], rtol=1e-12)

@@ -72,8 +72,8 @@ class HandModel:
             mass_a=i1 + i2 + m1 * c1**2 + m2 * (l1**2 + c2**2),
             mass_b=m2 * l1 * c2,
             mass_c=i2 + m2 * c2**2,
-            grav_1=g * (m1 * c1 + m2 * l1),
-            grav_2=g * m2 * c2,
+            grav_1=np.array([fi.gravity_gains(g)[0] for fi in f]),
+            grav_2=np.array([fi.gravity_gains(g)[1] for fi in f]),
             tau_max=np.concatenate([fi.tau_max for fi in f]),
         )
 

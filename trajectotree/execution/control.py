@@ -427,11 +427,6 @@ class GraspController(LeafSystem):
             wrench[:2] -= g.disturbance_feedforward * estimates.disturbance
         return wrench
 
-    def touching(self, box_state, p_WF) -> np.ndarray:
-        """(F,) each measured fingertip sphere is within gains.contact_distance of the measured box."""
-        p_BF = (p_WF - box_state[:2]) @ rotation_2d(box_state[2])
-        return self._shape.signed_distances(p_BF) - self._tip_radius <= self.gains.contact_distance
-
     def finger_forces(
         self, n: int, box_state, p_WF, estimates: Estimates | None = None, joints=None, *, at=None, scale=None
     ) -> tuple[np.ndarray, np.ndarray]:

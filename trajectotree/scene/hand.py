@@ -152,6 +152,19 @@ class FingerGeometry(TwoLinkFinger):
     # in joint 2's; None for a link without collision geometry (it passes through the object in simulation too)
     link_boxes: tuple
 
+    def gravity_gains(self, gravity: float) -> tuple[float, float]:
+        """(k1, k2) N m, gravity's moments on the joints under gravity m/s^2 along -y in W:
+        k1 = g (m1 c1 + m2 l1), k2 = g m2 c2, so that dV/dq = (k1 cos a1 + k2 cos a12, k2 cos a12)."""
+        return gravity * (self.masses[0] * self.coms[0] + self.masses[1] * self.l1), gravity * self.masses[
+            1
+        ] * self.coms[1]
+
+    def gravity_torques(self, q, gravity: float) -> np.ndarray:
+        """(2,) N m, the joint torques that hold the links up at joint angles q (2,): dV/dq."""
+        k1, k2 = self.gravity_gains(gravity)
+        a1, a12 = self.angles(np.asarray(q, dtype=float))
+        return np.array([k1 * np.cos(a1) + k2 * np.cos(a12), k2 * np.cos(a12)])
+
 
 @dataclass(frozen=True)
 class FingerDescription(FingerGeometry):

@@ -40,7 +40,7 @@ from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.kinematics import jacobian_from_links
-from trajectotree.scene.plant import FingerGeometry, Scene
+from trajectotree.scene.plant import Scene
 from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
 from trajectotree.search.initial_grasp import stance_fingers
@@ -128,15 +128,6 @@ class PushCapacityLp:
         self.lp_calls += 1
         result = self._solver.Solve(self.prog, None, self._options)
         return float(-result.get_optimal_cost()) if result.is_success() else -np.inf
-
-
-def link_gravity_torques(finger: FingerGeometry, q, gravity: float) -> np.ndarray:
-    """(2,) N m, the joint torques that hold `finger`'s links up at joint angles q (gravity -y in W):
-    dV/dq = g (m1 c1 + m2 l1) cos a1 + g m2 c2 cos a12, g m2 c2 cos a12."""
-    a1, a12 = finger.angles(np.asarray(q, dtype=float))
-    k1 = gravity * (finger.masses[0] * finger.coms[0] + finger.masses[1] * finger.l1)
-    k2 = gravity * finger.masses[1] * finger.coms[1]
-    return np.array([k1 * np.cos(a1) + k2 * np.cos(a12), k2 * np.cos(a12)])
 
 
 def weight_support_B(theta: float, weight: float) -> np.ndarray:
@@ -251,10 +242,7 @@ class StanceChecks:
             q = np.array([self.joint_angles(depth, j, s) for j, s in held])
             J_WF = np.array([jacobian_from_links(*self.scene.fingers[j].links(qj)) for j, qj in zip(fingers, q)])
             gravity = np.array(
-                [
-                    link_gravity_torques(self.scene.fingers[j], qj, self.scene.config.gravity)
-                    for j, qj in zip(fingers, q)
-                ]
+                [self.scene.fingers[j].gravity_torques(qj, self.scene.config.gravity) for j, qj in zip(fingers, q)]
             )
             tau_max = np.array([self.scene.fingers[j].tau_max for j in fingers])
             A, lower, upper, _ = torque_rows(J_WF, n_W, perp(n_W), self.reach.tip_radius, gravity, tau_max)

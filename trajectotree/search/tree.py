@@ -381,9 +381,7 @@ class _Search:
             closure_margin=self.closure.check(node.arclengths).margin,
             required_mu=required_mu,
             stance_required_mu=stance_required_mu,
-            stance_push_capacity=None
-            if stance_push_capacity is None or stance_push_capacity == -np.inf
-            else stance_push_capacity,
+            stance_push_capacity=None if stance_push_capacity == -np.inf else stance_push_capacity,
         )
 
     def stats(self, t0: float, roots: int = 0, candidates: int = 0) -> SearchStats:
