@@ -29,6 +29,8 @@ DEFAULT_HAND = "planar_hand"
 HAND_NAMES = ("planar_hand", "drake_planar_gripper", "planar_hand5")
 HAND_SUFFIXES = (".yaml", ".yml", ".sdf", ".urdf")
 MAX_NODES = 400  # search.num_nodes at most: a ten-turn goal takes 238 with the default segment rotations
+# (low, high) of the object's pose x m, y m, theta rad in W where a plan may start (scene.initial_pose, a start state)
+INITIAL_POSE_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-100.0, 100.0))  # theta: many turns
 
 
 class ConfigError(ValueError):
@@ -286,9 +288,8 @@ class SceneConfig:
             self._check_inertia_is_physical()
         check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
         check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
-        for i, v in enumerate(self.initial_pose[:2]):
-            check_range("scene.initial_pose", v, -1.0, 1.0, index=(i,))
-        check_range("scene.initial_pose", self.initial_pose[2], -100.0, 100.0, index=(2,))  # rad: many turns
+        for i, (v, (low, high)) in enumerate(zip(self.initial_pose, INITIAL_POSE_BOUNDS)):
+            check_range("scene.initial_pose", v, low, high, index=(i,))
         check_range("scene.corner_margin", self.corner_margin, 0.0, None)
         check_hand(self.hand)
         if self.object.is_box:

@@ -8,14 +8,14 @@ that state (trajectotree.planning.start checks it first). Units: m, rad, m/s, ra
 from __future__ import annotations
 
 import enum
+import json
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
 
 from trajectotree.config import ConfigError
-
-NUM_JOINTS = 8  # the hand's joints, finger-major (finger i: joints 2i, 2i + 1)
 
 
 class StartProblem(enum.Enum):
@@ -24,6 +24,9 @@ class StartProblem(enum.Enum):
     FINGER_OFF = "a fingertip does not touch the object"
     CONTACT_MISMATCH = "a given contact is not where the fingertip is"
     NOT_IN_CLOSURE = "the grasp cannot hold the object"
+    WRONG_SIZE = "the state has another number of joints or contacts than the hand"
+    JOINT_LIMIT = "a joint angle is outside its limits"
+    OUT_OF_BOUNDS = "the object's pose is outside the scene's bounds"
 
 
 @dataclass(frozen=True)
@@ -32,14 +35,23 @@ class StartRefusal:
 
     problem: StartProblem
     finger: int | None = None
-    value: float = float("nan")  # the measured quantity (m, m/s or the friction the grasp needs)
-    limit: float = float("nan")  # what it may be at most
+    value: float = float("nan")  # the measured quantity (m, m/s, rad, a count or the friction the grasp needs)
+    limit: float = float("nan")  # what it may be at most (WRONG_SIZE: what it must be)
+    lower: float = float("nan")  # what it may be at least (JOINT_LIMIT, OUT_OF_BOUNDS)
+    # what `value` is: the entry ("q", "arclengths"; an object pose's "x", "y", "theta") or the model's joint
+    name: str | None = None
+    index: int | None = None  # the entry of q or object_pose (JOINT_LIMIT, OUT_OF_BOUNDS)
 
     def to_json(self) -> dict:
-        numbers = {k: float(v) for k, v in (("value", self.value), ("limit", self.limit)) if math.isfinite(v)}
-        return {"kind": "start", "problem": self.problem.name.lower(), **numbers} | (
-            {} if self.finger is None else {"finger": int(self.finger)}
-        )
+        numbers = {
+            k: float(v)
+            for k, v in (("value", self.value), ("limit", self.limit), ("lower", self.lower))
+            if math.isfinite(v)
+        }
+        named = {
+            k: v for k, v in (("finger", self.finger), ("name", self.name), ("index", self.index)) if v is not None
+        }
+        return {"kind": "start", "problem": self.problem.name.lower(), **numbers, **named}
 
     def __str__(self) -> str:
         if self.problem is StartProblem.MOVING:
@@ -58,8 +70,22 @@ class StartRefusal:
                 f"start: finger {self.finger}'s given contact is {self.value * 1e3:.2f} mm from its fingertip's "
                 f"contact point; at most {self.limit * 1e3:g} mm"
             )
+        if self.problem is StartProblem.WRONG_SIZE:
+            entries = "joint angles" if self.name == "q" else "contacts"
+            return f"start.{self.name} has {self.value:g} entries; the hand has {self.limit:g} {entries}"
+        if self.problem is StartProblem.JOINT_LIMIT:
+            return (
+                f"start.q[{self.index}] = {self.value:.6g} rad (finger {self.finger}, joint {self.name!r}) is outside "
+                f"its limits; valid range: [{self.lower:g}, {self.limit:g}] rad"
+            )
+        if self.problem is StartProblem.OUT_OF_BOUNDS:
+            unit = "rad" if self.name == "theta" else "m"
+            return (
+                f"start.object_pose[{self.index}] = {self.value:.6g} {unit} ({self.name}) is outside the scene's "
+                f"bounds; valid range: [{self.lower:g}, {self.limit:g}] {unit}"
+            )
         return (
-            f"start: the grasp of fingers (0, 1, 2, 3) is not in frictional form closure at mu_plan "
+            f"start: the grasp of every finger is not in frictional form closure at mu_plan "
             f"{self.limit:.3g}; it needs mu {self.value:.3g}"
         )
 
@@ -69,18 +95,19 @@ class StartState:
     """A measured state to plan from; the object must be (nearly) at rest in a grasp of every finger."""
 
     object_pose: tuple[float, float, float]  # (x m, y m, theta rad) in W
-    q: tuple[float, ...]  # (8,) rad, joint angles, finger-major
+    q: tuple[float, ...]  # (J,) rad, the hand's joint angles, finger-major (planning.start checks J against the hand)
     object_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)  # (m/s, m/s, rad/s) in W
     # m, each finger's contact as an arclength along the object's boundary (geometry.ConvexPolygon);
     # None: derived from the fingertip positions (those touching the surface)
     arclengths: tuple[float, ...] | None = None
 
     def __post_init__(self):
-        _check_vector("start.object_pose", self.object_pose, 3)
-        _check_vector("start.q", self.q, NUM_JOINTS)
-        _check_vector("start.object_velocity", self.object_velocity, 3)
-        if self.arclengths is not None:
-            _check_vector("start.arclengths", self.arclengths, NUM_JOINTS // 2)
+        # each vector as a tuple of Python floats: a sim's numpy rows print and compare as plain numbers
+        object.__setattr__(self, "object_pose", _vector("start.object_pose", self.object_pose, 3))
+        object.__setattr__(self, "q", _vector("start.q", self.q))
+        object.__setattr__(self, "object_velocity", _vector("start.object_velocity", self.object_velocity, 3))
+        if self.arclengths is not None:  # one per finger: planning.start checks the count against the hand
+            object.__setattr__(self, "arclengths", _vector("start.arclengths", self.arclengths))
 
     def to_json(self) -> dict:
         return {
@@ -91,7 +118,7 @@ class StartState:
         }
 
     @staticmethod
-    def from_json(data, where: str = "start") -> StartState:
+    def from_json(data, where: str = "start.json") -> StartState:
         if not isinstance(data, dict):
             raise ConfigError(
                 f"{where}: a start state is a JSON object with object_pose, q (and optionally "
@@ -105,15 +132,17 @@ class StartState:
         for key in ("object_pose", "q"):
             if key not in data:
                 raise ConfigError(f"{where}: missing {key!r}")
+        velocity, arclengths = data.get("object_velocity"), data.get("arclengths")
+        fields = dict(
+            object_pose=_json_numbers(where, "object_pose", data["object_pose"]),
+            q=_json_numbers(where, "q", data["q"]),
+            object_velocity=(0.0, 0.0, 0.0) if velocity is None else _json_numbers(where, "object_velocity", velocity),
+            arclengths=None if arclengths is None else _json_numbers(where, "arclengths", arclengths),
+        )
         try:
-            return StartState(
-                object_pose=tuple(float(v) for v in data["object_pose"]),
-                q=tuple(float(v) for v in data["q"]),
-                object_velocity=tuple(float(v) for v in data.get("object_velocity") or (0.0, 0.0, 0.0)),
-                arclengths=None if data.get("arclengths") is None else tuple(float(s) for s in data["arclengths"]),
-            )
-        except (TypeError, ValueError) as e:
-            raise ConfigError(f"{where}: every entry must be a number ({e})") from None
+            return StartState(**fields)
+        except ConfigError as e:  # a size or a NaN: named with the file it came from
+            raise ConfigError(f"{where}: {e}") from None
 
     @staticmethod
     def from_run(t: np.ndarray, x: np.ndarray, q: np.ndarray, time_s: float) -> StartState:
@@ -125,9 +154,29 @@ class StartState:
         return StartState(object_pose=tuple(x[k]), q=tuple(q[k]), object_velocity=tuple(velocity))
 
 
-def _check_vector(name: str, values, size: int) -> None:
-    if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") or len(values) != size:
-        raise ConfigError(f"{name} = {values!r} must have {size} numbers")
+def _is_number(v) -> bool:
+    """A real number that is not a bool (JSON's true is no angle, though Python reads it as 1)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+
+
+def _vector(name: str, values, size: int | None = None) -> tuple[float, ...]:
+    """`values` as floats; ConfigError naming `name` unless it holds `size` (None: one or more) finite numbers."""
+    count = None if isinstance(values, (str, bytes)) or not hasattr(values, "__len__") else len(values)
+    if count is None or count == 0 or (size is not None and count != size):
+        wanted = "one or more" if size is None else f"{size}"
+        raise ConfigError(f"{name} = {values!r} must have {wanted} numbers")
     for i, v in enumerate(values):
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
+        if not _is_number(v) or not math.isfinite(v):
             raise ConfigError(f"{name}[{i}] = {v!r} is not a finite number")
+    return tuple(float(v) for v in values)
+
+
+def _json_numbers(where: str, key: str, values) -> tuple:
+    """A start.json entry's list, its entries numbers (not true or false, not strings); the sizes and
+    finiteness are StartState's checks."""
+    if not isinstance(values, list):
+        raise ConfigError(f"{where}: {key} = {values!r} must be a list of numbers")
+    for i, v in enumerate(values):
+        if not _is_number(v):
+            raise ConfigError(f"{where}: {key}[{i}] = {json.dumps(v, default=repr)} must be a number")
+    return tuple(float(v) for v in values)

@@ -227,9 +227,9 @@ def test_a_copy_of_the_gripper_yaml_reads_as_the_builtin(tmp_path):
             [
                 GOOD[0],
                 GOOD[1],
-                GOOD[2].replace("finger3_BaseJoint, finger3_MidJoint", "finger3_MidJoint, finger2_MidJoint"),
+                GOOD[2].replace("finger3_BaseJoint, finger3_MidJoint", "finger3_MidJoint, finger3_BaseJoint"),
             ],
-            "finger 2: joint 'finger2_MidJoint' does not follow joint 'finger3_MidJoint'",
+            "finger 2: joint 'finger3_BaseJoint' does not follow joint 'finger3_MidJoint'",
         ),
         (
             [GOOD[0], GOOD[1], GOOD[2].replace("finger3_tip_link,", "finger3_nail,")],

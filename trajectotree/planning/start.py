@@ -1,10 +1,12 @@
 """Planning from a measured state (trajectotree.start.StartState).
 
-A start is accepted when the object is nearly at rest and every fingertip touches its surface in
-a grasp that is in frictional form closure at mu_plan: the search is then rooted at exactly those
-contacts (search.initial_arclengths) at the start's object pose (scene.initial_pose), and the plan's
-first node carries the measured joint angles, so CITO's first knot is the measured state. Anything
-else is refused before planning, with a `StartRefusal` that names the finger, the value and the limit.
+A start is accepted when it is a state of the scene (a joint angle per joint of its hand, each
+within the model's limits, the object's pose within the scene's bounds), the object is nearly at
+rest and every fingertip touches its surface in a grasp that is in frictional form closure at
+mu_plan: the search is then rooted at exactly those contacts (search.initial_arclengths) at the
+start's object pose (scene.initial_pose), and the plan's first node carries the measured joint
+angles, so CITO's first knot is the measured state. Anything else is refused before planning, with
+a `StartRefusal` that names the finger (or joint), the value and the limit.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ import dataclasses
 
 import numpy as np
 
-from trajectotree.config import Config, ConfigError, mu_plan
+from trajectotree.config import INITIAL_POSE_BOUNDS, Config, ConfigError, mu_plan
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import world_to_box
+from trajectotree.scene.hand import JOINTS_PER_FINGER
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.start import StartProblem, StartRefusal, StartState
@@ -62,9 +65,35 @@ def start_contacts(scene: Scene, start: StartState) -> np.ndarray:
     return arclengths
 
 
+def check_fits_scene(scene: Scene, start: StartState) -> None:
+    """StartRefused unless the start is a state of this scene: a joint angle per joint of its hand, a
+    contact (when given) per finger, every joint within its limits (the model's) and the object's
+    pose within the scene's bounds (config.INITIAL_POSE_BOUNDS, those of scene.initial_pose)."""
+    for name, given, size in (
+        ("q", start.q, scene.num_hand_joints),
+        ("arclengths", start.arclengths, scene.num_fingers),
+    ):
+        if given is not None and len(given) != size:
+            raise StartRefused(StartRefusal(StartProblem.WRONG_SIZE, value=len(given), limit=size, name=name))
+    description = scene.hand_description
+    lower = np.concatenate([f.q_lower for f in description.fingers])
+    upper = np.concatenate([f.q_upper for f in description.fingers])
+    for k, (q, low, high) in enumerate(zip(start.q, lower, upper)):
+        if not low <= q <= high:  # a turn more or less may put the fingertip where it was: the limits tell
+            finger, name = k // JOINTS_PER_FINGER, description.joint_names[k]
+            raise StartRefused(StartRefusal(StartProblem.JOINT_LIMIT, finger, q, high, low, name, k))
+    for k, (v, (low, high), name) in enumerate(zip(start.object_pose, INITIAL_POSE_BOUNDS, ("x", "y", "theta"))):
+        if not low <= v <= high:
+            raise StartRefused(
+                StartRefusal(StartProblem.OUT_OF_BOUNDS, value=v, limit=high, lower=low, name=name, index=k)
+            )
+
+
 def start_config(scene: Scene, start: StartState, config: Config) -> Config:
-    """The config whose search roots at the start's grasp and pose; StartRefused when the object
-    moves, a finger does not touch it or the grasp is not in closure at mu_plan."""
+    """The config whose search roots at the start's grasp and pose; StartRefused when the start is
+    not a state of this scene (check_fits_scene), the object moves, a finger does not touch it or
+    the grasp is not in closure at mu_plan."""
+    check_fits_scene(scene, start)
     v = np.asarray(start.object_velocity, dtype=float)
     speed, spin = float(np.hypot(v[0], v[1])), abs(float(v[2]))
     if speed > START_SPEED_LIMIT:

@@ -17,8 +17,8 @@ fingertip sphere and the links' collision boxes (docs/design.md, "The hand descr
 PATH.yaml beside it; `add_hand` adds it to an unfinalized plant (welds, plane, fingertip frames,
 friction); `read_hand` reads the `HandDescription` from the finalized plant; `load_hand(spec)` does
 all three on a plant of its own. A model that does not fit (a missing joint, a finger with one
-joint, fewer than three fingers, a joint off the plane) raises `HandError` naming the finger, the
-joint and the file.
+joint, fewer than three fingers, a joint off the plane, a joint two fingers name or a moving joint
+of the model that no finger names) raises `HandError` naming the finger, the joint and the file.
 """
 
 from __future__ import annotations
@@ -333,6 +333,7 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
                 tip_xyz=_vector(source, f"finger {i}: tip_xyz", f.get("tip_xyz", [0, 0, 0])),
             )
         )
+    _check_joints_named_once(source, fingers)
     return HandFile(
         name=name,
         source=source,
@@ -343,6 +344,21 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         fingers=tuple(fingers),
         object=None if data.get("object") is None else _hand_object(source, data["object"]),
     )
+
+
+def _check_joints_named_once(source: str, fingers: list[FingerEntry]) -> None:
+    """HandError naming a joint that two fingers (or one twice) name: a joint moves one finger."""
+    owner: dict[str, int] = {}
+    for i, entry in enumerate(fingers):
+        for name in entry.joints:
+            if name in owner:
+                who = (
+                    f"finger {i} names joint {name!r} twice"
+                    if owner[name] == i
+                    else (f"fingers {owner[name]} and {i} both name joint {name!r}")
+                )
+                raise HandError(source, f"{who}; each joint of the model belongs to one finger")
+            owner[name] = i
 
 
 def _hand_object(source: str, value) -> HandObject:
@@ -497,7 +513,23 @@ def add_hand(plant: MultibodyPlant, hand: HandFile, mu: float, scene_graph: Scen
                     instance,
                 )
             )
+    _check_every_joint_named(plant, hand, instance)
     return instance
+
+
+def _check_every_joint_named(plant: MultibodyPlant, hand: HandFile, instance) -> None:
+    """HandError naming the joints of the model that move and no finger names: the planner's q, the
+    controller's torques and the simulated hand state are the named joints, so a model joint left out
+    would make the simulation's state larger than the plan's."""
+    joints = [plant.get_joint(j) for j in plant.GetJointIndices(instance)]
+    movable = [j.name() for j in joints if j.num_positions() > 0]
+    named = {name for entry in hand.fingers for name in entry.joints}
+    unnamed = [name for name in movable if name not in named]
+    if unnamed:
+        raise hand.error(
+            f"no finger names joint(s) {unnamed} of its model {hand.model}; each of its moving joints must be "
+            f"one finger's: {movable}"
+        )
 
 
 def tip_frame_name(hand: HandFile, i: int) -> str:
