@@ -194,3 +194,12 @@ def test_planar_hand5_replans_at_friction_0_4_and_plans_from_a_state_of_its_run(
     again = tmp_path / "from_start"
     assert main(["plan", "--hand", "planar_hand5", "--start", str(start), "--goal", "2.5", "--out", str(again)]) == 0
     assert (again / "plan.json").is_file()
+
+
+def test_a_start_moving_at_1e308_m_s_is_refused_as_moving_without_overflow(hand_start):
+    hand, scene, config, start = hand_start
+    fast = StartState(object_pose=start.object_pose, q=start.q, object_velocity=(1.7e308, 1.7e308, 0.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(StartRefused, match=r"the object moves at inf m/s; a plan starts at rest \(at most 0.1"):
+            start_config(scene, fast, config)

@@ -12,6 +12,7 @@ a `StartRefusal` that names the finger (or joint), the value and the limit.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -94,8 +95,8 @@ def start_config(scene: Scene, start: StartState, config: Config) -> Config:
     not a state of this scene (check_fits_scene), the object moves, a finger does not touch it or
     the grasp is not in closure at mu_plan."""
     check_fits_scene(scene, start)
-    v = np.asarray(start.object_velocity, dtype=float)
-    speed, spin = float(np.hypot(v[0], v[1])), abs(float(v[2]))
+    vx, vy, spin = start.object_velocity
+    speed, spin = math.hypot(vx, vy), abs(spin)  # math's hypot: inf, not numpy's overflow warning, at 1e308 m/s
     if speed > START_SPEED_LIMIT:
         raise StartRefused(StartRefusal(StartProblem.MOVING, value=speed, limit=START_SPEED_LIMIT))
     if spin > START_SPIN_LIMIT:
