@@ -3,7 +3,8 @@
 Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each dataclass validates itself on
 construction and raises `ConfigError` naming the field, its value and the valid range. `load_config` /
 `save_config` read and write the whole `Config` as YAML with Drake's typed YAML functions (yaml_load_typed,
-yaml_dump_typed, through trajectotree.typed_yaml), which check each value's type; `config_from_dict` reads the
+yaml_dump_typed, through trajectotree.typed_yaml), which check each value's type, the file read within
+typed_yaml.read_yaml's limits (size, anchors, nesting, duplicate keys); `config_from_dict` reads the
 same sections from plan.json and sweep manifests.
 """
 
