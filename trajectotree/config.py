@@ -3,7 +3,8 @@
 Defaults equal the paper's setup (Chen et al., TrajectoTree, Sec. IV-A). Each dataclass validates itself on
 construction and raises `ConfigError` naming the field, its value and the valid range. `load_config` /
 `save_config` read and write the whole `Config` as YAML with Drake's typed YAML functions (yaml_load_typed,
-yaml_dump_typed, through trajectotree.typed_yaml), which check each value's type; `config_from_dict` reads the
+yaml_dump_typed, through trajectotree.typed_yaml), which check each value's type, the file read within
+typed_yaml.read_yaml's limits (size, anchors, nesting, duplicate keys); `config_from_dict` reads the
 same sections from plan.json and sweep manifests.
 """
 
@@ -17,10 +18,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml  # only for yaml.YAMLError, the parse error Drake's YAML functions raise
 
 from trajectotree.geometry import ConvexPolygon, ellipse_points, polygon_problem
-from trajectotree.typed_yaml import DRAKE_ERRORS, drake_yaml, freeze, load_typed, thaw
+from trajectotree.typed_yaml import (
+    DRAKE_ERRORS,
+    YamlError,
+    clip,
+    clipped_repr,
+    drake_yaml,
+    freeze,
+    load_typed,
+    read_yaml,
+    thaw,
+)
 
 _NO_VALUE = object()  # a ConfigError about a field whose value its message does not repeat
 MAX_GOAL_ROTATION = 20 * math.pi  # rad, the largest goal rotation either way: ten turns
@@ -76,7 +86,7 @@ class ConfigError(ValueError):
             text = f"{self.subject}: {self.problem}"
         else:
             joint = "" if self.problem.startswith(":") else " "  # "is out of range", or ": a sentence of its own"
-            text = f"{self.subject} = {self.shown or repr(self.value)}{joint}{self.problem}"
+            text = f"{self.subject} = {self.shown or clipped_repr(self.value)}{joint}{self.problem}"
         if self.valid is not None:
             label = self.label or ("valid" if self.choices is not None else "valid range")
             text += f"; {label}: {self.valid}"
@@ -816,7 +826,7 @@ def _load_section(cls, data, name: str, where: str):
     if data is None:
         return cls()
     if not isinstance(data, dict):
-        raise ConfigError(f"{where} section {name} must be a mapping, got {data!r}")
+        raise ConfigError(f"{where} section {name} must be a mapping, got {clipped_repr(data)}")
     try:
         loaded = load_typed(cls, data)
     except DRAKE_ERRORS:  # Drake's message may name only the value: load key by key to name the key
@@ -828,7 +838,9 @@ def _load_section(cls, data, name: str, where: str):
                 kind = hints.get(key)
                 kind = kind.__name__ if isinstance(kind, type) else kind  # float, tuple[float, float, float]
                 why = f"valid keys: {list(hints)}" if kind is None else f"expected {kind}"
-                raise ConfigError(f"{where}: {name}.{key} = {value!r}: {e}; {why}") from None
+                raise ConfigError(
+                    f"{where}: {name}.{clip(str(key))} = {clipped_repr(value)}: {clip(str(e), 200)}; {why}"
+                ) from None
         raise
     return freeze(cls, loaded)
 
@@ -839,11 +851,11 @@ def config_from_dict(data: dict, where: str = "config") -> Config:
     if data is None:
         return Config()
     if not isinstance(data, dict):
-        raise ConfigError(f"{where} must be a mapping, got {data!r}")
+        raise ConfigError(f"{where} must be a mapping, got {clipped_repr(data)}")
     sections = {f.name: f.default_factory for f in dc.fields(Config)}
     unknown = sorted(set(data) - set(sections))
     if unknown:
-        raise ConfigError(f"unknown key(s) {unknown} in {where}; valid keys: {sorted(sections)}")
+        raise ConfigError(f"unknown key(s) {clipped_repr(unknown)} in {where}; valid keys: {sorted(sections)}")
     return Config(**{name: _load_section(sections[name], value, name, where) for name, value in data.items()})
 
 
@@ -852,21 +864,26 @@ def config_to_dict(config: Config) -> dict:
     return dc.asdict(thaw(config))
 
 
+def config_file_data(path: str | Path):
+    """The data of config file `path` (typed_yaml.read_yaml: size, anchors, nesting and duplicate keys
+    bounded); ConfigError naming the file."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            raise ConfigError(f"config file {str(path)!r} is a folder; give a YAML file")
+        if not path.is_file():
+            raise ConfigError(f"config file {str(path)!r} does not exist")
+        return read_yaml(path)
+    except YamlError as e:
+        raise ConfigError(f"config file {str(path)!r} {e}") from None
+    except OSError as e:  # a name too long to look up
+        raise ConfigError(f"config file {str(path)!r} cannot be read: {e.strerror}") from None
+
+
 def load_config(path: str | Path) -> Config:
     """Reads a YAML file; missing keys keep their defaults, unknown keys are errors."""
+    data = config_file_data(path)
     path = Path(path)
-    if path.is_dir():
-        raise ConfigError(f"config file {str(path)!r} is a folder; give a YAML file")
-    if not path.is_file():
-        raise ConfigError(f"config file {str(path)!r} does not exist")
-    try:
-        data = drake_yaml().yaml_load_data(path.read_text())
-    except UnicodeDecodeError as e:
-        raise ConfigError(
-            f"config file {str(path)!r} is not a text file (byte {e.start} is not UTF-8); give a YAML file"
-        ) from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"config file {str(path)!r} is not valid YAML: {e}") from None
     if data is None:  # empty, comments only or null: more often a file not yet written than a wish for defaults
         raise ConfigError(
             f"config file {str(path)!r} holds no settings (it is empty, or only comments or null); write the "

@@ -11,8 +11,6 @@ import sys
 import tempfile
 from pathlib import Path
 
-import yaml
-
 from trajectotree.config import (
     DEFAULT_HAND,
     FORMULATIONS,
@@ -22,6 +20,8 @@ from trajectotree.config import (
     ConfigError,
     ObjectConfig,
     check_integer,
+    clipped_repr,
+    config_file_data,
     load_config,
     mu_plan,
 )
@@ -95,11 +95,13 @@ def parse_polygon(text: str) -> tuple[tuple[float, float], ...]:
             vertices.append((float(parts[0]), float(parts[1])))
         except ValueError:
             raise ConfigError(
-                f"--polygon vertex {i} {pair!r} is not x,y (two numbers in m, comma-separated, no "
+                f"--polygon vertex {i} {clipped_repr(pair)} is not x,y (two numbers in m, comma-separated, no "
                 'space; vertices separated by spaces, e.g. "-0.07,-0.04 0.07,-0.04 0,0.08")'
             ) from None
     if not vertices:
-        raise ConfigError(f"--polygon {text!r} has no vertices: give at least 3 as x,y pairs separated by spaces")
+        raise ConfigError(
+            f"--polygon {clipped_repr(text)} has no vertices: give at least 3 as x,y pairs separated by spaces"
+        )
     return tuple(vertices)
 
 
@@ -203,7 +205,7 @@ def config_file_scene_fields(args: argparse.Namespace) -> set[str]:
     """The scene fields --config's file sets (load_config has checked the file)."""
     if not getattr(args, "config", None):
         return set()
-    data = yaml.safe_load(Path(args.config).read_text()) or {}
+    data = config_file_data(args.config) or {}
     scene = data.get("scene") if isinstance(data, dict) else None
     return set(scene) if isinstance(scene, dict) else set()
 

@@ -21,7 +21,7 @@ from trajectotree.cli.common import (
     print_json,
     scene_overrides,
 )
-from trajectotree.config import Config, ConfigError, check_controller, load_config
+from trajectotree.config import Config, ConfigError, check_controller, clipped_repr, load_config
 from trajectotree.io import SIM_JSON, SIM_NPZ, PlanFiles, read_plan_files, reading, write_json_atomic
 
 
@@ -89,7 +89,7 @@ def trajectory_arrays(files: PlanFiles) -> dict[str, np.ndarray]:
     if not files.arrays:  # save_plan writes an empty plan.npz when planning produced nothing
         raise ConfigError(
             f"{str(files.npz_path)!r} holds no trajectory: planning produced none "
-            f"(plan.json status: {files.data.get('status')!r})"
+            f"(plan.json status: {clipped_repr(files.data.get('status'))})"
         )
     with reading(files.npz_path):
         return check_plan_arrays(files.arrays)
@@ -177,7 +177,8 @@ def execution_config(args, plan_config: Config) -> Config:
         sim=dataclasses.replace(config.sim, **sim),
     )
     differ = [
-        f"scene.{f.name} = {getattr(config.scene, f.name)!r} (the plan's: {getattr(plan_config.scene, f.name)!r})"
+        f"scene.{f.name} = {clipped_repr(getattr(config.scene, f.name))} (the plan's: "
+        f"{clipped_repr(getattr(plan_config.scene, f.name))})"
         for f in dataclasses.fields(config.scene)
         if getattr(config.scene, f.name) != getattr(plan_config.scene, f.name)
     ]
@@ -277,7 +278,8 @@ def run(args) -> int:
     if not plan_success:
         print(
             f"trajectotree simulate: warning: the plan in {args.plan_dir} did not converge (IPOPT status "
-            f"{str(files.data.get('status'))!r}); executing it anyway, sim.json records plan_success: false",
+            f"{clipped_repr(str(files.data.get('status')))}); executing it anyway, sim.json records "
+            "plan_success: false",
             file=sys.stderr,
         )
     meshcat = None

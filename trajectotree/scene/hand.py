@@ -31,7 +31,6 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
 from pydrake.geometry import RoleAssign, SceneGraph
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.parsing import Parser
@@ -39,9 +38,10 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
-from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError, SceneConfig
+from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError, SceneConfig, clipped_repr
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger
+from trajectotree.typed_yaml import YamlError, read_yaml
 
 MODELS_DIR = resources.files("trajectotree.models")  # models/, installed as trajectotree/models (pyproject.toml)
 MODEL_SUFFIXES = (".sdf", ".urdf")
@@ -237,16 +237,16 @@ def _vector(source: str, where: str, value, length: int = 3) -> tuple[float, ...
     ok = isinstance(value, list) and len(value) == length
     ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
     if not ok:
-        raise HandError(source, f"{where} = {value!r} is not a list of {length} finite numbers")
+        raise HandError(source, f"{where} = {clipped_repr(value)} is not a list of {length} finite numbers")
     return tuple(float(v) for v in value)
 
 
 def _mapping(source: str, where: str, value, keys: tuple[str, ...], required: tuple[str, ...]) -> dict:
     if not isinstance(value, dict):
-        raise HandError(source, f"{where} must be a mapping with keys {list(keys)}, got {value!r}")
+        raise HandError(source, f"{where} must be a mapping with keys {list(keys)}, got {clipped_repr(value)}")
     unknown = sorted(set(value) - set(keys))
     if unknown:
-        raise HandError(source, f"{where}: unknown key(s) {unknown}; valid keys: {list(keys)}")
+        raise HandError(source, f"{where}: unknown key(s) {clipped_repr(unknown)}; valid keys: {list(keys)}")
     missing = [k for k in required if k not in value]
     if missing:
         raise HandError(source, f"{where}: missing {missing}")
@@ -255,7 +255,7 @@ def _mapping(source: str, where: str, value, keys: tuple[str, ...], required: tu
 
 def _name(source: str, where: str, value) -> str:
     if not isinstance(value, str) or not value:
-        raise HandError(source, f"{where} = {value!r} is not a name")
+        raise HandError(source, f"{where} = {clipped_repr(value)} is not a name")
     return value
 
 
@@ -266,9 +266,9 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
     if not path.is_file():
         raise HandError(source, "does not exist")
     try:
-        data = yaml.safe_load(path.read_text())
-    except (UnicodeDecodeError, yaml.YAMLError) as e:
-        raise HandError(source, f"is not a YAML text file: {e}") from None
+        data = read_yaml(path)
+    except YamlError as e:
+        raise HandError(source, str(e)) from None
     data = _mapping(source, "the file", data, ("model", "plane", "welds", "fingers", "object"), ("fingers",))
     model = data.get("model")
     if model is None:
@@ -276,11 +276,11 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
             raise HandError(source, "names no model: give model: PATH.sdf, PATH.urdf or a package:// URL")
         model = str(Path(spec).resolve())
     elif not isinstance(model, str) or not model:
-        raise HandError(source, f"model = {model!r} is not a file name")
+        raise HandError(source, f"model = {clipped_repr(model)} is not a file name")
     elif not model.startswith("package://"):
         model_path = (path.parent / model).resolve()
         if model_path.suffix.lower() not in MODEL_SUFFIXES:
-            raise HandError(source, f"model {model!r} is not an SDF or URDF file")
+            raise HandError(source, f"model {clipped_repr(model)} is not an SDF or URDF file")
         if not model_path.is_file():
             raise HandError(source, f"model {str(model_path)!r} does not exist")
         model = str(model_path)
@@ -294,7 +294,7 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         raise HandError(source, f"plane.x_axis {list(x_axis)} and plane.y_axis {list(y_axis)} are not orthogonal")
     welds_data = data.get("welds") or []
     if not isinstance(welds_data, list):
-        raise HandError(source, f"welds must be a list, got {welds_data!r}")
+        raise HandError(source, f"welds must be a list, got {clipped_repr(welds_data)}")
     welds = []
     for k, w in enumerate(welds_data):
         w = _mapping(source, f"welds[{k}]", w, ("frame", "xyz", "rpy"), ("frame",))
@@ -307,7 +307,7 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         )
     fingers_data = data["fingers"]
     if not isinstance(fingers_data, list):
-        raise HandError(source, f"fingers must be a list, got {fingers_data!r}")
+        raise HandError(source, f"fingers must be a list, got {clipped_repr(fingers_data)}")
     if len(fingers_data) < MIN_FINGERS:
         raise HandError(
             source,
@@ -319,12 +319,12 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         f = _mapping(source, f"fingers[{i}]", f, ("joints", "tip", "tip_xyz"), ("joints", "tip"))
         joints = f["joints"]
         if not isinstance(joints, list):
-            raise HandError(source, f"finger {i}: joints = {joints!r} is not a list of joint names")
+            raise HandError(source, f"finger {i}: joints = {clipped_repr(joints)} is not a list of joint names")
         if len(joints) != JOINTS_PER_FINGER:
             raise HandError(
                 source,
-                f"finger {i} has {len(joints)} joint(s) {joints}; each finger needs {JOINTS_PER_FINGER} revolute "
-                "joints (fingers of more links are not supported yet)",
+                f"finger {i} has {len(joints)} joint(s) {clipped_repr(joints)}; each finger needs "
+                f"{JOINTS_PER_FINGER} revolute joints (fingers of more links are not supported yet)",
             )
         fingers.append(
             FingerEntry(
@@ -370,7 +370,7 @@ def _hand_object(source: str, value) -> HandObject:
         if v is None:
             return None
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-            raise HandError(source, f"object.{key} = {v!r} is not a positive number")
+            raise HandError(source, f"object.{key} = {clipped_repr(v)} is not a positive number")
         return float(v)
 
     size = data.get("size")
