@@ -279,14 +279,15 @@ def check_plan_pair(files: PlanFiles) -> str | None:
     return None
 
 
-# rad, how far a successful plan's last knot may end from its goal's orientation: CITO meets the
-# goal to its constraint tolerance (1e-6); the other plan of a pair mixed up ends elsewhere by far more.
+# rad, how far a successful keyframes plan's last knot may end from its goal's orientation: its last
+# segment's end knot is fixed at the goal node (to IPOPT's constraint tolerance, 1e-6), while the other
+# plan of a pair mixed up ends elsewhere by far more. (The joint program only tracks its goals in its cost.)
 GOAL_FIT_TOL = 1e-3
 
 
 def _pair_mismatch(files: PlanFiles, goal_too: bool) -> str | None:
     """What plan.json says that plan.npz's arrays contradict, or None; `goal_too`: also whether a
-    successful TrajectoTree plan ends at its goal (its last node is the goal pose)."""
+    successful plan of TrajectoTree's keyframes formulation ends at its goal (GOAL_FIT_TOL)."""
     arrays, data = files.arrays, files.data
     if not arrays:
         return None
@@ -304,7 +305,9 @@ def _pair_mismatch(files: PlanFiles, goal_too: bool) -> str | None:
     if joints and arrays["q"].ndim == 2 and arrays["q"].shape[1] != joints:
         return f"its q has {arrays['q'].shape[1]} joint angles per knot, plan.json's nodes {joints}"
     goal, theta = data.get("goal"), _final_theta(arrays)
-    successful = data.get("method") == "trajectotree" and data.get("success") is True
+    successful = (
+        data.get("formulation") == "keyframes" and data.get("method") == "trajectotree" and data.get("success") is True
+    )
     if goal_too and successful and goal is not None and theta is not None and abs(theta - goal) > GOAL_FIT_TOL:
         return (
             f"it ends at orientation {theta:+.4f} rad, {abs(theta - goal):.4f} rad from plan.json's goal "
