@@ -43,7 +43,13 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "demo", help="plan, simulate and play back a pi/2 rotation (start here)", description=__doc__
     )
-    p.add_argument("--out", default="demo", metavar="DIR", help="output directory (default: ./demo)")
+    p.add_argument(
+        "--out",
+        default="demo",
+        metavar="DIR",
+        help="output directory (default: ./demo); the demo holds DIR/.lock while it runs, so no `plan` or "
+        "`simulate` works in DIR meanwhile",
+    )
     p.add_argument("--meshcat", action="store_true", help="also watch the run live in Meshcat on localhost")
     p.add_argument(
         "--goal",

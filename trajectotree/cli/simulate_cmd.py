@@ -37,7 +37,12 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "simulate", help="execute a saved plan with a controller in a Drake simulation", description=__doc__
     )
-    p.add_argument("plan_dir", metavar="PLAN_DIR", help="folder with plan.npz and plan.json (from `trajectotree plan`)")
+    p.add_argument(
+        "plan_dir",
+        metavar="PLAN_DIR",
+        help="folder with plan.npz and plan.json (from `trajectotree plan`); the command holds "
+        "PLAN_DIR/.lock while it runs, so no `plan` replaces the plan meanwhile",
+    )
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the run")
     p.add_argument("--gif", metavar="FILE", help="write a matplotlib GIF of the run (no WebGL needed)")
     p.add_argument(
