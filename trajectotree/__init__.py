@@ -8,8 +8,9 @@ The public API, by stage of the data flow (units: m, kg, s, rad, N, N m)::
     tt.save_plan(result, "out")             # out/plan.json + out/plan.npz
 
 Configuration is typed and frozen: Config(scene=SceneConfig(...), search=SearchConfig(...), ...),
-or load_config("file.yaml"). Names are imported on first use, so `import trajectotree` stays light
-(and the values modules never pull in Drake).
+or load_config("file.yaml"); tt.plan also takes the file's path or a mapping of its sections, and
+refuses before any planning what the CLI refuses (ConfigError; trajectotree.planning.request). Names
+are imported on first use, so `import trajectotree` stays light (and the values modules never pull in Drake).
 """
 
 from __future__ import annotations

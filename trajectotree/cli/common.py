@@ -5,10 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 from trajectotree.config import (
@@ -23,8 +20,8 @@ from trajectotree.config import (
     clipped_repr,
     config_file_data,
     load_config,
-    mu_plan,
 )
+from trajectotree.io import HTML_SUFFIXES, cannot_create_in, check_output_file  # noqa: F401 (the commands' output-file check)
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
 SEGMENTS_HELP = (
@@ -47,7 +44,6 @@ FORMULATION_HELP = (
     "(default: keyframes)"
 )
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
-HTML_SUFFIXES = (".html", ".htm")
 
 
 def add_scene_options(group, config_help: str = "YAML file with any Config fields") -> None:
@@ -225,87 +221,51 @@ def check_executable_hand(scene, use: str) -> None:
 
 
 def check_graspable(scene, config: Config, args: argparse.Namespace) -> None:
-    """ConfigError (exit 2, before any planning) when the hand has no initial grasp of the object
-    at scene.initial_pose (trajectotree.search.initial_grasp: a finger reaches no corner-free contact,
-    or no three-finger stance holds at mu_plan), unless search.initial_arclengths sets the grasp,
-    or when the object is heavier than the hand can hold (check_payload)."""
-    from trajectotree.scene.plant import describe_object
-    from trajectotree.search import initial_grasp
+    """ConfigError (exit 2, before any planning), naming the option that set the field, when the
+    hand has no initial grasp of the object or cannot hold its weight; a warning on stderr when only
+    plans that switch no finger can hold it (trajectotree.planning.request.check_graspable, which
+    tt.plan runs too)."""
+    from trajectotree.planning.request import check_graspable as check
 
-    if config.search.initial_arclengths is not None:
-        check_payload(scene, config, args)
-        return
-    # The planner ranks the grasps again inside its timed search, so search_time_s includes them.
-    grasps = initial_grasp.initial_grasp_candidates(scene, config.search)
-    if grasps.refusal is not None:
-        problem = (
-            f"the hand cannot grasp the {describe_object(config.scene)} at scene.initial_pose "
-            f"{list(config.scene.initial_pose)}: {grasps.refusal}; corner-free contacts each finger "
-            f"reaches: {list(grasps.reachable)} (see `trajectotree scene ... --figure FILE.png`)"
-        )
-        if config.scene.object.is_box:
-            raise ConfigError(f"the box: {problem}")
-        raise in_option_terms(ConfigError(field=config.scene.object.field_name, problem=problem), args)
-    check_payload(scene, config, args, grasps)
+    try:
+        warning = check(scene, config)
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+    print_warning(warning, args)
 
 
-def floor_digits(value: float, digits: int = 3) -> float:
-    """`value` rounded down to `digits` significant digits, so that a limit printed as a bound
-    is itself within it (3.2262 kg prints as 3.22, which the check accepts)."""
-    if not math.isfinite(value) or value <= 0:
-        return value
-    scale = 10.0 ** (digits - 1 - math.floor(math.log10(value)))
-    return math.floor(value * scale) / scale
+def check_payload(scene, config: Config, args: argparse.Namespace) -> None:
+    """check_graspable's weight check alone (trajectotree.planning.request.check_payload), for the
+    commands that need no grasp ranked besides it."""
+    from trajectotree.planning.request import check_payload as check
+
+    try:
+        warning = check(scene, config)
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+    print_warning(warning, args)
 
 
-def check_payload(scene, config: Config, args: argparse.Namespace, grasps=None) -> None:
-    """ConfigError (exit 2, before any planning) when no initial grasp holds the object's weight
-    at rest within the joint torque limits (trajectotree.search.payload: no plan can exist);
-    a warning on stderr when it is lighter than that but no three-finger stance carries it while
-    the fourth finger lets go (the search can then only find plans that switch no finger)."""
-    from trajectotree.search.initial_grasp import initial_grasp_candidates
-    from trajectotree.search.payload import payload
-
-    mass = config.scene.box_mass
-    if grasps is None and config.search.initial_arclengths is None:
-        grasps = initial_grasp_candidates(scene, config.search)  # as check_graspable: outside the timed search
-    quick = payload(scene, config.search, grasps, first=1)  # the best grasp usually holds it: one small LP
-    if quick is None or (quick.hold_kg >= mass and quick.switch_kg >= mass):
-        return
-    limits = payload(scene, config.search, grasps)
-    where = (
-        f"at scene.initial_pose {list(config.scene.initial_pose)} with friction mu_plan "
-        f"{mu_plan(config.scene, config.search):.3g} and each joint within its {limits.tau_max:g} N m "
-        f"torque limit (the links' own weight included)"
-    )
-    grasps_text = (
-        "search.initial_arclengths' grasp"
-        if config.search.initial_arclengths is not None
-        else f"the strongest of the {limits.grasps} candidate initial grasps"
-    )
-    if mass > limits.hold_kg:
-        hold = floor_digits(limits.hold_kg)
-        refused = ConfigError(
-            field="scene.box_mass",
-            value=mass,
-            shown=f"{mass!r} kg",
-            problem=f"is more than the hand can hold: {grasps_text} holds at most {hold:g} kg at rest with four "
-            f"fingers {where}",
-            valid=f"(0, {hold:g}] kg",
-        )
-        raise in_option_terms(refused, args)
-    if mass > limits.switch_kg:
-        cap = config.search.max_stance_force
-        warning = ConfigError(  # not raised: its message names the option as an error's would
-            field="scene.box_mass",
-            value=mass,
-            shown=f"{mass!r} kg",
-            problem=f"is more than three fingers can hold while the fourth lets go: at "
-            f"most {floor_digits(limits.switch_kg):g} kg ({grasps_text.replace('the strongest of ', '')}, {where}"
-            + (f", at most search.max_stance_force {cap:g} N of normal force in total" if cap else "")
-            + "); only plans that switch no finger (small rotations) can be found",
-        )
+def print_warning(warning: ConfigError | None, args: argparse.Namespace) -> None:
+    """A check's warning (not an error: the command goes on) on stderr, naming the option as an error would."""
+    if warning is not None:
         print(f"trajectotree {args.command}: warning: {in_option_terms(warning, args)}", file=sys.stderr)
+
+
+def plan_request_from_args(args: argparse.Namespace, scene, config: Config, goal, **request):
+    """The checked PlanRequest of a command that plans (trajectotree.planning.request.check_plan_request,
+    tt.plan's own checks) from the scene, config and goal its options give and `request`'s other
+    arguments (method, start, segment_workers); ConfigError naming the option that set a refused
+    value, before any planning; a warning on stderr as check_graspable's."""
+    from trajectotree.planning.request import check_plan_request
+
+    name = "--goal-pose X Y" if getattr(args, "goal_pose", None) is not None else "goal.position"
+    try:
+        checked = check_plan_request(goal=goal, config=config, scene=scene, goal_name=name, **request)
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+    print_warning(checked.warning, args)
+    return checked
 
 
 # The config fields command-line options set: field -> (the option's argparse attribute, the option
@@ -385,19 +345,6 @@ def _nearest_existing(path: Path) -> Path:
     return path
 
 
-def _cannot_create_in(folder: Path) -> str | None:
-    """Why no file can be created in `folder`, or None when one can: a probe file is made
-    and removed at once. Permission bits (and os.access) do not tell: root ignores them,
-    and they know nothing of an immutable folder or a read-only bind mount."""
-    try:
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".trajectotree-probe-")
-    except OSError as e:
-        return e.strerror or type(e).__name__
-    os.close(fd)
-    os.unlink(probe)
-    return None
-
-
 def check_output_dir(option: str, path: str | Path, files: tuple[str, ...] = ()) -> Path:
     """An output folder (created later if missing): never an existing file, its nearest
     existing ancestor a folder in which files can be created (tried, not assumed), and none
@@ -411,7 +358,7 @@ def check_output_dir(option: str, path: str | Path, files: tuple[str, ...] = ())
     base = _nearest_existing(path.absolute())
     if not base.is_dir():
         raise ConfigError(f"{option} {str(path)!r} cannot be created: {str(base)!r} is a file, not a folder")
-    why = _cannot_create_in(base)
+    why = cannot_create_in(base)
     if why:
         raise ConfigError(f"{option} {str(path)!r} cannot be written: no file can be created in {str(base)!r} ({why})")
     for name in files:
@@ -420,29 +367,4 @@ def check_output_dir(option: str, path: str | Path, files: tuple[str, ...] = ())
                 f"{option} {str(path)!r} cannot be written: {str(path / name)!r} is a folder, where the "
                 f"command writes the file {name}; move it away or give another folder"
             )
-    return path
-
-
-def check_output_file(
-    option: str, path: str | Path, suffixes: tuple[str, ...], *, created: tuple[Path, ...] = ()
-) -> Path:
-    """An output file: its name ends in one of `suffixes`, it is not a folder, and it goes
-    into an existing folder in which files can be created, or into one of the `created`
-    output folders (the command makes them; check_output_dir checks them). Checked before any
-    work starts (ConfigError: exit 2)."""
-    path = Path(path)
-    if path.suffix.lower() not in suffixes:
-        raise ConfigError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")
-    if path.is_dir():
-        raise ConfigError(f"{option} {str(path)!r} is a folder; give a file name ending in {' or '.join(suffixes)}")
-    folder = Path(os.path.abspath(path)).parent
-    if not folder.exists() and any(folder == Path(os.path.abspath(c)) for c in created):
-        return path  # written after the command has created that folder
-    if not folder.is_dir():
-        raise ConfigError(f"{option} {str(path)!r}: the folder {str(path.parent)!r} does not exist")
-    why = _cannot_create_in(folder)
-    if why:
-        raise ConfigError(
-            f"{option} {str(path)!r} cannot be written: no file can be created in {str(path.parent)!r} ({why})"
-        )
     return path

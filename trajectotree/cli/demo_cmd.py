@@ -20,9 +20,9 @@ from pathlib import Path
 from trajectotree.cli.common import (
     add_config_options,
     check_executable_hand,
-    check_graspable,
     check_output_dir,
     config_from_args,
+    plan_request_from_args,
     print_json,
 )
 from trajectotree.cli.progress import ipopt_progress
@@ -43,7 +43,13 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "demo", help="plan, simulate and play back a pi/2 rotation (start here)", description=__doc__
     )
-    p.add_argument("--out", default="demo", metavar="DIR", help="output directory (default: ./demo)")
+    p.add_argument(
+        "--out",
+        default="demo",
+        metavar="DIR",
+        help="output directory (default: ./demo); the demo holds DIR/.lock while it runs, so no `plan` or "
+        "`simulate` works in DIR meanwhile",
+    )
     p.add_argument("--meshcat", action="store_true", help="also watch the run live in Meshcat on localhost")
     p.add_argument(
         "--goal",
@@ -126,32 +132,39 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.cli.search_cmd import draw_plan
-    from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
-    from trajectotree.execution.playback import object_noun, start_meshcat
-    from trajectotree.execution.run import run_simulation
-    from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
-    from trajectotree.io import save_plan, save_sim, write_json_atomic
-    from trajectotree.planning.planners import plan
-    from trajectotree.scene.plant import build_scene, describe_object
+    from trajectotree.io import folder_lock
+    from trajectotree.scene.plant import build_scene
 
     goal = check_goal(args.goal, "--goal")
     config = config_from_args(args)
     out = check_output_dir("--out", args.out, (PLAN_JSON, PLAN_NPZ, *DERIVED_FILES))
     scene = build_scene(config.scene)
     check_executable_hand(scene, "the demo's simulation")
-    check_graspable(scene, config, args)
+    request = plan_request_from_args(args, scene, config, goal)  # tt.plan's checks, before any planning
+    with folder_lock(out, "--out", "trajectotree demo"):  # no `plan` or `simulate` writes there meanwhile
+        return demo_into(args, request, out)
+
+
+def demo_into(args, request, out: Path) -> int:
+    """Plans the checked request, executes and draws the plan, into `out`, whose lock this command holds."""
+    from trajectotree.cli.search_cmd import draw_plan
+    from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
+    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.run import run_simulation
+    from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
+    from trajectotree.io import save_plan, save_sim, write_json_atomic
+    from trajectotree.planning.planners import plan_request
+    from trajectotree.scene.plant import describe_object
+
+    goal, config, scene = request.goal, request.config, request.scene
     meshcat = start_meshcat() if args.meshcat else None
     log = sys.stderr if args.json else sys.stdout
     if meshcat is not None:
         print(f"Meshcat: {meshcat.web_url()} (open it now; the run plays once the plan is ready)", file=log, flush=True)
 
     print(f"planning a {goal.theta:+.3f} rad rotation with TrajectoTree ...", file=log, flush=True)
-    result = plan(
-        scene=scene, goal=goal, method="trajectotree", config=config, log_observer=ipopt_progress(progress_wanted(args))
-    )
-    out.mkdir(parents=True, exist_ok=True)  # only now: an interrupted plan leaves no folder behind
-    for name in DERIVED_FILES:
+    result = plan_request(request, log_observer=ipopt_progress(progress_wanted(args)))
+    for name in DERIVED_FILES:  # the lock made `out` and removes it, still empty, if the plan is interrupted
         (out / name).unlink(missing_ok=True)
     save_plan(result, out)
     files = [PLAN_JSON, PLAN_NPZ]

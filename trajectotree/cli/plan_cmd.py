@@ -14,12 +14,11 @@ from trajectotree.cli.common import (
     add_config_options,
     add_goal_options,
     check_executable_hand,
-    check_goal_workspace,
-    check_graspable,
     check_output_dir,
     check_output_file,
     config_from_args,
     goal_from_args,
+    plan_request_from_args,
     print_json,
     reason_lines,
 )
@@ -64,7 +63,9 @@ def register(subparsers) -> None:
     p.add_argument(
         "--out",
         metavar="DIR",
-        help="output folder (default: plan_<method>_<goal>); a previous plan's sim.json and sim.npz there are removed",
+        help="output folder (default: plan_<method>_<goal>); a previous plan's sim.json and sim.npz there are "
+        "removed, as they belong to the plan this one replaces; while planning the command holds DIR/.lock, so no "
+        "`simulate`, `demo` or other `plan` works in DIR meanwhile",
     )
     p.add_argument("--json", action="store_true", help="print plan.json to stdout")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the planned trajectory")
@@ -72,9 +73,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.io import load_start, plan_to_json, save_plan
+    from trajectotree.io import folder_lock, load_start
     from trajectotree.planning.keyframes import check_workers
-    from trajectotree.planning.planners import plan
     from trajectotree.scene.plant import build_scene
 
     method = check_method(args.method)
@@ -88,22 +88,19 @@ def run(args) -> int:
     scene = build_scene(config.scene)
     if args.html:
         check_executable_hand(scene, "--html's playback")
-    if start is None:
-        check_graspable(scene, config, args)
-    else:  # refused here, before any planning, when the start cannot hold the object
-        from trajectotree.planning.start import start_config
+    # refused here, before any planning, when the start or the object cannot be planned from (tt.plan's checks)
+    request = plan_request_from_args(args, scene, config, goal, method=method, start=start, segment_workers=workers)
+    with folder_lock(out, "--out", "trajectotree plan"):  # no `simulate` or other `plan` writes there meanwhile
+        return plan_into(args, request, out)
 
-        start_config(scene, start, config)
-    check_goal_workspace(scene, config, goal, args, start=None if start is None else start.object_pose)
-    result = plan(
-        scene=scene,
-        goal=goal,
-        method=method,
-        config=config,
-        segment_workers=workers,
-        start=start,
-        log_observer=ipopt_progress(progress_wanted(args)),
-    )
+
+def plan_into(args, request, out: Path) -> int:
+    """Plans the checked request and writes it into `out`, whose lock this command holds."""
+    from trajectotree.io import plan_to_json, save_plan
+    from trajectotree.planning.planners import plan_request
+
+    method, goal, config = request.method, request.goal, request.config
+    result = plan_request(request, log_observer=ipopt_progress(progress_wanted(args)))
     removed = remove_derived_files(out)
     save_plan(result, out)
     if removed:

@@ -176,7 +176,7 @@ def rotations_line(r: dict) -> str:
 
 def payload_line(reach: dict, mass: float) -> str:
     """What the hand can carry (search.payload) against the object's mass."""
-    from trajectotree.cli.common import floor_digits
+    from trajectotree.planning.request import floor_digits
 
     p = reach["payload"]
     hold, switch = floor_digits(p["hold_kg"]), floor_digits(p["switch_kg"])

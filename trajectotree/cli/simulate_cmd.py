@@ -22,14 +22,27 @@ from trajectotree.cli.common import (
     scene_overrides,
 )
 from trajectotree.config import Config, ConfigError, check_controller, clipped_repr, load_config
-from trajectotree.io import SIM_JSON, SIM_NPZ, PlanFiles, read_plan_files, reading, write_json_atomic
+from trajectotree.io import (
+    SIM_JSON,
+    SIM_NPZ,
+    PlanFiles,
+    folder_lock,
+    read_plan_files,
+    reading,
+    write_json_atomic,
+)
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "simulate", help="execute a saved plan with a controller in a Drake simulation", description=__doc__
     )
-    p.add_argument("plan_dir", metavar="PLAN_DIR", help="folder with plan.npz and plan.json (from `trajectotree plan`)")
+    p.add_argument(
+        "plan_dir",
+        metavar="PLAN_DIR",
+        help="folder with plan.npz and plan.json (from `trajectotree plan`); the command holds "
+        "PLAN_DIR/.lock while it runs, so no `plan` replaces the plan meanwhile",
+    )
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the run")
     p.add_argument("--gif", metavar="FILE", help="write a matplotlib GIF of the run (no WebGL needed)")
     p.add_argument(
@@ -106,8 +119,8 @@ def check_arrays_fit_plan(files: PlanFiles, arrays: dict[str, np.ndarray]) -> No
     """ConfigError naming the mismatch when plan.npz's arrays do not belong to the plan plan.json
     describes (the two files of different plans side by side): every contact point p_W_C on the
     boundary of plan.json's object at the planned pose, x[0] at its scene.initial_pose, and for a
-    TrajectoTree plan one cito.knots_per_segment knots per transition of its contact sequence,
-    cito.dt apart."""
+    TrajectoTree plan its knots cito.dt apart (io.read_plan_files has checked the arrays' digest
+    plan.json records and their knots per transition of its contact sequence)."""
     from trajectotree.geometry import poses_world_to_box
     from trajectotree.scene.plant import describe_object
 
@@ -130,12 +143,6 @@ def check_arrays_fit_plan(files: PlanFiles, arrays: dict[str, np.ndarray]) -> No
     nodes = files.data.get("contact_sequence") or ()
     if files.data.get("method") != "trajectotree" or len(nodes) < 2:
         return
-    M, knots = config.cito.knots_per_segment, len(arrays["t"])
-    if knots != (len(nodes) - 1) * M + 1:
-        raise ConfigError(
-            f"{where}: it has {knots} knots, plan.json's {len(nodes)} nodes of cito.knots_per_segment {M} "
-            f"make {(len(nodes) - 1) * M + 1}"
-        )
     steps = np.diff(arrays["t"])
     if np.abs(steps - config.cito.dt).max() > 1e-9:
         raise ConfigError(
@@ -241,13 +248,6 @@ def final_error_line(summary: dict) -> str:
 
 
 def run(args) -> int:
-    from trajectotree.execution.playback import object_noun, start_meshcat
-    from trajectotree.execution.reference import reference_from_arrays
-    from trajectotree.execution.run import run_simulation
-    from trajectotree.figures.run import figure_finger_forces, save_figure
-    from trajectotree.io import save_sim
-    from trajectotree.scene.plant import build_scene
-
     for option, path, suffixes in (
         ("--html", args.html, HTML_SUFFIXES),
         ("--gif", args.gif, (".gif",)),
@@ -255,7 +255,23 @@ def run(args) -> int:
     ):
         if path:
             check_output_file(option, path, suffixes)
+    # no `plan` replaces the plan, nor another `simulate` its run, while this one reads and writes them
+    with folder_lock(args.plan_dir, "PLAN_DIR", "trajectotree simulate", create=False):
+        return simulate_into(args)
+
+
+def simulate_into(args) -> int:
+    """Executes the plan in PLAN_DIR, whose lock this command holds, and writes the run there."""
+    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.reference import reference_from_arrays
+    from trajectotree.execution.run import run_simulation
+    from trajectotree.figures.run import figure_finger_forces, save_figure
+    from trajectotree.io import save_sim
+    from trajectotree.scene.plant import build_scene
+
     files = read_plan_files(args.plan_dir, "PLAN_DIR")
+    if files.unverified:
+        print(f"trajectotree simulate: warning: {files.unverified}", file=sys.stderr)
     check_output_dir("PLAN_DIR", args.plan_dir, (SIM_JSON, SIM_NPZ))  # the run is saved there: before it runs
     arrays = trajectory_arrays(files)
     check_arrays_fit_plan(files, arrays)

@@ -22,6 +22,7 @@ from trajectotree.execution.simulate import (
     simulate_reference,
 )
 from trajectotree.figures.run import controller_text
+from trajectotree.io import GIF_SUFFIXES, HTML_SUFFIXES, check_output_file
 from trajectotree.results import PlanResult, SimResult
 from trajectotree.scene.plant import build_scene
 
@@ -53,7 +54,8 @@ def run_simulation(
     result's replans list each time; the later segments of a new plan on `segment_workers` local
     processes, None: as planning.planners.plan); it records no playback. `config` defaults to the
     plan's own (a PlanResult's config). ConfigError on bad values. A live `meshcat` runs in real
-    time; `html_path` writes the recorded playback, `gif_path` a GIF of the run."""
+    time; `html_path` writes the recorded playback, `gif_path` a GIF of the run (each checked before
+    the run: its name's suffix, .html/.htm or .gif, and a folder that takes new files: io.check_output_file)."""
     if config is None:
         if not isinstance(plan, PlanResult):
             raise ConfigError("run_simulation: give config= with a Reference (only a PlanResult carries its own)")
@@ -66,6 +68,9 @@ def run_simulation(
         return _replanning(
             plan, config, replan, conditions, controller, (meshcat, html_path, gif_path), segment_workers
         )
+    for name, path, suffixes in (("html_path", html_path, HTML_SUFFIXES), ("gif_path", gif_path, GIF_SUFFIXES)):
+        if path is not None:  # before the run, as the CLI's --html and --gif: never a run lost to its playback
+            check_output_file(name, path, suffixes)
     scene = build_scene(config.scene)
     reference = reference_from_plan(plan, scene)
     result = simulate_reference(

@@ -4,12 +4,9 @@ Only the sweep process writes here; trials run elsewhere and return their files 
 
 from __future__ import annotations
 
-import fcntl
 import json
 import os
 import shutil
-import socket
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,13 +15,12 @@ from pathlib import Path
 from trajectotree import __version__
 from trajectotree.config import ConfigError
 from trajectotree.experiments.trial import ROW_FILE, TrialOutcome
-from trajectotree.io import PLAN_NPZ, SIM_NPZ, npz_problem, write_bytes_atomic
+from trajectotree.io import LOCK_FILE, PLAN_NPZ, SIM_NPZ, folder_lock, npz_problem, write_bytes_atomic
 
 MANIFEST_FILE = "manifest.json"
 TRIALS_DIR = "trials"
 ROWS_FILE = "trials.jsonl"
 TMP_PREFIX = ".tmp-"
-LOCK_FILE = ".lock"
 CORRUPT_DIR = "corrupt"
 # Manifest keys that may change between runs of one sweep: not part of a trial's identity.
 RUN_SETTINGS = ("goal_values", "version", "time_limit_s")
@@ -132,33 +128,12 @@ def prepare_dir(out_dir: Path, spec) -> list[str]:
 
 @contextmanager
 def sweep_lock(out_dir: Path) -> Iterator[None]:
-    """Holds OUT/.lock (flock, released by the kernel if this process dies) while the sweep
-    runs; ConfigError naming the holder's pid if another sweep holds it. The file keeps the
-    holder's pid while held and is emptied on release, so a pid found on taking it belonged
-    to a sweep that died (its stale lock is taken over, with a note on stderr)."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / LOCK_FILE
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        previous = os.pread(fd, 256, 0).decode(errors="replace").strip()
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = previous or "unknown pid"
-            raise ConfigError(
-                f"--out {str(out_dir)!r} is in use by another sweep (process {holder}; lock file "
-                f"{str(path)!r}); wait for it to finish or stop it, or choose another --out"
-            ) from None
-        if previous:
-            print(f"sweep {out_dir}: taking over the stale lock of process {previous}, which is gone", file=sys.stderr)
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
-        try:
-            yield
-        finally:
-            os.ftruncate(fd, 0)
-    finally:
-        os.close(fd)
+    """Holds OUT/.lock while the sweep runs (io.folder_lock, which `plan`, `simulate` and `demo`
+    take too); ConfigError naming the holder's pid if another process holds it. The file stays,
+    emptied, on release: a pid found in it on taking it belonged to a sweep that died (its stale
+    lock is taken over, with a note on stderr)."""
+    with folder_lock(out_dir, "--out", "sweep", keep=True):
+        yield
 
 
 def read_row(trial_dir: Path) -> dict:

@@ -25,12 +25,15 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
+from collections.abc import Mapping
 from concurrent.futures import Executor
+from pathlib import Path
 
 import numpy as np
 
 from trajectotree.cito.guess import plan_guess, static_guess
-from trajectotree.cito.hand import HandModel, check_cito_hand
+from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import LogObserver, solve, violations
@@ -38,17 +41,17 @@ from trajectotree.cito.transition import check_plan, transition_spec
 from trajectotree.config import Config, ConfigError, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
-from trajectotree.planning.keyframes import check_workers, plan_keyframes
+from trajectotree.planning.keyframes import plan_keyframes
 from trajectotree.planning.keyframes import trajectory as segment_trajectory
 from trajectotree.planning.physics import ObjectModel, check_physics
-from trajectotree.planning.start import begin_at, start_config
+from trajectotree.planning.request import PlanRequest, as_config, check_plan_request
+from trajectotree.planning.start import begin_at
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
-from trajectotree.scene.plant import Scene, build_scene
+from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
 from trajectotree.search.tree import choose_initial_grasp, find_contact_plan, object_path
-from trajectotree.search.workspace import check_goal_position
 from trajectotree.start import StartState
 
 
@@ -56,9 +59,9 @@ def plan(
     *,
     goal=None,
     method: str = "trajectotree",
-    config: Config | None = None,
+    config: Config | str | Path | Mapping | None = None,
     scene: Scene | None = None,
-    start: StartState | None = None,
+    start: StartState | str | Path | Mapping | None = None,
     contact_plan: ContactPlan | None = None,
     segment_executor: Executor | None = None,
     segment_workers: int | None = None,
@@ -73,11 +76,14 @@ def plan(
     config.goal. A goal position the hand cannot carry the object to is refused before planning
     (ConfigError, trajectotree.search.workspace). The path has search.num_nodes nodes, or as many
     as the goal's distance needs (config.segments_for); the result's config holds the goal and the
-    number. `config` defaults to Config() (the paper's scene), `scene` to the plant
-    built from config.scene (pass one to reuse it). With a `start` (a measured StartState) the plan
-    begins there: its grasp roots the search, its joint angles are the first knot's, and `goal` is
-    the object's final pose in W (StartRefused before any planning when the start cannot
-    hold the object: trajectotree.planning.start). A `contact_plan` may be given
+    number. `config` is a Config, the path of a YAML file or a mapping of its sections (None:
+    Config(), the paper's scene), `scene` the plant built from config.scene (None: built here; pass
+    one to reuse it). With a `start` (a measured StartState, a mapping as in start.json or the path
+    of one) the plan begins there: its grasp roots the search, its joint angles are the first knot's,
+    and `goal` is the object's final pose in W (StartRefused before any planning when the start cannot
+    hold the object: trajectotree.planning.start). Without one, an object the hand cannot grasp at its
+    initial pose or hold the weight of is refused before any planning, and one only four fingers hold
+    is warned of (trajectotree.planning.request: the checks the CLI makes). A `contact_plan` may be given
     for the methods that use one (the search is then skipped; its time counts 0).
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
     persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
@@ -91,25 +97,50 @@ def plan(
     (keyframes.solve_first_segment_first), segment 0's solves stopped `first_segment_deadline_s` after
     this call began (None: unbounded)."""
     called = time.perf_counter()
-    check_method(method)
-    config = config or Config()
-    if first_segment_first and (method != "trajectotree" or config.cito.formulation != "keyframes"):
-        raise ConfigError(
-            field="cito.formulation",
-            value=config.cito.formulation if method == "trajectotree" else method,
-            problem=": a first-segment-first plan is TrajectoTree's keyframes formulation's",
-            choices=("keyframes",),
-        )
-    goal = check_goal(config.goal if goal is None else goal)
-    scene = scene or build_scene(config.scene)
-    if start is not None:
-        config = start_config(scene, start, config)
-        scene = build_scene(config.scene)
-    check_workers(segment_workers)
-    check_cito_hand(scene)
-    if scene.config != config.scene:
-        raise ConfigError("scene was built from a different SceneConfig than config.scene")
-    check_goal_position(scene, config.search, goal)
+    config = as_config(config)
+    _check_first_segment_first(first_segment_first, method, config)
+    request = check_plan_request(
+        goal=goal,
+        method=method,
+        config=config,
+        scene=scene,
+        start=start,
+        segment_workers=segment_workers,
+        grasp_tables=grasp_tables,
+        grasp_given=contact_plan is not None,
+    )
+    if request.warning is not None:
+        warnings.warn(str(request.warning), stacklevel=2)
+    return plan_request(
+        request,
+        contact_plan=contact_plan,
+        segment_executor=segment_executor,
+        grasp_tables=grasp_tables,
+        log_observer=log_observer,
+        first_segment_first=first_segment_first,
+        first_segment_deadline_s=first_segment_deadline_s,
+        called=called,
+    )
+
+
+def plan_request(
+    request: PlanRequest,
+    *,
+    contact_plan: ContactPlan | None = None,
+    segment_executor: Executor | None = None,
+    grasp_tables: GraspTables | None = None,
+    log_observer: LogObserver | None = None,
+    first_segment_first: bool = False,
+    first_segment_deadline_s: float | None = None,
+    called: float | None = None,
+) -> PlanResult:
+    """plan() of a checked request (planning.request.check_plan_request, which the CLI calls itself
+    before it takes its output folder); the other arguments as plan()'s. `called`: when the plan was
+    asked for (time.perf_counter()), from which segment_ready_s counts (None: now)."""
+    called = time.perf_counter() if called is None else called
+    method, goal, config, scene, start = request.method, request.goal, request.config, request.scene, request.start
+    segment_workers = request.segment_workers
+    _check_first_segment_first(first_segment_first, method, config)
     search = with_segments(config.search, config.scene.initial_pose, goal)
     config = dataclasses.replace(config, goal=goal, search=search)
     search_time = 0.0
@@ -186,6 +217,16 @@ def plan(
         solver_timing=outcome.timing,
         physics_check=check,
     )
+
+
+def _check_first_segment_first(first_segment_first: bool, method: str, config: Config) -> None:
+    if first_segment_first and (method != "trajectotree" or config.cito.formulation != "keyframes"):
+        raise ConfigError(
+            field="cito.formulation",
+            value=config.cito.formulation if method == "trajectotree" else method,
+            problem=": a first-segment-first plan is TrajectoTree's keyframes formulation's",
+            choices=("keyframes",),
+        )
 
 
 def initial_grasp_plan(scene: Scene, goal, config: Config, tables: GraspTables | None = None) -> ContactPlan:
