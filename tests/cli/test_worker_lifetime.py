@@ -86,6 +86,15 @@ def wait_gone(pids: list[int], within_s: float = GONE_WITHIN_S) -> list[int]:
     return left
 
 
+def left_in_session(sid: int, within_s: float = GONE_WITHIN_S) -> list[int]:
+    """Session `sid`'s live processes after `within_s` seconds ([] as soon as there are none): a
+    spawn pool's resource tracker ends only once it reads the end of its pipe."""
+    deadline = time.monotonic() + within_s
+    while (left := session_processes(sid)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return left
+
+
 def kill_session(child: subprocess.Popen) -> None:
     """Whatever a failed fix left running in `child`'s session, killed; `child` reaped."""
     for pid in session_processes(child.pid):
@@ -100,7 +109,6 @@ def cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "trajectotree.cli", *args]
 
 
-@pytest.mark.slow  # the plan's search and its two segment workers: seconds
 def test_sigkill_of_plan_leaves_no_segment_worker_alive(tmp_path):
     out, log = tmp_path / "k", tmp_path / "stderr.txt"
     child = start(cli(*LONG_PLAN, "--out", str(out)), log)
@@ -109,14 +117,13 @@ def test_sigkill_of_plan_leaves_no_segment_worker_alive(tmp_path):
         child.kill()  # SIGKILL: no handler, no clean-up of the command's runs
         assert child.wait(timeout=30) == -signal.SIGKILL
         assert wait_gone(workers) == [], f"of the workers {workers}, left running"
-        assert session_processes(child.pid) == []
+        assert left_in_session(child.pid) == []
         assert not out.exists()  # killed while planning: no plan folder
         assert "Traceback" not in log.read_text()
     finally:
         kill_session(child)
 
 
-@pytest.mark.slow  # the plan's search and its two segment workers: seconds
 @pytest.mark.parametrize(
     ("stop", "to_group", "code", "message"),
     [
@@ -138,7 +145,7 @@ def test_a_stop_during_the_parallel_segments_prints_one_line_and_leaves_nothing(
         err = log.read_text()
         assert "Traceback" not in err and "concurrent.futures" not in err, err
         assert err == f"trajectotree plan: {message}\n"
-        assert wait_gone(workers) == [] and session_processes(child.pid) == []
+        assert wait_gone(workers) == [] and left_in_session(child.pid) == []
         assert not out.exists()  # stopped while planning: nothing written
     finally:
         kill_session(child)
@@ -165,6 +172,16 @@ if __name__ == "__main__":
 """
 
 
+def ignores_sigint(pid: int) -> bool:
+    """Whether `pid` ignores SIGINT (/proc's SigIgn mask): a pool worker past its initializer."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    ignored = int(next(line for line in status.splitlines() if line.startswith("SigIgn:")).split()[1], 16)
+    return bool(ignored & 1 << (signal.SIGINT - 1))
+
+
 def start_pool_script(start_method: str, log: Path) -> tuple[subprocess.Popen, list[int]]:
     """POOL_SCRIPT in a session of its own, and its two workers' pids."""
     with open(log, "w") as stderr:
@@ -185,11 +202,14 @@ def test_a_pools_workers_die_with_their_parent(start_method, tmp_path):
     log = tmp_path / "stderr.txt"
     child, workers = start_pool_script(start_method, log)
     try:
-        time.sleep(0.5)  # past the workers' initializer, spawned ones too (an interpreter start)
+        deadline = time.monotonic() + 60
+        while not all(ignores_sigint(p) for p in workers):  # each past its initializer, tied to the parent
+            assert time.monotonic() < deadline, "the workers never ran their initializer"
+            time.sleep(0.05)
         child.kill()
         child.wait(timeout=30)
         assert wait_gone(workers) == [], f"of the workers {workers}, left running"
-        assert session_processes(child.pid) == []  # multiprocessing's resource tracker ends with its pipe
+        assert left_in_session(child.pid) == []
     finally:
         child.stdout.close()
         kill_session(child)
