@@ -28,12 +28,11 @@ from __future__ import annotations
 
 import contextlib
 import json
-import multiprocessing
 import os
 import signal
 import sys
 import threading
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -51,6 +50,7 @@ from trajectotree.config import (
 )
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
 from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
+from trajectotree.planning.workers import kill_pool, process_pool
 
 EXEC_DIR = "exec"
 CLOSED_LOOP_SUFFIX = "-closed-loop"  # the executor label of closed-loop executions: grasp-closed-loop
@@ -344,8 +344,7 @@ def run_executions(
             bar = tqdm(total=len(tasks), desc="executions", unit="run")
         done = 0
         # Fresh interpreters (spawn), not forks of a process that may hold Drake's threads.
-        context = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1, mp_context=context)
+        pool = process_pool(workers or os.cpu_count() or 1, "spawn")
         try:
             with _stop_signals_deferred():  # the pool spawns its workers while the tasks are submitted
                 futures = {pool.submit(execute, t): t for t in tasks}
@@ -365,7 +364,7 @@ def run_executions(
                 if bar is not None:
                     bar.update()
         except BaseException:
-            _kill_pool(pool)  # interrupted (Ctrl-C, SIGTERM) or broken: run no queued execution, stop the running
+            kill_pool(pool)  # interrupted (Ctrl-C, SIGTERM) or broken: run no queued execution, stop the running
             raise
         pool.shutdown()
         if bar is not None:
@@ -404,19 +403,6 @@ def _stop_signals_deferred():
             signal.signal(s, signal.SIG_DFL if handler is None else handler)
         if received:
             signal.raise_signal(received[0])
-
-
-def _kill_pool(pool: ProcessPoolExecutor) -> None:
-    """Kills the pool's workers and shuts it down with its queued tasks cancelled: shutdown()
-    alone would first run every queued execution (as planning.keyframes.kill_workers does for the
-    segment workers; not imported from there, which would load Drake into the sweep process)."""
-    processes = list((getattr(pool, "_processes", None) or {}).values())  # no public kill before Python 3.14
-    for process in processes:
-        if process.is_alive():
-            process.kill()
-    for process in processes:
-        process.join(timeout=10)
-    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:

@@ -38,9 +38,8 @@ import math
 import multiprocessing
 import os
 import resource
-import signal
 import time
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +53,7 @@ from trajectotree.cito.variables import CitoVariables
 from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer, mu_plan
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.planning.physics import ObjectModel, check_physics, contact_points
+from trajectotree.planning.workers import TiedPool, kill_pool, process_pool
 from trajectotree.results import LINK_PENETRATION_TOL, PhysicsCheck, PlanResult, Trajectory
 from trajectotree.scene.plant import Scene, build_scene
 
@@ -193,17 +193,12 @@ def prepare_worker(config: SceneConfig) -> int:
     return os.getpid()
 
 
-def _worker_init() -> None:
-    # A forked worker inherits the parent's handlers; the CLI's turns SIGTERM into an exception,
-    # which in a worker would only unwind its task. A worker told to stop stops.
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-
-def local_pool(workers: int, start_method: str = START_METHOD) -> ProcessPoolExecutor:
-    """`workers` local processes for the segment programs (reuse one across plans to pay the
-    start-up once: each process keeps the scenes it solved in, worker_scene)."""
+def local_pool(workers: int, start_method: str = START_METHOD) -> TiedPool:
+    """`workers` local processes for the segment programs, tied to this process (workers.TiedPool:
+    submit to it from a thread that outlives it); reuse one across plans to pay the start-up once:
+    each process keeps the scenes it solved in, worker_scene."""
     check_integer("segment workers", workers, 1)
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(start_method), initializer=_worker_init)
+    return process_pool(workers, start_method)
 
 
 def check_workers(workers, name: str = "segment_workers") -> int | None:
@@ -232,12 +227,15 @@ def run_pieces(
         worker_scene(t.scene)
     pool = local_pool(workers)
     try:
-        results = [_received(r) for r in pool.map(solve_piece, tasks)]  # map yields in order, each once it is done
+        # Not pool.map: interrupted, its iterator cancels the queued futures, and Python 3.11's pool,
+        # broken by kill_pool, then sets an exception on a cancelled future in its management thread,
+        # which prints an InvalidStateError traceback (fixed in 3.12: cpython gh-107219).
+        futures = [pool.submit(solve_piece, t) for t in tasks]
+        results = [_received(f.result()) for f in futures]  # in order, each once it is done
     except BaseException:
         # Interrupted (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the CLI) or failed:
-        # shutdown() alone would wait for the running solves, minutes deep in IPOPT, and a
-        # killed parent would leave them running as orphans.
-        kill_workers(pool)
+        # shutdown() alone would wait for the running solves, minutes deep in IPOPT.
+        kill_pool(pool)
         raise
     pool.shutdown()
     return results
@@ -246,20 +244,6 @@ def run_pieces(
 def _received(result: PieceResult) -> PieceResult:
     """`result` stamped with the time this process has it (no earlier than its solve ended)."""
     return dataclasses.replace(result, finished_s=time.perf_counter())
-
-
-def kill_workers(pool: ProcessPoolExecutor) -> None:
-    """Kills a local pool's worker processes (SIGKILL: a forked worker inherits the parent's
-    signal handlers, and one inside IPOPT would not run them), reaps them, and shuts the pool
-    down, its queued tasks cancelled."""
-    # ProcessPoolExecutor has no public kill before Python 3.14 (kill_workers); its processes are _processes.
-    processes = list((getattr(pool, "_processes", None) or {}).values())
-    for process in processes:
-        if process.is_alive():
-            process.kill()
-    for process in processes:
-        process.join(timeout=10)
-    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[tuple[int, int]]:

@@ -1,0 +1,109 @@
+"""The package's local worker processes (the keyframes formulation's segment workers, a sweep's
+executions): pools whose workers live no longer than the process that started them, and leave the
+decision to stop to it.
+
+- A worker dies with its parent, however the parent ends (SIGKILL from the OOM killer, `timeout -s
+  KILL` or a scheduler included, where no clean-up of the parent's runs): on Linux the kernel sends
+  it SIGKILL then (prctl PR_SET_PDEATHSIG), elsewhere a watchdog thread polls the parent's pid.
+- Ctrl-C reaches the terminal's whole process group: a worker ignores SIGINT, and SIGTERM ends it
+  (a forked worker would otherwise inherit the CLI's handlers); its parent decides and kills it
+  (kill_pool). Both are blocked from the fork until the worker has set them, so no stop reaches a
+  worker still starting, which would print a traceback.
+
+Drake-free (it imports nothing of the package): the sweep's process, which never loads Drake,
+makes its execution pool here too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>: the signal a process gets when its parent thread dies
+PARENT_POLL_S = 0.5  # s, how often the watchdog (no PR_SET_PDEATHSIG) checks the parent's pid
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class TiedPool(ProcessPoolExecutor):
+    """A ProcessPoolExecutor whose workers start with the stop signals blocked (see the module doc).
+
+    Its workers are started by the thread that submits (all at the first submit when forked, one
+    per submit when spawned), and PR_SET_PDEATHSIG fires when that *thread* ends: the thread that
+    submits must outlive the pool. The package's pools are made, used and killed or shut down
+    within one call of one thread (keyframes.run_pieces, executions.run_executions), which cannot
+    end before them; a pool from keyframes.local_pool passed to plan() is the caller's to submit to
+    from a thread that lives as long (the main thread always does)."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        with _stops_blocked():  # a worker forked or spawned here inherits the mask
+            return super().submit(fn, *args, **kwargs)
+
+
+def process_pool(workers: int, start_method: str) -> TiedPool:
+    """`workers` local processes started by `start_method` ("fork" or "spawn"), tied to this process."""
+    return TiedPool(
+        workers,
+        mp_context=multiprocessing.get_context(start_method),
+        initializer=_start_worker,
+        initargs=(os.getpid(),),
+    )
+
+
+def kill_pool(pool: ProcessPoolExecutor) -> None:
+    """Kills a pool's worker processes (SIGKILL: one deep in a solver would not run a handler),
+    reaps them, and shuts the pool down, its queued tasks cancelled: shutdown() alone would first
+    wait for the running tasks (minutes in IPOPT) and then run the queued ones."""
+    # ProcessPoolExecutor has no public kill before Python 3.14 (kill_workers); its processes are _processes.
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+    for process in processes:
+        process.join(timeout=10)
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def _stops_blocked():
+    """SIGINT and SIGTERM blocked in this thread within the block. The process still takes them:
+    Python runs its handlers in the main thread whichever thread the kernel delivers a signal to,
+    and one that finds every thread blocking it waits until the block ends."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def _start_worker(parent_pid: int) -> None:
+    """A worker's initializer: the stop signals as the module doc says, then tied to `parent_pid`."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)  # blocked since the fork (TiedPool.submit)
+    if not _kernel_kills_orphan():
+        threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True, name="parent-watch").start()
+    if os.getppid() != parent_pid:  # the parent died before the tie: the kernel's signal has gone by
+        os._exit(1)
+
+
+def _kernel_kills_orphan() -> bool:
+    """Asks Linux to SIGKILL this process when the thread that forked it ends; False where it cannot."""
+    if not sys.platform.startswith("linux"):
+        return False
+    libc = ctypes.CDLL(None, use_errno=True)  # the C library the interpreter is linked with
+    return libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+
+
+def _watch_parent(parent_pid: int) -> None:
+    """Ends this process once its parent is gone (it is reparented: on macOS, to launchd). A fallback
+    for platforms without PR_SET_PDEATHSIG: it polls only while this thread gets the GIL."""
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
