@@ -156,6 +156,15 @@ def check_length(name: str, value, length: int, entries: str) -> None:
         raise ConfigError(field=name, value=value, problem=f"has {len(value)} entries", valid=f"{length}: {entries}")
 
 
+def is_file(path: str | Path) -> bool:
+    """Path.is_file, but False for a path the system cannot look up at all (a name longer than
+    NAME_MAX, ENAMETOOLONG), which Path.is_file raises as OSError: no such file can exist."""
+    try:
+        return Path(path).is_file()
+    except OSError:
+        return False
+
+
 def check_hand(value) -> None:
     """Raises ConfigError unless `value` names a built-in hand or an existing hand file (its
     contents are checked when the scene reads it: trajectotree.scene.hand)."""
@@ -167,7 +176,7 @@ def check_hand(value) -> None:
         return
     elif Path(value).suffix.lower() not in HAND_SUFFIXES:
         problem = "is not a hand name or file"
-    elif not Path(value).is_file():
+    elif not is_file(value):
         problem = "does not exist"
     if problem:
         raise ConfigError(field="scene.hand", value=value, problem=problem, valid=valid, label="valid")
@@ -871,7 +880,7 @@ def config_file_data(path: str | Path):
     try:
         if path.is_dir():
             raise ConfigError(f"config file {str(path)!r} is a folder; give a YAML file")
-        if not path.is_file():
+        if not is_file(path):
             raise ConfigError(f"config file {str(path)!r} does not exist")
         return read_yaml(path)
     except YamlError as e:

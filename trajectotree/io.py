@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.config import Config, ConfigError, config_from_dict, config_to_dict
+from trajectotree.config import Config, ConfigError, config_from_dict, config_to_dict, is_file
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.results import (
     CLOSED_LOOP_ARRAYS,
@@ -224,7 +224,7 @@ def reading(path: Path):
 def require_files(paths, holds: str) -> None:
     """ConfigError naming the first of `paths` that is not a file; `holds` says what should be there."""
     for path in paths:
-        if not Path(path).is_file():
+        if not is_file(path):
             raise ConfigError(f"{str(path)!r} is missing; {holds}")
 
 

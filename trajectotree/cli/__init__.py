@@ -3,14 +3,16 @@ package and exposes `register(subparsers)`; `main` adds those named in COMMANDS.
 
 Exit codes: 0 success (a plan that did not converge is still a success of the
 command, reported as "success": false), 2 invalid input, 1 unexpected error, 130
-interrupted (Ctrl-C), 143 terminated (SIGTERM). Either stop ends the command's worker
-processes (keyframes' segment workers, a sweep's trials) before it exits.
+interrupted (Ctrl-C), 143 terminated (SIGTERM), 141 stdout closed by its reader (`| head`).
+Either stop ends the command's worker processes (keyframes' segment workers, a sweep's
+trials) before it exits; SIGKILL ends them too (trajectotree.planning.workers).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
 import signal
 import sys
@@ -78,6 +80,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"trajectotree {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # whoever read stdout has gone (`| head`); the files are written by then
+        # Python flushes stdout again at exit and would report that too: point it at /dev/null
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + signal.SIGPIPE
     finally:
         if in_main_thread:  # main() called from a program (the tests) leaves its handler as it was
             signal.signal(signal.SIGTERM, previous)

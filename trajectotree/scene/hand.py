@@ -38,7 +38,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
-from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError, SceneConfig, clipped_repr
+from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError, SceneConfig, clipped_repr, is_file
 from trajectotree.geometry import rotation_2d
 from trajectotree.scene.kinematics import TwoLinkFinger
 from trajectotree.typed_yaml import YamlError, read_yaml
@@ -225,7 +225,7 @@ def hand_yaml_path(spec: str) -> tuple[str, Path]:
     path = Path(spec)
     if path.suffix.lower() in MODEL_SUFFIXES:
         beside = path.with_suffix(".yaml")
-        if not beside.is_file():
+        if not is_file(beside):
             raise HandError(
                 spec, f"has no description beside it: write {beside} (docs/design.md, the hand description)"
             )
@@ -263,7 +263,7 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
     """The hand `spec` names (see hand_yaml_path), its YAML read and checked; HandError naming the file."""
     name, path = hand_yaml_path(spec)
     source = str(path)
-    if not path.is_file():
+    if not is_file(path):
         raise HandError(source, "does not exist")
     try:
         data = read_yaml(path)
@@ -281,7 +281,7 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         model_path = (path.parent / model).resolve()
         if model_path.suffix.lower() not in MODEL_SUFFIXES:
             raise HandError(source, f"model {clipped_repr(model)} is not an SDF or URDF file")
-        if not model_path.is_file():
+        if not is_file(model_path):
             raise HandError(source, f"model {str(model_path)!r} does not exist")
         model = str(model_path)
     plane = _mapping(source, "plane", data.get("plane", {}), ("x_axis", "y_axis"), ())
