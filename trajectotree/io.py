@@ -106,6 +106,8 @@ def load_sim(plan_dir: str | Path) -> SimResult:
             dropped=bool(summary["dropped"]),
             drop_time_s=summary["drop_time_s"],
             error_at_drop=None if summary.get("error_at_drop") is None else tuple(summary["error_at_drop"]),
+            diverged_at_s=summary.get("diverged_at_s"),  # runs before the divergence test: none
+            divergence=summary.get("divergence"),
             sim_time_s=float(summary["sim_time_s"]),
             controller=summary.get("controller", "paper"),  # runs before the grasp controller
             conditions=summary.get("conditions", {}),

@@ -17,11 +17,16 @@ from trajectotree.config import (
     DEFAULT_HAND,
     FORMULATIONS,
     HAND_NAMES,
+    MAX_BOX_MASS,
+    MAX_MU,
     MAX_NODES,
+    MAX_OBJECT_SIZE,
+    MIN_BOX_MASS,
     Config,
     ConfigError,
     ObjectConfig,
     check_integer,
+    interval,
     load_config,
     mu_plan,
 )
@@ -46,6 +51,7 @@ FORMULATION_HELP = (
     "each segment alone between the search's nodes, in parallel; joint is the paper's one program "
     "(default: keyframes)"
 )
+SIZE_RANGE = interval(0.0, MAX_OBJECT_SIZE, low_open=True)  # m, of a side, a radius or a semi-axis
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
 HTML_SUFFIXES = (".html", ".htm")
 
@@ -54,7 +60,11 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
     """--config and the scene options on top of it (scene_overrides reads them)."""
     group.add_argument("--config", metavar="FILE.yaml", help=config_help)
     group.add_argument(
-        "--box-size", nargs=2, type=float, metavar=("W", "H"), help="the object is a box of this width and height, m"
+        "--box-size",
+        nargs=2,
+        type=float,
+        metavar=("W", "H"),
+        help=f"the object is a box of this width and height, m, each in {SIZE_RANGE}",
     )
     group.add_argument(
         "--polygon",
@@ -64,17 +74,28 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
         '"-0.07,-0.04 0.07,-0.04 0,0.08"',
     )
     group.add_argument(
-        "--circle", type=float, metavar="R", help="the object is a disc of radius R m (polygonized, 1 cm edges at most)"
+        "--circle",
+        type=float,
+        metavar="R",
+        help=f"the object is a disc of radius R m, in {SIZE_RANGE} (polygonized, 1 cm edges at most)",
     )
     group.add_argument(
         "--ellipse",
         nargs=2,
         type=float,
         metavar=("A", "B"),
-        help="the object is an ellipse with semi-axes A along its x and B along its y, m (polygonized)",
+        help=f"the object is an ellipse with semi-axes A along its x and B along its y, m, each in {SIZE_RANGE} "
+        "(polygonized)",
     )
-    group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
-    group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+    group.add_argument(
+        "--mass",
+        type=float,
+        metavar="KG",
+        help=f"the object's mass, kg, in {interval(MIN_BOX_MASS, MAX_BOX_MASS)}",
+    )
+    group.add_argument(
+        "--mu", type=float, metavar="MU", help=f"friction coefficient, in {interval(0.0, MAX_MU, low_open=True)}"
+    )
     group.add_argument(
         "--hand",
         metavar="NAME|FILE",
@@ -319,6 +340,14 @@ OPTION_FIELDS = {
     "scene.object.circle_radius": ("circle", "--circle"),
     "scene.object.ellipse_semi_axes": ("ellipse", "--ellipse"),
     "cito.formulation": ("formulation", "--formulation"),
+    "controller.kp": ("kp", "--kp"),
+    "controller.kv": ("kv", "--kv"),
+    "controller.object_kp": ("object_kp", "--object-kp"),
+    "controller.object_kd": ("object_kd", "--object-kd"),
+    "controller.tip_kp": ("tip_kp", "--tip-kp"),
+    "controller.tip_kd": ("tip_kd", "--tip-kd"),
+    "controller.rate_hz": ("rate", "--rate"),
+    "controller.friction_floor": ("friction_floor", "--friction-floor"),
 }
 
 
@@ -396,11 +425,46 @@ def _cannot_create_in(folder: Path) -> str | None:
     return None
 
 
+def _path_limit(folder: Path, name: str, default: int) -> int:
+    """os.pathconf(folder, name), or `default` (Linux's) where the system does not say."""
+    try:
+        return os.pathconf(folder, name)
+    except (OSError, ValueError):
+        return default
+
+
+def check_name_lengths(option: str, path: str | Path, files: tuple[str, ...] = ()) -> None:
+    """ConfigError (exit 2, before any work) when a name in `path` is longer than its file system
+    allows (NAME_MAX bytes, of the deepest existing folder on the way: new folders go there) or
+    the whole path, with the longest of `files` written into it, is (PATH_MAX bytes, with the
+    terminating NUL); without it the first stat of the path fails with an OSError."""
+    absolute = Path(os.path.abspath(path))
+    written = absolute / max(files, key=len) if files else absolute
+    path_max = _path_limit(Path(absolute.anchor), "PC_PATH_MAX", 4096)
+    if len(os.fsencode(str(written))) >= path_max:
+        with_file = f" with the file {written.name} in it" if files else ""
+        raise ConfigError(
+            f"{option} {str(path)!r} is too long: {len(os.fsencode(str(written)))} bytes as an absolute path"
+            f"{with_file}; valid: at most {path_max - 1} bytes (PATH_MAX)"
+        )
+    folder = Path(absolute.anchor)
+    for name in absolute.parts[1:]:
+        name_max = _path_limit(folder, "PC_NAME_MAX", 255)
+        if len(os.fsencode(name)) > name_max:
+            raise ConfigError(
+                f"{option} {str(path)!r}: a name in it is {len(os.fsencode(name))} bytes long; valid: at most "
+                f"{name_max} bytes per name (NAME_MAX of {str(folder)!r})"
+            )
+        if (folder / name).is_dir():
+            folder = folder / name
+
+
 def check_output_dir(option: str, path: str | Path, files: tuple[str, ...] = ()) -> Path:
     """An output folder (created later if missing): never an existing file, its nearest
     existing ancestor a folder in which files can be created (tried, not assumed), and none
     of the `files` the command writes into it an existing folder. Checked before any work
     starts (ConfigError: exit 2)."""
+    check_name_lengths(option, path, files)
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ConfigError(
@@ -428,6 +492,7 @@ def check_output_file(
     into an existing folder in which files can be created, or into one of the `created`
     output folders (the command makes them; check_output_dir checks them). Checked before any
     work starts (ConfigError: exit 2)."""
+    check_name_lengths(option, path)
     path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise ConfigError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")
