@@ -384,11 +384,21 @@ def ended_within_tolerance(final_error) -> bool:
     return math.hypot(x, y) <= FINAL_POSITION_TOLERANCE and abs(theta) <= FINAL_THETA_TOLERANCE
 
 
+def summary_outcome(summary: dict) -> RunOutcome:
+    """A run's outcome from its sim.json `summary`; one written before sim.json had "outcome" (no
+    divergence test then) from its drop and final error."""
+    if "outcome" in summary:
+        return RunOutcome(summary["outcome"])
+    if summary["dropped"]:
+        return RunOutcome.DROPPED
+    return RunOutcome.HELD if ended_within_tolerance(summary["final_error"]) else RunOutcome.OFF_PLAN
+
+
 def outcome_text(summary: dict, noun: str = "box") -> str:
     """How a run ended (sim.json's `summary`), for a person: "box held", "box DROPPED at 4.77 s", "box not
     dropped, but ended 1.100 rad (63 deg) off the plan's final pose (tolerance: 3 deg and 5 mm)", or "the
     simulation DIVERGED at 1.23 s: why"."""
-    outcome = RunOutcome(summary["outcome"])
+    outcome = summary_outcome(summary)
     if outcome is RunOutcome.DIVERGED:
         return f"the simulation DIVERGED at {summary['diverged_at_s']:.2f} s: {summary['divergence']}"
     if outcome is RunOutcome.DROPPED:

@@ -310,7 +310,7 @@ def check_payload(scene, config: Config, args: argparse.Namespace, grasps=None) 
             shown=f"{mass!r} kg",
             problem=f"is more than the hand can hold: {grasps_text} holds at most {hold:g} kg at rest with four "
             f"fingers {where}",
-            valid=f"(0, {hold:g}] kg",
+            valid=f"[{MIN_BOX_MASS:g}, {hold:g}] kg",
         )
         raise in_option_terms(refused, args)
     if mass > limits.switch_kg:
