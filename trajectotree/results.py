@@ -341,8 +341,9 @@ class SimResult(SimLog):
 
     @property
     def within_tolerance(self) -> bool:
-        """The run ended within FINAL_THETA_TOLERANCE and FINAL_POSITION_TOLERANCE of the plan's final pose."""
-        return ended_within_tolerance(self.final_error)
+        """The run ended within FINAL_THETA_TOLERANCE and FINAL_POSITION_TOLERANCE of the plan's final pose
+        (a diverged run has no end: its final_error is the one before it diverged)."""
+        return self.divergence is None and ended_within_tolerance(self.final_error)
 
     @property
     def outcome(self) -> RunOutcome:
