@@ -41,6 +41,24 @@ HAND_SUFFIXES = (".yaml", ".yml", ".sdf", ".urdf")
 MAX_NODES = 400  # search.num_nodes at most: a ten-turn goal takes 238 with the default segment rotations
 # (low, high) of the object's pose x m, y m, theta rad in W where a plan may start (scene.initial_pose, a start state)
 INITIAL_POSE_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-100.0, 100.0))  # theta: many turns
+MAX_OBJECT_SIZE = 0.3  # m, the object's largest extent along any axis, and its outline's largest radius
+MAX_MU = 5.0  # the friction coefficient at most: rubber on rubber is about 1-2
+# kg, the object's mass: at most far beyond what the 1 N m motors hold (the payload check names the hand's limit); at
+# least a gram, for Drake's discrete contact solver fails on a lighter object (1e-300 kg: a NaN Hessian at once)
+MIN_BOX_MASS, MAX_BOX_MASS = 0.001, 10.0
+MAX_GRAVITY = 100.0  # m/s^2, ten times Earth's: beyond it no hand model here holds any object
+# Controller gains: measured on a two-segment plan with a switch (goal 0.35 rad) at the default rate_hz and
+# sim.time_step, the discrete loop starts to chatter (joint speeds 5 -> 110 rad/s, the box off its plan) at
+# tip_kp 6000-7000 N/m, tip_kd 6-7 N s/m, object_kp 1e5-3e5 s^-2, object_kd 1500-2000 s^-1, kp 1.5e4-2e4 N/m
+# and kv 10-13 N s/m; each bound is below that with margin, and the demo's quarter turn holds at each bound.
+MAX_TIP_KP = 2000.0  # N/m
+MAX_TIP_KD = 5.0  # N s/m, the landing reflex's default land_tip_kd
+MAX_OBJECT_KP = 3e4  # s^-2
+MAX_OBJECT_KD = 500.0  # s^-1
+MAX_KP = 5000.0  # N/m, eq. 20's fingertip stiffness
+MAX_KV = 8.0  # N s/m, eq. 20's fingertip damping
+MAX_FORCE = 100.0  # N, any force bound or threshold: ten times what the 1 N m motors push at 0.1 m
+MAX_WEIGHT = 1e8  # 1, any cost weight: with the others near 1, double precision keeps 8 digits of the cost
 
 
 class ConfigError(ValueError):
@@ -199,11 +217,11 @@ class ObjectConfig:
         if len(given) > 1:
             raise ConfigError(f"scene.object: {' and '.join(given)} both describe the object; give one of them")
         if self.circle_radius is not None:
-            check_range("scene.object.circle_radius", self.circle_radius, 0.0, 0.3, low_open=True)
+            check_range("scene.object.circle_radius", self.circle_radius, 0.0, MAX_OBJECT_SIZE, low_open=True)
         if self.ellipse_semi_axes is not None:
             check_length("scene.object.ellipse_semi_axes", self.ellipse_semi_axes, 2, "a, b in m")
             for i, a in enumerate(self.ellipse_semi_axes):
-                check_range("scene.object.ellipse_semi_axes", a, 0.0, 0.3, low_open=True, index=(i,))
+                check_range("scene.object.ellipse_semi_axes", a, 0.0, MAX_OBJECT_SIZE, low_open=True, index=(i,))
         if self.vertices is None:
             return
         for i, v in enumerate(self.vertices):
@@ -219,9 +237,12 @@ class ObjectConfig:
                 check_range("scene.object.vertices", c, -1.0, 1.0, index=(i, j))  # m, before re-centring
         problem = polygon_problem(self.vertices)
         if problem:
+            listed = [list(v) for v in self.vertices]
+            shown = None if len(listed) <= 8 else f"[{len(listed)} vertices: {listed[0]}, ..., {listed[-1]}]"
             raise ConfigError(
                 field="scene.object.vertices",
-                value=[list(v) for v in self.vertices],
+                value=listed,
+                shown=shown,  # one line a person reads, however many vertices
                 problem=f": {problem}",
                 valid="at least 3 distinct (x, y) vertices in convex position",
             )
@@ -298,18 +319,19 @@ class SceneConfig:
             )
 
     def __post_init__(self):
-        check_range("scene.box_width", self.box_width, 0.0, 0.30, low_open=True)
-        check_range("scene.box_height", self.box_height, 0.0, 0.30, low_open=True)
-        for name in ("box_depth", "box_mass", "gravity"):
-            check_range(f"scene.{name}", getattr(self, name), 0.0, None, low_open=True)
+        for name in ("box_width", "box_height", "box_depth"):
+            check_range(f"scene.{name}", getattr(self, name), 0.0, MAX_OBJECT_SIZE, low_open=True)
+        check_range("scene.box_mass", self.box_mass, MIN_BOX_MASS, MAX_BOX_MASS)
+        check_range("scene.gravity", self.gravity, 0.0, MAX_GRAVITY, low_open=True)
         if self.object_inertia is not None:
             check_range("scene.object_inertia", self.object_inertia, 0.0, 1.0, low_open=True)
             self._check_inertia_is_physical()
-        check_range("scene.mu", self.mu, 0.0, 5.0, low_open=True)
+        check_range("scene.mu", self.mu, 0.0, MAX_MU, low_open=True)
         check_length("scene.initial_pose", self.initial_pose, 3, "x m, y m, theta rad")
         for i, (v, (low, high)) in enumerate(zip(self.initial_pose, INITIAL_POSE_BOUNDS)):
             check_range("scene.initial_pose", v, low, high, index=(i,))
-        check_range("scene.corner_margin", self.corner_margin, 0.0, None)
+        # m, half the largest side: a larger margin leaves no face a contact
+        check_range("scene.corner_margin", self.corner_margin, 0.0, MAX_OBJECT_SIZE / 2)
         check_hand(self.hand)
         if self.object.is_box:
             shortest = 2 * self.corner_margin  # each face must keep some contact points between its corner margins
@@ -320,7 +342,7 @@ class SceneConfig:
                     shown=f"{self.box_width:g} x {self.box_height:g} m",
                     problem=f"is too small: contacts keep scene.corner_margin = {self.corner_margin:g} m from each "
                     f"corner, so each side must be longer than {shortest:g} m",
-                    valid=f"{interval(shortest, 0.3, low_open=True)} m",
+                    valid=f"{interval(shortest, MAX_OBJECT_SIZE, low_open=True)} m",
                     label="valid range of each side",
                 )
             return
@@ -336,11 +358,14 @@ class SceneConfig:
                 f"{ends[1]:.3g} m from its corners (scene.corner_margin = {self.corner_margin:g} m at a right angle, "
                 f"less at a blunter corner), so it must be longer than {sum(ends):.3g} m",
             )
-        if shape.circumradius > 0.3:
+        # m: a disc of radius 0.3 m has its polygonized vertices (radius x cos, sin) and their re-centring at the
+        # area centroid each ~1e-16 m off, which must not make it larger than its radius
+        rounding = 1e-12
+        if shape.circumradius > MAX_OBJECT_SIZE + rounding:
             raise ConfigError(
                 field=self.object.field_name,
                 problem=f"a vertex is {shape.circumradius:.3g} m from the centroid",
-                valid="at most 0.3 m",
+                valid=f"at most {MAX_OBJECT_SIZE:g} m",
             )
 
 
@@ -447,7 +472,7 @@ class SearchConfig:
             for i, s in enumerate(self.initial_arclengths):
                 check_range("search.initial_arclengths", s, 0.0, 10.0, index=(i,))
         check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
-        check_range("search.min_closure_margin", self.min_closure_margin, 0.0, None)
+        check_range("search.min_closure_margin", self.min_closure_margin, 0.0, MAX_FORCE)
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_bool("search.rolled_stances", self.rolled_stances)
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
@@ -459,7 +484,7 @@ class SearchConfig:
         check_integer("search.commit_segments", self.commit_segments, 1, self.window_segments)
         for name in ("max_initial_grasps", "root_expansions", "max_expansions"):
             check_integer(f"search.{name}", getattr(self, name), 1)
-        check_range("search.time_budget_s", self.time_budget_s, 0.0, None, low_open=True)
+        check_range("search.time_budget_s", self.time_budget_s, 0.0, 86400.0, low_open=True)  # s, a day
         check_integer("search.grid_refinements", self.grid_refinements, 0, 3)
         finest = 2**self.grid_refinements
         if (self.num_displacements - 1) * finest + 1 > 201 or self.initial_grid_step / finest < 0.001:
@@ -533,9 +558,9 @@ class CitoConfig:
         check_range("cito.dt", self.dt, 0.0, 1.0, low_open=True)
         check_length("cito.weight_pose", self.weight_pose, 3, "on x, y, theta")
         for i, v in enumerate(self.weight_pose):
-            check_range("cito.weight_pose", v, 0.0, None, index=(i,))
+            check_range("cito.weight_pose", v, 0.0, MAX_WEIGHT, index=(i,))
         for name in ("weight_torque", "weight_force", "weight_slack", "weight_contact_slack", "weight_acceleration"):
-            check_range(f"cito.{name}", getattr(self, name), 0.0, None)
+            check_range(f"cito.{name}", getattr(self, name), 0.0, MAX_WEIGHT)
         check_range("cito.sdf_sharpness", self.sdf_sharpness, 10.0, 1e5)
         check_range("cito.switch_clearance", self.switch_clearance, 0.0, 0.05)
         for name in ("link_rows", "link_rows_on_demand"):
@@ -551,6 +576,20 @@ class CitoConfig:
             raise ConfigError(
                 field="cito.formulation", value=self.formulation, problem="is unknown", choices=FORMULATIONS
             )
+
+
+# (gain, its upper bound) of every ControllerGains field bounded by the discrete loop's stability (from 0):
+# the landing reflex's tip spring is the same fingertip's, so it has the tip spring's bounds
+GAIN_BOUNDS = (
+    ("kp", MAX_KP),
+    ("kv", MAX_KV),
+    ("object_kp", MAX_OBJECT_KP),
+    ("object_kd", MAX_OBJECT_KD),
+    ("tip_kp", MAX_TIP_KP),
+    ("tip_kd", MAX_TIP_KD),
+    ("land_tip_kp", MAX_TIP_KP),
+    ("land_tip_kd", MAX_TIP_KD),
+)
 
 
 @dataclass(frozen=True)
@@ -639,9 +678,13 @@ class ControllerGains:
 
     def __post_init__(self):
         check_range("controller.rate_hz", self.rate_hz, 10.0, 10000.0)
-        for name in ("kp", "kv", "object_kp", "object_kd", "tip_kp", "tip_kd", "min_normal_force", "wrench_weight"):
-            check_range(f"controller.{name}", getattr(self, name), 0.0, None)
-        check_range("controller.max_normal_force", self.max_normal_force, self.min_normal_force, None, low_open=True)
+        for name, high in GAIN_BOUNDS:
+            check_range(f"controller.{name}", getattr(self, name), 0.0, high)
+        check_range("controller.wrench_weight", self.wrench_weight, 0.0, MAX_WEIGHT)
+        check_range("controller.min_normal_force", self.min_normal_force, 0.0, MAX_FORCE)
+        check_range(
+            "controller.max_normal_force", self.max_normal_force, self.min_normal_force, MAX_FORCE, low_open=True
+        )
         check_range("controller.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_range("controller.ramp_time", self.ramp_time, 0.0, 2.0)
         check_range("controller.swing_lift", self.swing_lift, 0.0, 0.05)
@@ -659,7 +702,7 @@ class ControllerGains:
         low, high = self.mass_estimate_range
         check_range("controller.mass_estimate_range", low, 0.0, 1.0, low_open=True, index=(0,))
         check_range("controller.mass_estimate_range", high, 1.0, 100.0, index=(1,))
-        check_range("controller.reflex_force", self.reflex_force, 0.0, None, low_open=True)
+        check_range("controller.reflex_force", self.reflex_force, 0.0, MAX_FORCE, low_open=True)
         check_range("controller.reflex_confirm_time", self.reflex_confirm_time, 0.0, 1.0)
         check_range("controller.reflex_squeeze", self.reflex_squeeze, 0.0, self.max_normal_force)
         check_range("controller.reflex_gain", self.reflex_gain, 1.0, 100.0)
@@ -673,8 +716,6 @@ class ControllerGains:
         check_range("controller.land_approach_time", self.land_approach_time, 0.0, 2.0)
         check_range("controller.land_lag", self.land_lag, 0.0, 0.1, low_open=True)
         check_range("controller.land_approach_speedup", self.land_approach_speedup, 1.0, 100.0)
-        for name in ("land_tip_kp", "land_tip_kd"):
-            check_range(f"controller.{name}", getattr(self, name), 0.0, None)
 
 
 CONTROLLERS = ("grasp", "paper")  # sim.controller values: object-level grasp control, paper eq. 20

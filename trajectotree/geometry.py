@@ -17,6 +17,8 @@ box's plans identical to the last bit across this generalization.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 SMOOTH_EDGE = 0.01  # m, the longest edge of a polygonized disc or ellipse: tan(alpha / 2) keeps it a face
@@ -29,23 +31,11 @@ def _cross(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def _segments_cross(p1, p2, q1, q2) -> bool:
-    """True when the closed segments p1-p2 and q1-q2 share a point."""
-    d1, d2 = _cross(p2 - p1, q1 - p1), _cross(p2 - p1, q2 - p1)
-    d3, d4 = _cross(q2 - q1, p1 - q1), _cross(q2 - q1, p2 - q1)
-    if ((d1 > 0) != (d2 > 0)) and ((d3 > 0) != (d4 > 0)) and 0 not in (d1, d2, d3, d4):
-        return True
-
-    def on(a, b, c, d) -> bool:
-        """c lies on segment a-b, given d, the cross product saying whether it is on the line."""
-        return d == 0 and min(a[0], b[0]) <= c[0] <= max(a[0], b[0]) and min(a[1], b[1]) <= c[1] <= max(a[1], b[1])
-
-    return on(p1, p2, q1, d1) or on(p1, p2, q2, d2) or on(q1, q2, p1, d3) or on(q1, q2, p2, d4)
-
-
 def polygon_problem(points) -> str | None:
     """Why `points` (V, 2), a vertex sequence in either orientation, is not a convex polygon
-    (None when it is one)."""
+    (None when it is one). O(V): a closed polygon is convex and simple exactly when it turns the
+    same way at every vertex and its turns add up to one full turn (its turning number is +-1);
+    a self-intersecting one turns by another multiple of 2 pi (a bow tie 0, a pentagram 4 pi)."""
     p = np.asarray(points, dtype=float)
     if p.ndim != 2 or p.shape[1] != 2:
         return f"vertices must be (x, y) pairs, got an array of shape {p.shape}"
@@ -53,26 +43,30 @@ def polygon_problem(points) -> str | None:
         return f"a polygon needs at least 3 vertices, got {len(p)}"
     if not np.all(np.isfinite(p)):
         return "vertices must be finite numbers"
-    for i in range(len(p)):
-        for j in range(i + 1, len(p)):
-            if np.array_equal(p[i], p[j]):
-                return f"vertices {i} and {j} repeat the point ({p[i][0]:g}, {p[i][1]:g})"
     n = len(p)
-    edges = [(p[i], p[(i + 1) % n]) for i in range(n)]
-    for i in range(n):
-        for j in range(i + 2, n):
-            if i == 0 and j == n - 1:
-                continue  # neighbours through vertex 0
-            if _segments_cross(*edges[i], *edges[j]):
-                return f"edges {i} and {j} intersect: the polygon is self-intersecting"
-    turns = _cross(np.roll(p, -1, axis=0) - p, np.roll(p, -2, axis=0) - np.roll(p, -1, axis=0))
+    edges = np.roll(p, -1, axis=0) - p  # edge i runs from vertex i to vertex i + 1
+    repeated = np.flatnonzero(np.all(edges == 0, axis=1))
+    if repeated.size:
+        i = int(repeated[0])
+        j = (i + 1) % n
+        i, j = min(i, j), max(i, j)
+        return f"vertices {i} and {j} repeat the point ({p[i][0]:g}, {p[i][1]:g})"
+    following = np.roll(edges, -1, axis=0)
+    turns = _cross(edges, following)  # at vertex i + 1
     scale = np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)) ** 2
     flat = np.abs(turns) <= 1e-12 * scale
     if np.any(flat):
         k = (int(np.flatnonzero(flat)[0]) + 1) % n
         return f"vertex {k} ({p[k][0]:g}, {p[k][1]:g}) is collinear with its neighbours; leave it out"
+    turning = np.sum(np.arctan2(turns, np.einsum("va,va->v", edges, following)))  # rad, each turn within +-pi
+    windings = int(round(abs(turning) / (2 * np.pi)))
+    if windings != 1:
+        return (
+            f"the polygon is self-intersecting (its edges turn by {np.degrees(turning):.0f} deg in all, a simple "
+            "polygon's by +-360)"
+        )
     if not (np.all(turns > 0) or np.all(turns < 0)):
-        k = (int(np.flatnonzero(np.sign(turns) != np.sign(turns.sum()))[0]) + 1) % n
+        k = (int(np.flatnonzero(np.sign(turns) != np.sign(turning))[0]) + 1) % n
         return f"the polygon is not convex (it turns the other way at vertex {k}, ({p[k][0]:g}, {p[k][1]:g}))"
     return None
 
@@ -151,6 +145,17 @@ class ConvexPolygon:
     @property
     def is_box(self) -> bool:
         return self.box_half is not None
+
+    @functools.cached_property
+    def back_offsets(self) -> np.ndarray:
+        """(V,) m, min_j n_f . v_j: where the polygon ends along each face's normal n_f, opposite
+        that face (it spans [back_offsets_f, offsets_f] along n_f). O(V log V): the vertex farthest
+        along -n_f is the one between the two faces whose normal angles bracket n_f's plus pi (the
+        normals of a counter-clockwise convex polygon turn counter-clockwise, once round)."""
+        angles = np.unwrap(np.arctan2(self.normals[:, 1], self.normals[:, 0]))  # (V,) rad, increasing
+        opposite = angles[0] + np.mod(angles + np.pi - angles[0], 2 * np.pi)
+        far = np.searchsorted(angles, opposite) % len(angles)  # vertex j joins faces j - 1 and j
+        return np.einsum("fa,fa->f", self.normals, self.vertices[far])
 
     @property
     def circumradius(self) -> float:

@@ -120,6 +120,8 @@ def load_sim(plan_dir: str | Path) -> SimResult:
             dropped=bool(summary["dropped"]),
             drop_time_s=summary["drop_time_s"],
             error_at_drop=None if summary.get("error_at_drop") is None else tuple(summary["error_at_drop"]),
+            diverged_at_s=summary.get("diverged_at_s"),  # runs before the divergence test: none
+            divergence=summary.get("divergence"),
             sim_time_s=float(summary["sim_time_s"]),
             controller=summary.get("controller", "paper"),  # runs before the grasp controller
             conditions=summary.get("conditions", {}),
@@ -501,6 +503,40 @@ def cannot_create_in(folder: Path) -> str | None:
     return None
 
 
+def _path_limit(folder: Path, name: str, default: int) -> int:
+    """os.pathconf(folder, name), or `default` (Linux's) where the system does not say."""
+    try:
+        return os.pathconf(folder, name)
+    except (OSError, ValueError):
+        return default
+
+
+def check_name_lengths(option: str, path: str | Path, files: tuple[str, ...] = ()) -> None:
+    """ConfigError (exit 2, before any work) when a name in `path` is longer than its file system
+    allows (NAME_MAX bytes, of the deepest existing folder on the way: new folders go there) or
+    the whole path, with the longest of `files` written into it, is (PATH_MAX bytes, with the
+    terminating NUL); without it the first stat of the path fails with an OSError."""
+    absolute = Path(os.path.abspath(path))
+    written = absolute / max(files, key=len) if files else absolute
+    path_max = _path_limit(Path(absolute.anchor), "PC_PATH_MAX", 4096)
+    if len(os.fsencode(str(written))) >= path_max:
+        with_file = f" with the file {written.name} in it" if files else ""
+        raise ConfigError(
+            f"{option} {str(path)!r} is too long: {len(os.fsencode(str(written)))} bytes as an absolute path"
+            f"{with_file}; valid: at most {path_max - 1} bytes (PATH_MAX)"
+        )
+    folder = Path(absolute.anchor)
+    for name in absolute.parts[1:]:
+        name_max = _path_limit(folder, "PC_NAME_MAX", 255)
+        if len(os.fsencode(name)) > name_max:
+            raise ConfigError(
+                f"{option} {str(path)!r}: a name in it is {len(os.fsencode(name))} bytes long; valid: at most "
+                f"{name_max} bytes per name (NAME_MAX of {str(folder)!r})"
+            )
+        if (folder / name).is_dir():
+            folder = folder / name
+
+
 def check_output_file(
     option: str, path: str | Path, suffixes: tuple[str, ...], *, created: tuple[Path, ...] = ()
 ) -> Path:
@@ -508,6 +544,7 @@ def check_output_file(
     into an existing folder in which files can be created, or into one of the `created`
     output folders (the command makes them; check_output_dir checks them). Checked before any
     work starts (ConfigError: exit 2), by the CLI and the API (run_simulation's html_path) alike."""
+    check_name_lengths(option, path)
     path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise ConfigError(f"{option} {str(path)!r}: the file name must end in {' or '.join(suffixes)}")

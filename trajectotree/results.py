@@ -233,6 +233,25 @@ class SimLog:
     # What the closed loop watched and estimated (sim.npz's CLOSED_LOOP_ARRAYS besides SIM_ARRAYS, sim.json's
     # "closed_loop" summary); None: an open-loop run, whose sim.npz holds SIM_ARRAYS alone
     closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)
+    # Drake's message when a step of the simulation threw (the samples end before it); None: it ran to the end
+    step_error: str | None = field(default=None, kw_only=True)
+
+
+# A run "held" its object when it did not drop it and ended this close to the plan's final pose (README, results).
+FINAL_THETA_TOLERANCE = math.radians(3.0)  # rad
+# m: the tracking error past which ReplanConfig.position_error says a plan no longer holds (10x a tracked plan's)
+FINAL_POSITION_TOLERANCE = 0.005
+
+
+class RunOutcome(enum.Enum):
+    """How an execution ended (SimResult.outcome), as sim.json's "outcome" writes it."""
+
+    HELD = "held"  # not dropped, and ended within FINAL_THETA_TOLERANCE and FINAL_POSITION_TOLERANCE of the plan
+    OFF_PLAN = "off_plan"  # not dropped, but ended farther than that from the plan's final pose
+    DROPPED = "dropped"  # the drop rule fired (trajectotree.execution.metrics.detect_drop)
+    # the simulation stopped being physical: a state not finite, an object faster than any force could make it,
+    # or Drake refusing a step (trajectotree.execution.metrics.detect_divergence); not a drop
+    DIVERGED = "diverged"
 
 
 class ReplanReason(enum.Enum):
@@ -317,6 +336,22 @@ class SimResult(SimLog):
     # from then on; None without a drop
     error_at_drop: tuple[float, float, float] | None = None
     replans: tuple[ReplanEvent, ...] = ()  # simulate --replan: each time the closed loop planned again
+    diverged_at_s: float | None = None  # s, when the simulation diverged (RunOutcome.DIVERGED); None: it did not
+    divergence: str | None = None  # why it counts as diverged, a sentence; None: it did not
+
+    @property
+    def within_tolerance(self) -> bool:
+        """The run ended within FINAL_THETA_TOLERANCE and FINAL_POSITION_TOLERANCE of the plan's final pose
+        (a diverged run has no end: its final_error is the one before it diverged)."""
+        return self.divergence is None and ended_within_tolerance(self.final_error)
+
+    @property
+    def outcome(self) -> RunOutcome:
+        if self.divergence is not None:
+            return RunOutcome.DIVERGED
+        if self.dropped:
+            return RunOutcome.DROPPED
+        return RunOutcome.HELD if self.within_tolerance else RunOutcome.OFF_PLAN
 
     def to_json(self) -> dict:
         """The documented sim.json keys (README, "Executing a plan"), plus the run's length and sample count,
@@ -329,6 +364,10 @@ class SimResult(SimLog):
             "dropped": self.dropped,
             "drop_time_s": self.drop_time_s,
             "error_at_drop": None if self.error_at_drop is None else list(self.error_at_drop),
+            "outcome": self.outcome.value,
+            "within_tolerance": self.within_tolerance,
+            "diverged_at_s": self.diverged_at_s,
+            "divergence": self.divergence,
             "sim_time_s": self.sim_time_s,
             "duration_s": float(self.t[-1]),
             "num_samples": int(len(self.t)),
@@ -337,3 +376,39 @@ class SimResult(SimLog):
             "closed_loop": None if self.closed_loop is None else self.closed_loop.to_json(self.t),
             "replans": [event.to_json() for event in self.replans],
         }
+
+
+def ended_within_tolerance(final_error) -> bool:
+    """Whether a final error (x m, y m, theta rad) is within FINAL_POSITION_TOLERANCE in position and
+    FINAL_THETA_TOLERANCE in orientation."""
+    x, y, theta = (float(v) for v in final_error)
+    return math.hypot(x, y) <= FINAL_POSITION_TOLERANCE and abs(theta) <= FINAL_THETA_TOLERANCE
+
+
+def summary_outcome(summary: dict) -> RunOutcome:
+    """A run's outcome from its sim.json `summary`; one written before sim.json had "outcome" (no
+    divergence test then) from its drop and final error."""
+    if "outcome" in summary:
+        return RunOutcome(summary["outcome"])
+    if summary["dropped"]:
+        return RunOutcome.DROPPED
+    return RunOutcome.HELD if ended_within_tolerance(summary["final_error"]) else RunOutcome.OFF_PLAN
+
+
+def outcome_text(summary: dict, noun: str = "box") -> str:
+    """How a run ended (sim.json's `summary`), for a person: "box held", "box DROPPED at 4.77 s", "box not
+    dropped, but ended 1.100 rad (63 deg) off the plan's final pose (tolerance: 3 deg and 5 mm)", or "the
+    simulation DIVERGED at 1.23 s: why"."""
+    outcome = summary_outcome(summary)
+    if outcome is RunOutcome.DIVERGED:
+        return f"the simulation DIVERGED at {summary['diverged_at_s']:.2f} s: {summary['divergence']}"
+    if outcome is RunOutcome.DROPPED:
+        return f"{noun} DROPPED at {summary['drop_time_s']:.2f} s"
+    tolerance = f"{math.degrees(FINAL_THETA_TOLERANCE):g} deg and {1e3 * FINAL_POSITION_TOLERANCE:g} mm"
+    if outcome is RunOutcome.HELD:
+        return f"{noun} held (ended within {tolerance} of the plan's final pose)"
+    x, y, theta = summary["final_error"]
+    return (
+        f"{noun} not dropped, but ended {abs(theta):.3f} rad ({math.degrees(abs(theta)):.0f} deg) and "
+        f"{1e3 * math.hypot(x, y):.1f} mm off the plan's final pose (tolerance: {tolerance})"
+    )

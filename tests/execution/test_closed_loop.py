@@ -294,9 +294,12 @@ def test_simulate_command_closed_loop(scene, tmp_path, capsys):
     [
         (
             ["--closed-loop", "--friction-floor", "0"],
-            "controller.friction_floor = 0.0 is out of range; valid range: (0, 1]",
+            "(controller.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
         ),
-        (["--closed-loop", "--friction-floor", "1.5"], "controller.friction_floor = 1.5 is out of range"),
+        (
+            ["--closed-loop", "--friction-floor", "1.5"],
+            "--friction-floor (controller.friction_floor) = 1.5 is out of range",
+        ),
         (["--closed-loop", "--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
     ],
 )

@@ -80,7 +80,7 @@ def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
         controller="paper",
         conditions={"push": None},
     )
-    result = evaluate(log, drop_distance=0.05)
+    result = evaluate(log, drop_distance=0.05, gravity=9.81)
     assert result.dropped and result.drop_time_s == pytest.approx(0.11)
     y_at_drop = 0.5 * 9.81 * 0.11**2  # the error is held there after the drop
     y = np.minimum(0.5 * 9.81 * t**2, y_at_drop)
@@ -94,7 +94,7 @@ def test_a_logged_fall_evaluates_to_the_closed_form_metrics():
     summary = result.to_json()
     assert summary["controller"] == "paper" and summary["conditions"] == {"push": None}
     assert summary["num_samples"] == t.size and summary["duration_s"] == pytest.approx(0.99)
-    held = evaluate(dataclasses.replace(log, x=ref), drop_distance=0.05)
+    held = evaluate(dataclasses.replace(log, x=ref), drop_distance=0.05, gravity=9.81)
     assert not held.dropped and held.drop_time_s is None and held.final_error == (0.0, 0.0, 0.0)
     assert held.error_at_drop is None and held.to_json()["error_at_drop"] is None
 
@@ -118,7 +118,7 @@ def test_a_box_caught_again_after_the_drop_rule_fired_ends_on_the_plan():
         controller="grasp",
         conditions={},
     )
-    result = evaluate(log, drop_distance=0.05)
+    result = evaluate(log, drop_distance=0.05, gravity=9.81)
     assert result.dropped and result.drop_time_s == pytest.approx(t[away][0])
     assert result.final_error == (0.0, 0.0, 0.0)
     assert result.error_at_drop == pytest.approx((0.0, 0.06, 0.714))

@@ -166,7 +166,10 @@ def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
     "options, named",
     [
         (["--config", "THRESHOLD"], "sim.replan.theta_error = 0.0 is out of range; valid range: (0, 3.14"),
-        (["--friction-floor", "0"], "controller.friction_floor = 0.0 is out of range; valid range: (0, 1]"),
+        (
+            ["--friction-floor", "0"],
+            "--friction-floor (controller.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
+        ),
         (["--html", "run.html"], "--replan records no playback (--html)"),
         (["--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
     ],

@@ -170,7 +170,7 @@ def test_sim_files_round_trip_exactly_and_bad_ones_are_named(tmp_path):
         controller="paper",
         conditions={"sim_mu": 0.5},
     )
-    result = evaluate(log, drop_distance=10.0)
+    result = evaluate(log, drop_distance=10.0, gravity=9.81)
     save_sim(result, tmp_path)
     loaded = load_sim(tmp_path)
     for name in SIM_ARRAYS:

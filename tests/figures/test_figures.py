@@ -162,7 +162,7 @@ def synthetic_run() -> SimLog:
 
 
 def test_forces_figure_shares_one_scale_set_before_the_drop_and_marks_segments():
-    result = evaluate(synthetic_run(), drop_distance=0.05)
+    result = evaluate(synthetic_run(), drop_distance=0.05, gravity=9.81)
     assert result.dropped and result.drop_time_s == pytest.approx(0.6)
     spans = segment_spans([None, 0, 2], knots_per_segment=2, dt=0.1)
     assert spans == [(0.0, 0.2, 0), (0.2, 0.4, 2)]
@@ -321,7 +321,7 @@ def test_keyframes_share_metre_axes_labelled_on_the_outer_panels(scene):
 
 
 def test_forces_title_names_the_goal_the_controller_and_a_changed_world():
-    run = evaluate(synthetic_run(), drop_distance=0.05)
+    run = evaluate(synthetic_run(), drop_distance=0.05, gravity=9.81)
     assert forces_title(run, 1.5708).splitlines() == [
         "force of each finger on the box, magnitude |f|",
         "goal θ = +1.571 rad (+90.0°), grasp controller",

@@ -12,16 +12,26 @@ from trajectotree.config import (
     DEFAULT_HAND,
     FORMULATIONS,
     HAND_NAMES,
+    MAX_BOX_MASS,
+    MAX_MU,
     MAX_NODES,
+    MAX_OBJECT_SIZE,
+    MIN_BOX_MASS,
     Config,
     ConfigError,
     ObjectConfig,
     check_integer,
     clipped_repr,
     config_file_data,
+    interval,
     load_config,
 )
-from trajectotree.io import HTML_SUFFIXES, cannot_create_in, check_output_file  # noqa: F401 (the commands' output-file check)
+from trajectotree.io import (  # noqa: F401 (the commands' output-file check)
+    HTML_SUFFIXES,
+    cannot_create_in,
+    check_name_lengths,
+    check_output_file,
+)
 
 # One definition of --segments for the README, --help and the code (search.num_nodes = S + 1).
 SEGMENTS_HELP = (
@@ -43,6 +53,7 @@ FORMULATION_HELP = (
     "each segment alone between the search's nodes, in parallel; joint is the paper's one program "
     "(default: keyframes)"
 )
+SIZE_RANGE = interval(0.0, MAX_OBJECT_SIZE, low_open=True)  # m, of a side, a radius or a semi-axis
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
 
 
@@ -50,7 +61,11 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
     """--config and the scene options on top of it (scene_overrides reads them)."""
     group.add_argument("--config", metavar="FILE.yaml", help=config_help)
     group.add_argument(
-        "--box-size", nargs=2, type=float, metavar=("W", "H"), help="the object is a box of this width and height, m"
+        "--box-size",
+        nargs=2,
+        type=float,
+        metavar=("W", "H"),
+        help=f"the object is a box of this width and height, m, each in {SIZE_RANGE}",
     )
     group.add_argument(
         "--polygon",
@@ -60,17 +75,28 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
         '"-0.07,-0.04 0.07,-0.04 0,0.08"',
     )
     group.add_argument(
-        "--circle", type=float, metavar="R", help="the object is a disc of radius R m (polygonized, 1 cm edges at most)"
+        "--circle",
+        type=float,
+        metavar="R",
+        help=f"the object is a disc of radius R m, in {SIZE_RANGE} (polygonized, 1 cm edges at most)",
     )
     group.add_argument(
         "--ellipse",
         nargs=2,
         type=float,
         metavar=("A", "B"),
-        help="the object is an ellipse with semi-axes A along its x and B along its y, m (polygonized)",
+        help=f"the object is an ellipse with semi-axes A along its x and B along its y, m, each in {SIZE_RANGE} "
+        "(polygonized)",
     )
-    group.add_argument("--mass", type=float, metavar="KG", help="the object's mass, kg")
-    group.add_argument("--mu", type=float, metavar="MU", help="friction coefficient")
+    group.add_argument(
+        "--mass",
+        type=float,
+        metavar="KG",
+        help=f"the object's mass, kg, in {interval(MIN_BOX_MASS, MAX_BOX_MASS)}",
+    )
+    group.add_argument(
+        "--mu", type=float, metavar="MU", help=f"friction coefficient, in {interval(0.0, MAX_MU, low_open=True)}"
+    )
     group.add_argument(
         "--hand",
         metavar="NAME|FILE",
@@ -281,6 +307,14 @@ OPTION_FIELDS = {
     "scene.object.circle_radius": ("circle", "--circle"),
     "scene.object.ellipse_semi_axes": ("ellipse", "--ellipse"),
     "cito.formulation": ("formulation", "--formulation"),
+    "controller.kp": ("kp", "--kp"),
+    "controller.kv": ("kv", "--kv"),
+    "controller.object_kp": ("object_kp", "--object-kp"),
+    "controller.object_kd": ("object_kd", "--object-kd"),
+    "controller.tip_kp": ("tip_kp", "--tip-kp"),
+    "controller.tip_kd": ("tip_kd", "--tip-kd"),
+    "controller.rate_hz": ("rate", "--rate"),
+    "controller.friction_floor": ("friction_floor", "--friction-floor"),
 }
 
 
@@ -350,6 +384,7 @@ def check_output_dir(option: str, path: str | Path, files: tuple[str, ...] = ())
     existing ancestor a folder in which files can be created (tried, not assumed), and none
     of the `files` the command writes into it an existing folder. Checked before any work
     starts (ConfigError: exit 2)."""
+    check_name_lengths(option, path, files)
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ConfigError(

@@ -28,7 +28,7 @@ from trajectotree.cli.common import (
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
-from trajectotree.results import check_goal
+from trajectotree.results import check_goal, outcome_text
 
 KEYFRAMES = "keyframes.png"
 PLAYBACK = "playback.html"
@@ -117,9 +117,9 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
     )
     print(f"  total planning  {p['total_time_s']:6.2f} s wall     search and CITO: {verdict}, cost {cost}")
     if s is not None:
-        held = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held throughout"
         print(
-            f"  simulation      {s['sim_time_s']:6.2f} s wall     {s['duration_s']:.1f} s simulated, {noun} {held}; "
+            f"  simulation      {s['sim_time_s']:6.2f} s wall     {s['duration_s']:.1f} s simulated, "
+            f"{outcome_text(s, noun)}; "
             f"mean |error| x {1e3 * s['mae_x']:.1f} mm, y {1e3 * s['mae_y']:.1f} mm, "
             f"theta {s['mae_theta']:.3f} rad; final theta error {s['final_error'][2]:.3f} rad"
             + ("" if s.get("error_at_drop") is None else f" ({s['error_at_drop'][2]:.3f} rad at the drop)")

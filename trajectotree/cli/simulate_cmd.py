@@ -18,10 +18,27 @@ from trajectotree.cli.common import (
     check_executable_hand,
     check_output_dir,
     check_output_file,
+    in_option_terms,
     print_json,
     scene_overrides,
 )
-from trajectotree.config import Config, ConfigError, check_controller, clipped_repr, load_config
+from trajectotree.config import (
+    MAX_BOX_MASS,
+    MAX_KP,
+    MAX_KV,
+    MAX_MU,
+    MAX_OBJECT_KD,
+    MAX_OBJECT_KP,
+    MAX_TIP_KD,
+    MAX_TIP_KP,
+    MIN_BOX_MASS,
+    Config,
+    ConfigError,
+    check_controller,
+    clipped_repr,
+    interval,
+    load_config,
+)
 from trajectotree.io import (
     SIM_JSON,
     SIM_NPZ,
@@ -31,6 +48,7 @@ from trajectotree.io import (
     reading,
     write_json_atomic,
 )
+from trajectotree.results import RunOutcome, outcome_text
 
 
 def register(subparsers) -> None:
@@ -57,13 +75,16 @@ def register(subparsers) -> None:
     group.add_argument(
         "--controller", metavar="NAME", help="grasp (object-level grasp control, the default) or paper (eq. 20)"
     )
-    group.add_argument("--kp", type=float, metavar="N/M", help="fingertip stiffness of eq. 20 (--controller paper)")
-    group.add_argument("--kv", type=float, metavar="NS/M", help="fingertip damping of eq. 20 (--controller paper)")
-    group.add_argument("--object-kp", type=float, metavar="1/S2", help="grasp controller: object pose gain, s^-2")
-    group.add_argument("--object-kd", type=float, metavar="1/S", help="grasp controller: object velocity gain, s^-1")
-    group.add_argument("--tip-kp", type=float, metavar="N/M", help="grasp controller: fingertip spring, N/m")
-    group.add_argument("--tip-kd", type=float, metavar="NS/M", help="grasp controller: fingertip damping, N s/m")
-    group.add_argument("--rate", type=float, metavar="HZ", help="grasp controller: control rate, Hz")
+    for option, metavar, what, high in (
+        ("--kp", "N/M", "fingertip stiffness of eq. 20 (--controller paper), N/m", MAX_KP),
+        ("--kv", "NS/M", "fingertip damping of eq. 20 (--controller paper), N s/m", MAX_KV),
+        ("--object-kp", "1/S2", "grasp controller: object pose gain, s^-2", MAX_OBJECT_KP),
+        ("--object-kd", "1/S", "grasp controller: object velocity gain, s^-1", MAX_OBJECT_KD),
+        ("--tip-kp", "N/M", "grasp controller: fingertip spring, N/m", MAX_TIP_KP),
+        ("--tip-kd", "NS/M", "grasp controller: fingertip damping, N s/m", MAX_TIP_KD),
+    ):
+        group.add_argument(option, type=float, metavar=metavar, help=f"{what}, in {interval(0.0, high)}")
+    group.add_argument("--rate", type=float, metavar="HZ", help="grasp controller: control rate, Hz, in [10, 10000]")
     group.add_argument(
         "--closed-loop",
         action="store_true",
@@ -84,8 +105,18 @@ def register(subparsers) -> None:
         help="closed loop: the friction estimate never goes below this, in (0, 1] (default 0.2)",
     )
     world = p.add_argument_group("simulated world (differs from the plan's; the controller keeps the plan's values)")
-    world.add_argument("--sim-mu", type=float, metavar="MU", help="friction coefficient of the simulated plant")
-    world.add_argument("--sim-mass", type=float, metavar="KG", help="object mass of the simulated plant, kg")
+    world.add_argument(
+        "--sim-mu",
+        type=float,
+        metavar="MU",
+        help=f"friction coefficient of the simulated plant, in {interval(0.0, MAX_MU, low_open=True)}",
+    )
+    world.add_argument(
+        "--sim-mass",
+        type=float,
+        metavar="KG",
+        help=f"object mass of the simulated plant, kg, in {interval(MIN_BOX_MASS, MAX_BOX_MASS)}",
+    )
     world.add_argument(
         "--push",
         metavar="FX,FY@T",
@@ -177,12 +208,15 @@ def execution_config(args, plan_config: Config) -> Config:
     if args.controller is not None:
         check_controller(args.controller, "--controller")
     sim = {} if args.controller is None else {"controller": args.controller}
-    config = dataclasses.replace(
-        config,
-        scene=dataclasses.replace(config.scene, **scene),
-        controller=dataclasses.replace(config.controller, **gains),
-        sim=dataclasses.replace(config.sim, **sim),
-    )
+    try:
+        config = dataclasses.replace(
+            config,
+            scene=dataclasses.replace(config.scene, **scene),
+            controller=dataclasses.replace(config.controller, **gains),
+            sim=dataclasses.replace(config.sim, **sim),
+        )
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
     differ = [
         f"scene.{f.name} = {clipped_repr(getattr(config.scene, f.name))} (the plan's: "
         f"{clipped_repr(getattr(plan_config.scene, f.name))})"
@@ -221,9 +255,9 @@ def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
     from trajectotree.execution.simulate import Conditions, parse_push
 
     if args.sim_mu is not None:
-        check_range("--sim-mu", args.sim_mu, 0.0, 5.0, low_open=True)
+        check_range("--sim-mu", args.sim_mu, 0.0, MAX_MU, low_open=True)
     if args.sim_mass is not None:
-        check_range("--sim-mass", args.sim_mass, 0.0, 100.0, low_open=True)
+        check_range("--sim-mass", args.sim_mass, MIN_BOX_MASS, MAX_BOX_MASS)
     push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
     run_s = plan_duration_s + config.sim.settle_time
     if push is not None and push.time_s >= run_s - 1e-9:  # the knot times' rounding: 1.2 + 0.5 s is 1.7000000000000002
@@ -324,12 +358,12 @@ def simulate_into(args) -> int:
     if args.json:
         print_json(summary)
     else:
-        drop = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
+        held = {RunOutcome.DROPPED: "drop", RunOutcome.DIVERGED: "divergence"}.get(result.outcome)
         print(
             f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s: "
-            f"{object_noun(config.scene)} {drop}; "
+            f"{outcome_text(summary, object_noun(config.scene))}; "
             f"MAE x {1e3 * result.mae_x:.1f} mm, y {1e3 * result.mae_y:.1f} mm, theta {result.mae_theta:.3f} rad"
-            + (" (errors held at their drop-time values from the drop on)" if result.dropped else "")
+            + (f" (errors held at their values at the {held} from then on)" if held else "")
         )
         print(final_error_line(summary))
         loop = summary["closed_loop"]

@@ -14,6 +14,12 @@ error is held at its value at the drop (`hold_after_drop`), as if the box lay wh
 it left the hand; otherwise metres of free fall would swamp every mean.
 `final_error` is the error at the last sample all the same (a box the fingers caught
 again after the drop rule fired may end on the plan), and `error_at_drop` the held value.
+
+Divergence (`detect_divergence`): a run whose state stops being finite, whose object moves faster
+than gravity, the push and the fingers together could make it, or in which Drake refused a step,
+is no longer a simulation of anything: its outcome is "diverged", not a drop (results.RunOutcome).
+Its samples from then on count for nothing: the drop rule looks at those before, and the errors
+(final_error too) are held at the last sample before it.
 """
 
 from __future__ import annotations
@@ -24,6 +30,10 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from trajectotree.results import SimLog, SimResult
+
+# m/s, more than the fingers can give the object: fingers chattering at gains far beyond their ranges (a
+# fingertip spring of 1e12 N/m) flung the 50 g box at 10 m/s at most; gravity and a push add their own
+MAX_THROW_SPEED = 100.0
 
 
 def absolute_error(pose, pose_ref) -> np.ndarray:
@@ -50,6 +60,39 @@ def detect_drop(t, pose, pose_ref, drop_distance: float) -> tuple[bool, float | 
     return True, float(np.asarray(t)[beyond[0]])
 
 
+def detect_divergence(log: SimLog, gravity: float, push_speed: float) -> tuple[int, str | None]:
+    """(the number of samples before the run diverged, why it diverged; None: it did not), for
+    `gravity` m/s^2 and a push that can add at most `push_speed` m/s. The object starts at rest, so
+    at time t it cannot be faster than MAX_THROW_SPEED + push_speed + gravity t."""
+    t, x = np.asarray(log.t, dtype=float), np.asarray(log.x, dtype=float)
+    state = np.concatenate([x, np.asarray(log.q, dtype=float).reshape(len(t), -1)], axis=1)
+    broken = np.flatnonzero(~np.all(np.isfinite(state), axis=1))
+    good = int(broken[0]) if broken.size else len(t)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        dt = np.diff(t[:good])
+        speed = np.where(dt > 0, np.linalg.norm(np.diff(x[:good, :2], axis=0), axis=1) / dt, 0.0)
+    limit = MAX_THROW_SPEED + push_speed + gravity * t[1:good]
+    fast = np.flatnonzero(speed > limit)
+    if fast.size:
+        k = int(fast[0])
+        return k + 1, (
+            f"the object moved at {speed[k]:.3g} m/s at {t[k + 1]:.2f} s, faster than gravity, the push and the "
+            f"fingers could make it ({limit[k]:.3g} m/s)"
+        )
+    if good < len(t):
+        return good, f"the state is not finite at {t[good]:.2f} s"
+    if log.step_error is not None:
+        return good, f"Drake refused a step after {t[-1]:.2f} s ({log.step_error.strip().splitlines()[0]})"
+    return good, None
+
+
+def hold_from(abs_error, k: int) -> np.ndarray:
+    """(T, 3) abs_error with every sample from k on replaced by the one before it."""
+    held = np.array(abs_error, dtype=float)
+    held[max(k, 1) :] = held[max(k, 1) - 1]
+    return held
+
+
 def hold_after_drop(t, abs_error, drop_time: float | None) -> np.ndarray:
     """(T, 3) abs_error with every sample after drop_time replaced by the one at it."""
     held = np.array(abs_error, dtype=float)
@@ -60,11 +103,14 @@ def hold_after_drop(t, abs_error, drop_time: float | None) -> np.ndarray:
     return held
 
 
-def evaluate(log: SimLog, drop_distance: float) -> SimResult:
+def evaluate(log: SimLog, drop_distance: float, gravity: float, push_speed: float = 0.0) -> SimResult:
     """The run's tracking metrics against the planned object trajectory, with the drop
-    rule at `drop_distance` (m, SimConfig.drop_distance)."""
-    dropped, drop_time = detect_drop(log.t, log.x, log.x_plan, drop_distance)
-    error = absolute_error(log.x, log.x_plan)
+    rule at `drop_distance` (m, SimConfig.drop_distance) and the divergence test for `gravity`
+    (m/s^2) and a push that adds at most `push_speed` m/s (detect_divergence)."""
+    good, divergence = detect_divergence(log, gravity, push_speed)
+    with np.errstate(invalid="ignore"):
+        error = hold_from(absolute_error(log.x, log.x_plan), good) if divergence else absolute_error(log.x, log.x_plan)
+    dropped, drop_time = detect_drop(log.t[:good], log.x[:good], log.x_plan[:good], drop_distance)
     abs_error = hold_after_drop(log.t, error, drop_time)
     mae = mean_absolute_error(abs_error)
     return SimResult(
@@ -77,6 +123,8 @@ def evaluate(log: SimLog, drop_distance: float) -> SimResult:
         dropped=dropped,
         drop_time_s=drop_time,
         error_at_drop=None if drop_time is None else tuple(float(v) for v in abs_error[-1]),
+        diverged_at_s=None if divergence is None else float(log.t[min(good, len(log.t) - 1)]),
+        divergence=divergence,
     )
 
 

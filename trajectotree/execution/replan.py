@@ -281,7 +281,8 @@ def simulate_replanning(
             reference = delayed(reference, t_switch, event.latency_s)
             phase = phase.after(t_switch, event.latency_s)
     log = _joined(logs, reference, time.perf_counter() - started)
-    return dataclasses.replace(metrics.evaluate(log, config.sim.drop_distance), replans=tuple(events))
+    result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity, conditions.push_speed(config.scene))
+    return dataclasses.replace(result, replans=tuple(events))
 
 
 def replan(

@@ -42,7 +42,16 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from trajectotree.config import Config, ConfigError, check_controller, check_length, check_range
+from trajectotree.config import (
+    MAX_BOX_MASS,
+    MAX_MU,
+    MIN_BOX_MASS,
+    Config,
+    ConfigError,
+    check_controller,
+    check_length,
+    check_range,
+)
 from trajectotree.execution import closed_loop, metrics, playback
 from trajectotree.execution.control import GraspController, ImpedanceController
 from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule
@@ -92,9 +101,9 @@ class Conditions:
 
     def __post_init__(self):
         if self.mu is not None:
-            check_range("sim_mu", self.mu, 0.0, 5.0, low_open=True)
+            check_range("sim_mu", self.mu, 0.0, MAX_MU, low_open=True)
         if self.mass is not None:
-            check_range("sim_mass", self.mass, 0.0, 100.0, low_open=True)
+            check_range("sim_mass", self.mass, MIN_BOX_MASS, MAX_BOX_MASS)
 
     def scene(self, scene_config):
         """The simulated plant's SceneConfig."""
@@ -102,6 +111,12 @@ class Conditions:
         if self.mass is not None and scene_config.object_inertia is not None:  # the same body, heavier
             changes["object_inertia"] = scene_config.inertia_zz(self.mass)
         return dataclasses.replace(scene_config, **changes)
+
+    def push_speed(self, scene_config) -> float:
+        """m/s, the most speed the push can give the simulated object: its impulse over the object's mass."""
+        if self.push is None:
+            return 0.0
+        return float(np.hypot(*self.push.force)) * self.push.duration_s / self.scene(scene_config).box_mass
 
     def to_json(self, scene_config) -> dict:
         sim = self.scene(scene_config)
@@ -417,25 +432,39 @@ def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.nd
 
 
 def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict) -> SimLog:
-    """Runs `simulator` to the execution's end; what it logged, beside the plan at the same times."""
+    """Runs `simulator` to the execution's end; what it logged, beside the plan at the same times. When
+    Drake refuses a step (a state beyond what its solvers take), what it logged before, with the refusal's
+    message as step_error (metrics.detect_divergence: the run diverged)."""
     start = time.perf_counter()
-    simulator.AdvanceTo(execution.duration)
+    try:
+        simulator.AdvanceTo(execution.duration)
+    except RuntimeError as e:
+        log = collected_log(execution, simulator, reference, conditions, time.perf_counter() - start, complete=False)
+        return dataclasses.replace(log, step_error=str(e))
     return collected_log(execution, simulator, reference, conditions, time.perf_counter() - start)
 
 
 def collected_log(
-    execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict, sim_time_s: float
+    execution: ExecutionDiagram,
+    simulator: Simulator,
+    reference: Reference,
+    conditions: dict,
+    sim_time_s: float,
+    *,
+    complete: bool = True,
 ) -> SimLog:
-    """What `simulator` logged so far (to the execution's end), beside `reference` at the same times."""
-    logs = [finished_log(execution, simulator, logger) for logger in (execution.state_logger, execution.force_logger)]
+    """What `simulator` logged so far (to the execution's end, unless not `complete`: a run Drake
+    stopped, whose state is not evaluated again), beside `reference` at the same times."""
+
+    def log_of(logger):
+        return finished_log(execution, simulator, logger) if complete else logger.FindLog(simulator.get_context())
+
+    logs = [log_of(logger) for logger in (execution.state_logger, execution.force_logger)]
     t, x, q = split_state_log(execution, logs[0])
     f_W = logs[1].data().T.reshape(len(t), execution.hand_description.num_fingers, 2).copy()
     closed = None
     if execution.closed_loop_loggers is not None:
-        data = {
-            name: finished_log(execution, simulator, logger).data().T.copy()
-            for name, logger in execution.closed_loop_loggers.items()
-        }
+        data = {name: log_of(logger).data().T.copy() for name, logger in execution.closed_loop_loggers.items()}
         for name in ("in_contact", "slipping"):
             data[name] = data[name] > 0.5
         for name in ("mu_estimate", "mass_estimate", "reflex"):
@@ -496,7 +525,7 @@ def simulate_reference(
         meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
         animation = execution.visualizer.StartRecording()
     log = record_log(execution, simulator, reference, conditions.to_json(config.scene))
-    result = metrics.evaluate(log, config.sim.drop_distance)
+    result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity, conditions.push_speed(config.scene))
     if meshcat is not None:
         frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
         playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))

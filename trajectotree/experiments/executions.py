@@ -51,6 +51,7 @@ from trajectotree.config import (
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
 from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
 from trajectotree.planning.workers import kill_pool, process_pool
+from trajectotree.results import FINAL_THETA_TOLERANCE  # rad, "final orientation held" in the execution table
 
 EXEC_DIR = "exec"
 CLOSED_LOOP_SUFFIX = "-closed-loop"  # the executor label of closed-loop executions: grasp-closed-loop
@@ -429,9 +430,6 @@ def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
                     }
                 )
     return records
-
-
-FINAL_THETA_TOLERANCE = np.deg2rad(3.0)  # rad, "final orientation held" in the execution table
 
 
 def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from trajectotree.cito.hand import check_cito_hand
-from trajectotree.config import Config, ConfigError, GoalPose, config_from_dict, load_config, mu_plan
+from trajectotree.config import MIN_BOX_MASS, Config, ConfigError, GoalPose, config_from_dict, load_config, mu_plan
 from trajectotree.io import load_start
 from trajectotree.planning.keyframes import check_workers
 from trajectotree.planning.start import start_config
@@ -170,7 +170,7 @@ def check_payload(scene: Scene, config: Config, grasps: GraspCandidates | None =
             shown=f"{mass!r} kg",
             problem=f"is more than the hand can hold: {grasps_text} holds at most {hold:g} kg at rest with four "
             f"fingers {where}",
-            valid=f"(0, {hold:g}] kg",
+            valid=f"[{MIN_BOX_MASS:g}, {hold:g}] kg",
         )
     if mass <= limits.switch_kg:
         return None

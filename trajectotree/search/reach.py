@@ -67,8 +67,7 @@ def rectangles_overlap_polygon(
             & (np.abs(-cx * uy_s + cy * ux_s) < hw + a * uy + b * ux)
         )
     n, v = polygon.normals, polygon.vertices
-    # polygon normals: the polygon spans [min_j n_f . v_j, offset_f] along n_f
-    low = np.min(v @ n.T, axis=0)  # (V,)
+    low = polygon.back_offsets  # (V,): the polygon spans [low_f, offset_f] along n_f
     centre = c @ n.T  # (k, V)
     radius = hl * np.abs(ux_s[:, None] * n[:, 0] + uy_s[:, None] * n[:, 1]) + hw * np.abs(
         -uy_s[:, None] * n[:, 0] + ux_s[:, None] * n[:, 1]
