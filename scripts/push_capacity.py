@@ -1,12 +1,12 @@
 """How hard each plan's grasp can push back against a push, at the time the sweep's push
 conditions push it (experiments.executions.middle_of_middle_segment): the hardest push along
 --direction that the fingers holding at that time resist while they also hold the box's weight,
-each within the grasp controller's force bound (controller.max_normal_force), the joint motors'
+each within the grasp controller's force bound (controller.grasp.max_normal_force), the joint motors'
 tau_max (beside gravity on the links) and friction cones at mu: the LP the search orders its
 children by (search.stance.PushCapacityLp), here at the executed contacts and joint angles. It is
 the static limit of any controller that keeps that grasp: a push above it moves the box for as
 long as it lasts. Printed per plan for the cones of the open loop (max(search, controller
-friction_safety) x scene.mu) and of the reflex (controller.reflex_friction_safety x scene.mu).
+friction_safety) x scene.mu) and of the reflex (controller.push_reflex.friction_safety x scene.mu).
 
     python scripts/push_capacity.py PLAN_DIR [PLAN_DIR ...] [--direction 1 0]
 """
@@ -56,11 +56,13 @@ def main() -> None:
         )
         w_hold = np.array([0.0, config.scene.box_mass * config.scene.gravity, 0.0])
         cones = {
-            "open loop": max(config.search.friction_safety, gains.friction_safety) * config.scene.mu,
-            "reflex": max(gains.reflex_friction_safety, gains.friction_safety) * config.scene.mu,
+            "open loop": max(config.search.friction_safety, gains.grasp.friction_safety) * config.scene.mu,
+            "reflex": max(gains.push_reflex.friction_safety, gains.grasp.friction_safety) * config.scene.mu,
         }
         against = {
-            name: PushCapacityLp(len(holding), mu, gains.max_normal_force).solve(G, (A, lower, upper), w_hold, push)
+            name: PushCapacityLp(len(holding), mu, gains.grasp.max_normal_force).solve(
+                G, (A, lower, upper), w_hold, push
+            )
             for name, mu in cones.items()
         }
         fingers = "".join(str(i) for i in holding)

@@ -2,6 +2,7 @@
 a diverged simulation is not a drop, and "held" means ended within tolerance (issue items 6, 9, 12)."""
 
 import dataclasses
+import functools
 import math
 import typing
 
@@ -13,12 +14,17 @@ from trajectotree.config import (
     CitoConfig,
     Config,
     ConfigError,
-    ControllerGains,
+    EstimatorGains,
+    GraspGains,
+    ImpedanceGains,
+    LandingReflexGains,
     ObjectConfig,
+    PushReflexGains,
     ReplanConfig,
     SceneConfig,
     SearchConfig,
     SimConfig,
+    with_values,
 )
 from trajectotree.execution import metrics
 from trajectotree.execution.reference import static_hold_reference
@@ -27,7 +33,18 @@ from trajectotree.geometry import ConvexPolygon, polygon_problem
 from trajectotree.results import RunOutcome, SimLog, outcome_text
 from trajectotree.scene.plant import build_scene
 
-SECTIONS = (SceneConfig, SearchConfig, CitoConfig, ControllerGains, SimConfig, ReplanConfig)
+SECTIONS = (
+    SceneConfig,
+    SearchConfig,
+    CitoConfig,
+    ImpedanceGains,
+    GraspGains,
+    EstimatorGains,
+    PushReflexGains,
+    LandingReflexGains,
+    SimConfig,
+    ReplanConfig,
+)
 HOLD_ARCLENGTHS = (0.56, 0.14, 0.26, 0.44)  # a four-finger grasp of the default box
 
 
@@ -54,21 +71,21 @@ def test_every_number_has_a_finite_upper_bound(cls):
         ("scene", "box_mass", 10.0),
         ("scene", "gravity", 100.0),
         ("scene", "box_depth", 0.3),
-        ("controller", "tip_kp", 2000.0),
-        ("controller", "tip_kd", 5.0),
-        ("controller", "object_kp", 3e4),
-        ("controller", "object_kd", 500.0),
-        ("controller", "kp", 5000.0),
-        ("controller", "kv", 8.0),
-        ("controller", "land_tip_kp", 2000.0),
-        ("controller", "land_tip_kd", 5.0),
+        ("controller", "grasp.tip_kp", 2000.0),
+        ("controller", "grasp.tip_kd", 5.0),
+        ("controller", "grasp.object_kp", 3e4),
+        ("controller", "grasp.object_kd", 500.0),
+        ("controller", "impedance.kp", 5000.0),
+        ("controller", "impedance.kv", 8.0),
+        ("controller", "landing_reflex.tip_kp", 2000.0),
+        ("controller", "landing_reflex.tip_kd", 5.0),
     ],
 )
 def test_the_bounds_are_inclusive_and_the_next_value_is_refused(section, field, high):
-    cls = {"scene": SceneConfig, "controller": ControllerGains}[section]
-    assert getattr(cls(**{field: high}), field) == high
-    with pytest.raises(ConfigError, match=rf"{section}.{field} = .* is out of range; valid range: .*{high:g}\]"):
-        cls(**{field: high * (1 + 1e-9)})
+    path = f"{section}.{field}"
+    assert functools.reduce(getattr, path.split("."), with_values(Config(), {path: high})) == high
+    with pytest.raises(ConfigError, match=rf"{path} = .* is out of range; valid range: .*{high:g}\]"):
+        with_values(Config(), {path: high * (1 + 1e-9)})
 
 
 def test_the_mass_has_a_lower_end_drake_can_simulate():

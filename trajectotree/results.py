@@ -192,7 +192,7 @@ class ClosedLoopLog:
     run, at the SimLog's sample times t (T,): sim.npz's CLOSED_LOOP_ARRAYS."""
 
     in_contact: np.ndarray  # (T, 4) bool, the finger (either link) pushes on the box
-    slipping: np.ndarray  # (T, 4) bool, it pushes >= controller.slip_min_force and slides > slip_speed
+    slipping: np.ndarray  # (T, 4) bool, it pushes >= controller.estimators.slip_min_force and slides > slip_speed
     force_ratio: np.ndarray  # (T, 4) |f_t| / f_n of its force on the box (0 out of contact)
     slip_speed: np.ndarray  # (T, 4) m/s, relative tangential velocity at its contact points (fastest)
     tracking_error: np.ndarray  # (T, 3) measured - planned object pose (m, m, rad wrapped to [-pi, pi))
@@ -267,12 +267,12 @@ class ReplanOutcome(enum.Enum):
     PARTIAL = "a new plan took effect, but one of its later segments failed: the hand holds before it"
     START_REFUSED = "the planner refused the measured start: the old plan goes on"
     SEARCH_DEADLINE = (
-        "the search found no plan within its deadline (sim.replan.search_deadline_s): the old plan goes on"
+        "the search found no plan within its deadline (controller.replan.search_deadline_s): the old plan goes on"
     )
     NO_PLAN = "the search found no plan at the estimated friction and mass: the old plan goes on"
     FIRST_SEGMENT_FAILED = "the new plan's first segment failed: the old plan goes on"
     FIRST_SEGMENT_LATE = (
-        "the new plan's first segment was not solved within its deadline (sim.replan.first_segment_deadline_s): "
+        "the new plan's first segment was not solved within its deadline (controller.replan.first_segment_deadline_s): "
         "the old plan goes on"
     )
 

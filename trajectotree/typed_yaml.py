@@ -158,6 +158,13 @@ def read_yaml(path: Path):
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
         raise YamlError(f"is not a text file (byte {e.start} is not UTF-8); give a YAML file") from None
+    return parse_yaml(text)
+
+
+def parse_yaml(text: str):
+    """The data of YAML `text` (a file's, or a command line's --config-text) through the same guards
+    as read_yaml; YamlError as read_yaml's."""
+    _check_size(len(text.encode("utf-8", "surrogatepass")))
     try:
         loader = _GuardedLoader(text)
     except yaml.YAMLError as e:  # the reader checks every character first
@@ -213,27 +220,82 @@ def thaw(value):
     return [thaw(v) for v in value] if isinstance(value, tuple) else value
 
 
-def _tuples(value):
-    """`value` with its lists, at any depth, as tuples."""
-    return tuple(_tuples(v) for v in value) if isinstance(value, list) else value
+def _optional(kind) -> tuple[type, bool]:
+    """(the type, whether None is allowed) of a field of type `kind` (X or X | None)."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):  # X | None, the only union in the config
+        return typing.get_args(kind)[0], True
+    return kind, False
+
+
+def _frozen(kind, value):
+    """`value`, filled by Drake's loader for a field of type `kind`, as the frozen field takes it:
+    lists as tuples, dataclass twins as their frozen dataclasses, at any depth."""
+    kind, _ = _optional(kind)
+    if value is None:
+        return None
+    if dc.is_dataclass(kind):
+        return freeze(kind, value)
+    if typing.get_origin(kind) is tuple:
+        return tuple(_frozen(typing.get_args(kind)[0], v) for v in value)
+    return value
 
 
 def freeze(cls, loaded):
     """Frozen dataclass `cls` from its filled twin (lists back to tuples, nested dataclasses
     frozen too; __post_init__ checks the values)."""
     hints = typing.get_type_hints(cls)
-    return cls(
-        **{
-            f.name: freeze(hints[f.name], getattr(loaded, f.name))
-            if dc.is_dataclass(hints[f.name])
-            else _tuples(getattr(loaded, f.name))
-            for f in dc.fields(cls)
-        }
-    )
+    return cls(**{f.name: _frozen(hints[f.name], getattr(loaded, f.name)) for f in dc.fields(cls)})
 
 
-def load_typed(cls, data: dict):
-    """The twin of `cls` filled by Drake's typed loader from mapping `data`, passed as YAML text
-    (floats exactly, as repr). Raises one of DRAKE_ERRORS on a wrong key or type."""
+def _type_name(kind) -> str:
+    return kind.__name__ if isinstance(kind, type) else str(kind)  # float, tuple[float, float, float]
+
+
+def _diagnose(cls, data, path: str) -> None:
+    """YamlError naming the first key of mapping `data` (for dataclass `cls`, at `path`) that Drake's
+    loader refuses: an unknown key, a mapping or list where none belongs, or a value of another type.
+    Drake's own message may name only the value, so each is loaded alone."""
+    hints = typing.get_type_hints(cls)
+    if not isinstance(data, dict):
+        raise YamlError(f"{path} must be a mapping with keys {list(hints)}, got {clipped_repr(data)}")
+    for key, value in data.items():
+        name = f"{path}.{clip(str(key))}" if path else clip(str(key))
+        if key not in hints:
+            raise YamlError(f"{name}: unknown key; valid keys: {list(hints)}")
+        kind, optional = _optional(hints[key])
+        if value is None and optional:
+            continue
+        element = typing.get_args(kind)[0] if typing.get_origin(kind) is tuple else None
+        if dc.is_dataclass(kind):
+            _diagnose(kind, value, name)
+        elif dc.is_dataclass(element) and isinstance(value, list):
+            for i, entry in enumerate(value):
+                _diagnose(element, entry, f"{name}[{i}]")
+        else:
+            try:
+                _load(cls, {key: value})
+            except DRAKE_ERRORS as e:
+                raise YamlError(
+                    f"{name} = {clipped_repr(value)}: {clip(str(e), 200)}; expected {_type_name(hints[key])}"
+                ) from None
+
+
+def _load(cls, data: dict, defaults=None):
     yaml = drake_yaml()
-    return yaml.yaml_load_typed(schema=schema(cls), data=yaml.yaml_dump(data))
+    return yaml.yaml_load_typed(schema=schema(cls), data=yaml.yaml_dump(data), defaults=defaults)
+
+
+def load_typed(cls, data, path: str = "", defaults=None):
+    """Frozen dataclass `cls` from mapping `data` through Drake's typed loader (passed as YAML text:
+    floats exactly, as repr), on top of `defaults` (an instance of `cls`: the keys `data` gives replace
+    its fields, nested dataclasses key by key, as yaml_load_typed's defaults; None: the defaults of
+    `cls`), so that a file and then YAML text layer as Drake's own overrides do. YamlError naming the
+    key at `path` ("controller.grasp.tip_kp") Drake refuses; the frozen dataclass checks the values."""
+    if not isinstance(data, dict):
+        _diagnose(cls, data, path)
+    try:
+        loaded = _load(cls, data, None if defaults is None else thaw(defaults))
+    except DRAKE_ERRORS + (AssertionError,) as e:  # Drake asserts on a list of mappings given a mapping
+        _diagnose(cls, data, path)
+        raise YamlError(f"{path or 'the file'}: {clip(str(e), 200)}") from None
+    return freeze(cls, loaded)

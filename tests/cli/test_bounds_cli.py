@@ -61,10 +61,18 @@ def test_unbounded_config_values_are_refused_before_any_work(field, message, tmp
 @pytest.mark.parametrize(
     "option, value, message",
     [
-        ("--tip-kp", "1e12", "--tip-kp (controller.tip_kp) = 1000000000000.0 is out of range; valid range: [0, 2000]"),
-        ("--tip-kd", "7", "--tip-kd (controller.tip_kd) = 7.0 is out of range; valid range: [0, 5]"),
-        ("--object-kd", "2000", "--object-kd (controller.object_kd) = 2000.0 is out of range; valid range: [0, 500]"),
-        ("--kv", "20", "--kv (controller.kv) = 20.0 is out of range; valid range: [0, 8]"),
+        (
+            "--tip-kp",
+            "1e12",
+            "--tip-kp (controller.grasp.tip_kp) = 1000000000000.0 is out of range; valid range: [0, 2000] N/m",
+        ),
+        ("--tip-kd", "7", "--tip-kd (controller.grasp.tip_kd) = 7.0 is out of range; valid range: [0, 5] N s/m"),
+        (
+            "--object-kd",
+            "2000",
+            "--object-kd (controller.grasp.object_kd) = 2000.0 is out of range; valid range: [0, 500] s^-1",
+        ),
+        ("--kv", "20", "--kv (controller.impedance.kv) = 20.0 is out of range; valid range: [0, 8] N s/m"),
         ("--sim-mass", "50", "--sim-mass = 50.0 is out of range; valid range: [0.001, 10]"),
     ],
 )

@@ -2,14 +2,13 @@
 watch on a static hold that slips, the friction and mass estimates against the simulated
 world, the push reflex, the files and the command, and the open loop left exactly as it was."""
 
-import dataclasses
 import json
 
 import numpy as np
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.config import Config, ConfigError, ControllerGains
+from trajectotree.config import Config, ConfigError, ControllerGains, EstimatorGains, with_values
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.run import run_simulation
 from trajectotree.execution.simulate import Conditions, Push, simulate_reference
@@ -26,13 +25,9 @@ def scene():
     return build_scene()
 
 
-def hold_config(**gains) -> Config:
-    config = Config()
-    return dataclasses.replace(
-        config,
-        controller=dataclasses.replace(config.controller, **gains),
-        sim=dataclasses.replace(config.sim, settle_time=0.0),
-    )
+def hold_config(gains: dict | None = None) -> Config:
+    """The defaults with no settling and the controller fields `gains` names by path ("estimators.friction_floor")."""
+    return with_values(Config(), {"sim.settle_time": 0.0} | {f"controller.{k}": v for k, v in (gains or {}).items()})
 
 
 def three_finger_hold(scene, lifted: int, duration: float = 0.6):
@@ -84,7 +79,7 @@ def slipping_run(scene):
     plan's cones (the friction estimate's floor at the plan's 0.7, so the estimate cannot act)."""
     reference = three_finger_hold(scene, lifted=1)
     return simulate_reference(
-        reference, hold_config(friction_floor=0.7), conditions=Conditions(mu=0.45), closed_loop=True
+        reference, hold_config({"estimators.friction_floor": 0.7}), conditions=Conditions(mu=0.45), closed_loop=True
     )
 
 
@@ -107,7 +102,7 @@ def test_a_three_finger_hold_at_lowered_friction_reports_the_slipping_finger(sce
     sliding = watch.slipping[:, 2]
     assert np.median(watch.force_ratio[sliding, 2]) == pytest.approx(0.45, abs=0.03)
     assert np.all(watch.mu_estimate == 0.7)  # held at the floor: nothing estimated
-    assert np.all(watch.slip_speed[sliding, 2] > Config().controller.slip_speed)
+    assert np.all(watch.slip_speed[sliding, 2] > Config().controller.estimators.slip_speed)
 
 
 @pytest.mark.parametrize("mu, lifted", [(0.45, 1), (0.3, 0)])
@@ -124,14 +119,17 @@ def test_the_friction_estimate_of_a_scripted_slip_is_the_simulated_friction(scen
     assert np.all(np.diff(watch.mu_estimate) <= 0.0)
     assert watch.mu_estimate[-1] == pytest.approx(mu, abs=0.05)
     assert not result.dropped
-    late = result.t > 0.1 + 2 * Config().controller.cone_time_constant
+    late = result.t > 0.1 + 2 * Config().controller.grasp.cone_time_constant
     assert not watch.slipping[late].any()  # the QP's cones at the estimate: no more sliding
     assert result.to_json()["closed_loop"]["mu_estimate"] == watch.mu_estimate[-1]
 
 
 def test_the_friction_estimate_stops_at_the_floor(scene):
     result = simulate_reference(
-        three_finger_hold(scene, 0), hold_config(friction_floor=0.5), conditions=Conditions(mu=0.3), closed_loop=True
+        three_finger_hold(scene, 0),
+        hold_config({"estimators.friction_floor": 0.5}),
+        conditions=Conditions(mu=0.3),
+        closed_loop=True,
     )
     assert result.closed_loop.mu_estimate.min() == pytest.approx(0.5)
 
@@ -166,8 +164,8 @@ def test_the_push_reflex_squeezes_while_a_push_acts_and_lets_go_after(scene):
     during = (t > 0.31) & (t < 0.4)
     np.testing.assert_allclose(watch.disturbance[during], np.tile([1.5, 0.0], (during.sum(), 1)), atol=0.05)
     assert np.all(watch.reflex[t < 0.3] == 0.0)
-    assert np.all(watch.reflex[(t >= 0.31) & (t < 0.4 + gains.reflex_hold)] == 1.0)
-    assert np.all(watch.reflex[t > 0.4 + gains.reflex_hold + gains.reflex_release + 0.01] == 0.0)
+    assert np.all(watch.reflex[(t >= 0.31) & (t < 0.4 + gains.push_reflex.hold)] == 1.0)
+    assert np.all(watch.reflex[t > 0.4 + gains.push_reflex.hold + gains.push_reflex.release + 0.01] == 0.0)
     quiet = (t > 0.05) & ((t < 0.3) | (t > 0.41))
     assert np.abs(watch.disturbance[quiet]).max() < 0.05  # the contacts and gravity explain the rest
     assert np.all(watch.mu_estimate == 0.7)  # a pushed grasp's slides are no evidence of the friction
@@ -180,7 +178,13 @@ def test_the_reflex_holds_a_three_finger_grasp_against_a_push_it_would_give_way_
     way by 8 mm, and the open loop by 33 mm."""
     push = Conditions(push=Push(force=(3.0, 0.0), time_s=0.3, duration_s=0.2))
     reference = three_finger_hold(scene, 0, duration=0.8)
-    squeeze_only = hold_config(disturbance_feedforward=0.0, reflex_torque_weight=1.0, reflex_friction_safety=0.8)
+    squeeze_only = hold_config(
+        {
+            "push_reflex.disturbance_feedforward": 0.0,
+            "push_reflex.torque_weight": 1.0,
+            "push_reflex.friction_safety": 0.8,
+        }
+    )
     error = lambda r: np.abs(r.x - r.x_plan).max(axis=0)  # noqa: E731
     held = simulate_reference(reference, hold_config(), conditions=push, closed_loop=True)
     gave_way = simulate_reference(reference, squeeze_only, conditions=push, closed_loop=True)
@@ -265,8 +269,8 @@ def test_the_closed_loop_needs_the_grasp_controller(scene):
 
 @pytest.mark.parametrize("floor", [0.0, -0.1, 1.5, float("nan")])
 def test_a_friction_floor_outside_0_1_is_refused(floor):
-    with pytest.raises(ConfigError, match=r"controller.friction_floor = .* valid range: \(0, 1\]"):
-        ControllerGains(friction_floor=floor)
+    with pytest.raises(ConfigError, match=r"controller.estimators.friction_floor = .* valid range: \(0, 1\]"):
+        EstimatorGains(friction_floor=floor)
 
 
 def test_simulate_command_closed_loop(scene, tmp_path, capsys):
@@ -294,11 +298,11 @@ def test_simulate_command_closed_loop(scene, tmp_path, capsys):
     [
         (
             ["--closed-loop", "--friction-floor", "0"],
-            "(controller.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
+            "(controller.estimators.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
         ),
         (
             ["--closed-loop", "--friction-floor", "1.5"],
-            "--friction-floor (controller.friction_floor) = 1.5 is out of range",
+            "--friction-floor (controller.estimators.friction_floor) = 1.5 is out of range",
         ),
         (["--closed-loop", "--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
     ],

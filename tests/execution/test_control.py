@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from trajectotree.config import Config, ControllerGains
+from trajectotree.config import Config, ControllerGains, ImpedanceGains, with_values
 from trajectotree.execution.control import ImpedanceController
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.simulate import simulate_reference
@@ -34,7 +34,7 @@ def closed_form_gravity_compensation(finger, q, g):
 
 
 def test_actuation_is_eq20_in_closed_form(scene):
-    gains = ControllerGains(kp=150.0, kv=7.0)
+    gains = ControllerGains(impedance=ImpedanceGains(kp=150.0, kv=7.0))
     controller = ImpedanceController(scene.config, gains)
     rng = np.random.default_rng(0)
     for _ in range(5):
@@ -44,7 +44,11 @@ def test_actuation_is_eq20_in_closed_form(scene):
         for i, finger in enumerate(scene.fingers):
             q_i, v_i = q[2 * i : 2 * i + 2], v[2 * i : 2 * i + 2]
             J = finger.jacobian(q_i)
-            F = gains.kp * (p_ref[i] - finger.fingertip(q_i)) + gains.kv * (v_ref[i] - J @ v_i) + f_ref[i]
+            F = (
+                gains.impedance.kp * (p_ref[i] - finger.fingertip(q_i))
+                + gains.impedance.kv * (v_ref[i] - J @ v_i)
+                + f_ref[i]
+            )
             expected = J.T @ F + closed_form_gravity_compensation(finger, q_i, scene.config.gravity)
             np.testing.assert_allclose(tau[2 * i : 2 * i + 2], expected, atol=1e-9)
 
@@ -242,7 +246,7 @@ def test_a_rolled_two_finger_pinch_needs_the_controllers_friction_cone():
         )
         return lam, np.linalg.norm((G @ lam.ravel() - weight)[:2])
 
-    mu_control = max(config.search.friction_safety, config.controller.friction_safety) * config.scene.mu
+    mu_control = max(config.search.friction_safety, config.controller.grasp.friction_safety) * config.scene.mu
     assert mu_control == pytest.approx(0.56)
     (lam_plan, miss_plan), (lam, miss) = solve(config.search.friction_safety * config.scene.mu), solve(mu_control)
     assert lam_plan[0, 0] > 3.5 and miss_plan > 0.015
@@ -314,9 +318,9 @@ def test_grasp_controller_pushes_along_the_normal_where_a_disc_is_touched_now():
         tip_radius=disc.tip_radius,
         period=1.0 / gains.rate_hz,
         duration=1.0,
-        ramp_time=gains.ramp_time,
-        swing_lift=gains.swing_lift,
-        contact_distance=gains.contact_distance,
+        ramp_time=gains.grasp.ramp_time,
+        swing_lift=gains.grasp.swing_lift,
+        contact_distance=gains.grasp.contact_distance,
     )
     controller = GraspController(disc, schedule, gains, mu=0.56)
     p_WF = reference.p_WF[0]
@@ -328,12 +332,12 @@ def test_grasp_controller_pushes_along_the_normal_where_a_disc_is_touched_now():
         )  # rad; the outline's facets (1 cm at most) leave ~0.01
         assert np.all(np.abs(lean) < 0.02), (turn, lean)
         pushes = -np.sum(f_W * n_W, axis=1)
-        assert np.all(pushes >= gains.min_normal_force - 1e-6)
+        assert np.all(pushes >= gains.grasp.min_normal_force - 1e-6)
 
 
 @pytest.mark.parametrize("hand", ["planar_hand", "drake_planar_gripper"])
 def test_hand_dynamics_match_drakes_mass_matrix_and_bias_term(hand):
-    """The grasp controller's closed-form link dynamics (gains.hand_dynamics) against the plant's own:
+    """The grasp controller's closed-form link dynamics (gains.grasp.hand_dynamics) against the plant's own:
     each finger's mass matrix is the diagonal block of CalcMassMatrix, and its Coriolis torques the
     bias term's rows (the joint damping is returned with them, at the model's coefficients)."""
     from trajectotree.config import SceneConfig
@@ -377,9 +381,9 @@ def schedule_of(reference, scene, gains: ControllerGains, duration: float):
         tip_radius=scene.tip_radius,
         period=1.0 / gains.rate_hz,
         duration=duration,
-        ramp_time=gains.ramp_time,
-        swing_lift=gains.swing_lift,
-        contact_distance=gains.contact_distance,
+        ramp_time=gains.grasp.ramp_time,
+        swing_lift=gains.grasp.swing_lift,
+        contact_distance=gains.grasp.contact_distance,
     )
 
 
@@ -409,7 +413,7 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     n = schedule.index(1.0)  # the swing's core: finger 0 has no force budget
     assert schedule.force_scale[n, 0] == 0.0
     np.testing.assert_array_equal(controller.landing_clocks(n, np.full(4, n - 1), calm), [n] * 4)
-    speedup = int(gains.land_speedup)
+    speedup = int(gains.landing_reflex.speedup)
     for estimates in (pushed, slipped):
         clocks = controller.landing_clocks(n, np.full(4, n - 1), estimates)
         np.testing.assert_array_equal(clocks, [n - 1 + speedup, n, n, n])
@@ -421,17 +425,17 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
         if clocks[0] == landing:
             break
     # land_speedup x as fast, the last land_approach_time land_approach_speedup x
-    approach = round(gains.land_approach_time * gains.rate_hz)
-    slow = int(gains.land_approach_speedup)
+    approach = round(gains.landing_reflex.approach_time * gains.rate_hz)
+    slow = int(gains.landing_reflex.approach_speedup)
     assert clocks[0] == landing and steps <= (landing - n - approach) / (speedup - 1) + approach / (slow - 1) + 2
     # a fingertip that lags its target holds its sample
-    lagging = controller.landing_clocks(n, np.full(4, n - 1), pushed, lag=np.full(4, 2 * gains.land_lag))
+    lagging = controller.landing_clocks(n, np.full(4, n - 1), pushed, lag=np.full(4, 2 * gains.landing_reflex.lag))
     np.testing.assert_array_equal(lagging, [n] * 4)
     assert controller.landing_clocks(n + steps + 1, clocks, calm)[0] == landing
     assert controller.landing_clocks(landing + 3, clocks, calm)[0] == landing + 3
     # land_speedup 1: no reflex
     off = GraspController(
-        scene, schedule, dataclasses.replace(gains, land_speedup=1.0), mu=0.56, closed_loop=True
+        scene, schedule, with_values(gains, {"landing_reflex.speedup": 1.0}), mu=0.56, closed_loop=True
     ).landing_clocks(n, np.full(4, n - 1), pushed)
     np.testing.assert_array_equal(off, [n] * 4)
 
@@ -442,7 +446,7 @@ def test_closed_loop_cones_follow_the_friction_estimate_over_their_time_constant
     (about 63 % of the way after cone_time_constant, never past the estimate); 0: at once."""
     from trajectotree.execution.control import GraspController
 
-    gains = dataclasses.replace(ControllerGains(), cone_time_constant=tau)
+    gains = with_values(ControllerGains(), {"grasp.cone_time_constant": tau})
     held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.5)
     schedule = schedule_of(held, scene, gains, 0.5)
     controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)

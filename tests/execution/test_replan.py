@@ -89,7 +89,7 @@ def test_a_replan_without_a_plan_says_why_as_a_type_and_as_text():
     ],
 )
 def test_a_replan_threshold_at_or_below_zero_is_refused(field, value):
-    with pytest.raises(ConfigError, match=rf"sim.replan.{field} = .* is out of range; valid range: \(0"):
+    with pytest.raises(ConfigError, match=rf"controller.replan.{field} = .* is out of range; valid range: \(0"):
         ReplanConfig(**{field: value})
 
 
@@ -122,7 +122,7 @@ def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_f
     old = plan(goal=1.2, config=config, segment_workers=1)  # the plan whose goal the replan keeps
     # deadlines no busy machine meets too late: this test is about the plan, not the time it takes
     rules = ReplanConfig(search_deadline_s=30.0, first_segment_deadline_s=300.0)
-    executing = dataclasses.replace(old.config, sim=dataclasses.replace(old.config.sim, replan=rules))
+    executing = dataclasses.replace(old.config, controller=dataclasses.replace(old.config.controller, replan=rules))
     event, new = replan(old, executing, start, 4.8, ReplanReason.TRACKING, 0.6, 0.05, scene, segment_workers=1)
     assert event.outcome is ReplanOutcome.PLANNED and event.planned, event.status
     np.testing.assert_allclose(new.trajectory.x[0], start.object_pose, atol=1e-9)  # the measured state
@@ -165,10 +165,10 @@ def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
 @pytest.mark.parametrize(
     "options, named",
     [
-        (["--config", "THRESHOLD"], "sim.replan.theta_error = 0.0 is out of range; valid range: (0, 3.14"),
+        (["--config", "THRESHOLD"], "controller.replan.theta_error = 0.0 is out of range; valid range: (0, 3.14"),
         (
             ["--friction-floor", "0"],
-            "--friction-floor (controller.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
+            "--friction-floor (controller.estimators.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
         ),
         (["--html", "run.html"], "--replan records no playback (--html)"),
         (["--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),

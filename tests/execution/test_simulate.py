@@ -248,7 +248,7 @@ def test_simulate_command_rejects_a_different_scene(scene, short_config, tmp_pat
     assert "scene.box_width = 0.25" in err and "0.2" in err
     assert not (plan_dir / "sim.json").exists()
     assert main(["simulate", str(plan_dir), "--kp", "-1"]) == 2
-    assert "controller.kp" in capsys.readouterr().err
+    assert "controller.impedance.kp" in capsys.readouterr().err
     assert main(["simulate", str(plan_dir), "--forces", str(tmp_path / "forces.gif")]) == 2
     err = capsys.readouterr().err
     assert "forces.gif" in err and ".png" in err

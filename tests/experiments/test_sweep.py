@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.config import Config, ConfigError
+from trajectotree.config import Config, ConfigError, with_values
 from trajectotree.experiments.sweep import SweepSpec, run_sweep, sample_goals
 from trajectotree.experiments.sweep_store import MANIFEST_FILE, ROWS_FILE, TRIALS_DIR, prepare_dir, read_rows
 
@@ -83,15 +83,13 @@ def test_controller_settings_are_part_of_a_simulating_sweep_only(tmp_path):
     their defaults must not block resuming it; a sweep that simulates depends on them."""
 
     def with_gain(spec, kp):
-        return dataclasses.replace(
-            spec, config=dataclasses.replace(spec.config, controller=dataclasses.replace(spec.config.controller, kp=kp))
-        )
+        return dataclasses.replace(spec, config=with_values(spec.config, {"controller.impedance.kp": kp}))
 
     planning, simulating = tmp_path / "plan", tmp_path / "sim"
     prepare_dir(planning, small_spec())
     prepare_dir(simulating, small_spec(simulate=True))
     assert prepare_dir(planning, with_gain(small_spec(), 123.0)) == []
-    with pytest.raises(ConfigError, match="config.controller.kp: 400.0 there, 123.0 now"):
+    with pytest.raises(ConfigError, match="config.controller.impedance.kp: 400.0 there, 123.0 now"):
         prepare_dir(simulating, with_gain(small_spec(simulate=True), 123.0))
 
 

@@ -20,9 +20,11 @@ from trajectotree.config import (
     Config,
     ConfigError,
     ObjectConfig,
+    apply_config_text,
     check_integer,
     clipped_repr,
     config_file_data,
+    config_text_data,
     interval,
     load_config,
 )
@@ -60,6 +62,12 @@ FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and br
 def add_scene_options(group, config_help: str = "YAML file with any Config fields") -> None:
     """--config and the scene options on top of it (scene_overrides reads them)."""
     group.add_argument("--config", metavar="FILE.yaml", help=config_help)
+    group.add_argument(
+        "--config-text",
+        metavar="YAML",
+        help="YAML with any Config fields, applied after --config's file, e.g. "
+        "'{controller: {grasp: {tip_kp: 80}}}' (a field it does not name keeps its value)",
+    )
     group.add_argument(
         "--box-size",
         nargs=2,
@@ -202,7 +210,7 @@ def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True
 def config_from_args(args: argparse.Namespace) -> Config:
     """The Config from --config, then the individual options on top, then the object of the
     hand's YAML (scene.hand.with_hand_object) for what neither of them chose."""
-    config = load_config(args.config) if getattr(args, "config", None) else Config()
+    config = layered_config(args, Config())
     scene, search, cito = scene_overrides(args), {}, {}
     given = set(scene) | config_file_scene_fields(args)
     if getattr(args, "segments", None) is not None:
@@ -223,11 +231,25 @@ def config_from_args(args: argparse.Namespace) -> Config:
         raise in_option_terms(e, args) from None
 
 
+def layered_config(args: argparse.Namespace, base: Config) -> Config:
+    """--config's file (else `base`), then --config-text's YAML on top, as Drake's yaml_load_typed layers."""
+    config = load_config(args.config) if getattr(args, "config", None) else base
+    text = getattr(args, "config_text", None)
+    return config if text is None else apply_config_text(config, text)
+
+
 def config_file_scene_fields(args: argparse.Namespace) -> set[str]:
-    """The scene fields --config's file sets (load_config has checked the file)."""
-    if not getattr(args, "config", None):
-        return set()
-    data = config_file_data(args.config) or {}
+    """The scene fields --config's file and --config-text set (load_config and apply_config_text have
+    checked them)."""
+    fields = set()
+    if getattr(args, "config", None):
+        fields |= _scene_keys(config_file_data(args.config))
+    if getattr(args, "config_text", None) is not None:
+        fields |= _scene_keys(config_text_data(args.config_text))
+    return fields
+
+
+def _scene_keys(data) -> set[str]:
     scene = data.get("scene") if isinstance(data, dict) else None
     return set(scene) if isinstance(scene, dict) else set()
 
@@ -307,14 +329,14 @@ OPTION_FIELDS = {
     "scene.object.circle_radius": ("circle", "--circle"),
     "scene.object.ellipse_semi_axes": ("ellipse", "--ellipse"),
     "cito.formulation": ("formulation", "--formulation"),
-    "controller.kp": ("kp", "--kp"),
-    "controller.kv": ("kv", "--kv"),
-    "controller.object_kp": ("object_kp", "--object-kp"),
-    "controller.object_kd": ("object_kd", "--object-kd"),
-    "controller.tip_kp": ("tip_kp", "--tip-kp"),
-    "controller.tip_kd": ("tip_kd", "--tip-kd"),
+    "controller.impedance.kp": ("kp", "--kp"),
+    "controller.impedance.kv": ("kv", "--kv"),
+    "controller.grasp.object_kp": ("object_kp", "--object-kp"),
+    "controller.grasp.object_kd": ("object_kd", "--object-kd"),
+    "controller.grasp.tip_kp": ("tip_kp", "--tip-kp"),
+    "controller.grasp.tip_kd": ("tip_kd", "--tip-kd"),
     "controller.rate_hz": ("rate", "--rate"),
-    "controller.friction_floor": ("friction_floor", "--friction-floor"),
+    "controller.estimators.friction_floor": ("friction_floor", "--friction-floor"),
 }
 
 

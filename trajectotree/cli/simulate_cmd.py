@@ -14,11 +14,13 @@ import numpy as np
 from trajectotree.cli.common import (
     FIGURE_SUFFIXES,
     HTML_SUFFIXES,
+    OPTION_FIELDS,
     add_scene_options,
     check_executable_hand,
     check_output_dir,
     check_output_file,
     in_option_terms,
+    layered_config,
     print_json,
     scene_overrides,
 )
@@ -37,7 +39,7 @@ from trajectotree.config import (
     check_controller,
     clipped_repr,
     interval,
-    load_config,
+    with_values,
 )
 from trajectotree.io import (
     SIM_JSON,
@@ -95,7 +97,7 @@ def register(subparsers) -> None:
         "--replan",
         action="store_true",
         help="closed loop, and plan again from the measured state at a node when the friction or mass "
-        "estimate or the tracking error says the plan no longer holds (sim.replan); the new plan takes "
+        "estimate or the tracking error says the plan no longer holds (controller.replan); the new plan takes "
         "effect once its measured compute time has passed in simulated time",
     )
     group.add_argument(
@@ -192,28 +194,20 @@ def read_plan_dir(plan_dir: str) -> tuple[dict[str, np.ndarray], Config]:
 
 def execution_config(args, plan_config: Config) -> Config:
     """The plan's config (or --config) with the options on top; its scene must be the plan's."""
-    config = load_config(args.config) if args.config else plan_config
-    scene, gains = scene_overrides(args), {}
-    if args.kp is not None:
-        gains["kp"] = args.kp
-    if args.kv is not None:
-        gains["kv"] = args.kv
-    for name in ("object_kp", "object_kd", "tip_kp", "tip_kd"):
-        if getattr(args, name) is not None:
-            gains[name] = getattr(args, name)
-    if args.rate is not None:
-        gains["rate_hz"] = args.rate
-    if args.friction_floor is not None:
-        gains["friction_floor"] = args.friction_floor
+    config = layered_config(args, plan_config)
+    scene = scene_overrides(args)
+    gains = {
+        name: getattr(args, attribute)
+        for name, (attribute, _) in OPTION_FIELDS.items()
+        if name.startswith("controller.") and getattr(args, attribute, None) is not None
+    }
     if args.controller is not None:
         check_controller(args.controller, "--controller")
     sim = {} if args.controller is None else {"controller": args.controller}
     try:
-        config = dataclasses.replace(
-            config,
-            scene=dataclasses.replace(config.scene, **scene),
-            controller=dataclasses.replace(config.controller, **gains),
-            sim=dataclasses.replace(config.sim, **sim),
+        config = with_values(
+            dataclasses.replace(config, scene=dataclasses.replace(config.scene, **scene)),
+            {**gains, **{f"sim.{k}": v for k, v in sim.items()}},
         )
     except ConfigError as e:
         raise in_option_terms(e, args) from None

@@ -72,7 +72,7 @@ def register(subparsers) -> None:
         "--replan",
         action="store_true",
         help="run those executions with the closed loop replanning from the measured state when the plan no "
-        "longer holds (sim.replan; implies --closed-loop); listed as grasp-replan",
+        "longer holds (controller.replan; implies --closed-loop); listed as grasp-replan",
     )
     p.add_argument(
         "--out",

@@ -7,7 +7,7 @@ but the ObjectMonitor, which samples every plant step:
 
 - `ContactMonitor` reads the plant's `contact_results` and the measured `box_state` and
   reports per finger `in_contact`, `slipping` (the relative tangential velocity at a contact
-  point above controller.slip_speed while the finger pushes at least slip_min_force),
+  point above controller.estimators.slip_speed while the finger pushes at least slip_min_force),
   `force_ratio` |f_t| / f_n and `normal_force` of its force on the box and its `slip_speed`;
   and the box's `tracking_error` (measured - planned pose).
 - `ObjectMonitor` reads the measured `box_state` and the plant's generalized contact forces
@@ -15,7 +15,7 @@ but the ObjectMonitor, which samples every plant step:
   hand's `contact_force` on it in the same step.
 - `FrictionEstimator` (`mu_estimate`): starts at the plan's scene.mu; a loaded contact that
   slides steadily for slip_confirm_time lowers it to the median ratio |f_t| / f_n of the slide
-  (a sliding contact rides its friction cone), never below controller.friction_floor, and
+  (a sliding contact rides its friction cone), never below controller.estimators.friction_floor, and
   nothing raises it.
 - `MassEstimator` (`mass_estimate`): starts at the plan's mass and low-pass filters the
   hand's vertical force on the box over (g + a_y) while the box barely accelerates.
@@ -164,7 +164,8 @@ class ContactMonitor(PeriodicSystem):
         error[2] = wrap_angle(error[2])
         return {
             "in_contact": contacts.in_contact,
-            "slipping": (contacts.normal_force >= g.slip_min_force) & (contacts.slip_speed > g.slip_speed),
+            "slipping": (contacts.normal_force >= g.estimators.slip_min_force)
+            & (contacts.slip_speed > g.estimators.slip_speed),
             "force_ratio": contacts.force_ratio,
             "normal_force": contacts.normal_force,
             "slip_speed": contacts.slip_speed,
@@ -207,13 +208,14 @@ class ObjectMonitor(PeriodicSystem):
 class FrictionEstimator(PeriodicSystem):
     """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (4 each,
     ContactMonitor's), `tracking_error` (3, ContactMonitor's) and `reflex` (1, PushReflex's).
-    Output port `mu_estimate` (1): the plan's friction `mu_plan` until a contact has slid
-    steadily for gains.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
-    slide's last slip_confirm_time, never below gains.friction_floor and never raised.
+    Output port `mu_estimate` (1): the friction the plan assumed, `mu_assumed` (its scene.mu; not the
+    search's planning friction config.mu_plan), until a contact has slid
+    steadily for gains.estimators.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
+    slide's last slip_confirm_time, never below gains.estimators.friction_floor and never raised.
     A slide sample counts while no reflex is on and the box is within
-    gains.friction_evidence_error of the plan (its position, and its angle times
+    gains.estimators.friction_evidence_error of the plan (its position, and its angle times
     `torque_length`), when the plan loads the finger fully (`schedule.force_scale` 1), it
-    pushes with at least gains.friction_evidence_force, its normal force changed by at most
+    pushes with at least gains.estimators.friction_evidence_force, its normal force changed by at most
     STEADY_NORMAL_FORCE since the last sample and its contact neither opens nor closes faster
     than STEADY_APPROACH_SPEED: in Drake's lagged contact model (friction bounded by the
     previous step's elastic normal force) a light contact, or one whose penetration changes (a
@@ -223,10 +225,10 @@ class FrictionEstimator(PeriodicSystem):
     pushes at 0.7, 0.26-0.38 at 0.3-0.4). The median, not the mean: single steady ratios still
     lie up to 0.05 below or 0.02 above it."""
 
-    def __init__(self, mu_plan: float, torque_length: float, schedule: GraspSchedule, gains: ControllerGains):
+    def __init__(self, mu_assumed: float, torque_length: float, schedule: GraspSchedule, gains: ControllerGains):
         period = 1.0 / gains.rate_hz
         # Samples in slip_confirm_time (at least one); a period's rounding must not drop one.
-        self._window = max(int(np.floor(gains.slip_confirm_time / period + 1e-9)), 1)
+        self._window = max(int(np.floor(gains.estimators.slip_confirm_time / period + 1e-9)), 1)
         self._num_fingers = schedule.force_scale.shape[1]
         four = np.zeros(self._num_fingers)
         internal = {
@@ -234,7 +236,7 @@ class FrictionEstimator(PeriodicSystem):
             "slide_ratios": np.zeros(self._num_fingers * self._window),
             "normal_force": four,
         }
-        super().__init__(period, {"mu_estimate": max(mu_plan, gains.friction_floor)}, internal)
+        super().__init__(period, {"mu_estimate": max(mu_assumed, gains.estimators.friction_floor)}, internal)
         self.gains, self.schedule = gains, schedule
         self.slipping_port = self.DeclareVectorInputPort("slipping", self._num_fingers)
         self.force_ratio_port = self.DeclareVectorInputPort("force_ratio", self._num_fingers)
@@ -249,9 +251,12 @@ class FrictionEstimator(PeriodicSystem):
         steady = np.abs(normal - self.state(context, "normal_force")) <= STEADY_NORMAL_FORCE * normal
         steady &= self.approach_speed_port.Eval(context) <= STEADY_APPROACH_SPEED
         loaded = self.schedule.force_scale[self.schedule.index(context.get_time())] >= 1.0
-        pushing = normal >= self.gains.friction_evidence_force
+        pushing = normal >= self.gains.estimators.friction_evidence_force
         pushed = self.reflex_port.Eval(context)[0] > 0.0
-        off = np.abs(self.tracking_error_port.Eval(context) * self._scale).max() > self.gains.friction_evidence_error
+        off = (
+            np.abs(self.tracking_error_port.Eval(context) * self._scale).max()
+            > self.gains.estimators.friction_evidence_error
+        )
         valid = (self.slipping_port.Eval(context) > 0.5) & loaded & steady & pushing & (not pushed) & (not off)
         samples = np.where(valid, self.state(context, "slide_samples") + 1.0, 0.0)  # a slide ends: reset
         ratios = self.state(context, "slide_ratios").reshape(self._num_fingers, self._window)
@@ -261,7 +266,7 @@ class FrictionEstimator(PeriodicSystem):
         if confirmed.any():
             mu = min(mu, float(np.min(np.median(ratios[confirmed], axis=1))))
         return {
-            "mu_estimate": max(mu, self.gains.friction_floor),
+            "mu_estimate": max(mu, self.gains.estimators.friction_floor),
             "slide_samples": samples,
             "slide_ratios": ratios.ravel(),
             "normal_force": normal,
@@ -271,22 +276,27 @@ class FrictionEstimator(PeriodicSystem):
 class MassEstimator(PeriodicSystem):
     """Input ports `contact_force` (3, the hand's force on the box in W and its torque) and
     `acceleration` (3, the box's; both ObjectMonitor's). Output port `mass_estimate` (1, kg):
-    the plan's mass, low-pass filtered (gains.mass_time_constant) towards f_y / (g + a_y)
-    whenever |(a_x, a_y)| < gains.mass_accel_max, within gains.mass_estimate_range x the
+    the plan's mass, low-pass filtered (gains.estimators.mass_time_constant) towards f_y / (g + a_y)
+    whenever |(a_x, a_y)| < gains.estimators.mass_accel_max, within gains.estimators.mass_estimate_range x the
     plan's mass."""
 
     def __init__(self, mass_plan: float, gravity: float, gains: ControllerGains):
         super().__init__(1.0 / gains.rate_hz, {"mass_estimate": mass_plan})
         self.gains, self._gravity = gains, gravity
-        self._range = (gains.mass_estimate_range[0] * mass_plan, gains.mass_estimate_range[1] * mass_plan)
-        self._gain = min(self.period / gains.mass_time_constant, 1.0)  # the filter's step towards a measurement
+        self._range = (
+            gains.estimators.mass_estimate_range[0] * mass_plan,
+            gains.estimators.mass_estimate_range[1] * mass_plan,
+        )
+        self._gain = min(
+            self.period / gains.estimators.mass_time_constant, 1.0
+        )  # the filter's step towards a measurement
         self.contact_force_port = self.DeclareVectorInputPort("contact_force", 3)
         self.acceleration_port = self.DeclareVectorInputPort("acceleration", 3)
 
     def update(self, context) -> dict:
         accel, support = self.acceleration_port.Eval(context), self.contact_force_port.Eval(context)[1]
         # Not held up (the first sample, before any contact force, among them): nothing to weigh.
-        if np.linalg.norm(accel[:2]) >= self.gains.mass_accel_max or support <= 0.0:
+        if np.linalg.norm(accel[:2]) >= self.gains.estimators.mass_accel_max or support <= 0.0:
             return {}
         mass = self.state(context, "mass_estimate")[0]
         measured = support / (self._gravity + accel[1])
@@ -297,16 +307,16 @@ class PushReflex(PeriodicSystem):
     """Input ports `acceleration` and `contact_force` (3 each, the box's: ObjectMonitor's) and
     `mass_estimate` (1). Output ports `disturbance` (2, N in W): the force on the box
     that the hand's measured force and gravity do not explain, m a - f - m g; and `reflex`
-    (1): 1 once |disturbance| has exceeded gains.reflex_force for reflex_confirm_time, held
-    while it does and gains.reflex_hold s after, then falling linearly to 0 over
-    gains.reflex_release s. The disturbance, not the box's acceleration against the plan's:
+    (1): 1 once |disturbance| has exceeded gains.push_reflex.force for reflex_confirm_time, held
+    while it does and gains.push_reflex.hold s after, then falling linearly to 0 over
+    gains.push_reflex.release s. The disturbance, not the box's acceleration against the plan's:
     the fingers push back within 10 ms, after which a 3 N push barely accelerates the box,
     and a finger landing jolts it by 40 m/s^2 for a few ms, which its measured force
     explains."""
 
     def __init__(self, gravity: float, gains: ControllerGains):
         period = 1.0 / gains.rate_hz
-        self._confirm = max(int(np.floor(gains.reflex_confirm_time / period + 1e-9)), 1)  # samples
+        self._confirm = max(int(np.floor(gains.push_reflex.confirm_time / period + 1e-9)), 1)  # samples
         internal = {"pushed_samples": 0.0, "quiet_time": np.inf}
         super().__init__(period, {"disturbance": np.zeros(2), "reflex": 0.0}, internal)
         self.gains = gains
@@ -320,9 +330,13 @@ class PushReflex(PeriodicSystem):
         mass = self.mass_estimate_port.Eval(context)[0]
         accel = self.acceleration_port.Eval(context)[:2]
         disturbance = mass * (accel - self._gravity_W) - self.contact_force_port.Eval(context)[:2]
-        pushed = np.linalg.norm(disturbance) > g.reflex_force
+        pushed = np.linalg.norm(disturbance) > g.push_reflex.force
         samples = self.state(context, "pushed_samples")[0] + 1.0 if pushed else 0.0
         quiet = 0.0 if samples >= self._confirm else self.state(context, "quiet_time")[0] + self.period
-        after = quiet - g.reflex_hold
-        level = 1.0 if after <= 0.0 else (max(0.0, 1.0 - after / g.reflex_release) if g.reflex_release > 0 else 0.0)
+        after = quiet - g.push_reflex.hold
+        level = (
+            1.0
+            if after <= 0.0
+            else (max(0.0, 1.0 - after / g.push_reflex.release) if g.push_reflex.release > 0 else 0.0)
+        )
         return {"disturbance": disturbance, "reflex": level, "pushed_samples": samples, "quiet_time": quiet}

@@ -24,7 +24,7 @@ the box and the hand (the plant's; there is no estimator) and
      with fingertip targets the planned box-frame fingertip positions mapped through the
      MEASURED box pose (a switching finger follows its box-frame path, lifted): a finger
      in contact is force-controlled, a free one position-controlled;
-  4. with gains.hand_dynamics, also M(q) J^+ (a_target - Jdot qdot) + Coriolis + joint damping, the torques
+  4. with gains.grasp.hand_dynamics, also M(q) J^+ (a_target - Jdot qdot) + Coriolis + joint damping, the torques
      that move the links themselves (a touching finger with its box point, a swinging one along its path).
 Soft fingertip springs with strong object gains: stiff springs anchored to the
 measured box inject tangential force as the spheres roll and lose the grasp.
@@ -105,8 +105,8 @@ class ImpedanceController(LeafSystem):
         p_WF, v_WF, J_WF = self.fingertip_kinematics(hand_state)
         shape = (self._num_fingers, 2)
         F = (
-            self.gains.kp * (np.reshape(p_ref, shape) - p_WF)
-            + self.gains.kv * (np.reshape(v_ref, shape) - v_WF)
+            self.gains.impedance.kp * (np.reshape(p_ref, shape) - p_WF)
+            + self.gains.impedance.kv * (np.reshape(v_ref, shape) - v_WF)
             + np.reshape(f_ref, shape)
         )
         tau_v = np.einsum("fiv,fi->v", J_WF, F) - self._plant.CalcGravityGeneralizedForces(self._plant_context)
@@ -272,7 +272,7 @@ class GraspController(LeafSystem):
         *,
         mu: float,
         closed_loop: bool = False,
-        plan_mu: float | None = None,
+        mu_assumed: float | None = None,
     ):
         super().__init__()
         c = scene.config
@@ -284,13 +284,13 @@ class GraspController(LeafSystem):
         self._scene_config = c
         self._inertia = c.inertia_zz()  # a uniform plate (the box: m (w^2 + h^2) / 12) unless scene.object_inertia
         self._friction_safety = mu / c.mu
-        self._plan_mu = c.mu if plan_mu is None else plan_mu  # the friction the plan in effect assumes
+        self._mu_assumed = c.mu if mu_assumed is None else mu_assumed  # the friction the plan in effect assumes
         self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (F, 2) N m
         check_finger_major(scene)
         self._num_fingers, self._num_joints = scene.num_fingers, scene.num_hand_joints
         # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
         self._qp = GraspForceQp(
-            mu, c.shape.circumradius, gains.wrench_weight, num_fingers=scene.num_fingers, torque_rows=closed_loop
+            mu, c.shape.circumradius, gains.grasp.wrench_weight, num_fingers=scene.num_fingers, torque_rows=closed_loop
         )
         B = scene.plant.MakeActuationMatrix()  # (nv, nu), a selection
         self._u_from_tau = B[scene.hand_v_indices].T  # hand-joint torques -> actuation
@@ -308,7 +308,7 @@ class GraspController(LeafSystem):
             self._clock_state = self.DeclareDiscreteState(np.zeros(scene.num_fingers))
             self._landing = next_landing(schedule.force_scale)
             # The friction the QP's cones use: the estimate, low-pass filtered (cone_friction).
-            self._cone_state = self.DeclareDiscreteState(np.array([self._plan_mu]))
+            self._cone_state = self.DeclareDiscreteState(np.array([self._mu_assumed]))
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.InitializeActuation)
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
@@ -355,18 +355,18 @@ class GraspController(LeafSystem):
 
     def cone_friction(self, previous: float, estimate: float) -> float:
         """The friction of the QP's cones one control period after `previous`: a first-order lag
-        (gains.cone_time_constant) towards the friction `estimate`, so that the grasp forces move
+        (gains.grasp.cone_time_constant) towards the friction `estimate`, so that the grasp forces move
         over tens of milliseconds when the estimate falls, not in one step."""
-        tau = self.gains.cone_time_constant
+        tau = self.gains.grasp.cone_time_constant
         if tau <= 0.0:
             return estimate
         return previous + (estimate - previous) * min(1.0 / (self.gains.rate_hz * tau), 1.0)
 
     def landing_triggered(self, estimates: Estimates) -> bool:
         """The landing reflex is wanted: a push is on, or the friction estimate fell
-        gains.land_friction_drop below the plan's (its stances of fewer fingers may slip)."""
+        gains.landing_reflex.friction_drop below the plan's (its stances of fewer fingers may slip)."""
         g = self.gains
-        return estimates.reflex > 0.0 or estimates.mu < self._plan_mu - g.land_friction_drop
+        return estimates.reflex > 0.0 or estimates.mu < self._mu_assumed - g.landing_reflex.friction_drop
 
     def path_lag(self, clocks, box_state, hand_state) -> np.ndarray:
         """(F,) m, how far each measured fingertip is from its target at its schedule sample `clocks`."""
@@ -379,26 +379,26 @@ class GraspController(LeafSystem):
     def landing_clocks(self, n: int, previous: np.ndarray, estimates: Estimates, lag=None) -> np.ndarray:
         """(F,) the schedule sample each finger follows at plan sample n. The plan's (n), but a
         finger that swings while the landing reflex is wanted (or that already runs ahead: a
-        landing once begun is finished) runs its swing gains.land_speedup x as fast, up to its
+        landing once begun is finished) runs its swing gains.landing_reflex.speedup x as fast, up to its
         next planned landing, and then holds there until the plan catches up: its box-frame
         path lifted as planned, so that it lands where the plan lands it, only sooner. Its sample waits
-        while the fingertip lags its target by more than gains.land_lag (`lag` (F,) m, path_lag; None:
+        while the fingertip lags its target by more than gains.landing_reflex.lag (`lag` (F,) m, path_lag; None:
         none lags): a target run far ahead drew the finger after it at 3 m/s into the box."""
         # within this schedule: a replanning phase's controller takes the last phase's state
         clocks = np.minimum(np.maximum(previous, n), len(self.schedule.X) - 1)
-        if self.gains.land_speedup <= 1.0:
+        if self.gains.landing_reflex.speedup <= 1.0:
             return np.full(self._num_fingers, n)
         g = self.gains
         wanted = self.landing_triggered(estimates)
-        approach = int(round(g.land_approach_time / self.schedule.period))
+        approach = int(round(g.landing_reflex.approach_time / self.schedule.period))
         for i, c in enumerate(clocks):
             landing = self._landing[c, i]
             if landing < 0 or self.schedule.force_scale[c, i] >= 1.0:
                 continue  # holding (or landed early and waiting), or no landing ahead
-            if (wanted or c > n) and (lag is None or lag[i] <= g.land_lag):
+            if (wanted or c > n) and (lag is None or lag[i] <= g.landing_reflex.lag):
                 # The last land_approach_time of the path slower: at the full speed-up the sphere hit the box
                 # 4.5 mm deep with 9 N and knocked the other fingers off.
-                speedup = g.land_speedup if landing - c > approach else g.land_approach_speedup
+                speedup = g.landing_reflex.speedup if landing - c > approach else g.landing_reflex.approach_speedup
                 clocks[i] = min(max(previous[i], n - 1) + int(round(speedup)), landing)
         return clocks
 
@@ -407,11 +407,11 @@ class GraspController(LeafSystem):
         s, g = self.schedule, self.gains
         error = s.X[n] - box_state[:3]
         error[2] = (error[2] + np.pi) % (2 * np.pi) - np.pi
-        kp, kd = g.object_kp, g.object_kd
+        kp, kd = g.grasp.object_kp, g.grasp.object_kd
         if estimates is not None:
             # kd grows with the square root of kp: the same damping ratio, a faster response.
-            boost = 1.0 + estimates.reflex * (g.reflex_gain - 1.0)
-            kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
+            boost = 1.0 + estimates.reflex * (g.push_reflex.gain - 1.0)
+            kp, kd = boost * g.grasp.object_kp, np.sqrt(boost) * g.grasp.object_kd
         return s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
 
     def desired_wrench(self, n: int, box_state, estimates: Estimates | None = None) -> np.ndarray:
@@ -424,7 +424,7 @@ class GraspController(LeafSystem):
         a = self.desired_acceleration(n, box_state, estimates)
         wrench = np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
         if estimates is not None:
-            wrench[:2] -= g.disturbance_feedforward * estimates.disturbance
+            wrench[:2] -= g.push_reflex.disturbance_feedforward * estimates.disturbance
         return wrench
 
     def finger_forces(
@@ -455,29 +455,29 @@ class GraspController(LeafSystem):
                 G,
                 self.desired_wrench(n, box_state),
                 s.lambda_plan[at],
-                scale * g.min_normal_force,
-                scale * g.max_normal_force,
+                scale * g.grasp.min_normal_force,
+                scale * g.grasp.max_normal_force,
             )
         else:
             J_WF, rest = joints
             A, lower, upper, room = torque_rows(J_WF, n_W, t_W, self._tip_radius, rest, self._tau_max)
-            hi = scale * g.max_normal_force
+            hi = scale * g.grasp.max_normal_force
             safety = self._friction_safety + estimates.reflex * max(
-                g.reflex_friction_safety - self._friction_safety, 0.0
+                g.push_reflex.friction_safety - self._friction_safety, 0.0
             )
             self._qp.set_friction(safety * estimates.mu)
             # During the reflex the squeeze the motors can make is the QP's target push, its least the plan's.
             target = s.lambda_plan[at].copy()
-            squeeze = estimates.reflex * np.minimum(scale * g.reflex_squeeze, np.minimum(room, hi))
+            squeeze = estimates.reflex * np.minimum(scale * g.push_reflex.squeeze, np.minimum(room, hi))
             target[:, 0] = np.maximum(target[:, 0], squeeze)
             lam = self._qp.solve(
                 G,
                 self.desired_wrench(n, box_state, estimates),
                 target,
-                np.minimum(scale * g.min_normal_force, np.minimum(room, hi)),
+                np.minimum(scale * g.grasp.min_normal_force, np.minimum(room, hi)),
                 hi,
                 torque=(A, lower, upper),
-                torque_weight=1.0 + estimates.reflex * (g.reflex_torque_weight - 1.0),
+                torque_weight=1.0 + estimates.reflex * (g.push_reflex.torque_weight - 1.0),
             )
         return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
 
@@ -498,8 +498,10 @@ class GraspController(LeafSystem):
         r_W = s.p_BF[at] @ R.T
         p_target = box_state[:2] + r_W
         if ahead.any():  # a finger landing early runs its path faster
-            near = self._landing[at] - at[0] <= int(round(g.land_approach_time / s.period))
-            rate = np.where(ahead, np.where(near, g.land_approach_speedup, g.land_speedup), 1.0)[:, None]
+            near = self._landing[at] - at[0] <= int(round(g.landing_reflex.approach_time / s.period))
+            rate = np.where(ahead, np.where(near, g.landing_reflex.approach_speedup, g.landing_reflex.speedup), 1.0)[
+                :, None
+            ]
         else:
             rate = np.ones((self._num_fingers, 1))
         v_target = box_state[3:5] + box_state[5] * perp(r_W) + rate * (s.v_BF[at] @ R.T)
@@ -509,8 +511,8 @@ class GraspController(LeafSystem):
         # target fights the friction force as the sphere rolls (a slow in-grasp turn ran 0.05 rad
         # ahead); a lifting finger's normal spring pulled it off while the QP still counted on it.
         error = (1.0 - scale)[:, None] * (p_target - p_WF)
-        kp = np.where(ahead, g.land_tip_kp, g.tip_kp)[:, None]
-        kd = np.where(ahead, g.land_tip_kd, g.tip_kd)[:, None]
+        kp = np.where(ahead, g.landing_reflex.tip_kp, g.grasp.tip_kp)[:, None]
+        kd = np.where(ahead, g.landing_reflex.tip_kd, g.grasp.tip_kd)[:, None]
         spring = kp * error + kd * (v_target - v_WF)
         joints = None
         if estimates is not None:
@@ -521,12 +523,12 @@ class GraspController(LeafSystem):
         # tangential force also turns the second link (without it a static hold settled 0.035 rad off).
         lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)  # perp(r_FC) . f
         tau = np.einsum("fij,fi->fj", J_WF, spring + f_W) + lever[:, None] + g_hand
-        if g.hand_dynamics:
+        if g.grasp.hand_dynamics:
             tau = tau + self.link_torques(n, q, box_state, r_W, v_target, J_WF, estimates)
         return self._u_from_tau @ tau.ravel()
 
     def link_torques(self, n, q, box_state, r_W, v_target, J_WF, estimates) -> np.ndarray:
-        """(F, 2) the joint torques that move the fingers' own links (gains.hand_dynamics)."""
+        """(F, 2) the joint torques that move the fingers' own links (gains.grasp.hand_dynamics)."""
         s = self.schedule
         R = rotation_2d(box_state[2])
         # The motors also move the links: a finger in contact accelerates with the box point it touches

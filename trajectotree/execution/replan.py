@@ -14,7 +14,7 @@ plan's first segment before the others (keyframes.solve_first_segment_first) and
 effect once that segment's measured wall-clock compute time has passed in simulated time; each later
 segment begins no earlier than its own measured readiness (the last attempt of it and of its two
 neighbours, whose joint retries could replace it), so the hand holds at a node while a segment is not
-ready. The search gets sim.replan.search_deadline_s, and the first segment must be ready within
+ready. The search gets controller.replan.search_deadline_s, and the first segment must be ready within
 first_segment_deadline_s of the measured state. A
 start the planner refuses, a search without a plan (in time or at all) or a first segment that fails
 (or is not solved in time) is recorded with its typed reason
@@ -89,7 +89,7 @@ def replan_reason(execution, context, assumed: SceneConfig, config: Config) -> R
             ("contact_monitor", "in_contact"),
         )
     }
-    rules = config.sim.replan
+    rules = config.controller.replan
     if value["mu_estimate"][0] < assumed.mu - rules.friction_drop:
         return ReplanReason.FRICTION
     if abs(value["mass_estimate"][0] - assumed.box_mass) > rules.mass_change * assumed.box_mass:
@@ -231,7 +231,7 @@ def simulate_replanning(
     assumed = plan.config.scene  # what the plan in effect assumes (the last new plan's estimates)
     while True:
         execution = build_execution_diagram(
-            reference, config, conditions=conditions, closed_loop=True, plan_mu=assumed.mu
+            reference, config, conditions=conditions, closed_loop=True, mu_assumed=assumed.mu
         )
         simulator = Simulator(execution.diagram, execution.initial_context(reference))
         if context is not None:  # the same systems: the state carries over (SceneGraph's geometry ids do not)
@@ -243,7 +243,7 @@ def simulate_replanning(
         checks = [(t, None) for t in phase.checks]
         if phase.ends_short_s is not None:
             checks.append((phase.ends_short_s, ReplanReason.PLAN_ENDS_SHORT))
-        for t_check, forced in checks if len(events) < config.sim.replan.max_replans else ():
+        for t_check, forced in checks if len(events) < config.controller.replan.max_replans else ():
             if t_check <= now + 1e-9:
                 continue
             simulator.AdvanceTo(t_check)
@@ -297,8 +297,8 @@ def replan(
     segment_workers: int | None,
 ) -> tuple[ReplanEvent, PlanResult | None]:
     """Plans from the measured `start` to `plan`'s goal with the estimated friction and mass (the
-    search within sim.replan.search_deadline_s, the first segment first); the event and the new plan."""
-    rules = config.sim.replan
+    search within controller.replan.search_deadline_s, the first segment first); the event and the new plan."""
+    rules = config.controller.replan
     assumed = dataclasses.replace(
         config,
         scene=dataclasses.replace(

@@ -48,7 +48,7 @@ def run_simulation(
     controller keeps the plan's values. closed_loop (grasp controller only) watches the
     contacts, estimates the friction and the mass for the controller and adds the push
     reflex (trajectotree.execution.closed_loop; the result's closed_loop holds what they saw);
-    off, the run is the open-loop one. `replan` (True: config.sim.replan's rules, or a ReplanConfig;
+    off, the run is the open-loop one. `replan` (True: config.controller.replan's rules, or a ReplanConfig;
     a PlanResult only, since the planner needs its goal and config) runs the closed loop and plans
     again from the measured state when the plan no longer holds (trajectotree.execution.replan; the
     result's replans list each time; the later segments of a new plan on `segment_workers` local
@@ -112,7 +112,7 @@ def _replanning(plan, config: Config, replan, conditions, controller, outputs, s
                 problem="is neither a bool nor a ReplanConfig",
                 valid="True, False or a ReplanConfig",
             )
-        config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, replan=replan))
+        config = dataclasses.replace(config, controller=dataclasses.replace(config.controller, replan=replan))
     if controller is not None:
         config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, controller=controller))
     return simulate_replanning(plan, config, conditions=conditions, segment_workers=segment_workers)

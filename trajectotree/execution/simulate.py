@@ -258,26 +258,26 @@ def execution_schedule(reference: Reference, config: Config, scene: Scene) -> Gr
         tip_radius=scene.tip_radius,
         period=1.0 / gains.rate_hz,
         duration=reference.duration + config.sim.settle_time,
-        ramp_time=gains.ramp_time,
-        swing_lift=gains.swing_lift,
-        contact_distance=gains.contact_distance,
+        ramp_time=gains.grasp.ramp_time,
+        swing_lift=gains.grasp.swing_lift,
+        contact_distance=gains.grasp.contact_distance,
     )
 
 
 def add_grasp_controller(
-    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False, plan_mu=None
+    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False, mu_assumed=None
 ) -> GraspController:
     """The GraspController with the plan's scene (mass, size) and friction cones at
-    max(search.friction_safety, controller.friction_safety) x scene.mu (never less friction than
+    max(search.friction_safety, controller.grasp.friction_safety) x scene.mu (never less friction than
     the plan assumed), reading the box and hand state; with closed_loop, its estimate and
-    reflex ports are left for add_closed_loop to connect. plan_mu: the friction the plan in
+    reflex ports are left for add_closed_loop to connect. mu_assumed: the friction the plan in
     effect assumes, where its landing reflex compares the estimate (None: scene.mu)."""
     scene, gains = build_scene(config.scene), config.controller
     schedule = execution_schedule(reference, config, scene)
-    mu_control = max(config.search.friction_safety, gains.friction_safety) * config.scene.mu
+    mu_control = max(config.search.friction_safety, gains.grasp.friction_safety) * config.scene.mu
     controller = builder.AddNamedSystem(
         "grasp_controller",
-        GraspController(scene, schedule, gains, mu=mu_control, closed_loop=closed_loop, plan_mu=plan_mu),
+        GraspController(scene, schedule, gains, mu=mu_control, closed_loop=closed_loop, mu_assumed=mu_assumed),
     )
     builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
     builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
@@ -340,13 +340,13 @@ def build_execution_diagram(
     controller: str | None = None,
     conditions: Conditions = Conditions(),
     closed_loop: bool = False,
-    plan_mu: float | None = None,
+    mu_assumed: float | None = None,
 ) -> ExecutionDiagram:
     """The Diagram that executes `reference` with `controller` (default
     config.sim.controller) in the world `conditions` describe; controlled=False applies
     zero torque (the open-loop hand, for checking that the controller holds the box).
     closed_loop adds the contact monitor, the estimators and the push reflex around the
-    grasp controller (add_closed_loop) and their loggers. plan_mu: the friction the plan in
+    grasp controller (add_closed_loop) and their loggers. mu_assumed: the friction the plan in
     effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
     kind = check_closed_loop(check_controller(controller or config.sim.controller), closed_loop and controlled)
     builder = DiagramBuilder()
@@ -363,7 +363,7 @@ def build_execution_diagram(
         actuation = add_paper_controller(builder, plant, hand, reference, config).actuation_port
     else:
         grasp = add_grasp_controller(
-            builder, plant, hand, box, reference, config, closed_loop=closed_loop, plan_mu=plan_mu
+            builder, plant, hand, box, reference, config, closed_loop=closed_loop, mu_assumed=mu_assumed
         )
         actuation = grasp.actuation_port
     builder.Connect(actuation, plant.get_actuation_input_port())

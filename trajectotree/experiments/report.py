@@ -438,6 +438,6 @@ REFUSED_NOTES = """
 ## Replans without a plan
 
 Each replan that gave no new plan, per goal: the search refused at the estimated friction (no plan,
-or none within sim.replan.search_deadline_s), the planner refused the measured start (moving, a finger
+or none within controller.replan.search_deadline_s), the planner refused the measured start (moving, a finger
 off, not in closure), or the new plan's first segment failed; the old plan went on.
 """

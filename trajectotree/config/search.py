@@ -1,0 +1,232 @@
+"""The contact-sequence search's configuration (SearchConfig) and the goal it plans for (GoalPose),
+with the segments a path from the start to a goal takes."""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+from dataclasses import dataclass
+
+from trajectotree.config.checks import (
+    MAX_FORCE,
+    ConfigError,
+    check_bool,
+    check_integer,
+    check_length,
+    check_range,
+)
+from trajectotree.config.scene import SceneConfig
+
+MAX_GOAL_ROTATION = 20 * math.pi  # rad, the largest goal rotation either way: ten turns
+MAX_NODES = 400  # search.num_nodes at most: a ten-turn goal takes 238 with the default segment rotations
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    """The contact-sequence planner (paper Sec. III-A, Algorithm 1)."""
+
+    # N, nodes in the object path (tree depth), incl. the start; None: from the goal's distance
+    # (segments_for: the paper's 9 segments for a goal within pi, more for a longer one)
+    num_nodes: int | None = None
+    min_segments: int = 9  # segments of any goal the first_rotation covers: the paper's N = 10 nodes
+    # rad, the rotation the first min_segments segments make together at most: the paper's half turn
+    # (pi/9 each), for which the initial grasp is chosen.
+    first_rotation: float = math.pi
+    # rad, the most each further segment turns the object: gaiting sustained over turns needs more
+    # switches than the first half turn, whose initial grasp suits it (2 pi in 18 segments: no plan from
+    # the 200 best initial grasps; in 21, a plan from the first).
+    max_segment_rotation: float = math.pi / 12
+    # m, the most each segment moves the object: a fingertip holding its contact moves with it, and
+    # 0.01 m is a third of what a pi/12 turn moves a corner of the 0.2 m box.
+    max_segment_translation: float = 0.01
+    num_displacements: int = 17  # |D_cp|, contact displacements per free finger (odd, incl. zero)
+    # m, arclength spacing of the displacements in D_cp (17 x 0.02: moves up to 0.16 m), long enough
+    # that a +-pi goal fits in the 9 contact switches of the default 10 nodes.
+    displacement_step: float = 0.02
+    # Initial contact of each finger: arclength (m) along the box boundary, counter-clockwise
+    # from the corner (+w/2, -h/2). None: the planner ranks candidate grasps for the box and
+    # roots the search at the best ones in turn (trajectotree.search.initial_grasp).
+    initial_arclengths: tuple[float, ...] | None = None
+    # bool: initial_arclengths are where a measured start's fingers are (trajectotree.planning.start): the
+    # root keeps them even near a corner or with two fingertips closer than their diameter, as they are
+    measured_start: bool = False
+    nominal_joint2: float = math.pi / 4  # rad, heuristic: prefer second joints near this angle
+    min_closure_margin: float = 1e-3  # N, form-closure LP margin d* must exceed this
+    # Plans use mu_plan = friction_safety * scene.mu (every grasp, every three-finger stance and
+    # the CITO friction cones), so the executed grasp has friction to spare. 1.0 is the paper.
+    friction_safety: float = 0.7
+    # bool: every three-finger stance (all four fingers in a segment without a switch) must also be in
+    # closure at mu_plan, on its faces and rolled_corner_gap short of their corners, at the contacts its
+    # sticking fingertip spheres roll to (trajectotree.search.stance). False: the paper.
+    rolled_stances: bool = True
+    # m, how far short of a corner (a vertex ending a side) a stance's rolled contacts must stay: a sphere
+    # that rolls onto a corner pivots over it, its normal turning by the corner's angle; about twice the
+    # rolling prediction's error in simulation (trajectotree.search.stance). Used with rolled_stances only.
+    rolled_corner_gap: float = 0.002
+    # N, a switch is refused when its three holding fingers need more than this total normal force
+    # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
+    # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
+    max_stance_force: float = 10.0
+    # N, the push a stance (the fingers holding while one switches) should resist: a node's children whose
+    # holding fingers resist a push of this much along each of +-x and +-y in W (trajectotree.search.stance.
+    # PushCapacityLp at mu_plan, each finger within push_normal_force and its motors) are tried first, the others
+    # by how far short they fall, and only then by the paper's heuristic. An order, not a test: the same tree,
+    # within the same budgets. 0: the paper's order.
+    push_capacity: float = 6.0
+    push_normal_force: float = 8.0  # N, each finger's normal-force bound in the push capacity (the grasp controller's)
+    # m, arclength spacing of the candidate initial contacts when initial_arclengths is None
+    # (trajectotree.search.initial_grasp ranks every reachable grid grasp by its worst three-finger stance).
+    initial_grid_step: float = 0.02
+    # candidate initial grasps the search is rooted at, best first (per contact grid), many because a
+    # small polygon's trees die within a few expansions, so more roots are cheap.
+    max_initial_grasps: int = 200
+    root_expansions: int = 2000  # node budget of the search from one initial grasp (of each window of it)
+    # Segments one depth-first search looks ahead: the paper's 9, so a path of up to 9 segments is
+    # searched as Algorithm 1 does; a longer one window by window (trajectotree.search.tree), which
+    # keeps its search time linear in its length.
+    window_segments: int = 9
+    # Segments of a window's path kept before the next window is searched from their end, each kept
+    # node chosen seeing the 4 beyond it (3, 4 and 6 took 10-35 % more expansions on 8 long goals).
+    commit_segments: int = 5
+    max_expansions: int = 20000  # node budget of the search (all initial grasps together)
+    time_budget_s: float = 30.0  # s, wall-clock budget of the search
+    # When no plan is found, the search is rerun up to this many times on a finer contact grid
+    # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
+    # move), within the same budgets, for objects whose short faces hold few grid contacts.
+    # 0: the paper's single grid.
+    grid_refinements: int = 1
+
+    def __post_init__(self):
+        if self.num_nodes is not None:
+            check_integer("search.num_nodes", self.num_nodes, 2, MAX_NODES)
+        check_integer("search.min_segments", self.min_segments, 1, MAX_NODES - 1)
+        check_range("search.first_rotation", self.first_rotation, 0.0, MAX_GOAL_ROTATION)
+        check_range("search.max_segment_rotation", self.max_segment_rotation, 0.01, math.pi / 2)
+        check_range("search.max_segment_translation", self.max_segment_translation, 0.001, 0.1)
+        check_integer("search.num_displacements", self.num_displacements, 1, 201)
+        if self.num_displacements % 2 == 0:
+            raise ConfigError(
+                field="search.num_displacements",
+                value=self.num_displacements,
+                problem="is even (the displacements are symmetric around zero)",
+                valid="odd integers in [1, 201]",
+            )
+        check_range("search.displacement_step", self.displacement_step, 0.0, 0.2, low_open=True)
+        if self.initial_arclengths is not None:
+            # the count must be the hand's finger count, which only the scene knows (search.tree checks it)
+            if len(self.initial_arclengths) < 3:
+                raise ConfigError(
+                    field="search.initial_arclengths",
+                    value=self.initial_arclengths,
+                    problem=f"has {len(self.initial_arclengths)} entries",
+                    valid="one arclength (m) per finger of the hand (at least 3)",
+                )
+            for i, s in enumerate(self.initial_arclengths):
+                check_range("search.initial_arclengths", s, 0.0, 10.0, index=(i,))
+        check_range("search.nominal_joint2", self.nominal_joint2, -math.pi, math.pi)
+        check_range("search.min_closure_margin", self.min_closure_margin, 0.0, MAX_FORCE)
+        check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
+        check_bool("search.rolled_stances", self.rolled_stances)
+        check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
+        check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
+        check_range("search.push_capacity", self.push_capacity, 0.0, 100.0)
+        check_range("search.push_normal_force", self.push_normal_force, 0.0, 1000.0, low_open=True)
+        check_range("search.initial_grid_step", self.initial_grid_step, 0.001, 0.1)
+        check_integer("search.window_segments", self.window_segments, 1, 100)
+        check_integer("search.commit_segments", self.commit_segments, 1, self.window_segments)
+        for name in ("max_initial_grasps", "root_expansions", "max_expansions"):
+            check_integer(f"search.{name}", getattr(self, name), 1)
+        check_range("search.time_budget_s", self.time_budget_s, 0.0, 86400.0, low_open=True)  # s, a day
+        check_integer("search.grid_refinements", self.grid_refinements, 0, 3)
+        finest = 2**self.grid_refinements
+        if (self.num_displacements - 1) * finest + 1 > 201 or self.initial_grid_step / finest < 0.001:
+            raise ConfigError(
+                field="search.grid_refinements",
+                value=self.grid_refinements,
+                problem=f"refines num_displacements {self.num_displacements} to "
+                f"{(self.num_displacements - 1) * finest + 1} (at most 201) and initial_grid_step "
+                f"{self.initial_grid_step} m to {self.initial_grid_step / finest:g} m (at least 0.001)",
+                valid="fewer refinements",
+            )
+
+
+def mu_plan(scene: SceneConfig, search: SearchConfig) -> float:
+    """The friction coefficient every plan may use, search.friction_safety x scene.mu: the search's
+    grasps and stances and the CITO friction cones alike."""
+    return search.friction_safety * scene.mu
+
+
+@dataclass(frozen=True)
+class GoalPose:
+    """The pose in W the object is to end at: orientation theta (rad, any real number within
+    +-MAX_GOAL_ROTATION: 2 pi is one full turn, -3 pi one and a half the other way) and position
+    (x, y) (m; None: the start's, as a rotation goal). results.check_goal checks one; in a config
+    file (its goal section) theta None means the file sets no goal."""
+
+    theta: float | None = None
+    position: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        if self.theta is not None:
+            check_goal_rotation("goal.theta", self.theta)
+        if self.position is not None:
+            check_length("goal.position", self.position, 2, "x m, y m")
+            for i, v in enumerate(self.position):
+                check_range("goal.position", v, -1.0, 1.0, index=(i,))  # m, as scene.initial_pose
+
+    def pose(self, start) -> tuple[float, float, float]:
+        """(x, y, theta) of this goal for an object starting at pose `start` (x, y, theta)."""
+        x, y = (float(start[0]), float(start[1])) if self.position is None else self.position
+        return (x, y, float(self.theta))
+
+    def to_json(self) -> dict:
+        return {"theta": self.theta, "position": None if self.position is None else list(self.position)}
+
+
+# The bound as messages state it: 20 pi in 8 decimals rounded down, so that the printed bound is within it.
+GOAL_ROTATION_BOUND = f"[-20 pi, 20 pi] rad, 20 pi = {math.floor(MAX_GOAL_ROTATION * 1e8) / 1e8:.8f}"
+
+
+def check_goal_rotation(name: str, value, index: tuple[int, ...] = ()) -> float:
+    """A goal orientation (rad): a finite number within +-MAX_GOAL_ROTATION; ConfigError naming
+    `name` otherwise (results.check_goal, the one check of a whole goal, uses it)."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or abs(value) > MAX_GOAL_ROTATION + 1e-9
+    ):
+        raise ConfigError(field=name, index=index, value=value, valid=GOAL_ROTATION_BOUND)
+    return float(value)
+
+
+def segments_for(search: SearchConfig, start, goal: GoalPose) -> int:
+    """The transition segments S of the path from pose `start` to `goal`: search.num_nodes - 1 when
+    it is set, else enough that the first min_segments turn the object by first_rotation at most
+    and each further one by max_segment_rotation, and each moves it by max_segment_translation at
+    most. ConfigError when that is more than MAX_NODES - 1."""
+    if search.num_nodes is not None:
+        return search.num_nodes - 1
+    x, y, theta = goal.pose(start)
+    turn = abs(theta - float(start[2]))
+    shift = math.hypot(x - float(start[0]), y - float(start[1]))
+    beyond = max(turn - search.first_rotation, 0.0) / search.max_segment_rotation
+    segments = max(
+        search.min_segments + math.ceil(beyond - 1e-9),  # a rotation of exactly k steps takes k, not k + 1
+        math.ceil(shift / search.max_segment_translation - 1e-9),
+    )
+    if segments > MAX_NODES - 1:
+        raise ConfigError(
+            field="search.num_nodes",
+            value=segments + 1,
+            shown=f"{segments + 1} (for a goal {turn:.4g} rad and {shift:.4g} m from the start)",
+            problem=f"would be needed at search.max_segment_rotation {search.max_segment_rotation:g} rad and "
+            f"search.max_segment_translation {search.max_segment_translation:g} m",
+            valid=f"at most {MAX_NODES} nodes: larger segment limits, or search.num_nodes",
+        )
+    return segments
+
+
+def with_segments(search: SearchConfig, start, goal: GoalPose) -> SearchConfig:
+    """`search` with num_nodes set for the path from `start` to `goal` (segments_for)."""
+    return dc.replace(search, num_nodes=segments_for(search, start, goal) + 1)
