@@ -109,3 +109,9 @@ def test_a_plan_json_with_the_flat_controller_keys_loads_them_into_their_groups(
     assert (c.grasp.tip_kp, c.push_reflex.squeeze, c.landing_reflex.lag, c.impedance.kp) == (60.0, 3.0, 0.03, 300.0)
     assert (c.rate_hz, c.replan.max_replans, config.sim.settle_time) == (250.0, 2, 0.2)
     assert config_from_dict(config_to_dict(config)) == config  # today's layout round-trips
+
+
+def test_text_where_a_list_belongs_is_refused_not_split_into_characters():
+    """Drake's loader reads "123" for a list of floats as (1.0, 2.0, 3.0): the schema check refuses it first."""
+    with pytest.raises(ConfigError, match=r"search.initial_arclengths = '123' is not a list; expected"):
+        apply_config_text(Config(), "{search: {initial_arclengths: '123'}}")

@@ -251,13 +251,14 @@ def _type_name(kind) -> str:
     return kind.__name__ if isinstance(kind, type) else str(kind)  # float, tuple[float, float, float]
 
 
-def _diagnose(cls, data, path: str) -> None:
-    """YamlError naming the first key of mapping `data` (for dataclass `cls`, at `path`) that Drake's
-    loader refuses: an unknown key, a mapping or list where none belongs, or a value of another type.
-    Drake's own message may name only the value, so each is loaded alone."""
+def _check(cls, data, path: str, leaves: bool) -> None:
+    """YamlError naming the first key of mapping `data` (for dataclass `cls`, at `path`) that does not
+    fit the schema: an unknown key, anything but a mapping for a dataclass or anything but a list for a
+    tuple (Drake's loader would split a string into its characters), and with `leaves`, a value Drake's
+    loader refuses, loaded alone because Drake's own message may name only the value."""
     hints = typing.get_type_hints(cls)
     if not isinstance(data, dict):
-        raise YamlError(f"{path} must be a mapping with keys {list(hints)}, got {clipped_repr(data)}")
+        raise YamlError(f"{path or 'the file'} must be a mapping with keys {list(hints)}, got {clipped_repr(data)}")
     for key, value in data.items():
         name = f"{path}.{clip(str(key))}" if path else clip(str(key))
         if key not in hints:
@@ -267,11 +268,13 @@ def _diagnose(cls, data, path: str) -> None:
             continue
         element = typing.get_args(kind)[0] if typing.get_origin(kind) is tuple else None
         if dc.is_dataclass(kind):
-            _diagnose(kind, value, name)
-        elif dc.is_dataclass(element) and isinstance(value, list):
+            _check(kind, value, name, leaves)
+        elif element is not None and not isinstance(value, list):
+            raise YamlError(f"{name} = {clipped_repr(value)} is not a list; expected {_type_name(hints[key])}")
+        elif dc.is_dataclass(element):
             for i, entry in enumerate(value):
-                _diagnose(element, entry, f"{name}[{i}]")
-        else:
+                _check(element, entry, f"{name}[{i}]", leaves)
+        elif leaves:
             try:
                 _load(cls, {key: value})
             except DRAKE_ERRORS as e:
@@ -291,11 +294,10 @@ def load_typed(cls, data, path: str = "", defaults=None):
     its fields, nested dataclasses key by key, as yaml_load_typed's defaults; None: the defaults of
     `cls`), so that a file and then YAML text layer as Drake's own overrides do. YamlError naming the
     key at `path` ("controller.grasp.tip_kp") Drake refuses; the frozen dataclass checks the values."""
-    if not isinstance(data, dict):
-        _diagnose(cls, data, path)
+    _check(cls, data, path, leaves=False)
     try:
         loaded = _load(cls, data, None if defaults is None else thaw(defaults))
-    except DRAKE_ERRORS + (AssertionError,) as e:  # Drake asserts on a list of mappings given a mapping
-        _diagnose(cls, data, path)
+    except DRAKE_ERRORS as e:
+        _check(cls, data, path, leaves=True)
         raise YamlError(f"{path or 'the file'}: {clip(str(e), 200)}") from None
     return freeze(cls, loaded)
