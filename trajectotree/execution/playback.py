@@ -20,7 +20,6 @@ from html import escape
 from pathlib import Path
 
 import numpy as np
-from matplotlib.colors import to_rgb
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import (
     Box,
@@ -38,7 +37,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
 from trajectotree.config import Config, SceneConfig
-from trajectotree.figures.run import FINGER_COLORS, arrow_newtons_per_cm, arrow_scale_text, force_arrow
+from trajectotree.figures.legend import arrow_newtons_per_cm, arrow_scale_text, finger_rgb, force_arrow
 from trajectotree.io import write_bytes_atomic
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
 from trajectotree.scene.plant import add_hand_and_box
@@ -70,11 +69,6 @@ def set_planar_view(meshcat: Meshcat) -> None:
         ymin=-VIEW_HALF_WIDTH,
         ymax=VIEW_HALF_WIDTH,
     )
-
-
-def finger_rgb(i: int) -> tuple[float, float, float]:
-    """Finger i's colour (FINGER_COLORS), RGB in [0, 1]."""
-    return to_rgb(FINGER_COLORS[i])
 
 
 def finger_css(i: int) -> str:

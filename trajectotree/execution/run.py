@@ -21,7 +21,7 @@ from trajectotree.execution.simulate import (
     parse_push,
     simulate_reference,
 )
-from trajectotree.figures.run import controller_text
+from trajectotree.figures.legend import controller_text
 from trajectotree.io import GIF_SUFFIXES, HTML_SUFFIXES, check_output_file
 from trajectotree.results import PlanResult, SimResult
 from trajectotree.scene.plant import build_scene

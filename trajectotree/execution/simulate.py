@@ -55,7 +55,7 @@ from trajectotree.config import (
 from trajectotree.execution import closed_loop, metrics, playback
 from trajectotree.execution.control import GraspController, ImpedanceController
 from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule
-from trajectotree.figures.run import arrow_newtons_per_cm
+from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
 from trajectotree.scene.plant import Scene, add_hand_and_box, build_scene
