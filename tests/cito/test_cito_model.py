@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from trajectotree.cito.contact import smooth_distance, smooth_normal
-from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams, KnotRows, _smooth_contact
 from trajectotree.cito.variables import knot_block
 from trajectotree.config import CitoConfig, ObjectConfig, SceneConfig
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 
 # Polygon objects: an equilateral triangle of side 0.14 m, a regular hexagon of

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from trajectotree.cito.guess import plan_guess
-from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
 from trajectotree.cito.transition import check_plan, transition_spec
@@ -17,6 +16,7 @@ from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, S
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
 from trajectotree.planning.planners import plan
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.plant import build_scene
 
 SIDE = 0.14

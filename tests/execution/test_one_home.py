@@ -35,3 +35,14 @@ def test_the_fingers_colours_are_matplotlibs(i):
 
     assert to_hex(FINGER_COLORS[i]) == FINGER_HEX[i]
     assert finger_rgb(i) == to_rgb(FINGER_COLORS[i])  # the same floats: Meshcat's colours unchanged
+
+
+def test_the_controller_depends_on_no_planning_stage():
+    """The grasp controller reads the hand's dynamics from scene/ (HandModel), not from cito/."""
+    code = (
+        "import sys, trajectotree.execution.simulate; "
+        "print(sorted({m.split('.')[1] for m in sys.modules if m.startswith('trajectotree.')}))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "'cito'" not in out.stdout and "'search'" not in out.stdout, out.stdout

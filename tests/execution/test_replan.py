@@ -97,8 +97,8 @@ def test_a_replan_threshold_at_or_below_zero_is_refused(field, value):
 def moved_start():
     """Node 4 of the search's plan for 0.9 rad, the object 5 mm right and 0.1 rad further turned and the
     fingers re-solved onto the same contacts: a state measured off the plan."""
-    from trajectotree.cito.hand import HandModel
     from trajectotree.geometry import box_to_world, rotation_2d
+    from trajectotree.scene.dynamics import HandModel
     from trajectotree.scene.plant import build_scene
     from trajectotree.search.tree import find_contact_plan
     from trajectotree.start import StartState

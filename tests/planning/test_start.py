@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from trajectotree.cito.hand import HandModel
 from trajectotree.cli import main
 from trajectotree.config import Config, SceneConfig
 from trajectotree.geometry import box_to_world, rotation_2d
 from trajectotree.io import load_start, save_start
 from trajectotree.planning.planners import plan
 from trajectotree.planning.start import StartProblem, StartRefused, start_config
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.tree import find_contact_plan
 from trajectotree.start import StartState

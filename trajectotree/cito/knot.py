@@ -29,7 +29,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from trajectotree.cito.contact import smooth_distance, smooth_normal
-from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot_jacobian import knot_jacobian
 from trajectotree.cito.layout import (
     COL_P,
@@ -50,6 +49,7 @@ from trajectotree.cito.layout import (
     TWO,
     knot_layout,
 )
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.kinematics import K90, jacobian_from_links
 
 

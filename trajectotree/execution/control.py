@@ -39,10 +39,10 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, OsqpSolver, SolverOptions
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
-from trajectotree.cito.hand import HandModel
 from trajectotree.config import ControllerGains, SceneConfig
 from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.kinematics import TwoLinkFinger, jacobian_from_links
 from trajectotree.scene.plant import FingerGeometry, Scene, build_scene
 from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows

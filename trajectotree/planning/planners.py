@@ -33,7 +33,6 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cito.guess import plan_guess, static_guess
-from trajectotree.cito.hand import HandModel
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
 from trajectotree.cito.solve import LogObserver, solve, violations
@@ -48,6 +47,7 @@ from trajectotree.planning.request import PlanRequest, as_config, check_plan_req
 from trajectotree.planning.start import begin_at
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import METHODS, PlanResult, check_goal, check_method  # noqa: F401 (planners.METHODS)
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables
