@@ -416,3 +416,26 @@ def ellipse_points(semi_x: float, semi_y: float, max_edge: float = SMOOTH_EDGE) 
     n = 4 * int(np.ceil(np.pi / (4 * np.arcsin(min(1.0, max_edge / (2 * radius))))))
     angles = 2 * np.pi * (np.arange(n) + 0.5) / n
     return np.stack([semi_x * np.cos(angles), semi_y * np.sin(angles)], axis=1)
+
+
+# -- the box in space ------------------------------------------------------------------------
+# Its faces by outward normal in B, in this order (the index names a face everywhere in space).
+BOX_FACE_NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=float)
+BOX_FACE_NAMES = ("+x", "-x", "+y", "-y", "+z", "-z")
+
+
+def box_face_grid(half, per_side: int = 3, inset: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """(p_BC (6, per_side^2, 3), n_B (6, 3)): contacts on each face of a box of half-sizes `half`
+    (3,) m, on a per_side x per_side grid `inset` m in from the face's edges (a fingertip sphere
+    of that radius touches that face alone), faces in BOX_FACE_NORMALS order."""
+    half = np.asarray(half, dtype=float)
+    grid = []
+    for n in BOX_FACE_NORMALS:
+        axis = int(np.argmax(np.abs(n)))
+        u, v = [k for k in range(3) if k != axis]
+        su, sv = (np.linspace(-1, 1, per_side) * max(half[k] - inset, 0.0) for k in (u, v))
+        points = np.zeros((per_side, per_side, 3))
+        points[..., axis] = n[axis] * half[axis]
+        points[..., u], points[..., v] = np.meshgrid(su, sv, indexing="ij")
+        grid.append(points.reshape(-1, 3))
+    return np.array(grid), BOX_FACE_NORMALS.copy()

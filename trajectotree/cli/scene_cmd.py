@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -223,7 +224,10 @@ def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
 
 def run(args) -> int:
     from trajectotree.scene.plant import build_scene
+    from trajectotree.scene.spatial import is_space_hand
 
+    if args.hand is not None and is_space_hand(args.hand):
+        return run_space(args)
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     config = config_from_args(args)
@@ -265,4 +269,79 @@ def run(args) -> int:
             print(rotations_line(summary["reach"]["rotations"]))
         if args.figure:
             print(f"figure: {args.figure}")
+    return 0
+
+
+# -- a hand in space (scene.spatial) ------------------------------------------------------------
+def space_summary(scene) -> dict:
+    """The box, the fingers, which faces each finger reaches and each fingertip's workspace."""
+    from trajectotree.search.spatial_reach import face_reach, fingertip_workspace
+
+    box, workspace = scene.object, fingertip_workspace(scene)
+    return {
+        "kind": "space",
+        "object": {"size_m": list(box.size), "mass_kg": box.mass, "mu": box.mu},
+        "gravity_W": scene.plant.gravity_field().gravity_vector().tolist(),
+        "num_positions": scene.plant.num_positions(),
+        "num_actuators": scene.plant.num_actuators(),
+        "tip_radius_m": scene.tip_radius,
+        "fingers": [
+            {
+                "base_W": f.p_W_joint[0].round(6).tolist(),
+                "q_lower": f.q_lower.tolist(),
+                "q_upper": f.q_upper.tolist(),
+                "tau_max": scene.tau_max[i].tolist(),
+                "tip_workspace_W": workspace[i].round(4).tolist(),
+            }
+            for i, f in enumerate(scene.fingers)
+        ],
+        "reach": face_reach(scene).to_json(),
+    }
+
+
+def run_space(args) -> int:
+    """`trajectotree scene` for a hand in space: the plant's summary and each finger's reach."""
+    from trajectotree.cli.common import in_option_terms, scene_overrides
+    from trajectotree.config import Config, ConfigError, load_config
+    from trajectotree.scene.spatial import build_space_scene
+    from trajectotree.search.spatial_reach import CLEARANCE
+
+    if args.figure or args.rotations:
+        raise ConfigError("--figure and --rotations take a planar hand only so far")
+    config = load_config(args.config) if getattr(args, "config", None) else Config()
+    overrides = scene_overrides(args)
+    try:
+        scene_config = dataclasses.replace(config.scene, **overrides)
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+    scene = build_space_scene(
+        args.hand,
+        mu=scene_config.mu,
+        gravity=scene_config.gravity,
+        mass=scene_config.box_mass if "box_mass" in overrides else None,
+    )
+    summary = space_summary(scene)
+    if args.json:
+        print_json(summary)
+        return 0
+    o, reach = summary["object"], summary["reach"]
+    print(
+        f"object: {' x '.join(f'{s:.3f}' for s in o['size_m'])} m box, {o['mass_kg']:.3f} kg, mu {o['mu']}, "
+        f"on a free (quaternion) joint at the grasp point; gravity {summary['gravity_W']}"
+    )
+    for i, f in enumerate(summary["fingers"]):
+        low, high = f["tip_workspace_W"]
+        print(
+            f"finger {i}: base {f['base_W']} m, q in [{f['q_lower']}, {f['q_upper']}] rad, "
+            f"|tau| <= {f['tau_max']} N m; "
+            f"fingertip workspace x {low[0]:+.3f}..{high[0]:+.3f}, y {low[1]:+.3f}..{high[1]:+.3f}, "
+            f"z {low[2]:+.3f}..{high[2]:+.3f} m"
+        )
+    n = reach["contacts_per_face"]
+    print(f"reach at the start (of {n} contacts per face, IK with the links {CLEARANCE * 1000:g} mm clear of the box):")
+    print("  finger  " + "  ".join(f"{name:>3}" for name in reach["faces"]))
+    for i, row in enumerate(reach["reachable_contacts"]):
+        print(f"  {i:6d}  " + "  ".join(f"{c:3d}" for c in row))
+    per_face = ", ".join(f"{name} {k}" for name, k in zip(reach["faces"], reach["fingers_per_face"]))
+    print(f"fingers reaching each face: {per_face}")
     return 0

@@ -21,6 +21,9 @@ from trajectotree.geometry import ConvexPolygon, ellipse_points, polygon_problem
 DEFAULT_HAND = "planar_hand"
 # built-in hands, models/NAME.yaml (trajectotree.scene.hand); any other is a PATH.yaml, PATH.sdf or PATH.urdf
 HAND_NAMES = ("planar_hand", "drake_planar_gripper", "planar_hand5")
+# The built-in hands in space (models/NAME.yaml with kind: space, trajectotree.scene.spatial); only
+# `trajectotree scene` takes them so far, every planar stage refuses them (issue 36).
+SPACE_HAND_NAMES = ("fingerpro4",)
 HAND_SUFFIXES = (".yaml", ".yml", ".sdf", ".urdf")
 # (low, high) of the object's pose x m, y m, theta rad in W where a plan may start (scene.initial_pose, a start state)
 INITIAL_POSE_BOUNDS = ((-1.0, 1.0), (-1.0, 1.0), (-100.0, 100.0))  # theta: many turns
@@ -35,11 +38,11 @@ MAX_GRAVITY = 100.0  # m/s^2, ten times Earth's: beyond it no hand model here ho
 def check_hand(value) -> None:
     """Raises ConfigError unless `value` names a built-in hand or an existing hand file (its
     contents are checked when the scene reads it: trajectotree.scene.hand)."""
-    valid = f"{', '.join(HAND_NAMES)}, or an existing PATH.yaml, PATH.sdf or PATH.urdf"
+    valid = f"{', '.join(HAND_NAMES + SPACE_HAND_NAMES)}, or an existing PATH.yaml, PATH.sdf or PATH.urdf"
     problem = None
     if not isinstance(value, str) or not value:
         problem = "is not a hand name or file"
-    elif value in HAND_NAMES:
+    elif value in HAND_NAMES + SPACE_HAND_NAMES:
         return
     elif Path(value).suffix.lower() not in HAND_SUFFIXES:
         problem = "is not a hand name or file"

@@ -26,7 +26,15 @@ from pathlib import Path
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from trajectotree.config import DEFAULT_HAND, HAND_NAMES, ConfigError, SceneConfig, clipped_repr, is_file
+from trajectotree.config import (
+    DEFAULT_HAND,
+    HAND_NAMES,
+    SPACE_HAND_NAMES,
+    ConfigError,
+    SceneConfig,
+    clipped_repr,
+    is_file,
+)
 from trajectotree.typed_yaml import YamlError, load_typed, read_yaml
 
 MODELS_DIR = resources.files("trajectotree.models")  # models/, installed as trajectotree/models (pyproject.toml)
@@ -124,6 +132,8 @@ def hand_yaml_path(spec: str) -> tuple[str, Path]:
     """(name, the YAML's path) for a hand name, PATH.yaml or PATH.sdf / PATH.urdf (PATH.yaml beside it)."""
     if spec in HAND_NAMES:
         return spec, Path(str(MODELS_DIR / f"{spec}.yaml"))
+    if spec in SPACE_HAND_NAMES:  # scene.spatial reads it
+        raise HandError(spec, "is a hand in space (kind: space): only `trajectotree scene` takes it so far")
     path = Path(spec)
     if path.suffix.lower() in MODEL_SUFFIXES:
         beside = path.with_suffix(".yaml")

@@ -160,3 +160,57 @@ class TwoLinkFinger:
             if not any(np.array_equal(q, s) for s in solutions):
                 solutions.append(q)
         return solutions
+
+
+def rotate_about(axis: np.ndarray, angle, v: np.ndarray) -> np.ndarray:
+    """Rodrigues: v (..., 3) turned by `angle` (...) rad about the unit `axis` (..., 3)."""
+    angle = np.asarray(angle)[..., None]
+    c, s = np.cos(angle), np.sin(angle)
+    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, axis=-1, keepdims=True) * (1 - c)
+
+
+@dataclass(frozen=True)
+class SerialFinger:
+    """A finger in space: a chain of revolute joints, in the product-of-exponentials form. At zero
+    joint angles joint j passes through p_W_joint[j] (m) along the unit axis a_W[j], and the
+    fingertip sphere's centre F is at p_W_tip0 (all in W); turning joint j by q_j turns everything
+    beyond it about that axis, so
+
+        p_WF(q) = T_1(q_1) T_2(q_2) ... T_n(q_n) p_W_tip0,  T_j(q) p = c_j + Rot(a_j, q) (p - c_j),
+        J_WF[:, j] = a'_j x (p_WF - c'_j)
+
+    with a'_j, c'_j joint j's axis and point after the joints before it have turned. Read from the
+    plant at zero joint angles (scene.spatial), so the SDF stays the source of truth."""
+
+    p_W_joint: np.ndarray  # (n, 3) m
+    a_W: np.ndarray  # (n, 3) unit axes
+    p_W_tip0: np.ndarray  # (3,) m, the fingertip centre at q = 0
+    q_lower: np.ndarray  # (n,) rad
+    q_upper: np.ndarray  # (n,) rad
+
+    def frames(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(c' (..., n, 3), a' (..., n, 3), p_WF (..., 3)): each joint's point and axis, and the
+        fingertip centre, at joint angles q (..., n)."""
+        q = np.asarray(q, dtype=float)
+        n = len(self.a_W)
+        points = np.broadcast_to(self.p_W_joint, q.shape[:-1] + (n, 3)).copy()
+        axes = np.broadcast_to(self.a_W, q.shape[:-1] + (n, 3)).copy()
+        tip = np.broadcast_to(self.p_W_tip0, q.shape[:-1] + (3,)).copy()
+        for j in range(n):  # joint j turns the joints beyond it and the tip about its current axis
+            c, a, angle = points[..., j, :], axes[..., j, :], q[..., j]
+            tip = c + rotate_about(a, angle, tip - c)
+            for k in range(j + 1, n):
+                points[..., k, :] = c + rotate_about(a, angle, points[..., k, :] - c)
+                axes[..., k, :] = rotate_about(a, angle, axes[..., k, :])
+        return points, axes, tip
+
+    def fingertip(self, q) -> np.ndarray:
+        """p_WF (..., 3), the fingertip centre in W at joint angles q (..., n)."""
+        return self.frames(q)[2]
+
+    def jacobian(self, q, p_FQ_W=None) -> np.ndarray:
+        """J_WQ (..., 3, n) = d p_WQ / d q of the point Q fixed on the last link at p_FQ_W (..., 3, in W,
+        from the fingertip centre; default 0: Q = F), e.g. a contact point -r n from the centre."""
+        points, axes, tip = self.frames(q)
+        p_WQ = tip if p_FQ_W is None else tip + np.asarray(p_FQ_W, dtype=float)
+        return np.swapaxes(np.cross(axes, p_WQ[..., None, :] - points), -1, -2)

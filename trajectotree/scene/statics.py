@@ -59,3 +59,56 @@ def torque_rows(
             normal > 0, upper.reshape(-1, 2) / normal, np.where(normal < 0, lower.reshape(-1, 2) / normal, np.inf)
         )
     return A, lower, upper, room.min(axis=1)
+
+
+# -- in space ------------------------------------------------------------------------------------
+# A contact force in space: f = -lambda_n n + lambda_1 t1 + lambda_2 t2 on the object, n the outward
+# normal, (t1, t2) tangents with t1 x t2 = n; its friction cone linearized as a pyramid of m edges
+# -n + mu (cos a_e t1 + sin a_e t2), a_e = 2 pi e / m (inscribed: a force on an edge is in the cone).
+
+
+def tangent_basis(n_W) -> tuple[np.ndarray, np.ndarray]:
+    """(t1, t2), each (..., 3): unit tangents of the unit normals n_W (..., 3), t1 x t2 = n; t1 is
+    the normal's cross product with the world axis it is least aligned with (no singular direction)."""
+    n = np.asarray(n_W, dtype=float)
+    helper = np.eye(3)[np.argmin(np.abs(n), axis=-1)]
+    t1 = np.cross(helper, n)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    return t1, np.cross(n, t1)
+
+
+def pyramid_edges(n_W, mu: float, num_edges: int) -> np.ndarray:
+    """(k, m, 3): the m edges of each contact's friction pyramid (normal component 1) for normals (k, 3)."""
+    n = np.atleast_2d(np.asarray(n_W, dtype=float))
+    t1, t2 = tangent_basis(n)
+    a = 2 * np.pi * np.arange(num_edges) / num_edges
+    return -n[:, None, :] + mu * (np.cos(a)[None, :, None] * t1[:, None, :] + np.sin(a)[None, :, None] * t2[:, None, :])
+
+
+def wrenches_W(p_WC, f_W) -> np.ndarray:
+    """(..., 6) [f; p x f]: the wrenches about the object's centre of forces f_W (..., 3) at p_WC
+    (..., 3) relative to that centre (W)."""
+    f = np.asarray(f_W, dtype=float)
+    return np.concatenate([f, np.cross(np.broadcast_to(p_WC, f.shape), f)], axis=-1)
+
+
+def grasp_matrix_3d_W(p_WC, n_W) -> np.ndarray:
+    """(6, 3k): the wrench in W about the object's centre of the contact forces (lambda_n,
+    lambda_1, lambda_2) per contact at p_WC (k, 3) relative to that centre, normals n_W (k, 3)."""
+    p, n = np.atleast_2d(p_WC), np.atleast_2d(n_W)
+    t1, t2 = tangent_basis(n)
+    directions = np.stack([-n, t1, t2], axis=1)  # (k, 3, 3): a unit force along each column's direction
+    return wrenches_W(p[:, None, :], directions).reshape(-1, 6).T
+
+
+def edge_wrenches_W(p_WC, n_W, mu: float, num_edges: int) -> np.ndarray:
+    """(6, k m): the wrenches of each contact's pyramid edges, contact-major."""
+    edges = pyramid_edges(n_W, mu, num_edges)
+    return wrenches_W(np.atleast_2d(p_WC)[:, None, :], edges).reshape(-1, 6).T
+
+
+def finger_torques(J_WC, f_W, tau_gravity) -> np.ndarray:
+    """(F, n) N m: the joint torques a finger's motors give to push with f_W (F, 3) on the object at
+    its contact point (J_WC (F, 3, n), the point's translational Jacobian) while holding its own
+    weight (tau_gravity (F, n)): tau = tau_gravity + J^T f."""
+    return np.asarray(tau_gravity) + np.einsum("fcj,fc->fj", J_WC, f_W)

@@ -34,6 +34,7 @@ import numpy as np
 from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.statics import edge_wrenches_W
 
 WRENCH_DIM = 3  # planar wrench (f_x, f_y, tau_z)
 ARCLENGTH_KEY_DIGITS = 9  # arclengths equal to 1 nm share a cache entry
@@ -287,4 +288,70 @@ class FormClosure:
         rank = int(np.linalg.matrix_rank(G, tol=1e-9))
         return ClosureResult(
             in_closure=rank == WRENCH_DIM and margin > self.min_margin, margin=margin, rank=rank, forces=forces
+        )
+
+
+# -- in space ------------------------------------------------------------------------------------
+SPATIAL_WRENCH_DIM = 6  # (f, tau) in W
+# d* above this counts as closure: d* is at most 1 / (k m) (about 0.03 for 4 contacts of 8 edges), and a
+# set on the boundary of closure solves to ~1e-10 (Clp's tolerances)
+CLOSURE_MIN_MARGIN = 1e-6
+
+
+class SpatialClosureLp:
+    """Frictional force closure of k contacts in space, with linearized cones (statics.pyramid_edges):
+
+        maximize d  s.t.  W x = 0,  sum x = 1,  x_e >= d  for every edge e,
+
+    x the magnitudes along the k m pyramid edges, W (6, k m) their wrenches about the object's
+    centre with the torque rows divided by a length (the object's half-size: forces and torques
+    weigh alike). The contacts are in closure iff rank W = 6 and d* > 0 (here > min_margin): zero
+    is then a strictly positive combination of wrenches that span R^6, so every wrench is one.
+    Built once; `solve` only updates W (UpdateCoefficients)."""
+
+    def __init__(self, num_contacts: int, num_edges: int):
+        n = num_contacts * num_edges
+        prog = MathematicalProgram()
+        x = prog.NewContinuousVariables(n + 1, "x")  # edge magnitudes, then d
+        self.equilibrium = prog.AddLinearEqualityConstraint(
+            np.zeros((SPATIAL_WRENCH_DIM, n), order="F"), np.zeros(SPATIAL_WRENCH_DIM), x[:n]
+        )
+        prog.AddLinearEqualityConstraint(np.ones((1, n)), np.ones(1), x[:n])
+        prog.AddLinearConstraint(  # x_e - d >= 0
+            np.asfortranarray(np.hstack([np.eye(n), -np.ones((n, 1))])), np.zeros(n), np.full(n, np.inf), x
+        )
+        prog.AddLinearCost(-x[n])
+        self.prog, self._x, self.num_edges = prog, x, num_edges
+        self._solver, self._options = ClpSolver(), SolverOptions()
+        self.lp_calls = 0
+
+    def solve(self, W: np.ndarray) -> float:
+        """d* for the scaled edge wrenches W (6, k m); -inf when Clp reports failure."""
+        self.equilibrium.evaluator().UpdateCoefficients(np.asfortranarray(W), np.zeros(SPATIAL_WRENCH_DIM))
+        self.lp_calls += 1
+        result = self._solver.Solve(self.prog, None, self._options)
+        return float(result.GetSolution(self._x[-1])) if result.is_success() else -np.inf
+
+
+class SpatialClosure:
+    """The closure test of contacts on one object at one friction, an LP per number of contacts."""
+
+    def __init__(self, mu: float, half_size: float, num_edges: int = 8, min_margin: float = CLOSURE_MIN_MARGIN):
+        self.mu, self.half_size, self.num_edges, self.min_margin = mu, half_size, num_edges, min_margin
+        self.lps: dict[int, SpatialClosureLp] = {}
+
+    def check(self, p_WC, n_W) -> ClosureResult:
+        """Closure of contacts p_WC (k, 3) relative to the object's centre with outward normals n_W (k, 3)."""
+        W = edge_wrenches_W(p_WC, n_W, self.mu, self.num_edges)
+        W[3:] /= self.half_size
+        k = len(np.atleast_2d(p_WC))
+        if k not in self.lps:
+            self.lps[k] = SpatialClosureLp(k, self.num_edges)
+        margin = self.lps[k].solve(W)
+        rank = int(np.linalg.matrix_rank(W, tol=1e-9))
+        return ClosureResult(
+            in_closure=rank == SPATIAL_WRENCH_DIM and margin > self.min_margin,
+            margin=margin,
+            rank=rank,
+            forces=np.zeros((k, 3)),  # the LP's magnitudes are per edge, not per contact
         )

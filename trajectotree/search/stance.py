@@ -41,7 +41,7 @@ from trajectotree.geometry import ConvexPolygon, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.kinematics import jacobian_from_links
 from trajectotree.scene.plant import Scene
-from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows
+from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, pyramid_edges, torque_rows
 from trajectotree.search.grasp import WRENCH_DIM, closure_edges_parts, in_closure_many
 from trajectotree.search.initial_grasp import stance_fingers
 from trajectotree.search.reach import Reachability
@@ -276,3 +276,109 @@ class StanceChecks:
                 p_BC, n_B, self.mu_plan, weight_support_B(self.poses[depth][2], self.weight)
             )
         return self._force[key]
+
+
+# -- in space ------------------------------------------------------------------------------------
+class SpatialHoldingLp:
+    """The smallest largest joint torque with which k fingers hold the object still in space:
+
+        minimize t  s.t.  W x = w_hold,  x >= 0,  -t <= tau_g + A x <= t,
+
+    x the magnitudes along each contact's m pyramid edges (statics.pyramid_edges), W (6, k m) their
+    wrenches about the object's centre (W frame), w_hold the weight's opposite (0, 0, m g, 0, 0, 0)
+    for an object whose centre of mass is its centre, tau_g (k n,) the joints' torques against the
+    fingers' own weight and A (k n, k m) the joint torques of the edge forces (J_WC^T per finger,
+    statics.finger_torques). The stance holds within the motors iff t* <= tau_max. Built once;
+    `solve` only updates the coefficients."""
+
+    def __init__(self, num_contacts: int, num_edges: int, joints_per_finger: int):
+        n, r = num_contacts * num_edges, num_contacts * joints_per_finger
+        prog = MathematicalProgram()
+        z = prog.NewContinuousVariables(n + 1, "z")  # edge magnitudes, then t
+        self.balance = prog.AddLinearEqualityConstraint(np.zeros((6, n), order="F"), np.zeros(6), z[:n])
+        self.upper = prog.AddLinearConstraint(np.zeros((r, n + 1), order="F"), np.full(r, -np.inf), np.zeros(r), z)
+        self.lower = prog.AddLinearConstraint(np.zeros((r, n + 1), order="F"), np.full(r, -np.inf), np.zeros(r), z)
+        prog.AddBoundingBoxConstraint(0.0, np.inf, z)
+        prog.AddLinearCost(np.append(np.zeros(n), 1.0), 0.0, z)
+        self.prog, self._z, self.lp_calls = prog, z, 0
+        self._solver, self._options = ClpSolver(), SolverOptions()
+
+    def solve(self, W, A, tau_gravity, w_hold) -> tuple[float, np.ndarray]:
+        """(t* N m, the edge magnitudes x (k m,)); (inf, zeros) when no forces hold the object."""
+        ones = np.ones((len(A), 1))
+        tau_g = np.ravel(tau_gravity)
+        self.balance.evaluator().UpdateCoefficients(np.asfortranarray(W), np.asarray(w_hold, dtype=float))
+        # tau_g + A x <= t  and  -(tau_g + A x) <= t
+        self.upper.evaluator().UpdateCoefficients(
+            np.asfortranarray(np.hstack([A, -ones])), np.full(len(A), -np.inf), -tau_g
+        )
+        self.lower.evaluator().UpdateCoefficients(
+            np.asfortranarray(np.hstack([-A, -ones])), np.full(len(A), -np.inf), tau_g
+        )
+        self.lp_calls += 1
+        result = self._solver.Solve(self.prog, None, self._options)
+        if not result.is_success():
+            return np.inf, np.zeros(W.shape[1])
+        return float(result.get_optimal_cost()), result.GetSolution(self._z[:-1])
+
+
+def spatial_torque_rows(J_WC, n_W, mu: float, num_edges: int) -> np.ndarray:
+    """(k n, k m): the joint torques of unit magnitudes along each contact's pyramid edges, block-
+    diagonal (a finger's contact moves only its joints): J_WC (k, 3, n) at the contact points."""
+    edges = pyramid_edges(n_W, mu, num_edges)  # (k, m, 3)
+    k, n = len(J_WC), J_WC.shape[2]
+    A = np.zeros((k * n, k * num_edges))
+    for i in range(k):
+        A[i * n : (i + 1) * n, i * num_edges : (i + 1) * num_edges] = J_WC[i].T @ edges[i].T
+    return A
+
+
+SPATIAL_PUSH_DIRECTIONS = tuple(  # the pushes spatial push capacity resists: forces along +-x, +-y, +-z in W
+    tuple(s * e for e in row) for row in np.eye(3).tolist() for s in (1.0, -1.0)
+)
+
+
+class SpatialPushLp:
+    """The hardest push P = s u (u a unit wrench direction in W: a force, or a torque about the
+    centre) that k fingers resist while they hold the object, each within a normal-force bound and
+    its joints' torque limits:
+
+        maximize s  s.t.  W x = w_hold - s u,  x >= 0,  sum of each contact's x <= f_max,
+                          -tau_max <= tau_g + A x <= tau_max.
+
+    Each edge has unit normal component, so a contact's sum of x is its normal force. The static
+    limit of any controller that keeps the stance, as the planar PushCapacityLp. Built once."""
+
+    def __init__(self, num_contacts: int, num_edges: int, joints_per_finger: int, max_normal_force: float):
+        n, r = num_contacts * num_edges, num_contacts * joints_per_finger
+        prog = MathematicalProgram()
+        z = prog.NewContinuousVariables(n + 1, "z")  # edge magnitudes, then s
+        self.balance = prog.AddLinearEqualityConstraint(np.zeros((6, n + 1), order="F"), np.zeros(6), z)
+        self.torque = prog.AddLinearConstraint(np.zeros((r, n + 1), order="F"), np.zeros(r), np.zeros(r), z)
+        normal = np.kron(np.eye(num_contacts), np.ones((1, num_edges)))
+        prog.AddLinearConstraint(
+            np.asfortranarray(np.hstack([normal, np.zeros((num_contacts, 1))])),
+            np.zeros(num_contacts),
+            np.full(num_contacts, max_normal_force),
+            z,
+        )
+        prog.AddBoundingBoxConstraint(np.append(np.zeros(n), -np.inf), np.full(n + 1, np.inf), z)
+        prog.AddLinearCost(np.append(np.zeros(n), -1.0), 0.0, z)
+        self.prog, self.lp_calls = prog, 0
+        self._solver, self._options = ClpSolver(), SolverOptions()
+
+    def solve(self, W, A, tau_gravity, tau_max, w_hold, u) -> float:
+        """N (or N m), the hardest push along the unit wrench u (6,); -inf when the fingers cannot even hold."""
+        tau_g, tau_max = np.ravel(tau_gravity), np.ravel(tau_max)
+        self.balance.evaluator().UpdateCoefficients(np.asfortranarray(np.column_stack([W, u])), np.asarray(w_hold))
+        self.torque.evaluator().UpdateCoefficients(
+            np.asfortranarray(np.column_stack([A, np.zeros(len(A))])), -tau_max - tau_g, tau_max - tau_g
+        )
+        self.lp_calls += 1
+        result = self._solver.Solve(self.prog, None, self._options)
+        return float(-result.get_optimal_cost()) if result.is_success() else -np.inf
+
+
+def spatial_push_capacity(lp: SpatialPushLp, W, A, tau_gravity, tau_max, w_hold) -> float:
+    """N, the least over SPATIAL_PUSH_DIRECTIONS of the hardest push the stance resists."""
+    return min(lp.solve(W, A, tau_gravity, tau_max, w_hold, np.r_[u, 0.0, 0.0, 0.0]) for u in SPATIAL_PUSH_DIRECTIONS)

@@ -1,0 +1,294 @@
+"""A hand in space and a free object in a Drake MultibodyPlant: what only space needs of the scene.
+
+A hand in space is a YAML with `kind: space` (models/fingerpro4.yaml): its `model` (SDF or URDF,
+relative to the YAML), its `fingers` (each its joints from the base out and the frame at its
+fingertip sphere's centre) and optionally its `object` (`size` [x, y, z] m, `mass` kg). The model
+frame is W: z up, gravity along -z, the origin the grasp point G where the object's centre starts.
+Everything else is read from the plant at zero joint angles (`kinematics.SerialFinger`: each
+joint's point and axis, the fingertip centre), so the SDF stays the source of truth.
+
+The object is a box (`box` body, uniform density) on a quaternion floating joint `box_floating`;
+its positions are Drake's [qw, qx, qy, qz, px, py, pz] (W), its velocities [w_W, v_W].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, SceneGraph, Sphere
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import QuaternionFloatingJoint, SpatialInertia, UnitInertia
+from pydrake.systems.framework import DiagramBuilder
+
+from trajectotree.config import SPACE_HAND_NAMES, ConfigError, clipped_repr, is_file
+from trajectotree.scene.hand import MODELS_DIR
+from trajectotree.scene.kinematics import SerialFinger
+from trajectotree.typed_yaml import YamlError, read_yaml
+
+SPACE_KIND = "space"
+YAML_KEYS = ("kind", "model", "object", "fingers")
+MIN_FINGERS = 4  # three hold while one moves: two point contacts alone cannot resist a torque about their line
+OBJECT_RGBA = np.array([0.20, 0.45, 0.80, 0.9])
+
+
+def _error(source: str, problem: str) -> ConfigError:
+    return ConfigError(f"hand {source}: {problem}")
+
+
+@dataclass(frozen=True)
+class SpaceFinger:
+    """One finger as the YAML names it."""
+
+    joints: tuple[str, ...]  # from the base out
+    tip: str  # the frame at the fingertip sphere's centre
+
+
+@dataclass(frozen=True)
+class SpaceHandFile:
+    """A hand in space's YAML, read and checked (not yet its model)."""
+
+    name: str
+    source: str  # the YAML, for messages
+    model: str  # the model file's absolute path
+    fingers: tuple[SpaceFinger, ...]
+    object_size: tuple[float, float, float] | None = None  # m
+    object_mass: float | None = None  # kg
+
+
+def space_yaml_path(spec: str) -> Path:
+    """The YAML of a built-in hand in space (models/NAME.yaml), else `spec` itself."""
+    return Path(str(MODELS_DIR / f"{spec}.yaml")) if spec in SPACE_HAND_NAMES else Path(spec)
+
+
+def is_space_hand(spec: str) -> bool:
+    """Whether `spec` names a hand in space: a built-in one, or a YAML whose kind is space."""
+    if spec in SPACE_HAND_NAMES:
+        return True
+    path = Path(spec)
+    if path.suffix.lower() not in (".yaml", ".yml") or not is_file(path):
+        return False
+    try:
+        data = read_yaml(path)
+    except YamlError:
+        return False  # the planar reader names what is wrong with it
+    return isinstance(data, dict) and data.get("kind") == SPACE_KIND
+
+
+def _positive_numbers(source: str, where: str, value, length: int) -> tuple[float, ...]:
+    ok = isinstance(value, list) and len(value) == length
+    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    if not ok or min(value) <= 0:
+        raise _error(source, f"{where} = {clipped_repr(value)} is not a list of {length} positive numbers")
+    return tuple(float(v) for v in value)
+
+
+def _finger(source: str, i: int, value) -> SpaceFinger:
+    if not isinstance(value, dict) or set(value) != {"joints", "tip"}:
+        raise _error(source, f"finger {i} = {clipped_repr(value)} must be a mapping with keys joints and tip")
+    joints, tip = value["joints"], value["tip"]
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j for j in joints):
+        raise _error(source, f"finger {i}: joints = {clipped_repr(joints)} is not a list of joint names")
+    if not isinstance(tip, str) or not tip:
+        raise _error(source, f"finger {i}: tip = {clipped_repr(tip)} is not a frame name")
+    return SpaceFinger(joints=tuple(joints), tip=tip)
+
+
+def space_hand_file(spec: str) -> SpaceHandFile:
+    """The hand in space `spec` names, its YAML read and checked; ConfigError naming the file."""
+    path = space_yaml_path(spec)
+    source = str(path)
+    if not is_file(path):
+        raise _error(source, "does not exist")
+    try:
+        data = read_yaml(path)
+    except YamlError as e:
+        raise _error(source, str(e)) from None
+    if not isinstance(data, dict) or data.get("kind") != SPACE_KIND:
+        raise _error(source, f"is not a hand in space (kind: {SPACE_KIND})")
+    unknown = sorted(set(data) - set(YAML_KEYS))
+    if unknown:
+        raise _error(source, f"unknown key(s) {clipped_repr(unknown)}; valid keys: {list(YAML_KEYS)}")
+    model = data.get("model")
+    if not isinstance(model, str) or not model:
+        raise _error(source, f"model = {clipped_repr(model)} is not a file name")
+    model_path = (path.parent / model).resolve()
+    if not is_file(model_path):
+        raise _error(source, f"model {str(model_path)!r} does not exist")
+    fingers = data.get("fingers")
+    if not isinstance(fingers, list) or len(fingers) < MIN_FINGERS:
+        raise _error(
+            source, f"fingers = {clipped_repr(fingers)}: a hand in space needs a list of at least {MIN_FINGERS}"
+        )
+    counts = {len(f["joints"]) for f in fingers if isinstance(f, dict) and isinstance(f.get("joints"), list)}
+    if len(counts) > 1:
+        raise _error(source, f"the fingers have {sorted(counts)} joints: every finger needs as many")
+    obj = data.get("object") or {}
+    if not isinstance(obj, dict) or not set(obj) <= {"size", "mass"}:
+        raise _error(source, f"object = {clipped_repr(obj)} must be a mapping with keys size and mass")
+    return SpaceHandFile(
+        name=spec,
+        source=source,
+        model=str(model_path),
+        fingers=tuple(_finger(source, i, f) for i, f in enumerate(fingers)),
+        object_size=None if "size" not in obj else _positive_numbers(source, "object.size", obj["size"], 3),
+        object_mass=None if "mass" not in obj else _positive_numbers(source, "object.mass", [obj["mass"]], 1)[0],
+    )
+
+
+@dataclass(frozen=True)
+class SpaceObject:
+    """The object in space: a box of `size` (x, y, z) m and `mass` kg, friction `mu` with the fingertips."""
+
+    size: tuple[float, float, float]
+    mass: float
+    mu: float
+
+    @property
+    def half(self) -> np.ndarray:
+        return np.array(self.size) / 2
+
+
+def add_space_object(plant: MultibodyPlant, box: SpaceObject):
+    """Adds the box (body "box", model instance "box") on a quaternion floating joint "box_floating"
+    at the grasp point, its collision geometry with friction box.mu. Returns its ModelInstanceIndex."""
+    instance = plant.AddModelInstance("box")
+    body = plant.AddRigidBody("box", instance, SpatialInertia(box.mass, np.zeros(3), UnitInertia.SolidBox(*box.size)))
+    proximity = ProximityProperties()
+    AddContactMaterial(friction=CoulombFriction(box.mu, box.mu), properties=proximity)
+    plant.RegisterCollisionGeometry(body, RigidTransform(), Box(*box.size), "collision", proximity)
+    plant.RegisterVisualGeometry(body, RigidTransform(), Box(*box.size), "visual", OBJECT_RGBA)
+    plant.AddJoint(QuaternionFloatingJoint("box_floating", plant.world_frame(), body.body_frame()))
+    return instance
+
+
+@dataclass(frozen=True)
+class SpaceScene:
+    """A finalized continuous plant of a hand in space and its box, for planning-time queries."""
+
+    hand_file: SpaceHandFile
+    object: SpaceObject
+    gravity: float  # m/s^2, along -z
+    diagram: object
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    hand: object  # ModelInstanceIndex
+    box: object  # ModelInstanceIndex
+    fingers: tuple[SerialFinger, ...]
+    tip_radius: float  # m
+    tau_max: np.ndarray  # (F, n) N m, each joint's motor
+    hand_q_indices: np.ndarray  # (F * n,) the fingers' joints (finger-major) in the plant's positions
+    box_q_indices: np.ndarray  # (7,) [qw, qx, qy, qz, px, py, pz] in the plant's positions
+
+    @property
+    def num_fingers(self) -> int:
+        return len(self.fingers)
+
+    def tip_frame(self, i: int):
+        return self.plant.GetFrameByName(self.hand_file.fingers[i].tip, self.hand)
+
+    def positions(self, box_pose, q) -> np.ndarray:
+        """The plant's positions for the box's [qw, qx, qy, qz, px, py, pz] and the joint angles (F * n,)."""
+        out = np.zeros(self.plant.num_positions())
+        out[self.box_q_indices] = box_pose
+        out[self.hand_q_indices] = np.ravel(q)
+        return out
+
+    def gravity_torques(self, q) -> np.ndarray:
+        """(F, n) N m, the joint torques that hold the fingers still against their own weight at q (F, n)."""
+        context = self.plant.CreateDefaultContext()
+        self.plant.SetPositions(context, self.positions(START_POSE, q))
+        # CalcGravityGeneralizedForces is gravity's generalized force; the motors cancel it
+        tau_g = self.plant.CalcGravityGeneralizedForces(context)
+        v = [self.plant.GetJointByName(n, self.hand).velocity_start() for f in self.hand_file.fingers for n in f.joints]
+        return -tau_g[v].reshape(self.num_fingers, -1)
+
+
+START_POSE = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])  # the box at the grasp point, unturned
+
+
+def _joint_geometry(plant: MultibodyPlant, context, joint) -> tuple[np.ndarray, np.ndarray]:
+    """(p_W, a_W): a revolute joint's point and unit axis in W at the context's (zero) angles."""
+    X_WF = joint.frame_on_parent().CalcPoseInWorld(context)
+    return X_WF.translation(), X_WF.rotation().matrix() @ joint.revolute_axis()
+
+
+def _tip_radius(plant: MultibodyPlant, scene_graph: SceneGraph, frame, source: str) -> float:
+    """The radius of the sphere whose centre is the tip frame's origin, on the frame's body."""
+    inspector = scene_graph.model_inspector()
+    X_BT = frame.GetFixedPoseInBodyFrame()
+    for g in plant.GetCollisionGeometriesForBody(frame.body()):
+        shape = inspector.GetShape(g)
+        offset = inspector.GetPoseInFrame(g).translation() - X_BT.translation()
+        if isinstance(shape, Sphere) and np.linalg.norm(offset) < 1e-9:
+            return shape.radius()
+    raise _error(source, f"tip frame {frame.name()!r} has no collision sphere centred on it")
+
+
+def _finger_chain(plant: MultibodyPlant, context, hand, finger: SpaceFinger, source: str) -> SerialFinger:
+    joints = []
+    for name in finger.joints:
+        if not plant.HasJointNamed(name, hand):
+            raise _error(source, f"joint {name!r} is not in the model")
+        joints.append(plant.GetJointByName(name, hand))
+    if not plant.HasFrameNamed(finger.tip, hand):
+        raise _error(source, f"tip frame {finger.tip!r} is not in the model")
+    points, axes = zip(*(_joint_geometry(plant, context, j) for j in joints))
+    return SerialFinger(
+        p_W_joint=np.array(points),
+        a_W=np.array(axes),
+        p_W_tip0=plant.GetFrameByName(finger.tip, hand).CalcPoseInWorld(context).translation(),
+        q_lower=np.array([j.position_lower_limits()[0] for j in joints]),
+        q_upper=np.array([j.position_upper_limits()[0] for j in joints]),
+    )
+
+
+def build_space_scene(spec: str, *, mu: float, gravity: float, size=None, mass=None) -> SpaceScene:
+    """The hand in space `spec` and its box (size and mass: given, else the YAML's object), finalized."""
+    hand_file = space_hand_file(spec)
+    size = size if size is not None else hand_file.object_size
+    mass = mass if mass is not None else hand_file.object_mass
+    if size is None or mass is None:
+        raise _error(hand_file.source, "names no object size and mass, and none was given")
+    box = SpaceObject(size=tuple(float(s) for s in size), mass=float(mass), mu=mu)
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
+    (hand,) = Parser(plant).AddModels(hand_file.model)
+    instance = add_space_object(plant, box)
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -gravity])
+    plant.Finalize()
+    diagram = builder.Build()
+    context = plant.CreateDefaultContext()
+    fingers = tuple(_finger_chain(plant, context, hand, f, hand_file.source) for f in hand_file.fingers)
+    radii = {
+        _tip_radius(plant, scene_graph, plant.GetFrameByName(f.tip, hand), hand_file.source) for f in hand_file.fingers
+    }
+    if len(radii) != 1:
+        raise _error(hand_file.source, f"the fingertip spheres differ in radius: {sorted(radii)} m")
+    actuation = {
+        plant.get_joint_actuator(a).joint().name(): plant.get_joint_actuator(a).effort_limit()
+        for a in plant.GetJointActuatorIndices(hand)
+    }
+    tau_max = np.array([[actuation.get(n, np.inf) for n in f.joints] for f in hand_file.fingers])
+    joint = plant.GetJointByName("box_floating")
+    return SpaceScene(
+        hand_file=hand_file,
+        object=box,
+        gravity=gravity,
+        diagram=diagram,
+        plant=plant,
+        scene_graph=scene_graph,
+        hand=hand,
+        box=instance,
+        fingers=fingers,
+        tip_radius=radii.pop(),
+        tau_max=tau_max,
+        hand_q_indices=np.array(
+            [plant.GetJointByName(n, hand).position_start() for f in hand_file.fingers for n in f.joints]
+        ),
+        box_q_indices=np.arange(joint.position_start(), joint.position_start() + 7),
+    )
