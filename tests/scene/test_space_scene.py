@@ -10,7 +10,8 @@ from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces
 
 from trajectotree.cli import main
 from trajectotree.config import ConfigError
-from trajectotree.scene.spatial import START_POSE, build_space_scene, space_hand_file
+from trajectotree.scene.hand_file import space_hand_file
+from trajectotree.scene.spatial import START_POSE, build_space_scene
 
 
 @pytest.fixture(scope="module")
@@ -107,4 +108,4 @@ def test_a_hand_in_space_without_its_model_is_refused(tmp_path):
 def test_the_built_in_description_names_the_model_beside_it():
     hand = space_hand_file("fingerpro4")
     assert Path(hand.model).name == "fingerpro4.sdf" and len(hand.fingers) == 4
-    assert hand.object_size == (0.065, 0.065, 0.065) and hand.object_mass == 0.094
+    assert hand.object.size == (0.065, 0.065, 0.065) and hand.object.mass == 0.094

@@ -22,7 +22,7 @@ DEFAULT_HAND = "planar_hand"
 # built-in hands, models/NAME.yaml (trajectotree.scene.hand); any other is a PATH.yaml, PATH.sdf or PATH.urdf
 HAND_NAMES = ("planar_hand", "drake_planar_gripper", "planar_hand5")
 # The built-in hands in space (models/NAME.yaml with kind: space, trajectotree.scene.spatial); only
-# `trajectotree scene` takes them so far, every planar stage refuses them (issue 36).
+# `trajectotree scene` and `trajectotree search` take them so far, every planar stage refuses them (issue 36).
 SPACE_HAND_NAMES = ("fingerpro4",)
 HAND_SUFFIXES = (".yaml", ".yml", ".sdf", ".urdf")
 # (low, high) of the object's pose x m, y m, theta rad in W where a plan may start (scene.initial_pose, a start state)

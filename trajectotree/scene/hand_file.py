@@ -13,6 +13,13 @@ The YAML (models/planar_hand.yaml, models/drake_planar_gripper.yaml) gives
 - `fingers`, in order: each finger's joints from its base out, and the frame (or body) at its
   fingertip, with `tip_xyz` (m, in that frame) when the fingertip sphere's centre is not its origin;
 - `object` (optional): the object the hand's own example holds (HandObject).
+
+`kind` (optional) says which: `planar` (the default, everything above) or `space` (models/fingerpro4.yaml):
+a hand whose fingers move in three dimensions around a free object (trajectotree.scene.spatial). A hand in
+space gives `model`, `fingers` (at least MIN_SPACE_FINGERS, each as many joints, `tip` the frame at the
+fingertip sphere's centre) and `object` (`size` [x, y, z] m, `mass` kg), and no `plane` or `welds`: its
+model frame is the planner's W (z up). `hand_file` reads a planar hand, `space_hand_file` one in space;
+each refuses the other kind naming the commands that take it.
 """
 
 from __future__ import annotations
@@ -42,6 +49,11 @@ MODEL_SUFFIXES = (".sdf", ".urdf")
 YAML_SUFFIXES = (".yaml", ".yml")
 MIN_FINGERS = 3  # a switch leaves the others holding: two at least
 JOINTS_PER_FINGER = 2  # fingers of more links are not supported yet
+PLANAR, SPACE = "planar", "space"  # the kinds of hand a description names (HandYaml.kind)
+# three hold while one moves: two point contacts alone cannot resist a torque about the line through them
+MIN_SPACE_FINGERS = 4
+# the commands that take each kind of hand, for the refusal of the other kind
+TAKEN_BY = {PLANAR: "every command", SPACE: "only `trajectotree scene` and `trajectotree search` take it so far"}
 
 
 class HandError(ConfigError):
@@ -79,7 +91,8 @@ class HandObject:
     example): what planning with that hand uses unless the scene options or a config file say
     otherwise (with_hand_object). Each field None: the scene's default."""
 
-    size: tuple[float, float] | None = None  # m, a box's width and height (SceneConfig.box_width, box_height)
+    # m, a box's width and height (SceneConfig.box_width, box_height); a hand in space: its x, y and z
+    size: tuple[float, ...] | None = None
     mass: float | None = None  # kg
     mu: float | None = None  # friction coefficient between fingertips and object
     inertia: float | None = None  # kg m^2, about z at the centroid (SceneConfig.object_inertia)
@@ -102,6 +115,7 @@ class HandYaml:
     welds: tuple[Weld, ...] = ()
     fingers: tuple[FingerEntry, ...] = ()
     object: HandObject | None = None
+    kind: str = PLANAR  # PLANAR or SPACE
 
 
 @dataclass(frozen=True)
@@ -116,6 +130,7 @@ class HandFile:
     welds: tuple[Weld, ...]
     fingers: tuple[FingerEntry, ...]
     object: HandObject | None = None
+    kind: str = PLANAR  # PLANAR or SPACE
 
     @property
     def R_WM(self) -> np.ndarray:
@@ -130,10 +145,8 @@ class HandFile:
 # -- the YAML ---------------------------------------------------------------------------------
 def hand_yaml_path(spec: str) -> tuple[str, Path]:
     """(name, the YAML's path) for a hand name, PATH.yaml or PATH.sdf / PATH.urdf (PATH.yaml beside it)."""
-    if spec in HAND_NAMES:
+    if spec in HAND_NAMES + SPACE_HAND_NAMES:
         return spec, Path(str(MODELS_DIR / f"{spec}.yaml"))
-    if spec in SPACE_HAND_NAMES:  # scene.spatial reads it
-        raise HandError(spec, "is a hand in space (kind: space): only `trajectotree scene` takes it so far")
     path = Path(spec)
     if path.suffix.lower() in MODEL_SUFFIXES:
         beside = path.with_suffix(".yaml")
@@ -220,8 +233,9 @@ def _fingers(source: str, fingers: tuple[FingerEntry, ...]) -> tuple[FingerEntry
     return fingers
 
 
-def _hand_object(source: str, own: HandObject | None) -> HandObject | None:
-    """The YAML's `object` entry, checked (SceneConfig checks the values' ranges)."""
+def _hand_object(source: str, own: HandObject | None, size_length: int = 2) -> HandObject | None:
+    """The YAML's `object` entry, checked (SceneConfig checks the values' ranges): its size has
+    `size_length` numbers (2 in the plane, 3 in space)."""
     if own is None:
         return None
     for key in ("mass", "mu", "inertia"):
@@ -229,18 +243,22 @@ def _hand_object(source: str, own: HandObject | None) -> HandObject | None:
         if v is not None and (not math.isfinite(v) or v <= 0):
             raise HandError(source, f"object.{key} = {clipped_repr(v)} is not a positive number")
     if own.size is not None:
-        _vector(source, "object.size", own.size, 2)
+        _vector(source, "object.size", own.size, size_length)
     return own
 
 
-def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
-    """The hand `spec` names (see hand_yaml_path), its YAML read and checked; HandError naming the file."""
+def _read_hand_file(spec: str) -> HandFile:
+    """The hand `spec` names (see hand_yaml_path), of either kind, its YAML read and checked."""
     name, path = hand_yaml_path(spec)
     source = str(path)
     if not is_file(path):
         raise HandError(source, "does not exist")
     data = _read(source, path)
+    if data.kind not in TAKEN_BY:
+        raise HandError(source, f"kind = {clipped_repr(data.kind)} is not one of {list(TAKEN_BY)}")
     model = _model(source, spec, path, data.model)
+    if data.kind == SPACE:
+        return _space_hand(name, source, model, data)
     plane = _plane(source, data.plane)
     for k, w in enumerate(data.welds):
         _name(source, f"welds[{k}].frame", w.frame)
@@ -256,6 +274,78 @@ def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
         fingers=_fingers(source, data.fingers),
         object=_hand_object(source, data.object),
     )
+
+
+def _space_hand(name: str, source: str, model: str, data: HandYaml) -> HandFile:
+    """A hand in space's HandFile: its model frame is W (no plane, no welds), each finger's tip frame
+    at its fingertip sphere's centre, every finger as many joints, its object's size 3 positive numbers."""
+    if data.plane != Plane() or data.welds:
+        raise HandError(source, "a hand in space (kind: space) takes no plane or welds: its model frame is W, z up")
+    if len(data.fingers) < MIN_SPACE_FINGERS:
+        raise HandError(
+            source,
+            f"names {len(data.fingers)} finger(s); a hand in space needs at least {MIN_SPACE_FINGERS} (three hold "
+            "while one moves)",
+        )
+    for i, f in enumerate(data.fingers):
+        if not f.joints:
+            raise HandError(source, f"finger {i} names no joints")
+        for j, joint in enumerate(f.joints):
+            _name(source, f"finger {i}: joints[{j}]", joint)
+        _name(source, f"finger {i}: tip", f.tip)
+        if any(f.tip_xyz):
+            raise HandError(
+                source, f"finger {i}: tip_xyz = {list(f.tip_xyz)}: a hand in space takes its tip frame at the sphere"
+            )
+    counts = sorted({len(f.joints) for f in data.fingers})
+    if len(counts) > 1:
+        raise HandError(source, f"the fingers have {counts} joints: every finger of a hand in space needs as many")
+    _check_joints_named_once(source, data.fingers)
+    own = _hand_object(source, data.object, size_length=3)
+    if own is not None and own.size is not None and min(own.size) <= 0:
+        raise HandError(source, f"object.size = {list(own.size)} is not a list of 3 positive numbers")
+    return HandFile(
+        name=name,
+        source=source,
+        model=model,
+        x_axis=Plane().x_axis,
+        y_axis=Plane().y_axis,
+        welds=(),
+        fingers=data.fingers,
+        object=own,
+        kind=SPACE,
+    )
+
+
+def _of_kind(hand: HandFile, kind: str) -> HandFile:
+    """`hand` when it is of `kind`; else HandError naming the hand and the commands that take it."""
+    if hand.kind == kind:
+        return hand
+    if hand.kind == SPACE:
+        raise HandError(hand.name, f"is a hand in space (kind: space): {TAKEN_BY[SPACE]}")
+    raise HandError(hand.name, "is a planar hand (kind: planar), not a hand in space (kind: space)")
+
+
+def hand_file(spec: str = DEFAULT_HAND) -> HandFile:
+    """The planar hand `spec` names (see hand_yaml_path), its YAML read and checked; HandError naming the
+    file, or the hand when it is a hand in space."""
+    return _of_kind(_read_hand_file(spec), PLANAR)
+
+
+def space_hand_file(spec: str) -> HandFile:
+    """The hand in space `spec` names, its YAML read and checked; HandError naming the file, or the hand
+    when it is planar."""
+    return _of_kind(_read_hand_file(spec), SPACE)
+
+
+def hand_kind(spec: str) -> str:
+    """The kind of hand `spec` names (HandYaml.kind, through the typed loader, unchecked); PLANAR for
+    a file that cannot be read, whose refusal the planar reader gives."""
+    try:
+        _, path = hand_yaml_path(spec)
+        return _read(str(path), path).kind if is_file(path) else PLANAR
+    except HandError:
+        return PLANAR
 
 
 def _check_joints_named_once(source: str, fingers: tuple[FingerEntry, ...]) -> None:

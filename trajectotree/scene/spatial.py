@@ -1,7 +1,8 @@
 """A hand in space and a free object in a Drake MultibodyPlant: what only space needs of the scene.
 
-A hand in space is a YAML with `kind: space` (models/fingerpro4.yaml): its `model` (SDF or URDF,
-relative to the YAML), its `fingers` (each its joints from the base out and the frame at its
+A hand in space is a YAML with `kind: space` (models/fingerpro4.yaml), read and checked by the one
+typed loader of hand descriptions (trajectotree.scene.hand_file.space_hand_file): its `model` (SDF or
+URDF, relative to the YAML), its `fingers` (each its joints from the base out and the frame at its
 fingertip sphere's centre) and optionally its `object` (`size` [x, y, z] m, `mass` kg). The model
 frame is W: z up, gravity along -z, the origin the grasp point G where the object's centre starts.
 Everything else is read from the plant at zero joint angles (`kinematics.SerialFinger`: each
@@ -13,9 +14,7 @@ its positions are Drake's [qw, qx, qy, qz, px, py, pz] (W), its velocities [w_W,
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, SceneGraph, Sphere
@@ -25,119 +24,15 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import QuaternionFloatingJoint, SpatialInertia, UnitInertia
 from pydrake.systems.framework import DiagramBuilder
 
-from trajectotree.config import SPACE_HAND_NAMES, ConfigError, clipped_repr, is_file
-from trajectotree.scene.hand import MODELS_DIR
+from trajectotree.scene.hand_file import SPACE, FingerEntry, HandError, HandFile, hand_kind, space_hand_file
 from trajectotree.scene.kinematics import SerialFinger
-from trajectotree.typed_yaml import YamlError, read_yaml
 
-SPACE_KIND = "space"
-YAML_KEYS = ("kind", "model", "object", "fingers")
-MIN_FINGERS = 4  # three hold while one moves: two point contacts alone cannot resist a torque about their line
 OBJECT_RGBA = np.array([0.20, 0.45, 0.80, 0.9])
-
-
-def _error(source: str, problem: str) -> ConfigError:
-    return ConfigError(f"hand {source}: {problem}")
-
-
-@dataclass(frozen=True)
-class SpaceFinger:
-    """One finger as the YAML names it."""
-
-    joints: tuple[str, ...]  # from the base out
-    tip: str  # the frame at the fingertip sphere's centre
-
-
-@dataclass(frozen=True)
-class SpaceHandFile:
-    """A hand in space's YAML, read and checked (not yet its model)."""
-
-    name: str
-    source: str  # the YAML, for messages
-    model: str  # the model file's absolute path
-    fingers: tuple[SpaceFinger, ...]
-    object_size: tuple[float, float, float] | None = None  # m
-    object_mass: float | None = None  # kg
-
-
-def space_yaml_path(spec: str) -> Path:
-    """The YAML of a built-in hand in space (models/NAME.yaml), else `spec` itself."""
-    return Path(str(MODELS_DIR / f"{spec}.yaml")) if spec in SPACE_HAND_NAMES else Path(spec)
 
 
 def is_space_hand(spec: str) -> bool:
     """Whether `spec` names a hand in space: a built-in one, or a YAML whose kind is space."""
-    if spec in SPACE_HAND_NAMES:
-        return True
-    path = Path(spec)
-    if path.suffix.lower() not in (".yaml", ".yml") or not is_file(path):
-        return False
-    try:
-        data = read_yaml(path)
-    except YamlError:
-        return False  # the planar reader names what is wrong with it
-    return isinstance(data, dict) and data.get("kind") == SPACE_KIND
-
-
-def _positive_numbers(source: str, where: str, value, length: int) -> tuple[float, ...]:
-    ok = isinstance(value, list) and len(value) == length
-    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-    if not ok or min(value) <= 0:
-        raise _error(source, f"{where} = {clipped_repr(value)} is not a list of {length} positive numbers")
-    return tuple(float(v) for v in value)
-
-
-def _finger(source: str, i: int, value) -> SpaceFinger:
-    if not isinstance(value, dict) or set(value) != {"joints", "tip"}:
-        raise _error(source, f"finger {i} = {clipped_repr(value)} must be a mapping with keys joints and tip")
-    joints, tip = value["joints"], value["tip"]
-    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j for j in joints):
-        raise _error(source, f"finger {i}: joints = {clipped_repr(joints)} is not a list of joint names")
-    if not isinstance(tip, str) or not tip:
-        raise _error(source, f"finger {i}: tip = {clipped_repr(tip)} is not a frame name")
-    return SpaceFinger(joints=tuple(joints), tip=tip)
-
-
-def space_hand_file(spec: str) -> SpaceHandFile:
-    """The hand in space `spec` names, its YAML read and checked; ConfigError naming the file."""
-    path = space_yaml_path(spec)
-    source = str(path)
-    if not is_file(path):
-        raise _error(source, "does not exist")
-    try:
-        data = read_yaml(path)
-    except YamlError as e:
-        raise _error(source, str(e)) from None
-    if not isinstance(data, dict) or data.get("kind") != SPACE_KIND:
-        raise _error(source, f"is not a hand in space (kind: {SPACE_KIND})")
-    unknown = sorted(set(data) - set(YAML_KEYS))
-    if unknown:
-        raise _error(source, f"unknown key(s) {clipped_repr(unknown)}; valid keys: {list(YAML_KEYS)}")
-    model = data.get("model")
-    if not isinstance(model, str) or not model:
-        raise _error(source, f"model = {clipped_repr(model)} is not a file name")
-    model_path = (path.parent / model).resolve()
-    if not is_file(model_path):
-        raise _error(source, f"model {str(model_path)!r} does not exist")
-    fingers = data.get("fingers")
-    if not isinstance(fingers, list) or len(fingers) < MIN_FINGERS:
-        raise _error(
-            source, f"fingers = {clipped_repr(fingers)}: a hand in space needs a list of at least {MIN_FINGERS}"
-        )
-    counts = {len(f["joints"]) for f in fingers if isinstance(f, dict) and isinstance(f.get("joints"), list)}
-    if len(counts) > 1:
-        raise _error(source, f"the fingers have {sorted(counts)} joints: every finger needs as many")
-    obj = data.get("object") or {}
-    if not isinstance(obj, dict) or not set(obj) <= {"size", "mass"}:
-        raise _error(source, f"object = {clipped_repr(obj)} must be a mapping with keys size and mass")
-    return SpaceHandFile(
-        name=spec,
-        source=source,
-        model=str(model_path),
-        fingers=tuple(_finger(source, i, f) for i, f in enumerate(fingers)),
-        object_size=None if "size" not in obj else _positive_numbers(source, "object.size", obj["size"], 3),
-        object_mass=None if "mass" not in obj else _positive_numbers(source, "object.mass", [obj["mass"]], 1)[0],
-    )
+    return hand_kind(spec) == SPACE
 
 
 @dataclass(frozen=True)
@@ -170,7 +65,7 @@ def add_space_object(plant: MultibodyPlant, box: SpaceObject):
 class SpaceScene:
     """A finalized continuous plant of a hand in space and its box, for planning-time queries."""
 
-    hand_file: SpaceHandFile
+    hand_file: HandFile  # kind space
     object: SpaceObject
     gravity: float  # m/s^2, along -z
     diagram: object
@@ -226,17 +121,17 @@ def _tip_radius(plant: MultibodyPlant, scene_graph: SceneGraph, frame, source: s
         offset = inspector.GetPoseInFrame(g).translation() - X_BT.translation()
         if isinstance(shape, Sphere) and np.linalg.norm(offset) < 1e-9:
             return shape.radius()
-    raise _error(source, f"tip frame {frame.name()!r} has no collision sphere centred on it")
+    raise HandError(source, f"tip frame {frame.name()!r} has no collision sphere centred on it")
 
 
-def _finger_chain(plant: MultibodyPlant, context, hand, finger: SpaceFinger, source: str) -> SerialFinger:
+def _finger_chain(plant: MultibodyPlant, context, hand, finger: FingerEntry, source: str) -> SerialFinger:
     joints = []
     for name in finger.joints:
         if not plant.HasJointNamed(name, hand):
-            raise _error(source, f"joint {name!r} is not in the model")
+            raise HandError(source, f"joint {name!r} is not in the model")
         joints.append(plant.GetJointByName(name, hand))
     if not plant.HasFrameNamed(finger.tip, hand):
-        raise _error(source, f"tip frame {finger.tip!r} is not in the model")
+        raise HandError(source, f"tip frame {finger.tip!r} is not in the model")
     points, axes = zip(*(_joint_geometry(plant, context, j) for j in joints))
     return SerialFinger(
         p_W_joint=np.array(points),
@@ -250,10 +145,11 @@ def _finger_chain(plant: MultibodyPlant, context, hand, finger: SpaceFinger, sou
 def build_space_scene(spec: str, *, mu: float, gravity: float, size=None, mass=None) -> SpaceScene:
     """The hand in space `spec` and its box (size and mass: given, else the YAML's object), finalized."""
     hand_file = space_hand_file(spec)
-    size = size if size is not None else hand_file.object_size
-    mass = mass if mass is not None else hand_file.object_mass
+    own = hand_file.object
+    size = size if size is not None else (own and own.size)
+    mass = mass if mass is not None else (own and own.mass)
     if size is None or mass is None:
-        raise _error(hand_file.source, "names no object size and mass, and none was given")
+        raise HandError(hand_file.source, "names no object size and mass, and none was given")
     box = SpaceObject(size=tuple(float(s) for s in size), mass=float(mass), mu=mu)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
@@ -268,7 +164,7 @@ def build_space_scene(spec: str, *, mu: float, gravity: float, size=None, mass=N
         _tip_radius(plant, scene_graph, plant.GetFrameByName(f.tip, hand), hand_file.source) for f in hand_file.fingers
     }
     if len(radii) != 1:
-        raise _error(hand_file.source, f"the fingertip spheres differ in radius: {sorted(radii)} m")
+        raise HandError(hand_file.source, f"the fingertip spheres differ in radius: {sorted(radii)} m")
     actuation = {
         plant.get_joint_actuator(a).joint().name(): plant.get_joint_actuator(a).effort_limit()
         for a in plant.GetJointActuatorIndices(hand)
