@@ -136,3 +136,64 @@ class ContactPlan:
             mu_plan=_float_or_nan(data.get("mu_plan")),
             goal_position=None if data.get("goal_position") is None else tuple(data["goal_position"]),
         )
+
+
+# -- in space ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SpaceContactNode:
+    """Node n of a contact sequence in space: the box's pose, the joint angles and each finger's contact."""
+
+    object_pose: np.ndarray  # (7,) Drake's floating-body positions [qw, qx, qy, qz, px, py, pz] in W
+    q: np.ndarray  # (F, n) rad, joint angles from IK
+    faces: tuple[str, ...]  # each finger's face of the box (geometry.BOX_FACE_NAMES)
+    p_BC: np.ndarray  # (F, 3) m, the contact points in the box frame B
+    switching_finger: int | None  # the finger that moved between node n-1 and node n
+    closure_margin: float  # the 6-D closure LP's margin d* of the four contacts at mu_plan
+    # N m, the largest joint torque with which the fingers holding during segment n-1 -> n (all when none moved)
+    # hold the box at rest at both its ends, their own weight included; None for node 0
+    stance_torque: float | None = None
+    # N (or N m), the hardest push along +-x, +-y, +-z in W that stance resists at node n; None for node 0
+    stance_push_capacity: float | None = None
+
+    def to_json(self) -> dict:
+        return {
+            "object_pose": [float(v) for v in self.object_pose],
+            "q": np.asarray(self.q, dtype=float).tolist(),
+            "contacts": [
+                {"face": face, "p_BC": [float(v) for v in p]} for face, p in zip(self.faces, self.p_BC, strict=True)
+            ],
+            "switching_finger": self.switching_finger,
+            "closure_margin": float(self.closure_margin),
+            "stance_torque": self.stance_torque,
+            "stance_push_capacity": self.stance_push_capacity,
+        }
+
+
+@dataclass(frozen=True)
+class SpaceContactPlan:
+    """A contact sequence in space toward a goal orientation, or why none was found."""
+
+    goal: tuple[float, float, float, float]  # the goal orientation, a unit quaternion [w, x, y, z] in W
+    success: bool
+    refusal: SearchRefusal | None = None
+    nodes: tuple[SpaceContactNode, ...] = ()
+    stats: SearchStats = field(default_factory=SearchStats)
+    mu_plan: float = float("nan")
+    max_segment_rotation: float = float("nan")  # rad, the largest rotation between two nodes
+
+    @property
+    def reason(self) -> str:
+        return "" if self.refusal is None else str(self.refusal)
+
+    def to_json(self) -> dict:
+        return {
+            "kind": "space",
+            "goal_quaternion": [float(v) for v in self.goal],
+            "success": self.success,
+            "reason": self.reason,
+            "refusal": None if self.refusal is None else self.refusal.to_json(),
+            "mu_plan": _finite_or_none(self.mu_plan),
+            "max_segment_rotation": _finite_or_none(self.max_segment_rotation),
+            "stats": self.stats.to_json(),
+            "contact_sequence": [n.to_json() for n in self.nodes],
+        }

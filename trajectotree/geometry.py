@@ -439,3 +439,22 @@ def box_face_grid(half, per_side: int = 3, inset: float = 0.01) -> tuple[np.ndar
         points[..., u], points[..., v] = np.meshgrid(su, sv, indexing="ij")
         grid.append(points.reshape(-1, 3))
     return np.array(grid), BOX_FACE_NORMALS.copy()
+
+
+def quaternion_angle(q0, q1) -> float:
+    """rad in [0, pi], the angle of the rotation from unit quaternion q0 to q1 ([w, x, y, z])."""
+    return float(2 * np.arccos(min(1.0, abs(float(np.dot(q0, q1))))))
+
+
+def quaternion_slerp(q0, q1, t) -> np.ndarray:
+    """(len(t), 4) unit quaternions [w, x, y, z] on the geodesic from q0 to q1 at fractions t (the
+    shorter way: q1 and -q1 are one rotation)."""
+    q0, q1 = np.asarray(q0, dtype=float), np.asarray(q1, dtype=float)
+    if np.dot(q0, q1) < 0:
+        q1 = -q1
+    t = np.asarray(t, dtype=float)[:, None]
+    omega = np.arccos(min(1.0, float(np.dot(q0, q1))))
+    if omega < 1e-12:
+        return np.tile(q0, (len(t), 1))
+    out = (np.sin((1 - t) * omega) * q0 + np.sin(t * omega) * q1) / np.sin(omega)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)

@@ -25,6 +25,7 @@ class RefusalKind(enum.Enum):
     OUT_OF_REACH = "out_of_reach"  # (a reach cause) no joint angles within the limits
     LINKS_PENETRATE = "links_penetrate"  # (a reach cause) every solution has a link in the object
     IK_FAILED = "ik_failed"  # (a reach cause) Drake's IK did not converge
+    FINGERS_COLLIDE = "fingers_collide"  # (in space) `fingers` come within `limit` m of each other
     # a move is not generated (GetNeighbors)
     CONTACTS_LOST = "contacts_lost"  # two or more `fingers` leave reach at the next pose
     FINGER_HELD = "finger_held"  # `fingers[0]` may not let go: the other three (`stance`) not in closure
@@ -35,6 +36,7 @@ class RefusalKind(enum.Enum):
     # (search.rolled_corner_gap) of a corner
     STANCE_ROLLED_OPEN = "stance_rolled_open"  # `stance` not in closure at mu_plan where its tips roll to
     STANCE_TOO_HEAVY = "stance_too_heavy"  # `stance` needs more than `limit` N to hold the weight
+    STANCE_OVER_MOTORS = "stance_over_motors"  # (in space) `stance` needs more than `limit` N m at a joint to hold
     # an initial grasp is skipped before its tree is searched
     INITIAL_GRASP = "initial_grasp"  # the grasp itself: `cause`
     NO_PATH_CONTACTS = "no_path_contacts"  # `fingers` have no reachable corner-free contact at some node
@@ -127,6 +129,7 @@ _TEXT = {
     RefusalKind.OUT_OF_REACH: lambda r: "out of reach within joint limits",
     RefusalKind.LINKS_PENETRATE: lambda r: "finger links penetrate the box",
     RefusalKind.IK_FAILED: lambda r: "inverse kinematics failed",
+    RefusalKind.FINGERS_COLLIDE: lambda r: f"fingers {list(r.fingers)} come within {r.limit:g} m of each other",
     RefusalKind.CONTACTS_LOST: lambda r: (
         f"fingers {list(r.fingers)} lose their contacts (out of reach) at the same node"
     ),
@@ -141,6 +144,10 @@ _TEXT = {
     ),
     RefusalKind.STANCE_ROLLED_OPEN: lambda r: f"{_stance(r)} not in closure at mu_plan at its rolled contacts",
     RefusalKind.STANCE_TOO_HEAVY: lambda r: f"{_stance(r)} needs more than {r.limit:g} N to hold the object's weight",
+    RefusalKind.STANCE_OVER_MOTORS: lambda r: (
+        f"{_stance(r)} needs more than the motors' {r.limit:g} N m at a joint to hold the object (their own weight "
+        "included)"
+    ),
     RefusalKind.INITIAL_GRASP: lambda r: _caused(
         r, f"initial grasp {'not allowed' if r.cause and r.cause.kind in _NOT_ALLOWED else 'infeasible'}"
     ),

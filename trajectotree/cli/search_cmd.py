@@ -2,11 +2,16 @@
 
 Prints the plan (or why none was found) and the search statistics; exits 0 whether or
 not a plan was found (`"success": false` with a reason), 2 on invalid input.
+
+A hand in space (`--hand fingerpro4`, or a description of kind: space) takes its goal orientation as
+`--goal-quat W X Y Z` (Drake's order, normalized) or `--goal-rpy R P Y` (rad, Drake's RollPitchYaw),
+the cube's position unchanged (trajectotree.search.tree, in space).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from trajectotree.cli.common import (
     FIGURE_SUFFIXES,
@@ -27,6 +32,21 @@ def register(subparsers) -> None:
         "search", help="find a finger-gaiting contact sequence for a goal rotation or pose", description=__doc__
     )
     add_goal_options(p)
+    space = p.add_mutually_exclusive_group()
+    space.add_argument(
+        "--goal-quat",
+        type=float,
+        nargs=4,
+        metavar=("W", "X", "Y", "Z"),
+        help="a hand in space's goal orientation of the cube as a quaternion (Drake's order; normalized)",
+    )
+    space.add_argument(
+        "--goal-rpy",
+        type=float,
+        nargs=3,
+        metavar=("R", "P", "Y"),
+        help="a hand in space's goal orientation of the cube as roll, pitch, yaw in rad (Drake's RollPitchYaw)",
+    )
     add_config_options(p)
     p.add_argument(
         "--figure",
@@ -57,11 +77,69 @@ def draw_plan(scene, plan, path: str) -> None:
         plt.close(fig)
 
 
+SPACE_GOAL_OPTIONS = ("goal_quat", "goal_rpy")
+MIN_QUATERNION_NORM = 1e-6  # a quaternion shorter than this names no rotation (rounding decides its direction)
+MAX_RPY = 100.0  # rad, the goal's roll, pitch and yaw at most in size, as the planar goal's many turns
+
+
+def _space_goal_option(args) -> str | None:
+    return next((o for o in SPACE_GOAL_OPTIONS if getattr(args, o, None) is not None), None)
+
+
+def space_goal(args):
+    """The unit quaternion [w, x, y, z] of --goal-quat or --goal-rpy; ConfigError naming the value when
+    it has a NaN or infinity, a zero norm or an angle beyond MAX_RPY, or when neither (or a planar goal) is given."""
+    import numpy as np
+    from pydrake.math import RollPitchYaw
+
+    from trajectotree.config import ConfigError, check_range
+
+    planar = next((o for o in ("goal", "goal_pose") if getattr(args, o, None) is not None), None)
+    if planar is not None:
+        raise ConfigError(
+            field="--" + planar.replace("_", "-"),
+            value=getattr(args, planar),
+            problem="is a planar goal",
+            valid="--goal-quat W X Y Z or --goal-rpy R P Y for a hand in space",
+            label="valid",
+        )
+    if args.goal_quat is not None:
+        for i, v in enumerate(args.goal_quat):
+            check_range("--goal-quat", v, index=(i,))
+        norm = math.sqrt(sum(v * v for v in args.goal_quat))
+        if norm < MIN_QUATERNION_NORM:
+            raise ConfigError(
+                field="--goal-quat",
+                value=list(args.goal_quat),
+                problem=f"has norm {norm:g}",
+                valid=f"a quaternion W X Y Z of norm at least {MIN_QUATERNION_NORM:g} (it is normalized)",
+                label="valid",
+            )
+        return np.array(args.goal_quat) / norm
+    if args.goal_rpy is not None:
+        for i, v in enumerate(args.goal_rpy):
+            check_range("--goal-rpy", v, -MAX_RPY, MAX_RPY, index=(i,))
+        return RollPitchYaw(args.goal_rpy).ToQuaternion().wxyz()
+    raise ConfigError("no goal: give --goal-quat W X Y Z or --goal-rpy R P Y for a hand in space")
+
+
 def run(args) -> int:
-    from trajectotree.config import with_segments
+    from trajectotree.config import ConfigError, with_segments
     from trajectotree.scene.plant import build_scene
+    from trajectotree.scene.spatial import is_space_hand
     from trajectotree.search.tree import find_contact_plan
 
+    if args.hand is not None and is_space_hand(args.hand):
+        return run_space(args)
+    option = _space_goal_option(args)
+    if option is not None:
+        raise ConfigError(
+            field="--" + option.replace("_", "-"),
+            value=getattr(args, option),
+            problem=f"takes a hand in space; the hand {args.hand or 'planar_hand'!r} is planar",
+            valid="--hand fingerpro4 or a description of kind: space (or --goal RAD, --goal-pose X Y THETA)",
+            label="valid",
+        )
     config = config_from_args(args)
     goal = goal_from_args(args, config)
     if args.figure:
@@ -111,4 +189,61 @@ def run(args) -> int:
         )
     if args.figure:
         print(f"figure: {args.figure}" if plan.success else "figure: not drawn (no plan)")
+    return 0
+
+
+# -- a hand in space ------------------------------------------------------------------------------
+def run_space(args) -> int:
+    """`trajectotree search` for a hand in space: Algorithm 1 in space toward the goal orientation."""
+    from trajectotree.cli.common import in_option_terms, scene_overrides
+    from trajectotree.config import Config, ConfigError, load_config, mu_plan
+    from trajectotree.scene.spatial import build_space_scene
+    from trajectotree.search.tree import find_space_contact_plan
+
+    goal = space_goal(args)
+    if args.figure:
+        raise ConfigError("--figure takes a planar hand only so far")
+    config = load_config(args.config) if getattr(args, "config", None) else Config()
+    overrides = scene_overrides(args)
+    try:
+        scene_config = dataclasses.replace(config.scene, **overrides)
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+    mu = mu_plan(scene_config, config.search)
+    scene = build_space_scene(
+        args.hand,
+        mu=scene_config.mu,
+        gravity=scene_config.gravity,
+        mass=scene_config.box_mass if "box_mass" in overrides else None,
+    )
+    plan = find_space_contact_plan(scene, goal, config.search, mu)
+    if args.json:
+        print_json(plan.to_json())
+        return 0
+    s = plan.stats
+    summary, details = reason_lines(plan.reason)
+    w, x, y, z = plan.goal
+    outcome = "plan found" if plan.success else "no plan: " + summary
+    print(
+        f"goal quaternion [{w:+.4f}, {x:+.4f}, {y:+.4f}, {z:+.4f}], nodes at most "
+        f"{math.degrees(plan.max_segment_rotation):g} deg apart: {outcome}"
+    )
+    for line in details:
+        print(f"  {line}")
+    print(
+        f"search {s.time_s:.3f} s, {s.expanded} nodes expanded, {s.generated} generated, {s.lp_calls} LP and "
+        f"{s.ik_calls} IK solves; {s.initial_grasps_searched} of {s.initial_grasp_candidates} initial grasps searched; "
+        f"mu_plan {plan.mu_plan:.3g}"
+    )
+    for n, node in enumerate(plan.nodes):
+        moved = "-" if node.switching_finger is None else str(node.switching_finger)
+        quat = " ".join(f"{v:+.3f}" for v in node.object_pose[:4])
+        contacts = "  ".join(
+            f"{face} ({', '.join(f'{v * 1000:+.1f}' for v in p)}) mm" for face, p in zip(node.faces, node.p_BC)
+        )
+        stance = "" if node.stance_torque is None else f"  stance {node.stance_torque:.3f} N m"
+        if node.stance_push_capacity is not None:
+            stance += f", resists {node.stance_push_capacity:.2f} N"
+        print(f"  node {n}: quat [{quat}]  switching finger {moved}  contacts (B) {contacts}{stance}")
+        print(f"          q {' '.join(f'{v:+.3f}' for v in node.q.ravel())} rad")
     return 0

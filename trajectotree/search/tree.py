@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 import time
 from collections import Counter
 from dataclasses import dataclass, replace
@@ -68,14 +69,25 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, with_segments
-from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
+from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats, SpaceContactNode, SpaceContactPlan
+from trajectotree.geometry import BOX_FACE_NAMES, box_face_grid, quaternion_angle, quaternion_slerp
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
 from trajectotree.scene.plant import Scene
-from trajectotree.search.grasp import FormClosure
+from trajectotree.scene.spatial import START_POSE
+from trajectotree.scene.statics import edge_wrenches_W
+from trajectotree.search.grasp import FormClosure, SpatialClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
 from trajectotree.search.reach import Reachability
-from trajectotree.search.stance import StanceChecks, arclength_key
+from trajectotree.search.spatial_reach import SpatialReach, box_transform
+from trajectotree.search.stance import (
+    SpatialHoldingLp,
+    SpatialPushLp,
+    StanceChecks,
+    arclength_key,
+    spatial_push_capacity,
+    spatial_torque_rows,
+)
 from trajectotree.search.switch_bound import SwitchBound
 
 
@@ -596,3 +608,316 @@ def _find_on_grid(
         stats=search.stats(t0, searched, len(roots)),
         mu_plan=search.mu_plan,
     )
+
+
+# -- in space ------------------------------------------------------------------------------------
+# Algorithm 1 for a hand in space (scene.spatial): the same depth-first search over finger-to-contact
+# assignments along a fixed object path, one finger switching per node while the other three hold.
+# The path is the geodesic (slerp) from the start orientation to the goal, the object's position kept.
+# rad, the largest rotation between two nodes: a held contact (at most the 6.5 cm cube's half-diagonal,
+# 5.6 cm, from the centre) then moves at most 2.9 cm between nodes, where reach and clearance are checked
+# only at the nodes; a 180 deg goal takes 6 segments, and each node costs a reach table (spatial_reach)
+SPACE_MAX_SEGMENT_ROTATION = math.radians(30.0)
+SPACE_GRID_PER_SIDE = 3  # contacts per face: 3 x 3, a fingertip radius in from the edges
+PYRAMID_EDGES = 8  # each friction cone linearized by an inscribed 8-edge pyramid
+SPACE_ROOT_CHOICES = 4  # contacts per finger ranked (facing the finger first) for the initial grasps
+SPACE_MAX_ROOTS = 12  # initial grasps searched at most
+
+
+def space_object_path(
+    goal_quaternion, start=START_POSE, max_rotation: float = SPACE_MAX_SEGMENT_ROTATION
+) -> np.ndarray:
+    """(N, 7) poses [qw, qx, qy, qz, px, py, pz] on the geodesic from `start` to the goal orientation at
+    the start's position; N - 1 = the angle over max_rotation, rounded up (1 at least)."""
+    start = np.asarray(start, dtype=float)
+    goal = np.asarray(goal_quaternion, dtype=float)
+    segments = max(1, math.ceil(quaternion_angle(start[:4], goal) / max_rotation - 1e-9))
+    quats = quaternion_slerp(start[:4], goal, np.linspace(0.0, 1.0, segments + 1))
+    return np.hstack([quats, np.tile(start[4:], (segments + 1, 1))])
+
+
+@dataclass(frozen=True)
+class _SpaceNode:
+    depth: int
+    contacts: tuple[int, ...]  # per finger, its contact's index in the grid (face * per face + cell)
+    q: np.ndarray  # (F, n) rad
+    switching_finger: int | None
+    parent: _SpaceNode | None
+    stance_torque: float | None = None  # N m
+    push: float | None = None  # N
+
+
+@dataclass(frozen=True)
+class _SpaceChild:
+    """A child proposed by GetNeighbors, checked when popped (IsFeasible)."""
+
+    parent: _SpaceNode
+    contacts: tuple[int, ...]
+    finger: int | None
+    q_held: dict  # {finger: (n,)} the holding fingers' angles at the child's pose
+    stance_torque: float
+    push: float
+
+
+class _SpaceSearch:
+    """One run of Algorithm 1 in space; holds the reach, closure and holding caches and the counters."""
+
+    def __init__(self, scene, goal_quaternion, config: SearchConfig, mu: float):
+        self.scene, self.config, self.mu = scene, config, mu
+        self.poses = space_object_path(goal_quaternion)
+        p_BC, n_B = box_face_grid(scene.object.half, SPACE_GRID_PER_SIDE, scene.tip_radius)
+        per_face = p_BC.shape[1]
+        self.p_BC = p_BC.reshape(-1, 3)
+        self.n_B = np.repeat(n_B, per_face, axis=0)
+        self.face = np.repeat(np.arange(len(n_B)), per_face)
+        self.p_BF = self.p_BC + scene.tip_radius * self.n_B
+        self.reach = SpatialReach(scene)
+        self.closure = SpatialClosure(mu, half_size=float(max(scene.object.half)), num_edges=PYRAMID_EDGES)
+        n = len(scene.fingers[0].q_lower)
+        self.hold_lps = {k: SpatialHoldingLp(k, PYRAMID_EDGES, n) for k in (3, 4)}
+        self.push_lps = {k: SpatialPushLp(k, PYRAMID_EDGES, n, config.push_normal_force) for k in (3, 4)}
+        self.w_hold = np.r_[0.0, 0.0, scene.object.mass * scene.gravity, 0.0, 0.0, 0.0]
+        self.tau_limit = float(np.min(scene.tau_max))
+        self._reach: dict[tuple, object] = {}
+        self._closure: dict[tuple, object] = {}
+        self.refused: Counter[Refusal] = Counter()
+        self.visited: set[tuple] = set()
+        self.expanded = self.generated = 0
+
+    @property
+    def lp_calls(self) -> int:
+        lps = [*self.closure.lps.values(), *self.hold_lps.values(), *self.push_lps.values()]
+        return sum(lp.lp_calls for lp in lps)
+
+    # -- cached checks --------------------------------------------------------------------------
+    def finger_reach(self, depth: int, finger: int, contact: int, seed=None):
+        key = (depth, finger, contact)
+        if key not in self._reach:
+            self._reach[key] = self.reach.solve(self.poses[depth], finger, self.p_BF[contact], seed)
+        return self._reach[key]
+
+    def closed(self, contacts) -> object:
+        """The 6-D closure at mu_plan of `contacts` (grid indices): the same at every pose (the box frame's)."""
+        key = tuple(sorted(contacts))
+        if key not in self._closure:
+            self._closure[key] = self.closure.check(self.p_BC[list(key)], self.n_B[list(key)])
+        return self._closure[key]
+
+    def facing(self, depth: int, finger: int) -> np.ndarray:
+        """(K,) how squarely each contact's face turns to the finger's base at pose `depth`: the cosine
+        between the face's normal and the direction to the base (links reaching round the box meet it)."""
+        R = box_transform(self.poses[depth]).rotation().matrix()
+        to_base = self.scene.fingers[finger].p_W_joint[0] - self.p_BC @ R.T - self.poses[depth][4:]
+        return np.einsum("kc,kc->k", self.n_B @ R.T, to_base / np.linalg.norm(to_base, axis=1, keepdims=True))
+
+    def holding(self, depth: int, contacts, fingers, q_rows) -> tuple[float, float]:
+        """(N m, N): the least largest joint torque with which `fingers` on `contacts` at angles q_rows
+        hold the box at rest at pose `depth` (their own weight included), and the hardest push along
+        +-x, +-y, +-z in W they resist within their motors."""
+        R = box_transform(self.poses[depth]).rotation().matrix()
+        p_WC, n_W = self.p_BC[list(contacts)] @ R.T, self.n_B[list(contacts)] @ R.T
+        q = np.zeros((self.scene.num_fingers, len(self.scene.fingers[0].q_lower)))
+        for i, row in zip(fingers, q_rows):
+            q[i] = row
+        J = np.array([self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)])
+        W = edge_wrenches_W(p_WC, n_W, self.mu, PYRAMID_EDGES)
+        A = spatial_torque_rows(J, n_W, self.mu, PYRAMID_EDGES)
+        tau_g = self.scene.gravity_torques(q)[list(fingers)]
+        k = len(fingers)
+        torque, _ = self.hold_lps[k].solve(W, A, tau_g, self.w_hold)
+        if torque > self.tau_limit:
+            return torque, -np.inf
+        push = spatial_push_capacity(self.push_lps[k], W, A, tau_g, self.scene.tau_max[list(fingers)], self.w_hold)
+        return torque, push
+
+    # -- IsFeasible -----------------------------------------------------------------------------
+    def feasible(self, child: _SpaceChild) -> tuple[_SpaceNode | None, Refusal | None]:
+        """The child as a node (its joint angles), or why it is a dead end: its four contacts not in
+        closure at mu_plan, the moving finger's new contact out of reach, or the hand's links not clear."""
+        depth = child.parent.depth + 1
+        closure = self.closed(child.contacts)
+        if not closure.in_closure:
+            return None, Refusal(RefusalKind.NOT_IN_CLOSURE, mu_plan=self.mu, margin=closure.margin)
+        q = np.array([child.q_held.get(i) if i in child.q_held else None for i in range(len(child.contacts))], object)
+        if child.finger is not None:
+            reach = self.finger_reach(depth, child.finger, child.contacts[child.finger], child.parent.q[child.finger])
+            if not reach.reachable:
+                return None, Refusal(RefusalKind.UNREACHABLE, fingers=(child.finger,), cause=reach.refusal)
+            q[child.finger] = reach.q
+        q = np.array(q.tolist(), dtype=float)
+        clash = self.reach.links_clear(self.poses[depth], q)
+        if clash:
+            return None, clash
+        node = _SpaceNode(depth, child.contacts, q, child.finger, child.parent, child.stance_torque, child.push)
+        return node, None
+
+    # -- GetNeighbors ---------------------------------------------------------------------------
+    def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
+        """The children of `node`, best first: no switch, then each free finger's moves (its stance's push
+        capacity, larger first), each finger's new contacts freeing more fingers (freedom), then facing it
+        more squarely, first."""
+        depth = node.depth + 1
+        held = {i: self.finger_reach(depth, i, c, node.q[i]) for i, c in enumerate(node.contacts)}
+        stuck = [i for i, r in held.items() if not r.reachable]
+        if len(stuck) > 1:
+            self.refused[Refusal(RefusalKind.CONTACTS_LOST, fingers=tuple(stuck))] += 1
+            return []
+        options = stuck or [None, *range(self.scene.num_fingers)]
+        ranked = []
+        for finger in options:
+            stance = tuple(i for i in range(self.scene.num_fingers) if i != finger)
+            contacts = [node.contacts[i] for i in stance]
+            if finger is not None and not self.closed(contacts).in_closure:
+                self.refused[Refusal(RefusalKind.FINGER_HELD, fingers=(finger,), stance=stance, mu_plan=self.mu)] += 1
+                continue
+            torque0, _ = self.holding(node.depth, contacts, stance, node.q[list(stance)])
+            torque1, push = self.holding(depth, contacts, stance, [held[i].q for i in stance])
+            torque = max(torque0, torque1)
+            if torque > self.tau_limit:
+                self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
+                continue
+            ranked.append((finger is not None, -push, finger, stance, torque, push))
+        out = []
+        for _, _, finger, stance, torque, push in sorted(ranked, key=lambda r: r[:2]):
+            q_held = {i: held[i].q for i in stance}
+            if finger is None:
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push))
+                continue
+            others = self.p_BF[[node.contacts[i] for i in stance]]
+            facing, moves = self.facing(depth, finger), []
+            for c in np.flatnonzero(facing > 0.0):  # a face turned away from the finger: its links meet the box
+                if c == node.contacts[finger]:
+                    continue
+                if np.min(np.linalg.norm(others - self.p_BF[c], axis=1)) < 2 * self.scene.tip_radius:
+                    continue  # the fingertip spheres would overlap
+                contacts = list(node.contacts)
+                contacts[finger] = int(c)
+                moves.append((-self.freedom(contacts), -facing[c], tuple(contacts)))
+            for *_, contacts in sorted(moves):
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push))
+        return out
+
+    def freedom(self, contacts) -> int:
+        """How many fingers of a grasp on `contacts` may let go (the other three in closure at mu_plan):
+        how many ways on a node leaves the search (a grasp that frees none is a dead end after its node)."""
+        return sum(self.closed(contacts[:i] + contacts[i + 1 :]).in_closure for i in range(len(contacts)))
+
+    # -- Algorithm 1 ----------------------------------------------------------------------------
+    def roots(self) -> list[_SpaceNode]:
+        """Initial grasps at the start pose, best first: each finger's SPACE_ROOT_CHOICES reachable contacts
+        facing it most squarely, combined; distinct contacts in closure at mu_plan that free a finger at least,
+        links clear, held by the four within the motors; those that free more fingers, then resist harder
+        pushes, first."""
+        choices = []
+        for i in range(self.scene.num_fingers):
+            mine = []
+            for c in np.argsort(-self.facing(0, i), kind="stable"):
+                if self.finger_reach(0, i, int(c)).reachable:
+                    mine.append(int(c))
+                if len(mine) == SPACE_ROOT_CHOICES:
+                    break
+            choices.append(mine)
+        out = []
+        for contacts in itertools.product(*choices):
+            if len(set(contacts)) < len(contacts) or not self.closed(contacts).in_closure:
+                continue
+            freedom = self.freedom(list(contacts))
+            if not freedom:
+                continue
+            q = np.array([self.finger_reach(0, i, c).q for i, c in enumerate(contacts)])
+            if self.reach.links_clear(self.poses[0], q):
+                continue
+            fingers = tuple(range(self.scene.num_fingers))
+            torque, push = self.holding(0, contacts, fingers, q)
+            if torque <= self.tau_limit:
+                out.append(((-freedom, -push), _SpaceNode(0, contacts, q, None, None, torque, push)))
+            if len(out) == SPACE_MAX_ROOTS:
+                break
+        return [node for _, node in sorted(out, key=lambda r: r[0])]
+
+    def run(self, root: _SpaceNode, t0: float) -> tuple[_SpaceNode | None, Refusal | None]:
+        """Depth-first search from `root` to the last node, within search.max_expansions and time_budget_s."""
+        goal = len(self.poses) - 1
+        stack: list = [root]
+        while stack:
+            if self.expanded >= self.config.max_expansions:
+                return None, Refusal(RefusalKind.NODE_BUDGET, count=self.expanded)
+            if time.perf_counter() - t0 > self.config.time_budget_s:
+                return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
+            item = stack.pop()
+            if isinstance(item, _SpaceChild):
+                key = (item.parent.depth + 1, item.contacts)
+                if key in self.visited:
+                    continue
+                self.visited.add(key)
+                node, why = self.feasible(item)
+                if node is None:
+                    self.refused[why.coarse()] += 1
+                    continue
+            else:
+                node = item
+            if node.depth == goal:
+                return node, None
+            self.expanded += 1
+            children = self.neighbors(node)
+            self.generated += len(children)
+            stack.extend(reversed(children))
+        return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded)
+
+    def plan_nodes(self, leaf: _SpaceNode) -> tuple[SpaceContactNode, ...]:
+        path = []
+        while leaf is not None:
+            path.append(leaf)
+            leaf = leaf.parent
+        return tuple(
+            SpaceContactNode(
+                object_pose=self.poses[n.depth].copy(),
+                q=n.q.copy(),
+                faces=tuple(BOX_FACE_NAMES[self.face[c]] for c in n.contacts),
+                p_BC=self.p_BC[list(n.contacts)].copy(),
+                switching_finger=n.switching_finger,
+                closure_margin=float(self.closed(n.contacts).margin),
+                stance_torque=None if n.depth == 0 else n.stance_torque,
+                stance_push_capacity=None if n.depth == 0 else n.push,
+            )
+            for n in reversed(path)
+        )
+
+
+def find_space_contact_plan(scene, goal_quaternion, config: SearchConfig, mu: float) -> SpaceContactPlan:
+    """Algorithm 1 in space: a contact sequence for the hand in space `scene` (scene.spatial.SpaceScene)
+    turning its box from the start pose to the unit quaternion `goal_quaternion` [w, x, y, z], at
+    friction mu (mu_plan), or why none was found."""
+    t0 = time.perf_counter()
+    goal = tuple(float(v) for v in goal_quaternion)
+    search = _SpaceSearch(scene, goal, config, mu)
+    roots = search.roots()
+    leaf, last, searched = None, None, 0
+    for root in roots:
+        searched += 1
+        leaf, why = search.run(root, t0)
+        last = AtRoot(tuple(float(c) for c in root.contacts), why) if why else None
+        if leaf is not None or (why and why.kind in (RefusalKind.TIME_BUDGET, RefusalKind.NODE_BUDGET)):
+            break
+    stats = SearchStats(
+        expanded=search.expanded,
+        generated=search.generated,
+        lp_calls=search.lp_calls,
+        ik_calls=search.reach.ik_calls,
+        time_s=time.perf_counter() - t0,
+        initial_grasps_searched=searched,
+        initial_grasp_candidates=len(roots),
+    )
+    common = dict(goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION)
+    if leaf is not None:
+        return SpaceContactPlan(success=True, nodes=search.plan_nodes(leaf), **common)
+    refusal = NoPlan(
+        searched=stats.initial_grasps_searched,
+        candidates=len(roots),
+        skipped=0,
+        first_skipped=None,
+        last_searched=last,
+        mu_plan=mu,
+        refused=tuple(search.refused.most_common(5)),
+    )
+    return SpaceContactPlan(success=False, refusal=refusal, **common)
