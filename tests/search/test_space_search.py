@@ -61,13 +61,13 @@ def _tip(scene, pose, q, finger):
 
 def test_the_path_is_the_geodesic_in_segments_of_at_most_the_largest_rotation():
     path = space_object_path(QUARTER_ABOUT_X)
-    assert len(path) == 4  # 90 deg in 30 deg segments
+    assert len(path) == 6  # 90 deg in 5 segments of 18 deg (at most 20 deg each)
     np.testing.assert_allclose(path[0], START_POSE)
     np.testing.assert_allclose(path[-1][:4], QUARTER_ABOUT_X, atol=1e-12)
     steps = [quaternion_angle(a[:4], b[:4]) for a, b in zip(path[:-1], path[1:])]
-    np.testing.assert_allclose(steps, math.radians(30.0), atol=1e-9)
+    np.testing.assert_allclose(steps, math.radians(18.0), atol=1e-9)
     np.testing.assert_allclose(path[:, 4:], 0.0)  # the cube's position is kept
-    assert len(space_object_path(-QUARTER_ABOUT_X)) == 4  # -q is the same rotation: the shorter way
+    assert len(space_object_path(-QUARTER_ABOUT_X)) == 6  # -q is the same rotation: the shorter way
     assert len(space_object_path([0.0, 0.0, 0.0, 1.0])) == math.ceil(math.pi / SPACE_MAX_SEGMENT_ROTATION) + 1
 
 
@@ -171,7 +171,7 @@ def test_the_search_command_prints_the_sequence_as_json(capsys):
     assert plan["kind"] == "space" and plan["success"]
     np.testing.assert_allclose(plan["goal_quaternion"], QUARTER_ABOUT_X, atol=1e-12)
     nodes = plan["contact_sequence"]
-    assert len(nodes) == 4 and nodes[0]["switching_finger"] is None
+    assert len(nodes) == 6 and nodes[0]["switching_finger"] is None
     for node in nodes:
         assert len(node["object_pose"]) == 7 and np.array(node["q"]).shape == (4, 3)
         assert all(c["face"] in BOX_FACE_NAMES and len(c["p_BC"]) == 3 for c in node["contacts"])

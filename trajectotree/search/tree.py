@@ -614,10 +614,13 @@ def _find_on_grid(
 # Algorithm 1 for a hand in space (scene.spatial): the same depth-first search over finger-to-contact
 # assignments along a fixed object path, one finger switching per node while the other three hold.
 # The path is the geodesic (slerp) from the start orientation to the goal, the object's position kept.
-# rad, the largest rotation between two nodes: a held contact (at most the 6.5 cm cube's half-diagonal,
-# 5.6 cm, from the centre) then moves at most 2.9 cm between nodes, where reach and clearance are checked
-# only at the nodes; a 180 deg goal takes 6 segments, and each node costs a reach table (spatial_reach)
-SPACE_MAX_SEGMENT_ROTATION = math.radians(30.0)
+# rad, the largest rotation between two nodes. One finger switches per node, so the segments bound the
+# switches: of the 30 seed-0 goals of scripts/search_space.py, 30 deg planned 23 (turns over 120 deg need
+# more switches than 4-6 segments give), 20 deg 28 (docs/measurements.md), and 15 deg, on the 7 that 30 deg
+# missed, planned 5 as 20 deg did, in more time per goal (each node costs reach and stance checks). A held
+# contact (at most the 6.5 cm cube's half-diagonal, 5.6 cm, from the centre) moves at most 2 cm between nodes,
+# where reach and clearance are checked; a 180 deg goal takes 9 segments.
+SPACE_MAX_SEGMENT_ROTATION = math.radians(20.0)
 SPACE_GRID_PER_SIDE = 3  # contacts per face: 3 x 3, a fingertip radius in from the edges
 PYRAMID_EDGES = 8  # each friction cone linearized by an inscribed 8-edge pyramid
 SPACE_ROOT_CHOICES = 4  # contacts per finger ranked (facing the finger first) for the initial grasps
