@@ -18,6 +18,17 @@ and the start-up of a pool by fork and by spawn.
 Targets: TrajectoTree mean total <= 3 s, >= 10x faster than CITO, search
 median <= 0.2 s, function evaluations <= 30 % of solve time, build <= 10 % of solve.
 The baselines take minutes per goal: shorten with --goals, or give --rows to resume an interrupted run.
+
+Phase timing (--phases, or --compare TREE): plan() as a script calls it (scene and grasp tables kept,
+the package's own segment pool), each tree in processes of its own (scripts/plan_timing.py), the
+goals in chunks alternating between this checkout and TREE (the code before a change: `git worktree
+add DIR REV`), so both see the same machine. Per method and tree: plan()'s wall-clock time (mean,
+median, p90, max) split into search, first round, retries, pool and other; the processes' start-up
+(imports and scene); with --cli-goals K, the `trajectotree plan` process's wall-clock time on the
+first K goals beside plan()'s on the same goals. Goals: --goal-set paper (the 60 of seed 0, or the
+first --goals), heldout (8 unseen + 8 of seed 1), both, or --goal-list.
+
+    python scripts/bench_planning.py --goal-set both --compare /work/wt/lean-base --cli-goals 8
 """
 
 from __future__ import annotations
@@ -28,8 +39,11 @@ import json
 import math
 import os
 import resource
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -233,11 +247,123 @@ def pool_startup(config: Config, workers: int) -> str:
     return "pool start-up to a ready scene in every worker: " + ", ".join(out)
 
 
+ROOT = Path(__file__).resolve().parents[1]  # this checkout
+# The held-out goals (docs/measurements.md): 8 the project never tuned on and 8 of the sampler's seed 1.
+UNSEEN_GOALS = (2.95, -2.61, 1.57, -0.77, 0.05, -1.40, 2.20, -3.10)
+PHASES = ("search_s", "first_round_s", "retries_s", "pool_s", "other_s")
+CHUNK = 8  # goals per child process; the trees alternate chunk by chunk
+
+
+def goal_list(args) -> list[float]:
+    """The goals of --goal-list, else of --goal-set (paper: the first --goals of seed --seed)."""
+    if args.goal_list:
+        return [float(g) for g in args.goal_list.split(",")]
+    paper = [float(g) for g in sample_goals(args.goals, args.seed)]
+    heldout = list(UNSEEN_GOALS) + [float(g) for g in sample_goals(60, 1)[:8]]
+    return {"paper": paper, "heldout": heldout, "both": paper + heldout}[args.goal_set]
+
+
+def child_rows(tree: Path, goals: list[float], methods: list[str]) -> dict:
+    """scripts/plan_timing.py over `goals` with the package of `tree`, in a process of its own."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "rows.json"
+        command = [sys.executable, str(ROOT / "scripts" / "plan_timing.py"), "--goals", ",".join(map(str, goals))]
+        command += ["--methods", ",".join(methods), "--out", str(out)]
+        # cwd=tree: the child imports that tree's package whatever this one's path
+        subprocess.run(command, env={**os.environ, "PYTHONPATH": str(tree)}, cwd=tree, check=True)
+        return json.loads(out.read_text())
+
+
+def cli_seconds(tree: Path, goal: float) -> float:
+    """Wall-clock seconds of one `trajectotree plan --goal` process of `tree`, its output in a temporary folder."""
+    with tempfile.TemporaryDirectory() as tmp:
+        command = [sys.executable, "-m", "trajectotree.cli", "plan", "--goal", str(goal), "--out", f"{tmp}/plan"]
+        t0 = time.perf_counter()
+        subprocess.run(command, env={**os.environ, "PYTHONPATH": str(tree)}, cwd=tmp, check=True, capture_output=True)
+        return time.perf_counter() - t0
+
+
+def run_phases(trees: dict[str, Path], goals, methods, cli_goals: int) -> dict[str, dict]:
+    """{tree label: {"rows", "start_up_s", "cli_s"}}, the trees alternating chunk by chunk (the CLI goal by goal)."""
+    out = {label: {"rows": [], "start_up_s": [], "cli_s": []} for label in trees}
+    chunks = [goals[i : i + CHUNK] for i in range(0, len(goals), CHUNK)]
+    with tqdm(total=len(chunks) * len(trees) + cli_goals * len(trees), file=sys.stderr, desc="phases") as bar:
+        for chunk in chunks:
+            for label, tree in trees.items():
+                got = child_rows(tree, chunk, methods)
+                out[label]["rows"] += got["rows"]
+                out[label]["start_up_s"].append(got["start_up_s"])
+                bar.update()
+        for goal in goals[:cli_goals]:
+            for label, tree in trees.items():
+                out[label]["cli_s"].append(cli_seconds(tree, goal))
+                bar.update()
+    return out
+
+
+def stats(values) -> str:
+    a = np.asarray(values, dtype=float)
+    return f"{a.mean():6.2f} {np.median(a):6.2f} {np.percentile(a, 90):6.2f} {a.max():6.2f}"
+
+
+def phase_report(measured: dict[str, dict], methods: list[str], cli_goals: int) -> str:
+    """Per method and tree: plan()'s wall clock (mean, median, p90, max), its phases' means and
+    p90s, retries, successes; the start-up; the CLI beside plan() on the same goals."""
+    lines = [f"{'s: mean median p90 max':>42s}   phase means (p90): " + ", ".join(p[:-2] for p in PHASES)]
+    for method in methods:
+        for label, got in measured.items():
+            rows = [r for r in got["rows"] if r["method"] == method]
+            phases = ", ".join(
+                f"{np.mean([r[p] for r in rows]):.2f} ({np.percentile([r[p] for r in rows], 90):.2f})" for p in PHASES
+            )
+            worst = max(rows, key=lambda r: r["wall_s"])
+            lines.append(
+                f"{method:13s} {label:10s} plan() {stats([r['wall_s'] for r in rows])}   {phases}; "
+                f"plans with retries {sum(r['retry_rounds'] > 0 for r in rows)}/{len(rows)}, "
+                f"success {sum(r['success'] for r in rows)}/{len(rows)}, "
+                f"physics check passed {sum(r['physics_passed'] for r in rows)}/{len(rows)}, "
+                f"slowest goal {worst['goal']:+.3f}"
+            )
+    for label, got in measured.items():
+        line = f"{label:10s} start-up (imports and scene) per process: mean {np.mean(got['start_up_s']):.2f} s"
+        if cli_goals:
+            api = [r["wall_s"] for r in got["rows"] if r["method"] == "trajectotree"][:cli_goals]
+            cli = got["cli_s"]
+            line += (
+                f"; `trajectotree plan` process over the first {cli_goals} goals mean {np.mean(cli):.2f} s vs plan() "
+                f"{np.mean(api):.2f} s (CLI - plan() mean {np.mean(np.subtract(cli, api)):.2f} s, "
+                f"max {np.max(np.subtract(cli, api)):.2f} s)"
+            )
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def load_average() -> str:
+    return "load average " + " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def main_phases(args, methods: list[str]) -> None:
+    """--phases / --compare: the phase timing of this checkout (and TREE) over the goals."""
+    trees = {"this": ROOT} | ({"compare": Path(args.compare).resolve()} if args.compare else {})
+    goals = goal_list(args)
+    before = load_average()
+    measured = run_phases(trees, goals, methods, args.cli_goals)
+    print(f"{len(goals)} goals; trees: " + ", ".join(f"{k} = {v}" for k, v in trees.items()))
+    print(f"{before} before, {load_average()} after (2 shared cores)")
+    print(phase_report(measured, methods, args.cli_goals))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(measured, f, indent=1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--goals", type=int, default=60, help="number of goals (default 60, the paper's)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, from {', '.join(METHODS)}")
+    parser.add_argument(
+        "--methods",
+        help=f"comma-separated, from {', '.join(METHODS)} (default: all; with --phases: trajectotree)",
+    )
     parser.add_argument("--config", help="YAML config (default: the built-in defaults)")
     parser.add_argument("--json", help="also write every per-goal row to this JSON file")
     parser.add_argument(
@@ -257,8 +383,14 @@ def main() -> None:
         help="append each goal's rows to this file and skip the goals it already holds (a run "
         "of hours can stop and go on; the summary covers every goal in the file)",
     )
+    parser.add_argument("--phases", action="store_true", help="the phase timing (see above) instead")
+    parser.add_argument("--compare", metavar="TREE", help="phase timing of this checkout beside the package in TREE")
+    parser.add_argument("--goal-set", choices=("paper", "heldout", "both"), default="paper")
+    parser.add_argument("--goal-list", help="comma-separated goals (rad), instead of --goal-set")
+    parser.add_argument("--cli-goals", type=int, default=0, help="phase timing: time the CLI on this many goals")
     args = parser.parse_args()
-    methods = [m.strip() for m in args.methods.split(",")]
+    phases = args.phases or args.compare
+    methods = [m.strip() for m in (args.methods or ("trajectotree" if phases else ",".join(METHODS))).split(",")]
     unknown = [m for m in methods if m not in METHODS]
     formulations = [f.strip() for f in args.formulations.split(",")]
     bad = [f for f in formulations if f not in FORMULATIONS]
@@ -268,6 +400,9 @@ def main() -> None:
             f"(unknown: {unknown}); formulations from {', '.join(FORMULATIONS)} (unknown: {bad}); "
             f"--workers must be >= 1 (got {args.workers})"
         )
+    if phases:
+        main_phases(args, methods)
+        return
     config = load_config(args.config) if args.config else Config()
     header = {
         "goals": args.goals,

@@ -58,9 +58,10 @@ def main() -> None:
         mine, theirs = Path(tmp) / "this", Path(tmp) / "other"
         plan_all(ROOT, mine, args.goals, args.seed)
         plan_all(args.against.resolve(), theirs, args.goals, args.seed)
-        identical, worst = 0, {"x": 0.0, "q": 0.0, "forces": 0.0}
+        identical, worst, succeeded = 0, {"x": 0.0, "q": 0.0, "forces": 0.0}, [0, 0]
         for k in range(args.goals):
             a, b = np.load(mine / f"{k}.npz"), np.load(theirs / f"{k}.npz")
+            succeeded = [succeeded[0] + bool(a["success"]), succeeded[1] + bool(b["success"])]
             if sorted(a.files) != sorted(b.files) or any(a[n].shape != b[n].shape for n in a.files):
                 print(f"goal {k}: different arrays or shapes")
                 continue
@@ -71,7 +72,8 @@ def main() -> None:
                 worst[key] = max([worst[key]] + [float(np.max(np.abs(a[n] - b[n]))) for n in names if n in a.files])
         print(
             f"{identical}/{args.goals} plans bit-identical; largest difference otherwise: x {worst['x']:.3g}, "
-            f"q {worst['q']:.3g} rad, forces {worst['forces']:.3g} N"
+            f"q {worst['q']:.3g} rad, forces {worst['forces']:.3g} N; successful (physics check passed): "
+            f"this {succeeded[0]}/{args.goals}, other {succeeded[1]}/{args.goals}"
         )
 
 

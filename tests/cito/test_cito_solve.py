@@ -73,7 +73,9 @@ def test_ipopt_options_come_from_the_config():
     assert options["linear_solver"] == "spral" and options["hessian_approximation"] == "limited-memory"
     assert "output_file" not in options
     logged = cito_solve.ipopt_options(config, "/tmp/ipopt.txt").options[IpoptSolver.id().name()]
-    assert logged["output_file"] == "/tmp/ipopt.txt" and logged["print_timing_statistics"] == "yes"
+    assert logged["output_file"] == "/tmp/ipopt.txt" and logged["print_timing_statistics"] == "no"
+    timed = cito_solve.ipopt_options(config, "/tmp/ipopt.txt", timing_statistics=True)
+    assert timed.options[IpoptSolver.id().name()]["print_timing_statistics"] == "yes"
 
 
 def test_iterations_and_timing_are_read_from_ipopts_log(setup):
@@ -86,12 +88,13 @@ def test_iterations_and_timing_are_read_from_ipopts_log(setup):
         with open(log_path) as f:
             table.extend(int(m.group(1)) for m in re.finditer(r"^\s*(\d+)r?\s+[-+]?\d\.\d+e[-+]\d+", f.read(), re.M))
 
-    capped = cito_solve.solve(program, guess, dataclasses.replace(CONFIG, max_iter=3), read_table)
+    capped = cito_solve.solve(program, guess, dataclasses.replace(CONFIG, max_iter=3), read_table, None, True)
     again = cito_solve.solve(program, guess, CONFIG, read_table)
     assert not capped.success and capped.iterations == 3  # stopped by max_iter
     assert again.success and again.iterations == outcome.iterations > 3
     assert table[-1] == again.iterations  # the summary line agrees with the table
-    for result in (capped, outcome):
+    assert set(outcome.timing) == {"ipopt_total_s"}  # without the timing statistics, the total alone
+    for result in (capped,):  # with the timing statistics
         assert set(result.timing) == {
             "ipopt_total_s",
             "function_evaluations_s",
@@ -163,36 +166,3 @@ def test_each_group_reports_a_breach_of_known_size(setup):
         assert report["penetration"] == pytest.approx(plant_penetration(scene, moved), abs=1e-12)
         depths.append(report["penetration"])
     assert max(depths) > 5e-4  # one of the two turns pushed the fingertip into the box
-
-
-def test_knot_constraints_give_the_same_numbers_whatever_the_call_order(setup):
-    """Each knot's AutoDiff evaluation (values and Jacobian) is the same bit for bit whether it
-    is served by the knot alone, by the batch over the knots' latest value calls, or by the
-    batch at the vector of the visualization callback; float values are the scalar values_one
-    except at the primed vector, where they are the batch's."""
-    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
-
-    _, spec, _, guess, outcome = setup
-    body = BodyParams(build_scene(), CONFIG.sdf_sharpness, mu=MU_PLAN)
-    Z = 0.5 * (guess.stacked() + outcome.solution.stacked())  # a point neither solve evaluated
-
-    def ad_rows(program):
-        out = []
-        for k, binding in enumerate(program.knot_bindings):
-            y = binding.evaluator().Eval(InitializeAutoDiff(Z[k])[:, 0])
-            out.append((ExtractValue(y).tobytes(), ExtractGradient(y).tobytes()))
-        return out
-
-    alone = ad_rows(build_program(CONFIG, spec, body))  # empty cache: each knot alone
-    seen = build_program(CONFIG, spec, body)
-    floats = [b.evaluator().Eval(Z[k]) for k, b in enumerate(seen.knot_bindings)]
-    by_seen = ad_rows(seen)  # one batch over the value calls' inputs
-    primed = build_program(CONFIG, spec, body)
-    primed.prog.visualization_callbacks()[0].evaluator().Eval(Z.ravel())
-    by_primed = ad_rows(primed)
-    assert alone == by_seen == by_primed
-    values, _ = primed.rows.evaluate(Z, False)
-    for k, binding in enumerate(primed.knot_bindings):
-        n = primed.rows.num_rows[k]
-        np.testing.assert_array_equal(floats[k], primed.rows.knot(k).values_one(Z[k]))
-        np.testing.assert_array_equal(binding.evaluator().Eval(Z[k]), values[k, :n])

@@ -38,8 +38,10 @@ import math
 import multiprocessing
 import os
 import resource
+import threading
 import time
 from concurrent.futures import Executor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 
 import numpy as np
@@ -216,29 +218,51 @@ def run_pieces(
     log_observer: LogObserver | None = None,
 ) -> list[PieceResult]:
     """The tasks' results in order: on `executor`, else in this process (workers 1 or one
-    task; in `scene`, watched by `log_observer`), else on a pool of local processes started
-    for these tasks. Progress is shown only in this process: a terminal has one progress line."""
+    task; in `scene`, watched by `log_observer`), else on local processes: from the main thread
+    on the pool it keeps (kept_pool: one process per core), from another on a pool of `workers`
+    started for these tasks. Progress is shown only in this process: a terminal has one progress line."""
     if executor is not None:
         return [_received(r) for r in executor.map(solve_piece, tasks)]
-    workers = min(len(tasks), os.cpu_count() or 1) if workers is None else min(workers, len(tasks))
+    size = (os.cpu_count() or 1) if workers is None else workers  # a kept pool's, whatever the tasks
+    workers = min(len(tasks), size)
     if workers <= 1:
         return [_received(solve_piece(t, scene, log_observer)) for t in tasks]
     for t in tasks:  # a forked worker inherits the scene built here
         worker_scene(t.scene)
-    pool = local_pool(workers)
+    kept = threading.current_thread() is threading.main_thread()
+    pool = kept_pool(size, os.getpid()) if kept else local_pool(workers)
     try:
         # Not pool.map: interrupted, its iterator cancels the queued futures, and Python 3.11's pool,
         # broken by kill_pool, then sets an exception on a cancelled future in its management thread,
         # which prints an InvalidStateError traceback (fixed in 3.12: cpython gh-107219).
         futures = [pool.submit(solve_piece, t) for t in tasks]
         results = [_received(f.result()) for f in futures]  # in order, each once it is done
+    except BrokenProcessPool:
+        if not kept:
+            raise
+        # a kept pool whose worker died since (killed from outside): the next call starts a new one
+        kept_pool.cache_clear()
+        return run_pieces(tasks, None, workers, scene, log_observer)
     except BaseException:
         # Interrupted (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the CLI) or failed:
         # shutdown() alone would wait for the running solves, minutes deep in IPOPT.
         kill_pool(pool)
+        kept_pool.cache_clear()
         raise
-    pool.shutdown()
+    if not kept:
+        pool.shutdown()
     return results
+
+
+@functools.lru_cache(maxsize=1)
+def kept_pool(workers: int, pid: int) -> TiedPool:
+    """The pool of `workers` local processes that process `pid` keeps for the segments it solves
+    from its main thread: plan() called again pays no start (tens of ms per plan, issue 35). Only
+    the main thread's: a pool's workers die with the thread that started them (workers.TiedPool),
+    and the main thread lives as long as the process. Keyed by pid, so a forked child makes its own.
+    Python's exit shuts it down, as does its eviction by a call for another size (once collected);
+    run_pieces kills it when a solve is interrupted or fails."""
+    return local_pool(workers)
 
 
 def _received(result: PieceResult) -> PieceResult:

@@ -1,0 +1,45 @@
+"""scripts/bench_planning.py's phase timing (issue 35): the child process's rows split plan()'s
+wall-clock time into phases that add up to it, and the parent prints both trees side by side."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPTS = ROOT / "scripts"
+
+
+def run(args: list[str], tmp_path: Path) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, *args], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.slow
+def test_phases_add_up_to_the_wall_clock(tmp_path):
+    out = tmp_path / "rows.json"
+    done = run([str(SCRIPTS / "plan_timing.py"), "--goals", "0.861", "--out", str(out)], tmp_path)
+    assert done.returncode == 0, done.stderr
+    got = json.loads(out.read_text())
+    (row,) = got["rows"]
+    assert row["success"] and row["physics_passed"]
+    phases = ("search_s", "first_round_s", "retries_s", "pool_s", "other_s")
+    assert all(row[p] >= 0.0 for p in phases)
+    assert sum(row[p] for p in phases) == pytest.approx(row["wall_s"], rel=1e-9)
+    assert row["first_round_s"] > 0.0 and got["start_up_s"] > got["import_s"] > 0.0
+
+
+@pytest.mark.slow
+def test_compare_prints_both_trees(tmp_path):
+    # the same checkout as the other tree: the report names both and gives each its statistics
+    done = run(
+        [str(SCRIPTS / "bench_planning.py"), "--compare", str(ROOT), "--goal-list", "0.861", "--cli-goals", "1"],
+        tmp_path,
+    )
+    assert done.returncode == 0, done.stderr
+    plan_lines = [line for line in done.stdout.splitlines() if line.startswith("trajectotree ")]
+    assert [line.split()[1] for line in plan_lines] == ["this", "compare"]
+    assert "`trajectotree plan` process" in done.stdout
