@@ -17,7 +17,7 @@ import argparse
 
 import numpy as np
 
-from trajectotree.execution.control import HandKinematics
+from trajectotree.execution.fingers import HandKinematics
 from trajectotree.execution.reference import reference_from_plan
 from trajectotree.execution.simulate import execution_schedule
 from trajectotree.experiments.executions import middle_of_middle_segment

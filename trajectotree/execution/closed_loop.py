@@ -24,7 +24,8 @@ but the ObjectMonitor, which samples every plant step:
   exceeds reflex_force for reflex_confirm_time, held reflex_hold s after it subsides, then
   fading over reflex_release s.
 
-The GraspController (closed_loop=True) reads mu_estimate, mass_estimate, reflex and
+The ClosedLoopGraspController (trajectotree.execution.control) reads mu_estimate (through
+reflexes.ConeFriction), mass_estimate, reflex and
 disturbance (its desired wrench cancels the disturbance, disturbance-observer style). Each
 system reads the others' state as of their last update, as sampled controllers do.
 """

@@ -34,6 +34,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from trajectotree.config import Config, ConfigError, SceneConfig
+from trajectotree.config.executor import Executor
 from trajectotree.execution import metrics
 from trajectotree.execution.reference import Reference, reference_from_arrays, reference_from_plan
 from trajectotree.execution.simulate import Conditions, build_execution_diagram, collected_log
@@ -231,12 +232,14 @@ def simulate_replanning(
     assumed = plan.config.scene  # what the plan in effect assumes (the last new plan's estimates)
     while True:
         execution = build_execution_diagram(
-            reference, config, conditions=conditions, closed_loop=True, mu_assumed=assumed.mu
+            reference, config, executor=Executor.GRASP_REPLAN, conditions=conditions, mu_assumed=assumed.mu
         )
         simulator = Simulator(execution.diagram, execution.initial_context(reference))
         if context is not None:  # the same systems: the state carries over (SceneGraph's geometry ids do not)
             simulator.get_mutable_context().SetTime(context.get_time())
             simulator.get_mutable_context().get_mutable_discrete_state().SetFrom(context.get_discrete_state())
+            reflex = execution.landing_reflex
+            reflex.restart(reflex.GetMyMutableContextFromRoot(simulator.get_mutable_context()))
         simulator.Initialize()
         now = simulator.get_context().get_time()
         reason = None

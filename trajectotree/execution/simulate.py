@@ -5,7 +5,8 @@ models/ (point contact between fingertip spheres, links and the box, friction
 from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), a controller (the object-level
-GraspController, default, or eq. 20's ImpedanceController, `controller="paper"`),
+GraspController, default, or eq. 20's ImpedanceController: the `Executor` chosen, dispatched in
+add_executor_systems),
 loggers of the plant state and of each finger's simulated force on the box
 (`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
 `SimLog` (the logs beside the plan at the same times), which
@@ -48,13 +49,15 @@ from trajectotree.config import (
     MIN_BOX_MASS,
     Config,
     ConfigError,
-    check_controller,
     check_length,
     check_range,
 )
+from trajectotree.config.executor import Executor
 from trajectotree.execution import closed_loop, metrics, playback
-from trajectotree.execution.control import GraspController, ImpedanceController
+from trajectotree.execution.control import ClosedLoopGraspController, GraspController
+from trajectotree.execution.impedance import ImpedanceController
 from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule
+from trajectotree.execution.reflexes import ConeFriction, LandingReflex
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
@@ -203,6 +206,7 @@ class ExecutionDiagram:
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
     # closed loop: {ClosedLoopLog field: VectorLogSink of the output port of that name}; open loop: None
     closed_loop_loggers: dict | None = None
+    landing_reflex: LandingReflex | None = None  # the closed loop's (a replanned phase restarts it)
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -264,47 +268,70 @@ def execution_schedule(reference: Reference, config: Config, scene: Scene) -> Gr
     )
 
 
-def add_grasp_controller(
-    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False, mu_assumed=None
-) -> GraspController:
-    """The GraspController with the plan's scene (mass, size) and friction cones at
-    max(search.friction_safety, controller.grasp.friction_safety) x scene.mu (never less friction than
-    the plan assumed), reading the box and hand state; with closed_loop, its estimate and
-    reflex ports are left for add_closed_loop to connect. mu_assumed: the friction the plan in
-    effect assumes, where its landing reflex compares the estimate (None: scene.mu)."""
-    scene, gains = build_scene(config.scene), config.controller
+def control_friction(config: Config) -> float:
+    """The friction the grasp controller's cones allow: max(search.friction_safety,
+    controller.grasp.friction_safety) x scene.mu (never less friction than the plan assumed)."""
+    return max(config.search.friction_safety, config.controller.grasp.friction_safety) * config.scene.mu
+
+
+def add_grasp_controller(builder, plant, hand, box, reference: Reference, config: Config) -> GraspController:
+    """The open-loop GraspController with the plan's scene (mass, size) and friction
+    (control_friction), reading the box and hand state."""
+    scene = build_scene(config.scene)
     schedule = execution_schedule(reference, config, scene)
-    mu_control = max(config.search.friction_safety, gains.grasp.friction_safety) * config.scene.mu
     controller = builder.AddNamedSystem(
-        "grasp_controller",
-        GraspController(scene, schedule, gains, mu=mu_control, closed_loop=closed_loop, mu_assumed=mu_assumed),
+        "grasp_controller", GraspController(scene, schedule, config.controller, mu=control_friction(config))
     )
     builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
     builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
     return controller
 
 
-def add_closed_loop(
-    builder, plant, hand, box, description: HandDescription, controller: GraspController, config: Config
-) -> dict:
-    """The contact and object monitors, the friction and mass estimators and the push reflex
-    (trajectotree.execution.closed_loop), wired to the plant and into `controller`'s estimate
-    ports; returns {output name: output port} of every quantity a ClosedLoopLog records."""
-    gains, scene = config.controller, config.scene
-    monitor = builder.AddNamedSystem(
-        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, controller.schedule, gains)
+@dataclass(frozen=True)
+class ClosedLoop:
+    """The closed-loop grasp controller's systems in a Diagram: the controller, its landing reflex
+    (which a replanned phase restarts) and {ClosedLoopLog field: the output port of that name}."""
+
+    controller: ClosedLoopGraspController
+    landing_reflex: LandingReflex
+    logged: dict
+
+
+def add_closed_loop_grasp(
+    builder, plant, hand, box, description: HandDescription, reference: Reference, config: Config, mu_assumed: float
+) -> ClosedLoop:
+    """The ClosedLoopGraspController and around it the contact and object monitors, the friction and
+    mass estimators, the push reflex (trajectotree.execution.closed_loop), the landing reflex and the
+    cones' friction (trajectotree.execution.reflexes), wired to the plant and to each other. mu_assumed:
+    the friction the plan in effect assumes, where the landing reflex compares the estimate and the
+    cones start."""
+    gains, scene_config = config.controller, config.scene
+    scene = build_scene(scene_config)
+    schedule = execution_schedule(reference, config, scene)
+    controller = builder.AddNamedSystem(
+        "grasp_controller", ClosedLoopGraspController(scene, schedule, gains, mu=control_friction(config))
     )
-    builder.Connect(plant.get_contact_results_output_port(), monitor.contact_results_port)
-    builder.Connect(plant.get_state_output_port(box), monitor.box_state_port)
+    landing = builder.AddNamedSystem("landing_reflex", LandingReflex(scene, schedule, gains, mu_assumed=mu_assumed))
+    cones = builder.AddNamedSystem("cone_friction", ConeFriction(gains, mu_assumed=mu_assumed))
+    monitor = builder.AddNamedSystem(
+        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, schedule, gains)
+    )
     motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(plant.time_step()))
-    builder.Connect(plant.get_state_output_port(box), motion.box_state_port)
-    builder.Connect(plant.get_generalized_contact_forces_output_port(box), motion.box_contact_forces_port)
     friction = builder.AddNamedSystem(
         "friction_estimator",
-        closed_loop.FrictionEstimator(scene.mu, scene.shape.circumradius, controller.schedule, gains),
+        closed_loop.FrictionEstimator(scene_config.mu, scene_config.shape.circumradius, schedule, gains),
     )
-    mass = builder.AddNamedSystem("mass_estimator", closed_loop.MassEstimator(scene.box_mass, scene.gravity, gains))
-    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene.gravity, gains))
+    mass = builder.AddNamedSystem(
+        "mass_estimator", closed_loop.MassEstimator(scene_config.box_mass, scene_config.gravity, gains)
+    )
+    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene_config.gravity, gains))
+    for system in (controller, landing):
+        builder.Connect(plant.get_state_output_port(box), system.box_state_port)
+        builder.Connect(plant.get_state_output_port(hand), system.hand_state_port)
+    builder.Connect(plant.get_contact_results_output_port(), monitor.contact_results_port)
+    builder.Connect(plant.get_state_output_port(box), monitor.box_state_port)
+    builder.Connect(plant.get_state_output_port(box), motion.box_state_port)
+    builder.Connect(plant.get_generalized_contact_forces_output_port(box), motion.box_contact_forces_port)
     for source, target, name in (
         (monitor, friction, "slipping"),
         (monitor, friction, "force_ratio"),
@@ -317,7 +344,11 @@ def add_closed_loop(
         (motion, reflex, "acceleration"),
         (motion, reflex, "contact_force"),
         (mass, reflex, "mass_estimate"),
-        (friction, controller, "mu_estimate"),
+        (friction, cones, "mu_estimate"),
+        (friction, landing, "mu_estimate"),
+        (reflex, landing, "reflex"),
+        (cones, controller, "friction"),
+        (landing, controller, "clocks"),
         (mass, controller, "mass_estimate"),
         (reflex, controller, "reflex"),
         (reflex, controller, "disturbance"),
@@ -328,44 +359,58 @@ def add_closed_loop(
         "mu_estimate": friction.GetOutputPort("mu_estimate"),
         "mass_estimate": mass.GetOutputPort("mass_estimate"),
     }
-    return logged | {name: reflex.GetOutputPort(name) for name in ("disturbance", "reflex")}
+    logged |= {name: reflex.GetOutputPort(name) for name in ("disturbance", "reflex")}
+    return ClosedLoop(controller, landing, logged)
+
+
+def add_executor_systems(
+    builder,
+    plant,
+    hand,
+    box,
+    description: HandDescription,
+    reference: Reference,
+    config: Config,
+    executor: Executor,
+    mu_assumed: float,
+) -> tuple[object, ClosedLoop | None]:
+    """The systems of `executor` (the one place it is dispatched): the output port of the plant's actuation,
+    and the closed loop's systems where it has one (a replanning executor's: the replanner drives it)."""
+    match executor:
+        case Executor.NONE:
+            zero = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
+            return zero.get_output_port(), None
+        case Executor.PAPER:
+            return add_paper_controller(builder, plant, hand, reference, config).actuation_port, None
+        case Executor.GRASP:
+            return add_grasp_controller(builder, plant, hand, box, reference, config).actuation_port, None
+        case Executor.GRASP_CLOSED_LOOP | Executor.GRASP_REPLAN:
+            loop = add_closed_loop_grasp(builder, plant, hand, box, description, reference, config, mu_assumed)
+            return loop.controller.actuation_port, loop
 
 
 def build_execution_diagram(
     reference: Reference,
     config: Config,
     *,
+    executor: Executor | None = None,
     meshcat: Meshcat | None = None,
-    controlled: bool = True,
-    controller: str | None = None,
     conditions: Conditions = Conditions(),
-    closed_loop: bool = False,
     mu_assumed: float | None = None,
 ) -> ExecutionDiagram:
-    """The Diagram that executes `reference` with `controller` (default
-    config.sim.controller) in the world `conditions` describe; controlled=False applies
-    zero torque (the open-loop hand, for checking that the controller holds the box).
-    closed_loop adds the contact monitor, the estimators and the push reflex around the
-    grasp controller (add_closed_loop) and their loggers. mu_assumed: the friction the plan in
-    effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
-    kind = check_closed_loop(check_controller(controller or config.sim.controller), closed_loop and controlled)
+    """The Diagram that executes `reference` with `executor` (None: config.sim.controller, open loop)
+    in the world `conditions` describe; a closed-loop executor adds the monitors, the estimators and
+    the reflexes around the grasp controller (add_closed_loop_grasp) and their loggers. mu_assumed: the
+    friction the plan in effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
+    executor = Executor(config.sim.controller) if executor is None else executor
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
     hand, box = add_hand_and_box(plant, conditions.scene(config.scene), scene_graph)
     plant.Finalize()
     description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
     exclude_finger_finger_collisions(plant, scene_graph, hand, description)
-    hold = config.sim.settle_time
-    if not controlled:
-        system = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
-        actuation = system.get_output_port()
-    elif kind == "paper":
-        actuation = add_paper_controller(builder, plant, hand, reference, config).actuation_port
-    else:
-        grasp = add_grasp_controller(
-            builder, plant, hand, box, reference, config, closed_loop=closed_loop, mu_assumed=mu_assumed
-        )
-        actuation = grasp.actuation_port
+    assumed = config.scene.mu if mu_assumed is None else mu_assumed
+    actuation, loop = add_executor_systems(builder, plant, hand, box, description, reference, config, executor, assumed)
     builder.Connect(actuation, plant.get_actuation_input_port())
     if conditions.push is not None:
         push = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
@@ -376,10 +421,9 @@ def build_execution_diagram(
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     closed_loop_loggers = None
-    if closed_loop and controlled:
-        ports = add_closed_loop(builder, plant, hand, box, description, grasp, config)
+    if loop is not None:
         closed_loop_loggers = {
-            name: LogVectorOutput(port, builder, triggers, config.sim.log_period) for name, port in ports.items()
+            name: LogVectorOutput(port, builder, triggers, config.sim.log_period) for name, port in loop.logged.items()
         }
     visualizer = None
     if meshcat is not None:
@@ -396,9 +440,10 @@ def build_execution_diagram(
         state_logger=state_logger,
         force_logger=force_logger,
         visualizer=visualizer,
-        duration=reference.duration + hold,
-        controller=kind if controlled else "none",
+        duration=reference.duration + config.sim.settle_time,
+        controller=executor.controller,
         closed_loop_loggers=closed_loop_loggers,
+        landing_reflex=None if loop is None else loop.landing_reflex,
     )
 
 
@@ -406,18 +451,6 @@ def arrow_scale(reference: Reference) -> float:
     """The force arrows' scale (N per cm) of a run of `reference`: set by the plan's forces, so that
     the playback and the GIF of one plan share it and a dropped box's squeeze does not shrink it."""
     return arrow_newtons_per_cm(reference.f_W)
-
-
-def check_closed_loop(controller: str, closed_loop: bool) -> str:
-    """`controller`, unless the closed loop is asked for around another than the grasp controller."""
-    if closed_loop and controller != "grasp":
-        raise ConfigError(
-            field="controller",
-            value=controller,
-            problem=": the closed loop runs around the grasp controller only",
-            choices=("grasp",),
-        )
-    return controller
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -496,27 +529,18 @@ def simulate_reference(
     reference: Reference,
     config: Config,
     *,
+    executor: Executor | None = None,
     meshcat: Meshcat | None = None,
     html_path: str | Path | None = None,
-    controlled: bool = True,
     realtime_rate: float = 0.0,
-    controller: str | None = None,
     conditions: Conditions = Conditions(),
-    closed_loop: bool = False,
 ) -> SimResult:
-    """Runs the execution Diagram for the plan's length plus the settle time; the log it
-    records, evaluated by trajectotree.execution.metrics."""
+    """Runs the execution Diagram of `executor` (None: config.sim.controller, open loop; one that
+    replans runs its closed loop here, without the replanner: execution.replan) for the plan's length
+    plus the settle time; the log it records, evaluated by trajectotree.execution.metrics."""
     if html_path is not None and meshcat is None:
         meshcat = playback.start_meshcat()
-    execution = build_execution_diagram(
-        reference,
-        config,
-        meshcat=meshcat,
-        controlled=controlled,
-        controller=controller,
-        conditions=conditions,
-        closed_loop=closed_loop,
-    )
+    execution = build_execution_diagram(reference, config, executor=executor, meshcat=meshcat, conditions=conditions)
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:
