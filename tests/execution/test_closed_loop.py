@@ -42,7 +42,7 @@ def test_closed_loop_ports_are_named(scene):
     from trajectotree.execution.simulate import build_execution_diagram
 
     execution = build_execution_diagram(three_finger_hold(scene, 0), hold_config(), executor=Executor.GRASP_CLOSED_LOOP)
-    diagram = execution.diagram
+    diagram = execution.executor.diagram  # the executor's own Diagram (trajectotree.execution.executor)
     names = lambda system: [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]  # noqa: E731
     monitor = diagram.GetSubsystemByName("contact_monitor")
     assert names(monitor) == [
@@ -241,7 +241,7 @@ def test_open_loop_runs_are_unchanged_bit_for_bit(scene):
         for name in ("t", "x", "q", "f_W", "abs_error"):
             np.testing.assert_array_equal(getattr(result, name), golden[name], err_msg=name)
     assert result.closed_loop is None and result.to_json()["closed_loop"] is None
-    diagram = build_execution_diagram(reference, hold_config(), conditions=conditions).diagram
+    diagram = build_execution_diagram(reference, hold_config(), conditions=conditions).executor.diagram
     names = {diagram.GetSystems()[i].get_name() for i in range(len(diagram.GetSystems()))}
     assert not names & {"contact_monitor", "object_monitor", "friction_estimator", "mass_estimator", "push_reflex"}
 

@@ -50,8 +50,8 @@ def test_each_executor_builds_its_own_systems(scene, executor, controller, kind)
     exactly for the closed-loop executors, and the open-loop grasp controller reads the state alone."""
     reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.2)
     execution = build_execution_diagram(reference, Config(), executor=executor)
-    names = system_names(execution.diagram)
-    system = execution.diagram.GetSubsystemByName(controller)
+    names = system_names(execution.executor.diagram)
+    system = execution.executor.diagram.GetSubsystemByName(controller)
     assert type(system) is kind
     assert (CLOSED_LOOP_SYSTEMS <= names) == executor.closed_loop
     assert not (CLOSED_LOOP_SYSTEMS & names) or executor.closed_loop
@@ -67,10 +67,10 @@ def test_each_executor_builds_its_own_systems(scene, executor, controller, kind)
 def test_the_zero_torque_executor_and_the_default(scene):
     reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.2)
     none = build_execution_diagram(reference, Config(), executor=Executor.NONE)
-    assert "zero_torque" in system_names(none.diagram) and none.controller == "none"
+    assert "zero_torque" in system_names(none.executor.diagram) and none.controller == "none"
     paper = with_values(Config(), {"sim.controller": "paper"})
     default = build_execution_diagram(reference, paper)  # config.sim.controller, open loop
-    assert "impedance_controller" in system_names(default.diagram) and default.closed_loop_loggers is None
+    assert "impedance_controller" in system_names(default.executor.diagram) and default.closed_loop_loggers is None
 
 
 def test_executor_names_and_the_older_options():

@@ -10,10 +10,11 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, config_to_dict
 from trajectotree.config.executor import Executor
+from trajectotree.execution.executor import held_trajectory
 from trajectotree.execution.impedance import ImpedanceController
 from trajectotree.execution.reference import check_plan_arrays, reference_from_arrays, static_hold_reference
 from trajectotree.execution.run import run_simulation
-from trajectotree.execution.simulate import held_trajectory, simulate_reference
+from trajectotree.execution.simulate import simulate_reference
 from trajectotree.io import load_sim, save_sim
 from trajectotree.scene.plant import build_scene
 

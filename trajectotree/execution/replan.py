@@ -82,13 +82,8 @@ def replan_reason(execution, context, assumed: SceneConfig, config: Config) -> R
     """Why the plan in effect, which assumes the scene `assumed` (its friction and mass), no longer
     holds, from the closed loop's outputs at this moment (None: it holds)."""
     value = {
-        name: closed_loop_output(execution, context, system, name)
-        for system, name in (
-            ("friction_estimator", "mu_estimate"),
-            ("mass_estimator", "mass_estimate"),
-            ("contact_monitor", "tracking_error"),
-            ("contact_monitor", "in_contact"),
-        )
+        name: closed_loop_output(execution, context, name)
+        for name in ("mu_estimate", "mass_estimate", "tracking_error", "in_contact")
     }
     rules = config.controller.replan
     if value["mu_estimate"][0] < assumed.mu - rules.friction_drop:
@@ -103,17 +98,17 @@ def replan_reason(execution, context, assumed: SceneConfig, config: Config) -> R
     return None
 
 
-def closed_loop_output(execution, context, system: str, port: str) -> np.ndarray:
-    """The value of the closed-loop `system`'s output `port` (trajectotree.execution.closed_loop) now."""
-    sub = execution.diagram.GetSubsystemByName(system)
-    return sub.GetOutputPort(port).Eval(sub.GetMyContextFromRoot(context))
+def closed_loop_output(execution, context, port: str) -> np.ndarray:
+    """The value of the executor's closed-loop output `port` (trajectotree.execution.executor) now."""
+    diagram = execution.executor.diagram
+    return diagram.GetOutputPort(port).Eval(diagram.GetMyContextFromRoot(context))
 
 
 def estimates(execution, context) -> tuple[float, float]:
     """(friction, mass kg) as the closed loop estimates them now."""
     return (
-        float(closed_loop_output(execution, context, "friction_estimator", "mu_estimate")[0]),
-        float(closed_loop_output(execution, context, "mass_estimator", "mass_estimate")[0]),
+        float(closed_loop_output(execution, context, "mu_estimate")[0]),
+        float(closed_loop_output(execution, context, "mass_estimate")[0]),
     )
 
 
@@ -238,7 +233,7 @@ def simulate_replanning(
         if context is not None:  # the same systems: the state carries over (SceneGraph's geometry ids do not)
             simulator.get_mutable_context().SetTime(context.get_time())
             simulator.get_mutable_context().get_mutable_discrete_state().SetFrom(context.get_discrete_state())
-            reflex = execution.landing_reflex
+            reflex = execution.executor.landing_reflex
             reflex.restart(reflex.GetMyMutableContextFromRoot(simulator.get_mutable_context()))
         simulator.Initialize()
         now = simulator.get_context().get_time()

@@ -5,8 +5,8 @@ models/ (point contact between fingertip spheres, links and the box, friction
 from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), a controller (the object-level
-GraspController, default, or eq. 20's ImpedanceController: the `Executor` chosen, dispatched in
-add_executor_systems),
+GraspController, default, or eq. 20's ImpedanceController: the `Executor` chosen, one Diagram of its own,
+trajectotree.execution.executor.add_executor),
 loggers of the plant state and of each finger's simulated force on the box
 (`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
 `SimLog` (the logs beside the plan at the same times), which
@@ -40,8 +40,7 @@ from pydrake.multibody.plant import (
 )
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
-from pydrake.trajectories import PiecewisePolynomial
+from pydrake.systems.primitives import LogVectorOutput
 
 from trajectotree.config import (
     MAX_BOX_MASS,
@@ -53,15 +52,13 @@ from trajectotree.config import (
     check_range,
 )
 from trajectotree.config.executor import Executor
-from trajectotree.execution import closed_loop, metrics, playback
-from trajectotree.execution.control import ClosedLoopGraspController, GraspController
-from trajectotree.execution.impedance import ImpedanceController
-from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule
-from trajectotree.execution.reflexes import ConeFriction, LandingReflex
+from trajectotree.execution import metrics, playback
+from trajectotree.execution.executor import CLOSED_LOOP_OUTPUTS, ExecutorSystems, add_executor, connect_executor
+from trajectotree.execution.reference import Reference
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
-from trajectotree.scene.plant import Scene, add_hand_and_box, build_scene
+from trajectotree.scene.plant import add_hand_and_box
 
 
 @dataclass(frozen=True)
@@ -206,7 +203,7 @@ class ExecutionDiagram:
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
     # closed loop: {ClosedLoopLog field: VectorLogSink of the output port of that name}; open loop: None
     closed_loop_loggers: dict | None = None
-    landing_reflex: LandingReflex | None = None  # the closed loop's (a replanned phase restarts it)
+    executor: ExecutorSystems | None = None  # the executor's Diagram (its ports: trajectotree.execution.executor)
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -215,14 +212,6 @@ class ExecutionDiagram:
         self.plant.SetPositions(plant_context, self.box, reference.x[0])
         self.plant.SetPositions(plant_context, self.hand, reference.q[0])
         return context
-
-
-def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
-    """First-order hold through (times, values (K, n)), then constant for `hold` seconds."""
-    if hold > 0:
-        times = np.append(times, times[-1] + hold)
-        values = np.vstack([values, values[-1]])
-    return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
 
 
 def exclude_finger_finger_collisions(plant, scene_graph, hand, description: HandDescription) -> None:
@@ -237,158 +226,6 @@ def exclude_finger_finger_collisions(plant, scene_graph, hand, description: Hand
             manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
 
 
-def add_paper_controller(builder, plant, hand, reference: Reference, config: Config) -> ImpedanceController:
-    """Eq. 20 fed by reference sources (fingertip positions, velocities, forces)."""
-    controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
-
-    def flat(a):
-        return a.reshape(len(reference.t), -1)  # (K, F, 2) -> (K, 2F), finger-major
-
-    hold = config.sim.settle_time
-    for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
-        source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))
-        builder.Connect(source.get_output_port(), controller.GetInputPort(name))
-    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
-    return controller
-
-
-def execution_schedule(reference: Reference, config: Config, scene: Scene) -> GraspSchedule:
-    """The grasp controller's schedule of `reference`, sampled at its rate, to the run's end
-    (the plan, then config.sim.settle_time of hold)."""
-    gains = config.controller
-    return grasp_schedule(
-        reference,
-        shape=config.scene.shape,
-        tip_radius=scene.tip_radius,
-        period=1.0 / gains.rate_hz,
-        duration=reference.duration + config.sim.settle_time,
-        ramp_time=gains.grasp.ramp_time,
-        swing_lift=gains.grasp.swing_lift,
-        contact_distance=gains.grasp.contact_distance,
-    )
-
-
-def control_friction(config: Config) -> float:
-    """The friction the grasp controller's cones allow: max(search.friction_safety,
-    controller.grasp.friction_safety) x scene.mu (never less friction than the plan assumed)."""
-    return max(config.search.friction_safety, config.controller.grasp.friction_safety) * config.scene.mu
-
-
-def add_grasp_controller(builder, plant, hand, box, reference: Reference, config: Config) -> GraspController:
-    """The open-loop GraspController with the plan's scene (mass, size) and friction
-    (control_friction), reading the box and hand state."""
-    scene = build_scene(config.scene)
-    schedule = execution_schedule(reference, config, scene)
-    controller = builder.AddNamedSystem(
-        "grasp_controller", GraspController(scene, schedule, config.controller, mu=control_friction(config))
-    )
-    builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
-    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
-    return controller
-
-
-@dataclass(frozen=True)
-class ClosedLoop:
-    """The closed-loop grasp controller's systems in a Diagram: the controller, its landing reflex
-    (which a replanned phase restarts) and {ClosedLoopLog field: the output port of that name}."""
-
-    controller: ClosedLoopGraspController
-    landing_reflex: LandingReflex
-    logged: dict
-
-
-def add_closed_loop_grasp(
-    builder, plant, hand, box, description: HandDescription, reference: Reference, config: Config, mu_assumed: float
-) -> ClosedLoop:
-    """The ClosedLoopGraspController and around it the contact and object monitors, the friction and
-    mass estimators, the push reflex (trajectotree.execution.closed_loop), the landing reflex and the
-    cones' friction (trajectotree.execution.reflexes), wired to the plant and to each other. mu_assumed:
-    the friction the plan in effect assumes, where the landing reflex compares the estimate and the
-    cones start."""
-    gains, scene_config = config.controller, config.scene
-    scene = build_scene(scene_config)
-    schedule = execution_schedule(reference, config, scene)
-    controller = builder.AddNamedSystem(
-        "grasp_controller", ClosedLoopGraspController(scene, schedule, gains, mu=control_friction(config))
-    )
-    landing = builder.AddNamedSystem("landing_reflex", LandingReflex(scene, schedule, gains, mu_assumed=mu_assumed))
-    cones = builder.AddNamedSystem("cone_friction", ConeFriction(gains, mu_assumed=mu_assumed))
-    monitor = builder.AddNamedSystem(
-        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, schedule, gains)
-    )
-    motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(plant.time_step()))
-    friction = builder.AddNamedSystem(
-        "friction_estimator",
-        closed_loop.FrictionEstimator(scene_config.mu, scene_config.shape.circumradius, schedule, gains),
-    )
-    mass = builder.AddNamedSystem(
-        "mass_estimator", closed_loop.MassEstimator(scene_config.box_mass, scene_config.gravity, gains)
-    )
-    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene_config.gravity, gains))
-    for system in (controller, landing):
-        builder.Connect(plant.get_state_output_port(box), system.box_state_port)
-        builder.Connect(plant.get_state_output_port(hand), system.hand_state_port)
-    builder.Connect(plant.get_contact_results_output_port(), monitor.contact_results_port)
-    builder.Connect(plant.get_state_output_port(box), monitor.box_state_port)
-    builder.Connect(plant.get_state_output_port(box), motion.box_state_port)
-    builder.Connect(plant.get_generalized_contact_forces_output_port(box), motion.box_contact_forces_port)
-    for source, target, name in (
-        (monitor, friction, "slipping"),
-        (monitor, friction, "force_ratio"),
-        (monitor, friction, "normal_force"),
-        (monitor, friction, "approach_speed"),
-        (reflex, friction, "reflex"),
-        (monitor, friction, "tracking_error"),
-        (motion, mass, "contact_force"),
-        (motion, mass, "acceleration"),
-        (motion, reflex, "acceleration"),
-        (motion, reflex, "contact_force"),
-        (mass, reflex, "mass_estimate"),
-        (friction, cones, "mu_estimate"),
-        (friction, landing, "mu_estimate"),
-        (reflex, landing, "reflex"),
-        (cones, controller, "friction"),
-        (landing, controller, "clocks"),
-        (mass, controller, "mass_estimate"),
-        (reflex, controller, "reflex"),
-        (reflex, controller, "disturbance"),
-    ):
-        builder.Connect(source.GetOutputPort(name), target.GetInputPort(name))
-    logged = {name: monitor.GetOutputPort(name) for name in ClosedLoopLog.MONITOR_ARRAYS}
-    logged |= {
-        "mu_estimate": friction.GetOutputPort("mu_estimate"),
-        "mass_estimate": mass.GetOutputPort("mass_estimate"),
-    }
-    logged |= {name: reflex.GetOutputPort(name) for name in ("disturbance", "reflex")}
-    return ClosedLoop(controller, landing, logged)
-
-
-def add_executor_systems(
-    builder,
-    plant,
-    hand,
-    box,
-    description: HandDescription,
-    reference: Reference,
-    config: Config,
-    executor: Executor,
-    mu_assumed: float,
-) -> tuple[object, ClosedLoop | None]:
-    """The systems of `executor` (the one place it is dispatched): the output port of the plant's actuation,
-    and the closed loop's systems where it has one (a replanning executor's: the replanner drives it)."""
-    match executor:
-        case Executor.NONE:
-            zero = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
-            return zero.get_output_port(), None
-        case Executor.PAPER:
-            return add_paper_controller(builder, plant, hand, reference, config).actuation_port, None
-        case Executor.GRASP:
-            return add_grasp_controller(builder, plant, hand, box, reference, config).actuation_port, None
-        case Executor.GRASP_CLOSED_LOOP | Executor.GRASP_REPLAN:
-            loop = add_closed_loop_grasp(builder, plant, hand, box, description, reference, config, mu_assumed)
-            return loop.controller.actuation_port, loop
-
-
 def build_execution_diagram(
     reference: Reference,
     config: Config,
@@ -400,7 +237,7 @@ def build_execution_diagram(
 ) -> ExecutionDiagram:
     """The Diagram that executes `reference` with `executor` (None: config.sim.controller, open loop)
     in the world `conditions` describe; a closed-loop executor adds the monitors, the estimators and
-    the reflexes around the grasp controller (add_closed_loop_grasp) and their loggers. mu_assumed: the
+    the reflexes around the grasp controller (trajectotree.execution.executor) and their loggers. mu_assumed: the
     friction the plan in effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
     executor = Executor(config.sim.controller) if executor is None else executor
     builder = DiagramBuilder()
@@ -409,9 +246,18 @@ def build_execution_diagram(
     plant.Finalize()
     description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
     exclude_finger_finger_collisions(plant, scene_graph, hand, description)
-    assumed = config.scene.mu if mu_assumed is None else mu_assumed
-    actuation, loop = add_executor_systems(builder, plant, hand, box, description, reference, config, executor, assumed)
-    builder.Connect(actuation, plant.get_actuation_input_port())
+    added = add_executor(
+        builder,
+        plant,
+        reference,
+        config,
+        scene_graph=scene_graph,
+        hand=hand,
+        box=box,
+        executor=executor,
+        mu_assumed=mu_assumed,
+    )
+    connect_executor(builder, added, plant, hand, box)
     if conditions.push is not None:
         push = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
         builder.Connect(push.spatial_forces_port, plant.get_applied_spatial_force_input_port())
@@ -421,9 +267,10 @@ def build_execution_diagram(
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     closed_loop_loggers = None
-    if loop is not None:
+    if executor.closed_loop:
         closed_loop_loggers = {
-            name: LogVectorOutput(port, builder, triggers, config.sim.log_period) for name, port in loop.logged.items()
+            name: LogVectorOutput(added.GetOutputPort(name), builder, triggers, config.sim.log_period)
+            for name in CLOSED_LOOP_OUTPUTS
         }
     visualizer = None
     if meshcat is not None:
@@ -443,7 +290,7 @@ def build_execution_diagram(
         duration=reference.duration + config.sim.settle_time,
         controller=executor.controller,
         closed_loop_loggers=closed_loop_loggers,
-        landing_reflex=None if loop is None else loop.landing_reflex,
+        executor=added,
     )
 
 
