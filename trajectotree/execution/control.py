@@ -36,7 +36,7 @@ from trajectotree.config import ControllerGains
 from trajectotree.execution.fingers import HandKinematics, check_finger_major
 from trajectotree.execution.reference import GraspSchedule
 from trajectotree.execution.reflexes import next_landing
-from trajectotree.geometry import rotation_2d
+from trajectotree.geometry import rotation_2d, wrap_angle
 from trajectotree.scene.plant import Scene
 from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows
 
@@ -191,7 +191,7 @@ class GraspController(LeafSystem):
         a faster response)."""
         s, g = self.schedule, self.gains
         error = s.X[n] - box_state[:3]
-        error[2] = (error[2] + np.pi) % (2 * np.pi) - np.pi
+        error[2] = wrap_angle(error[2])
         boost = 1.0 + estimates.reflex * (g.push_reflex.gain - 1.0)
         kp, kd = boost * g.grasp.object_kp, np.sqrt(boost) * g.grasp.object_kd
         return s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])

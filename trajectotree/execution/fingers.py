@@ -27,8 +27,6 @@ class HandKinematics:
     def __init__(self, fingers: tuple[FingerGeometry, ...], gravity: float):
         self.fingers = TwoLinkFinger.stack(fingers)
         self._model = HandModel.from_fingers(fingers, gravity)  # CITO's hand dynamics: the same closed forms
-        # dV/dq = [k1 cos a1 + k2 cos a12, k2 cos a12]
-        self._k1, self._k2 = self._model.grav_1, self._model.grav_2
         self.damping = np.array([f.damping for f in fingers])  # (F, 2) N m s/rad
 
     def dynamics(self, q, v) -> tuple[np.ndarray, np.ndarray]:
@@ -46,6 +44,4 @@ class HandKinematics:
         q = np.reshape(q, (-1, 2))
         r1, r2 = self.fingers.links(q)
         p = self.fingers.tip_from_links(r1, r2)
-        c1, c12 = (np.cos(a) for a in self.fingers.angles(q))
-        g = np.column_stack([self._k1 * c1 + self._k2 * c12, self._k2 * c12])
-        return p, jacobian_from_links(r1, r2), g
+        return p, jacobian_from_links(r1, r2), -self._model.gravity_forces(q.ravel())  # gravity's own home

@@ -18,6 +18,7 @@ import numpy as np
 from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
+from trajectotree.execution.closed_loop import low_pass_step
 from trajectotree.execution.fingers import HandKinematics
 from trajectotree.execution.reference import GraspSchedule
 from trajectotree.geometry import rotation_2d
@@ -150,4 +151,4 @@ class ConeFriction(LeafSystem):
         tau = self.gains.grasp.cone_time_constant
         if tau <= 0.0:
             return estimate
-        return previous + (estimate - previous) * min(1.0 / (self.gains.rate_hz * tau), 1.0)
+        return low_pass_step(previous, estimate, min(1.0 / (self.gains.rate_hz * tau), 1.0))
