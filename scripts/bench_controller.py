@@ -19,6 +19,7 @@ import sys
 import numpy as np
 
 from trajectotree.config import Config
+from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import Reference, reference_from_arrays, reference_from_plan
 from trajectotree.execution.simulate import simulate_reference
 from trajectotree.scene.plant import build_scene
@@ -59,7 +60,7 @@ def main() -> None:
     times = {c: [] for c in CONTROLLERS}
     for _ in range(args.repeats):
         for controller in CONTROLLERS:  # alternating, so a change in machine load hits both
-            result = simulate_reference(reference, config, controller=controller)
+            result = simulate_reference(reference, config, executor=Executor(controller))
             times[controller].append(result.sim_time_s)
             print(
                 f"  {controller:5s} {result.sim_time_s:6.2f} s  dropped {result.dropped}  "
@@ -75,7 +76,7 @@ def main() -> None:
     print(f"ratio grasp / paper: {medians['grasp'] / medians['paper']:.2f} (target <= 1.5)")
     if args.profile:
         profiler = cProfile.Profile()
-        profiler.runcall(simulate_reference, reference, config, controller="grasp")
+        profiler.runcall(simulate_reference, reference, config, executor=Executor.GRASP)
         pstats.Stats(profiler).sort_stats("cumulative").print_stats(25)
 
 

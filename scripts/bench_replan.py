@@ -34,7 +34,7 @@ def replanning(results: list, sim_mu: float) -> None:
         if not result.success:
             print(f"goal {result.goal:+.2f}: no plan ({result.status})")
             continue
-        run = tt.run_simulation(plan=result, sim_mu=sim_mu, replan=True)
+        run = tt.run_simulation(plan=result, sim_mu=sim_mu, executor="grasp-replan")
         drops += run.dropped
         print(
             f"goal {result.goal:+.2f}: {'DROPPED' if run.dropped else 'held'}, MAE theta {run.mae_theta:.4f} rad, "

@@ -17,9 +17,9 @@ import argparse
 
 import numpy as np
 
-from trajectotree.execution.control import HandKinematics
+from trajectotree.execution.executor import execution_schedule
+from trajectotree.execution.fingers import HandKinematics
 from trajectotree.execution.reference import reference_from_plan
-from trajectotree.execution.simulate import execution_schedule
 from trajectotree.experiments.executions import middle_of_middle_segment
 from trajectotree.geometry import rotation_2d
 from trajectotree.io import load_plan

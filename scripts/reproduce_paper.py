@@ -24,8 +24,9 @@ import sys
 import time
 from pathlib import Path
 
-from trajectotree.config import CONTROLLERS, Config, ConfigError
-from trajectotree.experiments.executions import run_executions
+from trajectotree.config import Config, ConfigError
+from trajectotree.config.executor import Executor
+from trajectotree.experiments.executions import PAPER_EXECUTORS, run_executions
 from trajectotree.experiments.report import make_report, table_markdown
 from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
@@ -59,9 +60,9 @@ def main() -> int:
         start = time.perf_counter()
         summary = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler)
         settings = {"gains": spec.config.controller, "sim": spec.config.sim, "workers": args.workers}
-        run_executions(args.out, controllers=CONTROLLERS, conditions=["nominal"], **settings)
+        run_executions(args.out, executors=PAPER_EXECUTORS, conditions=["nominal"], **settings)
         run_executions(
-            args.out, controllers=["grasp"], conditions=["mismatch", "push"], methods=["trajectotree"], **settings
+            args.out, executors=[Executor.GRASP], conditions=["mismatch", "push"], methods=["trajectotree"], **settings
         )
         files, table = make_report(args.out, args.report_dir)
     except ConfigError as e:

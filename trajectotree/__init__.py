@@ -50,6 +50,8 @@ _EXPORTS = {
     "plan": "planning.planners",
     "check_physics": "planning.physics",
     "run_simulation": "execution.run",
+    "add_executor": "execution.executor",
+    "Executor": "config.executor",
     "write_plan_html": "execution.playback",
 }
 __all__ = ["__version__", *_EXPORTS]

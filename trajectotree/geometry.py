@@ -373,6 +373,11 @@ class ConvexPolygon:
         return f"ConvexPolygon({np.round(self.vertices, 6).tolist()})"
 
 
+def wrap_angle(a):
+    """An angle (rad, or an array of them) in [-pi, pi)."""
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
 def rotation_2d(theta: float) -> np.ndarray:
     """R_WB for a rotation by theta about z."""
     c, s = np.cos(theta), np.sin(theta)

@@ -9,6 +9,7 @@ import pytest
 
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, ControllerGains, EstimatorGains, with_values
+from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.run import run_simulation
 from trajectotree.execution.simulate import Conditions, Push, simulate_reference
@@ -40,8 +41,8 @@ def test_closed_loop_ports_are_named(scene):
     """What a replanner reads: the monitor's, the estimators' and the reflex's output ports by name."""
     from trajectotree.execution.simulate import build_execution_diagram
 
-    execution = build_execution_diagram(three_finger_hold(scene, 0), hold_config(), closed_loop=True)
-    diagram = execution.diagram
+    execution = build_execution_diagram(three_finger_hold(scene, 0), hold_config(), executor=Executor.GRASP_CLOSED_LOOP)
+    diagram = execution.executor.diagram  # the executor's own Diagram (trajectotree.execution.executor)
     names = lambda system: [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]  # noqa: E731
     monitor = diagram.GetSubsystemByName("contact_monitor")
     assert names(monitor) == [
@@ -59,7 +60,9 @@ def test_closed_loop_ports_are_named(scene):
     assert names(diagram.GetSubsystemByName("push_reflex")) == ["disturbance", "reflex"]
     controller = diagram.GetSubsystemByName("grasp_controller")
     inputs = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]
-    assert inputs == ["box_state", "hand_state", "mu_estimate", "mass_estimate", "reflex", "disturbance"]
+    assert inputs == ["box_state", "hand_state", "friction", "mass_estimate", "reflex", "disturbance", "clocks"]
+    assert names(diagram.GetSubsystemByName("landing_reflex")) == ["clocks"]
+    assert names(diagram.GetSubsystemByName("cone_friction")) == ["friction"]
     assert set(execution.closed_loop_loggers) == set(CLOSED_LOOP_ARRAYS)
 
 
@@ -79,7 +82,10 @@ def slipping_run(scene):
     plan's cones (the friction estimate's floor at the plan's 0.7, so the estimate cannot act)."""
     reference = three_finger_hold(scene, lifted=1)
     return simulate_reference(
-        reference, hold_config({"estimators.friction_floor": 0.7}), conditions=Conditions(mu=0.45), closed_loop=True
+        reference,
+        hold_config({"estimators.friction_floor": 0.7}),
+        conditions=Conditions(mu=0.45),
+        executor=Executor.GRASP_CLOSED_LOOP,
     )
 
 
@@ -112,7 +118,10 @@ def test_the_friction_estimate_of_a_scripted_slip_is_the_simulated_friction(scen
     of `mu` (never rising), and the grasp QP's cones, which follow it over cone_time_constant,
     then keep the contacts sticking."""
     result = simulate_reference(
-        three_finger_hold(scene, lifted), hold_config(), conditions=Conditions(mu=mu), closed_loop=True
+        three_finger_hold(scene, lifted),
+        hold_config(),
+        conditions=Conditions(mu=mu),
+        executor=Executor.GRASP_CLOSED_LOOP,
     )
     watch = result.closed_loop
     assert watch.mu_estimate[0] == pytest.approx(0.7)
@@ -129,7 +138,7 @@ def test_the_friction_estimate_stops_at_the_floor(scene):
         three_finger_hold(scene, 0),
         hold_config({"estimators.friction_floor": 0.5}),
         conditions=Conditions(mu=0.3),
-        closed_loop=True,
+        executor=Executor.GRASP_CLOSED_LOOP,
     )
     assert result.closed_loop.mu_estimate.min() == pytest.approx(0.5)
 
@@ -139,7 +148,7 @@ def test_the_mass_estimate_of_a_box_held_at_twice_the_mass(scene):
     mass within 10 %, and the box, which sags under the plan's mass, hangs where planned."""
     reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
     heavy = Conditions(mass=2.0 * scene.config.box_mass)
-    closed = simulate_reference(reference, hold_config(), conditions=heavy, closed_loop=True)
+    closed = simulate_reference(reference, hold_config(), conditions=heavy, executor=Executor.GRASP_CLOSED_LOOP)
     estimate = closed.closed_loop.mass_estimate
     assert estimate[0] == pytest.approx(scene.config.box_mass)
     late = closed.t > 0.6
@@ -157,7 +166,10 @@ def test_the_push_reflex_squeezes_while_a_push_acts_and_lets_go_after(scene):
     gains = ControllerGains()
     push = Push(force=(1.5, 0.0), time_s=0.3, duration_s=0.1)
     result = simulate_reference(
-        three_finger_hold(scene, 0, duration=1.0), hold_config(), conditions=Conditions(push=push), closed_loop=True
+        three_finger_hold(scene, 0, duration=1.0),
+        hold_config(),
+        conditions=Conditions(push=push),
+        executor=Executor.GRASP_CLOSED_LOOP,
     )
     watch, t = result.closed_loop, result.t
     assert not result.dropped
@@ -186,8 +198,8 @@ def test_the_reflex_holds_a_three_finger_grasp_against_a_push_it_would_give_way_
         }
     )
     error = lambda r: np.abs(r.x - r.x_plan).max(axis=0)  # noqa: E731
-    held = simulate_reference(reference, hold_config(), conditions=push, closed_loop=True)
-    gave_way = simulate_reference(reference, squeeze_only, conditions=push, closed_loop=True)
+    held = simulate_reference(reference, hold_config(), conditions=push, executor=Executor.GRASP_CLOSED_LOOP)
+    gave_way = simulate_reference(reference, squeeze_only, conditions=push, executor=Executor.GRASP_CLOSED_LOOP)
     assert not held.dropped
     assert error(held)[0] < 0.003 and error(held)[2] < 0.01, error(held)
     assert error(gave_way)[0] > 0.005, error(gave_way)
@@ -206,7 +218,7 @@ def test_a_planned_goal_pushed_mid_segment_with_3_n_is_held_closed_loop():
     config = result.config
     start = middle_of_middle_segment(config, float(result.trajectory.t[-1]))
     push = Push(force=(3.0, 0.0), time_s=start, duration_s=config.sim.push_duration)
-    run = run_simulation(plan=result, push=push, closed_loop=True)
+    run = run_simulation(plan=result, push=push, executor="grasp-closed-loop")
     assert not run.dropped
     assert run.closed_loop.reflex[(run.t > start + 0.01) & (run.t < start + push.duration_s)].min() == 1.0
     assert run.final_error[2] < np.radians(3.0)
@@ -229,7 +241,7 @@ def test_open_loop_runs_are_unchanged_bit_for_bit(scene):
         for name in ("t", "x", "q", "f_W", "abs_error"):
             np.testing.assert_array_equal(getattr(result, name), golden[name], err_msg=name)
     assert result.closed_loop is None and result.to_json()["closed_loop"] is None
-    diagram = build_execution_diagram(reference, hold_config(), conditions=conditions).diagram
+    diagram = build_execution_diagram(reference, hold_config(), conditions=conditions).executor.diagram
     names = {diagram.GetSystems()[i].get_name() for i in range(len(diagram.GetSystems()))}
     assert not names & {"contact_monitor", "object_monitor", "friction_estimator", "mass_estimator", "push_reflex"}
 
@@ -263,8 +275,13 @@ def test_slip_intervals_are_the_runs_of_samples():
 
 
 def test_the_closed_loop_needs_the_grasp_controller(scene):
+    """Eq. 20 with the closed loop is no executor: the older options that would combine them are refused."""
+    from trajectotree.config.executor import executor_of
+
     with pytest.raises(ConfigError, match="controller = 'paper': the closed loop runs around the grasp controller"):
-        run_simulation(plan=three_finger_hold(scene, 0), config=hold_config(), controller="paper", closed_loop=True)
+        executor_of("paper", closed_loop=True)
+    with pytest.raises(ConfigError, match="executor = 'paper-closed-loop' is not an executor; valid: grasp, grasp-"):
+        run_simulation(plan=three_finger_hold(scene, 0), config=hold_config(), executor="paper-closed-loop")
 
 
 @pytest.mark.parametrize("floor", [0.0, -0.1, 1.5, float("nan")])

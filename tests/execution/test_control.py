@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from trajectotree.config import Config, ControllerGains, ImpedanceGains, with_values
-from trajectotree.execution.control import ImpedanceController
+from trajectotree.config.executor import Executor
+from trajectotree.execution.impedance import ImpedanceController
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.simulate import simulate_reference
 from trajectotree.geometry import ConvexPolygon
@@ -75,7 +76,7 @@ def hold_config():
 
 
 def test_controller_holds_the_box_for_two_seconds(hold_reference, hold_config):
-    result = simulate_reference(hold_reference, hold_config, controller="paper")
+    result = simulate_reference(hold_reference, hold_config, executor=Executor.PAPER)
     assert result.t[-1] == pytest.approx(2.0)
     position_error = np.linalg.norm(result.x[:, :2] - hold_reference.x[0, :2], axis=1)
     assert position_error.max() < 5e-3
@@ -84,7 +85,7 @@ def test_controller_holds_the_box_for_two_seconds(hold_reference, hold_config):
 
 
 def test_without_the_controller_the_box_falls(hold_reference, hold_config):
-    result = simulate_reference(hold_reference, hold_config, controlled=False)
+    result = simulate_reference(hold_reference, hold_config, executor=Executor.NONE)
     assert result.dropped
     assert result.drop_time_s < 0.5
     assert result.x[-1, 1] < hold_reference.x[0, 1] - hold_config.sim.drop_distance  # it fell (gravity -y)
@@ -119,7 +120,7 @@ def in_grasp_rotation(scene, angle: float, duration: float, knots: int = 21):
 @pytest.mark.slow
 def test_controller_tracks_a_slow_in_grasp_rotation(scene, hold_config, controller):
     reference = in_grasp_rotation(scene, 0.25, 2.0)
-    result = simulate_reference(reference, hold_config, controller=controller)
+    result = simulate_reference(reference, hold_config, executor=Executor(controller))
     assert not result.dropped and result.controller == controller
     assert result.x[-1, 2] == pytest.approx(0.25, abs=0.03)
     assert result.mae_theta < 0.03 and result.mae_x < 3e-3 and result.mae_y < 3e-3
@@ -168,7 +169,7 @@ def test_grasp_controller_ports_are_named(scene, three_finger_hold):
 
 
 def test_grasp_controller_holds_a_three_finger_grasp_for_two_seconds(three_finger_hold):
-    result = simulate_reference(three_finger_hold, grasp_config(), controller="grasp")
+    result = simulate_reference(three_finger_hold, grasp_config(), executor=Executor.GRASP)
     assert result.controller == "grasp" and result.t[-1] == pytest.approx(2.0)
     position_error = np.linalg.norm(result.x[:, :2] - three_finger_hold.x[0, :2], axis=1)
     assert position_error.max() < 1e-3
@@ -183,7 +184,9 @@ def test_grasp_controller_recovers_from_a_push(three_finger_hold):
     from trajectotree.execution.simulate import Conditions, Push
 
     push = Push(force=(0.2, 0.0), time_s=0.5, duration_s=0.2)
-    result = simulate_reference(three_finger_hold, grasp_config(), controller="grasp", conditions=Conditions(push=push))
+    result = simulate_reference(
+        three_finger_hold, grasp_config(), executor=Executor.GRASP, conditions=Conditions(push=push)
+    )
     error = np.linalg.norm(result.x[:, :2] - three_finger_hold.x[0, :2], axis=1)
     during = (result.t > 0.5) & (result.t < 0.8)
     assert error[during].max() > 1e-3  # the push moved the box
@@ -192,7 +195,7 @@ def test_grasp_controller_recovers_from_a_push(three_finger_hold):
     assert not result.dropped
     assert result.conditions["push"] == {"force": [0.2, 0.0], "time_s": 0.5, "duration_s": 0.2}
     # without the push the same run stays put (so the excursion above is the push's)
-    still = simulate_reference(three_finger_hold, grasp_config(), controller="grasp")
+    still = simulate_reference(three_finger_hold, grasp_config(), executor=Executor.GRASP)
     assert np.linalg.norm(still.x[:, :2] - three_finger_hold.x[0, :2], axis=1).max() < 1e-3
 
 
@@ -279,7 +282,7 @@ def test_schedule_ramps_a_switching_finger_and_follows_a_cubic():
 
 
 def test_vectorized_hand_kinematics_match_each_finger(scene):
-    from trajectotree.execution.control import HandKinematics
+    from trajectotree.execution.fingers import HandKinematics
 
     kinematics = HandKinematics(scene.fingers, scene.config.gravity)
     rng = np.random.default_rng(1)
@@ -326,7 +329,7 @@ def test_grasp_controller_pushes_along_the_normal_where_a_disc_is_touched_now():
     p_WF = reference.p_WF[0]
     radial = p_WF / np.linalg.norm(p_WF, axis=1, keepdims=True)  # the disc's centre at the origin
     for turn in (0.0, 0.1):
-        f_W, n_W = controller.finger_forces(0, np.array([0.0, 0.0, turn, 0.0, 0.0, 0.0]), p_WF)
+        f_W, n_W = controller.finger_forces(0, np.array([0.0, 0.0, turn, 0.0, 0.0, 0.0]), p_WF, controller.planned)
         lean = np.arcsin(
             radial[:, 0] * n_W[:, 1] - radial[:, 1] * n_W[:, 0]
         )  # rad; the outline's facets (1 cm at most) leave ~0.01
@@ -341,7 +344,7 @@ def test_hand_dynamics_match_drakes_mass_matrix_and_bias_term(hand):
     each finger's mass matrix is the diagonal block of CalcMassMatrix, and its Coriolis torques the
     bias term's rows (the joint damping is returned with them, at the model's coefficients)."""
     from trajectotree.config import SceneConfig
-    from trajectotree.execution.control import HandKinematics
+    from trajectotree.execution.fingers import HandKinematics
 
     scene = build_scene(SceneConfig(hand=hand))
     plant, context = scene.plant, scene.plant.CreateDefaultContext()
@@ -391,8 +394,8 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     """A finger that swings while a push is on (or the friction estimate has fallen) follows its
     planned swing land_speedup x as fast up to its next planned landing and holds there until
     the plan gets there; without a trigger every finger follows the plan's sample."""
-    from trajectotree.execution.control import Estimates, GraspController
     from trajectotree.execution.reference import Reference
+    from trajectotree.execution.reflexes import LandingReflex
 
     held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0)
     lifted = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=1.0, lifted=0)
@@ -405,11 +408,12 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     )
     gains = ControllerGains()
     schedule = schedule_of(reference, scene, gains, 2.0)
-    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
+    controller = LandingReflex(scene, schedule, gains, mu_assumed=0.7)
     landing = int(np.argmax(schedule.force_scale[schedule.index(1.0) :, 0] >= 1.0)) + schedule.index(1.0)
     assert schedule.index(1.4) < landing <= schedule.index(1.5)
-    calm, pushed = Estimates(mu=0.7, mass=0.05, reflex=0.0), Estimates(mu=0.7, mass=0.05, reflex=1.0)
-    slipped = Estimates(mu=0.4, mass=0.05, reflex=0.0)
+    calm, pushed = controller.landing_triggered(0.7, 0.0), controller.landing_triggered(0.7, 1.0)
+    slipped = controller.landing_triggered(0.4, 0.0)
+    assert not calm and pushed and slipped
     n = schedule.index(1.0)  # the swing's core: finger 0 has no force budget
     assert schedule.force_scale[n, 0] == 0.0
     np.testing.assert_array_equal(controller.landing_clocks(n, np.full(4, n - 1), calm), [n] * 4)
@@ -434,8 +438,8 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     assert controller.landing_clocks(n + steps + 1, clocks, calm)[0] == landing
     assert controller.landing_clocks(landing + 3, clocks, calm)[0] == landing + 3
     # land_speedup 1: no reflex
-    off = GraspController(
-        scene, schedule, with_values(gains, {"landing_reflex.speedup": 1.0}), mu=0.56, closed_loop=True
+    off = LandingReflex(
+        scene, schedule, with_values(gains, {"landing_reflex.speedup": 1.0}), mu_assumed=0.7
     ).landing_clocks(n, np.full(4, n - 1), pushed)
     np.testing.assert_array_equal(off, [n] * 4)
 
@@ -444,12 +448,10 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
 def test_closed_loop_cones_follow_the_friction_estimate_over_their_time_constant(scene, tau):
     """When the estimate falls from 0.7 to 0.3 the QP's cone friction falls as a first-order lag
     (about 63 % of the way after cone_time_constant, never past the estimate); 0: at once."""
-    from trajectotree.execution.control import GraspController
+    from trajectotree.execution.reflexes import ConeFriction
 
     gains = with_values(ControllerGains(), {"grasp.cone_time_constant": tau})
-    held = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.5)
-    schedule = schedule_of(held, scene, gains, 0.5)
-    controller = GraspController(scene, schedule, gains, mu=0.56, closed_loop=True)
+    controller = ConeFriction(gains, mu_assumed=0.7)
     cone, cones = 0.7, []
     for _ in range(int(round(0.1 * gains.rate_hz))):  # 0.1 s of control periods
         cone = controller.cone_friction(cone, 0.3)

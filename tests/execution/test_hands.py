@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from trajectotree.config import Config, SceneConfig
+from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.simulate import build_execution_diagram, simulate_reference
 from trajectotree.scene.plant import build_scene
@@ -27,17 +28,17 @@ def short_config(scene_config: SceneConfig) -> Config:
 
 
 @pytest.mark.parametrize("hand", sorted(HANDS))
-@pytest.mark.parametrize("closed_loop", [False, True])
-def test_a_hand_of_three_or_five_fingers_holds_the_object_in_simulation(hand, closed_loop):
+@pytest.mark.parametrize("executor", [Executor.GRASP, Executor.GRASP_CLOSED_LOOP])
+def test_a_hand_of_three_or_five_fingers_holds_the_object_in_simulation(hand, executor):
     scene_config, arclengths = HANDS[hand]
     scene = build_scene(scene_config)
     F = scene.num_fingers
     config = short_config(scene_config)
     reference = static_hold_reference(scene, arclengths, min_normal_force=1.0, duration=0.3)
     assert reference is not None
-    execution = build_execution_diagram(reference, config, closed_loop=closed_loop)
+    execution = build_execution_diagram(reference, config, executor=executor)
     assert execution.hand_description.num_fingers == F == len(arclengths)
-    result = simulate_reference(reference, config, closed_loop=closed_loop)
+    result = simulate_reference(reference, config, executor=executor)
     T = len(result.t)
     assert result.q.shape == (T, 2 * F) and result.f_W.shape == (T, F, 2)
     assert not result.dropped

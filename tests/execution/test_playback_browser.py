@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from trajectotree.config import Config, SceneConfig
+from trajectotree.config.executor import Executor
 from trajectotree.execution.playback import (
     ARROW_HEAD,
     ARROW_Z,
@@ -54,7 +55,7 @@ def drop_run(tmp_path_factory):
         build_scene(config.scene), (0.56, 0.14, 0.26, 0.44), min_normal_force=1.0, duration=0.3
     )
     path = tmp_path_factory.mktemp("playback") / "drop.html"
-    result = simulate_reference(reference, config, controlled=False, html_path=path)
+    result = simulate_reference(reference, config, executor=Executor.NONE, html_path=path)
     assert result.dropped and result.x[-1, 1] < -0.05  # the box moved well within the view
     return SimpleNamespace(path=path, reference=reference, result=result, config=config)
 
@@ -366,7 +367,7 @@ def triangle_html(tmp_path_factory):
     grasp = initial_grasp_candidates(scene, config.search).candidates[0]
     reference = static_hold_reference(scene, grasp.arclengths, min_normal_force=1.0, duration=0.3)
     path = tmp_path_factory.mktemp("playback") / "triangle.html"
-    result = simulate_reference(reference, config, controlled=False, html_path=path)
+    result = simulate_reference(reference, config, executor=Executor.NONE, html_path=path)
     assert result.dropped
     return path, side, result.drop_time_s
 

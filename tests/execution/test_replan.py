@@ -148,7 +148,7 @@ def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
 
     result = plan(goal=-2.61)  # a goal none of the defaults were tuned on
     assert result.success, result.status
-    run = run_simulation(plan=result, sim_mu=0.4, replan=True)
+    run = run_simulation(plan=result, sim_mu=0.4, executor="grasp-replan")
     assert not run.dropped, [e.to_json() for e in run.replans]
     assert abs(run.final_error[2]) < np.radians(3)
     assert all(e.latency_s <= e.compute_s + 1e-9 for e in run.replans)
@@ -170,7 +170,7 @@ def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
             ["--friction-floor", "0"],
             "--friction-floor (controller.estimators.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
         ),
-        (["--html", "run.html"], "--replan records no playback (--html)"),
+        (["--html", "run.html"], "grasp-replan records no playback (--html)"),
         (["--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
     ],
 )

@@ -9,10 +9,12 @@ import pytest
 
 from trajectotree.cli import main
 from trajectotree.config import Config, config_to_dict
-from trajectotree.execution.control import ImpedanceController
+from trajectotree.config.executor import Executor
+from trajectotree.execution.executor import held_trajectory
+from trajectotree.execution.impedance import ImpedanceController
 from trajectotree.execution.reference import check_plan_arrays, reference_from_arrays, static_hold_reference
 from trajectotree.execution.run import run_simulation
-from trajectotree.execution.simulate import held_trajectory, simulate_reference
+from trajectotree.execution.simulate import simulate_reference
 from trajectotree.io import load_sim, save_sim
 from trajectotree.scene.plant import build_scene
 
@@ -198,7 +200,7 @@ def test_simulated_finger_forces_hold_the_box_up_as_planned(scene, short_config)
     )
     np.testing.assert_allclose(result.f_W[late], result.f_W_plan[late], atol=0.1)
     # without the controller the fingers let go: no force on the falling box at the end
-    open_loop = simulate_reference(reference, short_config, controlled=False)
+    open_loop = simulate_reference(reference, short_config, executor=Executor.NONE)
     assert open_loop.dropped and np.all(open_loop.f_W[-1] == 0.0)
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, config_to_dict
+from trajectotree.config.executor import Executor
 from trajectotree.experiments.executions import (
     CONDITIONS,
     ConditionSpec,
@@ -84,16 +85,14 @@ def test_closed_loop_executions_are_their_own_and_never_copied(tmp_path):
     world = {"sim_mu": 0.7, "sim_mass": 0.05, "plan_mu": 0.7, "plan_mass": 0.05, "push": None}
     trial = write_trial(tmp_path, "t0", config, {"controller": "grasp", "conditions": world, "closed_loop": None})
     spec = ConditionSpec()
-    closed = pending_executions(tmp_path, ["grasp"], ["nominal"], spec, closed_loop=True)
-    assert [(t.controller, t.condition, t.closed_loop) for t in closed] == [("grasp", "nominal", True)]
-    assert execution_dir(trial, "grasp", "nominal", closed_loop=True) == trial / "exec" / "grasp-closed-loop_nominal"
+    closed = pending_executions(tmp_path, ["grasp-closed-loop"], ["nominal"], spec)
+    assert [(t.executor, t.condition) for t in closed] == [(Executor.GRASP_CLOSED_LOOP, "nominal")]
+    assert execution_dir(trial, Executor.GRASP_CLOSED_LOOP, "nominal") == trial / "exec" / "grasp-closed-loop_nominal"
     assert pending_executions(tmp_path, ["grasp"], ["nominal"], spec) == []  # copied from the sweep's run
     assert (trial / "exec" / "grasp_nominal" / "sim.json").is_file()
     assert not (trial / "exec" / "grasp-closed-loop_nominal").exists()
-    with pytest.raises(
-        ConfigError, match="controller = 'paper': the closed loop .* grasp controller only; valid: grasp"
-    ):
-        pending_executions(tmp_path, ["paper"], ["nominal"], spec, closed_loop=True)
+    with pytest.raises(ConfigError, match="executor = 'paper-closed-loop' is not an executor; valid: grasp, "):
+        pending_executions(tmp_path, ["paper-closed-loop"], ["nominal"], spec)
 
 
 @pytest.mark.slow
@@ -142,7 +141,7 @@ def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
     closed = ["sweep", "--out", str(out), "--goals", "1", "--no-progress", "--closed-loop"]
     assert main(closed + ["--controllers", "grasp", "paper"]) == 2
     err = capsys.readouterr().err
-    assert "controller = 'paper': the closed loop (--closed-loop) runs around the grasp controller only" in err
+    assert "--controllers (controller) = 'paper': the closed loop runs around the grasp controller only" in err
     assert main(closed + ["--conditions", "friction-0.5"]) == 2
     assert "condition = 'friction-0.5' is unknown" in capsys.readouterr().err
     assert not out.exists()
@@ -154,12 +153,11 @@ def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path):
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     # TrajectoTree's plans only (the command would execute every method's; the simulations are the cost)
-    run = functools.partial(
-        run_executions, out, controllers=["grasp"], conditions=["push-3N"], methods=["trajectotree"], progress=False
-    )
-    assert run(workers=2) == 2 and run(workers=2, closed_loop=True) == 2
+    run = functools.partial(run_executions, out, conditions=["push-3N"], methods=["trajectotree"], progress=False)
+    assert run(executors=[Executor.GRASP], workers=2) == 2
+    assert run(executors=[Executor.GRASP_CLOSED_LOOP], workers=2) == 2
     trial = out / "trials" / "0000_trajectotree"
-    closed = json.loads((execution_dir(trial, "grasp", "push-3N", closed_loop=True) / "sim.json").read_text())
+    closed = json.loads((execution_dir(trial, Executor.GRASP_CLOSED_LOOP, "push-3N") / "sim.json").read_text())
     assert closed["controller"] == "grasp" and closed["closed_loop"] is not None
     assert closed["conditions"]["push"]["force"] == [3.0, 0.0]
     report = tmp_path / "report"
@@ -175,22 +173,20 @@ def test_a_closed_loop_execution_beside_a_finished_open_loop_one_is_not_called_t
     open-loop execution of the same condition is no torn one of theirs."""
     config = Config()
     trial = write_trial(tmp_path, "t0", config, None)
-    done = execution_dir(trial, "grasp", "push-3N")
+    done = execution_dir(trial, Executor.GRASP, "push-3N")
     done.mkdir(parents=True)
     (done / "sim.json").write_text(json.dumps({"dropped": False}))
     np.savez(done / "sim.npz", t=np.zeros(2))
     spec = ConditionSpec()
     assert pending_executions(tmp_path, ["grasp"], ["push-3N"], spec) == []
-    for loop in ({"closed_loop": True}, {"replan": True}):
-        tasks = pending_executions(tmp_path, ["grasp"], ["push-3N"], spec, **loop)
-        assert [t.folder.name for t in tasks] == [
-            "grasp-replan_push-3N" if "replan" in loop else "grasp-closed-loop_push-3N"
-        ]
+    for executor in (Executor.GRASP_CLOSED_LOOP, Executor.GRASP_REPLAN):
+        tasks = pending_executions(tmp_path, [executor], ["push-3N"], spec)
+        assert [t.folder.name for t in tasks] == [f"{executor.value}_push-3N"]
         assert torn_executions(tasks) == []
-    torn = execution_dir(trial, "grasp", "push-3N", closed_loop=True)
+    torn = execution_dir(trial, Executor.GRASP_CLOSED_LOOP, "push-3N")
     torn.mkdir()
     (torn / "sim.json").write_text("{")
-    tasks = pending_executions(tmp_path, ["grasp"], ["push-3N"], spec, closed_loop=True)
+    tasks = pending_executions(tmp_path, ["grasp-closed-loop"], ["push-3N"], spec)
     (line,) = torn_executions(tasks)
     assert str(torn) in line and "unreadable" in line and line.endswith("it is recomputed")
 
@@ -252,7 +248,7 @@ def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_ru
     out = tmp_path / "sweep"
     replan = ["sweep", "--out", str(out), "--goals", "1", "--no-progress", "--replan"]
     assert main(replan + ["--controllers", "paper"]) == 2
-    assert "controller = 'paper': the closed loop (--replan) runs around the grasp controller only" in (
+    assert "--controllers (controller) = 'paper': the closed loop runs around the grasp controller only" in (
         capsys.readouterr().err
     )
     assert main(replan + ["--conditions", "friction-0.2"]) == 2
@@ -267,11 +263,10 @@ def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     # The cito-warm plans only, replanned by TrajectoTree (the command would execute every method's)
-    run = functools.partial(
-        run_executions, out, controllers=["grasp"], conditions=["friction-0.4"], methods=["cito-warm"], progress=False
-    )
-    assert run(workers=2) == 2 and run(workers=2, replan=True) == 2
-    runs = [execution_dir(out / "trials" / f"{i:04d}_cito-warm", "grasp", "friction-0.4", replan=True) for i in (0, 1)]
+    run = functools.partial(run_executions, out, conditions=["friction-0.4"], methods=["cito-warm"], progress=False)
+    assert run(executors=[Executor.GRASP], workers=2) == 2 and run(executors=[Executor.GRASP_REPLAN], workers=2) == 2
+    trials = [out / "trials" / f"{i:04d}_cito-warm" for i in (0, 1)]
+    runs = [execution_dir(trial, Executor.GRASP_REPLAN, "friction-0.4") for trial in trials]
     replanned = [json.loads((folder / "sim.json").read_text()) for folder in runs]
     assert all(run["closed_loop"] is not None and run["conditions"]["sim_mu"] == 0.4 for run in replanned)
     events = [event for run in replanned for event in run["replans"]]

@@ -13,6 +13,7 @@ from pydrake.multibody.tree import CalcSpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import Config, ObjectConfig, SceneConfig
+from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.simulate import simulate_reference
 from trajectotree.geometry import ConvexPolygon
@@ -144,7 +145,7 @@ def test_fingertips_hold_the_triangle_in_simulation():
     weight = config.scene.box_mass * config.scene.gravity
     assert held.f_W[late, :, 1].sum(axis=1).mean() == pytest.approx(weight, rel=0.02)  # fingers carry m g
     assert np.all(np.linalg.norm(held.f_W[late], axis=2).min(axis=0) > 0.1)  # every finger touches
-    dropped = simulate_reference(reference, config, controlled=False)
+    dropped = simulate_reference(reference, config, executor=Executor.NONE)
     assert dropped.dropped
 
 

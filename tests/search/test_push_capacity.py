@@ -103,7 +103,7 @@ def test_push_capacity_settings_out_of_range(field, value):
 
 def test_a_fingers_gravity_torques_are_the_controllers(scene):
     # the grasp controller's gravity compensation (closed forms checked against the plant in its tests)
-    from trajectotree.execution.control import HandKinematics
+    from trajectotree.execution.fingers import HandKinematics
 
     q = np.random.default_rng(0).uniform(-1.5, 1.5, (scene.num_fingers, 2))
     g_hand = HandKinematics(scene.fingers, scene.config.gravity)(q.ravel())[2]

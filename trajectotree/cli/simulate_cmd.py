@@ -41,6 +41,7 @@ from trajectotree.config import (
     interval,
     with_values,
 )
+from trajectotree.config.executor import EXECUTORS, Executor, executor_of, parse_executor
 from trajectotree.io import (
     SIM_JSON,
     SIM_NPZ,
@@ -74,6 +75,13 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print sim.json to stdout")
     group = p.add_argument_group("execution settings (default: the plan's config; the scene must match the plan)")
     add_scene_options(group, config_help="YAML file with the Config to execute with")
+    group.add_argument(
+        "--executor",
+        metavar="NAME",
+        help=f"how the plan is executed, one of {', '.join(EXECUTORS)} (grasp: the object-level grasp controller "
+        "open loop; grasp-closed-loop: with the closed loop, as --closed-loop; grasp-replan: replanning too, as "
+        "--replan; paper: eq. 20; none: the motors off); default: --controller's, open loop",
+    )
     group.add_argument(
         "--controller", metavar="NAME", help="grasp (object-level grasp control, the default) or paper (eq. 20)"
     )
@@ -275,7 +283,39 @@ def final_error_line(summary: dict) -> str:
     return line
 
 
+def named_executor(args) -> Executor | None:
+    """The executor --executor names (None: not given); ConfigError for a name that is no executor, or
+    beside the older options that name a part of one (--controller, --closed-loop, --replan)."""
+    if args.executor is None:
+        return None
+    executor = parse_executor(args.executor, "--executor")
+    shorthands = [
+        option
+        for option, given in (
+            ("--controller", args.controller is not None),
+            ("--closed-loop", args.closed_loop),
+            ("--replan", args.replan),
+        )
+        if given
+    ]
+    if shorthands:
+        raise ConfigError(
+            f"--executor {executor.value} names the whole executor: give it without {', '.join(shorthands)}"
+        )
+    return executor
+
+
+def chosen_executor(args, config: Config) -> Executor:
+    """The one executor the options name: --executor, or the controller (--controller, else the
+    config's sim.controller) with --closed-loop or --replan; ConfigError for a combination that names none."""
+    named = named_executor(args)
+    if named is not None:
+        return named
+    return executor_of(config.sim.controller, closed_loop=args.closed_loop, replan=args.replan)
+
+
 def run(args) -> int:
+    named_executor(args)  # before the lock and any file is read
     for option, path, suffixes in (
         ("--html", args.html, HTML_SUFFIXES),
         ("--gif", args.gif, (".gif",)),
@@ -311,13 +351,12 @@ def simulate_into(args) -> int:
 
         check_plan_arrays(arrays, scene.num_fingers)
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
-    if args.closed_loop or args.replan:
-        from trajectotree.execution.simulate import check_closed_loop
-
-        check_closed_loop(config.sim.controller, True)
+    executor = chosen_executor(args, config)
     playback = [o for o, given in (("--html", args.html), ("--gif", args.gif), ("--meshcat", args.meshcat)) if given]
-    if args.replan and playback:
-        raise ConfigError(f"--replan records no playback ({', '.join(playback)}): run it without, or without --replan")
+    if executor.replans and playback:
+        raise ConfigError(
+            f"{executor.value} records no playback ({', '.join(playback)}): run it without, or with another executor"
+        )
     plan_success = bool(files.data.get("success"))
     if not plan_success:
         print(
@@ -330,10 +369,10 @@ def simulate_into(args) -> int:
     if args.meshcat:
         meshcat = start_meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
-    if args.replan:  # the planner needs the plan itself (its goal and config), not only its arrays
+    if executor.replans:  # the planner needs the plan itself (its goal and config), not only its arrays
         from trajectotree.io import load_plan
 
-        result = run_simulation(plan=load_plan(args.plan_dir), config=config, replan=True, **conditions)
+        result = run_simulation(plan=load_plan(args.plan_dir), config=config, executor=executor, **conditions)
     else:
         reference = reference_from_arrays(arrays, build_scene(config.scene))
         result = run_simulation(
@@ -342,7 +381,7 @@ def simulate_into(args) -> int:
             meshcat=meshcat,
             html_path=args.html,
             gif_path=args.gif,
-            closed_loop=args.closed_loop,
+            executor=executor,
             **conditions,
         )
     save_sim(result, args.plan_dir)

@@ -20,10 +20,10 @@ from trajectotree.cli.common import (
     config_from_args,
     print_json,
 )
-from trajectotree.config import CONTROLLERS, check_controller
+from trajectotree.config import CONTROLLERS, ConfigError, check_controller
+from trajectotree.config.executor import executor_of
 from trajectotree.experiments.executions import (
     CONDITIONS,
-    check_closed_loop_controllers,
     check_condition,
     run_executions,
 )
@@ -136,7 +136,10 @@ def run(args) -> int:
         check_executable_hand(scene, "the sweep's simulations")
     if (conditions or args.closed_loop or args.replan) and not controllers:
         controllers = [spec.config.sim.controller]
-    check_closed_loop_controllers(controllers, args.closed_loop, args.replan)
+    try:  # the executors the options name, each chosen once here
+        executors = [executor_of(c, closed_loop=args.closed_loop, replan=args.replan) for c in controllers]
+    except ConfigError as e:
+        raise (e.as_option("--controllers") if args.controllers else e) from None
     summary = run_sweep(
         spec,
         args.out,
@@ -149,12 +152,10 @@ def run(args) -> int:
     ran = (
         run_executions(
             args.out,
-            controllers=controllers,
+            executors=executors,
             conditions=conditions or ["nominal"],
             gains=spec.config.controller,
             sim=spec.config.sim,
-            closed_loop=args.closed_loop,
-            replan=args.replan,
             workers=args.workers,
             progress=not args.no_progress,
         )

@@ -24,7 +24,8 @@ but the ObjectMonitor, which samples every plant step:
   exceeds reflex_force for reflex_confirm_time, held reflex_hold s after it subsides, then
   fading over reflex_release s.
 
-The GraspController (closed_loop=True) reads mu_estimate, mass_estimate, reflex and
+The ClosedLoopGraspController (trajectotree.execution.control) reads mu_estimate (through
+reflexes.ConeFriction), mass_estimate, reflex and
 disturbance (its desired wrench cancels the disturbance, disturbance-observer style). Each
 system reads the others' state as of their last update, as sampled controllers do.
 """
@@ -40,6 +41,7 @@ from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
 from trajectotree.execution.reference import GraspSchedule
+from trajectotree.geometry import wrap_angle
 from trajectotree.scene.hand import HandDescription, finger_bodies
 
 # N, a finger pushing less is out of contact: a contact that opens leaves forces of 1e-18 N, whose
@@ -54,8 +56,10 @@ STEADY_NORMAL_FORCE = 0.05
 STEADY_APPROACH_SPEED = 2e-4
 
 
-def wrap_angle(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
+def low_pass_step(previous, target, gain: float):
+    """One step of a discrete first-order low-pass filter: `gain` (0..1, the sample period over the
+    time constant, at most 1) of the way from `previous` to `target`."""
+    return previous + gain * (target - previous)
 
 
 @dataclass(frozen=True)
@@ -300,7 +304,7 @@ class MassEstimator(PeriodicSystem):
             return {}
         mass = self.state(context, "mass_estimate")[0]
         measured = support / (self._gravity + accel[1])
-        return {"mass_estimate": float(np.clip(mass + self._gain * (measured - mass), *self._range))}
+        return {"mass_estimate": float(np.clip(low_pass_step(mass, measured, self._gain), *self._range))}
 
 
 class PushReflex(PeriodicSystem):

@@ -34,6 +34,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from trajectotree.config import Config, ConfigError, SceneConfig
+from trajectotree.config.executor import Executor
 from trajectotree.execution import metrics
 from trajectotree.execution.reference import Reference, reference_from_arrays, reference_from_plan
 from trajectotree.execution.simulate import Conditions, build_execution_diagram, collected_log
@@ -81,13 +82,8 @@ def replan_reason(execution, context, assumed: SceneConfig, config: Config) -> R
     """Why the plan in effect, which assumes the scene `assumed` (its friction and mass), no longer
     holds, from the closed loop's outputs at this moment (None: it holds)."""
     value = {
-        name: closed_loop_output(execution, context, system, name)
-        for system, name in (
-            ("friction_estimator", "mu_estimate"),
-            ("mass_estimator", "mass_estimate"),
-            ("contact_monitor", "tracking_error"),
-            ("contact_monitor", "in_contact"),
-        )
+        name: closed_loop_output(execution, context, name)
+        for name in ("mu_estimate", "mass_estimate", "tracking_error", "in_contact")
     }
     rules = config.controller.replan
     if value["mu_estimate"][0] < assumed.mu - rules.friction_drop:
@@ -102,17 +98,17 @@ def replan_reason(execution, context, assumed: SceneConfig, config: Config) -> R
     return None
 
 
-def closed_loop_output(execution, context, system: str, port: str) -> np.ndarray:
-    """The value of the closed-loop `system`'s output `port` (trajectotree.execution.closed_loop) now."""
-    sub = execution.diagram.GetSubsystemByName(system)
-    return sub.GetOutputPort(port).Eval(sub.GetMyContextFromRoot(context))
+def closed_loop_output(execution, context, port: str) -> np.ndarray:
+    """The value of the executor's closed-loop output `port` (trajectotree.execution.executor) now."""
+    diagram = execution.executor.diagram
+    return diagram.GetOutputPort(port).Eval(diagram.GetMyContextFromRoot(context))
 
 
 def estimates(execution, context) -> tuple[float, float]:
     """(friction, mass kg) as the closed loop estimates them now."""
     return (
-        float(closed_loop_output(execution, context, "friction_estimator", "mu_estimate")[0]),
-        float(closed_loop_output(execution, context, "mass_estimator", "mass_estimate")[0]),
+        float(closed_loop_output(execution, context, "mu_estimate")[0]),
+        float(closed_loop_output(execution, context, "mass_estimate")[0]),
     )
 
 
@@ -231,12 +227,14 @@ def simulate_replanning(
     assumed = plan.config.scene  # what the plan in effect assumes (the last new plan's estimates)
     while True:
         execution = build_execution_diagram(
-            reference, config, conditions=conditions, closed_loop=True, mu_assumed=assumed.mu
+            reference, config, executor=Executor.GRASP_REPLAN, conditions=conditions, mu_assumed=assumed.mu
         )
         simulator = Simulator(execution.diagram, execution.initial_context(reference))
         if context is not None:  # the same systems: the state carries over (SceneGraph's geometry ids do not)
             simulator.get_mutable_context().SetTime(context.get_time())
             simulator.get_mutable_context().get_mutable_discrete_state().SetFrom(context.get_discrete_state())
+            reflex = execution.executor.landing_reflex
+            reflex.restart(reflex.GetMyMutableContextFromRoot(simulator.get_mutable_context()))
         simulator.Initialize()
         now = simulator.get_context().get_time()
         reason = None

@@ -4,12 +4,12 @@ Its own module, since replanning builds on the execution Diagram of trajectotree
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 from pydrake.geometry import Meshcat
 
-from trajectotree.config import Config, ConfigError, ReplanConfig, check_controller
+from trajectotree.config import Config, ConfigError
+from trajectotree.config.executor import Executor, parse_executor
 from trajectotree.execution import playback
 from trajectotree.execution.reference import reference_from_plan
 from trajectotree.execution.replan import simulate_replanning
@@ -17,7 +17,6 @@ from trajectotree.execution.simulate import (
     Conditions,
     Push,
     arrow_scale,
-    check_closed_loop,
     parse_push,
     simulate_reference,
 )
@@ -31,43 +30,38 @@ def run_simulation(
     *,
     plan,
     config: Config | None = None,
+    executor: Executor | str | None = None,
     meshcat: Meshcat | None = None,
     html_path: str | Path | None = None,
     gif_path: str | Path | None = None,
-    controller: str | None = None,
     sim_mu: float | None = None,
     sim_mass: float | None = None,
     push: Push | str | None = None,
-    closed_loop: bool = False,
-    replan: bool | ReplanConfig = False,
     segment_workers: int | None = None,
 ) -> SimResult:
-    """Executes `plan` (a PlanResult, or a Reference) with `controller` ("grasp" or
-    "paper"; default config.sim.controller) in a world with friction `sim_mu`, box mass
-    `sim_mass` (kg; None: the plan's) and an optional `push` (a Push or "FX,FY@T": N, N, s); the
-    controller keeps the plan's values. closed_loop (grasp controller only) watches the
-    contacts, estimates the friction and the mass for the controller and adds the push
-    reflex (trajectotree.execution.closed_loop; the result's closed_loop holds what they saw);
-    off, the run is the open-loop one. `replan` (True: config.controller.replan's rules, or a ReplanConfig;
-    a PlanResult only, since the planner needs its goal and config) runs the closed loop and plans
-    again from the measured state when the plan no longer holds (trajectotree.execution.replan; the
-    result's replans list each time; the later segments of a new plan on `segment_workers` local
-    processes, None: as planning.planners.plan); it records no playback. `config` defaults to the
-    plan's own (a PlanResult's config). ConfigError on bad values. A live `meshcat` runs in real
-    time; `html_path` writes the recorded playback, `gif_path` a GIF of the run (each checked before
-    the run: its name's suffix, .html/.htm or .gif, and a folder that takes new files: io.check_output_file)."""
+    """Executes `plan` (a PlanResult, or a Reference) with `executor` (an Executor or its name; None:
+    config.sim.controller, open loop) in a world with friction `sim_mu`, box mass `sim_mass` (kg;
+    None: the plan's) and an optional `push` (a Push or "FX,FY@T": N, N, s); the controller keeps the
+    plan's values. The closed-loop executors watch the contacts, estimate the friction and the mass for
+    the controller and add the reflexes (trajectotree.execution.closed_loop; the result's closed_loop
+    holds what they saw). grasp-replan (a PlanResult only, since the planner needs its goal and config)
+    also plans again from the measured state when the plan no longer holds, by config.controller.replan's
+    rules (trajectotree.execution.replan; the result's replans list each time; the later segments of a new
+    plan on `segment_workers` local processes, None: as planning.planners.plan); it records no playback.
+    `config` defaults to the plan's own (a PlanResult's config). ConfigError on bad values. A live
+    `meshcat` runs in real time; `html_path` writes the recorded playback, `gif_path` a GIF of the run
+    (each checked before the run: its name's suffix, .html/.htm or .gif, and a folder that takes new
+    files: io.check_output_file)."""
     if config is None:
         if not isinstance(plan, PlanResult):
             raise ConfigError("run_simulation: give config= with a Reference (only a PlanResult carries its own)")
         config = plan.config
+    executor = Executor(config.sim.controller) if executor is None else parse_executor(executor)
     if isinstance(push, str):
         push = parse_push(push, config.sim.push_duration)
     conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
-    check_closed_loop(check_controller(controller or config.sim.controller), closed_loop or replan is not False)
-    if replan is not False:
-        return _replanning(
-            plan, config, replan, conditions, controller, (meshcat, html_path, gif_path), segment_workers
-        )
+    if executor.replans:
+        return _replanning(plan, config, conditions, (meshcat, html_path, gif_path), segment_workers)
     for name, path, suffixes in (("html_path", html_path, HTML_SUFFIXES), ("gif_path", gif_path, GIF_SUFFIXES)):
         if path is not None:  # before the run, as the CLI's --html and --gif: never a run lost to its playback
             check_output_file(name, path, suffixes)
@@ -76,12 +70,11 @@ def run_simulation(
     result = simulate_reference(
         reference,
         config,
+        executor=executor,
         meshcat=meshcat,
         html_path=html_path,
         realtime_rate=1.0 if meshcat is not None else 0.0,
-        controller=controller,
         conditions=conditions,
-        closed_loop=closed_loop,
     )
     if gif_path is not None:
         playback.write_gif(
@@ -98,21 +91,10 @@ def run_simulation(
     return result
 
 
-def _replanning(plan, config: Config, replan, conditions, controller, outputs, segment_workers) -> SimResult:
+def _replanning(plan, config: Config, conditions, outputs, segment_workers) -> SimResult:
     """run_simulation's replanning run; ConfigError for what it cannot do."""
     if not isinstance(plan, PlanResult):
-        raise ConfigError("run_simulation(replan=...): give the PlanResult (the planner needs its goal and config)")
+        raise ConfigError("run_simulation(executor='grasp-replan'): give the PlanResult (the planner needs its goal)")
     if any(out is not None for out in outputs):
-        raise ConfigError("run_simulation(replan=...) records no Meshcat, HTML or GIF playback; run without them")
-    if replan is not True:
-        if not isinstance(replan, ReplanConfig):
-            raise ConfigError(
-                field="replan",
-                value=replan,
-                problem="is neither a bool nor a ReplanConfig",
-                valid="True, False or a ReplanConfig",
-            )
-        config = dataclasses.replace(config, controller=dataclasses.replace(config.controller, replan=replan))
-    if controller is not None:
-        config = dataclasses.replace(config, sim=dataclasses.replace(config.sim, controller=controller))
+        raise ConfigError("run_simulation(executor='grasp-replan') records no Meshcat, HTML or GIF playback")
     return simulate_replanning(plan, config, conditions=conditions, segment_workers=segment_workers)

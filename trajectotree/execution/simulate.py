@@ -5,7 +5,8 @@ models/ (point contact between fingertip spheres, links and the box, friction
 from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), a controller (the object-level
-GraspController, default, or eq. 20's ImpedanceController, `controller="paper"`),
+GraspController, default, or eq. 20's ImpedanceController: the `Executor` chosen, one Diagram of its own,
+trajectotree.execution.executor.add_executor),
 loggers of the plant state and of each finger's simulated force on the box
 (`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
 `SimLog` (the logs beside the plan at the same times), which
@@ -39,8 +40,7 @@ from pydrake.multibody.plant import (
 )
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
-from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
-from pydrake.trajectories import PiecewisePolynomial
+from pydrake.systems.primitives import LogVectorOutput
 
 from trajectotree.config import (
     MAX_BOX_MASS,
@@ -48,17 +48,17 @@ from trajectotree.config import (
     MIN_BOX_MASS,
     Config,
     ConfigError,
-    check_controller,
     check_length,
     check_range,
 )
-from trajectotree.execution import closed_loop, metrics, playback
-from trajectotree.execution.control import GraspController, ImpedanceController
-from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule
+from trajectotree.config.executor import Executor
+from trajectotree.execution import metrics, playback
+from trajectotree.execution.executor import CLOSED_LOOP_OUTPUTS, ExecutorSystems, add_executor, connect_executor
+from trajectotree.execution.reference import Reference
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
-from trajectotree.scene.plant import Scene, add_hand_and_box, build_scene
+from trajectotree.scene.plant import add_hand_and_box
 
 
 @dataclass(frozen=True)
@@ -203,6 +203,7 @@ class ExecutionDiagram:
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
     # closed loop: {ClosedLoopLog field: VectorLogSink of the output port of that name}; open loop: None
     closed_loop_loggers: dict | None = None
+    executor: ExecutorSystems | None = None  # the executor's Diagram (its ports: trajectotree.execution.executor)
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -211,14 +212,6 @@ class ExecutionDiagram:
         self.plant.SetPositions(plant_context, self.box, reference.x[0])
         self.plant.SetPositions(plant_context, self.hand, reference.q[0])
         return context
-
-
-def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
-    """First-order hold through (times, values (K, n)), then constant for `hold` seconds."""
-    if hold > 0:
-        times = np.append(times, times[-1] + hold)
-        values = np.vstack([values, values[-1]])
-    return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
 
 
 def exclude_finger_finger_collisions(plant, scene_graph, hand, description: HandDescription) -> None:
@@ -233,140 +226,38 @@ def exclude_finger_finger_collisions(plant, scene_graph, hand, description: Hand
             manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
 
 
-def add_paper_controller(builder, plant, hand, reference: Reference, config: Config) -> ImpedanceController:
-    """Eq. 20 fed by reference sources (fingertip positions, velocities, forces)."""
-    controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
-
-    def flat(a):
-        return a.reshape(len(reference.t), -1)  # (K, F, 2) -> (K, 2F), finger-major
-
-    hold = config.sim.settle_time
-    for name, values in (("p_WF_ref", reference.p_WF), ("v_WF_ref", reference.v_WF), ("f_W_ref", reference.f_W)):
-        source = builder.AddNamedSystem(name, TrajectorySource(held_trajectory(reference.t, flat(values), hold)))
-        builder.Connect(source.get_output_port(), controller.GetInputPort(name))
-    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
-    return controller
-
-
-def execution_schedule(reference: Reference, config: Config, scene: Scene) -> GraspSchedule:
-    """The grasp controller's schedule of `reference`, sampled at its rate, to the run's end
-    (the plan, then config.sim.settle_time of hold)."""
-    gains = config.controller
-    return grasp_schedule(
-        reference,
-        shape=config.scene.shape,
-        tip_radius=scene.tip_radius,
-        period=1.0 / gains.rate_hz,
-        duration=reference.duration + config.sim.settle_time,
-        ramp_time=gains.grasp.ramp_time,
-        swing_lift=gains.grasp.swing_lift,
-        contact_distance=gains.grasp.contact_distance,
-    )
-
-
-def add_grasp_controller(
-    builder, plant, hand, box, reference: Reference, config: Config, closed_loop: bool = False, mu_assumed=None
-) -> GraspController:
-    """The GraspController with the plan's scene (mass, size) and friction cones at
-    max(search.friction_safety, controller.grasp.friction_safety) x scene.mu (never less friction than
-    the plan assumed), reading the box and hand state; with closed_loop, its estimate and
-    reflex ports are left for add_closed_loop to connect. mu_assumed: the friction the plan in
-    effect assumes, where its landing reflex compares the estimate (None: scene.mu)."""
-    scene, gains = build_scene(config.scene), config.controller
-    schedule = execution_schedule(reference, config, scene)
-    mu_control = max(config.search.friction_safety, gains.grasp.friction_safety) * config.scene.mu
-    controller = builder.AddNamedSystem(
-        "grasp_controller",
-        GraspController(scene, schedule, gains, mu=mu_control, closed_loop=closed_loop, mu_assumed=mu_assumed),
-    )
-    builder.Connect(plant.get_state_output_port(box), controller.box_state_port)
-    builder.Connect(plant.get_state_output_port(hand), controller.hand_state_port)
-    return controller
-
-
-def add_closed_loop(
-    builder, plant, hand, box, description: HandDescription, controller: GraspController, config: Config
-) -> dict:
-    """The contact and object monitors, the friction and mass estimators and the push reflex
-    (trajectotree.execution.closed_loop), wired to the plant and into `controller`'s estimate
-    ports; returns {output name: output port} of every quantity a ClosedLoopLog records."""
-    gains, scene = config.controller, config.scene
-    monitor = builder.AddNamedSystem(
-        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, controller.schedule, gains)
-    )
-    builder.Connect(plant.get_contact_results_output_port(), monitor.contact_results_port)
-    builder.Connect(plant.get_state_output_port(box), monitor.box_state_port)
-    motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(plant.time_step()))
-    builder.Connect(plant.get_state_output_port(box), motion.box_state_port)
-    builder.Connect(plant.get_generalized_contact_forces_output_port(box), motion.box_contact_forces_port)
-    friction = builder.AddNamedSystem(
-        "friction_estimator",
-        closed_loop.FrictionEstimator(scene.mu, scene.shape.circumradius, controller.schedule, gains),
-    )
-    mass = builder.AddNamedSystem("mass_estimator", closed_loop.MassEstimator(scene.box_mass, scene.gravity, gains))
-    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene.gravity, gains))
-    for source, target, name in (
-        (monitor, friction, "slipping"),
-        (monitor, friction, "force_ratio"),
-        (monitor, friction, "normal_force"),
-        (monitor, friction, "approach_speed"),
-        (reflex, friction, "reflex"),
-        (monitor, friction, "tracking_error"),
-        (motion, mass, "contact_force"),
-        (motion, mass, "acceleration"),
-        (motion, reflex, "acceleration"),
-        (motion, reflex, "contact_force"),
-        (mass, reflex, "mass_estimate"),
-        (friction, controller, "mu_estimate"),
-        (mass, controller, "mass_estimate"),
-        (reflex, controller, "reflex"),
-        (reflex, controller, "disturbance"),
-    ):
-        builder.Connect(source.GetOutputPort(name), target.GetInputPort(name))
-    logged = {name: monitor.GetOutputPort(name) for name in ClosedLoopLog.MONITOR_ARRAYS}
-    logged |= {
-        "mu_estimate": friction.GetOutputPort("mu_estimate"),
-        "mass_estimate": mass.GetOutputPort("mass_estimate"),
-    }
-    return logged | {name: reflex.GetOutputPort(name) for name in ("disturbance", "reflex")}
-
-
 def build_execution_diagram(
     reference: Reference,
     config: Config,
     *,
+    executor: Executor | None = None,
     meshcat: Meshcat | None = None,
-    controlled: bool = True,
-    controller: str | None = None,
     conditions: Conditions = Conditions(),
-    closed_loop: bool = False,
     mu_assumed: float | None = None,
 ) -> ExecutionDiagram:
-    """The Diagram that executes `reference` with `controller` (default
-    config.sim.controller) in the world `conditions` describe; controlled=False applies
-    zero torque (the open-loop hand, for checking that the controller holds the box).
-    closed_loop adds the contact monitor, the estimators and the push reflex around the
-    grasp controller (add_closed_loop) and their loggers. mu_assumed: the friction the plan in
-    effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
-    kind = check_closed_loop(check_controller(controller or config.sim.controller), closed_loop and controlled)
+    """The Diagram that executes `reference` with `executor` (None: config.sim.controller, open loop)
+    in the world `conditions` describe; a closed-loop executor adds the monitors, the estimators and
+    the reflexes around the grasp controller (trajectotree.execution.executor) and their loggers. mu_assumed: the
+    friction the plan in effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
+    executor = Executor(config.sim.controller) if executor is None else executor
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
     hand, box = add_hand_and_box(plant, conditions.scene(config.scene), scene_graph)
     plant.Finalize()
     description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
     exclude_finger_finger_collisions(plant, scene_graph, hand, description)
-    hold = config.sim.settle_time
-    if not controlled:
-        system = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
-        actuation = system.get_output_port()
-    elif kind == "paper":
-        actuation = add_paper_controller(builder, plant, hand, reference, config).actuation_port
-    else:
-        grasp = add_grasp_controller(
-            builder, plant, hand, box, reference, config, closed_loop=closed_loop, mu_assumed=mu_assumed
-        )
-        actuation = grasp.actuation_port
-    builder.Connect(actuation, plant.get_actuation_input_port())
+    added = add_executor(
+        builder,
+        plant,
+        reference,
+        config,
+        scene_graph=scene_graph,
+        hand=hand,
+        box=box,
+        executor=executor,
+        mu_assumed=mu_assumed,
+    )
+    connect_executor(builder, added, plant, hand, box)
     if conditions.push is not None:
         push = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
         builder.Connect(push.spatial_forces_port, plant.get_applied_spatial_force_input_port())
@@ -376,10 +267,10 @@ def build_execution_diagram(
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
     closed_loop_loggers = None
-    if closed_loop and controlled:
-        ports = add_closed_loop(builder, plant, hand, box, description, grasp, config)
+    if executor.closed_loop:
         closed_loop_loggers = {
-            name: LogVectorOutput(port, builder, triggers, config.sim.log_period) for name, port in ports.items()
+            name: LogVectorOutput(added.GetOutputPort(name), builder, triggers, config.sim.log_period)
+            for name in CLOSED_LOOP_OUTPUTS
         }
     visualizer = None
     if meshcat is not None:
@@ -396,9 +287,10 @@ def build_execution_diagram(
         state_logger=state_logger,
         force_logger=force_logger,
         visualizer=visualizer,
-        duration=reference.duration + hold,
-        controller=kind if controlled else "none",
+        duration=reference.duration + config.sim.settle_time,
+        controller=executor.controller,
         closed_loop_loggers=closed_loop_loggers,
+        executor=added,
     )
 
 
@@ -406,18 +298,6 @@ def arrow_scale(reference: Reference) -> float:
     """The force arrows' scale (N per cm) of a run of `reference`: set by the plan's forces, so that
     the playback and the GIF of one plan share it and a dropped box's squeeze does not shrink it."""
     return arrow_newtons_per_cm(reference.f_W)
-
-
-def check_closed_loop(controller: str, closed_loop: bool) -> str:
-    """`controller`, unless the closed loop is asked for around another than the grasp controller."""
-    if closed_loop and controller != "grasp":
-        raise ConfigError(
-            field="controller",
-            value=controller,
-            problem=": the closed loop runs around the grasp controller only",
-            choices=("grasp",),
-        )
-    return controller
 
 
 def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -496,27 +376,18 @@ def simulate_reference(
     reference: Reference,
     config: Config,
     *,
+    executor: Executor | None = None,
     meshcat: Meshcat | None = None,
     html_path: str | Path | None = None,
-    controlled: bool = True,
     realtime_rate: float = 0.0,
-    controller: str | None = None,
     conditions: Conditions = Conditions(),
-    closed_loop: bool = False,
 ) -> SimResult:
-    """Runs the execution Diagram for the plan's length plus the settle time; the log it
-    records, evaluated by trajectotree.execution.metrics."""
+    """Runs the execution Diagram of `executor` (None: config.sim.controller, open loop; one that
+    replans runs its closed loop here, without the replanner: execution.replan) for the plan's length
+    plus the settle time; the log it records, evaluated by trajectotree.execution.metrics."""
     if html_path is not None and meshcat is None:
         meshcat = playback.start_meshcat()
-    execution = build_execution_diagram(
-        reference,
-        config,
-        meshcat=meshcat,
-        controlled=controlled,
-        controller=controller,
-        conditions=conditions,
-        closed_loop=closed_loop,
-    )
+    execution = build_execution_diagram(reference, config, executor=executor, meshcat=meshcat, conditions=conditions)
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:

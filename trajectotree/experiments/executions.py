@@ -1,9 +1,9 @@
 """Executing a sweep's plans under several controllers and robustness conditions.
 
 A plan does not depend on how it is executed, so a sweep plans each (goal, method) once
-and this module executes every saved plan again for each (controller, condition) pair,
-resumably: `trials/<key>/exec/<controller>_<condition>/sim.json` (+ `sim.npz`). Adding a
-controller or a condition to a finished sweep runs only the new executions.
+and this module executes every saved plan again for each (executor, condition) pair,
+resumably: `trials/<key>/exec/<executor>_<condition>/sim.json` (+ `sim.npz`; config.executor.Executor's
+names). Adding an executor or a condition to a finished sweep runs only the new executions.
 
 The conditions (`ConditionSpec`):
 - `nominal`: the plan's world;
@@ -18,10 +18,10 @@ The conditions (`ConditionSpec`):
   the simulated box mass over the planned one), `push-3N` and `push-6N` (`push_forces`: N
   along +x in W, timed like `push`).
 
-Executions with the closed loop (`closed_loop`: the grasp controller with the contact watch,
-the estimates and the push reflex, trajectotree.execution.closed_loop) are kept and listed
-apart, as the executor `grasp-closed-loop`, beside the open-loop `grasp`; those that also replan
-from the measured state (`replan`, trajectotree.execution.replan) as `grasp-replan`.
+Executions with the closed loop (the executor `grasp-closed-loop`: the grasp controller with the contact
+watch, the estimates and the reflexes, trajectotree.execution.closed_loop) are kept and listed apart,
+beside the open-loop `grasp`; those that also replan from the measured state (trajectotree.execution.replan)
+as `grasp-replan`.
 """
 
 from __future__ import annotations
@@ -40,22 +40,19 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.config import (
-    CONTROLLERS,
     Config,
     ConfigError,
     ControllerGains,
     SimConfig,
-    check_controller,
     check_range,
 )
+from trajectotree.config.executor import Executor, parse_executor
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
 from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
 from trajectotree.planning.workers import kill_pool, process_pool
 from trajectotree.results import FINAL_THETA_TOLERANCE  # rad, "final orientation held" in the execution table
 
 EXEC_DIR = "exec"
-CLOSED_LOOP_SUFFIX = "-closed-loop"  # the executor label of closed-loop executions: grasp-closed-loop
-REPLAN_SUFFIX = "-replan"  # the executor label of closed-loop executions with replanning: grasp-replan
 
 
 @dataclass(frozen=True)
@@ -134,56 +131,34 @@ def check_condition(condition: str, spec: ConditionSpec | None = None) -> str:
     return condition
 
 
-def check_closed_loop_controllers(controllers, closed_loop: bool, replan: bool = False) -> None:
-    """ConfigError when the closed loop (or replanning) is asked for around another than the grasp controller."""
-    others = [c for c in controllers if c != "grasp"]
-    if (closed_loop or replan) and others:
-        raise ConfigError(
-            field="controller",
-            value=others[0],
-            problem=f": the closed loop ({'--replan' if replan else '--closed-loop'}) runs around the grasp "
-            "controller only",
-            choices=("grasp",),
-        )
+# The executors of the tables, in their order (a condition's open loop, closed loop and replanning together).
+EXECUTORS = tuple(e.value for e in (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.GRASP_REPLAN, Executor.PAPER))
+PAPER_EXECUTORS = (Executor.GRASP, Executor.PAPER)  # the paper's: its controller and eq. 20, open loop
 
 
-def executor_label(controller: str, closed_loop: bool = False, replan: bool = False) -> str:
-    """The executor's name in the execution folders and tables: the controller, + -closed-loop, or
-    + -replan for the closed loop with replanning."""
-    if replan:
-        return controller + REPLAN_SUFFIX
-    return controller + CLOSED_LOOP_SUFFIX if closed_loop else controller
-
-
-EXECUTORS = ("grasp", "grasp-closed-loop", "grasp-replan", "paper")  # executor_label's, in the tables' order
-
-
-def execution_dir(
-    trial_dir: str | Path, controller: str, condition: str, closed_loop: bool = False, replan: bool = False
-) -> Path:
-    return Path(trial_dir) / EXEC_DIR / f"{executor_label(controller, closed_loop, replan)}_{condition}"
+def execution_dir(trial_dir: str | Path, executor: Executor | str, condition: str) -> Path:
+    """The folder of a trial's execution by `executor` (an Executor or its name) under `condition`."""
+    return Path(trial_dir) / EXEC_DIR / f"{parse_executor(executor).value}_{condition}"
 
 
 @dataclass(frozen=True)
 class ExecutionTask:
     trial_dir: str  # the sweep trial's folder (plan.json, plan.npz)
-    controller: str  # config.CONTROLLERS
+    executor: Executor  # a replanning one plans its segments in this process
     condition: str  # CONDITIONS
     spec: ConditionSpec
     # The executor's gains and simulation settings; None: those saved with the plan.
     gains: ControllerGains | None = None
     sim: SimConfig | None = None
-    closed_loop: bool = False  # the grasp controller with the closed loop (run_simulation's closed_loop)
-    replan: bool = False  # the closed loop replanning too (run_simulation's replan; its segments in this process)
 
     @property
     def folder(self) -> Path:
-        return execution_dir(self.trial_dir, self.controller, self.condition, self.closed_loop, self.replan)
+        return execution_dir(self.trial_dir, self.executor, self.condition)
 
 
 def execute(task: ExecutionTask) -> dict:
     """Loads the trial's plan, executes it, writes sim.json + sim.npz into its execution
-    folder; returns sim.json's content (with the trial folder, controller and condition)."""
+    folder; returns sim.json's content."""
     from trajectotree.execution.run import run_simulation
     from trajectotree.io import load_plan, save_sim
 
@@ -191,17 +166,14 @@ def execute(task: ExecutionTask) -> dict:
     config = replace(
         plan.config,
         controller=task.gains or plan.config.controller,
-        sim=replace(task.sim or plan.config.sim, controller=task.controller),
+        sim=task.sim or plan.config.sim,
     )
     duration = float(plan.trajectory.t[-1] - plan.trajectory.t[0])
-    # a replan's later segments in this process: the sweep runs one execution per core already
-    replanning = {"replan": True, "segment_workers": 1} if task.replan else {}
     result = run_simulation(
         plan=plan,
         config=config,
-        controller=task.controller,
-        closed_loop=task.closed_loop,
-        **replanning,
+        executor=task.executor,
+        segment_workers=1,  # a replan's later segments in this process: the sweep runs one execution per core
         **task.spec.simulation_kwargs(task.condition, config, duration),
     )
     out = task.folder
@@ -237,23 +209,18 @@ def execution_problem(folder: Path) -> str | None:
 
 def pending_executions(
     sweep_dir: str | Path,
-    controllers,
+    executors,
     conditions,
     spec: ConditionSpec,
     methods=None,
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
-    closed_loop: bool = False,
-    replan: bool = False,
 ) -> list[ExecutionTask]:
-    """Every (trial with a trajectory, of `methods` (None: all), controller, condition)
-    without a finished execution (with the closed loop, or without; replanning, or not).
-    A nominal open-loop execution the sweep's own --simulate already ran (the trial's
-    sim.json, same controller) is copied instead of rerun."""
-    controllers = [check_controller(c) for c in controllers]
+    """Every (trial with a trajectory, of `methods` (None: all), executor (an Executor or its name),
+    condition) without a finished execution. A nominal open-loop execution the sweep's own --simulate
+    already ran (the trial's sim.json, same controller) is copied instead of rerun."""
+    executors = [parse_executor(e) for e in executors]
     conditions = [check_condition(c, spec) for c in conditions]
-    check_closed_loop_controllers(controllers, closed_loop, replan)
-    closed_loop = closed_loop or replan
     tasks = []
     for trial_dir in sorted(p for p in (Path(sweep_dir) / TRIALS_DIR).iterdir() if p.is_dir()):
         try:
@@ -268,13 +235,13 @@ def pending_executions(
         same_settings = (gains is None or _as_saved(gains) == saved.get("controller")) and (
             sim is None or {**_as_saved(sim), "controller": None} == {**saved.get("sim", {}), "controller": None}
         )
-        for controller in controllers:
+        for executor in executors:
             for condition in conditions:
-                task = ExecutionTask(str(trial_dir), controller, condition, spec, gains, sim, closed_loop, replan)
+                task = ExecutionTask(str(trial_dir), executor, condition, spec, gains, sim)
                 if execution_problem(task.folder) is None or (
                     same_settings
-                    and not closed_loop
-                    and _reuse_sweep_simulation(trial_dir, controller, condition, task.folder)
+                    and not executor.closed_loop
+                    and _reuse_sweep_simulation(trial_dir, executor.controller, condition, task.folder)
                 ):
                     continue
                 tasks.append(task)
@@ -313,27 +280,25 @@ def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, ou
 def run_executions(
     sweep_dir: str | Path,
     *,
-    controllers=CONTROLLERS,
+    executors=PAPER_EXECUTORS,
     conditions=CONDITIONS,
     spec: ConditionSpec = ConditionSpec(),
     methods=None,
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
-    closed_loop: bool = False,
-    replan: bool = False,
     workers: int | None = None,
     progress: bool = True,
 ) -> int:
-    """Runs the pending executions of a sweep's plans (of `methods`, None: all) with the
-    controller `gains` and `sim` settings (None: those saved with each plan), with the closed
-    loop or without (replanning, or not), on `workers` local processes, holding the
+    """Runs the pending executions of a sweep's plans (of `methods`, None: all) by each of `executors`
+    with the controller `gains` and `sim` settings (None: those saved with each plan), on `workers`
+    local processes, holding the
     sweep's lock; returns how many ran. A failed execution is reported on stderr and left
     pending (rerun to retry); the others go on."""
     sweep_dir = Path(sweep_dir)
     if not (sweep_dir / TRIALS_DIR).is_dir():
         raise ConfigError(f"{str(sweep_dir)!r} is not a sweep directory (no {TRIALS_DIR}/)")
     with sweep_lock(sweep_dir):
-        tasks = pending_executions(sweep_dir, controllers, conditions, spec, methods, gains, sim, closed_loop, replan)
+        tasks = pending_executions(sweep_dir, executors, conditions, spec, methods, gains, sim)
         if not tasks:
             return 0
         for line in torn_executions(tasks):
@@ -358,7 +323,7 @@ def run_executions(
                     raise  # the workers themselves died: every other execution would fail the same way
                 except Exception as e:  # one broken plan must not stop the others
                     print(
-                        f"execution {Path(task.trial_dir).name} {task.controller}/{task.condition} failed: "
+                        f"execution {Path(task.trial_dir).name} {task.executor.value}/{task.condition} failed: "
                         f"{type(e).__name__}: {e}",
                         file=sys.stderr,
                     )
