@@ -463,3 +463,113 @@ def quaternion_slerp(q0, q1, t) -> np.ndarray:
         return np.tile(q0, (len(t), 1))
     out = (np.sin((1 - t) * omega) * q0 + np.sin(t * omega) * q1) / np.sin(omega)
     return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+# -- rotations and the box's distance in space -----------------------------------------------------
+def quaternion_matrices(quats) -> np.ndarray:
+    """(..., 3, 3) rotation matrices of the quaternions (..., 4) [w, x, y, z] (normalized here)."""
+    q = np.asarray(quats, dtype=float)
+    w, x, y, z = np.moveaxis(q / np.linalg.norm(q, axis=-1, keepdims=True), -1, 0)
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def matrix_quaternions(R) -> np.ndarray:
+    """(..., 4) unit quaternions [w, x, y, z] with w >= 0 of the rotation matrices R (..., 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    phi = so3_log(R)
+    angle = np.linalg.norm(phi, axis=-1, keepdims=True)
+    axis = np.divide(phi, angle, out=np.zeros_like(phi), where=angle > 0)
+    return np.concatenate([np.cos(angle / 2), np.sin(angle / 2) * axis], axis=-1)
+
+
+def skew(v) -> np.ndarray:
+    """(..., 3, 3) [v]x, the matrix of v x (.) for vectors v (..., 3)."""
+    v = np.asarray(v)
+    zero = np.zeros_like(v[..., 0])
+    return np.stack(
+        [
+            np.stack([zero, -v[..., 2], v[..., 1]], axis=-1),
+            np.stack([v[..., 2], zero, -v[..., 0]], axis=-1),
+            np.stack([-v[..., 1], v[..., 0], zero], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def so3_exp(phi) -> np.ndarray:
+    """(..., 3, 3) exp([phi]x), the rotation by |phi| rad about phi (..., 3) (Rodrigues; series below 1e-6 rad)."""
+    phi = np.asarray(phi, dtype=float)
+    theta2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    small = theta2 < 1e-12
+    theta = np.sqrt(np.where(small, 1.0, theta2))
+    a = np.where(small, 1.0 - theta2 / 6, np.sin(theta) / theta)
+    b = np.where(small, 0.5 - theta2 / 24, (1 - np.cos(theta)) / np.where(small, 1.0, theta2))
+    K = skew(phi)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def so3_log(R) -> np.ndarray:
+    """(..., 3) the rotation vector phi (|phi| in [0, pi]) with exp([phi]x) = R (..., 3, 3)."""
+    R = np.asarray(R, dtype=float)
+    vee = 0.5 * np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
+    s = np.linalg.norm(vee, axis=-1)
+    c = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1)
+    theta = np.arctan2(s, c)
+    scale = np.where(s > 1e-9, theta / np.where(s > 1e-9, s, 1.0), 1.0 + theta**2 / 6)
+    phi = vee * scale[..., None]
+    # Near pi the antisymmetric part vanishes: the axis from the symmetric part's largest column.
+    near_pi = c < -0.99
+    if np.any(near_pi):
+        Rn = R[near_pi]
+        B = (Rn + np.swapaxes(Rn, -1, -2)) / 2 - c[near_pi][:, None, None] * np.eye(3)  # (1 - c) a a^T
+        column = np.take_along_axis(B, np.argmax(np.diagonal(B, axis1=-2, axis2=-1), axis=-1)[:, None, None], -1)
+        axis = column[..., 0] / np.linalg.norm(column[..., 0], axis=-1, keepdims=True)
+        axis *= np.where(np.sum(axis * vee[near_pi], axis=-1, keepdims=True) < 0, -1.0, 1.0)
+        phi[near_pi] = axis * theta[near_pi][..., None]
+    return phi
+
+
+def rotation_angles(R) -> np.ndarray:
+    """(...) rad in [0, pi], the angles of the rotation matrices R (..., 3, 3)."""
+    return np.linalg.norm(so3_log(R), axis=-1)
+
+
+def box_signed_distances(half, p_B) -> np.ndarray:
+    """(...) m, the signed distance of points p_B (..., 3, in B) from the box of half-sizes `half`
+    (3,) centred at B's origin: positive outside, negative inside (exact)."""
+    d = np.abs(np.asarray(p_B, dtype=float)) - np.asarray(half, dtype=float)
+    outside = np.linalg.norm(np.maximum(d, 0.0), axis=-1)
+    return outside + np.minimum(d.max(axis=-1), 0.0)
+
+
+def box_face_normals(half, p_B) -> np.ndarray:
+    """(..., 3) the outward unit normal in B of the box face nearest each point p_B (..., 3)."""
+    p = np.asarray(p_B, dtype=float)
+    axis = np.argmax(np.abs(p) - np.asarray(half, dtype=float), axis=-1)
+    n = np.zeros_like(p)
+    np.put_along_axis(n, axis[..., None], np.where(np.take_along_axis(p, axis[..., None], -1) < 0, -1.0, 1.0), -1)
+    return n
+
+
+def segment_box_distances(half, a_B, b_B, iterations: int = 60) -> np.ndarray:
+    """(...) m, the least signed distance from the box (half-sizes `half`) of the points on the
+    segments a_B -> b_B (..., 3, in B). The signed distance from a convex set is convex along a
+    segment, so a golden-section search finds its least value (to 0.618^iterations of the length)."""
+    a, b = np.asarray(a_B, dtype=float), np.asarray(b_B, dtype=float)
+    ratio = (np.sqrt(5.0) - 1) / 2
+    lo, hi = np.zeros(a.shape[:-1]), np.ones(a.shape[:-1])
+
+    def at(t):
+        return box_signed_distances(half, a + t[..., None] * (b - a))
+
+    for _ in range(iterations):
+        t1, t2 = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
+        left = at(t1) <= at(t2)
+        lo, hi = np.where(left, lo, t1), np.where(left, t2, hi)
+    ends = np.minimum(at(np.zeros_like(lo)), at(np.ones_like(lo)))
+    return np.minimum(at((lo + hi) / 2), ends)

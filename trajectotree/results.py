@@ -412,3 +412,50 @@ def outcome_text(summary: dict, noun: str = "box") -> str:
         f"{noun} not dropped, but ended {abs(theta):.3f} rad ({math.degrees(abs(theta)):.0f} deg) and "
         f"{1e3 * math.hypot(x, y):.1f} mm off the plan's final pose (tolerance: {tolerance})"
     )
+
+
+# -- in space ------------------------------------------------------------------------------------
+# The plan.npz arrays of a hand in space (README, "Plans in space"), in the order they are saved.
+SPACE_TRAJECTORY_ARRAYS = ("t", "x", "v", "q", "tau", "f_W", "p_W_C", "p_W_tip", "p_W_links")
+# The rule between knots k and k + 1, h = t_{k+1} - t_k, that the plan was made with and is checked by
+# (plan.json "integration"): trapezoidal in the velocities, the forces and the moments.
+SPACE_INTEGRATION = (
+    "trapezoidal: p[k+1] = p[k] + h (v[k] + v[k+1]) / 2; R[k+1] = exp([h (w[k] + w[k+1]) / 2]x) R[k]; "
+    "m (v[k+1] - v[k]) = h (F[k] + F[k+1]) / 2, F = sum_i f_W[i] + m g; "
+    "L[k+1] - L[k] = h (T[k] + T[k+1]) / 2, L = R I_B R^T w, T = sum_i (p_W_C[i] - p) x f_W[i]; "
+    "x = [qw, qx, qy, qz, px, py, pz] (R from q, p), v = [w, v] in W"
+)
+# m, a fingertip sphere farther than this from the box carries no force (the issue's rule in space)
+SPACE_GAP_TOL = 1e-3
+# rad and m, how far the poses may stray from the integration rule's (IPOPT holds its rows to 1e-6)
+KINEMATICS_TOL = 1e-5
+
+
+@dataclass(frozen=True)
+class SpaceTrajectory:
+    """A plan in space at every knot (the plan.npz arrays of a hand in space)."""
+
+    t: np.ndarray  # (K,) s
+    x: np.ndarray  # (K, 7) the object's pose: Drake's floating-body positions [qw, qx, qy, qz, px, py, pz] in W
+    v: np.ndarray  # (K, 6) its angular then linear velocity in W (rad/s, m/s)
+    q: np.ndarray  # (K, F n) rad, the fingers' joints, finger-major
+    tau: np.ndarray  # (K, F n) N m, their motors' torques (quasi-static: J^T f plus the fingers' weight)
+    f_W: np.ndarray  # (K, F, 3) N, each fingertip's force ON the object, in W
+    p_W_C: np.ndarray  # (K, F, 3) m, where each force acts on the object's surface, in W
+    p_W_tip: np.ndarray  # (K, F, 3) m, the fingertip sphere centres in W
+    p_W_links: np.ndarray  # (K, F, L, 2, 3) m, the ends of each link's collision capsule axis in W
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {name: getattr(self, name) for name in SPACE_TRAJECTORY_ARRAYS}
+
+
+@dataclass(frozen=True)
+class SpacePhysicsCheck(PhysicsCheck):
+    """The check of a plan in space (trajectotree.planning.physics.check_space_physics): the planar
+    check's fields, with the gap at SPACE_GAP_TOL, and how far the poses stray from the integration rule."""
+
+    kinematics_rad: float  # max angle between R[k+1] and the rule's exp([h w_mid]x) R[k]
+    kinematics_m: float  # max |p[k+1] - p[k] - h v_mid|
+
+    def to_json(self) -> dict:
+        return {**super().to_json(), "gap_tol_m": SPACE_GAP_TOL, "kinematics_tol": KINEMATICS_TOL}

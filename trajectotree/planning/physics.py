@@ -17,6 +17,13 @@ A plan passes when no fingertip more than GAP_TOL off the box carries more than
 FORCE_TOL, none sinks deeper than PENETRATION_TOL, no link overlaps it deeper than
 LINK_PENETRATION_TOL (where the links are given), the cones hold to CONE_TOL and
 Newton-Euler to NEWTON_EULER_TOL.
+
+In space (check_space_physics, a plan of a hand in space: results.SpaceTrajectory's arrays and the
+object that plan.json names) the same rules in 3D: Newton-Euler under plan.json's integration rule
+(results.SPACE_INTEGRATION: trapezoidal, the rotation in angular momentum L = R I_B R^T w), the poses
+against that rule's kinematics, each force in its cone (|f_t| <= mu f_n about the normal of the face
+its contact lies on), no force from a fingertip sphere or contact point more than SPACE_GAP_TOL (1 mm)
+off the box, no sphere sunk nor link capsule inside it more than 1 mm.
 """
 
 from __future__ import annotations
@@ -26,7 +33,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from trajectotree.geometry import ConvexPolygon, poses_box_to_world, poses_world_to_box
+from trajectotree.geometry import (
+    ConvexPolygon,
+    box_face_normals,
+    box_signed_distances,
+    poses_box_to_world,
+    poses_world_to_box,
+    quaternion_matrices,
+    rotation_angles,
+    segment_box_distances,
+    so3_exp,
+)
 
 # The check's value type and its tolerances live with the other saved values (plan.json records both).
 if TYPE_CHECKING:  # annotations only: the check itself needs numpy alone
@@ -35,10 +52,14 @@ from trajectotree.results import (
     CONE_TOL,
     FORCE_TOL,
     GAP_TOL,
+    KINEMATICS_TOL,
     LINK_PENETRATION_TOL,
     NEWTON_EULER_TOL,
     PENETRATION_TOL,
+    SPACE_GAP_TOL,
+    SPACE_TRAJECTORY_ARRAYS,
     PhysicsCheck,
+    SpacePhysicsCheck,
 )
 
 
@@ -172,4 +193,173 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
         link_penetration_finger=i_link,
         passed=not reasons,
         reason="; ".join(reasons),
+    )
+
+
+# -- in space ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SpaceObjectModel:
+    """What the check in space needs: the object (plan.json "object") and the hand's radii."""
+
+    size: tuple[float, float, float]  # m, the box's edges along B's x, y, z
+    mass: float  # kg
+    inertia: np.ndarray  # (3, 3) kg m^2, about the centre, in B
+    gravity: float  # m/s^2, along -z in W
+    tip_radius: float  # m
+    link_radii: tuple[float, ...]  # m, each link's capsule radius, the order of p_W_links' third axis
+
+    @property
+    def half(self) -> np.ndarray:
+        return np.asarray(self.size, dtype=float) / 2
+
+    def to_json(self) -> dict:
+        return {
+            "size": [float(v) for v in self.size],
+            "mass": float(self.mass),
+            "inertia": np.asarray(self.inertia, dtype=float).tolist(),
+            "gravity": float(self.gravity),
+            "tip_radius": float(self.tip_radius),
+            "link_radii": [float(r) for r in self.link_radii],
+        }
+
+    @staticmethod
+    def from_json(data: dict) -> SpaceObjectModel:
+        return SpaceObjectModel(
+            size=tuple(float(v) for v in data["size"]),
+            mass=float(data["mass"]),
+            inertia=np.asarray(data["inertia"], dtype=float),
+            gravity=float(data["gravity"]),
+            tip_radius=float(data["tip_radius"]),
+            link_radii=tuple(float(r) for r in data["link_radii"]),
+        )
+
+
+def space_newton_euler(a, box: SpaceObjectModel) -> tuple[np.ndarray, np.ndarray]:
+    """((K - 1, 3) N, (K - 1, 3) N m): the translational and rotational residuals of the rule between
+    consecutive knots of the arrays `a` (results.SPACE_INTEGRATION)."""
+    R = quaternion_matrices(a["x"][:, :4])
+    p, w, v, f = a["x"][:, 4:], a["v"][:, :3], a["v"][:, 3:], a["f_W"]
+    h = np.diff(a["t"])[:, None]
+    force = f.sum(axis=1) + np.array([0.0, 0.0, -box.mass * box.gravity])
+    moment = np.cross(a["p_W_C"] - p[:, None, :], f).sum(axis=1)
+    momentum = np.einsum("kij,jl,kml,km->ki", R, box.inertia, R, w)  # R I_B R^T w
+    translation = box.mass * np.diff(v, axis=0) - 0.5 * h * (force[1:] + force[:-1])
+    rotation = np.diff(momentum, axis=0) - 0.5 * h * (moment[1:] + moment[:-1])
+    return translation / h, rotation / h
+
+
+def space_kinematics(a) -> tuple[float, float]:
+    """(rad, m): how far the poses stray from the rule's R[k+1] = exp([h w_mid]x) R[k], p[k+1] = p[k] + h v_mid."""
+    R = quaternion_matrices(a["x"][:, :4])
+    h = np.diff(a["t"])[:, None]
+    w_mid, v_mid = 0.5 * (a["v"][1:] + a["v"][:-1])[:, :3], 0.5 * (a["v"][1:] + a["v"][:-1])[:, 3:]
+    predicted = so3_exp(h * w_mid) @ R[:-1]
+    angle = rotation_angles(np.swapaxes(predicted, -1, -2) @ R[1:])
+    offset = np.linalg.norm(np.diff(a["x"][:, 4:], axis=0) - h * v_mid, axis=-1)
+    return float(angle.max(initial=0.0)), float(offset.max(initial=0.0))
+
+
+def check_space_arrays(arrays) -> dict[str, np.ndarray]:
+    """The plan in space's arrays as floats, their shapes checked against each other: K knots, F
+    fingers, n joints each; ValueError naming the array, its shape and the shape expected."""
+    a = {name: np.asarray(arrays[name], dtype=float) for name in SPACE_TRAJECTORY_ARRAYS}
+    K = a["t"].shape[0] if a["t"].ndim == 1 else -1
+    F = a["f_W"].shape[1] if a["f_W"].ndim == 3 else -1
+    expected = {
+        "t": (K,),
+        "x": (K, 7),
+        "v": (K, 6),
+        "q": (K, a["q"].shape[-1]),
+        "tau": a["q"].shape,
+        "f_W": (K, F, 3),
+        "p_W_C": (K, F, 3),
+        "p_W_tip": (K, F, 3),
+        "p_W_links": (K, F, a["p_W_links"].shape[2] if a["p_W_links"].ndim == 5 else -1, 2, 3),
+    }
+    for name, shape in expected.items():
+        if a[name].shape != shape or K < 2 or F < 1:
+            want = "x".join("K" if s == K else "F" if s == F else str(s) for s in shape)
+            raise ValueError(f"plan.npz {name} has shape {a[name].shape}, expected ({want}) with K >= 2 knots")
+    if a["q"].shape[1] % F:
+        raise ValueError(f"plan.npz q has {a['q'].shape[1]} joints, not a multiple of its {F} fingers")
+    return a
+
+
+def check_space_physics(arrays, box: SpaceObjectModel, mu: float) -> SpacePhysicsCheck:
+    """The check of a plan in space's arrays (plan.npz: results.SPACE_TRAJECTORY_ARRAYS, shapes checked by
+    check_space_arrays) against the object `box` and friction `mu`."""
+    a = check_space_arrays(arrays)
+    translation, rotation = space_newton_euler(a, box)
+    ne_force, ne_moment = float(np.abs(translation).max()), float(np.abs(rotation).max())
+    angle_off, position_off = space_kinematics(a)
+    R = quaternion_matrices(a["x"][:, :4])
+    p = a["x"][:, 4:]
+
+    def in_B(p_W):  # points (K, ..., 3) in W to B
+        flat = (p_W.reshape(len(p), -1, 3) - p[:, None, :]) @ R
+        return flat.reshape(p_W.shape)
+
+    p_BC = in_B(a["p_W_C"])
+    n_W = np.einsum("kij,kfj->kfi", R, box_face_normals(box.half, p_BC))
+    f = a["f_W"]
+    f_n = -np.sum(f * n_W, axis=-1)
+    f_t = np.linalg.norm(f + f_n[..., None] * n_W, axis=-1)
+    cone = float(np.maximum(f_t - mu * f_n, -f_n).max())
+    force = np.linalg.norm(f, axis=-1)
+    gap = box_signed_distances(box.half, in_B(a["p_W_tip"])) - box.tip_radius  # (K, F)
+    off = np.abs(box_signed_distances(box.half, p_BC))
+    away = np.where((gap > SPACE_GAP_TOL) | (off > SPACE_GAP_TOL), force, 0.0)
+    k, i = np.unravel_index(int(np.argmax(away)), away.shape)
+    worst = float(away[k, i])
+    k_deep, i_deep = np.unravel_index(int(np.argmin(gap)), gap.shape)
+    penetration = max(0.0, -float(gap[k_deep, i_deep]))
+    ends = in_B(a["p_W_links"])
+    depth = np.asarray(box.link_radii) - segment_box_distances(box.half, ends[..., 0, :], ends[..., 1, :])
+    links = np.maximum(depth, 0.0).max(axis=2)  # (K, F)
+    k_link, i_link = np.unravel_index(int(np.argmax(links)), links.shape)
+    link_depth = float(links[k_link, i_link])
+    k_link, i_link = (int(k_link), int(i_link)) if link_depth > 0 else (-1, -1)
+    reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
+    if worst > FORCE_TOL:
+        reasons.append(
+            f"finger {i} pushes the box with {worst:.3g} N from {1e3 * max(gap[k, i], off[k, i]):.2f} mm away at "
+            f"knot {k} (limit {FORCE_TOL} N beyond {1e3 * SPACE_GAP_TOL:g} mm)"
+        )
+    if penetration > PENETRATION_TOL:
+        reasons.append(
+            f"finger {i_deep} sinks {1e3 * penetration:.2f} mm into the box at knot {k_deep} "
+            f"(limit {1e3 * PENETRATION_TOL:g} mm)"
+        )
+    if link_depth > LINK_PENETRATION_TOL:
+        reasons.append(
+            f"a link of finger {i_link} is {1e3 * link_depth:.2f} mm inside the box at knot {k_link} "
+            f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)"
+        )
+    if cone > CONE_TOL:
+        reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
+    if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
+        reasons.append(f"Newton-Euler residual {ne_force:.3g} N, {ne_moment:.3g} N m (limit {NEWTON_EULER_TOL:g})")
+    if max(angle_off, position_off) > KINEMATICS_TOL:
+        reasons.append(
+            f"the poses stray {angle_off:.3g} rad and {position_off:.3g} m from the integration rule "
+            f"(limit {KINEMATICS_TOL:g})"
+        )
+    return SpacePhysicsCheck(
+        newton_euler_force_N=ne_force,
+        newton_euler_moment_Nm=ne_moment,
+        friction_cone_N=cone,
+        mu=float(mu),
+        force_at_distance_N=worst,
+        force_at_distance_knot=int(k) if worst > 0 else -1,
+        force_at_distance_finger=int(i) if worst > 0 else -1,
+        force_at_distance_gap_m=float(max(gap[k, i], off[k, i])) if worst > 0 else 0.0,
+        contact_point_off_surface_m=float(off.max()),
+        penetration_m=penetration,
+        link_penetration_m=link_depth,
+        link_penetration_knot=k_link,
+        link_penetration_finger=i_link,
+        passed=not reasons,
+        reason="; ".join(reasons),
+        kinematics_rad=angle_off,
+        kinematics_m=position_off,
     )

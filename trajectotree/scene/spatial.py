@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, SceneGraph, Sphere
+from pydrake.geometry import AddContactMaterial, Box, Capsule, ProximityProperties, SceneGraph, Sphere
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
@@ -101,6 +101,47 @@ class SpaceScene:
         tau_g = self.plant.CalcGravityGeneralizedForces(context)
         v = [self.plant.GetJointByName(n, self.hand).velocity_start() for f in self.hand_file.fingers for n in f.joints]
         return -tau_g[v].reshape(self.num_fingers, -1)
+
+    def link_capsules(self) -> tuple[tuple[LinkCapsule, ...], ...]:
+        """Each finger's link capsules (every capsule collision geometry of its bodies), base out."""
+        plant, inspector = self.plant, self.scene_graph.model_inspector()
+        out = []
+        for finger in self.hand_file.fingers:
+            capsules = []
+            for name in finger.joints:
+                body = plant.GetJointByName(name, self.hand).child_body()
+                for g in plant.GetCollisionGeometriesForBody(body):
+                    shape = inspector.GetShape(g)
+                    if isinstance(shape, Capsule):
+                        X_BG = inspector.GetPoseInFrame(g)
+                        half = np.array([0.0, 0.0, shape.length() / 2])  # a capsule's axis is its frame's z
+                        capsules.append(LinkCapsule(body.name(), X_BG @ -half, X_BG @ half, shape.radius()))
+            out.append(tuple(capsules))
+        return tuple(out)
+
+    def link_ends_W(self, poses, q) -> np.ndarray:
+        """(K, F, L, 2, 3) m: the ends of each finger's link capsule axes in W with the box at `poses`
+        (K, 7) and the joints at q (K, F n), from the plant's kinematics."""
+        capsules = self.link_capsules()
+        context = self.plant.CreateDefaultContext()
+        out = np.zeros((len(q), self.num_fingers, len(capsules[0]), 2, 3))
+        for k in range(len(q)):
+            self.plant.SetPositions(context, self.positions(poses[k], q[k]))
+            for i, finger in enumerate(capsules):
+                for j, c in enumerate(finger):
+                    X_WB = self.plant.GetBodyByName(c.body, self.hand).EvalPoseInWorld(context)
+                    out[k, i, j] = X_WB @ c.p_B_end0, X_WB @ c.p_B_end1
+        return out
+
+
+@dataclass(frozen=True)
+class LinkCapsule:
+    """A link's collision capsule: the ends of its axis in its body's frame, and its radius."""
+
+    body: str
+    p_B_end0: np.ndarray  # (3,) m
+    p_B_end1: np.ndarray  # (3,) m
+    radius: float  # m
 
 
 START_POSE = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])  # the box at the grasp point, unturned
