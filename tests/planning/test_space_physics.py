@@ -161,9 +161,9 @@ def test_a_turning_cube_follows_the_rule(hold):
 @pytest.mark.parametrize(
     "name, shape, message",
     [
-        ("x", (3, 3), "plan.npz x has shape (3, 3), expected (Kx7)"),
+        ("x", (3, 3), "plan.npz x has shape (3, 3), expected (Kx7) with K = 3"),
         ("f_W", (3, 4, 2), "plan.npz f_W has shape (3, 4, 2)"),
-        ("v", (2, 6), "plan.npz v has shape (2, 6), expected (Kx6)"),
+        ("v", (2, 6), "plan.npz v has shape (2, 6), expected (Kx6) with K = 3"),
     ],
 )
 def test_arrays_that_do_not_fit_are_named(hold, name, shape, message):

@@ -6,8 +6,11 @@ IPOPT's status (exit code 0)."""
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from trajectotree.cli.common import (
     HTML_SUFFIXES,
@@ -24,6 +27,7 @@ from trajectotree.cli.common import (
 )
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
+from trajectotree.cli.space_goal import add_space_goal_options, refuse_space_goal_on_planar_hand, space_goal
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
 from trajectotree.results import METHODS, check_method
 
@@ -39,6 +43,7 @@ def register(subparsers) -> None:
         description=__doc__,
     )
     add_goal_options(p)
+    add_space_goal_options(p)
     p.add_argument(
         "--method",
         default="trajectotree",
@@ -76,7 +81,11 @@ def run(args) -> int:
     from trajectotree.io import folder_lock, load_start
     from trajectotree.planning.keyframes import check_workers
     from trajectotree.scene.plant import build_scene
+    from trajectotree.scene.spatial import is_space_hand
 
+    if args.hand is not None and is_space_hand(args.hand):
+        return run_space(args)
+    refuse_space_goal_on_planar_hand(args)
     method = check_method(args.method)
     config = config_from_args(args)
     goal = goal_from_args(args, config)
@@ -147,3 +156,66 @@ def remove_derived_files(out: Path) -> list[str]:
             (out / name).unlink()
             removed.append(name)
     return removed
+
+
+# -- a hand in space ------------------------------------------------------------------------------
+def run_space(args) -> int:
+    """`trajectotree plan` for a hand in space: the contact search and the keyframes programs in space, written as
+    plan.npz and plan.json (trajectotree.planning.spatial)."""
+    from trajectotree.cli.common import in_option_terms, scene_overrides
+    from trajectotree.config import Config, ConfigError, load_config
+    from trajectotree.io import folder_lock
+    from trajectotree.planning.spatial import plan_space, save_space_plan
+    from trajectotree.scene.spatial import build_space_scene
+
+    goal = space_goal(args)
+    if args.html:
+        raise ConfigError("--html takes a planar hand only so far")
+    if args.method != "trajectotree":
+        raise ConfigError(field="--method", value=args.method, problem="takes a planar hand only so far",
+                          valid="trajectotree for a hand in space")  # fmt: skip
+    config = load_config(args.config) if getattr(args, "config", None) else Config()
+    overrides = scene_overrides(args)
+    try:
+        scene_config = dataclasses.replace(config.scene, **overrides)
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+    config = dataclasses.replace(config, scene=scene_config)
+    w, x, y, z = goal
+    default = f"plan_space_{w:+.3f}_{x:+.3f}_{y:+.3f}_{z:+.3f}"
+    out = check_output_dir("--out", args.out or default, (PLAN_JSON, PLAN_NPZ))
+    scene = build_space_scene(
+        args.hand,
+        mu=scene_config.mu,
+        gravity=scene_config.gravity,
+        mass=scene_config.box_mass if "box_mass" in overrides else None,
+    )
+    with folder_lock(out, "--out", "trajectotree plan"):
+        result = plan_space(scene, goal, config)
+        removed = remove_derived_files(out)
+        save_space_plan(result, out, config)
+    if removed:
+        print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces", file=sys.stderr)
+    if args.json:
+        print_json(result.to_json())
+        return 0
+    status, details = reason_lines(result.status)
+    print(
+        f"trajectotree in space: goal quaternion [{w:+.4f}, {x:+.4f}, {y:+.4f}, {z:+.4f}], "
+        f"{len(result.contact_plan.nodes)} nodes, {'succeeded' if result.success else 'FAILED'} ({status})"
+    )
+    for line in details:
+        print(f"  {line}")
+    print(
+        f"time: search {result.search_time_s:.2f} s, segments {result.solve_time_s:.2f} s, "
+        f"total {result.total_time_s:.2f} s"
+    )
+    if result.physics_check is not None:
+        c = result.physics_check
+        print(
+            f"final orientation {np.degrees(result.final_error_rad):.3f} deg from the goal; physics check "
+            f"{'passed' if c.passed else 'FAILED'}: Newton-Euler {c.newton_euler_force_N:.1e} N, "
+            f"{c.newton_euler_moment_Nm:.1e} N m, cones {c.friction_cone_N:.1e} N"
+        )
+    print(f"wrote {out}/plan.json" + (f" and {out}/plan.npz" if result.trajectory is not None else ""))
+    return 0

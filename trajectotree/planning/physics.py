@@ -265,21 +265,24 @@ def check_space_arrays(arrays) -> dict[str, np.ndarray]:
     a = {name: np.asarray(arrays[name], dtype=float) for name in SPACE_TRAJECTORY_ARRAYS}
     K = a["t"].shape[0] if a["t"].ndim == 1 else -1
     F = a["f_W"].shape[1] if a["f_W"].ndim == 3 else -1
-    expected = {
-        "t": (K,),
-        "x": (K, 7),
-        "v": (K, 6),
-        "q": (K, a["q"].shape[-1]),
-        "tau": a["q"].shape,
-        "f_W": (K, F, 3),
-        "p_W_C": (K, F, 3),
-        "p_W_tip": (K, F, 3),
-        "p_W_links": (K, F, a["p_W_links"].shape[2] if a["p_W_links"].ndim == 5 else -1, 2, 3),
+    L = a["p_W_links"].shape[2] if a["p_W_links"].ndim == 5 else -1
+    expected = {  # name: the shape, each axis (its size, its name in the message)
+        "t": (("K", K),),
+        "x": (("K", K), ("7", 7)),
+        "v": (("K", K), ("6", 6)),
+        "q": (("K", K), ("n", a["q"].shape[-1])),
+        "tau": (("K", K), ("n", a["q"].shape[-1])),
+        "f_W": (("K", K), ("F", F), ("3", 3)),
+        "p_W_C": (("K", K), ("F", F), ("3", 3)),
+        "p_W_tip": (("K", K), ("F", F), ("3", 3)),
+        "p_W_links": (("K", K), ("F", F), ("L", L), ("2", 2), ("3", 3)),
     }
-    for name, shape in expected.items():
-        if a[name].shape != shape or K < 2 or F < 1:
-            want = "x".join("K" if s == K else "F" if s == F else str(s) for s in shape)
-            raise ValueError(f"plan.npz {name} has shape {a[name].shape}, expected ({want}) with K >= 2 knots")
+    for name, axes in expected.items():
+        if a[name].shape != tuple(size for _, size in axes) or K < 2 or F < 1:
+            want = "x".join(label for label, _ in axes)
+            raise ValueError(
+                f"plan.npz {name} has shape {a[name].shape}, expected ({want}) with K = {K} >= 2 knots, F = {F} fingers"
+            )
     if a["q"].shape[1] % F:
         raise ValueError(f"plan.npz q has {a['q'].shape[1]} joints, not a multiple of its {F} fingers")
     return a

@@ -1,0 +1,182 @@
+"""Planning for a hand in space: the contact search in space (search.tree, find_space_contact_plan), then the
+keyframes formulation in space (cito.spatial: one IPOPT program per segment), the segments joined at their
+nodes into one trajectory, checked from its arrays alone (planning.physics.check_space_physics) and written as
+plan.npz (results.SPACE_TRAJECTORY_ARRAYS) and plan.json (the object, the integration rule, the check,
+the solve report per segment and the contact sequence).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from trajectotree.cito.spatial import segment_spec, solve_space_segment, space_fingers
+from trajectotree.config import Config, config_to_dict, mu_plan
+from trajectotree.contact_plan import SpaceContactPlan
+from trajectotree.geometry import quaternion_angle
+from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
+from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
+from trajectotree.search.tree import find_space_contact_plan
+
+GOAL_TOLERANCE = np.radians(2.0)  # rad, how close to its goal orientation a plan in space ends to count
+
+
+@dataclass(frozen=True)
+class SpacePlanResult:
+    """A plan in space: the search's contact sequence, the segments' solves and the trajectory, checked."""
+
+    goal: tuple[float, float, float, float]  # unit quaternion [w, x, y, z]
+    success: bool  # searched, every segment solved, the check passed, within GOAL_TOLERANCE of the goal
+    status: str
+    contact_plan: SpaceContactPlan
+    trajectory: SpaceTrajectory | None
+    physics_check: SpacePhysicsCheck | None
+    object_model: SpaceObjectModel
+    mu_plan: float
+    final_error_rad: float  # the angle from the last knot's orientation to the goal (nan: nothing solved)
+    segments: tuple[dict, ...]  # per segment: success, status, build and solve times
+    search_time_s: float
+    solve_time_s: float
+    total_time_s: float
+
+    def to_json(self) -> dict:
+        return {
+            "kind": "space",
+            "goal_quaternion": [float(v) for v in self.goal],
+            "success": self.success,
+            "status": self.status,
+            "object": {**self.object_model.to_json(), "mu_plan": self.mu_plan},
+            "integration": SPACE_INTEGRATION,
+            "final_error_rad": None if not np.isfinite(self.final_error_rad) else float(self.final_error_rad),
+            "physics_check": None if self.physics_check is None else self.physics_check.to_json(),
+            "segments": list(self.segments),
+            "search_time_s": self.search_time_s,
+            "solve_time_s": self.solve_time_s,
+            "total_time_s": self.total_time_s,
+            "contact_plan": self.contact_plan.to_json(),
+        }
+
+
+def object_model(scene) -> SpaceObjectModel:
+    """The object and radii the check needs, from a SpaceScene (a uniform box's inertia about its centre)."""
+    size = np.asarray(scene.object.size, dtype=float)
+    inertia = scene.object.mass * np.diag([np.sum(size**2) - s * s for s in size]) / 12
+    return SpaceObjectModel(
+        size=tuple(float(s) for s in size),
+        mass=scene.object.mass,
+        inertia=inertia,
+        gravity=scene.gravity,
+        tip_radius=scene.tip_radius,
+        link_radii=tuple(c.radius for c in scene.link_capsules()[0]),
+    )
+
+
+def plan_space(scene, goal_quaternion, config: Config) -> SpacePlanResult:
+    """Plans the cube of the hand in space `scene` (scene.spatial.SpaceScene) from its start pose to the unit
+    quaternion `goal_quaternion`: Algorithm 1 in space, then each segment's program, one after another."""
+    t0 = time.perf_counter()
+    mu = mu_plan(config.scene, config.search)
+    goal = tuple(float(v) for v in goal_quaternion)
+    contact_plan = find_space_contact_plan(scene, goal, config.search, mu)
+    search_time = time.perf_counter() - t0
+    model = object_model(scene)
+    common = dict(goal=goal, contact_plan=contact_plan, object_model=model, mu_plan=mu, search_time_s=search_time)
+    if not contact_plan.success:
+        return SpacePlanResult(
+            success=False,
+            status="search: " + contact_plan.reason,
+            trajectory=None,
+            physics_check=None,
+            final_error_rad=float("nan"),
+            segments=(),
+            solve_time_s=0.0,
+            total_time_s=time.perf_counter() - t0,
+            **common,
+        )
+    fingers = space_fingers(scene)
+    nodes = contact_plan.nodes
+    results = [
+        solve_space_segment(scene, fingers, segment_spec(scene, fingers, a, b), mu, config.cito)
+        for a, b in zip(nodes[:-1], nodes[1:])
+    ]
+    trajectory = join_segments(scene, results)
+    check = check_space_physics(trajectory.arrays(), model, mu)
+    error = quaternion_angle(trajectory.x[-1, :4], np.asarray(goal))
+    failed = [i for i, r in enumerate(results) if not r.success]
+    reasons = [f"segment {i}: {results[i].status}" for i in failed]
+    reasons += [] if check.passed else ["physics check: " + check.reason]
+    if error > GOAL_TOLERANCE:
+        reasons.append(f"ends {np.degrees(error):.2f} deg from the goal (limit {np.degrees(GOAL_TOLERANCE):g} deg)")
+    return SpacePlanResult(
+        success=not reasons,
+        status="; ".join(reasons) or "Success",
+        trajectory=trajectory,
+        physics_check=check,
+        final_error_rad=error,
+        segments=tuple(
+            {
+                "success": r.success,
+                "status": r.status,
+                "build_time_s": r.build_time_s,
+                "solve_time_s": r.solve_time_s,
+            }
+            for r in results
+        ),
+        solve_time_s=float(sum(r.build_time_s + r.solve_time_s for r in results)),
+        total_time_s=time.perf_counter() - t0,
+        **common,
+    )
+
+
+def join_segments(scene, results) -> SpaceTrajectory:
+    """One trajectory of the segments' knots, each segment after the last (a node is both one's last knot and
+    the next one's first: kept once), and the link capsules' ends by the plant's kinematics."""
+    parts = {name: [] for name in ("t", "x", "v", "q", "tau", "f_W", "p_W_C", "p_W_tip")}
+    offset = 0.0
+    for s, r in enumerate(results):
+        first = 0 if s == 0 else 1
+        for name in parts:
+            value = getattr(r, name)[first:]
+            parts[name].append(value + offset if name == "t" else value)
+        offset += float(r.t[-1])
+    arrays = {name: np.concatenate(values) for name, values in parts.items()}
+    # a node where the switching finger lands carries both segments' forces: the later one's (both hold it still)
+    return SpaceTrajectory(**arrays, p_W_links=scene.link_ends_W(arrays["x"], arrays["q"]))
+
+
+PLAN_JSON, PLAN_NPZ = "plan.json", "plan.npz"
+
+
+def save_space_plan(result: SpacePlanResult, folder: Path, config: Config) -> None:
+    """folder/plan.json and, when something was solved, folder/plan.npz (the arrays by their names)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / PLAN_NPZ).unlink(missing_ok=True)
+    if result.trajectory is not None:
+        np.savez(folder / PLAN_NPZ, **result.trajectory.arrays())
+    data = {**result.to_json(), "config": config_to_dict(config)}
+    (folder / PLAN_JSON).write_text(json.dumps(data, indent=1) + "\n")
+
+
+def recheck_space_plan(folder: Path) -> SpacePhysicsCheck:
+    """The physics check redone from folder/plan.npz and the object folder/plan.json names; ConfigError naming
+    the file and what does not fit (a missing array, arrays whose shapes disagree)."""
+    from trajectotree.config import ConfigError
+    from trajectotree.planning.physics import check_space_arrays
+    from trajectotree.results import SPACE_TRAJECTORY_ARRAYS
+
+    data = json.loads((folder / PLAN_JSON).read_text())
+    with np.load(folder / PLAN_NPZ) as npz:
+        missing = [name for name in SPACE_TRAJECTORY_ARRAYS if name not in npz.files]
+        if missing:
+            raise ConfigError(f"{str(folder / PLAN_NPZ)!r} lacks the array(s) {', '.join(missing)}")
+        arrays = {name: npz[name] for name in SPACE_TRAJECTORY_ARRAYS}
+    try:
+        check_space_arrays(arrays)
+    except ValueError as e:
+        raise ConfigError(f"{str(folder / PLAN_NPZ)!r}: {e}") from None
+    model = SpaceObjectModel.from_json(data["object"])
+    return check_space_physics(arrays, model, data["object"]["mu_plan"])
