@@ -415,7 +415,7 @@ def outcome_text(summary: dict, noun: str = "box") -> str:
 
 
 # -- in space ------------------------------------------------------------------------------------
-# The plan.npz arrays of a hand in space (README, "Plans in space"), in the order they are saved.
+# The plan.npz arrays of a hand in space (docs/method.md, "Trajectory optimization in space"), in saving order.
 SPACE_TRAJECTORY_ARRAYS = ("t", "x", "v", "q", "tau", "f_W", "p_W_C", "p_W_tip", "p_W_links")
 # The rule between knots k and k + 1, h = t_{k+1} - t_k, that the plan was made with and is checked by
 # (plan.json "integration"): trapezoidal in the velocities, the forces and the moments.
