@@ -7,7 +7,8 @@ the same for xd/xdd, q/qd, qd/qdd), the friction cone mu_plan lambda_n >= |lambd
 lambda_n >= 0, slack >= 0, joint and torque limits, fixed x_0 and q_0, rest knots.
 The nonlinear rows of a knot (knot.KnotRows) form one Python constraint per knot
 with an analytic Jacobian and its sparsity pattern; the link rows (links.LinkRows, unless
-`cito.link_rows` is off) another per knot whose pose or joints are free, with a cache of their own.
+`cito.link_rows` is off) another per knot whose pose or joints are free, with a cache of their own,
+and so do the finger-finger rows (fingers.FingerRows) of the spec's `finger_pairs`.
 
 Speed: IPOPT evaluates a Python constraint per knot; each call crosses into Python.
 All knots are evaluated at once (vectorized) when the first knot asks for its
@@ -31,6 +32,7 @@ import scipy.sparse as sp
 from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
 from pydrake.solvers import MathematicalProgram
 
+from trajectotree.cito.fingers import FingerRows
 from trajectotree.cito.knot import BodyParams, KnotRows
 from trajectotree.cito.links import LinkRows
 from trajectotree.cito.variables import CitoVariables, knot_block
@@ -56,6 +58,8 @@ class ProgramSpec:
     x_end: np.ndarray | None = None  # (3,) fixed final object pose
     q_end: np.ndarray | None = None  # (8,) fixed final joint angles
     static_knots: tuple = ()
+    # the pairs of fingers (i, j) kept apart by finger rows at the free knots (fingers.near_pairs; () : none)
+    finger_pairs: tuple = ()
 
     @property
     def num_knots(self) -> int:
@@ -75,6 +79,7 @@ class CitoProgram:
     spec: ProgramSpec
     knot_bindings: list = field(default_factory=list)
     link_bindings: list = field(default_factory=list)  # links.py's rows per free knot ([] when off)
+    finger_bindings: list = field(default_factory=list)  # fingers.py's rows per free knot ([] when none)
     build_time_s: float = 0.0
 
 
@@ -236,6 +241,11 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
     link_bindings = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else []
+    finger_bindings = (
+        _add_finger_rows(prog, v, spec, FingerRows(body, spec.finger_pairs, K), config.link_clearance)
+        if spec.finger_pairs
+        else []
+    )
     _add_costs(prog, v, spec, config)
     return CitoProgram(
         prog=prog,
@@ -244,6 +254,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         spec=spec,
         knot_bindings=bindings,
         link_bindings=link_bindings,
+        finger_bindings=finger_bindings,
         build_time_s=time.perf_counter() - t0,
     )
 
@@ -267,6 +278,21 @@ def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, cl
     bindings = []
     for k in link_knots(spec):
         binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, blocks[k], description=f"links{k}")
+        binding.evaluator().SetGradientSparsityPattern(pattern)
+        bindings.append(binding)
+    return bindings
+
+
+def _add_finger_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: FingerRows, clearance: float) -> list:
+    """fingers.py's rows, one binding per knot of `link_knots` on its joints, served by a cache of
+    their own (primed by a visualization callback over every knot's q), as _add_link_rows."""
+    cache = _KnotCache(rows, spec.num_knots, rows.block_size)
+    prog.AddVisualizationCallback(cache.prime, v.q.ravel())
+    lower, upper = rows.bounds(clearance, [spec.q0] + ([spec.q_end] if spec.last_knot_fixed else []))
+    pattern = rows.sparsity()
+    bindings = []
+    for k in link_knots(spec):
+        binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, v.q[k], description=f"fingers{k}")
         binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
     return bindings

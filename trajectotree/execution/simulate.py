@@ -15,9 +15,10 @@ loggers of the plant state and of each finger's simulated force on the box
 the friction coefficient (sim_mu), the box mass (sim_mass: model mismatch) and a
 push, a force on the box in W for SimConfig.push_duration seconds.
 
-The run starts in the plan's initial state (x_0, q_0, at rest). Finger-finger
-collisions are filtered out: the planners do not model them, and the fingers
-only meet when the plan itself is infeasible for the hand.
+The run starts in the plan's initial state (x_0, q_0, at rest). Fingers collide with
+each other like any other bodies (only each finger's own adjacent links are filtered,
+as MultibodyPlant does for bodies joined by a joint): the planners keep them apart
+(search.finger_clearance, CITO's finger rows) and the physics check measures it.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import CollisionFilterDeclaration, Meshcat
+from pydrake.geometry import Meshcat
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
@@ -206,18 +207,6 @@ def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
     return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
 
 
-def exclude_finger_finger_collisions(plant, scene_graph, hand, description: HandDescription) -> None:
-    """Filters contact between different fingers (each finger's own links are adjacent)."""
-    fingers = []
-    for f in description.fingers:
-        bodies = list(finger_bodies(plant, hand, f))
-        fingers.append(plant.CollectRegisteredGeometries(bodies))
-    manager = scene_graph.collision_filter_manager()
-    for a in range(len(fingers)):
-        for b in range(a + 1, len(fingers)):
-            manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
-
-
 def add_paper_controller(builder, plant, hand, reference: Reference, config: Config) -> ImpedanceController:
     """Eq. 20 fed by reference sources (fingertip positions, velocities, forces)."""
     controller = builder.AddNamedSystem("impedance_controller", ImpedanceController(config.scene, config.controller))
@@ -339,7 +328,6 @@ def build_execution_diagram(
     hand, box = add_hand_and_box(plant, conditions.scene(config.scene), scene_graph)
     plant.Finalize()
     description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
-    exclude_finger_finger_collisions(plant, scene_graph, hand, description)
     hold = config.sim.settle_time
     if not controlled:
         system = builder.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))

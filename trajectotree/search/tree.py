@@ -11,9 +11,11 @@ broken by the paper's heuristic sum_i |q2_i - nominal_joint2|.
 
 IsFeasible runs when a node is selected, as in Algorithm 1: frictional form closure (LP,
 trajectotree.search.grasp) and reachability by Drake IK without the links entering the object
-(trajectotree.search.reach). GetNeighbors already drops candidates that fail cheap exact tests
-(corner margin, overlapping fingertips, closed-form reachability), so the LP and the IK
-run only for nodes the search actually visits. States reached twice at the same depth are
+(trajectotree.search.reach), and (not in the paper) no two fingers within search.finger_clearance
+of each other at the node's joint angles nor on the straight joint-space path from its parent's.
+GetNeighbors already drops candidates that fail cheap exact tests (corner margin, overlapping
+fingertips, closed-form reachability), so the LP and the IK run only for nodes the search
+actually visits. States reached twice at the same depth are
 inserted once (their subtrees are identical).
 
 Two additions to the paper, neither of which changes which plans exist:
@@ -74,7 +76,7 @@ from trajectotree.results import check_goal
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
-from trajectotree.search.reach import Reachability
+from trajectotree.search.reach import Reachability, fingers_refusal, path_refusal
 from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
 
@@ -176,12 +178,26 @@ class _Search:
         return None
 
     def unreachable(self, node: _Node) -> Refusal | None:
-        pose = self.poses[node.depth]
+        """Why a finger of `node` cannot reach its contact, or two fingers collide there or on the
+        straight joint-space path from its parent (None when neither)."""
+        q = self.joints(node)
+        if isinstance(q, Refusal):
+            return q
+        fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
+        collide = fingers_refusal(fingers, q[None], r, clearance)
+        if collide is None and node.parent is not None:
+            collide = path_refusal(fingers, self.joints(node.parent), q, r, clearance)
+        return collide
+
+    def joints(self, node: _Node) -> np.ndarray | Refusal:
+        """The node's joint angles (2F,) by Drake IK (memoized per finger), or why a finger cannot reach."""
+        pose, q = self.poses[node.depth], []
         for i, s in enumerate(node.arclengths):
             reach = self.reach.solve(pose, i, s, seed=self.bound.tabulated(node.depth, i, s))
             if not reach.reachable:
                 return Refusal(RefusalKind.UNREACHABLE, fingers=(i,), cause=reach.refusal)
-        return None
+            q.append(reach.q)
+        return np.concatenate(q)
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
