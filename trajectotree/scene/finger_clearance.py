@@ -97,13 +97,33 @@ def shapes_distance(a: FingerShapes, b: FingerShapes) -> np.ndarray:
 
 def pair_distances(fingers, q, tip_radius: float, pairs=None) -> dict[tuple[int, int], np.ndarray]:
     """{(i, j): (K,) m} the signed distance between fingers i < j at joint angles q (K, 2F,
-    finger-major), for each pair of `pairs` (default: all)."""
+    finger-major), for each pair of `pairs` (default: all), every pair in one vectorized pass per
+    kind of shape pair (the search asks at every node it visits)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
-    pairs = list(itertools.combinations(range(len(fingers)), 2)) if pairs is None else pairs
-    shapes = {
-        i: finger_shapes(fingers[i], q[:, 2 * i : 2 * i + 2], tip_radius) for i in sorted({k for p in pairs for k in p})
-    }
-    return {(i, j): shapes_distance(shapes[i], shapes[j]) for i, j in pairs}
+    pairs = list(itertools.combinations(range(len(fingers)), 2)) if pairs is None else list(pairs)
+    if not pairs:
+        return {}
+    shapes = [finger_shapes(f, q[:, 2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)]
+    if len({len(s.links) for s in shapes}) > 1:  # fingers boxed differently: pair by pair
+        return {(i, j): shapes_distance(shapes[i], shapes[j]) for i, j in pairs}
+    a, b = (np.array(side) for side in zip(*pairs))
+    tips = np.stack([s.tip for s in shapes], axis=1)  # (K, F, 2)
+    links = [np.stack([s.links[n] for s in shapes], axis=1) for n in range(len(shapes[0].links))]  # (K, F, 4, 2)
+    d = np.linalg.norm(tips[:, a] - tips[:, b], axis=-1) - 2 * tip_radius  # (K, P)
+    for box in links:
+        d = np.minimum(d, point_polygon_distance(tips[:, a], box[:, b]) - tip_radius)
+        d = np.minimum(d, point_polygon_distance(tips[:, b], box[:, a]) - tip_radius)
+        for other in links:
+            d = np.minimum(d, polygon_distance(box[:, a], other[:, b]))
+    return {pair: d[:, n] for n, pair in enumerate(pairs)}
+
+
+def sweep_bound(finger, q_from, q_to, tip_radius: float) -> float:
+    """m, how far any point of `finger` (its links and fingertip sphere) moves at most on the straight
+    joint-space path from q_from to q_to (2,): joint 1 turns points within l1 + l2 + r of its axis,
+    joint 2 those within l2 + r of its own."""
+    dq = np.abs(np.subtract(q_to, q_from))
+    return float(dq[0] * (finger.l1 + finger.l2 + tip_radius) + dq[1] * (finger.l2 + tip_radius))
 
 
 @dataclass(frozen=True)

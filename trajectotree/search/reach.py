@@ -35,16 +35,14 @@ from pydrake.solvers import SnoptSolver
 
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
-from trajectotree.scene.finger_clearance import closest_fingers, interpolate_joints
+from trajectotree.scene.finger_clearance import closest_fingers, interpolate_joints, pair_distances, sweep_bound
 from trajectotree.scene.kinematics import first_solution
 from trajectotree.scene.plant import Scene
 
 IK_TOLERANCE = 1e-6  # m, fingertip position tolerance of the IK constraint
-# rad, the largest joint step between the samples of the straight joint-space path between two nodes at
-# which the fingers are tested against each other: a point of a finger of 0.2 m reach moves at most 5 mm
-# between samples, half the fingertip sphere's radius (a switching finger's joints turn up to 1.83 rad in
-# a segment of the 60 seed-0 plans: 74 samples)
-PATH_STEP = 0.025
+# m, the most any point of two fingers moves between the samples of the straight joint-space path between
+# two nodes at which they are tested against each other: half the fingertip sphere's radius
+PATH_RESOLUTION = 0.005
 KEY_DIGITS = 9  # poses and arclengths equal to 1e-9 share a cache entry
 
 
@@ -104,13 +102,25 @@ def fingers_refusal(fingers, q, tip_radius: float, clearance: float, *, on_path:
 
 
 def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
-    """fingers_refusal on the straight joint-space path from q_from to q_to (2F,), its ends excluded,
-    sampled every PATH_STEP rad of its largest joint's turn."""
-    steps = max(1, int(np.ceil(np.max(np.abs(np.subtract(q_to, q_from))) / PATH_STEP)))
-    path = interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
-    if not len(path):
-        return None
-    return fingers_refusal(fingers, path, tip_radius, clearance, on_path=True)
+    """fingers_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear:
+    each pair of fingers sampled every PATH_RESOLUTION of the most its points move (sweep_bound),
+    and only where that motion could close its gap (half the two ends' gaps less the motion:
+    the least the gap can be on the way)."""
+    q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
+    ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
+    moves = [
+        sweep_bound(f, q_from[2 * i : 2 * i + 2], q_to[2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)
+    ]
+    for (i, j), d in ends.items():
+        motion = moves[i] + moves[j]
+        if 0.5 * (d[0] + d[1] - motion) >= clearance:
+            continue
+        steps = max(2, int(np.ceil(motion / PATH_RESOLUTION)))
+        path = interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
+        gap = pair_distances(fingers, path, tip_radius, pairs=[(i, j)])[(i, j)]
+        if gap.min() < clearance:
+            return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=(i, j), limit=clearance, count=1)
+    return None
 
 
 class Reachability:
