@@ -56,7 +56,7 @@ def changed(a: Path, b: Path) -> list[str]:
             out.append(name)
             continue
         with np.load(da[name] / "plan.npz") as x, np.load(db[name] / "plan.npz") as y:
-            if any(not np.array_equal(x[n], y[n]) for n in TRAJECTORY_ARRAYS):
+            if any(n not in x or n not in y or not np.array_equal(x[n], y[n]) for n in TRAJECTORY_ARRAYS):
                 out.append(name)
     return out
 
