@@ -65,6 +65,16 @@ def polygon_distance(A, B) -> np.ndarray:
     return np.where(depth > 0.0, -depth, gap)
 
 
+# m, how far off by rounding the distances computed here may be: two fingertips on contacts 2 r apart
+# along one face (just touching) come out ~1e-17 m either side of 0; a clearance of 0 admits them
+DISTANCE_ROUNDING = 1e-9
+
+
+def fingers_clear(distance, clearance: float):
+    """Whether the signed distances `distance` (m) keep `clearance` m, up to DISTANCE_ROUNDING."""
+    return np.asarray(distance) >= clearance - DISTANCE_ROUNDING
+
+
 @dataclass(frozen=True)
 class FingerShapes:
     """One finger's collision shapes at K configurations, in W."""
@@ -103,12 +113,14 @@ def pair_distances(fingers, q, tip_radius: float, pairs=None) -> dict[tuple[int,
     pairs = list(itertools.combinations(range(len(fingers)), 2)) if pairs is None else list(pairs)
     if not pairs:
         return {}
-    shapes = [finger_shapes(f, q[:, 2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)]
+    used = sorted({i for pair in pairs for i in pair})  # only the fingers asked about: the shapes cost most
+    shapes = [finger_shapes(fingers[i], q[:, 2 * i : 2 * i + 2], tip_radius) for i in used]
+    index = {finger: n for n, finger in enumerate(used)}
     if len({len(s.links) for s in shapes}) > 1:  # fingers boxed differently: pair by pair
-        return {(i, j): shapes_distance(shapes[i], shapes[j]) for i, j in pairs}
-    a, b = (np.array(side) for side in zip(*pairs))
-    tips = np.stack([s.tip for s in shapes], axis=1)  # (K, F, 2)
-    links = [np.stack([s.links[n] for s in shapes], axis=1) for n in range(len(shapes[0].links))]  # (K, F, 4, 2)
+        return {(i, j): shapes_distance(shapes[index[i]], shapes[index[j]]) for i, j in pairs}
+    a, b = (np.array([index[i] for i in side]) for side in zip(*pairs))
+    tips = np.stack([s.tip for s in shapes], axis=1)  # (K, F', 2)
+    links = [np.stack([s.links[n] for s in shapes], axis=1) for n in range(len(shapes[0].links))]  # (K, F', 4, 2)
     d = np.linalg.norm(tips[:, a] - tips[:, b], axis=-1) - 2 * tip_radius  # (K, P)
     for box in links:
         d = np.minimum(d, point_polygon_distance(tips[:, a], box[:, b]) - tip_radius)

@@ -33,7 +33,7 @@ import numpy as np
 
 from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.refusal import Refusal, RefusalKind
-from trajectotree.scene.finger_clearance import pair_distances
+from trajectotree.scene.finger_clearance import fingers_clear, pair_distances
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import required_mu_many
 from trajectotree.search.reach import Reachability
@@ -141,9 +141,17 @@ def grasp_joints(scene: Scene, reach: Reachability, grasps: np.ndarray) -> np.nd
 
 def fingers_apart(scene: Scene, reach: Reachability, grasps: np.ndarray, clearance: float) -> np.ndarray:
     """(M,) bool: no two fingers of each grasp (M, F) within `clearance` m of each other at the
-    initial pose (link boxes and fingertip spheres, at the closed-form joint angles)."""
-    distances = pair_distances(scene.fingers, grasp_joints(scene, reach, grasps), reach.tip_radius)
-    return np.all([d >= clearance for d in distances.values()], axis=0)
+    initial pose (link boxes and fingertip spheres, at the closed-form joint angles; fingers_clear).
+    Each pair's distance depends on its two contacts alone: computed once per distinct pair of
+    contacts (the default table: 1.1 k of them instead of 2.9 k grasps x 6 pairs)."""
+    q, apart = grasp_joints(scene, reach, grasps), np.ones(len(grasps), dtype=bool)
+    for i, j in itertools.combinations(range(scene.num_fingers), 2):
+        contacts, first, index = np.unique(grasps[:, [i, j]], axis=0, return_index=True, return_inverse=True)
+        pair_q = np.zeros((len(contacts), 2 * scene.num_fingers))
+        pair_q[:, [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]] = q[first][:, [2 * i, 2 * i + 1, 2 * j, 2 * j + 1]]
+        d = pair_distances(scene.fingers, pair_q, reach.tip_radius, pairs=[(i, j)])[(i, j)]
+        apart &= fingers_clear(d, clearance)[index.ravel()]
+    return apart
 
 
 def _joint2_cost(scene: Scene, search: SearchConfig, reach: Reachability, grasps: np.ndarray) -> np.ndarray:

@@ -35,7 +35,13 @@ from pydrake.solvers import SnoptSolver
 
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
-from trajectotree.scene.finger_clearance import closest_fingers, interpolate_joints, pair_distances, sweep_bound
+from trajectotree.scene.finger_clearance import (
+    closest_fingers,
+    fingers_clear,
+    interpolate_joints,
+    pair_distances,
+    sweep_bound,
+)
 from trajectotree.scene.kinematics import first_solution
 from trajectotree.scene.plant import Scene
 
@@ -96,30 +102,32 @@ def fingers_refusal(fingers, q, tip_radius: float, clearance: float, *, on_path:
     within `clearance` m of each other at joint angles q (K, 2F) (None when none do); on_path: q
     samples the path to a node (the refusal's count 1)."""
     closest = closest_fingers(fingers, q, tip_radius)
-    if closest.distance >= clearance:
+    if fingers_clear(closest.distance, clearance):
         return None
     return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest.fingers, limit=clearance, count=1 if on_path else None)
 
 
-def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
+def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float, ends=None) -> Refusal | None:
     """fingers_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear:
-    each pair of fingers sampled every PATH_RESOLUTION of the most its points move (sweep_bound),
-    and only where that motion could close its gap (half the two ends' gaps less the motion:
-    the least the gap can be on the way)."""
+    the pairs whose motion could close their gap (half the two ends' gaps less the motion: the least
+    the gap can be on the way), sampled together every PATH_RESOLUTION of the most the points of
+    any of them move (sweep_bound), in one vectorized pass. `ends`: {(i, j): (gap at q_from, gap at
+    q_to)} m when the caller knows them (the search does), else computed here."""
     q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
-    ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
+    if ends is None:
+        ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
     moves = [
         sweep_bound(f, q_from[2 * i : 2 * i + 2], q_to[2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)
     ]
-    for (i, j), d in ends.items():
-        motion = moves[i] + moves[j]
-        if 0.5 * (d[0] + d[1] - motion) >= clearance:
-            continue
-        steps = max(2, int(np.ceil(motion / PATH_RESOLUTION)))
-        path = interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
-        gap = pair_distances(fingers, path, tip_radius, pairs=[(i, j)])[(i, j)]
-        if gap.min() < clearance:
-            return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=(i, j), limit=clearance, count=1)
+    motion = {(i, j): moves[i] + moves[j] for i, j in ends}
+    near = [pair for pair, d in ends.items() if 0.5 * (d[0] + d[1] - motion[pair]) < clearance]
+    if not near:
+        return None
+    steps = max(2, int(np.ceil(max(motion[pair] for pair in near) / PATH_RESOLUTION)))
+    path = interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
+    for pair, gap in pair_distances(fingers, path, tip_radius, pairs=near).items():
+        if not np.all(fingers_clear(gap, clearance)):
+            return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=pair, limit=clearance, count=1)
     return None
 
 

@@ -73,10 +73,11 @@ from trajectotree.config import ConfigError, GoalPose, SearchConfig, mu_plan, wi
 from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
+from trajectotree.scene.finger_clearance import fingers_clear, pair_distances
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
-from trajectotree.search.reach import Reachability, fingers_refusal, path_refusal
+from trajectotree.search.reach import Reachability, path_refusal
 from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
 
@@ -124,6 +125,7 @@ class _Search:
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         self.expanded = self.generated = self.backups = 0
         self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
+        self.gaps: dict[tuple, float] = {}  # (depth, i, s_i, j, s_j) -> m, finger_gaps' pair distances
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
@@ -183,11 +185,29 @@ class _Search:
         q = self.joints(node)
         if isinstance(q, Refusal):
             return q
-        fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
-        collide = fingers_refusal(fingers, q[None], r, clearance)
-        if collide is None and node.parent is not None:
-            collide = path_refusal(fingers, self.joints(node.parent), q, r, clearance)
-        return collide
+        clearance, gaps = self.config.finger_clearance, self.finger_gaps(node, q)
+        closest = min(gaps, key=gaps.get, default=None)
+        if closest is not None and not fingers_clear(gaps[closest], clearance):
+            return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest, limit=clearance)
+        if node.parent is None:
+            return None
+        q_parent = self.joints(node.parent)
+        parent_gaps = self.finger_gaps(node.parent, q_parent)
+        ends = {pair: (parent_gaps[pair], gap) for pair, gap in gaps.items()}
+        return path_refusal(self.scene.fingers, q_parent, q, self.reach.tip_radius, clearance, ends)
+
+    def finger_gaps(self, node: _Node, q: np.ndarray) -> dict[tuple[int, int], float]:
+        """{(i, j): m} the signed distance between fingers i < j at the node's joint angles q (2F,),
+        memoized by (depth, both fingers' contacts): a node's siblings share the pairs of the fingers
+        that do not move (each pair costs a vectorized exact test)."""
+        keys = {
+            (i, j): (node.depth, i, node.arclengths[i], j, node.arclengths[j])
+            for i, j in itertools.combinations(range(self.scene.num_fingers), 2)
+        }
+        missing = [pair for pair, key in keys.items() if key not in self.gaps]
+        for pair, d in pair_distances(self.scene.fingers, q[None], self.reach.tip_radius, pairs=missing).items():
+            self.gaps[keys[pair]] = float(d[0])
+        return {pair: self.gaps[key] for pair, key in keys.items()}
 
     def joints(self, node: _Node) -> np.ndarray | Refusal:
         """The node's joint angles (2F,) by Drake IK (memoized per finger), or why a finger cannot reach."""
