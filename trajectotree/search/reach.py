@@ -107,25 +107,30 @@ def fingers_refusal(fingers, q, tip_radius: float, clearance: float, *, on_path:
     return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest.fingers, limit=clearance, count=1 if on_path else None)
 
 
-def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float, ends=None) -> Refusal | None:
-    """fingers_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear:
-    the pairs whose motion could close their gap (half the two ends' gaps less the motion: the least
-    the gap can be on the way), sampled together every PATH_RESOLUTION of the most the points of
-    any of them move (sweep_bound), in one vectorized pass. `ends`: {(i, j): (gap at q_from, gap at
-    q_to)} m when the caller knows them (the search does), else computed here."""
+def path_samples(fingers, q_from, q_to, tip_radius: float, clearance: float, gaps_from):
+    """(pairs, samples (S, 2F)): the pairs of fingers whose motion on the straight joint-space path
+    from q_from to q_to (2F,) could bring them within `clearance` m (the gap at q_from, gaps_from
+    {(i, j): m}, less the most the two fingers' points move, sweep_bound: the least it can be on the
+    way), and that path sampled every PATH_RESOLUTION of the most any of them moves, q_from left
+    out and q_to last (just q_to when no pair is near)."""
     q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
-    if ends is None:
-        ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
     moves = [
         sweep_bound(f, q_from[2 * i : 2 * i + 2], q_to[2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)
     ]
-    motion = {(i, j): moves[i] + moves[j] for i, j in ends}
-    near = [pair for pair, d in ends.items() if 0.5 * (d[0] + d[1] - motion[pair]) < clearance]
+    motion = {(i, j): moves[i] + moves[j] for i, j in gaps_from}
+    near = [pair for pair, gap in gaps_from.items() if gap - motion[pair] < clearance]
     if not near:
-        return None
+        return [], q_to[None]
     steps = max(2, int(np.ceil(max(motion[pair] for pair in near) / PATH_RESOLUTION)))
-    path = interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
-    for pair, gap in pair_distances(fingers, path, tip_radius, pairs=near).items():
+    return near, interpolate_joints(np.stack([q_from, q_to]), steps)[1:]
+
+
+def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
+    """FINGERS_COLLIDE (count 1) naming two fingers that come within `clearance` m of each other
+    on the straight joint-space path from q_from to q_to (2F,) (path_samples), None when none do."""
+    start = {pair: float(d[0]) for pair, d in pair_distances(fingers, np.atleast_2d(q_from), tip_radius).items()}
+    near, samples = path_samples(fingers, q_from, q_to, tip_radius, clearance, start)
+    for pair, gap in pair_distances(fingers, samples, tip_radius, pairs=near).items():
         if not np.all(fingers_clear(gap, clearance)):
             return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=pair, limit=clearance, count=1)
     return None
