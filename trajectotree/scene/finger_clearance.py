@@ -132,6 +132,56 @@ def pair_distances(fingers, q, tip_radius: float, pairs=None) -> dict[tuple[int,
     return {pair: d[:, n] for n, pair in enumerate(pairs)}
 
 
+def _to_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(...) m, the distance of points p to segments a b (all (..., 2), broadcast)."""
+    e = b - a
+    t = np.clip(np.sum((p - a) * e, axis=-1) / np.sum(e * e, axis=-1), 0.0, 1.0)
+    return np.linalg.norm(p - a - t[..., None] * e, axis=-1)
+
+
+def _between_segments(a0, a1, b0, b1) -> np.ndarray:
+    """(...) m, the distance between segments a0 a1 and b0 b1 (all (..., 2), broadcast): 0 where
+    they cross, else the least distance of an end of either to the other."""
+
+    def side(p, q, r):  # the sign of r's side of the line p q
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+    ends = np.minimum(
+        np.minimum(_to_segments(a0, b0, b1), _to_segments(a1, b0, b1)),
+        np.minimum(_to_segments(b0, a0, a1), _to_segments(b1, a0, a1)),
+    )
+    crossing = (side(a0, a1, b0) * side(a0, a1, b1) < 0) & (side(b0, b1, a0) * side(b0, b1, a1) < 0)
+    return np.where(crossing, 0.0, ends)
+
+
+def pair_lower_bounds(fingers, q, tip_radius: float, pairs) -> dict[tuple[int, int], np.ndarray]:
+    """{(i, j): (K,) m} for each of `pairs` at joint angles q (K, 2F): where not negative, at most
+    pair_distances' (to rounding, 2e-16 m), at about 40 % of its cost (each link box replaced by the
+    capsule that contains it, its long axis between the middles of its ends, radius its half
+    width, as CITO's finger rows do); where negative, some shapes' capsules overlap and only the
+    sign means anything. Fingers boxed differently get pair_distances' own."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    pairs = list(pairs)
+    used = sorted({i for pair in pairs for i in pair})
+    shapes = [finger_shapes(fingers[i], q[:, 2 * i : 2 * i + 2], tip_radius) for i in used]
+    if not pairs or len({len(s.links) for s in shapes}) > 1:
+        return pair_distances(fingers, q, tip_radius, pairs)
+    index = {finger: n for n, finger in enumerate(used)}
+    a, b = (np.array([index[i] for i in side]) for side in zip(*pairs))
+    tips = np.stack([s.tip for s in shapes], axis=1)  # (K, F', 2)
+    d = np.linalg.norm(tips[:, a] - tips[:, b], axis=-1) - 2 * tip_radius  # (K, P)
+    if shapes[0].links:
+        boxes = np.stack([np.stack(s.links, axis=1) for s in shapes], axis=1)  # (K, F', L, 4, 2)
+        start, end = 0.5 * (boxes[..., 0, :] + boxes[..., 1, :]), 0.5 * (boxes[..., 2, :] + boxes[..., 3, :])
+        width = 0.5 * np.linalg.norm(boxes[..., 1, :] - boxes[..., 0, :], axis=-1)  # (K, F', L)
+        for tip, other in ((tips[:, a], b), (tips[:, b], a)):  # each fingertip against the other's links
+            gap = _to_segments(tip[:, :, None], start[:, other], end[:, other]) - width[:, other]
+            d = np.minimum(d, gap.min(axis=-1) - tip_radius)
+        links = _between_segments(start[:, a, :, None], end[:, a, :, None], start[:, b, None], end[:, b, None])
+        d = np.minimum(d, (links - width[:, a, :, None] - width[:, b, None]).min(axis=(-2, -1)))
+    return {pair: d[:, n] for n, pair in enumerate(pairs)}
+
+
 def sweep_bound(finger, q_from, q_to, tip_radius: float) -> float:
     """m, how far any point of `finger` (its links and fingertip sphere) moves at most on the straight
     joint-space path from q_from to q_to (2,): joint 1 turns points within l1 + l2 + r of its axis,

@@ -40,6 +40,7 @@ from trajectotree.scene.finger_clearance import (
     fingers_clear,
     interpolate_joints,
     pair_distances,
+    pair_lower_bounds,
     sweep_bound,
 )
 from trajectotree.scene.kinematics import first_solution
@@ -107,33 +108,45 @@ def fingers_refusal(fingers, q, tip_radius: float, clearance: float, *, on_path:
     return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest.fingers, limit=clearance, count=1 if on_path else None)
 
 
-def path_samples(fingers, q_from, q_to, tip_radius: float, clearance: float, gaps_from):
+def path_samples(fingers, q_from, q_to, tip_radius: float, clearance: float, ends):
     """(pairs, samples (S, 2F)): the pairs of fingers whose motion on the straight joint-space path
-    from q_from to q_to (2F,) could bring them within `clearance` m (the gap at q_from, gaps_from
-    {(i, j): m}, less the most the two fingers' points move, sweep_bound: the least it can be on the
-    way), and that path sampled every PATH_RESOLUTION of the most any of them moves, q_from left
-    out and q_to last (just q_to when no pair is near)."""
+    from q_from to q_to (2F,) could bring them within `clearance` m (half the two ends' gaps, `ends`
+    {(i, j): (m at q_from, m at q_to)}, less the most the two fingers' points move, sweep_bound: the
+    least the gap can be on the way), and the path between its ends sampled every PATH_RESOLUTION
+    of the most any of them moves (none when no pair is near)."""
     q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
     moves = [
         sweep_bound(f, q_from[2 * i : 2 * i + 2], q_to[2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)
     ]
-    motion = {(i, j): moves[i] + moves[j] for i, j in gaps_from}
-    near = [pair for pair, gap in gaps_from.items() if gap - motion[pair] < clearance]
+    motion = {(i, j): moves[i] + moves[j] for i, j in ends}
+    near = [pair for pair, (a, b) in ends.items() if 0.5 * (a + b - motion[pair]) < clearance]
     if not near:
-        return [], q_to[None]
+        return [], np.zeros((0, len(q_to)))
     steps = max(2, int(np.ceil(max(motion[pair] for pair in near) / PATH_RESOLUTION)))
-    return near, interpolate_joints(np.stack([q_from, q_to]), steps)[1:]
+    return near, interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
 
 
-def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
-    """FINGERS_COLLIDE (count 1) naming two fingers that come within `clearance` m of each other
-    on the straight joint-space path from q_from to q_to (2F,) (path_samples), None when none do."""
-    start = {pair: float(d[0]) for pair, d in pair_distances(fingers, np.atleast_2d(q_from), tip_radius).items()}
-    near, samples = path_samples(fingers, q_from, q_to, tip_radius, clearance, start)
-    for pair, gap in pair_distances(fingers, samples, tip_radius, pairs=near).items():
+def samples_refusal(fingers, samples, tip_radius: float, clearance: float, pairs) -> Refusal | None:
+    """FINGERS_COLLIDE (count 1: on the path to a node) naming a pair of `pairs` that comes within
+    `clearance` m at one of the joint angles `samples` (S, 2F), None when none does: the exact
+    distance only where the capsules' cheaper bound (pair_lower_bounds) does not already clear them."""
+    bounds = pair_lower_bounds(fingers, samples, tip_radius, pairs)
+    unsure = [pair for pair in pairs if bounds[pair].min() < clearance]
+    if not unsure:
+        return None
+    rows = np.any([bounds[pair] < clearance for pair in unsure], axis=0)
+    for pair, gap in pair_distances(fingers, samples[rows], tip_radius, pairs=unsure).items():
         if not np.all(fingers_clear(gap, clearance)):
             return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=pair, limit=clearance, count=1)
     return None
+
+
+def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
+    """samples_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear
+    (path_samples)."""
+    ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
+    near, samples = path_samples(fingers, q_from, q_to, tip_radius, clearance, ends)
+    return samples_refusal(fingers, samples, tip_radius, clearance, near) if near else None
 
 
 class Reachability:

@@ -83,7 +83,7 @@ from trajectotree.scene.finger_clearance import fingers_clear, pair_distances
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
-from trajectotree.search.reach import Reachability, path_samples
+from trajectotree.search.reach import Reachability, path_samples, samples_refusal
 from trajectotree.search.stance import StanceChecks, arclength_key
 from trajectotree.search.switch_bound import SwitchBound
 
@@ -196,28 +196,24 @@ class _Search:
     def fingers_refused(self, node: _Node, q: np.ndarray) -> Refusal | None:
         """FINGERS_COLLIDE when two fingers come within search.finger_clearance of each other at the
         node's joint angles q (2F,), or on the straight joint-space path from its parent's (count 1);
-        None when neither. The node's pair distances not yet known (memoized by depth and the two
-        fingers' contacts, `gaps`: its siblings share the pairs of the fingers that do not move) and
-        the path's samples of the pairs it could bring that close (reach.path_samples) in one
-        vectorized pass: the calls' overhead, not their size, is what they cost."""
+        None when neither. The node's pair distances are memoized by depth and the two fingers'
+        contacts (`gaps`: its siblings share the pairs of the fingers that do not move); the path is
+        sampled for the pairs it could bring that close only (reach.path_samples, samples_refusal)."""
         fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
         keys = self.gap_keys(node)
         missing = [pair for pair, key in keys.items() if key not in self.gaps]
-        near, samples = [], q[None]
-        if node.parent is not None:  # the parent passed: all its gaps are known
-            parent = {pair: self.gaps[key] for pair, key in self.gap_keys(node.parent).items()}
-            near, samples = path_samples(fingers, self.joints(node.parent), q, r, clearance, parent)
-        distances = pair_distances(fingers, samples, r, pairs=sorted(set(missing) | set(near)))
-        for pair in missing:
-            self.gaps[keys[pair]] = float(distances[pair][-1])  # the last sample is the node
+        for pair, d in pair_distances(fingers, q[None], r, pairs=missing).items():
+            self.gaps[keys[pair]] = float(d[0])
         gaps = {pair: self.gaps[key] for pair, key in keys.items()}
         closest = min(gaps, key=gaps.get, default=None)
         if closest is not None and not fingers_clear(gaps[closest], clearance):
             return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest, limit=clearance)
-        for pair in near:
-            if not np.all(fingers_clear(distances[pair], clearance)):
-                return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=pair, limit=clearance, count=1)
-        return None
+        if node.parent is None:
+            return None
+        parent = self.gap_keys(node.parent)  # the parent passed: all its gaps are known
+        ends = {pair: (self.gaps[parent[pair]], gap) for pair, gap in gaps.items()}
+        near, samples = path_samples(fingers, self.joints(node.parent), q, r, clearance, ends)
+        return samples_refusal(fingers, samples, r, clearance, near) if near else None
 
     def gap_keys(self, node: _Node) -> dict[tuple[int, int], tuple]:
         """{(i, j): the key of `gaps`} for each pair of fingers i < j of `node`."""
