@@ -1,7 +1,9 @@
 """How close two fingers come in a sweep's plans: the exact signed distance between any two fingers'
 collision shapes (link boxes and fingertip spheres, trajectotree.scene.finger_clearance) at every
 knot of every plan.npz, and on the straight joint-space path between knots (--between samples per
-interval), and, given a second sweep (--against), how many plans' arrays differ.
+interval), in the simulated run where the trial has one (its sim.npz's, else its first exec/*/sim.npz's
+logged joint angles, every sample: 0 or less means two fingers touched), and, given a second sweep (--against), how many
+plans' arrays differ.
 
     python scripts/finger_clearance.py SWEEP [--between 10] [--against OTHER_SWEEP] [--json]
 """
@@ -36,7 +38,13 @@ def measure(sweep: Path, between: int) -> dict:
         q = result.trajectory.q
         knots = closest_fingers(scene.fingers, q, scene.tip_radius)
         dense = closest_fingers(scene.fingers, interpolate_joints(q, between), scene.tip_radius)
+        executed, runs = None, [folder / "sim.npz", *sorted(folder.glob("exec/*/sim.npz"))]
+        run = next((path for path in runs if path.exists()), None)
+        if run is not None:
+            with np.load(run) as sim:
+                executed = closest_fingers(scene.fingers, sim["q"], scene.tip_radius).distance
         rows[name] = {
+            "executed_m": executed,
             "knots_m": knots.distance,
             "knot": knots.knot,
             "fingers": list(knots.fingers),
@@ -83,6 +91,13 @@ def main() -> None:
         "plans_overlapping_at_knots": int(np.sum(knots < 0.0)),
         "plans_overlapping_between_knots": int(np.sum(dense < 0.0)),
     }
+    executed = [r["executed_m"] for r in rows.values() if r["executed_m"] is not None]
+    if executed:
+        summary |= {
+            "runs_simulated": len(executed),
+            "closest_executed_m": float(min(executed)),
+            "runs_with_fingers_touching": int(np.sum(np.array(executed) <= 0.0)),
+        }
     if args.against is not None:
         diff = changed(args.sweep, args.against)
         summary |= {"plans_changed": len(diff), "changed_trials": diff}
@@ -93,6 +108,7 @@ def main() -> None:
             print(
                 f"{name}: knots {1e3 * r['knots_m']:7.2f} mm (fingers {r['fingers']}, knot {r['knot']}), "
                 f"between {1e3 * r['between_m']:7.2f} mm, check {'passed' if r['passed'] else 'FAILED'}"
+                + ("" if r["executed_m"] is None else f", executed {1e3 * r['executed_m']:7.2f} mm")
             )
         print(json.dumps(summary, indent=1))
 
