@@ -397,9 +397,10 @@ class SearchConfig:
     commit_segments: int = 5
     max_expansions: int = 20000  # node budget of the search (all initial grasps together)
     time_budget_s: float = 30.0  # s, wall-clock budget of the search
-    # When no plan is found, the search is rerun up to this many times on a finer contact grid
-    # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
-    # move), within the same budgets, for objects whose short faces hold few grid contacts.
+    # When the first initial grasp yields no plan, the search goes on with up to this many finer contact
+    # grids too (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
+    # move), the grids taking turns, one initial grasp each, within the same budgets, for objects whose
+    # short faces hold few grid contacts and fingertips kept apart on one face (trajectotree.search.tree).
     # 0: the paper's single grid.
     grid_refinements: int = 1
 
