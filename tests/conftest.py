@@ -66,6 +66,7 @@ def shared_computations():
                 search.friction_safety,
                 search.initial_grid_step,
                 search.nominal_joint2,
+                search.finger_clearance,
             ),
         ),
         _share(scene_cmd, "object_reach", lambda scene, search: (scene.config, search)),

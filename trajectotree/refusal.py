@@ -25,7 +25,9 @@ class RefusalKind(enum.Enum):
     OUT_OF_REACH = "out_of_reach"  # (a reach cause) no joint angles within the limits
     LINKS_PENETRATE = "links_penetrate"  # (a reach cause) every solution has a link in the object
     IK_FAILED = "ik_failed"  # (a reach cause) Drake's IK did not converge
-    FINGERS_COLLIDE = "fingers_collide"  # (in space) `fingers` come within `limit` m of each other
+    # `fingers` (two) come within `limit` m (search.finger_clearance) of each other at the node, or on the
+    # straight joint-space path to it from its parent (`count` 1); in space, at a stance
+    FINGERS_COLLIDE = "fingers_collide"
     # a move is not generated (GetNeighbors)
     CONTACTS_LOST = "contacts_lost"  # two or more `fingers` leave reach at the next pose
     FINGER_HELD = "finger_held"  # `fingers[0]` may not let go: the other three (`stance`) not in closure
@@ -72,7 +74,7 @@ class Refusal:
     margin: float | None = None  # N, the closure LP's margin d*
     limit: float | None = None  # the bound not met: m, N, s, expansions or steps (per kind)
     count: int | None = None  # expansions made, switches needed, a node, grasps (per kind)
-    subset: int | None = None  # of `count`, those without overlapping fingertips (NO_INITIAL_GRASP)
+    subset: int | None = None  # of `count`, those with the fingers apart (NO_INITIAL_GRASP)
     per_finger: tuple[int, ...] = ()  # contact switches each finger needs (TOO_MANY_SWITCHES)
     cause: Refusal | None = None  # the refusal underneath (a finger's reach, the initial grasp's)
 
@@ -129,7 +131,10 @@ _TEXT = {
     RefusalKind.OUT_OF_REACH: lambda r: "out of reach within joint limits",
     RefusalKind.LINKS_PENETRATE: lambda r: "finger links penetrate the box",
     RefusalKind.IK_FAILED: lambda r: "inverse kinematics failed",
-    RefusalKind.FINGERS_COLLIDE: lambda r: f"fingers {list(r.fingers)} come within {r.limit:g} m of each other",
+    RefusalKind.FINGERS_COLLIDE: lambda r: (
+        f"fingers {list(r.fingers)} come within {r.limit:g} m of each other"
+        + (" on the way from the previous node" if r.count else "")
+    ),
     RefusalKind.CONTACTS_LOST: lambda r: (
         f"fingers {list(r.fingers)} lose their contacts (out of reach) at the same node"
     ),
@@ -173,8 +178,8 @@ _TEXT = {
     ),
     RefusalKind.NO_INITIAL_GRASP: (
         lambda r: (
-            f"no initial grasp: of {r.count} reachable grid grasps ({r.subset} without overlapping "
-            f"fingertips) none has a three-finger stance in frictional form closure at mu_plan {r.mu_plan:.3g} "
+            f"no initial grasp: of {r.count} reachable grid grasps ({r.subset} with the fingers "
+            f"apart) none has a three-finger stance in frictional form closure at mu_plan {r.mu_plan:.3g} "
             f"(best stance needs mu {r.required_mu:.3g})"
         )
     ),

@@ -60,6 +60,8 @@ PENETRATION_TOL = 1e-3
 # m, how deep a finger link's collision box may overlap the object: the link rows keep 1 mm of
 # smooth distance (cito.link_clearance), exact at a face
 LINK_PENETRATION_TOL = 1e-3
+# m, how deep two fingers' collision shapes (link boxes, fingertip spheres) may overlap: the link rule's
+FINGER_OVERLAP_TOL = 1e-3
 
 
 def check_method(method: str) -> str:
@@ -134,6 +136,11 @@ class PhysicsCheck:
     link_penetration_finger: int
     passed: bool
     reason: str  # why it failed ("" if passed)
+    # m, the least signed distance between two fingers' collision shapes over the knots (negative: the
+    # deepest overlap); NaN: unchecked (a plan.json from before the rule, or no hand given)
+    finger_distance_m: float = float("nan")
+    finger_distance_knot: int = -1  # where that is (-1: unchecked)
+    finger_distance_fingers: tuple = ()  # the two fingers (i, j), i < j
 
     def to_json(self) -> dict:
         """The fields (non-finite numbers as None: JSON has no NaN) and the tolerances."""
@@ -146,13 +153,18 @@ class PhysicsCheck:
             "newton_euler_tol": NEWTON_EULER_TOL,
             "penetration_tol_m": PENETRATION_TOL,
             "link_penetration_tol_m": LINK_PENETRATION_TOL,
+            "finger_overlap_tol_m": FINGER_OVERLAP_TOL,
         }
 
     @staticmethod
     def from_json(data: dict) -> PhysicsCheck:
-        """Fields a plan.json from before a rule existed lacks (penetration_m) read as NaN: unknown."""
+        """Fields a plan.json from before a rule existed lacks (penetration_m) read as NaN: unknown (the
+        finger rule's as its defaults: unchecked)."""
         nan = float("nan")
-        return PhysicsCheck(**{f.name: nan if data.get(f.name) is None else data[f.name] for f in fields(PhysicsCheck)})
+        values = {f.name: nan if data.get(f.name) is None else data[f.name] for f in fields(PhysicsCheck)}
+        values["finger_distance_knot"] = data.get("finger_distance_knot", -1)
+        values["finger_distance_fingers"] = tuple(data.get("finger_distance_fingers", ()))
+        return PhysicsCheck(**values)
 
 
 @dataclass(frozen=True)
@@ -449,7 +461,7 @@ class SpaceTrajectory:
         return {name: getattr(self, name) for name in SPACE_TRAJECTORY_ARRAYS}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)  # after PhysicsCheck's fields with defaults
 class SpacePhysicsCheck(PhysicsCheck):
     """The check of a plan in space (trajectotree.planning.physics.check_space_physics): the planar
     check's fields, with the gap at SPACE_GAP_TOL, and how far the poses stray from the integration rule."""

@@ -20,9 +20,9 @@ from trajectotree.search.reach import Reachability, rectangles_overlap_polygon
 from trajectotree.search.tree import find_contact_plan
 
 TRIANGLE = tuple((0.08 * np.cos(a), 0.08 * np.sin(a)) for a in np.pi / 2 + 2 * np.pi / 3 * np.arange(3))
-# Goal -0.089 rad of seed 0: in segment 5 (nodes 5-6) finger 3 is pinned to the box's left face
-# while the box swings 4 cm sideways, and without the link rows its link 2 cut 21 mm into the box.
-GOAL, SEGMENT = -0.08899906526957402, 5
+# Goal -2.884 rad of seed 0 (the search keeping the fingers apart): in segment 4 (nodes 4-5), without the
+# link rows, finger 1's links 1 and 2 cut 25 mm into the box.
+GOAL, SEGMENT = -2.8841484100105235, 4
 CONFIG = Config()
 
 
@@ -187,8 +187,8 @@ def test_segment_whose_link_cut_the_box_is_clear_with_the_rows(scene, goal_plan)
         return solve_piece(task)
 
     without = segment(dataclasses.replace(CONFIG.cito, link_rows=False))
-    assert without.converged and {(i, j) for _, i, j in links_overlap(scene, without.trajectory)} == {(3, 2)}
-    assert not without.success and "a link of finger 3 overlaps the box" in without.check.reason  # the check's rule
+    assert without.converged and {(i, j) for _, i, j in links_overlap(scene, without.trajectory)} == {(1, 1), (1, 2)}
+    assert not without.success and "a link of finger 1 overlaps the box" in without.check.reason  # the check's rule
     with_rows = segment(CONFIG.cito)
     assert with_rows.success, with_rows.status
     assert links_overlap(scene, with_rows.trajectory) == []

@@ -14,7 +14,7 @@ from trajectotree.scene.plant import build_scene
 
 # (scene, contact arclengths: `trajectotree scene --json`'s best initial grasp of each)
 HANDS = {
-    "planar_hand5": (SceneConfig(hand="planar_hand5"), (0.08, 0.02, 0.38, 0.32, 0.42)),
+    "planar_hand5": (SceneConfig(hand="planar_hand5"), (0.06, 0.2, 0.34, 0.5, 0.58)),
     "drake_planar_gripper": (
         SceneConfig(hand="drake_planar_gripper", box_width=0.1, box_height=0.1, box_mass=0.028),
         (0.24, 0.06, 0.32),

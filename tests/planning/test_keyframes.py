@@ -91,10 +91,10 @@ def test_keyframes_plan_is_continuous_at_the_nodes_and_physical(scene, contact_p
     check = check_physics(a.arrays(), ObjectModel.from_scene(scene), mu_plan(CONFIG.scene, CONFIG.search))
     assert check.passed and check == serial.physics_check, check.reason
     assert check.newton_euler_force_N < 1e-6
-    for record in serial.segments:  # segment 0's link 2 of a finger cuts the box without the link rows
+    for record in serial.segments:  # this goal's plan (the fingers kept apart) needs no link retry
         assert record["success"] and record["iterations"] > 0
         assert [r["kind"] for r in record["attempts"]] in (["keyframes"], ["keyframes", "links"])
-    assert [len(r["attempts"]) for r in serial.segments] == [2, 1]
+    assert [len(r["attempts"]) for r in serial.segments] == [1, 1]
     assert serial.iterations == sum(r["iterations"] for r in serial.segments)
 
 

@@ -19,7 +19,7 @@ from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.grasp import FormClosure
 from trajectotree.search.initial_grasp import initial_grasp_candidates
 from trajectotree.search.reach import Reachability
-from trajectotree.search.tree import _Node, _Search, choose_initial_grasp, find_contact_plan
+from trajectotree.search.tree import _Node, _Search, choose_initial_grasp, find_contact_plan, grid_levels
 
 OLD_DEFAULT_GRASP = (0.54, 0.12, 0.36, 0.48)  # its stance of fingers 1, 2, 3 needs mu 0.67
 
@@ -58,7 +58,10 @@ def check_plan(scene, plan, config: SearchConfig):
             plan.nodes[0].arclengths, np.mod(config.initial_arclengths, boundary.perimeter), atol=1e-9
         )
     else:
-        candidates = [c.arclengths for c in initial_grasp_candidates(scene, config).candidates]
+        # the candidates of the grid the plan was found on (the configured one, else a refined one)
+        candidates = [
+            c.arclengths for level in grid_levels(config) for c in initial_grasp_candidates(scene, level).candidates
+        ]
         assert tuple(plan.nodes[0].arclengths) in candidates
     assert plan.nodes[0].switching_finger is None and plan.nodes[0].stance_required_mu is None
     for n, node in enumerate(plan.nodes):
@@ -170,8 +173,8 @@ def test_cito_uses_the_choosers_first_choice(scene):
         node = initial_grasp_plan(scene, goal, Config()).nodes[0]
         np.testing.assert_allclose(node.arclengths, chosen)
         assert node.required_mu < 0.49 and node.closure_margin > 1e-3
-    given = SearchConfig(initial_arclengths=(0.52, 0.14, 0.32, 0.5))
-    assert choose_initial_grasp(scene, 0.8, given) == ((0.52, 0.14, 0.32, 0.5), None)
+    given = SearchConfig(initial_arclengths=(0.54, 0.14, 0.32, 0.5))
+    assert choose_initial_grasp(scene, 0.8, given) == ((0.54, 0.14, 0.32, 0.5), None)
 
 
 def test_plan_json_keeps_required_friction(scene):
@@ -189,7 +192,7 @@ def test_plan_json_keeps_required_friction(scene):
 
 
 def test_custom_initial_grasp_and_segments(scene):
-    config = SearchConfig(num_nodes=5, initial_arclengths=(0.52, 0.14, 0.32, 0.5))
+    config = SearchConfig(num_nodes=5, initial_arclengths=(0.54, 0.14, 0.32, 0.5))
     check_plan(scene, find_contact_plan(scene, 0.8, config), config)
 
 
@@ -203,7 +206,7 @@ def test_failures_are_results_with_a_reason(scene):
     plan = find_contact_plan(scene, np.pi, SearchConfig(num_nodes=3, grid_refinements=0))
     assert not plan.success and "skipped by cheap checks" in plan.reason and plan.stats.initial_grasps_searched == 0
     assert plan.refusal.kind is RefusalKind.NO_PLAN and plan.refusal.searched == 0
-    given = SearchConfig(num_nodes=3, initial_arclengths=(0.52, 0.14, 0.32, 0.5), grid_refinements=0)
+    given = SearchConfig(num_nodes=3, initial_arclengths=(0.54, 0.14, 0.32, 0.5), grid_refinements=0)
     plan = find_contact_plan(scene, np.pi, given)
     assert not plan.success and plan.refusal.kind is RefusalKind.TOO_MANY_SWITCHES and plan.refusal.limit == 2
     assert "contact switches" in plan.reason and "more than the 2 steps of 3 nodes" in plan.reason

@@ -8,7 +8,8 @@ lambda_n >= 0, slack >= 0, joint and torque limits, fixed x_0 and q_0, rest knot
 The nonlinear rows of every knot (knot.KnotRows) form one Python constraint over all the
 knots' variables, evaluated vectorized with its analytic, block-diagonal sparse Jacobian; the
 link rows (links.LinkRows, unless `cito.link_rows` is off) another over the pose and joints of
-every knot whose pose or joints are free (_BatchConstraint).
+every knot whose pose or joints are free (_BatchConstraint), and so do the finger-finger rows
+(fingers.FingerRows) of the spec's `finger_pairs` over those knots' joints.
 
 Speed: IPOPT crosses into Python once per evaluation of each of the two constraints. Per-knot
 constraints (13 per segment) cost Drake and pybind more in AutoDiff marshalling per call than one
@@ -28,6 +29,7 @@ import scipy.sparse as sp
 from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
 from pydrake.solvers import MathematicalProgram
 
+from trajectotree.cito.fingers import FingerRows
 from trajectotree.cito.knot import BodyParams, KnotRows
 from trajectotree.cito.links import LinkRows
 from trajectotree.cito.variables import CitoVariables, knot_block
@@ -53,6 +55,8 @@ class ProgramSpec:
     x_end: np.ndarray | None = None  # (3,) fixed final object pose
     q_end: np.ndarray | None = None  # (8,) fixed final joint angles
     static_knots: tuple = ()
+    # the pairs of fingers (i, j) kept apart by finger rows at the free knots (fingers.near_pairs; () : none)
+    finger_pairs: tuple = ()
 
     @property
     def num_knots(self) -> int:
@@ -73,6 +77,7 @@ class CitoProgram:
     knot_binding: object  # the knot rows of every knot, one binding (_BatchConstraint)
     knot_row_offsets: np.ndarray  # (K + 1,) knot k's rows are the binding's offsets[k]:offsets[k + 1]
     link_binding: object | None = None  # links.py's rows of every free knot, one binding (None when off)
+    finger_binding: object | None = None  # fingers.py's rows of every free knot, one binding (None: no pairs)
     build_time_s: float = 0.0
 
 
@@ -204,6 +209,11 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     )
     binding.evaluator().SetGradientSparsityPattern(knots.sparsity())
     link_binding = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else None
+    finger_binding = (
+        _add_finger_rows(prog, v, spec, FingerRows(body, spec.finger_pairs, K), config.link_clearance)
+        if spec.finger_pairs
+        else None
+    )
     _add_costs(prog, v, spec, config)
     return CitoProgram(
         prog=prog,
@@ -213,6 +223,7 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         knot_binding=binding,
         knot_row_offsets=knots.offsets,
         link_binding=link_binding,
+        finger_binding=finger_binding,
         build_time_s=time.perf_counter() - t0,
     )
 
@@ -235,6 +246,21 @@ def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, cl
     evaluator = _BatchConstraint(rows, np.full(len(knots), lower.size), rows.link_size, [rows.sparsity()] * len(knots))
     binding = prog.AddConstraint(
         evaluator, np.tile(lower, len(knots)), np.tile(upper, len(knots)), blocks.ravel(), description="links"
+    )
+    binding.evaluator().SetGradientSparsityPattern(evaluator.sparsity())
+    return binding
+
+
+def _add_finger_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: FingerRows, clearance: float):
+    """fingers.py's rows of every knot of `link_knots`, on their joints, as one binding (None: no such knot),
+    as _add_link_rows."""
+    knots = link_knots(spec)
+    if not knots:
+        return None
+    lower, upper = rows.bounds(clearance, [spec.q0] + ([spec.q_end] if spec.last_knot_fixed else []))
+    evaluator = _BatchConstraint(rows, np.full(len(knots), lower.size), rows.block_size, [rows.sparsity()] * len(knots))
+    binding = prog.AddConstraint(
+        evaluator, np.tile(lower, len(knots)), np.tile(upper, len(knots)), v.q[knots].ravel(), description="fingers"
     )
     binding.evaluator().SetGradientSparsityPattern(evaluator.sparsity())
     return binding

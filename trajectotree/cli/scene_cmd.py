@@ -11,6 +11,8 @@ import numpy as np
 from trajectotree.cli.common import FIGURE_SUFFIXES, add_config_options, check_output_file, config_from_args, print_json
 from trajectotree.scene.plant import describe_object
 
+FIGURE_GOAL = math.pi / 2  # rad, the goal whose plan's initial grasp `--figure` draws: the demo's quarter turn
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -22,7 +24,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "--figure",
         metavar="FILE.png",
-        help="draw the model (hand at the best initial grasp, object, "
+        help="draw the model (hand at the initial grasp of a plan to a quarter turn, object, "
         "reach circles, each finger's reachable contacts); .png, .pdf or .svg",
     )
     p.add_argument(
@@ -85,7 +87,10 @@ class ObjectReach:
     contacts: list  # per finger, arclengths (m) of its reachable corner-free grid contacts
     #                           (initial_grasp.grid_contacts: what the initial grasps are built from)
     grasps: object  # initial_grasp.GraspCandidates
-    q_best: np.ndarray | None  # (8,) rad, joint angles at the best initial grasp (None without one)
+    # (2F,) rad, the joint angles (Drake IK, as the search's) of the initial grasp a plan for FIGURE_GOAL starts
+    # from (search.tree.choose_initial_grasp; None: no plan root for it)
+    q_start: np.ndarray | None
+    start: tuple | None  # m, that grasp's contacts' arclengths (None: none)
     payload: object  # search.payload.Payload: the heaviest object they carry (None without a grasp)
     workspace: object  # search.workspace.Workspace: where the hand can move the object (None without a grasp)
 
@@ -100,6 +105,8 @@ class ObjectReach:
             "initial_grasps": len(g.candidates),
             "best_grasp_arclengths_m": None if best is None else list(best.arclengths),
             "best_grasp_worst_stance_mu": None if best is None else best.worst_stance_mu,
+            "start_grasp_goal_rad": FIGURE_GOAL,
+            "start_grasp_arclengths_m": None if self.start is None else list(self.start),
             "reason": "" if g.refusal is None else str(g.refusal),
             "refusal": None if g.refusal is None else g.refusal.to_json(),
             "payload": None if self.payload is None else self.payload.to_json(),
@@ -108,23 +115,26 @@ class ObjectReach:
 
 
 def object_reach(scene, search) -> ObjectReach:
-    from trajectotree.search.initial_grasp import grid_contacts, initial_grasp_candidates
+    from trajectotree.search.initial_grasp import GraspTables, grid_contacts
     from trajectotree.search.payload import payload
     from trajectotree.search.reach import Reachability
+    from trajectotree.search.tree import choose_initial_grasp
     from trajectotree.search.workspace import Graspability, workspace
 
-    reach = Reachability(scene)
-    grasps = initial_grasp_candidates(scene, search, reach)
-    q = None
+    reach, tables = Reachability(scene), GraspTables()
+    grasps = tables.get(scene, search, reach)
+    start, q = None, None
     if grasps.candidates:
+        # the grasp the search roots a plan at, not the best-ranked candidate: that one may fail the
+        # search's checks before its tree (the seed-0 box's did: two fingers out of reach at node 1)
+        start, _ = choose_initial_grasp(scene, FIGURE_GOAL, search, tables)
+    if start is not None:
         pose = np.asarray(scene.config.initial_pose, dtype=float)
-        q = np.concatenate(
-            [reach.closed_form_many(pose, i, [s])[0] for i, s in enumerate(grasps.candidates[0].arclengths)]
-        )
+        q = np.concatenate([reach.solve(pose, i, s).q for i, s in enumerate(start)])
     contacts = grid_contacts(scene, search.initial_grid_step, reach)
     limits = payload(scene, search, grasps) if grasps.candidates else None
     reachable = workspace(scene, search, Graspability(scene, search, reach)) if grasps.candidates else None
-    return ObjectReach(contacts=contacts, grasps=grasps, q_best=q, payload=limits, workspace=reachable)
+    return ObjectReach(contacts=contacts, grasps=grasps, q_start=q, start=start, payload=limits, workspace=reachable)
 
 
 def reach_line(reach: dict) -> str:
@@ -199,7 +209,7 @@ def payload_line(reach: dict, mass: float) -> str:
 
 
 def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
-    """The hand (at the best initial grasp, if any) and the object, each finger's reachable
+    """The hand (at the initial grasp a quarter turn's plan starts from, if any) and the object, each finger's reachable
     contacts (figures.figure_model), written atomically."""
     import matplotlib
 
@@ -213,9 +223,11 @@ def draw_model(scene, path: str, reach: ObjectReach | None = None) -> None:
     else:
         counts = [len(s) for s in reach.contacts]
         note = f"dots: reachable contacts {tuple(counts)}; " + (
-            "hand: best initial grasp" if reach.q_best is not None else "NO initial grasp"
+            f"hand: the initial grasp of a plan to {math.degrees(FIGURE_GOAL):+.0f} deg"
+            if reach.q_start is not None
+            else "NO initial grasp"
         )
-        fig = figure_model(scene, q=reach.q_best, reachable=reach.contacts, note=note)
+        fig = figure_model(scene, q=reach.q_start, reachable=reach.contacts, note=note)
     try:
         save_figure(fig, path, dpi=120)
     finally:

@@ -63,6 +63,10 @@ class SearchConfig:
     # that rolls onto a corner pivots over it, its normal turning by the corner's angle; about twice the
     # rolling prediction's error in simulation (trajectotree.search.stance). Used with rolled_stances only.
     rolled_corner_gap: float = 0.002
+    # m, the least gap between any two fingers' collision shapes (link boxes, fingertip spheres) at a node
+    # and on the straight joint-space path from its parent (exact planar test, trajectotree.search.reach),
+    # since the simulation's fingers collide like any other bodies; the initial grasps keep it too.
+    finger_clearance: float = 0.002
     # N, a switch is refused when its three holding fingers need more than this total normal force
     # (at mu_plan, at their planned contacts) to carry the object's weight at either end of the
     # transition (trajectotree.search.stance): such squeezes saturate the 1 N m joints. 0: no cap (the paper).
@@ -90,9 +94,10 @@ class SearchConfig:
     commit_segments: int = 5
     max_expansions: int = 20000  # node budget of the search (all initial grasps together)
     time_budget_s: float = 30.0  # s, wall-clock budget of the search
-    # When no plan is found, the search is rerun up to this many times on a finer contact grid
-    # (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
-    # move), within the same budgets, for objects whose short faces hold few grid contacts.
+    # When the first initial grasp yields no plan, the search goes on with up to this many finer contact
+    # grids too (initial_grid_step and displacement_step halved, num_displacements 2 n - 1: the same longest
+    # move), the grids taking turns, one initial grasp each, within the same budgets, for objects whose
+    # short faces hold few grid contacts and fingertips kept apart on one face (trajectotree.search.tree).
     # 0: the paper's single grid.
     grid_refinements: int = 1
 
@@ -128,6 +133,7 @@ class SearchConfig:
         check_range("search.friction_safety", self.friction_safety, 0.0, 1.0, low_open=True)
         check_bool("search.rolled_stances", self.rolled_stances)
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
+        check_range("search.finger_clearance", self.finger_clearance, 0.0, 0.05)
         check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
         check_range("search.push_capacity", self.push_capacity, 0.0, 100.0)
         check_range("search.push_normal_force", self.push_normal_force, 0.0, 1000.0, low_open=True)

@@ -16,9 +16,10 @@ loggers of the plant state and of each finger's simulated force on the box
 the friction coefficient (sim_mu), the box mass (sim_mass: model mismatch) and a
 push, a force on the box in W for SimConfig.push_duration seconds.
 
-The run starts in the plan's initial state (x_0, q_0, at rest). Finger-finger
-collisions are filtered out: the planners do not model them, and the fingers
-only meet when the plan itself is infeasible for the hand.
+The run starts in the plan's initial state (x_0, q_0, at rest). Fingers collide with
+each other like any other bodies (only each finger's own adjacent links are filtered,
+as MultibodyPlant does for bodies joined by a joint): the planners keep them apart
+(search.finger_clearance, CITO's finger rows) and the physics check measures it.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import CollisionFilterDeclaration, Meshcat
+from pydrake.geometry import Meshcat
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
@@ -214,18 +215,6 @@ class ExecutionDiagram:
         return context
 
 
-def exclude_finger_finger_collisions(plant, scene_graph, hand, description: HandDescription) -> None:
-    """Filters contact between different fingers (each finger's own links are adjacent)."""
-    fingers = []
-    for f in description.fingers:
-        bodies = list(finger_bodies(plant, hand, f))
-        fingers.append(plant.CollectRegisteredGeometries(bodies))
-    manager = scene_graph.collision_filter_manager()
-    for a in range(len(fingers)):
-        for b in range(a + 1, len(fingers)):
-            manager.Apply(CollisionFilterDeclaration().ExcludeBetween(fingers[a], fingers[b]))
-
-
 def build_execution_diagram(
     reference: Reference,
     config: Config,
@@ -245,7 +234,6 @@ def build_execution_diagram(
     hand, box = add_hand_and_box(plant, conditions.scene(config.scene), scene_graph)
     plant.Finalize()
     description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
-    exclude_finger_finger_collisions(plant, scene_graph, hand, description)
     added = add_executor(
         builder,
         plant,

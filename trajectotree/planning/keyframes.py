@@ -15,7 +15,11 @@ joint program's constraints wherever both segments do. The final pose is the goa
 
 The link rows (cito.link_rows) are added on demand (cito.link_rows_on_demand): a segment is
 first solved without them and, when one of its links then overlaps the object (the physics
-check's exact test), again with them from the plan's guess ("links").
+check's exact test), again with them from the plan's guess ("links"). The finger-finger rows
+(cito/fingers.py) keep the pairs of fingers that come within cito.fingers.NEAR_MARGIN of each
+other on the straight joint-space path between the piece's nodes apart from the first solve
+(`finger_pairs`); a piece whose fingers then overlap (the physics check) is retried as "links"
+too, with rows for every pair.
 
 A segment that fails is retried: one IPOPT did not converge first from its last iterate
 ("restart": IPOPT's barrier and L-BFGS memory start afresh; a converged one would only converge
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import math
 import multiprocessing
 import os
@@ -46,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trajectotree.cito.fingers import near_pairs
 from trajectotree.cito.guess import plan_guess
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program
@@ -56,7 +62,7 @@ from trajectotree.config import CitoConfig, Config, SceneConfig, check_integer, 
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.planning.physics import ObjectModel, check_physics, contact_points
 from trajectotree.planning.workers import TiedPool, kill_pool, process_pool
-from trajectotree.results import LINK_PENETRATION_TOL, PhysicsCheck, PlanResult, Trajectory
+from trajectotree.results import FINGER_OVERLAP_TOL, LINK_PENETRATION_TOL, PhysicsCheck, PlanResult, Trajectory
 from trajectotree.scene.plant import Scene, build_scene
 
 # Local worker processes start by fork where the platform has it: a child inherits the loaded
@@ -153,6 +159,16 @@ def worker_scene(config: SceneConfig) -> Scene:
     return build_scene(config)
 
 
+def finger_pairs(task: PieceTask, scene: Scene) -> tuple:
+    """The pairs of fingers the piece's program keeps apart by finger rows: those that come near each
+    other on the straight joint-space path between its nodes (cito.fingers.near_pairs), every pair in a
+    "links" retry (it follows an attempt whose links or fingers overlapped)."""
+    if task.kind == "links":
+        return tuple(itertools.combinations(range(scene.num_fingers), 2))
+    q_nodes = [node.q for node in task.plan.nodes[task.first : task.last + 1]]
+    return near_pairs(scene.fingers, q_nodes, scene.tip_radius)
+
+
 def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogObserver | None = None) -> PieceResult:
     """Builds and solves one piece in this process: in `scene` (built from task.scene), else in
     this process's worker_scene (a worker's entry point); `log_observer` watches its IPOPT solve."""
@@ -160,6 +176,7 @@ def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogOb
     t0 = time.perf_counter()
     body = BodyParams(scene, task.cito.sdf_sharpness, mu=task.mu)
     spec = piece_spec(task.plan, task.first, task.last, radius=scene.tip_radius, config=task.cito)
+    spec = dataclasses.replace(spec, finger_pairs=finger_pairs(task, scene))
     program = build_program(task.cito, spec, body)
     sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
@@ -333,7 +350,12 @@ def solve_segments(
     retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
     if on_demand:  # from the guess: from a link deep inside the object IPOPT may not recover
         retry(
-            [s for s in range(n) if best[s].check.link_penetration_m > LINK_PENETRATION_TOL],
+            [
+                s
+                for s in range(n)
+                if best[s].check.link_penetration_m > LINK_PENETRATION_TOL
+                or -best[s].check.finger_distance_m > FINGER_OVERLAP_TOL
+            ],
             "links",
             from_last_iterate=False,
         )

@@ -12,10 +12,14 @@ Anyone holding plan.npz can recompute these numbers (its arrays: README, "Trajec
   - contact_point_off_surface: how far any p_W_C lies from the box boundary (m);
   - penetration: how deep any fingertip sphere sinks into the box (m);
   - link_penetration: how deep any finger link's collision box overlaps the box (m; the least
-    translation that separates them), given the hand's links (ObjectModel.fingers).
+    translation that separates them), given the hand's links (ObjectModel.fingers);
+  - finger_distance: the least signed distance between two fingers' collision shapes (link boxes
+    and fingertip spheres; negative: how deep they overlap) at any knot, given the hand's links
+    (trajectotree.scene.finger_clearance, exact in the plane).
 A plan passes when no fingertip more than GAP_TOL off the box carries more than
 FORCE_TOL, none sinks deeper than PENETRATION_TOL, no link overlaps it deeper than
-LINK_PENETRATION_TOL (where the links are given), the cones hold to CONE_TOL and
+LINK_PENETRATION_TOL and no two fingers overlap deeper than FINGER_OVERLAP_TOL (where the
+links are given), the cones hold to CONE_TOL and
 Newton-Euler to NEWTON_EULER_TOL.
 
 In space (check_space_physics, a plan of a hand in space: results.SpaceTrajectory's arrays and the
@@ -44,12 +48,14 @@ from trajectotree.geometry import (
     segment_box_distances,
     so3_exp,
 )
+from trajectotree.scene.finger_clearance import ClosestFingers, closest_fingers
 
 # The check's value type and its tolerances live with the other saved values (plan.json records both).
 if TYPE_CHECKING:  # annotations only: the check itself needs numpy alone
     from trajectotree.scene.plant import FingerGeometry
 from trajectotree.results import (
     CONE_TOL,
+    FINGER_OVERLAP_TOL,
     FORCE_TOL,
     GAP_TOL,
     KINEMATICS_TOL,
@@ -151,7 +157,9 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     penetration = max(0.0, -float(gap[k_deep, i_deep]))
     if box.fingers is None:
         link_depth, k_link, i_link = float("nan"), -1, -1
+        apart = ClosestFingers(float("nan"), -1, ())
     else:
+        apart = closest_fingers(box.fingers, arrays["q"], box.tip_radius)
         links = link_penetrations(x, arrays["q"], box.fingers, box.shape).max(axis=2)  # (K, 4)
         k_link, i_link = np.unravel_index(int(np.argmax(links)), links.shape)
         link_depth = float(links[k_link, i_link])
@@ -173,6 +181,11 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
             f"a link of finger {i_link} overlaps the box by {1e3 * link_depth:.2f} mm at knot {k_link} "
             f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)"
         )
+    if -apart.distance > FINGER_OVERLAP_TOL:
+        reasons.append(
+            f"fingers {apart.fingers[0]} and {apart.fingers[1]} overlap by {-1e3 * apart.distance:.2f} mm at knot "
+            f"{apart.knot} (limit {1e3 * FINGER_OVERLAP_TOL:g} mm)"
+        )
     if cone > CONE_TOL:
         reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
     if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
@@ -193,6 +206,9 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
         link_penetration_finger=i_link,
         passed=not reasons,
         reason="; ".join(reasons),
+        finger_distance_m=apart.distance,
+        finger_distance_knot=apart.knot,
+        finger_distance_fingers=apart.fingers,
     )
 
 

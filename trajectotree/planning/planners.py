@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from trajectotree.cito.fingers import near_pairs
 from trajectotree.cito.guess import plan_guess, static_guess
 from trajectotree.cito.knot import BodyParams
 from trajectotree.cito.program import build_program, general_spec
@@ -178,6 +179,8 @@ def plan_request(
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
     if method == "trajectotree":
         spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
+        q_nodes = [node.q for node in contact_plan.nodes]  # the fingers kept apart: cito/fingers.py
+        spec = dataclasses.replace(spec, finger_pairs=near_pairs(scene.fingers, q_nodes, scene.tip_radius))
     else:
         node0 = contact_plan.nodes[0]
         path = (

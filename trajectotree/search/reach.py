@@ -12,6 +12,11 @@ Two stages keep the search cheap:
   would fail too: this is an exact filter.
 - `solve` runs Drake IK seeded with the closed-form answer and keeps its joint angles.
 
+Fingers against each other (`fingers_refusal`): the same exact planar geometry between two
+fingers' link boxes and fingertip spheres (trajectotree.scene.finger_clearance), at a node's
+joint angles and sampled on the straight joint-space path from its parent, kept at least
+search.finger_clearance apart, since the simulation's fingers collide (trajectotree.search.tree).
+
 Collision test (links vs object): an exact planar separating-axis test between the object's
 convex polygon (trajectotree.geometry; the box keeps its closed form) and each link's
 collision box from the SDF (scene.FingerGeometry.link_boxes: read from SceneGraph's inspector,
@@ -30,10 +35,21 @@ from pydrake.solvers import SnoptSolver
 
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
+from trajectotree.scene.finger_clearance import (
+    closest_fingers,
+    fingers_clear,
+    interpolate_joints,
+    pair_distances,
+    pair_lower_bounds,
+    sweep_bound,
+)
 from trajectotree.scene.kinematics import first_solution
 from trajectotree.scene.plant import Scene
 
 IK_TOLERANCE = 1e-6  # m, fingertip position tolerance of the IK constraint
+# m, the most any point of two fingers moves between the samples of the straight joint-space path between
+# two nodes at which they are tested against each other: half the fingertip sphere's radius
+PATH_RESOLUTION = 0.005
 KEY_DIGITS = 9  # poses and arclengths equal to 1e-9 share a cache entry
 
 
@@ -79,6 +95,57 @@ def rectangles_overlap_polygon(
         mid = np.einsum("ka,ka->k", c, axis)
         overlap &= (mid - half < proj.max(axis=1)) & (mid + half > proj.min(axis=1))
     return overlap
+
+
+def fingers_refusal(fingers, q, tip_radius: float, clearance: float, *, on_path: bool = False) -> Refusal | None:
+    """FINGERS_COLLIDE naming the two fingers that come closest, when any two of `fingers` come
+    within `clearance` m of each other at joint angles q (K, 2F) (None when none do); on_path: q
+    samples the path to a node (the refusal's count 1)."""
+    closest = closest_fingers(fingers, q, tip_radius)
+    if fingers_clear(closest.distance, clearance):
+        return None
+    return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest.fingers, limit=clearance, count=1 if on_path else None)
+
+
+def path_samples(fingers, q_from, q_to, tip_radius: float, clearance: float, ends):
+    """(pairs, samples (S, 2F)): the pairs of fingers whose motion on the straight joint-space path
+    from q_from to q_to (2F,) could bring them within `clearance` m (half the two ends' gaps, `ends`
+    {(i, j): (m at q_from, m at q_to)}, less the most the two fingers' points move, sweep_bound: the
+    least the gap can be on the way), and the path between its ends sampled every PATH_RESOLUTION
+    of the most any of them moves (none when no pair is near)."""
+    q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
+    moves = [
+        sweep_bound(f, q_from[2 * i : 2 * i + 2], q_to[2 * i : 2 * i + 2], tip_radius) for i, f in enumerate(fingers)
+    ]
+    motion = {(i, j): moves[i] + moves[j] for i, j in ends}
+    near = [pair for pair, (a, b) in ends.items() if 0.5 * (a + b - motion[pair]) < clearance]
+    if not near:
+        return [], np.zeros((0, len(q_to)))
+    steps = max(2, int(np.ceil(max(motion[pair] for pair in near) / PATH_RESOLUTION)))
+    return near, interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
+
+
+def samples_refusal(fingers, samples, tip_radius: float, clearance: float, pairs) -> Refusal | None:
+    """FINGERS_COLLIDE (count 1: on the path to a node) naming a pair of `pairs` that comes within
+    `clearance` m at one of the joint angles `samples` (S, 2F), None when none does: the exact
+    distance only where the capsules' cheaper bound (pair_lower_bounds) does not already clear them."""
+    bounds = pair_lower_bounds(fingers, samples, tip_radius, pairs)
+    unsure = [pair for pair in pairs if bounds[pair].min() < clearance]
+    if not unsure:
+        return None
+    rows = np.any([bounds[pair] < clearance for pair in unsure], axis=0)
+    for pair, gap in pair_distances(fingers, samples[rows], tip_radius, pairs=unsure).items():
+        if not np.all(fingers_clear(gap, clearance)):
+            return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=pair, limit=clearance, count=1)
+    return None
+
+
+def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
+    """samples_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear
+    (path_samples)."""
+    ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
+    near, samples = path_samples(fingers, q_from, q_to, tip_radius, clearance, ends)
+    return samples_refusal(fingers, samples, tip_radius, clearance, near) if near else None
 
 
 class Reachability:

@@ -11,10 +11,13 @@ broken by the paper's heuristic sum_i |q2_i - nominal_joint2|.
 
 IsFeasible runs when a node is selected, as in Algorithm 1: frictional form closure (LP,
 trajectotree.search.grasp) and reachability by Drake IK without the links entering the object
-(trajectotree.search.reach). GetNeighbors already drops candidates that fail cheap exact tests
-(corner margin, overlapping fingertips, closed-form reachability), so the LP and the IK
-run only for nodes the search actually visits. States reached twice at the same depth are
-inserted once (their subtrees are identical).
+(trajectotree.search.reach), and (not in the paper) no two fingers within search.finger_clearance
+of each other at the node's joint angles nor on the straight joint-space path from its parent's.
+GetNeighbors already drops candidates that fail cheap exact tests (corner margin, overlapping
+fingertips, closed-form reachability), so the LP and the IK run only for nodes the search
+actually visits. States reached twice at the same depth are
+inserted once (their subtrees are identical), except one refused for the fingers' path from its
+parent, which another parent may still reach (_refuses_the_move).
 
 Two additions to the paper, neither of which changes which plans exist:
 - Before the search, a table per finger of every contact it can ever hold at every depth
@@ -49,12 +52,17 @@ search, and each searched candidate gets at most search.root_expansions expansio
 search.max_initial_grasps candidates. States found dead from one root stay dead for the next.
 
 Contact grid (not in the paper): contacts lie on a grid of arclengths, the initial grid plus
-multiples of the displacement step. When it yields no plan, the search is rerun on a grid
-halved search.grid_refinements times (grid_levels), within the same budgets. Short faces need
-it: the 0.14 m triangle's faces hold six 0.02 m grid points (none at a face's middle, where the
-three normals meet): at mu_plan 0.49 the search finds no plan on that grid for 3 of its 12
-seed-0 goals, and one for all 12 on the 0.01 m grid. A plan found on the coarse grid is
-unchanged.
+multiples of the displacement step. When its first root yields no plan, a grid halved
+search.grid_refinements times (grid_levels) is searched too, the grids taking turns, one root
+each, coarsest first, within the same budgets. Short faces need it: the 0.14 m triangle's faces
+hold six 0.02 m grid points (none at a face's middle, where the three normals meet): at mu_plan
+0.49 the search finds no plan on that grid for 3 of its 12 seed-0 goals, and one for all 12 on
+the 0.01 m grid. So do fingers kept apart (search.finger_clearance) on the default box: two
+fingertips (10 mm) on one face sit 20 or 40 mm apart on the 0.02 m grid, 30 mm on the 0.01 m one,
+and five of the 60 seed-0 goals (2.59-3.12 rad) have no plan from 200 of the coarse grid's roots
+(3500-6000 expansions) while the fine grid's first or third root has one. Why turns rather than
+the whole coarse grid first: the coarse grid's later roots rarely succeed where its first failed.
+A plan from the coarse grid's first root is unchanged.
 """
 
 from __future__ import annotations
@@ -73,12 +81,13 @@ from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats, Spa
 from trajectotree.geometry import BOX_FACE_NAMES, box_face_grid, quaternion_angle, quaternion_slerp
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
+from trajectotree.scene.finger_clearance import fingers_clear, pair_distances
 from trajectotree.scene.plant import Scene
 from trajectotree.scene.spatial import START_POSE
 from trajectotree.scene.statics import edge_wrenches_W
 from trajectotree.search.grasp import FormClosure, SpatialClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
-from trajectotree.search.reach import Reachability
+from trajectotree.search.reach import Reachability, path_samples, samples_refusal
 from trajectotree.search.spatial_reach import SpatialReach, box_transform
 from trajectotree.search.stance import (
     SpatialHoldingLp,
@@ -113,7 +122,7 @@ class _Search:
     def __init__(self, scene: Scene, goal, config: SearchConfig):
         goal = check_goal(goal)
         config = with_segments(config, scene.config.initial_pose, goal)
-        self.scene, self.config = scene, config
+        self.scene, self.config, self.goal = scene, config, goal
         self.boundary = scene.config.shape
         self.poses = object_path(scene.config.initial_pose, goal, config.num_nodes)
         self.mu_plan = mu_plan(scene.config, config)
@@ -134,6 +143,7 @@ class _Search:
         self.dead: set[tuple] = set()  # (depth, arclengths) whose subtree was searched without a plan
         self.expanded = self.generated = self.backups = 0
         self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
+        self.gaps: dict[tuple, float] = {}  # (depth, i, s_i, j, s_j) -> m, two fingers' distance at a node
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
@@ -188,12 +198,51 @@ class _Search:
         return None
 
     def unreachable(self, node: _Node) -> Refusal | None:
-        pose = self.poses[node.depth]
+        """Why a finger of `node` cannot reach its contact, or two fingers collide there or on the
+        straight joint-space path from its parent (None when neither)."""
+        q = self.joints(node)
+        if isinstance(q, Refusal):
+            return q
+        return self.fingers_refused(node, q)
+
+    def fingers_refused(self, node: _Node, q: np.ndarray) -> Refusal | None:
+        """FINGERS_COLLIDE when two fingers come within search.finger_clearance of each other at the
+        node's joint angles q (2F,), or on the straight joint-space path from its parent's (count 1);
+        None when neither. The node's pair distances are memoized by depth and the two fingers'
+        contacts (`gaps`: its siblings share the pairs of the fingers that do not move); the path is
+        sampled for the pairs it could bring that close only (reach.path_samples, samples_refusal)."""
+        fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
+        keys = self.gap_keys(node)
+        missing = [pair for pair, key in keys.items() if key not in self.gaps]
+        for pair, d in pair_distances(fingers, q[None], r, pairs=missing).items():
+            self.gaps[keys[pair]] = float(d[0])
+        gaps = {pair: self.gaps[key] for pair, key in keys.items()}
+        closest = min(gaps, key=gaps.get, default=None)
+        if closest is not None and not fingers_clear(gaps[closest], clearance):
+            return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest, limit=clearance)
+        if node.parent is None:
+            return None
+        parent = self.gap_keys(node.parent)  # the parent passed: all its gaps are known
+        ends = {pair: (self.gaps[parent[pair]], gap) for pair, gap in gaps.items()}
+        near, samples = path_samples(fingers, self.joints(node.parent), q, r, clearance, ends)
+        return samples_refusal(fingers, samples, r, clearance, near) if near else None
+
+    def gap_keys(self, node: _Node) -> dict[tuple[int, int], tuple]:
+        """{(i, j): the key of `gaps`} for each pair of fingers i < j of `node`."""
+        return {
+            (i, j): (node.depth, i, node.arclengths[i], j, node.arclengths[j])
+            for i, j in itertools.combinations(range(self.scene.num_fingers), 2)
+        }
+
+    def joints(self, node: _Node) -> np.ndarray | Refusal:
+        """The node's joint angles (2F,) by Drake IK (memoized per finger), or why a finger cannot reach."""
+        pose, q = self.poses[node.depth], []
         for i, s in enumerate(node.arclengths):
             reach = self.reach.solve(pose, i, s, seed=self.bound.tabulated(node.depth, i, s))
             if not reach.reachable:
                 return Refusal(RefusalKind.UNREACHABLE, fingers=(i,), cause=reach.refusal)
-        return None
+            q.append(reach.q)
+        return np.concatenate(q)
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
@@ -347,6 +396,8 @@ class _Search:
             dead_end = self.infeasibility(node)
             if dead_end:
                 self.refused[dead_end.coarse()] += 1
+                if _refuses_the_move(dead_end):  # not the state: another parent may still reach it
+                    inserted.discard((node.depth, node.arclengths))
                 continue
             if node.depth == target:
                 return node, None
@@ -406,6 +457,14 @@ class _Search:
             initial_grasps_searched=roots,
             initial_grasp_candidates=candidates,
         )
+
+
+def _refuses_the_move(refusal: Refusal) -> bool:
+    """Whether `refusal` is of the move into a node (its fingers collide on the way from its parent:
+    FINGERS_COLLIDE with count 1), not of its state. Such a state is neither inserted (it may be
+    generated again from a later parent, which the DFS expands only after every deeper node, this
+    one included) nor dead for the next root."""
+    return refusal.kind is RefusalKind.FINGERS_COLLIDE and bool(refusal.count)
 
 
 class _Roots:
@@ -506,108 +565,130 @@ def find_contact_plan(scene: Scene, goal, config: SearchConfig, tables: GraspTab
     GoalPose) of scene's object: N nodes (search.num_nodes, or from the goal's distance:
     config.segments_for) from the initial grasp (node 0) to the goal pose, each in frictional
     form closure at mu_plan and reachable, with at most one finger changing contact between consecutive nodes while the
-    other three are in closure at mu_plan. Searched on the configured contact grid, then on
-    the finer ones of grid_levels until a plan is found; the budgets (time, expansions) hold
-    for all grids together. A search that finds no plan returns success=False with the
-    refusal of each grid (which stance or reach failed). `tables` keeps the ranked initial
-    grasps between searches (without it each search ranks them, inside its time)."""
+    other three are in closure at mu_plan. The contact grids of grid_levels take turns, one
+    searched root each, coarsest first, a finer grid's search set up when the coarser one's first
+    root has no plan (module doc); the budgets (time, expansions) hold for all grids together.
+    A search that finds no plan returns success=False with the refusal of each grid (which stance
+    or reach failed). `tables` keeps the ranked initial grasps between searches (without it each
+    search ranks them, inside its time)."""
     goal = check_goal(goal)
     config = with_segments(config, scene.config.initial_pose, goal)
     t0 = time.perf_counter()
-    total, refused = SearchStats(), []
-    for level in grid_levels(config):
-        plan = _find_on_grid(scene, goal, level, t0, config.max_expansions - total.expanded, tables)
-        total = _add_stats(total, plan.stats, t0)
-        if plan.success:
-            return replace(plan, stats=total)
-        refused.append((level.displacement_step, plan.refusal))
-        if total.expanded >= config.max_expansions or time.perf_counter() - t0 > config.time_budget_s:
+    levels, grids = grid_levels(config), []
+    while True:
+        turned = False
+        for n, level in enumerate(levels):
+            left = config.max_expansions - sum(g.search.expanded for g in grids)
+            if left <= 0 or time.perf_counter() - t0 > config.time_budget_s:
+                break
+            if n == len(grids):
+                grids.append(_Grid(scene, goal, level, tables))
+            if grids[n].done:
+                continue
+            turned = True
+            grids[n].search_next_root(t0, left)
+            if grids[n].leaf is not None:
+                return replace(grids[n].plan(t0), stats=_total_stats(grids, t0))
+        if not turned:
             break
-    return replace(plan, refusal=on_grids(refused), stats=total)
-
-
-def _add_stats(a: SearchStats, b: SearchStats, t0: float) -> SearchStats:
-    """The statistics of two grids' searches together (each grid ranks its own candidates)."""
-    return SearchStats(
-        expanded=a.expanded + b.expanded,
-        generated=a.generated + b.generated,
-        lp_calls=a.lp_calls + b.lp_calls,
-        ik_calls=a.ik_calls + b.ik_calls,
-        time_s=time.perf_counter() - t0,
-        initial_grasps_searched=a.initial_grasps_searched + b.initial_grasps_searched,
-        initial_grasp_candidates=a.initial_grasp_candidates + b.initial_grasp_candidates,
+    plans = [g.plan(t0) for g in grids]
+    return replace(
+        plans[-1],
+        refusal=on_grids([(g.config.displacement_step, p.refusal) for g, p in zip(grids, plans)]),
+        stats=_total_stats(grids, t0),
     )
 
 
-def _find_on_grid(
-    scene: Scene, goal: GoalPose, config: SearchConfig, t0: float, budget: int, tables: GraspTables | None
-) -> ContactPlan:
-    """find_contact_plan on config's contact grid with at most `budget` expansions."""
-    search = _Search(scene, goal, config)
-    roots, refusal = _roots(scene, config, search, tables)
-    if not roots:
-        return ContactPlan(
-            goal=goal.theta,
-            goal_position=goal.position,
-            success=False,
-            refusal=refusal,
-            stats=search.stats(t0),
-            mu_plan=search.mu_plan,
-        )
-    search.plan_switch_bounds(roots.per_finger())
-    leaf, searched, skipped, first_skip, last = None, 0, 0, None, None
-    for root in roots:
-        if (
-            searched >= config.max_initial_grasps
-            or search.expanded >= budget
-            or time.perf_counter() - t0 > config.time_budget_s
-        ):
-            break
-        why = search.precheck(root, candidate=config.initial_arclengths is None)
-        if why:
-            skipped += 1
-            first_skip = first_skip or AtRoot(root, why)
-            continue
-        searched += 1
-        leaf, why = search.run(root, t0, config.root_expansions, budget - search.expanded)
-        if leaf is not None:
-            break
-        last = AtRoot(root, why)
-    stats = search.stats(t0, searched, len(roots))
-    if leaf is None:
-        if len(roots) == 1 and first_skip is not None:  # the one root was skipped: its own refusal
-            refusal = first_skip.refusal
-        else:
-            refusal = NoPlan(
-                searched=searched,
-                candidates=len(roots),
-                skipped=skipped,
-                first_skipped=first_skip,
-                last_searched=last,
+def _total_stats(grids: list[_Grid], t0: float) -> SearchStats:
+    """The statistics of the grids' searches together (each grid ranks its own candidates)."""
+    return SearchStats(
+        expanded=sum(g.search.expanded for g in grids),
+        generated=sum(g.search.generated for g in grids),
+        lp_calls=sum(g.search.closure.lp_calls for g in grids),
+        ik_calls=sum(g.search.reach.ik_calls for g in grids),
+        time_s=time.perf_counter() - t0,
+        initial_grasps_searched=sum(g.searched for g in grids),
+        initial_grasp_candidates=sum(len(g.roots) for g in grids),
+    )
+
+
+class _Grid:
+    """The search on one contact grid (grid_levels), rooted at its candidates one at a time."""
+
+    def __init__(self, scene: Scene, goal: GoalPose, config: SearchConfig, tables: GraspTables | None):
+        self.config = config
+        self.search = _Search(scene, goal, config)
+        self.roots, self.refusal = _roots(scene, config, self.search, tables)
+        if self.roots:
+            self.search.plan_switch_bounds(self.roots.per_finger())
+        self.pending = iter(self.roots)
+        self.leaf: _Node | None = None
+        self.searched, self.skipped = 0, 0
+        self.first_skip: AtRoot | None = None
+        self.last: AtRoot | None = None
+        self.done = not self.roots
+
+    def search_next_root(self, t0: float, budget: int) -> None:
+        """Algorithm 1 from the next candidate that passes the precheck (those that fail it
+        skipped), with at most `budget` expansions; `leaf` is the goal node when it found a plan,
+        and `done` set when it did or no root is left (search.max_initial_grasps searched, the
+        budget or the time spent)."""
+        for root in self.pending:
+            if self.searched >= self.config.max_initial_grasps or time.perf_counter() - t0 > self.config.time_budget_s:
+                break
+            why = self.search.precheck(root, candidate=self.config.initial_arclengths is None)
+            if why:
+                self.skipped += 1
+                self.first_skip = self.first_skip or AtRoot(root, why)
+                continue
+            self.searched += 1
+            expanded0 = self.search.expanded
+            self.leaf, why = self.search.run(root, t0, self.config.root_expansions, budget)
+            if self.leaf is None:
+                self.last = AtRoot(root, why)
+            self.done = self.leaf is not None or self.search.expanded - expanded0 >= budget
+            return
+        self.done = True
+
+    def plan(self, t0: float) -> ContactPlan:
+        """The plan from `leaf`, or why this grid found none."""
+        search, goal = self.search, self.search.goal
+        stats = search.stats(t0, self.searched, len(self.roots))
+        if self.leaf is None:
+            if not self.roots:
+                refusal = self.refusal
+            elif len(self.roots) == 1 and self.first_skip is not None:  # the one root was skipped: its own refusal
+                refusal = self.first_skip.refusal
+            else:
+                refusal = NoPlan(
+                    searched=self.searched,
+                    candidates=len(self.roots),
+                    skipped=self.skipped,
+                    first_skipped=self.first_skip,
+                    last_searched=self.last,
+                    mu_plan=search.mu_plan,
+                    refused=tuple(search.refused.most_common(4)),
+                )
+            return ContactPlan(
+                goal=goal.theta,
+                goal_position=goal.position,
+                success=False,
+                refusal=refusal,
+                stats=stats,
                 mu_plan=search.mu_plan,
-                refused=tuple(search.refused.most_common(4)),
             )
+        path, leaf = [], self.leaf
+        while leaf is not None:
+            path.append(leaf)
+            leaf = leaf.parent
         return ContactPlan(
             goal=goal.theta,
             goal_position=goal.position,
-            success=False,
-            refusal=refusal,
+            success=True,
+            nodes=search.contact_nodes(path[::-1]),
             stats=stats,
             mu_plan=search.mu_plan,
         )
-    path = []
-    while leaf is not None:
-        path.append(leaf)
-        leaf = leaf.parent
-    nodes = search.contact_nodes(path[::-1])
-    return ContactPlan(
-        goal=goal.theta,
-        goal_position=goal.position,
-        success=True,
-        nodes=nodes,
-        stats=search.stats(t0, searched, len(roots)),
-        mu_plan=search.mu_plan,
-    )
 
 
 # -- in space ------------------------------------------------------------------------------------
