@@ -2,6 +2,8 @@
 replanned execution; the replanner's plan output feeds every system that follows the plan, a replan swaps
 it in at the update at a node, and the plan in effect holds the measured state while the planner ran."""
 
+import json
+
 import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
@@ -11,7 +13,7 @@ from trajectotree.config import Config, ConfigError, with_values
 from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import reference_from_plan, static_hold_reference
 from trajectotree.execution.replan import HOLD_RAMP, Phase
-from trajectotree.execution.simulate import Conditions, advance_to_end, build_execution_diagram
+from trajectotree.execution.simulate import Conditions, build_execution_diagram
 from trajectotree.results import ReplanReason
 from trajectotree.scene.plant import build_scene
 
@@ -84,7 +86,7 @@ def test_a_replan_swaps_the_plan_in_one_simulator_holding_while_the_planner_ran(
         reference, config, executor=Executor.GRASP_REPLAN, plan=plan, conditions=Conditions(mu=0.3)
     )
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
-    advance_to_end(execution, simulator)
+    execution.executor.advance_to_end(simulator)
     context = simulator.get_context()
     (event,) = execution.executor.replans(context)
     assert event.reason is ReplanReason.TRACKING and event.time_s == pytest.approx(1.2)  # at the node's update
@@ -103,3 +105,41 @@ def test_a_replan_swaps_the_plan_in_one_simulator_holding_while_the_planner_ran(
     ramp = min(HOLD_RAMP, 0.5 * event.latency_s) if event.planned else 0.0  # to the measured pose
     poses = followed.object_pose_at(np.linspace(event.time_s + ramp, event.takes_effect_s, 20))
     np.testing.assert_allclose(poses, poses[:1].repeat(len(poses), axis=0), atol=1e-12)
+
+
+@pytest.mark.slow
+def test_simulate_replans_and_writes_its_playback_and_run(tmp_path, short_plan, capsys):
+    """`simulate --executor grasp-replan --html` (refused before the replanner was a system) writes the
+    run and its playback; exit 0."""
+    from trajectotree.cli import main
+    from trajectotree.io import save_plan
+
+    plan, _ = short_plan
+    save_plan(plan, tmp_path / "plan")
+    tight = "controller: {replan: {theta_error: 0.0001, position_error: 0.00001, max_replans: 1}}"
+    html = tmp_path / "run.html"
+    options = ["--executor", "grasp-replan", "--sim-mu", "0.3", "--config-text", tight, "--html", str(html)]
+    assert main(["simulate", str(tmp_path / "plan"), *options, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert len(summary["replans"]) == 1 and summary["replans"][0]["reason"] == "tracking"
+    assert html.stat().st_size > 0
+    assert sorted(p.name for p in (tmp_path / "plan").iterdir()) == ["plan.json", "plan.npz", "sim.json", "sim.npz"]
+
+
+@pytest.mark.slow
+def test_add_executor_adds_the_replanner_with_the_closed_loops_ports_and_the_plan(short_plan):
+    from test_executor_api import callers_diagram, port_names
+
+    from trajectotree.execution import executor as executor_module
+
+    plan, config = short_plan
+    builder, plant, scene_graph, hand, box = callers_diagram(config)
+    added = tt.add_executor(
+        builder, plant, plan, config, scene_graph=scene_graph, hand=hand, box=box, executor="grasp-replan"
+    )
+    inputs, outputs = port_names(added.diagram, "input"), port_names(added.diagram, "output")
+    assert inputs == {"box_state": 6, "hand_state": 16, "contact_results": 0, "box_contact_forces": 3}
+    assert set(outputs) == {"actuation", "plan", *executor_module.CLOSED_LOOP_OUTPUTS}
+    for name in {*inputs, *outputs}:
+        assert f"`{name}`" in executor_module.__doc__ and f"`{name}`" in tt.add_executor.__doc__, name
+    assert added.replanner is not None and added.duration == pytest.approx(2.4 + config.sim.settle_time)

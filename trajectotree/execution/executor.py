@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -88,6 +88,24 @@ class ExecutorSystems:
     def end_s(self, root_context) -> float:
         """s, when the run ends: the end of the plan in effect, then the settle time."""
         return self.reference_in_effect(root_context).duration + self.settle_s
+
+    def advance_to_end(self, simulator) -> None:
+        """Runs `simulator` (of a Diagram holding this executor) to end_s. A replan moves the end: a
+        monitor stops the Simulator after the step in which it moved, and the run goes on to the new end
+        (one Simulator throughout, its state untouched)."""
+        context = simulator.get_context()
+        target = self.end_s(context)
+        if self.replanner is not None:
+
+            def moved(root) -> EventStatus:
+                if self.end_s(root) != target:
+                    return EventStatus.ReachedTermination(self.diagram, "the plan in effect changed")
+                return EventStatus.Succeeded()
+
+            simulator.set_monitor(moved)
+        while context.get_time() < target:
+            simulator.AdvanceTo(target)
+            target = self.end_s(context)
 
     def replans(self, root_context) -> tuple[ReplanEvent, ...]:
         """The replans so far (none but for grasp-replan)."""
@@ -240,12 +258,18 @@ def add_executor(
     """Adds the executor `executor` (an Executor or its name) of `plan` (a PlanResult, or a Reference
     with `config`) to `builder` as one Diagram named `name`, for the caller's finalized `plant` (with
     its `scene_graph` and the `hand` and `box` model instances, as scene.plant.add_hand_and_box adds them
-    to a plant of the plan's scene): its ports (module doc) are left for the caller to connect by name.
+    to a plant of the plan's scene): its ports are left for the caller to connect by name (units and
+    sizes: module doc). Inputs: `box_state` (6: the object's planar [x, y, theta] m, m, rad and their
+    rates), `hand_state` (4F: [q rad; v rad/s]) and, closed loop, `contact_results` (the plant's) and
+    `box_contact_forces` (3: N, N, N m on the object). Outputs: `actuation` (2F joint torques, N m);
+    closed loop: `mu_estimate`, `mass_estimate` (kg), `reflex` (0..1), `disturbance` (N in W), per finger
+    `in_contact`, `slipping`, `force_ratio` and `slip_speed` (m/s), and `tracking_error` (m, m, rad);
+    the grasp executors: `plan` (abstract, the PlanInEffect followed now).
     The controller assumes the plan's scene (`config.scene`: its friction and mass), whatever the plant's.
     The zero-torque executor has only its `actuation` output. grasp-replan (a PlanResult only: the
     planner needs its goal) also adds the Replanner (trajectotree.execution.replan; a new plan's later
     segments on `segment_workers` local processes, None: as planning.planners.plan); simulate it to its
-    ExecutorSystems.end_s (execution.simulate.advance_to_end), which a replan moves. ConfigError for a
+    ExecutorSystems.end_s, which a replan moves (ExecutorSystems.advance_to_end). ConfigError for a
     name that is no executor, a Reference without config or a Reference to replan."""
     executor = parse_executor(executor)
     if config is None:

@@ -27,7 +27,8 @@ first_segment_deadline_s of the measured state. A start the planner refuses, a s
 (in time or at all) or a first segment that fails (or is not solved in time) is recorded with its typed
 reason (results.ReplanOutcome, the refusal) and the old plan resumes after the same hold; a plan whose
 later segment failed is executed up to that segment and planned again from there. The run ends at the
-end of the plan in effect (and config.sim.settle_time of hold): a swap moves it (`advance_to_end`).
+end of the plan in effect (and config.sim.settle_time of hold): a swap moves it
+(executor.ExecutorSystems.advance_to_end).
 
 Against the phase-by-phase runs before (one Simulator per phase, its state copied across): a node is
 checked at the first control update at or after it (within one control period, 2 ms at 500 Hz), and a

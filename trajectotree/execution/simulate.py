@@ -39,7 +39,7 @@ from pydrake.multibody.plant import (
     MultibodyPlantConfig,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem, TriggerType
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import LogVectorOutput
 
 from trajectotree.config import (
@@ -318,25 +318,6 @@ def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.nd
     return log.sample_times().copy(), data[box_start : box_start + 3].T.copy(), data[hand_q].T.copy()
 
 
-def advance_to_end(execution: ExecutionDiagram, simulator: Simulator) -> None:
-    """Runs `simulator` to the execution's end (ExecutionDiagram.end_s). A replan moves the end: a
-    monitor stops the Simulator after the step in which it moved, and the run goes on to the new end
-    (one Simulator throughout, its state untouched)."""
-    context = simulator.get_context()
-    target = execution.end_s(context)
-    if execution.executor.replanner is not None:
-
-        def moved(root) -> EventStatus:
-            if execution.end_s(root) != target:
-                return EventStatus.ReachedTermination(execution.diagram, "the plan in effect changed")
-            return EventStatus.Succeeded()
-
-        simulator.set_monitor(moved)
-    while context.get_time() < target:
-        simulator.AdvanceTo(target)
-        target = execution.end_s(context)
-
-
 def record_log(execution: ExecutionDiagram, simulator: Simulator, conditions: dict) -> SimLog:
     """Runs `simulator` to the execution's end; what it logged, beside the plan it followed (a replanned
     run's: the plans spliced at each swap) at the same times. When Drake refuses a step (a state beyond
@@ -344,7 +325,7 @@ def record_log(execution: ExecutionDiagram, simulator: Simulator, conditions: di
     (metrics.detect_divergence: the run diverged)."""
     start = time.perf_counter()
     try:
-        advance_to_end(execution, simulator)
+        execution.executor.advance_to_end(simulator)
     except RuntimeError as e:
         log = collected_log(execution, simulator, conditions, time.perf_counter() - start, complete=False)
         return dataclasses.replace(log, step_error=str(e))
