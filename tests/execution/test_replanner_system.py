@@ -143,3 +143,15 @@ def test_add_executor_adds_the_replanner_with_the_closed_loops_ports_and_the_pla
     for name in {*inputs, *outputs}:
         assert f"`{name}`" in executor_module.__doc__ and f"`{name}`" in tt.add_executor.__doc__, name
     assert added.replanner is not None and added.duration == pytest.approx(2.4 + config.sim.settle_time)
+
+
+def test_bench_replan_compares_trees_only_on_the_same_saved_plans():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).parents[2] / "scripts" / "bench_replan.py"
+    done = subprocess.run(
+        [sys.executable, str(script), "--compare", "/tmp"], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 2 and "--compare needs --plan-dirs" in done.stderr
