@@ -122,6 +122,11 @@ def test_simulate_replans_and_writes_its_playback_and_run(tmp_path, short_plan, 
     assert main(["simulate", str(tmp_path / "plan"), *options, "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert len(summary["replans"]) == 1 and summary["replans"][0]["reason"] == "tracking"
+    # one log: the phase-by-phase runs logged the node twice (1.2 s and 1e-16 s later, the poses apart), read
+    # as an object at 9e8 m/s, and this run ended "diverged" at the replan
+    assert summary["outcome"] != "diverged" and summary["diverged_at_s"] is None
+    t = np.load(tmp_path / "plan" / "sim.npz")["t"]
+    assert np.all(np.diff(t) > 1e-6)
     assert html.stat().st_size > 0
     assert sorted(p.name for p in (tmp_path / "plan").iterdir()) == ["plan.json", "plan.npz", "sim.json", "sim.npz"]
 

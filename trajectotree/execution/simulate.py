@@ -6,7 +6,8 @@ from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), a controller (the object-level
 GraspController, default, or eq. 20's ImpedanceController: the `Executor` chosen, one Diagram of its own,
-trajectotree.execution.executor.add_executor),
+trajectotree.execution.executor.add_executor; grasp-replan's holds the Replanner too, and its run lasts
+until the end of the plan in effect: trajectotree.execution.replan),
 loggers of the plant state and of each finger's simulated force on the box
 (`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
 `SimLog` (the logs beside the plan at the same times), which
@@ -199,15 +200,14 @@ class ExecutionDiagram:
     state_logger: object  # VectorLogSink of the plant's full state
     force_logger: object  # VectorLogSink of FingertipForces (2F)
     visualizer: object | None  # MeshcatVisualizer or None
-    duration: float  # s, plan length + settle time
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
     # closed loop: {ClosedLoopLog field: VectorLogSink of the output port of that name}; open loop: None
     closed_loop_loggers: dict | None = None
     executor: ExecutorSystems | None = None  # the executor's Diagram (its ports: trajectotree.execution.executor)
 
     def end_s(self, context) -> float:
-        """s, when the run ends: `duration`, or for a replanned run the end of the plan in effect in the
-        root `context` (a replan moves it)."""
+        """s, when the run ends in the root `context`: the plan's length and the settle time (a replanned
+        run's: the plan in effect's, which a replan moves)."""
         return self.executor.end_s(context)
 
     def initial_context(self, reference: Reference):
@@ -294,7 +294,6 @@ def build_execution_diagram(
         state_logger=state_logger,
         force_logger=force_logger,
         visualizer=visualizer,
-        duration=reference.duration + config.sim.settle_time,
         controller=executor.controller,
         closed_loop_loggers=closed_loop_loggers,
         executor=added,
