@@ -17,8 +17,8 @@ import argparse
 
 import numpy as np
 
-from trajectotree.execution.executor import execution_schedule
 from trajectotree.execution.fingers import HandKinematics
+from trajectotree.execution.in_effect import execution_schedule
 from trajectotree.execution.reference import reference_from_plan
 from trajectotree.experiments.executions import middle_of_middle_segment
 from trajectotree.geometry import rotation_2d

@@ -201,7 +201,7 @@ def test_drake_refusing_a_step_is_recorded_as_a_divergence():
     context = execution.initial_context(reference)
     plant_context = execution.plant.GetMyMutableContextFromRoot(context)
     execution.plant.SetVelocities(plant_context, execution.box, np.array([0.0, 1e300, 0.0]))
-    log = record_log(execution, Simulator(execution.diagram, context), reference, {})
+    log = record_log(execution, Simulator(execution.diagram, context), {})
     assert log.step_error
     result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity)
     assert result.outcome is RunOutcome.DIVERGED and result.divergence.startswith("Drake refused a step after 0.00 s")

@@ -60,7 +60,7 @@ def test_closed_loop_ports_are_named(scene):
     assert names(diagram.GetSubsystemByName("push_reflex")) == ["disturbance", "reflex"]
     controller = diagram.GetSubsystemByName("grasp_controller")
     inputs = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]
-    assert inputs == ["box_state", "hand_state", "friction", "mass_estimate", "reflex", "disturbance", "clocks"]
+    assert inputs == ["box_state", "hand_state", "plan", "friction", "mass_estimate", "reflex", "disturbance", "clocks"]
     assert names(diagram.GetSubsystemByName("landing_reflex")) == ["clocks"]
     assert names(diagram.GetSubsystemByName("cone_friction")) == ["friction"]
     assert set(execution.closed_loop_loggers) == set(CLOSED_LOOP_ARRAYS)

@@ -158,9 +158,9 @@ def test_grasp_controller_ports_are_named(scene, three_finger_hold):
         swing_lift=0.008,
         contact_distance=1e-3,
     )
-    controller = GraspController(scene, schedule, gains, mu=0.49)
+    controller = GraspController(scene, gains, mu=0.49)
     names = [controller.get_input_port(i).get_name() for i in range(controller.num_input_ports())]
-    assert names == ["box_state", "hand_state"]
+    assert names == ["box_state", "hand_state", "plan"]
     assert controller.get_output_port().get_name() == "actuation" and controller.get_output_port().size() == 8
     # the lifted finger is out of contact for the whole hold: no planned force, no force budget
     np.testing.assert_array_equal(schedule.force_scale[:, 0], 0.0)
@@ -325,11 +325,12 @@ def test_grasp_controller_pushes_along_the_normal_where_a_disc_is_touched_now():
         swing_lift=gains.grasp.swing_lift,
         contact_distance=gains.grasp.contact_distance,
     )
-    controller = GraspController(disc, schedule, gains, mu=0.56)
+    controller = GraspController(disc, gains, mu=0.56)
     p_WF = reference.p_WF[0]
     radial = p_WF / np.linalg.norm(p_WF, axis=1, keepdims=True)  # the disc's centre at the origin
     for turn in (0.0, 0.1):
-        f_W, n_W = controller.finger_forces(0, np.array([0.0, 0.0, turn, 0.0, 0.0, 0.0]), p_WF, controller.planned)
+        box_state = np.array([0.0, 0.0, turn, 0.0, 0.0, 0.0])
+        f_W, n_W = controller.finger_forces(schedule, 0, box_state, p_WF, controller.planned)
         lean = np.arcsin(
             radial[:, 0] * n_W[:, 1] - radial[:, 1] * n_W[:, 0]
         )  # rad; the outline's facets (1 cm at most) leave ~0.01
@@ -408,23 +409,23 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     )
     gains = ControllerGains()
     schedule = schedule_of(reference, scene, gains, 2.0)
-    controller = LandingReflex(scene, schedule, gains, mu_assumed=0.7)
+    controller = LandingReflex(scene, gains)
     landing = int(np.argmax(schedule.force_scale[schedule.index(1.0) :, 0] >= 1.0)) + schedule.index(1.0)
     assert schedule.index(1.4) < landing <= schedule.index(1.5)
-    calm, pushed = controller.landing_triggered(0.7, 0.0), controller.landing_triggered(0.7, 1.0)
-    slipped = controller.landing_triggered(0.4, 0.0)
+    calm, pushed = controller.landing_triggered(0.7, 0.0, 0.7), controller.landing_triggered(0.7, 1.0, 0.7)
+    slipped = controller.landing_triggered(0.4, 0.0, 0.7)
     assert not calm and pushed and slipped
     n = schedule.index(1.0)  # the swing's core: finger 0 has no force budget
     assert schedule.force_scale[n, 0] == 0.0
-    np.testing.assert_array_equal(controller.landing_clocks(n, np.full(4, n - 1), calm), [n] * 4)
+    np.testing.assert_array_equal(controller.landing_clocks(schedule, n, np.full(4, n - 1), calm), [n] * 4)
     speedup = int(gains.landing_reflex.speedup)
     for estimates in (pushed, slipped):
-        clocks = controller.landing_clocks(n, np.full(4, n - 1), estimates)
+        clocks = controller.landing_clocks(schedule, n, np.full(4, n - 1), estimates)
         np.testing.assert_array_equal(clocks, [n - 1 + speedup, n, n, n])
     # once begun, the landing goes on without the trigger, stops at the landing and waits there
     clocks, steps = np.full(4, n - 1), 0
     for k in range(n, landing + 5):
-        clocks = controller.landing_clocks(k, clocks, pushed if k == n else calm)
+        clocks = controller.landing_clocks(schedule, k, clocks, pushed if k == n else calm)
         steps += 1
         if clocks[0] == landing:
             break
@@ -433,14 +434,16 @@ def test_landing_reflex_runs_a_swing_ahead_to_its_landing_and_waits_there(scene)
     slow = int(gains.landing_reflex.approach_speedup)
     assert clocks[0] == landing and steps <= (landing - n - approach) / (speedup - 1) + approach / (slow - 1) + 2
     # a fingertip that lags its target holds its sample
-    lagging = controller.landing_clocks(n, np.full(4, n - 1), pushed, lag=np.full(4, 2 * gains.landing_reflex.lag))
+    lagging = controller.landing_clocks(
+        schedule, n, np.full(4, n - 1), pushed, lag=np.full(4, 2 * gains.landing_reflex.lag)
+    )
     np.testing.assert_array_equal(lagging, [n] * 4)
-    assert controller.landing_clocks(n + steps + 1, clocks, calm)[0] == landing
-    assert controller.landing_clocks(landing + 3, clocks, calm)[0] == landing + 3
+    assert controller.landing_clocks(schedule, n + steps + 1, clocks, calm)[0] == landing
+    assert controller.landing_clocks(schedule, landing + 3, clocks, calm)[0] == landing + 3
     # land_speedup 1: no reflex
-    off = LandingReflex(
-        scene, schedule, with_values(gains, {"landing_reflex.speedup": 1.0}), mu_assumed=0.7
-    ).landing_clocks(n, np.full(4, n - 1), pushed)
+    off = LandingReflex(scene, with_values(gains, {"landing_reflex.speedup": 1.0})).landing_clocks(
+        schedule, n, np.full(4, n - 1), pushed
+    )
     np.testing.assert_array_equal(off, [n] * 4)
 
 

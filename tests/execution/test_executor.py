@@ -41,13 +41,13 @@ def system_names(diagram) -> set[str]:
     [
         (Executor.GRASP, "grasp_controller", GraspController),
         (Executor.GRASP_CLOSED_LOOP, "grasp_controller", ClosedLoopGraspController),
-        (Executor.GRASP_REPLAN, "grasp_controller", ClosedLoopGraspController),
         (Executor.PAPER, "impedance_controller", ImpedanceController),
     ],
 )
 def test_each_executor_builds_its_own_systems(scene, executor, controller, kind):
     """The executor is dispatched once, where the Diagram is built: the closed loop's systems exist
-    exactly for the closed-loop executors, and the open-loop grasp controller reads the state alone."""
+    exactly for the closed-loop executors, and the open-loop grasp controller reads the state and the
+    plan alone (grasp-replan, which needs a PlanResult: tests/execution/test_replanner_system.py)."""
     reference = static_hold_reference(scene, HOLD_ARCLENGTHS, min_normal_force=1.0, duration=0.2)
     execution = build_execution_diagram(reference, Config(), executor=executor)
     names = system_names(execution.executor.diagram)
@@ -61,6 +61,7 @@ def test_each_executor_builds_its_own_systems(scene, executor, controller, kind)
         assert [system.get_input_port(i).get_name() for i in range(system.num_input_ports())] == [
             "box_state",
             "hand_state",
+            "plan",
         ]
 
 
@@ -107,7 +108,6 @@ def plan_dir(tmp_path, scene):
         (["--executor", "paper", "--closed-loop"], "--executor paper names the whole executor: give it without "),
         (["--executor", "grasp", "--replan"], "without --replan"),
         (["--closed-loop", "--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
-        (["--executor", "grasp-replan", "--html", "run.html"], "grasp-replan records no playback (--html)"),
     ],
 )
 def test_simulate_refuses_an_executor_that_does_not_exist_and_writes_nothing(

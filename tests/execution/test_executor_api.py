@@ -48,7 +48,7 @@ def test_the_executor_has_its_ports_by_name_and_its_doc_names_each(executor):
     closed = {"box_state": 6, "hand_state": 16, "contact_results": 0, "box_contact_forces": 3}
     assert inputs == expected.get(executor, closed)
     if executor == "grasp-closed-loop":
-        assert set(outputs) == {"actuation", *executor_module.CLOSED_LOOP_OUTPUTS}
+        assert set(outputs) == {"actuation", "plan", *executor_module.CLOSED_LOOP_OUTPUTS}
         assert outputs["mu_estimate"] == 1 and outputs["disturbance"] == 2 and outputs["tracking_error"] == 3
     doc = executor_module.__doc__
     for name in {*inputs, *outputs}:

@@ -389,3 +389,43 @@ def test_polygon_playback_draws_the_polygon(pages, triangle_html):
     assert page.page.inner_text("#tt-legend").splitlines()[1:3] == ["object", "planned object pose (outline)"]
     page.frame_at(0.25)
     assert page.page.inner_text("#tt-drop-note") == f"object dropped at {drop:.2f} s"
+
+
+# ---- a replanned run (playback.html): one Simulator, its playback as any other's -------------------
+
+
+@pytest.fixture(scope="module")
+def replanned_run(tmp_path_factory):
+    """A two-segment plan (0.3 rad) executed with replanning in a world of friction 0.3, with a tracking
+    threshold that makes it replan at its node (1.2 s): its playback.html, GIF and result."""
+    from trajectotree.config import with_values
+    from trajectotree.execution.run import run_simulation
+    from trajectotree.planning.planners import plan
+
+    result = plan(goal=0.3, config=with_values(Config(), {"search.num_nodes": 3}))
+    assert result.success, result.status
+    tight = {"controller.replan.theta_error": 1e-4, "controller.replan.position_error": 1e-5}
+    config = with_values(result.config, tight | {"controller.replan.max_replans": 1})
+    folder = tmp_path_factory.mktemp("playback")
+    path, gif = folder / "playback.html", folder / "replan.gif"
+    run = run_simulation(plan=result, config=config, executor="grasp-replan", sim_mu=0.3, html_path=path, gif_path=gif)
+    assert len(run.replans) == 1 and path.exists() and gif.stat().st_size > 0
+    return SimpleNamespace(path=path, result=run, plan=result)
+
+
+# The run before the page: with the browser started first, the run's planner hung (no chromium left running).
+def test_a_replanned_run_writes_its_playback(replanned_run, pages):
+    page = pages.open(replanned_run.path)
+    run, (event,) = replanned_run.result, replanned_run.result.replans
+    assert page.requests == [replanned_run.path.resolve().as_uri()] and page.errors == []
+    # the whole run in one recording: past the first plan's end by the hold while the planner ran
+    duration = page.page.evaluate("() => viewer.animator.duration")
+    assert duration == pytest.approx(run.t[-1], abs=0.05)
+    assert run.t[-1] >= replanned_run.plan.trajectory.t[-1] + event.latency_s
+    # the box is drawn where the simulation had it, before the replan and at the end
+    for t in (0.5 * event.time_s, run.t[-1]):
+        i = int(np.argmin(np.abs(run.t - t)))
+        rows, cols = np.nonzero(box_pixels(page.frame_at(run.t[i])))
+        assert rows.size > 2000
+        row, col = to_pixel(run.x[i, :2])
+        assert abs(np.mean(rows) - row) < 6 and abs(np.mean(cols) - col) < 6, (t, np.mean(rows), np.mean(cols))

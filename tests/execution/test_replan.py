@@ -170,7 +170,6 @@ def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
             ["--friction-floor", "0"],
             "--friction-floor (controller.estimators.friction_floor) = 0.0 is out of range; valid range: (0, 1]",
         ),
-        (["--html", "run.html"], "grasp-replan records no playback (--html)"),
         (["--controller", "paper"], "controller = 'paper': the closed loop runs around the grasp"),
     ],
 )

@@ -352,11 +352,6 @@ def simulate_into(args) -> int:
         check_plan_arrays(arrays, scene.num_fingers)
     conditions = world_conditions(args, config, float(arrays["t"][-1] - arrays["t"][0]))
     executor = chosen_executor(args, config)
-    playback = [o for o, given in (("--html", args.html), ("--gif", args.gif), ("--meshcat", args.meshcat)) if given]
-    if executor.replans and playback:
-        raise ConfigError(
-            f"{executor.value} records no playback ({', '.join(playback)}): run it without, or with another executor"
-        )
     plan_success = bool(files.data.get("success"))
     if not plan_success:
         print(
@@ -372,18 +367,18 @@ def simulate_into(args) -> int:
     if executor.replans:  # the planner needs the plan itself (its goal and config), not only its arrays
         from trajectotree.io import load_plan
 
-        result = run_simulation(plan=load_plan(args.plan_dir), config=config, executor=executor, **conditions)
+        plan = load_plan(args.plan_dir)
     else:
-        reference = reference_from_arrays(arrays, build_scene(config.scene))
-        result = run_simulation(
-            plan=reference,
-            config=config,
-            meshcat=meshcat,
-            html_path=args.html,
-            gif_path=args.gif,
-            executor=executor,
-            **conditions,
-        )
+        plan = reference_from_arrays(arrays, build_scene(config.scene))
+    result = run_simulation(
+        plan=plan,
+        config=config,
+        meshcat=meshcat,
+        html_path=args.html,
+        gif_path=args.gif,
+        executor=executor,
+        **conditions,
+    )
     save_sim(result, args.plan_dir)
     summary = save_sim_json_with_plan_status(result, args.plan_dir, plan_success)
     if args.forces:

@@ -40,7 +40,7 @@ from pydrake.multibody.plant import ContactResults
 from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
-from trajectotree.execution.reference import GraspSchedule
+from trajectotree.execution.in_effect import declare_plan_input
 from trajectotree.geometry import wrap_angle
 from trajectotree.scene.hand import HandDescription, finger_bodies
 
@@ -137,19 +137,20 @@ class PeriodicSystem(LeafSystem):
 
 
 class ContactMonitor(PeriodicSystem):
-    """Input ports `contact_results` (the plant's) and `box_state` (6: x, y, theta and their
-    rates). Output ports, per finger (F each): `in_contact` (1/0), `slipping` (1/0),
+    """Input ports `contact_results` (the plant's), `box_state` (6: x, y, theta and their
+    rates) and `plan` (the PlanInEffect, trajectotree.execution.in_effect). Output ports, per finger
+    (F each): `in_contact` (1/0), `slipping` (1/0),
     `force_ratio`, `normal_force` (N), `slip_speed` and `approach_speed` (m/s: how fast a
     contact point slides, and opens or closes); and the box's `tracking_error` (3: measured -
     planned pose, theta wrapped)."""
 
-    def __init__(self, plant, hand, box, description: HandDescription, schedule: GraspSchedule, gains: ControllerGains):
+    def __init__(self, plant, hand, box, description: HandDescription, gains: ControllerGains):
         self._num_fingers = description.num_fingers
         four = np.zeros(self._num_fingers)
         outputs = {"in_contact": four, "slipping": four, "force_ratio": four, "normal_force": four}
         outputs |= {"slip_speed": four, "approach_speed": four}
         super().__init__(1.0 / gains.rate_hz, outputs | {"tracking_error": np.zeros(3)})
-        self.schedule, self.gains = schedule, gains
+        self.gains = gains
         self._finger_of_body = {
             body.index(): i for i, f in enumerate(description.fingers) for body in finger_bodies(plant, hand, f)
         }
@@ -158,9 +159,10 @@ class ContactMonitor(PeriodicSystem):
             "contact_results", AbstractValue.Make(ContactResults())
         )
         self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+        self.plan_port = declare_plan_input(self)
 
     def update(self, context) -> dict:
-        s, g = self.schedule, self.gains
+        s, g = self.plan_port.Eval(context).schedule, self.gains
         contacts = finger_contacts(
             self.contact_results_port.Eval(context), self._finger_of_body, self._box_body, self._num_fingers
         )
@@ -211,14 +213,15 @@ class ObjectMonitor(PeriodicSystem):
 
 class FrictionEstimator(PeriodicSystem):
     """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (4 each,
-    ContactMonitor's), `tracking_error` (3, ContactMonitor's) and `reflex` (1, PushReflex's).
+    ContactMonitor's), `tracking_error` (3, ContactMonitor's), `reflex` (1, PushReflex's) and `plan` (the
+    PlanInEffect, whose schedule says when the plan loads a finger).
     Output port `mu_estimate` (1): the friction the plan assumed, `mu_assumed` (its scene.mu; not the
     search's planning friction config.mu_plan), until a contact has slid
     steadily for gains.estimators.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
     slide's last slip_confirm_time, never below gains.estimators.friction_floor and never raised.
     A slide sample counts while no reflex is on and the box is within
     gains.estimators.friction_evidence_error of the plan (its position, and its angle times
-    `torque_length`), when the plan loads the finger fully (`schedule.force_scale` 1), it
+    `torque_length`), when the plan loads the finger fully (its schedule's force_scale 1), it
     pushes with at least gains.estimators.friction_evidence_force, its normal force changed by at most
     STEADY_NORMAL_FORCE since the last sample and its contact neither opens nor closes faster
     than STEADY_APPROACH_SPEED: in Drake's lagged contact model (friction bounded by the
@@ -229,11 +232,11 @@ class FrictionEstimator(PeriodicSystem):
     pushes at 0.7, 0.26-0.38 at 0.3-0.4). The median, not the mean: single steady ratios still
     lie up to 0.05 below or 0.02 above it."""
 
-    def __init__(self, mu_assumed: float, torque_length: float, schedule: GraspSchedule, gains: ControllerGains):
+    def __init__(self, mu_assumed: float, torque_length: float, num_fingers: int, gains: ControllerGains):
         period = 1.0 / gains.rate_hz
         # Samples in slip_confirm_time (at least one); a period's rounding must not drop one.
         self._window = max(int(np.floor(gains.estimators.slip_confirm_time / period + 1e-9)), 1)
-        self._num_fingers = schedule.force_scale.shape[1]
+        self._num_fingers = num_fingers
         four = np.zeros(self._num_fingers)
         internal = {
             "slide_samples": four,
@@ -241,20 +244,22 @@ class FrictionEstimator(PeriodicSystem):
             "normal_force": four,
         }
         super().__init__(period, {"mu_estimate": max(mu_assumed, gains.estimators.friction_floor)}, internal)
-        self.gains, self.schedule = gains, schedule
+        self.gains = gains
         self.slipping_port = self.DeclareVectorInputPort("slipping", self._num_fingers)
         self.force_ratio_port = self.DeclareVectorInputPort("force_ratio", self._num_fingers)
         self.normal_force_port = self.DeclareVectorInputPort("normal_force", self._num_fingers)
         self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", self._num_fingers)
         self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
         self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", 3)
+        self.plan_port = declare_plan_input(self)
         self._scale = np.array([1.0, 1.0, torque_length])  # rad -> m at the box's rim
 
     def update(self, context) -> dict:
         normal = self.normal_force_port.Eval(context)
         steady = np.abs(normal - self.state(context, "normal_force")) <= STEADY_NORMAL_FORCE * normal
         steady &= self.approach_speed_port.Eval(context) <= STEADY_APPROACH_SPEED
-        loaded = self.schedule.force_scale[self.schedule.index(context.get_time())] >= 1.0
+        schedule = self.plan_port.Eval(context).schedule
+        loaded = schedule.force_scale[schedule.index(context.get_time())] >= 1.0
         pushing = normal >= self.gains.estimators.friction_evidence_force
         pushed = self.reflex_port.Eval(context)[0] > 0.0
         off = (

@@ -34,8 +34,8 @@ from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
 from trajectotree.execution.fingers import HandKinematics, check_finger_major
+from trajectotree.execution.in_effect import declare_plan_input
 from trajectotree.execution.reference import GraspSchedule
-from trajectotree.execution.reflexes import next_landing
 from trajectotree.geometry import rotation_2d, wrap_angle
 from trajectotree.scene.plant import Scene
 from trajectotree.scene.statics import cone_rows, grasp_matrix_W, perp, torque_rows
@@ -130,17 +130,18 @@ class Estimates:
 class GraspController(LeafSystem):
     """Object-level grasp control of a planned box motion, open loop (see the module doc).
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
-    joint) and `hand_state` (4F for F fingers: the hand's [q; v]). Output port:
+    joint), `hand_state` (4F for F fingers: the hand's [q; v]) and `plan` (the PlanInEffect whose
+    schedule it follows: trajectotree.execution.in_effect). Output port:
     `actuation` (2F, N m, the plant's actuation order), updated every 1 / gains.rate_hz s and held
     in between. `mass` is the plan's and `mu` the friction its QP's cones allow
     (simulate passes max(search, controller friction_safety) x scene.mu), not the simulated plant's."""
 
     TORQUE_ROWS = False  # the QP bounds the joint torques its forces make (GraspForceQp)
 
-    def __init__(self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float):
+    def __init__(self, scene: Scene, gains: ControllerGains, *, mu: float):
         super().__init__()
         c = scene.config
-        self.gains, self.schedule = gains, schedule
+        self.gains = gains
         self._kinematics, self._tip_radius = HandKinematics(scene.fingers, c.gravity), scene.tip_radius
         self._gravity = c.gravity
         self._shape = c.shape
@@ -150,7 +151,6 @@ class GraspController(LeafSystem):
         self._tau_max = np.array([f.tau_max for f in scene.fingers])  # (F, 2) N m
         check_finger_major(scene)
         self._num_fingers, self._num_joints = scene.num_fingers, scene.num_hand_joints
-        self._landing = next_landing(schedule.force_scale)
         # m, the torque length of the wrench QP: the circumradius (the box's half diagonal)
         self._qp = GraspForceQp(
             mu,
@@ -163,6 +163,7 @@ class GraspController(LeafSystem):
         self._u_from_tau = B[scene.hand_v_indices].T  # hand-joint torques -> actuation
         self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
         self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * scene.num_hand_joints)
+        self.plan_port = declare_plan_input(self)
         state = self.DeclareDiscreteState(B.shape[1])
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
@@ -172,42 +173,44 @@ class GraspController(LeafSystem):
         """What the controller assumes now: the plan's values."""
         return self.planned
 
-    def clocks(self, context) -> np.ndarray:
-        """(F,) int, the schedule sample each finger follows now: the plan's."""
-        return np.full(self._num_fingers, self.schedule.index(context.get_time()))
+    def clocks(self, context, schedule: GraspSchedule) -> np.ndarray:
+        """(F,) int, the sample of `schedule` each finger follows now: the plan's."""
+        return np.full(self._num_fingers, schedule.index(context.get_time()))
 
     def UpdateActuation(self, context, discrete_state):
         box_state, hand_state = self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
+        s = self.plan_port.Eval(context).schedule
         discrete_state.set_value(
             self.compute_actuation(
-                context.get_time(), box_state, hand_state, self.estimates(context), self.clocks(context)
+                s, context.get_time(), box_state, hand_state, self.estimates(context), self.clocks(context, s)
             )
         )
         return EventStatus.Succeeded()
 
-    def desired_acceleration(self, n: int, box_state, estimates: Estimates) -> np.ndarray:
-        """(3,) the box's desired acceleration at sample n: the plan's, with pose and velocity feedback
+    def desired_acceleration(self, s: GraspSchedule, n: int, box_state, estimates: Estimates) -> np.ndarray:
+        """(3,) the box's desired acceleration at sample n of `s`: the plan's, with pose and velocity feedback
         (the push reflex raises the gains; kd grows with the square root of kp: the same damping ratio,
         a faster response)."""
-        s, g = self.schedule, self.gains
+        g = self.gains
         error = s.X[n] - box_state[:3]
         error[2] = wrap_angle(error[2])
         boost = 1.0 + estimates.reflex * (g.push_reflex.gain - 1.0)
         kp, kd = boost * g.grasp.object_kp, np.sqrt(boost) * g.grasp.object_kd
         return s.A[n] + kp * error + kd * (s.V[n] - box_state[3:])
 
-    def desired_wrench(self, n: int, box_state, estimates: Estimates) -> np.ndarray:
-        """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n, cancelling the disturbance."""
+    def desired_wrench(self, s: GraspSchedule, n: int, box_state, estimates: Estimates) -> np.ndarray:
+        """(f_x N, f_y N, torque N m) the fingers should apply to the box at sample n of `s`, cancelling the
+        disturbance."""
         mass, inertia = estimates.mass, self._scene_config.inertia_zz(estimates.mass)
-        a = self.desired_acceleration(n, box_state, estimates)
+        a = self.desired_acceleration(s, n, box_state, estimates)
         wrench = np.array([mass * a[0], mass * (a[1] + self._gravity), inertia * a[2]])
         wrench[:2] -= self.gains.push_reflex.disturbance_feedforward * estimates.disturbance
         return wrench
 
     def finger_forces(
-        self, n: int, box_state, p_WF, estimates: Estimates, joints=None, *, at=None, scale=None
+        self, s: GraspSchedule, n: int, box_state, p_WF, estimates: Estimates, joints=None, *, at=None, scale=None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """f_W (F, 2), the force each finger should apply to the box at sample n (QP),
+        """f_W (F, 2), the force each finger should apply to the box at sample n of `s` (QP),
         and n_W (F, 2), the outward normals of the faces it pushes on. The forces act
         where the measured fingertips p_WF (F, 2) touch the faces: a sphere rolls along
         the face as the box turns, and with the planned points instead, 2 mm of rolling
@@ -218,7 +221,6 @@ class GraspController(LeafSystem):
         a disc's normals cannot make, squeezed to 3 N and let go (4 of 12 disc goals
         dropped). `joints` = (J_WF (F, 2, 2), the other joint torques (F, 2)), which a
         closed-loop controller's QP bounds."""
-        s = self.schedule
         R = rotation_2d(box_state[2])
         p_BF = (p_WF - box_state[:2]) @ R  # R^T (p_WF - p): the measured fingertips in B
         n_W = self._shape.face_normals(self._shape.nearest_points(p_BF)) @ R.T
@@ -227,7 +229,7 @@ class GraspController(LeafSystem):
         G = grasp_matrix_W(r_W, n_W)
         at = (n, slice(None)) if at is None else at  # each finger's sample (all n but a finger landing early)
         scale = s.force_scale[at] if scale is None else scale
-        wrench = self.desired_wrench(n, box_state, estimates)
+        wrench = self.desired_wrench(s, n, box_state, estimates)
         lam = self.grasp_forces(G, wrench, s.lambda_plan[at], scale, estimates, (n_W, t_W), joints)
         return -lam[:, :1] * n_W + lam[:, 1:] * t_W, n_W
 
@@ -239,10 +241,12 @@ class GraspController(LeafSystem):
             G, wrench, lambda_plan, scale * g.grasp.min_normal_force, scale * g.grasp.max_normal_force
         )
 
-    def compute_actuation(self, t: float, box_state, hand_state, estimates: Estimates, clocks) -> np.ndarray:
-        """The actuation at time t; `clocks` (F,) the schedule sample each finger follows (the landing
-        reflex's, trajectotree.execution.reflexes; the plan's sample for all in open loop)."""
-        s, g = self.schedule, self.gains
+    def compute_actuation(
+        self, s: GraspSchedule, t: float, box_state, hand_state, estimates: Estimates, clocks
+    ) -> np.ndarray:
+        """The actuation at time t following the schedule `s`; `clocks` (F,) the sample of `s` each finger
+        follows (the landing reflex's, trajectotree.execution.reflexes; the plan's sample for all in open loop)."""
+        g = self.gains
         n = s.index(t)
         q, v = hand_state[: self._num_joints], hand_state[self._num_joints :]
         p_WF, J_WF, g_hand = self._kinematics(q)
@@ -253,7 +257,7 @@ class GraspController(LeafSystem):
         r_W = s.p_BF[at] @ R.T
         p_target = box_state[:2] + r_W
         if ahead.any():  # a finger landing early runs its path faster
-            near = self._landing[at] - at[0] <= int(round(g.landing_reflex.approach_time / s.period))
+            near = s.landing[at] - at[0] <= int(round(g.landing_reflex.approach_time / s.period))
             rate = np.where(ahead, np.where(near, g.landing_reflex.approach_speedup, g.landing_reflex.speedup), 1.0)[
                 :, None
             ]
@@ -270,25 +274,24 @@ class GraspController(LeafSystem):
         kd = np.where(ahead, g.landing_reflex.tip_kd, g.grasp.tip_kd)[:, None]
         spring = kp * error + kd * (v_target - v_WF)
         joints = (J_WF, np.einsum("fij,fi->fj", J_WF, spring) + g_hand)
-        f_W, n_W = self.finger_forces(n, box_state, p_WF, estimates, joints, at=at, scale=scale)
+        f_W, n_W = self.finger_forces(s, n, box_state, p_WF, estimates, joints, at=at, scale=scale)
         # The force acts on the sphere's surface, tip_radius from its centre along -n_W: through the
         # contact point's Jacobian J_C = J + perp(r_FC) [1 1] (link 2 turns at q1dot + q2dot), a
         # tangential force also turns the second link (without it a static hold settled 0.035 rad off).
         lever = np.sum(perp(-self._tip_radius * n_W) * f_W, axis=1)  # perp(r_FC) . f
         tau = np.einsum("fij,fi->fj", J_WF, spring + f_W) + lever[:, None] + g_hand
         if g.grasp.hand_dynamics:
-            tau = tau + self.link_torques(n, q, box_state, r_W, v_target, J_WF, estimates)
+            tau = tau + self.link_torques(s, n, q, box_state, r_W, v_target, J_WF, estimates)
         return self._u_from_tau @ tau.ravel()
 
-    def link_torques(self, n, q, box_state, r_W, v_target, J_WF, estimates) -> np.ndarray:
+    def link_torques(self, s: GraspSchedule, n, q, box_state, r_W, v_target, J_WF, estimates) -> np.ndarray:
         """(F, 2) the joint torques that move the fingers' own links (gains.grasp.hand_dynamics)."""
-        s = self.schedule
         R = rotation_2d(box_state[2])
         # The motors also move the links: a finger in contact accelerates with the box point it touches
         # (the box at its desired acceleration), so that its own inertia and damping do not eat the QP's
         # forces (Drake's gripper: 0.0083 kg m^2 links, reflected ~20 kg along a face it pushes).
         w = box_state[5]
-        feedback = np.clip(self.desired_acceleration(n, box_state, estimates) - s.A[n], -ACCEL_LIMIT, ACCEL_LIMIT)
+        feedback = np.clip(self.desired_acceleration(s, n, box_state, estimates) - s.A[n], -ACCEL_LIMIT, ACCEL_LIMIT)
         accel = s.A[n] + feedback
         a_BF = (s.v_BF[min(n + 1, len(s.X) - 1)] - s.v_BF[max(n - 1, 0)]) / (2 * s.period)
         swinging = (1.0 - s.force_scale[n])[:, None]
@@ -322,8 +325,8 @@ class ClosedLoopGraspController(GraspController):
 
     TORQUE_ROWS = True
 
-    def __init__(self, scene: Scene, schedule: GraspSchedule, gains: ControllerGains, *, mu: float):
-        super().__init__(scene, schedule, gains, mu=mu)
+    def __init__(self, scene: Scene, gains: ControllerGains, *, mu: float):
+        super().__init__(scene, gains, mu=mu)
         self.friction_port = self.DeclareVectorInputPort("friction", 1)
         self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
         self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
@@ -338,7 +341,7 @@ class ClosedLoopGraspController(GraspController):
             disturbance=np.array(self.disturbance_port.Eval(context)),
         )
 
-    def clocks(self, context) -> np.ndarray:
+    def clocks(self, context, schedule: GraspSchedule) -> np.ndarray:
         return self.clocks_port.Eval(context).astype(int)
 
     def grasp_forces(self, G, wrench, lambda_plan, scale, estimates: Estimates, normals, joints) -> np.ndarray:

@@ -1,7 +1,8 @@
 """An executor as a Diagram that a caller adds to their own DiagramBuilder and wires by port name, as
 Drake's MakeHardwareStation users wire their controllers: `add_executor` adds the controller of one
 `config.executor.Executor` (and, for a closed-loop one, the contact and object monitors, the estimators
-and the reflexes around it: trajectotree.execution.closed_loop, .reflexes) for the caller's plant.
+and the reflexes around it: trajectotree.execution.closed_loop, .reflexes; for grasp-replan also the
+Replanner: trajectotree.execution.replan) for the caller's plant.
 
 Its ports (F fingers; units m, rad, s, N, N m):
 - input `box_state` (6): the object's planar joint [x m, y m, theta rad, xdot m/s, ydot m/s, thetadot rad/s];
@@ -11,16 +12,20 @@ Its ports (F fingers; units m, rad, s, N, N m):
 - output `actuation` (2F): the joint torques, N m, in the plant's actuation input order;
 - closed loop: outputs `mu_estimate` (1), `mass_estimate` (1, kg), `reflex` (1, 0..1), `disturbance` (2, N in W)
   and the contact monitor's per finger (F each) `in_contact` (1/0), `slipping` (1/0), `force_ratio` (1),
-  `slip_speed` (m/s) and the object's `tracking_error` (3: measured - planned pose, m, m, rad).
-The replanning executor runs its closed loop here; its replanner is trajectotree.execution.replan, outside.
+  `slip_speed` (m/s) and the object's `tracking_error` (3: measured - planned pose, m, m, rad);
+- the grasp executors: output `plan` (abstract: the PlanInEffect the controller follows now,
+  trajectotree.execution.in_effect; grasp-replan: the Replanner's, which a replan swaps).
+grasp-replan's Replanner reads `box_state`, `hand_state` and the closed loop's estimates inside the
+Diagram; a run of it lasts until its plan in effect ends (ExecutorSystems.end_s: a swap moves it).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -29,11 +34,15 @@ from trajectotree.config.executor import Executor, parse_executor
 from trajectotree.execution import closed_loop
 from trajectotree.execution.control import ClosedLoopGraspController, GraspController
 from trajectotree.execution.impedance import ImpedanceController
-from trajectotree.execution.reference import GraspSchedule, Reference, grasp_schedule, reference_from_plan
+from trajectotree.execution.in_effect import PLAN_PORT, PlanInEffect, add_plan_source, plan_in_effect
+from trajectotree.execution.reference import Reference, reference_from_plan
 from trajectotree.execution.reflexes import ConeFriction, LandingReflex
-from trajectotree.results import ClosedLoopLog, PlanResult
+from trajectotree.results import ClosedLoopLog, PlanResult, ReplanEvent
 from trajectotree.scene.hand import HandDescription, hand_file, read_hand
 from trajectotree.scene.plant import Scene, build_scene
+
+if TYPE_CHECKING:
+    from trajectotree.execution.replan import Replanner
 
 # The closed loop's outputs besides the actuation: what a ClosedLoopLog records.
 CLOSED_LOOP_OUTPUTS = ClosedLoopLog.MONITOR_ARRAYS + ("mu_estimate", "mass_estimate", "disturbance", "reflex")
@@ -47,22 +56,6 @@ def held_trajectory(times, values, hold: float) -> PiecewisePolynomial:
     return PiecewisePolynomial.FirstOrderHold(times, np.asarray(values).T)
 
 
-def execution_schedule(reference: Reference, config: Config, scene: Scene) -> GraspSchedule:
-    """The grasp controller's schedule of `reference`, sampled at its rate, to the run's end
-    (the plan, then config.sim.settle_time of hold)."""
-    gains = config.controller
-    return grasp_schedule(
-        reference,
-        shape=config.scene.shape,
-        tip_radius=scene.tip_radius,
-        period=1.0 / gains.rate_hz,
-        duration=reference.duration + config.sim.settle_time,
-        ramp_time=gains.grasp.ramp_time,
-        swing_lift=gains.grasp.swing_lift,
-        contact_distance=gains.grasp.contact_distance,
-    )
-
-
 def control_friction(config: Config) -> float:
     """The friction the grasp controller's cones allow: max(search.friction_safety,
     controller.grasp.friction_safety) x scene.mu (never less friction than the plan assumed)."""
@@ -72,13 +65,53 @@ def control_friction(config: Config) -> float:
 @dataclass(frozen=True)
 class ExecutorSystems:
     """What add_executor added: `diagram`, the executor as one system of the caller's Diagram, with the
-    ports the module doc names; the `executor` it runs; its `landing_reflex` (closed loop: a replanned
-    phase restarts it, else None); `duration`, s, the plan's length and config.sim.settle_time of hold."""
+    ports the module doc names; the `executor` it runs; the `reference` it starts with; `settle_s`, s,
+    the hold after the plan (config.sim.settle_time); grasp-replan's `replanner` (else None)."""
 
     diagram: Diagram
     executor: Executor
-    landing_reflex: LandingReflex | None
-    duration: float
+    reference: Reference
+    settle_s: float
+    replanner: Replanner | None = None
+
+    @property
+    def duration(self) -> float:
+        """s, the plan's length and the settle time (a replanned run's first plan's: end_s)."""
+        return self.reference.duration + self.settle_s
+
+    def reference_in_effect(self, root_context) -> Reference:
+        """The reference followed up to now (a replanned run's: the plans spliced at each swap)."""
+        if self.replanner is None:
+            return self.reference
+        return self.replanner.replanning(self.replanner.GetMyContextFromRoot(root_context)).plan.reference
+
+    def end_s(self, root_context) -> float:
+        """s, when the run ends: the end of the plan in effect, then the settle time."""
+        return self.reference_in_effect(root_context).duration + self.settle_s
+
+    def advance_to_end(self, simulator) -> None:
+        """Runs `simulator` (of a Diagram holding this executor) to end_s. A replan moves the end: a
+        monitor stops the Simulator after the step in which it moved, and the run goes on to the new end
+        (one Simulator throughout, its state untouched)."""
+        context = simulator.get_context()
+        target = self.end_s(context)
+        if self.replanner is not None:
+
+            def moved(root) -> EventStatus:
+                if self.end_s(root) != target:
+                    return EventStatus.ReachedTermination(self.diagram, "the plan in effect changed")
+                return EventStatus.Succeeded()
+
+            simulator.set_monitor(moved)
+        while context.get_time() < target:
+            simulator.AdvanceTo(target)
+            target = self.end_s(context)
+
+    def replans(self, root_context) -> tuple[ReplanEvent, ...]:
+        """The replans so far (none but for grasp-replan)."""
+        if self.replanner is None:
+            return ()
+        return self.replanner.replanning(self.replanner.GetMyContextFromRoot(root_context)).events
 
     def GetInputPort(self, name: str):
         return self.diagram.GetInputPort(name)
@@ -102,37 +135,39 @@ def add_paper_controller(builder, reference: Reference, config: Config) -> None:
     builder.ExportOutput(controller.actuation_port, "actuation")
 
 
-def add_grasp_controller(builder, scene: Scene, schedule: GraspSchedule, config: Config) -> None:
-    """The open-loop GraspController with the plan's scene (mass, size) and friction (control_friction)."""
+def add_grasp_controller(builder, scene: Scene, config: Config, plan_output) -> None:
+    """The open-loop GraspController with the plan's scene (mass, size) and friction (control_friction),
+    following the plan of `plan_output` (an output port of a PlanInEffect)."""
     controller = builder.AddNamedSystem(
-        "grasp_controller", GraspController(scene, schedule, config.controller, mu=control_friction(config))
+        "grasp_controller", GraspController(scene, config.controller, mu=control_friction(config))
     )
+    builder.Connect(plan_output, controller.plan_port)
     builder.ExportInput(controller.box_state_port, "box_state")
     builder.ExportInput(controller.hand_state_port, "hand_state")
     builder.ExportOutput(controller.actuation_port, "actuation")
 
 
 def add_closed_loop_grasp(
-    builder, plant, hand, box, description: HandDescription, scene: Scene, schedule, config: Config, mu_assumed: float
-) -> LandingReflex:
+    builder, plant, hand, box, description: HandDescription, scene: Scene, config: Config, mu_assumed: float
+) -> dict:
     """The ClosedLoopGraspController and around it the contact and object monitors, the friction and
     mass estimators, the push reflex (trajectotree.execution.closed_loop), the landing reflex and the
     cones' friction (trajectotree.execution.reflexes), wired to each other and to the exported inputs.
-    mu_assumed: the friction the plan in effect assumes, where the landing reflex compares the estimate
-    and the cones start. Returns the landing reflex."""
+    mu_assumed: the friction the plan assumes at the start, where the cones start. Returns the systems
+    whose input `plan` the caller connects, by name."""
     gains, scene_config = config.controller, config.scene
     controller = builder.AddNamedSystem(
-        "grasp_controller", ClosedLoopGraspController(scene, schedule, gains, mu=control_friction(config))
+        "grasp_controller", ClosedLoopGraspController(scene, gains, mu=control_friction(config))
     )
-    landing = builder.AddNamedSystem("landing_reflex", LandingReflex(scene, schedule, gains, mu_assumed=mu_assumed))
+    landing = builder.AddNamedSystem("landing_reflex", LandingReflex(scene, gains))
     cones = builder.AddNamedSystem("cone_friction", ConeFriction(gains, mu_assumed=mu_assumed))
     monitor = builder.AddNamedSystem(
-        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, schedule, gains)
+        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, gains)
     )
     motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(plant.time_step()))
     friction = builder.AddNamedSystem(
         "friction_estimator",
-        closed_loop.FrictionEstimator(scene_config.mu, scene_config.shape.circumradius, schedule, gains),
+        closed_loop.FrictionEstimator(scene_config.mu, scene_config.shape.circumradius, scene.num_fingers, gains),
     )
     mass = builder.AddNamedSystem(
         "mass_estimator", closed_loop.MassEstimator(scene_config.box_mass, scene_config.gravity, gains)
@@ -177,7 +212,34 @@ def add_closed_loop_grasp(
     builder.ExportOutput(mass.GetOutputPort("mass_estimate"), "mass_estimate")
     for name in ("disturbance", "reflex"):
         builder.ExportOutput(reflex.GetOutputPort(name), name)
-    return landing
+    return {
+        "followers": (controller, landing, monitor, friction),
+        "monitor": monitor,
+        "friction": friction,
+        "mass": mass,
+    }
+
+
+def add_replanner(builder, plan: PlanResult, config: Config, initial: PlanInEffect, loop: dict, segment_workers):
+    """The Replanner of `plan` (trajectotree.execution.replan), reading the measured state (the exported
+    inputs) and the closed loop's estimates (the systems `loop` of add_closed_loop_grasp); its plan
+    output feeds every system that follows the plan."""
+    # Here, not at the top: the replanner loads the planner (search, cito), which no other executor needs.
+    from trajectotree.execution.replan import Replanner
+
+    replanner = builder.AddNamedSystem(
+        "replanner", Replanner(plan, config, build_scene(config.scene), initial, segment_workers)
+    )
+    builder.ConnectInput("box_state", replanner.box_state_port)
+    builder.ConnectInput("hand_state", replanner.hand_state_port)
+    for source, name in (
+        (loop["monitor"], "tracking_error"),
+        (loop["monitor"], "in_contact"),
+        (loop["friction"], "mu_estimate"),
+        (loop["mass"], "mass_estimate"),
+    ):
+        builder.Connect(source.GetOutputPort(name), replanner.GetInputPort(name))
+    return replanner
 
 
 def add_executor(
@@ -190,25 +252,38 @@ def add_executor(
     hand,
     box,
     executor: Executor | str = Executor.GRASP_CLOSED_LOOP,
-    mu_assumed: float | None = None,
     name: str = "executor",
+    segment_workers: int | None = None,
 ) -> ExecutorSystems:
     """Adds the executor `executor` (an Executor or its name) of `plan` (a PlanResult, or a Reference
     with `config`) to `builder` as one Diagram named `name`, for the caller's finalized `plant` (with
     its `scene_graph` and the `hand` and `box` model instances, as scene.plant.add_hand_and_box adds them
-    to a plant of the plan's scene): its ports (module doc) are left for the caller to connect by name.
+    to a plant of the plan's scene): its ports are left for the caller to connect by name (units and
+    sizes: module doc). Inputs: `box_state` (6: the object's planar [x, y, theta] m, m, rad and their
+    rates), `hand_state` (4F: [q rad; v rad/s]) and, closed loop, `contact_results` (the plant's) and
+    `box_contact_forces` (3: N, N, N m on the object). Outputs: `actuation` (2F joint torques, N m);
+    closed loop: `mu_estimate`, `mass_estimate` (kg), `reflex` (0..1), `disturbance` (N in W), per finger
+    `in_contact`, `slipping`, `force_ratio` and `slip_speed` (m/s), and `tracking_error` (m, m, rad);
+    the grasp executors: `plan` (abstract, the PlanInEffect followed now).
     The controller assumes the plan's scene (`config.scene`: its friction and mass), whatever the plant's.
-    mu_assumed: the friction the plan in effect assumes (None: config.scene.mu). The zero-torque executor
-    has only its `actuation` output. ConfigError for a name that is no executor or a Reference without config."""
+    The zero-torque executor has only its `actuation` output. grasp-replan (a PlanResult only: the
+    planner needs its goal) also adds the Replanner (trajectotree.execution.replan; a new plan's later
+    segments on `segment_workers` local processes, None: as planning.planners.plan); simulate it to its
+    ExecutorSystems.end_s, which a replan moves (ExecutorSystems.advance_to_end). ConfigError for a
+    name that is no executor, a Reference without config or a Reference to replan."""
     executor = parse_executor(executor)
     if config is None:
         if not isinstance(plan, PlanResult):
             raise ConfigError("add_executor: give config= with a Reference (only a PlanResult carries its own)")
         config = plan.config
+    if executor.replans and not isinstance(plan, PlanResult):
+        raise ConfigError(
+            f"add_executor(executor={executor.value!r}): give the PlanResult (the planner needs its goal)"
+        )
     scene = build_scene(config.scene)
     reference = plan if isinstance(plan, Reference) else reference_from_plan(plan, scene)
     inner = DiagramBuilder()
-    landing = None
+    replanner = None
     match executor:
         case Executor.NONE:
             zero = inner.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
@@ -216,14 +291,23 @@ def add_executor(
         case Executor.PAPER:
             add_paper_controller(inner, reference, config)
         case Executor.GRASP:
-            add_grasp_controller(inner, scene, execution_schedule(reference, config, scene), config)
+            source = add_plan_source(inner, plan_in_effect(reference, config, scene, config.scene.mu))
+            add_grasp_controller(inner, scene, config, source.get_output_port())
+            inner.ExportOutput(source.get_output_port(), PLAN_PORT)
         case Executor.GRASP_CLOSED_LOOP | Executor.GRASP_REPLAN:
             description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
-            schedule = execution_schedule(reference, config, scene)
-            assumed = config.scene.mu if mu_assumed is None else mu_assumed
-            landing = add_closed_loop_grasp(inner, plant, hand, box, description, scene, schedule, config, assumed)
+            loop = add_closed_loop_grasp(inner, plant, hand, box, description, scene, config, config.scene.mu)
+            initial = plan_in_effect(reference, config, scene, config.scene.mu)
+            if executor.replans:
+                replanner = add_replanner(inner, plan, config, initial, loop, segment_workers)
+                plan_output = replanner.plan_port
+            else:
+                plan_output = add_plan_source(inner, initial).get_output_port()
+            for follower in loop["followers"]:
+                inner.Connect(plan_output, follower.plan_port)
+            inner.ExportOutput(plan_output, PLAN_PORT)
     diagram = builder.AddNamedSystem(name, inner.Build())
-    return ExecutorSystems(diagram, executor, landing, reference.duration + config.sim.settle_time)
+    return ExecutorSystems(diagram, executor, reference, config.sim.settle_time, replanner)
 
 
 def connect_executor(builder, added: ExecutorSystems, plant, hand, box) -> None:

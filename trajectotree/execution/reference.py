@@ -11,6 +11,7 @@ tip frames); forces are those of each finger ON the box, in W.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from pydrake.solvers import MathematicalProgram, Solve
@@ -229,6 +230,23 @@ class GraspSchedule:
 
     def index(self, t: float) -> int:
         return min(int(round(t / self.period)), len(self.X) - 1)
+
+    @cached_property
+    def landing(self) -> np.ndarray:
+        """(N, F) int, next_landing of force_scale: computed once per schedule, for every system that follows it."""
+        return next_landing(self.force_scale)
+
+
+def next_landing(force_scale: np.ndarray) -> np.ndarray:
+    """(N, F) int: for each sample n and finger, the first sample >= n where the finger's force
+    budget is full again (its next planned landing, or n itself while it holds), -1 if none."""
+    N, F = force_scale.shape
+    out = np.full((N, F), -1, dtype=int)
+    nxt = np.full(F, -1, dtype=int)
+    for n in range(N - 1, -1, -1):
+        nxt = np.where(force_scale[n] >= 1.0, n, nxt)
+        out[n] = nxt
+    return out
 
 
 def hermite(t_knots, values, rates, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

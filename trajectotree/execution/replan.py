@@ -1,27 +1,38 @@
-"""Replanning during execution (simulate --replan): the closed loop plans again from the measured
-state when what it measures says the plan no longer holds.
+"""Replanning during execution (executor grasp-replan): the `Replanner`, a system of the execution
+Diagram, plans again from the measured state when what the closed loop measures says the plan no longer
+holds, and swaps the new plan in; one Diagram and one Simulator run the whole execution.
 
-At each node of the plan being executed (where every finger holds the object at rest, the moment a
-plan may start from), the closed loop's estimates and monitor are read: when the friction estimate
-has fallen `friction_drop` below the plan's, the mass estimate is `mass_change` off the plan's, the
-object is `theta_error` or `position_error` off its planned pose, or a finger the plan holds with
-is out of contact, the planner runs from the measured state (trajectotree.planning.start) to the
-same goal, with the estimated friction and mass.
+The Replanner keeps the plan in effect in abstract state (a `Replanning`: the PlanInEffect, the nodes
+still to check, the friction and mass the plan assumes, the replans so far) and puts the PlanInEffect
+on its output port `plan`, which feeds the `plan` input of every system that follows the plan (the grasp
+controller, the landing reflex, the contact monitor and the friction estimator: execution.in_effect), so
+that a swap reaches them all at once. Its periodic unrestricted update (at controller.rate_hz) looks,
+at the first update at or after each node of the plan in effect (where every finger holds the object
+at rest, the moment a plan may start from), at the closed loop's estimates and monitor through its
+input ports: when the friction estimate has fallen `friction_drop` below the plan's, the mass estimate
+is `mass_change` off the plan's, the object is `theta_error` or `position_error` off its planned pose,
+or a finger the plan holds with is out of contact, the planner runs from the measured state
+(trajectotree.planning.start) to the same goal, with the estimated friction and mass.
 
-Honest timing: the simulated world does not wait for the planner. While it runs, the controller
-holds the measured state (with the old plan's forces at the node). The planner solves the new
-plan's first segment before the others (keyframes.solve_first_segment_first) and the new plan takes
-effect once that segment's measured wall-clock compute time has passed in simulated time; each later
-segment begins no earlier than its own measured readiness (the last attempt of it and of its two
-neighbours, whose joint retries could replace it), so the hand holds at a node while a segment is not
-ready. The search gets controller.replan.search_deadline_s, and the first segment must be ready within
-first_segment_deadline_s of the measured state. A
-start the planner refuses, a search without a plan (in time or at all) or a first segment that fails
-(or is not solved in time) is recorded with its typed reason
-(results.ReplanOutcome, the refusal) and the old plan resumes after the same hold; a plan whose later
-segment failed is executed up to that segment and planned again from there. Each phase is the same
-execution Diagram built around the spliced reference, continued from the previous phase's full state
-(plant, controller and estimators).
+Honest timing: the planner runs inside the update, so the simulated world stands still while it
+computes, and its wall-clock compute time is measured; the plan swapped in at the update's time
+t_switch holds the measured state (with the old plan's forces at the node) until t_switch + that time
+in simulated time, as the hand would hold while a real planner ran. The planner solves the new plan's
+first segment before the others (keyframes.solve_first_segment_first) and the new plan takes effect
+once that segment's measured compute time has passed; each later segment begins no earlier than its
+own measured readiness (the last attempt of it and of its two neighbours, whose joint retries could
+replace it), so the hand holds at a node while a segment is not ready. The search gets
+controller.replan.search_deadline_s, and the first segment must be ready within
+first_segment_deadline_s of the measured state. A start the planner refuses, a search without a plan
+(in time or at all) or a first segment that fails (or is not solved in time) is recorded with its typed
+reason (results.ReplanOutcome, the refusal) and the old plan resumes after the same hold; a plan whose
+later segment failed is executed up to that segment and planned again from there. The run ends at the
+end of the plan in effect (and config.sim.settle_time of hold): a swap moves it
+(executor.ExecutorSystems.advance_to_end).
+
+Against the phase-by-phase runs before (one Simulator per phase, its state copied across): a node is
+checked at the first control update at or after it (within one control period, 2 ms at 500 Hz), and a
+swap does not re-run every system's initialization update, so replanned runs differ slightly from those.
 """
 
 from __future__ import annotations
@@ -31,26 +42,17 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import EventStatus, LeafSystem
 
-from trajectotree.config import Config, ConfigError, SceneConfig
-from trajectotree.config.executor import Executor
-from trajectotree.execution import metrics
-from trajectotree.execution.reference import Reference, reference_from_arrays, reference_from_plan
-from trajectotree.execution.simulate import Conditions, build_execution_diagram, collected_log
+from trajectotree.config import Config, SceneConfig
+from trajectotree.execution.in_effect import PLAN_PORT, PlanInEffect, plan_in_effect
+from trajectotree.execution.reference import Reference, reference_from_arrays
 from trajectotree.planning.planners import plan as make_plan
 from trajectotree.planning.start import StartRefused
 from trajectotree.refusal import NoPlan, OnGrids, Refusal, RefusalKind
-from trajectotree.results import (
-    ClosedLoopLog,
-    PlanResult,
-    ReplanEvent,
-    ReplanOutcome,
-    ReplanReason,
-    SimLog,
-    SimResult,
-)
-from trajectotree.scene.plant import Scene, build_scene
+from trajectotree.results import PlanResult, ReplanEvent, ReplanOutcome, ReplanReason
+from trajectotree.scene.plant import Scene
 from trajectotree.start import StartState
 
 # s, over which the reference moves from the old plan's node to the measured state while the planner runs
@@ -66,6 +68,14 @@ class Phase:
     checks: tuple[float, ...]  # s
     ends_short_s: float | None = None  # s
 
+    def due(self, t: float) -> tuple[bool, ReplanReason | None, Phase]:
+        """Whether a check falls at or before `t` (the update at or after a node), the reason it forces
+        (PLAN_ENDS_SHORT where the plan ends short, else None) and the phase after it."""
+        checked = any(c <= t + 1e-9 for c in self.checks)
+        short = self.ends_short_s is not None and self.ends_short_s <= t + 1e-9
+        rest = Phase(tuple(c for c in self.checks if c > t + 1e-9), None if short else self.ends_short_s)
+        return checked or short, ReplanReason.PLAN_ENDS_SHORT if short else None, rest
+
     def after(self, t: float, delay: float = 0.0) -> Phase:
         """The checks after `t`, `delay` later (the old plan resuming after a hold)."""
         end = None if self.ends_short_s is None else self.ends_short_s + delay
@@ -78,49 +88,121 @@ def node_times(plan: PlanResult, start_s: float) -> np.ndarray:
     return start_s + np.asarray(plan.trajectory.t)[::m] - plan.trajectory.t[0]
 
 
-def replan_reason(execution, context, assumed: SceneConfig, config: Config) -> ReplanReason | None:
+def replan_reason(values: dict, assumed: SceneConfig, config: Config) -> ReplanReason | None:
     """Why the plan in effect, which assumes the scene `assumed` (its friction and mass), no longer
-    holds, from the closed loop's outputs at this moment (None: it holds)."""
-    value = {
-        name: closed_loop_output(execution, context, name)
-        for name in ("mu_estimate", "mass_estimate", "tracking_error", "in_contact")
-    }
+    holds, from the closed loop's `values` now (mu_estimate, mass_estimate, tracking_error, in_contact;
+    None: it holds)."""
     rules = config.controller.replan
-    if value["mu_estimate"][0] < assumed.mu - rules.friction_drop:
+    if values["mu_estimate"][0] < assumed.mu - rules.friction_drop:
         return ReplanReason.FRICTION
-    if abs(value["mass_estimate"][0] - assumed.box_mass) > rules.mass_change * assumed.box_mass:
+    if abs(values["mass_estimate"][0] - assumed.box_mass) > rules.mass_change * assumed.box_mass:
         return ReplanReason.MASS
-    error = value["tracking_error"]
+    error = values["tracking_error"]
     if abs(error[2]) > rules.theta_error or np.hypot(error[0], error[1]) > rules.position_error:
         return ReplanReason.TRACKING
-    if np.any(value["in_contact"] < 0.5):
+    if np.any(values["in_contact"] < 0.5):
         return ReplanReason.CONTACT_LOST
     return None
 
 
-def closed_loop_output(execution, context, port: str) -> np.ndarray:
-    """The value of the executor's closed-loop output `port` (trajectotree.execution.executor) now."""
-    diagram = execution.executor.diagram
-    return diagram.GetOutputPort(port).Eval(diagram.GetMyContextFromRoot(context))
+@dataclass(frozen=True, eq=False)
+class Replanning:
+    """The Replanner's state: the `plan` in effect, the `phase` (its nodes still to check), the scene
+    it `assumed` (the last new plan's estimates of friction and mass) and the `events` (each replan)."""
+
+    plan: PlanInEffect
+    phase: Phase
+    assumed: SceneConfig
+    events: tuple[ReplanEvent, ...] = ()
+
+    def __deepcopy__(self, memo) -> Replanning:
+        # Immutable: Drake copies abstract state at each unrestricted update; a copy shares it.
+        return self
 
 
-def estimates(execution, context) -> tuple[float, float]:
-    """(friction, mass kg) as the closed loop estimates them now."""
-    return (
-        float(closed_loop_output(execution, context, "mu_estimate")[0]),
-        float(closed_loop_output(execution, context, "mass_estimate")[0]),
-    )
+class Replanner(LeafSystem):
+    """Replans `plan` (a PlanResult: its goal; executed with `config`) during its execution (module doc).
+    Input ports: `box_state` (6: x m, y m, theta rad and their rates, the object's planar joint),
+    `hand_state` (4F: the hand's [q rad; v rad/s]), `mu_estimate` (1), `mass_estimate` (1, kg),
+    `tracking_error` (3: m, m, rad) and `in_contact` (F, 1/0), the closed loop's outputs of those names.
+    Output port `plan` (abstract: the PlanInEffect). `initial`: the plan in effect at the start (its
+    reference `plan`'s); the later segments of a new plan on `segment_workers` local processes (None: as
+    planning.planners.plan takes them)."""
 
+    def __init__(
+        self, plan: PlanResult, config: Config, scene: Scene, initial: PlanInEffect, segment_workers: int | None
+    ):
+        super().__init__()
+        self._plan, self._config, self._scene, self._segment_workers = plan, config, scene, segment_workers
+        self._num_joints = scene.num_hand_joints
+        start = Phase(tuple(node_times(plan, 0.0)[1:-1]))
+        self._state = self.DeclareAbstractState(AbstractValue.Make(Replanning(initial, start, plan.config.scene)))
+        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * scene.num_hand_joints)
+        self._estimate_ports = {
+            name: self.DeclareVectorInputPort(name, size)
+            for name, size in (("mu_estimate", 1), ("mass_estimate", 1), ("tracking_error", 3))
+        }
+        self._estimate_ports["in_contact"] = self.DeclareVectorInputPort("in_contact", scene.num_fingers)
+        self.plan_port = self.DeclareAbstractOutputPort(
+            PLAN_PORT, lambda: AbstractValue.Make(initial), self.CalcPlan, {self.abstract_state_ticket(self._state)}
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.controller.rate_hz, 0.0, self._Update)
 
-def measured_start(execution, context) -> StartState:
-    plant = execution.plant
-    plant_context = plant.GetMyContextFromRoot(context)
-    x = plant.GetPositions(plant_context, execution.box)
-    return StartState(
-        object_pose=tuple(x),
-        q=tuple(plant.GetPositions(plant_context, execution.hand)),
-        object_velocity=tuple(plant.GetVelocities(plant_context, execution.box)),
-    )
+    def replanning(self, context) -> Replanning:
+        """The state in this system's `context`."""
+        return context.get_abstract_state(self._state).get_value()
+
+    def end_s(self, context) -> float:
+        """s, when the run ends: the plan in effect's end, then config.sim.settle_time of hold."""
+        return self.replanning(context).plan.reference.duration + self._config.sim.settle_time
+
+    def CalcPlan(self, context, output):
+        output.set_value(self.replanning(context).plan)
+
+    def _Update(self, context, state):
+        now = self.replanning(context)
+        t = context.get_time()
+        checked, forced, rest = now.phase.due(t)
+        if not checked or len(now.events) >= self._config.controller.replan.max_replans:
+            return EventStatus.DidNothing()
+        values = {name: port.Eval(context) for name, port in self._estimate_ports.items()}
+        reason = replan_reason(values, now.assumed, self._config) or forced
+        after = dataclasses.replace(now, phase=rest) if reason is None else self.replanned(context, now, reason)
+        state.get_mutable_abstract_state(self._state).set_value(after)
+        return EventStatus.Succeeded()
+
+    def measured_start(self, context) -> StartState:
+        box, hand = self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
+        return StartState(object_pose=tuple(box[:3]), q=tuple(hand[: self._num_joints]), object_velocity=tuple(box[3:]))
+
+    def replanned(self, context, now: Replanning, reason: ReplanReason) -> Replanning:
+        """The state after planning again at this update for `reason` (the world stands still meanwhile)."""
+        t_switch, scene, start = context.get_time(), self._scene, self.measured_start(context)
+        mu, mass = (float(self._estimate_ports[name].Eval(context)[0]) for name in ("mu_estimate", "mass_estimate"))
+        event, new = replan(self._plan, self._config, start, t_switch, reason, mu, mass, scene, self._segment_workers)
+        reference, assumed = now.plan.reference, now.assumed
+        if event.planned:
+            m = new.config.cito.knots_per_segment
+            usable = next((k for k, r in enumerate(event.segment_ready_s) if not np.isfinite(r)), None)
+            arrays = new.trajectory.arrays()
+            if usable is not None:  # the segments before the failed one
+                arrays = {name: values[: usable * m + 1] for name, values in arrays.items()}
+            ready = [r - event.latency_s for r in event.segment_ready_s]
+            new_reference, arrivals = scheduled(reference_from_arrays(arrays, scene), m, ready)
+            reference = spliced(reference, t_switch, start, scene, new_reference, event.takes_effect_s)
+            arrivals = event.takes_effect_s + arrivals
+            if usable is None:
+                phase = Phase(tuple(arrivals[1:-1]))
+            else:  # planned again at the last node reached, once the failure is known
+                known = t_switch + event.compute_s
+                phase = Phase(tuple(arrivals[1:-1]), max(arrivals[-1], known))
+            assumed = new.config.scene
+        else:  # the hand held while the planner ran: the old plan resumes that much later
+            reference = delayed(reference, t_switch, event.latency_s)
+            phase = now.phase.after(t_switch, event.latency_s)
+        swapped = plan_in_effect(reference, self._config, scene, assumed.mu, now.plan.version + 1)
+        return Replanning(swapped, phase, assumed, now.events + (event,))
 
 
 def scheduled(new: Reference, knots_per_segment: int, ready: list[float]) -> tuple[Reference, np.ndarray]:
@@ -210,79 +292,6 @@ def _xdot(reference: Reference) -> np.ndarray:
     return reference.xdot if reference.xdot is not None else np.gradient(reference.x, reference.t, axis=0)
 
 
-def simulate_replanning(
-    plan: PlanResult, config: Config, *, conditions: Conditions | None = None, segment_workers: int | None = None
-) -> SimResult:
-    """Executes `plan` closed loop (grasp controller) in the world of `conditions`, replanning at its
-    nodes as the module doc says (the later segments of a new plan on `segment_workers`, as
-    planning.planners.plan takes them); the whole run, its replans in `replans`."""
-    if plan.trajectory is None:
-        raise ConfigError("simulate --replan: the plan has no trajectory")
-    conditions = conditions or Conditions()
-    scene = build_scene(config.scene)
-    reference = reference_from_plan(plan, scene)
-    phase = Phase(tuple(node_times(plan, 0.0)[1:-1]))
-    events, logs, context, started = [], [], None, time.perf_counter()
-    conditions_json = conditions.to_json(config.scene)
-    assumed = plan.config.scene  # what the plan in effect assumes (the last new plan's estimates)
-    while True:
-        execution = build_execution_diagram(
-            reference, config, executor=Executor.GRASP_REPLAN, conditions=conditions, mu_assumed=assumed.mu
-        )
-        simulator = Simulator(execution.diagram, execution.initial_context(reference))
-        if context is not None:  # the same systems: the state carries over (SceneGraph's geometry ids do not)
-            simulator.get_mutable_context().SetTime(context.get_time())
-            simulator.get_mutable_context().get_mutable_discrete_state().SetFrom(context.get_discrete_state())
-            reflex = execution.executor.landing_reflex
-            reflex.restart(reflex.GetMyMutableContextFromRoot(simulator.get_mutable_context()))
-        simulator.Initialize()
-        now = simulator.get_context().get_time()
-        reason = None
-        checks = [(t, None) for t in phase.checks]
-        if phase.ends_short_s is not None:
-            checks.append((phase.ends_short_s, ReplanReason.PLAN_ENDS_SHORT))
-        for t_check, forced in checks if len(events) < config.controller.replan.max_replans else ():
-            if t_check <= now + 1e-9:
-                continue
-            simulator.AdvanceTo(t_check)
-            reason = replan_reason(execution, simulator.get_context(), assumed, config) or forced
-            if reason is not None:
-                break
-        if reason is None:
-            simulator.AdvanceTo(execution.duration)
-            logs.append(collected_log(execution, simulator, reference, conditions_json, 0.0))
-            break
-        t_switch = simulator.get_context().get_time()
-        logs.append(collected_log(execution, simulator, reference, conditions_json, 0.0))
-        start = measured_start(execution, simulator.get_context())
-        mu, mass = estimates(execution, simulator.get_context())
-        event, new = replan(plan, config, start, t_switch, reason, mu, mass, scene, segment_workers)
-        events.append(event)
-        context = simulator.get_context().Clone()
-        if event.planned:
-            m = new.config.cito.knots_per_segment
-            usable = next((k for k, r in enumerate(event.segment_ready_s) if not np.isfinite(r)), None)
-            arrays = new.trajectory.arrays()
-            if usable is not None:  # the segments before the failed one
-                arrays = {name: values[: usable * m + 1] for name, values in arrays.items()}
-            ready = [r - event.latency_s for r in event.segment_ready_s]
-            new_reference, arrivals = scheduled(reference_from_arrays(arrays, scene), m, ready)
-            reference = spliced(reference, t_switch, start, scene, new_reference, event.takes_effect_s)
-            arrivals = event.takes_effect_s + arrivals
-            if usable is None:
-                phase = Phase(tuple(arrivals[1:-1]))
-            else:  # planned again at the last node reached, once the failure is known
-                known = t_switch + event.compute_s
-                phase = Phase(tuple(arrivals[1:-1]), max(arrivals[-1], known))
-            assumed = new.config.scene
-        else:  # the hand held while the planner ran: the old plan resumes that much later
-            reference = delayed(reference, t_switch, event.latency_s)
-            phase = phase.after(t_switch, event.latency_s)
-    log = _joined(logs, reference, time.perf_counter() - started)
-    result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity, conditions.push_speed(config.scene))
-    return dataclasses.replace(result, replans=tuple(events))
-
-
 def replan(
     plan: PlanResult,
     config: Config,
@@ -354,27 +363,3 @@ def out_of_time(refusal) -> bool:
     if isinstance(refusal, OnGrids):
         return any(out_of_time(why) for _, why in refusal.grids)
     return False
-
-
-def _joined(logs: list[SimLog], reference: Reference, sim_time_s: float) -> SimLog:
-    """The phases' logs as one run: each phase's samples before the next one begins."""
-    ends = [nxt.t[0] - 1e-9 for nxt in logs[1:]] + [np.inf]
-    pieces = [log.t < end for log, end in zip(logs, ends)]
-    t = np.concatenate([log.t[keep] for log, keep in zip(logs, pieces)])
-    closed = None
-    if logs[0].closed_loop is not None:
-        arrays = [log.closed_loop.arrays() for log in logs]
-        closed = ClosedLoopLog(
-            **{name: np.concatenate([a[name][keep] for a, keep in zip(arrays, pieces)]) for name in arrays[0]}
-        )
-    return dataclasses.replace(
-        logs[0],
-        t=t,
-        x=np.concatenate([log.x[keep] for log, keep in zip(logs, pieces)]),
-        q=np.concatenate([log.q[keep] for log, keep in zip(logs, pieces)]),
-        x_plan=reference.object_pose_at(t),
-        f_W=np.concatenate([log.f_W[keep] for log, keep in zip(logs, pieces)]),
-        f_W_plan=reference.forces_at(t),
-        sim_time_s=sim_time_s,
-        closed_loop=closed,
-    )

@@ -1,6 +1,6 @@
 """The public entry to execution: `run_simulation` executes a plan open loop, closed loop
-(trajectotree.execution.closed_loop) or closed loop with replanning (trajectotree.execution.replan).
-Its own module, since replanning builds on the execution Diagram of trajectotree.execution.simulate."""
+(trajectotree.execution.closed_loop) or closed loop with replanning (trajectotree.execution.replan),
+and writes its playback (Meshcat, HTML, GIF) whichever the executor."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from trajectotree.config import Config, ConfigError
 from trajectotree.config.executor import Executor, parse_executor
 from trajectotree.execution import playback
 from trajectotree.execution.reference import reference_from_plan
-from trajectotree.execution.replan import simulate_replanning
 from trajectotree.execution.simulate import (
     Conditions,
     Push,
@@ -47,7 +46,7 @@ def run_simulation(
     holds what they saw). grasp-replan (a PlanResult only, since the planner needs its goal and config)
     also plans again from the measured state when the plan no longer holds, by config.controller.replan's
     rules (trajectotree.execution.replan; the result's replans list each time; the later segments of a new
-    plan on `segment_workers` local processes, None: as planning.planners.plan); it records no playback.
+    plan on `segment_workers` local processes, None: as planning.planners.plan).
     `config` defaults to the plan's own (a PlanResult's config). ConfigError on bad values. A live
     `meshcat` runs in real time; `html_path` writes the recorded playback, `gif_path` a GIF of the run
     (each checked before the run: its name's suffix, .html/.htm or .gif, and a folder that takes new
@@ -60,8 +59,8 @@ def run_simulation(
     if isinstance(push, str):
         push = parse_push(push, config.sim.push_duration)
     conditions = Conditions(mu=sim_mu, mass=sim_mass, push=push)
-    if executor.replans:
-        return _replanning(plan, config, conditions, (meshcat, html_path, gif_path), segment_workers)
+    if executor.replans and not isinstance(plan, PlanResult):
+        raise ConfigError("run_simulation(executor='grasp-replan'): give the PlanResult (the planner needs its goal)")
     for name, path, suffixes in (("html_path", html_path, HTML_SUFFIXES), ("gif_path", gif_path, GIF_SUFFIXES)):
         if path is not None:  # before the run, as the CLI's --html and --gif: never a run lost to its playback
             check_output_file(name, path, suffixes)
@@ -75,6 +74,8 @@ def run_simulation(
         html_path=html_path,
         realtime_rate=1.0 if meshcat is not None else 0.0,
         conditions=conditions,
+        plan=plan if isinstance(plan, PlanResult) else None,
+        segment_workers=segment_workers,
     )
     if gif_path is not None:
         playback.write_gif(
@@ -89,12 +90,3 @@ def run_simulation(
             title=f"simulated run, {controller_text(result.controller)}",
         )
     return result
-
-
-def _replanning(plan, config: Config, conditions, outputs, segment_workers) -> SimResult:
-    """run_simulation's replanning run; ConfigError for what it cannot do."""
-    if not isinstance(plan, PlanResult):
-        raise ConfigError("run_simulation(executor='grasp-replan'): give the PlanResult (the planner needs its goal)")
-    if any(out is not None for out in outputs):
-        raise ConfigError("run_simulation(executor='grasp-replan') records no Meshcat, HTML or GIF playback")
-    return simulate_replanning(plan, config, conditions=conditions, segment_workers=segment_workers)

@@ -6,7 +6,8 @@ from the config, gravity -y), reference sources from the plan (fingertip
 positions, velocities and forces, held at their last value for
 SimConfig.settle_time after the plan ends), a controller (the object-level
 GraspController, default, or eq. 20's ImpedanceController: the `Executor` chosen, one Diagram of its own,
-trajectotree.execution.executor.add_executor),
+trajectotree.execution.executor.add_executor; grasp-replan's holds the Replanner too, and its run lasts
+until the end of the plan in effect: trajectotree.execution.replan),
 loggers of the plant state and of each finger's simulated force on the box
 (`FingertipForces`) and, optionally, a Meshcat visualizer. A run records a
 `SimLog` (the logs beside the plan at the same times), which
@@ -57,7 +58,7 @@ from trajectotree.execution import metrics, playback
 from trajectotree.execution.executor import CLOSED_LOOP_OUTPUTS, ExecutorSystems, add_executor, connect_executor
 from trajectotree.execution.reference import Reference
 from trajectotree.figures.legend import arrow_newtons_per_cm
-from trajectotree.results import ClosedLoopLog, SimLog, SimResult
+from trajectotree.results import ClosedLoopLog, PlanResult, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
 from trajectotree.scene.plant import add_hand_and_box
 
@@ -200,11 +201,15 @@ class ExecutionDiagram:
     state_logger: object  # VectorLogSink of the plant's full state
     force_logger: object  # VectorLogSink of FingertipForces (2F)
     visualizer: object | None  # MeshcatVisualizer or None
-    duration: float  # s, plan length + settle time
     controller: str  # "grasp", "paper" or "none" (uncontrolled)
     # closed loop: {ClosedLoopLog field: VectorLogSink of the output port of that name}; open loop: None
     closed_loop_loggers: dict | None = None
     executor: ExecutorSystems | None = None  # the executor's Diagram (its ports: trajectotree.execution.executor)
+
+    def end_s(self, context) -> float:
+        """s, when the run ends in the root `context`: the plan's length and the settle time (a replanned
+        run's: the plan in effect's, which a replan moves)."""
+        return self.executor.end_s(context)
 
     def initial_context(self, reference: Reference):
         """A context in the plan's first state: object pose x_0, joint angles q_0, at rest."""
@@ -222,12 +227,14 @@ def build_execution_diagram(
     executor: Executor | None = None,
     meshcat: Meshcat | None = None,
     conditions: Conditions = Conditions(),
-    mu_assumed: float | None = None,
+    plan: PlanResult | None = None,
+    segment_workers: int | None = None,
 ) -> ExecutionDiagram:
     """The Diagram that executes `reference` with `executor` (None: config.sim.controller, open loop)
     in the world `conditions` describe; a closed-loop executor adds the monitors, the estimators and
-    the reflexes around the grasp controller (trajectotree.execution.executor) and their loggers. mu_assumed: the
-    friction the plan in effect assumes (None: config.scene.mu; a replanned phase's plan assumed the estimate)."""
+    the reflexes around the grasp controller (trajectotree.execution.executor) and their loggers, and
+    grasp-replan the Replanner of `plan` (the PlanResult of `reference`, whose goal it keeps; the later
+    segments of a new plan on `segment_workers`)."""
     executor = Executor(config.sim.controller) if executor is None else executor
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
@@ -237,13 +244,13 @@ def build_execution_diagram(
     added = add_executor(
         builder,
         plant,
-        reference,
+        reference if plan is None else plan,
         config,
         scene_graph=scene_graph,
         hand=hand,
         box=box,
         executor=executor,
-        mu_assumed=mu_assumed,
+        segment_workers=segment_workers,
     )
     connect_executor(builder, added, plant, hand, box)
     if conditions.push is not None:
@@ -275,7 +282,6 @@ def build_execution_diagram(
         state_logger=state_logger,
         force_logger=force_logger,
         visualizer=visualizer,
-        duration=reference.duration + config.sim.settle_time,
         controller=executor.controller,
         closed_loop_loggers=closed_loop_loggers,
         executor=added,
@@ -299,30 +305,31 @@ def split_state_log(execution: ExecutionDiagram, log) -> tuple[np.ndarray, np.nd
     return log.sample_times().copy(), data[box_start : box_start + 3].T.copy(), data[hand_q].T.copy()
 
 
-def record_log(execution: ExecutionDiagram, simulator: Simulator, reference: Reference, conditions: dict) -> SimLog:
-    """Runs `simulator` to the execution's end; what it logged, beside the plan at the same times. When
-    Drake refuses a step (a state beyond what its solvers take), what it logged before, with the refusal's
-    message as step_error (metrics.detect_divergence: the run diverged)."""
+def record_log(execution: ExecutionDiagram, simulator: Simulator, conditions: dict) -> SimLog:
+    """Runs `simulator` to the execution's end; what it logged, beside the plan it followed (a replanned
+    run's: the plans spliced at each swap) at the same times. When Drake refuses a step (a state beyond
+    what its solvers take), what it logged before, with the refusal's message as step_error
+    (metrics.detect_divergence: the run diverged)."""
     start = time.perf_counter()
     try:
-        simulator.AdvanceTo(execution.duration)
+        execution.executor.advance_to_end(simulator)
     except RuntimeError as e:
-        log = collected_log(execution, simulator, reference, conditions, time.perf_counter() - start, complete=False)
+        log = collected_log(execution, simulator, conditions, time.perf_counter() - start, complete=False)
         return dataclasses.replace(log, step_error=str(e))
-    return collected_log(execution, simulator, reference, conditions, time.perf_counter() - start)
+    return collected_log(execution, simulator, conditions, time.perf_counter() - start)
 
 
 def collected_log(
     execution: ExecutionDiagram,
     simulator: Simulator,
-    reference: Reference,
     conditions: dict,
     sim_time_s: float,
     *,
     complete: bool = True,
 ) -> SimLog:
     """What `simulator` logged so far (to the execution's end, unless not `complete`: a run Drake
-    stopped, whose state is not evaluated again), beside `reference` at the same times."""
+    stopped, whose state is not evaluated again), beside the reference followed at the same times."""
+    reference = execution.executor.reference_in_effect(simulator.get_context())
 
     def log_of(logger):
         return finished_log(execution, simulator, logger) if complete else logger.FindLog(simulator.get_context())
@@ -355,7 +362,7 @@ def collected_log(
 def finished_log(execution: ExecutionDiagram, simulator: Simulator, logger):
     """`logger`'s log, with a last sample at the execution's end (the periodic log can miss it by rounding)."""
     log = logger.FindLog(simulator.get_context())
-    if log.sample_times()[-1] < execution.duration - 1e-9:
+    if log.sample_times()[-1] < execution.end_s(simulator.get_context()) - 1e-9:
         logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
     return log
 
@@ -369,13 +376,24 @@ def simulate_reference(
     html_path: str | Path | None = None,
     realtime_rate: float = 0.0,
     conditions: Conditions = Conditions(),
+    plan: PlanResult | None = None,
+    segment_workers: int | None = None,
 ) -> SimResult:
-    """Runs the execution Diagram of `executor` (None: config.sim.controller, open loop; one that
-    replans runs its closed loop here, without the replanner: execution.replan) for the plan's length
-    plus the settle time; the log it records, evaluated by trajectotree.execution.metrics."""
+    """Runs the execution Diagram of `executor` (None: config.sim.controller, open loop; grasp-replan
+    replans `plan`, the PlanResult of `reference`: execution.replan, its later segments on
+    `segment_workers`) for the plan's length plus the settle time (a replanned run's: the plan in effect's
+    at the end); the log it records, evaluated by trajectotree.execution.metrics, with the replans."""
     if html_path is not None and meshcat is None:
         meshcat = playback.start_meshcat()
-    execution = build_execution_diagram(reference, config, executor=executor, meshcat=meshcat, conditions=conditions)
+    execution = build_execution_diagram(
+        reference,
+        config,
+        executor=executor,
+        meshcat=meshcat,
+        conditions=conditions,
+        plan=plan,
+        segment_workers=segment_workers,
+    )
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:
@@ -383,11 +401,13 @@ def simulate_reference(
         playback.add_plan_ghost(meshcat, config.scene)
         meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
         animation = execution.visualizer.StartRecording()
-    log = record_log(execution, simulator, reference, conditions.to_json(config.scene))
+    log = record_log(execution, simulator, conditions.to_json(config.scene))
     result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity, conditions.push_speed(config.scene))
+    result = dataclasses.replace(result, replans=execution.executor.replans(simulator.get_context()))
     if meshcat is not None:
-        frame_times = np.arange(0.0, execution.duration + 1e-9, playback.PUBLISH_PERIOD)
-        playback.animate_plan_ghost(animation, frame_times, reference.object_pose_at(frame_times))
+        followed = execution.executor.reference_in_effect(simulator.get_context())
+        frame_times = np.arange(0.0, execution.end_s(simulator.get_context()) + 1e-9, playback.PUBLISH_PERIOD)
+        playback.animate_plan_ghost(animation, frame_times, followed.object_pose_at(frame_times))
         if html_path is not None:
             playback.save_recording_html(
                 meshcat,
