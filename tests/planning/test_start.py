@@ -29,11 +29,12 @@ def scene():
 
 @pytest.fixture(scope="module")
 def moved_node(scene):
-    """Node 4 of the search's plan for 0.9 rad, the object 5 mm right and 0.1 rad further turned,
+    """Node 7 of the search's plan for 0.9 rad, the object 5 mm right and 0.1 rad further turned,
     the fingers re-solved (closed-form IK) onto the same contacts (the paper's order of the search's
-    children: its node 4 needs more friction than 0.035, which the refusals below use)."""
+    children: its node 7 needs more friction than 0.035, which the refusals below use). Node 4, used
+    before the fingers were kept apart, is now another grasp whose finger 2 cannot reach its contact so moved."""
     contact_plan = find_contact_plan(scene, 0.9, dataclasses.replace(CONFIG.search, push_capacity=0.0))
-    node = contact_plan.nodes[4]
+    node = contact_plan.nodes[7]
     pose = node.object_pose + np.array([0.005, 0.0, 0.1])
     hand = HandModel.from_scene(scene)
     tips = [box_to_world(pose, node.p_BC[i]) + scene.tip_radius * rotation_2d(pose[2]) @ node.n_B[i] for i in range(4)]
