@@ -40,7 +40,7 @@ def test_a_mass_the_motors_cannot_carry_is_refused_with_the_limit(tmp_path, caps
         assert main(args) == 2, args
         err = capsys.readouterr().err
         assert f"trajectotree {args[0]}: error: {value} is more than the hand can hold" in err, err
-        assert "the strongest of the 2583 candidate initial grasps holds at most 3.22 kg" in err
+        assert "the strongest of the 2139 candidate initial grasps holds at most 3.22 kg" in err
         assert "3.22 kg at rest with four fingers" in err and "1 N m torque limit" in err, err
         assert err.rstrip().endswith("valid range: [0.001, 3.22] kg"), err
     assert listing(tmp_path) == ["heavy.yaml"]  # nothing written
@@ -69,7 +69,7 @@ def test_scene_states_the_payload(capsys):
     assert "the hand CANNOT hold the object's 5 kg (planning refuses it)" in out
     assert main(["scene", "--json"]) == 0
     payload = json.loads(capsys.readouterr().out)["reach"]["payload"]
-    assert payload["grasps"] == 2583 and math.isclose(payload["switch_kg"], 10 / 9.81)
+    assert payload["grasps"] == 2139 and math.isclose(payload["switch_kg"], 10 / 9.81)
 
 
 # ---- values that start with a minus sign ----------------------------------------------------------
@@ -172,10 +172,10 @@ def test_a_long_failure_reason_is_a_short_line_with_the_details_after(capsys):
     assert len(reason) > 250 and "; " in reason  # one line of the search's clauses
     assert main(["search", "--goal", "3.0", "--segments", "1", "--config", str(ONE_GRID)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0] == "goal +3.0000 rad, N = 2: no plan: no plan from 0 searched initial grasp(s) of 2583"
+    assert lines[0] == "goal +3.0000 rad, N = 2: no plan: no plan from 0 searched initial grasp(s) of 2139"
     details = lines[1 : lines.index(next(line for line in lines if line.startswith("search ")))]
     assert all(len(line) <= 2 + REASON_WIDTH for line in details)
-    assert details[0].startswith("  no plan from 0 searched initial grasp(s) of 2583 (2583 skipped by cheap")
+    assert details[0].startswith("  no plan from 0 searched initial grasp(s) of 2139 (2139 skipped by cheap")
     assert "  last searched none" in details and "  moves refused (mu_plan 0.49): none" in details
     # nothing is lost: the lines hold the reason's clauses, in order, wrapped between words
     assert " ".join(line.strip() for line in details) == " ".join(reason.replace("; ", " ").split())

@@ -69,9 +69,9 @@ def test_the_space_reader_refuses_a_planar_hand():
 @pytest.mark.parametrize("given_as", ["name", "file"])
 def test_a_planar_command_refuses_a_hand_in_space_naming_it(tmp_path, capsys, given_as):
     hand = "fingerpro4" if given_as == "name" else str(space_yaml(tmp_path))
-    out = tmp_path / "plan"
-    assert main(["plan", "--hand", hand, "--goal", "0.3", "--out", str(out)]) == 2
+    out = tmp_path / "demo"  # demo, simulate and sweep are planar only so far
+    assert main(["demo", "--hand", hand, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err
-    assert f"hand {hand}: is a hand in space (kind: space): only `trajectotree scene` and" in err
+    assert f"hand {hand}: is a hand in space (kind: space): only `trajectotree scene`, `search` and `plan`" in err
     assert not out.exists()
