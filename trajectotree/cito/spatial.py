@@ -24,8 +24,8 @@ pinned to its old contact at k = 0 and its new one at k = N. The ends are the no
 by Newton's method to the contacts exactly) and rest. The costs are small quadratic ones: the forces, the
 joints' steps and phi.
 
-The Jacobian: lambda enters linearly (analytic); every other column by complex-step differentiation of the
-vectorized rows (exact to rounding), all knots of one parity at once (a pair row meets one knot of each parity).
+The Jacobian is analytic and vectorized over knots and fingers, in the sparsity of what each row depends on
+(SpaceSegmentRows.jacobians, knot_mask, pair_mask).
 """
 
 from __future__ import annotations
@@ -58,7 +58,6 @@ SWITCH_CLEARANCE = 0.01  # m, the lifted fingertip's least gap at mid-segment (s
 WEIGHT_FORCE = 0.01  # per N^2 of edge magnitude
 WEIGHT_JOINT_STEP = 1.0  # per rad^2 of joint motion between knots
 WEIGHT_PHI = 1.0  # per rad^2 of correction
-COMPLEX_STEP = 1e-30
 NEWTON_ITERATIONS = 50  # IK refinements of a fingertip onto its target (damped Newton, converges in ~5)
 
 # Column layout of a knot's variables.
@@ -85,7 +84,7 @@ class _Layout:
         return 3 * len(_NAMES) + self.num_fingers * (self.edges + self.joints)
 
 
-# -- complex-safe kinematics ------------------------------------------------------------------------
+# -- kinematics -------------------------------------------------------------------------------------
 def _skew(v):
     z = np.zeros_like(v[..., 0])
     return np.stack(
@@ -96,15 +95,34 @@ def _skew(v):
 
 
 def _exp(phi):
-    """exp([phi]x) (..., 3, 3) for real or complex-stepped phi (..., 3) (Rodrigues, series near 0)."""
+    """exp([phi]x) (..., 3, 3) for phi (..., 3) (Rodrigues, series near 0)."""
     theta2 = np.sum(phi * phi, axis=-1)[..., None, None]
-    small = np.real(theta2) < 1e-10
+    small = theta2 < 1e-10
     t2 = np.where(small, 1.0, theta2)
     theta = np.sqrt(t2)
     a = np.where(small, 1.0 - theta2 / 6 + theta2**2 / 120, np.sin(theta) / theta)
     b = np.where(small, 0.5 - theta2 / 24 + theta2**2 / 720, (1 - np.cos(theta)) / t2)
     K = _skew(phi)
     return np.eye(3) + a * K + b * (K @ K)
+
+
+def _right_jacobian(phi):
+    """J_r(phi) (..., 3, 3): exp([phi + d]x) = exp([phi]x) exp([J_r d]x) to first order in d (series near 0)."""
+    theta2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    small = theta2 < 1e-10
+    t2 = np.where(small, 1.0, theta2)
+    theta = np.sqrt(t2)
+    a = np.where(small, 0.5 - theta2 / 24 + theta2**2 / 720, (1 - np.cos(theta)) / t2)
+    b = np.where(small, 1.0 / 6 - theta2 / 120 + theta2**2 / 5040, (theta - np.sin(theta)) / (t2 * theta))
+    K = _skew(phi)
+    return np.eye(3) - a * K + b * (K @ K)
+
+
+def _turned(R, J_r, u):
+    """d(R u)/dphi (K, ..., 3, 3) for u (K, ..., 3) fixed in B, R = N exp([phi]x) (K, 3, 3), J_r at phi:
+    -R [u]x J_r."""
+    shape = (len(R),) + (1,) * (u.ndim - 2) + (3, 3)
+    return -R.reshape(shape) @ _skew(u) @ J_r.reshape(shape)
 
 
 def _cross(a, b):
@@ -121,28 +139,37 @@ def _rotate(axis, angle, v):
     return v * c + _cross(a, v) * s + a * np.sum(a * v, -1)[..., None] * (1 - c)
 
 
+def _vee_skew(M):
+    """vee((M - M^T) / 2) (..., 3) of M (..., 3, 3)."""
+    return 0.5 * np.stack([M[..., 2, 1] - M[..., 1, 2], M[..., 0, 2] - M[..., 2, 0], M[..., 1, 0] - M[..., 0, 1]], -1)
+
+
+_BASIS_SKEW = _skew(np.eye(3))  # [e_i]x, i = 0..2
+
+
 @dataclass(frozen=True)
 class _Finger:
     """A finger's chain at zero angles (scene.kinematics.SerialFinger) and its links' masses and centres of
-    mass (link j beyond joint j), for complex-safe forward kinematics and gravity torques."""
+    mass (link j beyond joint j), for forward kinematics and gravity torques; the arrays may carry a leading
+    axis of fingers (_stacked), all with the same number n of joints."""
 
-    p_W_joint: np.ndarray  # (n, 3)
-    a_W: np.ndarray  # (n, 3)
-    p_W_tip0: np.ndarray  # (3,)
-    p_W_com0: np.ndarray  # (n, 3)
-    mass: np.ndarray  # (n,) kg
+    p_W_joint: np.ndarray  # ([F,] n, 3)
+    a_W: np.ndarray  # ([F,] n, 3)
+    p_W_tip0: np.ndarray  # ([F,] 3)
+    p_W_com0: np.ndarray  # ([F,] n, 3)
+    mass: np.ndarray  # ([F,] n) kg
 
     def chain(self, q):
         """(points (..., n, 3), axes (..., n, 3), tip (..., 3), centres of mass (..., n, 3)) at q (..., n):
         joint j turns the joints beyond it, the tip and the links from j on about its current axis."""
-        n = len(self.a_W)
+        n = self.a_W.shape[-2]
         shape = q.shape[:-1]
         # rows: joint points 0..n-1, tip, centres of mass 0..n-1 (points); axes apart (directions)
         P = np.broadcast_to(
-            np.concatenate([self.p_W_joint, self.p_W_tip0[None], self.p_W_com0]), shape + (2 * n + 1, 3)
-        )
-        A = np.broadcast_to(self.a_W, shape + (n, 3))
-        P, A = P.astype(np.result_type(q, float)), A.astype(np.result_type(q, float))
+            np.concatenate([self.p_W_joint, self.p_W_tip0[..., None, :], self.p_W_com0], axis=-2),
+            shape + (2 * n + 1, 3),
+        ).astype(float)
+        A = np.broadcast_to(self.a_W, shape + (n, 3)).astype(float)
         for j in range(n):
             c, a = P[..., j, :], A[..., j, :]
             moving = np.r_[j + 1 : n + 1, n + 1 + j : 2 * n + 1]  # joints beyond j, the tip, links j..n-1
@@ -154,14 +181,54 @@ class _Finger:
         """(tip (..., 3), tau (..., n)): the motors' torques that hold the finger still against its weight and
         push with f_W (..., 3) at the point p_FC_W (..., 3) from the tip centre (quasi-static)."""
         points, axes, tip, coms = self.chain(q)
-        lever = tip + p_FC_W
-        push = np.sum(_cross(axes, lever[..., None, :] - points) * f_W[..., None, :], -1)
+        return tip, self._push(axes, points, tip + p_FC_W, f_W) + self._weight(axes, points, coms, gravity)
+
+    @staticmethod
+    def _push(axes, points, lever, f_W):
+        return np.sum(_cross(axes, lever[..., None, :] - points) * f_W[..., None, :], -1)
+
+    def _weight(self, axes, points, coms, gravity: float):
         # joint j carries links j..n-1: tau_j = sum_l m_l g e_z . (a_j x (c_l - p_j))
         moment = _cross(axes[..., :, None, :], coms[..., None, :, :] - points[..., :, None, :])[..., 2]
-        n = len(self.mass)
+        n = self.a_W.shape[-2]
         beyond = np.triu(np.ones((n, n)))  # [j, l]: link l is beyond joint j
-        weight = gravity * np.sum(moment * beyond * self.mass, -1)
-        return tip, push + weight
+        return gravity * np.sum(moment * beyond * self.mass[..., None, :], -1)
+
+    def derivatives(self, q, f_W, p_FC_W, gravity: float):
+        """(tip (..., 3), tau (..., n), J_tip (..., 3, n) the tip centre's Jacobian, J_C (..., n, 3) the lever
+        rows a_j x (c - p_j) at the contact point c = tip + p_FC_W, dtau/dq (..., n, n), the axes (..., n, 3)).
+        A joint k turns the axes and points beyond it: d a_j = a_k x a_j and d(x - p_j) = a_k x (x - p_j) for
+        k < j; for k >= j only the tip and the links from k on move, d x = a_k x (x - p_k)."""
+        points, axes, tip, coms = self.chain(q)
+        n = self.a_W.shape[-2]
+        lever = tip + p_FC_W
+        J_C = _cross(axes, lever[..., None, :] - points)
+        tau = np.sum(J_C * f_W[..., None, :], -1) + self._weight(axes, points, coms, gravity)
+        U = _cross(axes, tip[..., None, :] - points)  # (..., k, 3): d tip / d q_k
+        a_j, a_k = axes[..., :, None, :], axes[..., None, :, :]  # (..., j, k, 3)
+        before = np.tril(np.ones((n, n)), -1)[..., None]  # [j, k]: k < j
+        to_tip = tip[..., None, :] - points  # (..., j, 3)
+        inner = _cross(_cross(a_k, a_j), (lever[..., None, :] - points)[..., :, None, :]) + _cross(
+            a_j, _cross(a_k, to_tip[..., :, None, :])
+        )
+        outer = _cross(a_j, U[..., None, :, :])
+        dpush = np.sum(np.where(before, inner, outer) * f_W[..., None, None, :], -1)
+        # the weight: [j, k, l]
+        rel = coms[..., None, :, :] - points[..., :, None, :]  # (..., i, l, 3): c_l - p_i
+        rel_j, rel_k = rel[..., :, None, :, :], rel[..., None, :, :, :]  # (..., j, k, l, 3)
+        A_j, A_k = axes[..., :, None, None, :], axes[..., None, :, None, :]
+        inner_g = _cross(_cross(A_k, A_j), rel_j) + _cross(A_j, _cross(A_k, rel_j))
+        outer_g = _cross(A_j, _cross(A_k, rel_k))
+        jj, kk, ll = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+        gz = np.where((kk < jj)[..., None], inner_g, outer_g)[..., 2]
+        carried = (ll >= jj) & (ll >= kk)  # link l carried by joint j and turned by joint k
+        dweight = gravity * np.sum(gz * carried * self.mass[..., None, None, :], -1)
+        return tip, tau, np.swapaxes(U, -1, -2), J_C, dpush + dweight, axes
+
+
+def _stacked(fingers) -> _Finger:
+    """The fingers as one _Finger with a leading axis of fingers (the same number of joints each)."""
+    return _Finger(*(np.stack([getattr(f, name) for f in fingers]) for name in _Finger.__dataclass_fields__))
 
 
 def space_fingers(scene) -> tuple[_Finger, ...]:
@@ -261,6 +328,7 @@ class SpaceSegmentRows:
 
     def __init__(self, scene, fingers, spec: SegmentSpec, mu: float, intervals: int, dt: float):
         self.scene, self.fingers, self.spec = scene, fingers, spec
+        self.hand = _stacked(fingers)  # every finger at once
         F, n = scene.num_fingers, len(scene.fingers[0].q_lower)
         self.layout = _Layout(F, n, PYRAMID_EDGES)
         self.K, self.h = intervals + 1, dt
@@ -305,41 +373,49 @@ class SpaceSegmentRows:
         """(K, F, 3) each finger's force on the object in B."""
         return np.einsum("kfe,kfec->kfc", lam, self.edges_B)
 
-    def knot_values(self, Z):
-        """(rows (K, 9 + 7F): F, T, L balance, fingertip pins (3F), torques (3F... n F), clearance (1)),
-        and the joint torques (K, F, n), the fingertip centres (K, F, 3)."""
+    def _knot(self, Z, derivatives: bool):
+        """The knots' variables, rotations, forces and the fingers' kinematics (with their derivatives)."""
         x = self.split(Z)
         R = self.rotations(x["phi"])
         f_B = self.forces_B(x["lam"])
         f_W = np.einsum("kij,kfj->kfi", R, f_B)
+        n_W = np.einsum("kij,kfj->kfi", R, self.n_B)
+        if derivatives:
+            kin = self.hand.derivatives(x["q"], f_W, -self.r * n_W, self.g)
+        else:
+            kin = self.hand.torques(x["q"], f_W, -self.r * n_W, self.g)
+        return x, R, f_B, f_W, n_W, kin
+
+    def knot_values(self, Z):
+        """(rows (K, 9 + 3F + nF + 1): F, T, L balance, fingertip pins (3F), joint torques (nF), clearance (1)),
+        and the joint torques (K, F, n), the fingertip centres (K, F, 3)."""
+        x, R, f_B, f_W, n_W, (tips, taus) = self._knot(Z, False)
+        return self._rows(x, R, f_B, f_W, tips, taus), taus, tips
+
+    def _rows(self, x, R, f_B, f_W, tips, taus):
         force = x["F"] - f_W.sum(1)
         moment = x["T"] - np.einsum("kij,kj->ki", R, np.cross(self.p_BC, f_B).sum(1))
         momentum = x["L"] - np.einsum("kij,jl,kml,km->ki", R, self.inertia, R, x["w"])
-        n_W = np.einsum("kij,kfj->kfi", R, self.n_B)
-        tips, taus = [], []
-        for i, finger in enumerate(self.fingers):
-            tip, tau = finger.torques(x["q"][:, i], f_W[:, i], -self.r * n_W[:, i], self.g)
-            tips.append(tip)
-            taus.append(tau)
-        tips, taus = np.stack(tips, 1), np.stack(taus, 1)
         targets = x["p"][:, None, :] + np.einsum("kij,kfj->kfi", R, self.p_BC + self.r * self.n_B)
         pins = (tips - targets).reshape(self.K, -1)
-        clearance = np.zeros(self.K, dtype=Z.dtype)
+        clearance = np.zeros(self.K)
         if self.spec.switching is not None:
-            p_B = np.einsum("kji,kj->ki", R, tips[:, self.spec.switching] - x["p"])
-            d = p_B * np.where(np.real(p_B) < 0, -1.0, 1.0) - self.half
-            out = np.where(np.real(d) > 0, d, 0.0)
+            out = self._outside(R, tips[:, self.spec.switching] - x["p"])[1]
             clearance = np.sum(out * out, -1)
-        rows = np.concatenate([force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]], axis=1)
-        return rows, taus, tips
+        return np.concatenate([force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]], axis=1)
+
+    def _outside(self, R, tip_rel):
+        """(p_B (K, 3) the switching fingertip's centre in B, its excess over the box's half sizes, >= 0)."""
+        p_B = np.einsum("kji,kj->ki", R, tip_rel)
+        d = np.abs(p_B) - self.half
+        return p_B, np.where(d > 0, d, 0.0)
 
     def pair_values(self, Z):
         """(K - 1, 3): vee(Q - Q^T) / 2, Q = exp(-[h w_mid]x) R[k+1] R[k]^T."""
         x = self.split(Z)
         R = self.rotations(x["phi"])
         w_mid = 0.5 * (x["w"][1:] + x["w"][:-1])
-        Q = _exp(-self.h * w_mid) @ R[1:] @ np.swapaxes(R[:-1], -1, -2)
-        return 0.5 * np.stack([Q[:, 2, 1] - Q[:, 1, 2], Q[:, 0, 2] - Q[:, 2, 0], Q[:, 1, 0] - Q[:, 0, 1]], -1)
+        return _vee_skew(_exp(-self.h * w_mid) @ R[1:] @ np.swapaxes(R[:-1], -1, -2))
 
     def knot_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         F = self.layout.num_fingers
@@ -353,101 +429,150 @@ class SpaceSegmentRows:
         return np.array(lo), np.array(hi)
 
     # -- the Jacobian ------------------------------------------------------------------------------
+    def knot_mask(self) -> np.ndarray:
+        """(rows, width) bool: the variables of its own knot each knot row depends on."""
+        lay = self.layout
+        F, n, m = lay.num_fingers, lay.joints, lay.edges
+        mask = np.zeros((9 + 3 * F + n * F + 1, lay.width), dtype=bool)
+        mask[:, lay.slice("phi")] = True
+        lam, q = lay.slice("lam").start, lay.slice("q").start
+        for row, name in ((0, "F"), (3, "T"), (6, "L")):
+            mask[row : row + 3, lay.slice(name)] = True
+        mask[0:6, lay.slice("lam")] = True
+        mask[6:9, lay.slice("w")] = True
+        for i in range(F):
+            joints = slice(q + n * i, q + n * (i + 1))
+            mask[9 + 3 * i : 12 + 3 * i, lay.slice("p")] = True
+            mask[9 + 3 * i : 12 + 3 * i, joints] = True
+            taus = slice(9 + 3 * F + n * i, 9 + 3 * F + n * (i + 1))
+            mask[taus, joints] = True
+            mask[taus, lam + m * i : lam + m * (i + 1)] = True
+        if self.spec.switching is None:
+            mask[-1] = False  # no clearance row: zero
+        else:
+            s = self.spec.switching
+            mask[-1, lay.slice("p")] = True
+            mask[-1, q + n * s : q + n * (s + 1)] = True
+        return mask
+
+    def pair_mask(self) -> np.ndarray:
+        """(3, width) bool: the variables of either knot a pair row depends on."""
+        mask = np.zeros((3, self.layout.width), dtype=bool)
+        mask[:, self.layout.slice("phi")] = mask[:, self.layout.slice("w")] = True
+        return mask
+
     def jacobians(self, Z):
         """(knot rows (K, Rk), their Jacobian (K, Rk, width); pair rows (K-1, 3), Jacobians on knot k and
-        k+1 (K-1, 3, width) each). Complex steps: a knot row meets its own knot's variables alone, so a column
-        is stepped at every knot at once, and finger i's rows meet only finger i's joints, so joint j of every
-        finger at once; a pair row meets knots k and k+1, so phi and w are stepped at one parity at a time.
-        F, T and L enter their rows with the identity, v no knot row, lambda linearly (_lambda_columns)."""
+        k+1 (K-1, 3, width) each), analytic: R = N exp([phi]x) perturbs as R exp([J_r dphi]x), so a vector
+        u fixed in B turns as d(R u) = -R [u]x J_r dphi (_turned)."""
         lay = self.layout
-        rows, _, _ = self.knot_values(Z)
-        pair = self.pair_values(Z)
-        Jk = np.zeros(rows.shape + (lay.width,))
-        Jl = np.zeros(pair.shape + (lay.width,))
-        Jr = np.zeros(pair.shape + (lay.width,))
-        q0, F, n = lay.slice("q").start, lay.num_fingers, lay.joints
-        groups = [[c] for name in ("phi", "p", "w") for c in range(lay.slice(name).start, lay.slice(name).stop)]
-        groups += [[q0 + i * n + j for i in range(F)] for j in range(n)]
-        for group in groups:
-            Zc = Z.astype(complex)
-            Zc[:, group] += 1j * COMPLEX_STEP
-            d = np.imag(self.knot_values(Zc)[0]) / COMPLEX_STEP
-            if len(group) == 1:
-                Jk[:, :, group[0]] = d
-                continue
-            for i, c in enumerate(group):  # finger i's joint: its pins, torques and (switching) clearance
-                mine = np.r_[9 + 3 * i : 12 + 3 * i, 9 + 3 * F + n * i : 9 + 3 * F + n * (i + 1)]
-                if i == self.spec.switching:
-                    mine = np.r_[mine, rows.shape[1] - 1]
-                Jk[:, mine, c] = d[:, mine]
-        for name in ("F", "T", "L"):
-            cols = lay.slice(name)
-            row = 3 * ("F", "T", "L").index(name)
-            Jk[:, row : row + 3, cols] = np.eye(3)
-        parity = np.arange(self.K) % 2
-        for c in [*range(3), *range(lay.slice("w").start, lay.slice("w").stop)]:
-            for colour in (0, 1):
-                Zc = Z.astype(complex)
-                Zc[parity == colour, c] += 1j * COMPLEX_STEP
-                dp = np.imag(self.pair_values(Zc)) / COMPLEX_STEP
-                left = parity[:-1] == colour
-                Jl[left, :, c] = dp[left]
-                Jr[~left, :, c] = dp[~left]
-        self._lambda_columns(Z, Jk)
-        return rows, Jk, pair, Jl, Jr
-
-    def _lambda_columns(self, Z, Jk) -> None:
-        """The rows' derivatives in lambda, where they are linear: F, T and the torques."""
-        lay = self.layout
-        x = self.split(Z)
-        R = self.rotations(x["phi"])
         F, n, m = lay.num_fingers, lay.joints, lay.edges
+        x, R, f_B, f_W, _, (tips, taus, J_tip, J_C, dtau_dq, axes) = self._knot(Z, True)
+        rows = self._rows(x, R, f_B, f_W, tips, taus)
+        J_r = _right_jacobian(x["phi"])
+        phi, eye = lay.slice("phi"), np.eye(3)
+        Jk = np.zeros(rows.shape + (lay.width,))
+        Jk[:, 0:3, phi] = -_turned(R, J_r, f_B.sum(1))
+        Jk[:, 3:6, phi] = -_turned(R, J_r, np.cross(self.p_BC, f_B).sum(1))
+        for row, name in ((0, "F"), (3, "T"), (6, "L")):
+            Jk[:, row : row + 3, lay.slice(name)] = eye
+        # momentum L - R I R^T w: with a = R^T w, d(R I a) = R ([I a]x - I [a]x) J_r dphi + R I R^T dw
+        a = np.einsum("kji,kj->ki", R, x["w"])
+        Jk[:, 6:9, phi] = R @ (_skew(a @ self.inertia) - self.inertia @ _skew(a)) @ J_r
+        Jk[:, 6:9, lay.slice("w")] = -R @ self.inertia @ np.swapaxes(R, -1, -2)
         edges_W = np.einsum("kij,kfej->kfei", R, self.edges_B)  # (K, F, m, 3)
         moments_W = np.einsum("kij,kfej->kfei", R, np.cross(self.p_BC[:, :, None, :], self.edges_B))
-        n_W = np.einsum("kij,kfj->kfi", R, self.n_B)
-        start = lay.slice("lam").start
-        tau_row = 9 + 3 * F
-        for i, finger in enumerate(self.fingers):
-            cols = slice(start + i * m, start + (i + 1) * m)
-            Jk[:, 0:3, cols] = -np.swapaxes(edges_W[:, i], -1, -2)
-            Jk[:, 3:6, cols] = -np.swapaxes(moments_W[:, i], -1, -2)
-            points, axes, tip, _ = finger.chain(x["q"][:, i])
-            lever = tip - self.r * n_W[:, i]
-            J_C = _cross(axes, lever[:, None, :] - points)  # (K, n, 3): row j is joint j's lever
-            Jk[:, tau_row + i * n : tau_row + (i + 1) * n, cols] = np.einsum("kjc,kec->kje", J_C, edges_W[:, i])
+        lam0, q0 = lay.slice("lam").start, lay.slice("q").start
+        pin_phi = -_turned(R, J_r, self.p_BC + self.r * self.n_B)  # (K, F, 3, 3)
+        # tau_j = (a_j x (tip - r n_W - p_j)) . f_W: f_W and n_W turn with phi, d tau_j = J_C,j . df_W
+        # - r (f_W x a_j) . dn_W
+        tau_phi = J_C @ _turned(R, J_r, f_B) - self.r * _cross(f_W[:, :, None, :], axes) @ _turned(R, J_r, self.n_B)
+        for i in range(F):
+            lam_i, q_i = slice(lam0 + m * i, lam0 + m * (i + 1)), slice(q0 + n * i, q0 + n * (i + 1))
+            pins, tau_rows = slice(9 + 3 * i, 12 + 3 * i), slice(9 + 3 * F + n * i, 9 + 3 * F + n * (i + 1))
+            Jk[:, 0:3, lam_i] = -np.swapaxes(edges_W[:, i], -1, -2)
+            Jk[:, 3:6, lam_i] = -np.swapaxes(moments_W[:, i], -1, -2)
+            Jk[:, pins, phi] = pin_phi[:, i]
+            Jk[:, pins, lay.slice("p")] = -eye
+            Jk[:, pins, q_i] = J_tip[:, i]
+            Jk[:, tau_rows, lam_i] = np.einsum("kjc,kec->kje", J_C[:, i], edges_W[:, i])
+            Jk[:, tau_rows, q_i] = dtau_dq[:, i]
+            Jk[:, tau_rows, phi] = tau_phi[:, i]
+        if self.spec.switching is not None:
+            self._clearance_columns(Jk, x, R, J_r, tips, J_tip)
+        return rows, Jk, self.pair_values(Z), *self._pair_jacobians(x, R, J_r)
+
+    def _clearance_columns(self, Jk, x, R, J_r, tips, J_tip) -> None:
+        """The clearance row sum(out^2), out = max(|p_B| - half, 0), p_B = R^T (tip - p): d p_B = R^T (J_tip dq
+        - dp) + [p_B]x J_r dphi."""
+        lay, s, n = self.layout, self.spec.switching, self.layout.joints
+        p_B, out = self._outside(R, tips[:, s] - x["p"])
+        g = 2 * out * np.where(p_B < 0, -1.0, 1.0)  # d row / d p_B (K, 3)
+        gR = np.einsum("ki,kji->kj", g, R)  # g R^T (K, 3): d row / d tip
+        q = lay.slice("q").start + n * s
+        Jk[:, -1, q : q + n] = np.einsum("kj,kjc->kc", gR, J_tip[:, s])
+        Jk[:, -1, lay.slice("p")] = -gR
+        Jk[:, -1, lay.slice("phi")] = np.einsum("ki,kij->kj", g, _skew(p_B) @ J_r)
+
+    def _pair_jacobians(self, x, R, J_r):
+        """(d pair / d knot k, d pair / d knot k + 1), each (K-1, 3, width). With Q = E R[k+1] R[k]^T, E =
+        exp(-[h w_mid]x): dphi[k+1] gives dQ = [E R[k+1] J_r dphi]x Q, dphi[k] dQ = -Q [R[k] J_r dphi]x, dw at
+        either knot dQ = [E J_r(-h w_mid) (-h / 2) dw]x Q; vee of the skew part is linear in the vector."""
+        lay = self.layout
+        w_mid = 0.5 * (x["w"][1:] + x["w"][:-1])
+        E = _exp(-self.h * w_mid)
+        Q = E @ R[1:] @ np.swapaxes(R[:-1], -1, -2)
+        left = np.stack([_vee_skew(B @ Q) for B in _BASIS_SKEW], -1)  # (K-1, 3, 3): u -> vee skew([u]x Q)
+        right = np.stack([_vee_skew(Q @ B) for B in _BASIS_SKEW], -1)  # u -> vee skew(Q [u]x)
+        dw = left @ E @ _right_jacobian(-self.h * w_mid) * (-0.5 * self.h)
+        Jl = np.zeros((self.K - 1, 3, lay.width))
+        Jr = np.zeros_like(Jl)
+        Jl[:, :, lay.slice("phi")] = -right @ R[:-1] @ J_r[:-1]
+        Jr[:, :, lay.slice("phi")] = left @ E @ R[1:] @ J_r[1:]
+        Jl[:, :, lay.slice("w")] = Jr[:, :, lay.slice("w")] = dw
+        return Jl, Jr
 
 
 class _SegmentConstraint:
     """Drake's evaluator for a segment's nonlinear rows (knot rows, then pair rows) over all its knots'
-    variables, knot after knot: float input gives the values, AutoDiffXd input values and gradient."""
+    variables, knot after knot: float input gives the values, AutoDiffXd input values and gradient, the
+    analytic Jacobian scattered into the binding's sparsity pattern (SpaceSegmentRows.knot_mask and pair_mask
+    per knot). Drake's solvers pass identity input gradients, which skip the chain rule's product."""
 
     def __init__(self, rows: SpaceSegmentRows):
         self.rows = rows
         K, W = rows.K, rows.layout.width
-        self.num_knot_rows = rows.knot_bounds()[0].shape[1]
-        self.shape = (K * self.num_knot_rows + 3 * (K - 1), K * W)
+        knot = rows.knot_mask()
+        self.num_knot_rows = knot.shape[0]
+        Rk = self.num_knot_rows
+        self.shape = (K * Rk + 3 * (K - 1), K * W)
+        # (binding row, binding column, flat index into the knot or pair Jacobians) of every entry
+        k, r, c = np.nonzero(np.broadcast_to(knot, (K,) + knot.shape))
+        pk, pr, pc = np.nonzero(np.broadcast_to(rows.pair_mask(), (K - 1, 3, W)))
+        self.knot_entries = (k * Rk + r, k * W + c, (k * Rk + r) * W + c)
+        base = K * Rk
+        self.pair_entries = (base + 3 * pk + pr, pk * W + pc, (pk * 3 + pr) * W + pc)
 
     def values(self, Z) -> np.ndarray:
         return np.concatenate([self.rows.knot_values(Z)[0].ravel(), self.rows.pair_values(Z).ravel()])
 
     def jacobian(self, Z) -> tuple[np.ndarray, np.ndarray]:
         rows, Jk, pair, Jl, Jr = self.rows.jacobians(Z)
-        K, W, Rk = self.rows.K, self.rows.layout.width, self.num_knot_rows
         J = np.zeros(self.shape)
-        for k in range(K):
-            J[k * Rk : (k + 1) * Rk, k * W : (k + 1) * W] = Jk[k]
-        base = K * Rk
-        for k in range(K - 1):
-            J[base + 3 * k : base + 3 * k + 3, k * W : (k + 1) * W] = Jl[k]
-            J[base + 3 * k : base + 3 * k + 3, (k + 1) * W : (k + 2) * W] = Jr[k]
+        r, c, source = self.knot_entries
+        J[r, c] = Jk.reshape(-1)[source]
+        r, c, source = self.pair_entries
+        J[r, c] = Jl.reshape(-1)[source]
+        J[r, c + self.rows.layout.width] = Jr.reshape(-1)[source]
         return np.concatenate([rows.ravel(), pair.ravel()]), J
 
     def sparsity(self) -> list[tuple[int, int]]:
-        K, W, Rk = self.rows.K, self.rows.layout.width, self.num_knot_rows
-        out = [(k * Rk + r, k * W + c) for k in range(K) for r in range(Rk) for c in range(W)]
-        base = K * Rk
-        out += [(base + 3 * k + r, k * W + c) for k in range(K - 1) for r in range(3) for c in range(2 * W)]
-        return out
+        r, c, _ = self.knot_entries
+        pr, pc, _ = self.pair_entries
+        W = self.rows.layout.width
+        rows = np.concatenate([r, pr, pr])
+        cols = np.concatenate([c, pc, pc + W])
+        return list(zip(rows.tolist(), cols.tolist()))
 
     def __call__(self, z):
         W = self.rows.layout.width
@@ -536,8 +661,19 @@ def _lifted(start, end, s: float, half, gap: float) -> np.ndarray:
     return max(hi, 1.0) * point
 
 
-def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
-    """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess."""
+@dataclass(frozen=True)
+class SpaceSegmentProgram:
+    """One segment's program, its initial guess set (_guess)."""
+
+    prog: MathematicalProgram
+    z: np.ndarray  # (K, width) the knots' variables
+    rows: SpaceSegmentRows
+    binding: object  # the nonlinear rows (_SegmentConstraint) over z, knot after knot
+    build_time_s: float
+
+
+def build_space_segment(scene, fingers, spec: SegmentSpec, mu: float) -> SpaceSegmentProgram:
+    """One segment's program (see the module's doc) with its initial guess."""
     t0 = time.perf_counter()
     rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT)
     lay, K = rows.layout, rows.K
@@ -595,13 +731,18 @@ def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: Ci
     for k in range(K - 1):
         Q = np.block([[np.eye(nq), -np.eye(nq)], [-np.eye(nq), np.eye(nq)]]) * 2 * WEIGHT_JOINT_STEP
         prog.AddQuadraticCost(Q, np.zeros(2 * nq), np.concatenate([var["q"][k], var["q"][k + 1]]), is_convex=True)
-    guess = _guess(rows)
-    build = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    result = IpoptSolver().Solve(prog, guess.ravel(), ipopt_options(config))
-    solve_time = time.perf_counter() - t1
-    Z = result.GetSolution(z).reshape(K, lay.width)
-    return _segment_arrays(rows, Z, result, build, solve_time)
+    prog.SetInitialGuess(z, _guess(rows))  # by name: Drake orders a matrix's variables column-major
+    return SpaceSegmentProgram(prog, z, rows, binding, time.perf_counter() - t0)
+
+
+def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
+    """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess."""
+    program = build_space_segment(scene, fingers, spec, mu)
+    t0 = time.perf_counter()
+    result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
+    solve_time = time.perf_counter() - t0
+    Z = result.GetSolution(program.z)
+    return _segment_arrays(program.rows, Z, result, program.build_time_s, solve_time)
 
 
 def _segment_arrays(rows: SpaceSegmentRows, Z, result, build: float, solve_time: float) -> SpaceSegmentResult:
