@@ -44,6 +44,19 @@ def test_ipopt_starts_from_the_guess_knot_by_knot(setting):
     assert np.all(values >= lo - 1e-9) and np.all(values <= hi + 1e-9)
 
 
+def test_the_gap_row_binds_only_the_lifted_knots(setting):
+    """At the last knot the switching fingertip is pinned to its new contact, r off the face: a gap row there
+    (sin(pi) is 1e-16, not 0) was active with the pin and its multiplier reached 7e3."""
+    scene, fingers, plan, mu, _ = setting
+    s = _switching_segment(plan)
+    spec = sp.segment_spec(scene, fingers, plan.nodes[s], plan.nodes[s + 1])
+    rows = sp.SpaceSegmentRows(scene, fingers, spec, mu, sp.SPACE_INTERVALS, sp.SPACE_DT)
+    gap = rows.knot_bounds()[0][:, -1]
+    lifted = ~rows.pinned[:, spec.switching]
+    assert not lifted[0] and not lifted[-1] and lifted[1:-1].all()
+    assert np.all(np.isneginf(gap[~lifted])) and np.all(gap[lifted] > (scene.tip_radius**2) * rows.clearance_scale)
+
+
 @pytest.mark.parametrize("rotated", [False, True])
 def test_analytic_jacobian_in_its_sparsity(setting, rotated):
     """At the full segment's knots, a perturbed guess whose corrections phi are far from zero (rotated: the

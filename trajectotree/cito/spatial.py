@@ -30,6 +30,7 @@ The Jacobian is analytic and vectorized over knots and fingers, in the sparsity 
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 
@@ -47,6 +48,7 @@ from trajectotree.geometry import (
     quaternion_matrices,
     so3_log,
 )
+from trajectotree.scene.spatial import SpaceObject
 from trajectotree.scene.statics import pyramid_edges
 from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
 
@@ -252,6 +254,35 @@ def space_fingers(scene) -> tuple[_Finger, ...]:
     return tuple(out)
 
 
+@dataclass(frozen=True)
+class SpaceHandModel:
+    """What a segment's program needs of a SpaceScene (scene.spatial), in plain values: it pickles to a worker
+    process, which then needs no plant of its own."""
+
+    fingers: tuple  # (F,) scene.kinematics.SerialFinger: the chains, their joint limits and Jacobians
+    chains: tuple[_Finger, ...]  # (F,) the chains with their links' masses (space_fingers)
+    object: SpaceObject
+    tip_radius: float  # m
+    gravity: float  # m/s^2
+    tau_max: np.ndarray  # (F, n) N m
+
+    @property
+    def num_fingers(self) -> int:
+        return len(self.fingers)
+
+
+def hand_model(scene) -> SpaceHandModel:
+    """The SpaceHandModel of a SpaceScene."""
+    return SpaceHandModel(
+        fingers=tuple(scene.fingers),
+        chains=space_fingers(scene),
+        object=scene.object,
+        tip_radius=float(scene.tip_radius),
+        gravity=float(scene.gravity),
+        tau_max=np.array(scene.tau_max, dtype=float),
+    )
+
+
 def refine_ik(finger, q0, target, lower, upper) -> np.ndarray:
     """Joint angles (..., n) near q0 that put the fingertip centre on `target` (..., 3): damped Newton steps
     within the limits (the nodes' IK holds the tips to 0.1 mm; the program pins them exactly)."""
@@ -349,7 +380,13 @@ class SpaceSegmentRows:
         self.clearance = np.zeros(self.K)
         if spec.switching is not None:
             self.pinned[1:-1, spec.switching] = False
-            self.clearance = SWITCH_CLEARANCE * np.sin(np.pi * np.arange(self.K) / intervals)
+            # on the lifted knots only: at the last, where sin(pi) is 1e-16 and not 0, the gap row would be
+            # active where the pin already holds the fingertip, a redundant pair whose multipliers blow up
+            lifted = ~self.pinned[:, spec.switching]
+            self.clearance = np.where(lifted, SWITCH_CLEARANCE * np.sin(np.pi * np.arange(self.K) / intervals), 0.0)
+        # 1/m: the squared gap's row divided by twice the largest gap, so that its gradient is about one, as the
+        # pins' (20 segments of three seed-0 goals: 887 IPOPT iterations in all, 1046 unscaled)
+        self.clearance_scale = 1.0 / (2 * (scene.tip_radius + SWITCH_CLEARANCE))
         self.inertia = scene.object.mass * np.diag(
             [sum(np.square(scene.object.size)) - e * e for e in scene.object.size]
         ) / 12  # fmt: skip
@@ -401,7 +438,7 @@ class SpaceSegmentRows:
         clearance = np.zeros(self.K)
         if self.spec.switching is not None:
             out = self._outside(R, tips[:, self.spec.switching] - x["p"])[1]
-            clearance = np.sum(out * out, -1)
+            clearance = np.sum(out * out, -1) * self.clearance_scale
         return np.concatenate([force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]], axis=1)
 
     def _outside(self, R, tip_rel):
@@ -423,7 +460,7 @@ class SpaceSegmentRows:
         lo, hi = [], []
         for k in range(self.K):
             pin = np.where(np.repeat(self.pinned[k], 3), 0.0, np.inf)
-            gap = (self.r + self.clearance[k]) ** 2 if self.clearance[k] > 0 else -np.inf
+            gap = (self.r + self.clearance[k]) ** 2 * self.clearance_scale if self.clearance[k] > 0 else -np.inf
             lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap]]))
             hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf]]))
         return np.array(lo), np.array(hi)
@@ -507,7 +544,7 @@ class SpaceSegmentRows:
         - dp) + [p_B]x J_r dphi."""
         lay, s, n = self.layout, self.spec.switching, self.layout.joints
         p_B, out = self._outside(R, tips[:, s] - x["p"])
-        g = 2 * out * np.where(p_B < 0, -1.0, 1.0)  # d row / d p_B (K, 3)
+        g = 2 * self.clearance_scale * out * np.where(p_B < 0, -1.0, 1.0)  # d row / d p_B (K, 3)
         gR = np.einsum("ki,kji->kj", g, R)  # g R^T (K, 3): d row / d tip
         q = lay.slice("q").start + n * s
         Jk[:, -1, q : q + n] = np.einsum("kj,kjc->kc", gR, J_tip[:, s])
@@ -593,6 +630,8 @@ class SpaceSegmentResult:
     iterations: int
     solve_time_s: float
     build_time_s: float
+    cpu_time_s: float  # s of this process's CPU time, build and solve (wall time counts other processes' too)
+    pid: int  # the process that solved it
     t: np.ndarray  # (K,) s from the segment's start
     x: np.ndarray  # (K, 7)
     v: np.ndarray  # (K, 6)
@@ -736,16 +775,20 @@ def build_space_segment(scene, fingers, spec: SegmentSpec, mu: float) -> SpaceSe
 
 
 def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
-    """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess."""
+    """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess; `scene` a
+    SpaceScene or its SpaceHandModel, `fingers` the chains of space_fingers."""
+    cpu = time.process_time()
     program = build_space_segment(scene, fingers, spec, mu)
     t0 = time.perf_counter()
     result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
     solve_time = time.perf_counter() - t0
     Z = result.GetSolution(program.z)
-    return _segment_arrays(program.rows, Z, result, program.build_time_s, solve_time)
+    times = (program.build_time_s, solve_time, time.process_time() - cpu)
+    return _segment_arrays(program.rows, Z, result, times)
 
 
-def _segment_arrays(rows: SpaceSegmentRows, Z, result, build: float, solve_time: float) -> SpaceSegmentResult:
+def _segment_arrays(rows: SpaceSegmentRows, Z, result, times: tuple[float, float, float]) -> SpaceSegmentResult:
+    """The arrays of a solved segment; `times` (build, solve, CPU) in s."""
     x = rows.split(Z)
     R = rows.rotations(x["phi"])
     _, taus, tips = rows.knot_values(Z)
@@ -758,8 +801,10 @@ def _segment_arrays(rows: SpaceSegmentRows, Z, result, build: float, solve_time:
         success=bool(result.is_success()),
         status=details.ConvertStatusToString(),
         iterations=-1,
-        solve_time_s=solve_time,
-        build_time_s=build,
+        build_time_s=times[0],
+        solve_time_s=times[1],
+        cpu_time_s=times[2],
+        pid=os.getpid(),
         t=rows.h * np.arange(rows.K),
         x=np.hstack([matrix_quaternions(R), p]),
         v=np.hstack([x["w"], x["v"]]),

@@ -165,10 +165,12 @@ def run_space(args) -> int:
     from trajectotree.cli.common import in_option_terms, scene_overrides
     from trajectotree.config import Config, ConfigError, load_config
     from trajectotree.io import folder_lock
+    from trajectotree.planning.keyframes import check_workers
     from trajectotree.planning.spatial import plan_space, save_space_plan
     from trajectotree.scene.spatial import build_space_scene
 
     goal = space_goal(args)
+    workers = check_workers(args.segment_workers, "--segment-workers")
     if args.html:
         raise ConfigError("--html takes a planar hand only so far")
     if args.method != "trajectotree":
@@ -191,7 +193,7 @@ def run_space(args) -> int:
         mass=scene_config.box_mass if "box_mass" in overrides else None,
     )
     with folder_lock(out, "--out", "trajectotree plan"):
-        result = plan_space(scene, goal, config)
+        result = plan_space(scene, goal, config, workers)
         removed = remove_derived_files(out)
         save_space_plan(result, out, config)
     if removed:
