@@ -19,6 +19,10 @@ T = R sum_i p_BC,i x f_B,i, L = R I_B R^T w; each pinned fingertip centre on its
 (p + R (p_BC + r n_B), fixed in B); the joint torques of a quasi-static hand (the fingers' own weight and
 J_C^T f at the contact point; the fingers' inertia left out, 2-3 orders below the motors at these speeds)
 within the motors; the switching finger's centre at least r + clearance sin(pi k / N) off the box while lifted.
+The link rows, on demand: a segment whose solution has a link capsule over 1 mm inside the box (the physics
+check's limit, results.LINK_PENETRATION_TOL) is solved again from that solution with a row per capsule and free
+knot, the signed distance of its axis from the box at least its radius (the nearest point by golden-section
+search; 2 of the first 9 seed-0 goals had such a segment, 1.4 and 7 mm deep).
 Complementarity by construction: the switching finger's lambda is zero on the interior knots, and it is
 pinned to its old contact at k = 0 and its new one at k = N. The ends are the nodes: pose, joints (refined
 by Newton's method to the contacts exactly) and rest. The costs are small quadratic ones: the forces, the
@@ -46,8 +50,11 @@ from trajectotree.geometry import (
     box_signed_distances,
     matrix_quaternions,
     quaternion_matrices,
+    segment_box_distances,
+    segment_box_nearest,
     so3_log,
 )
+from trajectotree.results import LINK_PENETRATION_TOL
 from trajectotree.scene.spatial import SpaceObject
 from trajectotree.scene.statics import pyramid_edges
 from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
@@ -60,6 +67,7 @@ SWITCH_CLEARANCE = 0.01  # m, the lifted fingertip's least gap at mid-segment (s
 WEIGHT_FORCE = 0.01  # per N^2 of edge magnitude
 WEIGHT_JOINT_STEP = 1.0  # per rad^2 of joint motion between knots
 WEIGHT_PHI = 1.0  # per rad^2 of correction
+LINK_SEARCH_ITERATIONS = 30  # golden-section steps along a capsule's axis: 0.618^30 = 5e-7 of its length
 NEWTON_ITERATIONS = 50  # IK refinements of a fingertip onto its target (damped Newton, converges in ~5)
 
 # Column layout of a knot's variables.
@@ -160,29 +168,49 @@ class _Finger:
     p_W_tip0: np.ndarray  # ([F,] 3)
     p_W_com0: np.ndarray  # ([F,] n, 3)
     mass: np.ndarray  # ([F,] n) kg
+    p_W_link0: np.ndarray  # ([F,] L, 2, 3) m, the ends of the links' capsule axes
+    link_joint: np.ndarray  # ([F,] L) the joint whose child body carries each capsule (the same in every finger)
+    link_radius: np.ndarray  # ([F,] L) m
+
+    def _owners(self) -> np.ndarray:
+        """The last joint that turns each point of chain's rows: joint point j (j - 1), the tip (n - 1), centre
+        of mass l (l), then each capsule's two ends (its joint)."""
+        n = self.a_W.shape[-2]
+        links = np.repeat(np.asarray(self.link_joint).reshape(-1, self.link_joint.shape[-1])[0], 2)
+        return np.concatenate([np.arange(n) - 1, [n - 1], np.arange(n), links])
 
     def chain(self, q):
-        """(points (..., n, 3), axes (..., n, 3), tip (..., 3), centres of mass (..., n, 3)) at q (..., n):
-        joint j turns the joints beyond it, the tip and the links from j on about its current axis."""
+        """(points (..., n, 3), axes (..., n, 3), tip (..., 3), centres of mass (..., n, 3), capsule ends
+        (..., L, 2, 3)) at q (..., n): joint j turns the points beyond it about its current axis."""
         n = self.a_W.shape[-2]
         shape = q.shape[:-1]
-        # rows: joint points 0..n-1, tip, centres of mass 0..n-1 (points); axes apart (directions)
+        L = self.link_joint.shape[-1]
         P = np.broadcast_to(
-            np.concatenate([self.p_W_joint, self.p_W_tip0[..., None, :], self.p_W_com0], axis=-2),
-            shape + (2 * n + 1, 3),
+            np.concatenate(
+                [
+                    self.p_W_joint,
+                    self.p_W_tip0[..., None, :],
+                    self.p_W_com0,
+                    self.p_W_link0.reshape(self.p_W_link0.shape[:-3] + (2 * L, 3)),
+                ],
+                axis=-2,
+            ),
+            shape + (2 * n + 1 + 2 * L, 3),
         ).astype(float)
         A = np.broadcast_to(self.a_W, shape + (n, 3)).astype(float)
+        owners = self._owners()
         for j in range(n):
             c, a = P[..., j, :], A[..., j, :]
-            moving = np.r_[j + 1 : n + 1, n + 1 + j : 2 * n + 1]  # joints beyond j, the tip, links j..n-1
+            moving = np.flatnonzero(owners >= j)
             P[..., moving, :] = c[..., None, :] + _rotate(a, q[..., j], P[..., moving, :] - c[..., None, :])
             A[..., j + 1 :, :] = _rotate(a, q[..., j], A[..., j + 1 :, :])
-        return P[..., :n, :], A, P[..., n, :], P[..., n + 1 :, :]
+        ends = P[..., 2 * n + 1 :, :].reshape(shape + (L, 2, 3))
+        return P[..., :n, :], A, P[..., n, :], P[..., n + 1 : 2 * n + 1, :], ends
 
     def torques(self, q, f_W, p_FC_W, gravity: float):
         """(tip (..., 3), tau (..., n)): the motors' torques that hold the finger still against its weight and
         push with f_W (..., 3) at the point p_FC_W (..., 3) from the tip centre (quasi-static)."""
-        points, axes, tip, coms = self.chain(q)
+        points, axes, tip, coms, _ = self.chain(q)
         return tip, self._push(axes, points, tip + p_FC_W, f_W) + self._weight(axes, points, coms, gravity)
 
     @staticmethod
@@ -201,7 +229,7 @@ class _Finger:
         rows a_j x (c - p_j) at the contact point c = tip + p_FC_W, dtau/dq (..., n, n), the axes (..., n, 3)).
         A joint k turns the axes and points beyond it: d a_j = a_k x a_j and d(x - p_j) = a_k x (x - p_j) for
         k < j; for k >= j only the tip and the links from k on move, d x = a_k x (x - p_k)."""
-        points, axes, tip, coms = self.chain(q)
+        points, axes, tip, coms, _ = self.chain(q)
         n = self.a_W.shape[-2]
         lever = tip + p_FC_W
         J_C = _cross(axes, lever[..., None, :] - points)
@@ -234,14 +262,19 @@ def _stacked(fingers) -> _Finger:
 
 
 def space_fingers(scene) -> tuple[_Finger, ...]:
-    """Each finger's chain and its links' masses and centres of mass at zero angles, from the plant."""
+    """Each finger's chain, its links' masses and centres of mass and its link capsules at zero angles, from the
+    plant."""
     plant = scene.plant
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, scene.positions(np.r_[1.0, 0, 0, 0, 0, 0, 0], np.zeros(scene.hand_q_indices.size)))
+    start, zero = np.r_[1.0, 0, 0, 0, 0, 0, 0], np.zeros(scene.hand_q_indices.size)
+    plant.SetPositions(context, scene.positions(start, zero))
+    capsules = scene.link_capsules()
+    ends = scene.link_ends_W(start[None], zero[None])[0]  # (F, L, 2, 3)
     out = []
-    for chain, entry in zip(scene.fingers, scene.hand_file.fingers):
+    for i, (chain, entry) in enumerate(zip(scene.fingers, scene.hand_file.fingers)):
         bodies = [plant.GetJointByName(n, scene.hand).child_body() for n in entry.joints]
         coms = [b.EvalPoseInWorld(context) @ b.CalcCenterOfMassInBodyFrame(context) for b in bodies]
+        names = [b.name() for b in bodies]
         out.append(
             _Finger(
                 p_W_joint=chain.p_W_joint,
@@ -249,6 +282,9 @@ def space_fingers(scene) -> tuple[_Finger, ...]:
                 p_W_tip0=chain.p_W_tip0,
                 p_W_com0=np.array(coms),
                 mass=np.array([b.get_mass(context) for b in bodies]),
+                p_W_link0=ends[i],
+                link_joint=np.array([names.index(c.body) for c in capsules[i]]),
+                link_radius=np.array([c.radius for c in capsules[i]]),
             )
         )
     return tuple(out)
@@ -288,7 +324,7 @@ def refine_ik(finger, q0, target, lower, upper) -> np.ndarray:
     within the limits (the nodes' IK holds the tips to 0.1 mm; the program pins them exactly)."""
     q = np.array(q0, dtype=float)
     for _ in range(NEWTON_ITERATIONS):
-        points, axes, tip, _ = finger.chain(q)
+        points, axes, tip, _, _ = finger.chain(q)
         error = target - tip
         if np.max(np.abs(error)) < 1e-13:
             break
@@ -357,10 +393,12 @@ def time_law(intervals: int) -> tuple[np.ndarray, np.ndarray]:
 class SpaceSegmentRows:
     """The nonlinear rows of one segment's program, vectorized over its knots (see the module's doc)."""
 
-    def __init__(self, scene, fingers, spec: SegmentSpec, mu: float, intervals: int, dt: float):
+    def __init__(self, scene, fingers, spec: SegmentSpec, mu: float, intervals: int, dt: float, links: bool = False):
         self.scene, self.fingers, self.spec = scene, fingers, spec
         self.hand = _stacked(fingers)  # every finger at once
+        self.links = links  # with the link rows (each capsule's axis at least its radius off the box)
         F, n = scene.num_fingers, len(scene.fingers[0].q_lower)
+        self.clearance_row = 9 + 3 * F + n * F
         self.layout = _Layout(F, n, PYRAMID_EDGES)
         self.K, self.h = intervals + 1, dt
         s, self.rate = time_law(intervals)
@@ -439,7 +477,36 @@ class SpaceSegmentRows:
         if self.spec.switching is not None:
             out = self._outside(R, tips[:, self.spec.switching] - x["p"])[1]
             clearance = np.sum(out * out, -1) * self.clearance_scale
-        return np.concatenate([force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]], axis=1)
+        rows = [force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]]
+        if self.links:
+            rows.append(self._link_rows(x, R)[0].reshape(self.K, -1))
+        return np.concatenate(rows, axis=1)
+
+    def _link_rows(self, x, R, J_r=None):
+        """The signed distance from the box of each link capsule's axis (K, F, L), at its nearest point (the
+        golden-section search of geometry.segment_box_nearest), and with J_r its derivatives in q_i (K, F, L, n),
+        p (K, F, L, 3) and phi (K, F, L, 3): at a minimum over the axis, those of the distance at that point."""
+        points, axes, _, _, ends = self.hand.chain(x["q"])
+        e_B = np.einsum("kji,kflej->kflei", R, ends - x["p"][:, None, None, None, :])
+        t = segment_box_nearest(self.half, e_B[..., 0, :], e_B[..., 1, :], LINK_SEARCH_ITERATIONS)[..., None]
+        x_B = (1 - t) * e_B[..., 0, :] + t * e_B[..., 1, :]
+        value = box_signed_distances(self.half, x_B)
+        if J_r is None:
+            return (value,)
+        sign = np.where(x_B < 0, -1.0, 1.0)
+        d = np.abs(x_B) - self.half
+        out = np.maximum(d, 0.0)
+        norm = np.linalg.norm(out, axis=-1, keepdims=True)
+        face = np.eye(3)[np.argmax(d, axis=-1)]  # inside: the nearest face's axis
+        g = np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), face) * sign  # d value / d x_B
+        x_W = (1 - t) * ends[..., 0, :] + t * ends[..., 1, :]  # (K, F, L, 3)
+        lever = _cross(axes[:, :, None], x_W[:, :, :, None, :] - points[:, :, None])  # (K, F, L, n, 3)
+        n = self.layout.joints
+        turned = np.arange(n)[None, :] <= self.hand.link_joint[0][:, None]  # (L, n): joint k turns capsule l
+        gR = np.einsum("kfli,kji->kflj", g, R)  # d value / d x_W
+        dq = np.einsum("kflj,kflnj->kfln", gR, lever) * turned
+        dphi = np.einsum("kfli,kflij->kflj", g, _skew(x_B) @ J_r[:, None, None])
+        return value, dq, -gR, dphi
 
     def _outside(self, R, tip_rel):
         """(p_B (K, 3) the switching fingertip's centre in B, its excess over the box's half sizes, >= 0)."""
@@ -457,12 +524,17 @@ class SpaceSegmentRows:
     def knot_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         F = self.layout.num_fingers
         n = self.layout.joints
+        L = self.hand.link_joint.shape[-1]
         lo, hi = [], []
         for k in range(self.K):
             pin = np.where(np.repeat(self.pinned[k], 3), 0.0, np.inf)
             gap = (self.r + self.clearance[k]) ** 2 * self.clearance_scale if self.clearance[k] > 0 else -np.inf
             lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap]]))
             hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf]]))
+            if self.links:  # on the free knots: the nodes' links the search kept 2 mm off
+                free = 0 < k < self.K - 1
+                lo[-1] = np.concatenate([lo[-1], self.hand.link_radius.ravel() if free else np.full(F * L, -np.inf)])
+                hi[-1] = np.concatenate([hi[-1], np.full(F * L, np.inf)])
         return np.array(lo), np.array(hi)
 
     # -- the Jacobian ------------------------------------------------------------------------------
@@ -470,7 +542,8 @@ class SpaceSegmentRows:
         """(rows, width) bool: the variables of its own knot each knot row depends on."""
         lay = self.layout
         F, n, m = lay.num_fingers, lay.joints, lay.edges
-        mask = np.zeros((9 + 3 * F + n * F + 1, lay.width), dtype=bool)
+        L = self.hand.link_joint.shape[-1]
+        mask = np.zeros((self.clearance_row + 1 + (F * L if self.links else 0), lay.width), dtype=bool)
         mask[:, lay.slice("phi")] = True
         lam, q = lay.slice("lam").start, lay.slice("q").start
         for row, name in ((0, "F"), (3, "T"), (6, "L")):
@@ -484,12 +557,18 @@ class SpaceSegmentRows:
             taus = slice(9 + 3 * F + n * i, 9 + 3 * F + n * (i + 1))
             mask[taus, joints] = True
             mask[taus, lam + m * i : lam + m * (i + 1)] = True
+        c = self.clearance_row
         if self.spec.switching is None:
-            mask[-1] = False  # no clearance row: zero
+            mask[c] = False  # no clearance row: zero
         else:
             s = self.spec.switching
-            mask[-1, lay.slice("p")] = True
-            mask[-1, q + n * s : q + n * (s + 1)] = True
+            mask[c, lay.slice("p")] = True
+            mask[c, q + n * s : q + n * (s + 1)] = True
+        if self.links:
+            for i in range(F):  # finger i's capsules
+                rows = slice(c + 1 + L * i, c + 1 + L * (i + 1))
+                mask[rows, lay.slice("phi")] = mask[rows, lay.slice("p")] = True
+                mask[rows, q + n * i : q + n * (i + 1)] = True
         return mask
 
     def pair_mask(self) -> np.ndarray:
@@ -537,6 +616,8 @@ class SpaceSegmentRows:
             Jk[:, tau_rows, phi] = tau_phi[:, i]
         if self.spec.switching is not None:
             self._clearance_columns(Jk, x, R, J_r, tips, J_tip)
+        if self.links:
+            self._link_columns(Jk, x, R, J_r)
         return rows, Jk, self.pair_values(Z), *self._pair_jacobians(x, R, J_r)
 
     def _clearance_columns(self, Jk, x, R, J_r, tips, J_tip) -> None:
@@ -546,10 +627,21 @@ class SpaceSegmentRows:
         p_B, out = self._outside(R, tips[:, s] - x["p"])
         g = 2 * self.clearance_scale * out * np.where(p_B < 0, -1.0, 1.0)  # d row / d p_B (K, 3)
         gR = np.einsum("ki,kji->kj", g, R)  # g R^T (K, 3): d row / d tip
-        q = lay.slice("q").start + n * s
-        Jk[:, -1, q : q + n] = np.einsum("kj,kjc->kc", gR, J_tip[:, s])
-        Jk[:, -1, lay.slice("p")] = -gR
-        Jk[:, -1, lay.slice("phi")] = np.einsum("ki,kij->kj", g, _skew(p_B) @ J_r)
+        q, c = lay.slice("q").start + n * s, self.clearance_row
+        Jk[:, c, q : q + n] = np.einsum("kj,kjc->kc", gR, J_tip[:, s])
+        Jk[:, c, lay.slice("p")] = -gR
+        Jk[:, c, lay.slice("phi")] = np.einsum("ki,kij->kj", g, _skew(p_B) @ J_r)
+
+    def _link_columns(self, Jk, x, R, J_r) -> None:
+        lay = self.layout
+        F, n, L = lay.num_fingers, lay.joints, self.hand.link_joint.shape[-1]
+        _, dq, dp, dphi = self._link_rows(x, R, J_r)
+        first, q0 = self.clearance_row + 1, lay.slice("q").start
+        for i in range(F):
+            rows = slice(first + L * i, first + L * (i + 1))
+            Jk[:, rows, q0 + n * i : q0 + n * (i + 1)] = dq[:, i]
+            Jk[:, rows, lay.slice("p")] = dp[:, i]
+            Jk[:, rows, lay.slice("phi")] = dphi[:, i]
 
     def _pair_jacobians(self, x, R, J_r):
         """(d pair / d knot k, d pair / d knot k + 1), each (K-1, 3, width). With Q = E R[k+1] R[k]^T, E =
@@ -631,6 +723,7 @@ class SpaceSegmentResult:
     solve_time_s: float
     build_time_s: float
     cpu_time_s: float  # s of this process's CPU time, build and solve (wall time counts other processes' too)
+    link_rows: bool  # solved again with the link rows (the first solve had a link over 1 mm inside the box)
     pid: int  # the process that solved it
     t: np.ndarray  # (K,) s from the segment's start
     x: np.ndarray  # (K, 7)
@@ -711,10 +804,13 @@ class SpaceSegmentProgram:
     build_time_s: float
 
 
-def build_space_segment(scene, fingers, spec: SegmentSpec, mu: float) -> SpaceSegmentProgram:
-    """One segment's program (see the module's doc) with its initial guess."""
+def build_space_segment(
+    scene, fingers, spec: SegmentSpec, mu: float, links: bool = False, start: np.ndarray | None = None
+) -> SpaceSegmentProgram:
+    """One segment's program (see the module's doc), with the link rows or not, from `start` (K, width), else
+    from its guess."""
     t0 = time.perf_counter()
-    rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT)
+    rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links)
     lay, K = rows.layout, rows.K
     prog = MathematicalProgram()
     z = prog.NewContinuousVariables(K, lay.width, "z")
@@ -770,7 +866,8 @@ def build_space_segment(scene, fingers, spec: SegmentSpec, mu: float) -> SpaceSe
     for k in range(K - 1):
         Q = np.block([[np.eye(nq), -np.eye(nq)], [-np.eye(nq), np.eye(nq)]]) * 2 * WEIGHT_JOINT_STEP
         prog.AddQuadraticCost(Q, np.zeros(2 * nq), np.concatenate([var["q"][k], var["q"][k + 1]]), is_convex=True)
-    prog.SetInitialGuess(z, _guess(rows))  # by name: Drake orders a matrix's variables column-major
+    # by name: Drake orders a matrix's variables column-major
+    prog.SetInitialGuess(z, _guess(rows) if start is None else start)
     return SpaceSegmentProgram(prog, z, rows, binding, time.perf_counter() - t0)
 
 
@@ -778,13 +875,28 @@ def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: Ci
     """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess; `scene` a
     SpaceScene or its SpaceHandModel, `fingers` the chains of space_fingers."""
     cpu = time.process_time()
-    program = build_space_segment(scene, fingers, spec, mu)
-    t0 = time.perf_counter()
-    result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
-    solve_time = time.perf_counter() - t0
-    Z = result.GetSolution(program.z)
-    times = (program.build_time_s, solve_time, time.process_time() - cpu)
+    build, solve_time, Z = 0.0, 0.0, None
+    for links in (False, True):
+        program = build_space_segment(scene, fingers, spec, mu, links, Z)
+        t0 = time.perf_counter()
+        result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
+        build, solve_time = build + program.build_time_s, solve_time + time.perf_counter() - t0
+        Z = result.GetSolution(program.z)
+        if not result.is_success() or link_depth(program.rows, Z) <= LINK_PENETRATION_TOL:
+            break
+    times = (build, solve_time, time.process_time() - cpu)
     return _segment_arrays(program.rows, Z, result, times)
+
+
+def link_depth(rows: SpaceSegmentRows, Z) -> float:
+    """m, how deep the deepest link capsule reaches into the box over the knots Z (0: none does), as the physics
+    check measures it (geometry.segment_box_distances)."""
+    x = rows.split(Z)
+    R = rows.rotations(x["phi"])
+    ends = rows.hand.chain(x["q"])[4]
+    e_B = np.einsum("kji,kflej->kflei", R, ends - x["p"][:, None, None, None, :])
+    depth = rows.hand.link_radius - segment_box_distances(rows.half, e_B[..., 0, :], e_B[..., 1, :])
+    return float(max(depth.max(), 0.0))
 
 
 def _segment_arrays(rows: SpaceSegmentRows, Z, result, times: tuple[float, float, float]) -> SpaceSegmentResult:
@@ -804,6 +916,7 @@ def _segment_arrays(rows: SpaceSegmentRows, Z, result, times: tuple[float, float
         build_time_s=times[0],
         solve_time_s=times[1],
         cpu_time_s=times[2],
+        link_rows=rows.links,
         pid=os.getpid(),
         t=rows.h * np.arange(rows.K),
         x=np.hstack([matrix_quaternions(R), p]),
