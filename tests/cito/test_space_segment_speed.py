@@ -1,8 +1,8 @@
 """The segment program in space (cito.spatial) as IPOPT receives it: the initial guess it starts from is the
 program's guess knot by knot (Drake orders a matrix of variables column-major), the analytic Jacobian in its
 declared sparsity against central differences at a perturbed guess (with the link rows too), the switching
-finger's gap row on its lifted knots only, one segment solved, and one whose link went through the box solved
-again with the link rows."""
+finger's gap row on its lifted knots only, the end knots' pyramids the search's, one segment solved, and one
+whose link went through the box solved again with the link rows."""
 
 import math
 
@@ -16,6 +16,7 @@ from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import box_signed_distances, quaternion_matrices, segment_box_distances, segment_box_nearest
 from trajectotree.results import LINK_PENETRATION_TOL
 from trajectotree.scene.spatial import build_space_scene
+from trajectotree.scene.statics import pyramid_edges
 from trajectotree.search.tree import find_space_contact_plan
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
@@ -137,3 +138,33 @@ def test_a_link_through_the_box_gets_the_link_rows(setting):
     radii = np.array([c.radius for c in scene.link_capsules()[0]])
     depth = radii - segment_box_distances(scene.object.half, e_B[..., 0, :], e_B[..., 1, :])
     assert depth.max() <= LINK_PENETRATION_TOL
+
+
+@pytest.fixture(scope="module")
+def goal_28_segment_6(setting):
+    """Seed 0's goal 28, segment 6 (no switch): its end node held within the motors by the search (0.388 N m)."""
+    scene, fingers, _, mu, config = setting
+    goal = Rotation.random(30, random_state=0).as_quat(scalar_first=True)[28]
+    plan = find_space_contact_plan(scene, goal, config.search, mu)
+    assert plan.nodes[7].switching_finger is None and plan.nodes[7].stance_torque <= scene.tau_max.min()
+    return sp.segment_spec(scene, fingers, plan.nodes[6], plan.nodes[7])
+
+
+def test_the_end_knots_pyramids_are_the_searchs(setting, goal_28_segment_6):
+    """With its pyramids turned otherwise than the search's, the hold at the segment's last knot needed 0.402 N m
+    (> 0.396) and IPOPT failed; now the guess (the holding LP at each knot) keeps every row, torques included."""
+    scene, fingers, _, mu, _ = setting
+    rows = sp.SpaceSegmentRows(scene, fingers, goal_28_segment_6, mu, sp.SPACE_INTERVALS, sp.SPACE_DT)
+    values = rows.knot_values(sp._guess(rows))[0]
+    lo, hi = rows.knot_bounds()
+    assert np.all(values >= lo - 1e-9) and np.all(values <= hi + 1e-9)
+    for k in (0, -1):  # the search's construction in W at the nodes' orientations
+        n_W = rows.n_B[k] @ rows.N[k].T
+        assert np.allclose(rows.edges_B[k] @ rows.N[k].T, pyramid_edges(n_W, mu, sp.PYRAMID_EDGES), atol=1e-14)
+
+
+@pytest.mark.slow
+def test_goal_28_segment_6_solves(setting, goal_28_segment_6):
+    scene, fingers, _, mu, config = setting
+    result = sp.solve_space_segment(scene, fingers, goal_28_segment_6, mu, config.cito)
+    assert result.success, result.status

@@ -62,7 +62,7 @@ from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
 PHI_BOUND = 0.3  # rad, each component of the correction to the nominal (the nominal segment turns <= 20 deg)
 SPACE_INTERVALS = 10  # knots per segment - 1
 SPACE_DT = 0.1  # s between knots: a segment lasts 1 s
-PYRAMID_EDGES = 8  # as the search's stances
+PYRAMID_EDGES = 8  # as the search's stances, turned as theirs (SpaceSegmentRows.edges_B)
 SWITCH_CLEARANCE = 0.01  # m, the lifted fingertip's least gap at mid-segment (sin profile, as in the plane)
 WEIGHT_FORCE = 0.01  # per N^2 of edge magnitude
 WEIGHT_JOINT_STEP = 1.0  # per rad^2 of joint motion between knots
@@ -413,7 +413,14 @@ class SpaceSegmentRows:
                 spec.p_BC_b[spec.switching],
                 spec.n_B_b[spec.switching],
             )
-        self.edges_B = pyramid_edges(self.n_B.reshape(-1, 3), mu, PYRAMID_EDGES).reshape(self.K, F, PYRAMID_EDGES, 3)
+        # Each knot's pyramids as the search builds them in W (statics.pyramid_edges of the normal in W) at the
+        # knot's nominal orientation, in B: at the end knots exactly the pyramids the search held the nodes with.
+        # The pyramid's turn about its normal follows the normal's direction in W, and an 8-edge pyramid turned
+        # otherwise missed a node's hold within the motors (seed-0 goal 28: 0.402 N m where the search's held
+        # it with 0.388 N m, and IPOPT failed in restoration).
+        n_W = np.einsum("kij,kfj->kfi", self.N, self.n_B)
+        edges_W = pyramid_edges(n_W.reshape(-1, 3), mu, PYRAMID_EDGES).reshape(self.K, F, PYRAMID_EDGES, 3)
+        self.edges_B = np.einsum("kji,kfej->kfei", self.N, edges_W)
         self.pinned = np.ones((self.K, F), dtype=bool)
         self.clearance = np.zeros(self.K)
         if spec.switching is not None:
