@@ -1,15 +1,21 @@
 """Planning in space on fingerpro4 (search + the keyframes programs in space): of `--goals` orientations uniform
-over SO(3) (seed 0, the cube's position unchanged), how many are planned, pass the 3D physics check and end
-within 2 deg of their goal, and the planning time (mean, median, p90 over all goals), one process, the
-segments one after another, this machine's CPU.
+over SO(3) (seed 0, the cube's position unchanged), or of the 23 axis-aligned ones (`--axis-aligned`: the
+cube's 24 rotations but the identity, MuJoCo MPC's task), how many are planned, pass the 3D physics check and
+end within 2 deg of their goal, and the planning time per goal (mean, median, p90 over all goals, wall time of
+plan_space: the search, then the segments at once on the segment pool). One process; the machine's load
+average is printed before and after, and per goal the CPU seconds of the segments' solves (summed over the
+workers), which other processes on a shared machine disturb less than the wall time.
 
-    python scripts/bench_space.py                # 30 goals, seed 0
-    python scripts/bench_space.py --goals 5 --first 10
+    python scripts/bench_space.py                # 30 goals, seed 0, one worker per core
+    python scripts/bench_space.py --goals 5 --first 2
+    python scripts/bench_space.py --axis-aligned
+    python scripts/bench_space.py --workers 1    # the segments one after another in this process
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -21,21 +27,35 @@ from trajectotree.planning.spatial import plan_space
 from trajectotree.scene.spatial import START_POSE, build_space_scene
 
 
+def axis_aligned_goals() -> np.ndarray:
+    """(23, 4) [w, x, y, z]: the cube's rotations but the identity, applied to the start orientation in W."""
+    start = Rotation.from_quat(START_POSE[:4], scalar_first=True)
+    group = [r for r in Rotation.create_group("O") if r.magnitude() > 1e-9]
+    return np.array([(r * start).as_quat(scalar_first=True) for r in group])
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--goals", type=int, default=30)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--first", type=int, default=0, help="start at this goal of the seed's list")
+    parser.add_argument("--first", type=int, default=0, help="start at this goal of the list")
+    parser.add_argument("--axis-aligned", action="store_true", help="the 23 axis-aligned orientations instead")
+    parser.add_argument("--workers", type=int, default=None, help="segment workers (default: one per core)")
     args = parser.parse_args()
     config = Config()
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
-    goals = Rotation.random(args.goals, random_state=args.seed).as_quat(scalar_first=True)
-    times, searched, checked, planned = [], 0, 0, 0
-    for k in range(args.first, args.goals):
+    if args.axis_aligned:
+        goals = axis_aligned_goals()
+    else:
+        goals = Rotation.random(args.goals, random_state=args.seed).as_quat(scalar_first=True)
+    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores", flush=True)
+    times, searched, checked, planned, cpu = [], 0, 0, 0, []
+    for k in range(args.first, len(goals)):
         goal = goals[k]
         t0 = time.perf_counter()
-        result = plan_space(scene, goal, config)
+        result = plan_space(scene, goal, config, args.workers)
         times.append(time.perf_counter() - t0)
+        cpu.append(sum(s["cpu_time_s"] for s in result.segments))
         searched += result.contact_plan.success
         check = result.physics_check
         checked += check is not None and check.passed
@@ -44,9 +64,9 @@ def main() -> None:
         error = np.degrees(result.final_error_rad)
         print(
             f"goal {k:2d}: {angle:5.1f} deg, {'planned' if result.success else 'NOT PLANNED'} in {times[-1]:.1f} s "
-            f"(search {result.search_time_s:.1f} s, {len(result.segments)} segments {result.solve_time_s:.1f} s), "
-            f"check {'-' if check is None else 'passed' if check.passed else 'FAILED'}, final error {error:.3f} deg"
-            + ("" if result.success else f": {result.status[:200]}"),
+            f"(search {result.search_time_s:.1f} s, {len(result.segments)} segments {result.solve_time_s:.1f} s, "
+            f"their CPU {cpu[-1]:.1f} s), check {'-' if check is None else 'passed' if check.passed else 'FAILED'}, "
+            f"final error {error:.3f} deg" + ("" if result.success else f": {result.status[:200]}"),
             flush=True,
         )
     t = np.array(times)
@@ -54,8 +74,9 @@ def main() -> None:
     print(
         f"searched {searched}/{n}, passed the check {checked}/{n}, planned (check and within 2 deg) {planned}/{n}; "
         f"time mean {t.mean():.1f} s, median {np.median(t):.1f} s, p90 {np.percentile(t, 90):.1f} s, "
-        f"max {t.max():.1f} s"
+        f"max {t.max():.1f} s; segments' CPU per goal mean {np.mean(cpu):.1f} s"
     )
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
 if __name__ == "__main__":

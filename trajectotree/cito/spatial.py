@@ -19,17 +19,22 @@ T = R sum_i p_BC,i x f_B,i, L = R I_B R^T w; each pinned fingertip centre on its
 (p + R (p_BC + r n_B), fixed in B); the joint torques of a quasi-static hand (the fingers' own weight and
 J_C^T f at the contact point; the fingers' inertia left out, 2-3 orders below the motors at these speeds)
 within the motors; the switching finger's centre at least r + clearance sin(pi k / N) off the box while lifted.
+The link rows, on demand: a segment whose solution has a link capsule over 1 mm inside the box (the physics
+check's limit, results.LINK_PENETRATION_TOL) is solved again from that solution with a row per capsule and free
+knot, the signed distance of its axis from the box at least its radius (the nearest point by golden-section
+search; 2 of the first 9 seed-0 goals had such a segment, 1.4 and 7 mm deep).
 Complementarity by construction: the switching finger's lambda is zero on the interior knots, and it is
 pinned to its old contact at k = 0 and its new one at k = N. The ends are the nodes: pose, joints (refined
 by Newton's method to the contacts exactly) and rest. The costs are small quadratic ones: the forces, the
 joints' steps and phi.
 
-The Jacobian: lambda enters linearly (analytic); every other column by complex-step differentiation of the
-vectorized rows (exact to rounding), all knots of one parity at once (a pair row meets one knot of each parity).
+The Jacobian is analytic and vectorized over knots and fingers, in the sparsity of what each row depends on
+(SpaceSegmentRows.jacobians, knot_mask, pair_mask).
 """
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 
@@ -45,20 +50,24 @@ from trajectotree.geometry import (
     box_signed_distances,
     matrix_quaternions,
     quaternion_matrices,
+    segment_box_distances,
+    segment_box_nearest,
     so3_log,
 )
+from trajectotree.results import LINK_PENETRATION_TOL
+from trajectotree.scene.spatial import SpaceObject
 from trajectotree.scene.statics import pyramid_edges
 from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
 
 PHI_BOUND = 0.3  # rad, each component of the correction to the nominal (the nominal segment turns <= 20 deg)
 SPACE_INTERVALS = 10  # knots per segment - 1
 SPACE_DT = 0.1  # s between knots: a segment lasts 1 s
-PYRAMID_EDGES = 8  # as the search's stances
+PYRAMID_EDGES = 8  # as the search's stances, turned as theirs (SpaceSegmentRows.edges_B)
 SWITCH_CLEARANCE = 0.01  # m, the lifted fingertip's least gap at mid-segment (sin profile, as in the plane)
 WEIGHT_FORCE = 0.01  # per N^2 of edge magnitude
 WEIGHT_JOINT_STEP = 1.0  # per rad^2 of joint motion between knots
 WEIGHT_PHI = 1.0  # per rad^2 of correction
-COMPLEX_STEP = 1e-30
+LINK_SEARCH_ITERATIONS = 30  # golden-section steps along a capsule's axis: 0.618^30 = 5e-7 of its length
 NEWTON_ITERATIONS = 50  # IK refinements of a fingertip onto its target (damped Newton, converges in ~5)
 
 # Column layout of a knot's variables.
@@ -85,7 +94,7 @@ class _Layout:
         return 3 * len(_NAMES) + self.num_fingers * (self.edges + self.joints)
 
 
-# -- complex-safe kinematics ------------------------------------------------------------------------
+# -- kinematics -------------------------------------------------------------------------------------
 def _skew(v):
     z = np.zeros_like(v[..., 0])
     return np.stack(
@@ -96,15 +105,34 @@ def _skew(v):
 
 
 def _exp(phi):
-    """exp([phi]x) (..., 3, 3) for real or complex-stepped phi (..., 3) (Rodrigues, series near 0)."""
+    """exp([phi]x) (..., 3, 3) for phi (..., 3) (Rodrigues, series near 0)."""
     theta2 = np.sum(phi * phi, axis=-1)[..., None, None]
-    small = np.real(theta2) < 1e-10
+    small = theta2 < 1e-10
     t2 = np.where(small, 1.0, theta2)
     theta = np.sqrt(t2)
     a = np.where(small, 1.0 - theta2 / 6 + theta2**2 / 120, np.sin(theta) / theta)
     b = np.where(small, 0.5 - theta2 / 24 + theta2**2 / 720, (1 - np.cos(theta)) / t2)
     K = _skew(phi)
     return np.eye(3) + a * K + b * (K @ K)
+
+
+def _right_jacobian(phi):
+    """J_r(phi) (..., 3, 3): exp([phi + d]x) = exp([phi]x) exp([J_r d]x) to first order in d (series near 0)."""
+    theta2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    small = theta2 < 1e-10
+    t2 = np.where(small, 1.0, theta2)
+    theta = np.sqrt(t2)
+    a = np.where(small, 0.5 - theta2 / 24 + theta2**2 / 720, (1 - np.cos(theta)) / t2)
+    b = np.where(small, 1.0 / 6 - theta2 / 120 + theta2**2 / 5040, (theta - np.sin(theta)) / (t2 * theta))
+    K = _skew(phi)
+    return np.eye(3) - a * K + b * (K @ K)
+
+
+def _turned(R, J_r, u):
+    """d(R u)/dphi (K, ..., 3, 3) for u (K, ..., 3) fixed in B, R = N exp([phi]x) (K, 3, 3), J_r at phi:
+    -R [u]x J_r."""
+    shape = (len(R),) + (1,) * (u.ndim - 2) + (3, 3)
+    return -R.reshape(shape) @ _skew(u) @ J_r.reshape(shape)
 
 
 def _cross(a, b):
@@ -121,58 +149,132 @@ def _rotate(axis, angle, v):
     return v * c + _cross(a, v) * s + a * np.sum(a * v, -1)[..., None] * (1 - c)
 
 
+def _vee_skew(M):
+    """vee((M - M^T) / 2) (..., 3) of M (..., 3, 3)."""
+    return 0.5 * np.stack([M[..., 2, 1] - M[..., 1, 2], M[..., 0, 2] - M[..., 2, 0], M[..., 1, 0] - M[..., 0, 1]], -1)
+
+
+_BASIS_SKEW = _skew(np.eye(3))  # [e_i]x, i = 0..2
+
+
 @dataclass(frozen=True)
 class _Finger:
     """A finger's chain at zero angles (scene.kinematics.SerialFinger) and its links' masses and centres of
-    mass (link j beyond joint j), for complex-safe forward kinematics and gravity torques."""
+    mass (link j beyond joint j), for forward kinematics and gravity torques; the arrays may carry a leading
+    axis of fingers (_stacked), all with the same number n of joints."""
 
-    p_W_joint: np.ndarray  # (n, 3)
-    a_W: np.ndarray  # (n, 3)
-    p_W_tip0: np.ndarray  # (3,)
-    p_W_com0: np.ndarray  # (n, 3)
-    mass: np.ndarray  # (n,) kg
+    p_W_joint: np.ndarray  # ([F,] n, 3)
+    a_W: np.ndarray  # ([F,] n, 3)
+    p_W_tip0: np.ndarray  # ([F,] 3)
+    p_W_com0: np.ndarray  # ([F,] n, 3)
+    mass: np.ndarray  # ([F,] n) kg
+    p_W_link0: np.ndarray  # ([F,] L, 2, 3) m, the ends of the links' capsule axes
+    link_joint: np.ndarray  # ([F,] L) the joint whose child body carries each capsule (the same in every finger)
+    link_radius: np.ndarray  # ([F,] L) m
+
+    def _owners(self) -> np.ndarray:
+        """The last joint that turns each point of chain's rows: joint point j (j - 1), the tip (n - 1), centre
+        of mass l (l), then each capsule's two ends (its joint)."""
+        n = self.a_W.shape[-2]
+        links = np.repeat(np.asarray(self.link_joint).reshape(-1, self.link_joint.shape[-1])[0], 2)
+        return np.concatenate([np.arange(n) - 1, [n - 1], np.arange(n), links])
 
     def chain(self, q):
-        """(points (..., n, 3), axes (..., n, 3), tip (..., 3), centres of mass (..., n, 3)) at q (..., n):
-        joint j turns the joints beyond it, the tip and the links from j on about its current axis."""
-        n = len(self.a_W)
+        """(points (..., n, 3), axes (..., n, 3), tip (..., 3), centres of mass (..., n, 3), capsule ends
+        (..., L, 2, 3)) at q (..., n): joint j turns the points beyond it about its current axis."""
+        n = self.a_W.shape[-2]
         shape = q.shape[:-1]
-        # rows: joint points 0..n-1, tip, centres of mass 0..n-1 (points); axes apart (directions)
+        L = self.link_joint.shape[-1]
         P = np.broadcast_to(
-            np.concatenate([self.p_W_joint, self.p_W_tip0[None], self.p_W_com0]), shape + (2 * n + 1, 3)
-        )
-        A = np.broadcast_to(self.a_W, shape + (n, 3))
-        P, A = P.astype(np.result_type(q, float)), A.astype(np.result_type(q, float))
+            np.concatenate(
+                [
+                    self.p_W_joint,
+                    self.p_W_tip0[..., None, :],
+                    self.p_W_com0,
+                    self.p_W_link0.reshape(self.p_W_link0.shape[:-3] + (2 * L, 3)),
+                ],
+                axis=-2,
+            ),
+            shape + (2 * n + 1 + 2 * L, 3),
+        ).astype(float)
+        A = np.broadcast_to(self.a_W, shape + (n, 3)).astype(float)
+        owners = self._owners()
         for j in range(n):
             c, a = P[..., j, :], A[..., j, :]
-            moving = np.r_[j + 1 : n + 1, n + 1 + j : 2 * n + 1]  # joints beyond j, the tip, links j..n-1
+            moving = np.flatnonzero(owners >= j)
             P[..., moving, :] = c[..., None, :] + _rotate(a, q[..., j], P[..., moving, :] - c[..., None, :])
             A[..., j + 1 :, :] = _rotate(a, q[..., j], A[..., j + 1 :, :])
-        return P[..., :n, :], A, P[..., n, :], P[..., n + 1 :, :]
+        ends = P[..., 2 * n + 1 :, :].reshape(shape + (L, 2, 3))
+        return P[..., :n, :], A, P[..., n, :], P[..., n + 1 : 2 * n + 1, :], ends
 
     def torques(self, q, f_W, p_FC_W, gravity: float):
         """(tip (..., 3), tau (..., n)): the motors' torques that hold the finger still against its weight and
         push with f_W (..., 3) at the point p_FC_W (..., 3) from the tip centre (quasi-static)."""
-        points, axes, tip, coms = self.chain(q)
-        lever = tip + p_FC_W
-        push = np.sum(_cross(axes, lever[..., None, :] - points) * f_W[..., None, :], -1)
+        points, axes, tip, coms, _ = self.chain(q)
+        return tip, self._push(axes, points, tip + p_FC_W, f_W) + self._weight(axes, points, coms, gravity)
+
+    @staticmethod
+    def _push(axes, points, lever, f_W):
+        return np.sum(_cross(axes, lever[..., None, :] - points) * f_W[..., None, :], -1)
+
+    def _weight(self, axes, points, coms, gravity: float):
         # joint j carries links j..n-1: tau_j = sum_l m_l g e_z . (a_j x (c_l - p_j))
         moment = _cross(axes[..., :, None, :], coms[..., None, :, :] - points[..., :, None, :])[..., 2]
-        n = len(self.mass)
+        n = self.a_W.shape[-2]
         beyond = np.triu(np.ones((n, n)))  # [j, l]: link l is beyond joint j
-        weight = gravity * np.sum(moment * beyond * self.mass, -1)
-        return tip, push + weight
+        return gravity * np.sum(moment * beyond * self.mass[..., None, :], -1)
+
+    def derivatives(self, q, f_W, p_FC_W, gravity: float):
+        """(tip (..., 3), tau (..., n), J_tip (..., 3, n) the tip centre's Jacobian, J_C (..., n, 3) the lever
+        rows a_j x (c - p_j) at the contact point c = tip + p_FC_W, dtau/dq (..., n, n), the axes (..., n, 3)).
+        A joint k turns the axes and points beyond it: d a_j = a_k x a_j and d(x - p_j) = a_k x (x - p_j) for
+        k < j; for k >= j only the tip and the links from k on move, d x = a_k x (x - p_k)."""
+        points, axes, tip, coms, _ = self.chain(q)
+        n = self.a_W.shape[-2]
+        lever = tip + p_FC_W
+        J_C = _cross(axes, lever[..., None, :] - points)
+        tau = np.sum(J_C * f_W[..., None, :], -1) + self._weight(axes, points, coms, gravity)
+        U = _cross(axes, tip[..., None, :] - points)  # (..., k, 3): d tip / d q_k
+        a_j, a_k = axes[..., :, None, :], axes[..., None, :, :]  # (..., j, k, 3)
+        before = np.tril(np.ones((n, n)), -1)[..., None]  # [j, k]: k < j
+        to_tip = tip[..., None, :] - points  # (..., j, 3)
+        inner = _cross(_cross(a_k, a_j), (lever[..., None, :] - points)[..., :, None, :]) + _cross(
+            a_j, _cross(a_k, to_tip[..., :, None, :])
+        )
+        outer = _cross(a_j, U[..., None, :, :])
+        dpush = np.sum(np.where(before, inner, outer) * f_W[..., None, None, :], -1)
+        # the weight: [j, k, l]
+        rel = coms[..., None, :, :] - points[..., :, None, :]  # (..., i, l, 3): c_l - p_i
+        rel_j, rel_k = rel[..., :, None, :, :], rel[..., None, :, :, :]  # (..., j, k, l, 3)
+        A_j, A_k = axes[..., :, None, None, :], axes[..., None, :, None, :]
+        inner_g = _cross(_cross(A_k, A_j), rel_j) + _cross(A_j, _cross(A_k, rel_j))
+        outer_g = _cross(A_j, _cross(A_k, rel_k))
+        jj, kk, ll = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
+        gz = np.where((kk < jj)[..., None], inner_g, outer_g)[..., 2]
+        carried = (ll >= jj) & (ll >= kk)  # link l carried by joint j and turned by joint k
+        dweight = gravity * np.sum(gz * carried * self.mass[..., None, None, :], -1)
+        return tip, tau, np.swapaxes(U, -1, -2), J_C, dpush + dweight, axes
+
+
+def _stacked(fingers) -> _Finger:
+    """The fingers as one _Finger with a leading axis of fingers (the same number of joints each)."""
+    return _Finger(*(np.stack([getattr(f, name) for f in fingers]) for name in _Finger.__dataclass_fields__))
 
 
 def space_fingers(scene) -> tuple[_Finger, ...]:
-    """Each finger's chain and its links' masses and centres of mass at zero angles, from the plant."""
+    """Each finger's chain, its links' masses and centres of mass and its link capsules at zero angles, from the
+    plant."""
     plant = scene.plant
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, scene.positions(np.r_[1.0, 0, 0, 0, 0, 0, 0], np.zeros(scene.hand_q_indices.size)))
+    start, zero = np.r_[1.0, 0, 0, 0, 0, 0, 0], np.zeros(scene.hand_q_indices.size)
+    plant.SetPositions(context, scene.positions(start, zero))
+    capsules = scene.link_capsules()
+    ends = scene.link_ends_W(start[None], zero[None])[0]  # (F, L, 2, 3)
     out = []
-    for chain, entry in zip(scene.fingers, scene.hand_file.fingers):
+    for i, (chain, entry) in enumerate(zip(scene.fingers, scene.hand_file.fingers)):
         bodies = [plant.GetJointByName(n, scene.hand).child_body() for n in entry.joints]
         coms = [b.EvalPoseInWorld(context) @ b.CalcCenterOfMassInBodyFrame(context) for b in bodies]
+        names = [b.name() for b in bodies]
         out.append(
             _Finger(
                 p_W_joint=chain.p_W_joint,
@@ -180,9 +282,41 @@ def space_fingers(scene) -> tuple[_Finger, ...]:
                 p_W_tip0=chain.p_W_tip0,
                 p_W_com0=np.array(coms),
                 mass=np.array([b.get_mass(context) for b in bodies]),
+                p_W_link0=ends[i],
+                link_joint=np.array([names.index(c.body) for c in capsules[i]]),
+                link_radius=np.array([c.radius for c in capsules[i]]),
             )
         )
     return tuple(out)
+
+
+@dataclass(frozen=True)
+class SpaceHandModel:
+    """What a segment's program needs of a SpaceScene (scene.spatial), in plain values: it pickles to a worker
+    process, which then needs no plant of its own."""
+
+    fingers: tuple  # (F,) scene.kinematics.SerialFinger: the chains, their joint limits and Jacobians
+    chains: tuple[_Finger, ...]  # (F,) the chains with their links' masses (space_fingers)
+    object: SpaceObject
+    tip_radius: float  # m
+    gravity: float  # m/s^2
+    tau_max: np.ndarray  # (F, n) N m
+
+    @property
+    def num_fingers(self) -> int:
+        return len(self.fingers)
+
+
+def hand_model(scene) -> SpaceHandModel:
+    """The SpaceHandModel of a SpaceScene."""
+    return SpaceHandModel(
+        fingers=tuple(scene.fingers),
+        chains=space_fingers(scene),
+        object=scene.object,
+        tip_radius=float(scene.tip_radius),
+        gravity=float(scene.gravity),
+        tau_max=np.array(scene.tau_max, dtype=float),
+    )
 
 
 def refine_ik(finger, q0, target, lower, upper) -> np.ndarray:
@@ -190,7 +324,7 @@ def refine_ik(finger, q0, target, lower, upper) -> np.ndarray:
     within the limits (the nodes' IK holds the tips to 0.1 mm; the program pins them exactly)."""
     q = np.array(q0, dtype=float)
     for _ in range(NEWTON_ITERATIONS):
-        points, axes, tip, _ = finger.chain(q)
+        points, axes, tip, _, _ = finger.chain(q)
         error = target - tip
         if np.max(np.abs(error)) < 1e-13:
             break
@@ -259,9 +393,12 @@ def time_law(intervals: int) -> tuple[np.ndarray, np.ndarray]:
 class SpaceSegmentRows:
     """The nonlinear rows of one segment's program, vectorized over its knots (see the module's doc)."""
 
-    def __init__(self, scene, fingers, spec: SegmentSpec, mu: float, intervals: int, dt: float):
+    def __init__(self, scene, fingers, spec: SegmentSpec, mu: float, intervals: int, dt: float, links: bool = False):
         self.scene, self.fingers, self.spec = scene, fingers, spec
+        self.hand = _stacked(fingers)  # every finger at once
+        self.links = links  # with the link rows (each capsule's axis at least its radius off the box)
         F, n = scene.num_fingers, len(scene.fingers[0].q_lower)
+        self.clearance_row = 9 + 3 * F + n * F
         self.layout = _Layout(F, n, PYRAMID_EDGES)
         self.K, self.h = intervals + 1, dt
         s, self.rate = time_law(intervals)
@@ -276,12 +413,25 @@ class SpaceSegmentRows:
                 spec.p_BC_b[spec.switching],
                 spec.n_B_b[spec.switching],
             )
-        self.edges_B = pyramid_edges(self.n_B.reshape(-1, 3), mu, PYRAMID_EDGES).reshape(self.K, F, PYRAMID_EDGES, 3)
+        # Each knot's pyramids as the search builds them in W (statics.pyramid_edges of the normal in W) at the
+        # knot's nominal orientation, in B: at the end knots exactly the pyramids the search held the nodes with.
+        # The pyramid's turn about its normal follows the normal's direction in W, and an 8-edge pyramid turned
+        # otherwise missed a node's hold within the motors (seed-0 goal 28: 0.402 N m where the search's held
+        # it with 0.388 N m, and IPOPT failed in restoration).
+        n_W = np.einsum("kij,kfj->kfi", self.N, self.n_B)
+        edges_W = pyramid_edges(n_W.reshape(-1, 3), mu, PYRAMID_EDGES).reshape(self.K, F, PYRAMID_EDGES, 3)
+        self.edges_B = np.einsum("kji,kfej->kfei", self.N, edges_W)
         self.pinned = np.ones((self.K, F), dtype=bool)
         self.clearance = np.zeros(self.K)
         if spec.switching is not None:
             self.pinned[1:-1, spec.switching] = False
-            self.clearance = SWITCH_CLEARANCE * np.sin(np.pi * np.arange(self.K) / intervals)
+            # on the lifted knots only: at the last, where sin(pi) is 1e-16 and not 0, the gap row would be
+            # active where the pin already holds the fingertip, a redundant pair whose multipliers blow up
+            lifted = ~self.pinned[:, spec.switching]
+            self.clearance = np.where(lifted, SWITCH_CLEARANCE * np.sin(np.pi * np.arange(self.K) / intervals), 0.0)
+        # 1/m: the squared gap's row divided by twice the largest gap, so that its gradient is about one, as the
+        # pins' (20 segments of three seed-0 goals: 887 IPOPT iterations in all, 1046 unscaled)
+        self.clearance_scale = 1.0 / (2 * (scene.tip_radius + SWITCH_CLEARANCE))
         self.inertia = scene.object.mass * np.diag(
             [sum(np.square(scene.object.size)) - e * e for e in scene.object.size]
         ) / 12  # fmt: skip
@@ -305,149 +455,260 @@ class SpaceSegmentRows:
         """(K, F, 3) each finger's force on the object in B."""
         return np.einsum("kfe,kfec->kfc", lam, self.edges_B)
 
-    def knot_values(self, Z):
-        """(rows (K, 9 + 7F): F, T, L balance, fingertip pins (3F), torques (3F... n F), clearance (1)),
-        and the joint torques (K, F, n), the fingertip centres (K, F, 3)."""
+    def _knot(self, Z, derivatives: bool):
+        """The knots' variables, rotations, forces and the fingers' kinematics (with their derivatives)."""
         x = self.split(Z)
         R = self.rotations(x["phi"])
         f_B = self.forces_B(x["lam"])
         f_W = np.einsum("kij,kfj->kfi", R, f_B)
+        n_W = np.einsum("kij,kfj->kfi", R, self.n_B)
+        if derivatives:
+            kin = self.hand.derivatives(x["q"], f_W, -self.r * n_W, self.g)
+        else:
+            kin = self.hand.torques(x["q"], f_W, -self.r * n_W, self.g)
+        return x, R, f_B, f_W, n_W, kin
+
+    def knot_values(self, Z):
+        """(rows (K, 9 + 3F + nF + 1): F, T, L balance, fingertip pins (3F), joint torques (nF), clearance (1)),
+        and the joint torques (K, F, n), the fingertip centres (K, F, 3)."""
+        x, R, f_B, f_W, n_W, (tips, taus) = self._knot(Z, False)
+        return self._rows(x, R, f_B, f_W, tips, taus), taus, tips
+
+    def _rows(self, x, R, f_B, f_W, tips, taus):
         force = x["F"] - f_W.sum(1)
         moment = x["T"] - np.einsum("kij,kj->ki", R, np.cross(self.p_BC, f_B).sum(1))
         momentum = x["L"] - np.einsum("kij,jl,kml,km->ki", R, self.inertia, R, x["w"])
-        n_W = np.einsum("kij,kfj->kfi", R, self.n_B)
-        tips, taus = [], []
-        for i, finger in enumerate(self.fingers):
-            tip, tau = finger.torques(x["q"][:, i], f_W[:, i], -self.r * n_W[:, i], self.g)
-            tips.append(tip)
-            taus.append(tau)
-        tips, taus = np.stack(tips, 1), np.stack(taus, 1)
         targets = x["p"][:, None, :] + np.einsum("kij,kfj->kfi", R, self.p_BC + self.r * self.n_B)
         pins = (tips - targets).reshape(self.K, -1)
-        clearance = np.zeros(self.K, dtype=Z.dtype)
+        clearance = np.zeros(self.K)
         if self.spec.switching is not None:
-            p_B = np.einsum("kji,kj->ki", R, tips[:, self.spec.switching] - x["p"])
-            d = p_B * np.where(np.real(p_B) < 0, -1.0, 1.0) - self.half
-            out = np.where(np.real(d) > 0, d, 0.0)
-            clearance = np.sum(out * out, -1)
-        rows = np.concatenate([force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]], axis=1)
-        return rows, taus, tips
+            out = self._outside(R, tips[:, self.spec.switching] - x["p"])[1]
+            clearance = np.sum(out * out, -1) * self.clearance_scale
+        rows = [force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]]
+        if self.links:
+            rows.append(self._link_rows(x, R)[0].reshape(self.K, -1))
+        return np.concatenate(rows, axis=1)
+
+    def _link_rows(self, x, R, J_r=None):
+        """The signed distance from the box of each link capsule's axis (K, F, L), at its nearest point (the
+        golden-section search of geometry.segment_box_nearest), and with J_r its derivatives in q_i (K, F, L, n),
+        p (K, F, L, 3) and phi (K, F, L, 3): at a minimum over the axis, those of the distance at that point."""
+        points, axes, _, _, ends = self.hand.chain(x["q"])
+        e_B = np.einsum("kji,kflej->kflei", R, ends - x["p"][:, None, None, None, :])
+        t = segment_box_nearest(self.half, e_B[..., 0, :], e_B[..., 1, :], LINK_SEARCH_ITERATIONS)[..., None]
+        x_B = (1 - t) * e_B[..., 0, :] + t * e_B[..., 1, :]
+        value = box_signed_distances(self.half, x_B)
+        if J_r is None:
+            return (value,)
+        sign = np.where(x_B < 0, -1.0, 1.0)
+        d = np.abs(x_B) - self.half
+        out = np.maximum(d, 0.0)
+        norm = np.linalg.norm(out, axis=-1, keepdims=True)
+        face = np.eye(3)[np.argmax(d, axis=-1)]  # inside: the nearest face's axis
+        g = np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), face) * sign  # d value / d x_B
+        x_W = (1 - t) * ends[..., 0, :] + t * ends[..., 1, :]  # (K, F, L, 3)
+        lever = _cross(axes[:, :, None], x_W[:, :, :, None, :] - points[:, :, None])  # (K, F, L, n, 3)
+        n = self.layout.joints
+        turned = np.arange(n)[None, :] <= self.hand.link_joint[0][:, None]  # (L, n): joint k turns capsule l
+        gR = np.einsum("kfli,kji->kflj", g, R)  # d value / d x_W
+        dq = np.einsum("kflj,kflnj->kfln", gR, lever) * turned
+        dphi = np.einsum("kfli,kflij->kflj", g, _skew(x_B) @ J_r[:, None, None])
+        return value, dq, -gR, dphi
+
+    def _outside(self, R, tip_rel):
+        """(p_B (K, 3) the switching fingertip's centre in B, its excess over the box's half sizes, >= 0)."""
+        p_B = np.einsum("kji,kj->ki", R, tip_rel)
+        d = np.abs(p_B) - self.half
+        return p_B, np.where(d > 0, d, 0.0)
 
     def pair_values(self, Z):
         """(K - 1, 3): vee(Q - Q^T) / 2, Q = exp(-[h w_mid]x) R[k+1] R[k]^T."""
         x = self.split(Z)
         R = self.rotations(x["phi"])
         w_mid = 0.5 * (x["w"][1:] + x["w"][:-1])
-        Q = _exp(-self.h * w_mid) @ R[1:] @ np.swapaxes(R[:-1], -1, -2)
-        return 0.5 * np.stack([Q[:, 2, 1] - Q[:, 1, 2], Q[:, 0, 2] - Q[:, 2, 0], Q[:, 1, 0] - Q[:, 0, 1]], -1)
+        return _vee_skew(_exp(-self.h * w_mid) @ R[1:] @ np.swapaxes(R[:-1], -1, -2))
 
     def knot_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         F = self.layout.num_fingers
         n = self.layout.joints
+        L = self.hand.link_joint.shape[-1]
         lo, hi = [], []
         for k in range(self.K):
             pin = np.where(np.repeat(self.pinned[k], 3), 0.0, np.inf)
-            gap = (self.r + self.clearance[k]) ** 2 if self.clearance[k] > 0 else -np.inf
+            gap = (self.r + self.clearance[k]) ** 2 * self.clearance_scale if self.clearance[k] > 0 else -np.inf
             lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap]]))
             hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf]]))
+            if self.links:  # on the free knots: the nodes' links the search kept 2 mm off
+                free = 0 < k < self.K - 1
+                lo[-1] = np.concatenate([lo[-1], self.hand.link_radius.ravel() if free else np.full(F * L, -np.inf)])
+                hi[-1] = np.concatenate([hi[-1], np.full(F * L, np.inf)])
         return np.array(lo), np.array(hi)
 
     # -- the Jacobian ------------------------------------------------------------------------------
+    def knot_mask(self) -> np.ndarray:
+        """(rows, width) bool: the variables of its own knot each knot row depends on."""
+        lay = self.layout
+        F, n, m = lay.num_fingers, lay.joints, lay.edges
+        L = self.hand.link_joint.shape[-1]
+        mask = np.zeros((self.clearance_row + 1 + (F * L if self.links else 0), lay.width), dtype=bool)
+        mask[:, lay.slice("phi")] = True
+        lam, q = lay.slice("lam").start, lay.slice("q").start
+        for row, name in ((0, "F"), (3, "T"), (6, "L")):
+            mask[row : row + 3, lay.slice(name)] = True
+        mask[0:6, lay.slice("lam")] = True
+        mask[6:9, lay.slice("w")] = True
+        for i in range(F):
+            joints = slice(q + n * i, q + n * (i + 1))
+            mask[9 + 3 * i : 12 + 3 * i, lay.slice("p")] = True
+            mask[9 + 3 * i : 12 + 3 * i, joints] = True
+            taus = slice(9 + 3 * F + n * i, 9 + 3 * F + n * (i + 1))
+            mask[taus, joints] = True
+            mask[taus, lam + m * i : lam + m * (i + 1)] = True
+        c = self.clearance_row
+        if self.spec.switching is None:
+            mask[c] = False  # no clearance row: zero
+        else:
+            s = self.spec.switching
+            mask[c, lay.slice("p")] = True
+            mask[c, q + n * s : q + n * (s + 1)] = True
+        if self.links:
+            for i in range(F):  # finger i's capsules
+                rows = slice(c + 1 + L * i, c + 1 + L * (i + 1))
+                mask[rows, lay.slice("phi")] = mask[rows, lay.slice("p")] = True
+                mask[rows, q + n * i : q + n * (i + 1)] = True
+        return mask
+
+    def pair_mask(self) -> np.ndarray:
+        """(3, width) bool: the variables of either knot a pair row depends on."""
+        mask = np.zeros((3, self.layout.width), dtype=bool)
+        mask[:, self.layout.slice("phi")] = mask[:, self.layout.slice("w")] = True
+        return mask
+
     def jacobians(self, Z):
         """(knot rows (K, Rk), their Jacobian (K, Rk, width); pair rows (K-1, 3), Jacobians on knot k and
-        k+1 (K-1, 3, width) each). Complex steps: a knot row meets its own knot's variables alone, so a column
-        is stepped at every knot at once, and finger i's rows meet only finger i's joints, so joint j of every
-        finger at once; a pair row meets knots k and k+1, so phi and w are stepped at one parity at a time.
-        F, T and L enter their rows with the identity, v no knot row, lambda linearly (_lambda_columns)."""
+        k+1 (K-1, 3, width) each), analytic: R = N exp([phi]x) perturbs as R exp([J_r dphi]x), so a vector
+        u fixed in B turns as d(R u) = -R [u]x J_r dphi (_turned)."""
         lay = self.layout
-        rows, _, _ = self.knot_values(Z)
-        pair = self.pair_values(Z)
-        Jk = np.zeros(rows.shape + (lay.width,))
-        Jl = np.zeros(pair.shape + (lay.width,))
-        Jr = np.zeros(pair.shape + (lay.width,))
-        q0, F, n = lay.slice("q").start, lay.num_fingers, lay.joints
-        groups = [[c] for name in ("phi", "p", "w") for c in range(lay.slice(name).start, lay.slice(name).stop)]
-        groups += [[q0 + i * n + j for i in range(F)] for j in range(n)]
-        for group in groups:
-            Zc = Z.astype(complex)
-            Zc[:, group] += 1j * COMPLEX_STEP
-            d = np.imag(self.knot_values(Zc)[0]) / COMPLEX_STEP
-            if len(group) == 1:
-                Jk[:, :, group[0]] = d
-                continue
-            for i, c in enumerate(group):  # finger i's joint: its pins, torques and (switching) clearance
-                mine = np.r_[9 + 3 * i : 12 + 3 * i, 9 + 3 * F + n * i : 9 + 3 * F + n * (i + 1)]
-                if i == self.spec.switching:
-                    mine = np.r_[mine, rows.shape[1] - 1]
-                Jk[:, mine, c] = d[:, mine]
-        for name in ("F", "T", "L"):
-            cols = lay.slice(name)
-            row = 3 * ("F", "T", "L").index(name)
-            Jk[:, row : row + 3, cols] = np.eye(3)
-        parity = np.arange(self.K) % 2
-        for c in [*range(3), *range(lay.slice("w").start, lay.slice("w").stop)]:
-            for colour in (0, 1):
-                Zc = Z.astype(complex)
-                Zc[parity == colour, c] += 1j * COMPLEX_STEP
-                dp = np.imag(self.pair_values(Zc)) / COMPLEX_STEP
-                left = parity[:-1] == colour
-                Jl[left, :, c] = dp[left]
-                Jr[~left, :, c] = dp[~left]
-        self._lambda_columns(Z, Jk)
-        return rows, Jk, pair, Jl, Jr
-
-    def _lambda_columns(self, Z, Jk) -> None:
-        """The rows' derivatives in lambda, where they are linear: F, T and the torques."""
-        lay = self.layout
-        x = self.split(Z)
-        R = self.rotations(x["phi"])
         F, n, m = lay.num_fingers, lay.joints, lay.edges
+        x, R, f_B, f_W, _, (tips, taus, J_tip, J_C, dtau_dq, axes) = self._knot(Z, True)
+        rows = self._rows(x, R, f_B, f_W, tips, taus)
+        J_r = _right_jacobian(x["phi"])
+        phi, eye = lay.slice("phi"), np.eye(3)
+        Jk = np.zeros(rows.shape + (lay.width,))
+        Jk[:, 0:3, phi] = -_turned(R, J_r, f_B.sum(1))
+        Jk[:, 3:6, phi] = -_turned(R, J_r, np.cross(self.p_BC, f_B).sum(1))
+        for row, name in ((0, "F"), (3, "T"), (6, "L")):
+            Jk[:, row : row + 3, lay.slice(name)] = eye
+        # momentum L - R I R^T w: with a = R^T w, d(R I a) = R ([I a]x - I [a]x) J_r dphi + R I R^T dw
+        a = np.einsum("kji,kj->ki", R, x["w"])
+        Jk[:, 6:9, phi] = R @ (_skew(a @ self.inertia) - self.inertia @ _skew(a)) @ J_r
+        Jk[:, 6:9, lay.slice("w")] = -R @ self.inertia @ np.swapaxes(R, -1, -2)
         edges_W = np.einsum("kij,kfej->kfei", R, self.edges_B)  # (K, F, m, 3)
         moments_W = np.einsum("kij,kfej->kfei", R, np.cross(self.p_BC[:, :, None, :], self.edges_B))
-        n_W = np.einsum("kij,kfj->kfi", R, self.n_B)
-        start = lay.slice("lam").start
-        tau_row = 9 + 3 * F
-        for i, finger in enumerate(self.fingers):
-            cols = slice(start + i * m, start + (i + 1) * m)
-            Jk[:, 0:3, cols] = -np.swapaxes(edges_W[:, i], -1, -2)
-            Jk[:, 3:6, cols] = -np.swapaxes(moments_W[:, i], -1, -2)
-            points, axes, tip, _ = finger.chain(x["q"][:, i])
-            lever = tip - self.r * n_W[:, i]
-            J_C = _cross(axes, lever[:, None, :] - points)  # (K, n, 3): row j is joint j's lever
-            Jk[:, tau_row + i * n : tau_row + (i + 1) * n, cols] = np.einsum("kjc,kec->kje", J_C, edges_W[:, i])
+        lam0, q0 = lay.slice("lam").start, lay.slice("q").start
+        pin_phi = -_turned(R, J_r, self.p_BC + self.r * self.n_B)  # (K, F, 3, 3)
+        # tau_j = (a_j x (tip - r n_W - p_j)) . f_W: f_W and n_W turn with phi, d tau_j = J_C,j . df_W
+        # - r (f_W x a_j) . dn_W
+        tau_phi = J_C @ _turned(R, J_r, f_B) - self.r * _cross(f_W[:, :, None, :], axes) @ _turned(R, J_r, self.n_B)
+        for i in range(F):
+            lam_i, q_i = slice(lam0 + m * i, lam0 + m * (i + 1)), slice(q0 + n * i, q0 + n * (i + 1))
+            pins, tau_rows = slice(9 + 3 * i, 12 + 3 * i), slice(9 + 3 * F + n * i, 9 + 3 * F + n * (i + 1))
+            Jk[:, 0:3, lam_i] = -np.swapaxes(edges_W[:, i], -1, -2)
+            Jk[:, 3:6, lam_i] = -np.swapaxes(moments_W[:, i], -1, -2)
+            Jk[:, pins, phi] = pin_phi[:, i]
+            Jk[:, pins, lay.slice("p")] = -eye
+            Jk[:, pins, q_i] = J_tip[:, i]
+            Jk[:, tau_rows, lam_i] = np.einsum("kjc,kec->kje", J_C[:, i], edges_W[:, i])
+            Jk[:, tau_rows, q_i] = dtau_dq[:, i]
+            Jk[:, tau_rows, phi] = tau_phi[:, i]
+        if self.spec.switching is not None:
+            self._clearance_columns(Jk, x, R, J_r, tips, J_tip)
+        if self.links:
+            self._link_columns(Jk, x, R, J_r)
+        return rows, Jk, self.pair_values(Z), *self._pair_jacobians(x, R, J_r)
+
+    def _clearance_columns(self, Jk, x, R, J_r, tips, J_tip) -> None:
+        """The clearance row sum(out^2), out = max(|p_B| - half, 0), p_B = R^T (tip - p): d p_B = R^T (J_tip dq
+        - dp) + [p_B]x J_r dphi."""
+        lay, s, n = self.layout, self.spec.switching, self.layout.joints
+        p_B, out = self._outside(R, tips[:, s] - x["p"])
+        g = 2 * self.clearance_scale * out * np.where(p_B < 0, -1.0, 1.0)  # d row / d p_B (K, 3)
+        gR = np.einsum("ki,kji->kj", g, R)  # g R^T (K, 3): d row / d tip
+        q, c = lay.slice("q").start + n * s, self.clearance_row
+        Jk[:, c, q : q + n] = np.einsum("kj,kjc->kc", gR, J_tip[:, s])
+        Jk[:, c, lay.slice("p")] = -gR
+        Jk[:, c, lay.slice("phi")] = np.einsum("ki,kij->kj", g, _skew(p_B) @ J_r)
+
+    def _link_columns(self, Jk, x, R, J_r) -> None:
+        lay = self.layout
+        F, n, L = lay.num_fingers, lay.joints, self.hand.link_joint.shape[-1]
+        _, dq, dp, dphi = self._link_rows(x, R, J_r)
+        first, q0 = self.clearance_row + 1, lay.slice("q").start
+        for i in range(F):
+            rows = slice(first + L * i, first + L * (i + 1))
+            Jk[:, rows, q0 + n * i : q0 + n * (i + 1)] = dq[:, i]
+            Jk[:, rows, lay.slice("p")] = dp[:, i]
+            Jk[:, rows, lay.slice("phi")] = dphi[:, i]
+
+    def _pair_jacobians(self, x, R, J_r):
+        """(d pair / d knot k, d pair / d knot k + 1), each (K-1, 3, width). With Q = E R[k+1] R[k]^T, E =
+        exp(-[h w_mid]x): dphi[k+1] gives dQ = [E R[k+1] J_r dphi]x Q, dphi[k] dQ = -Q [R[k] J_r dphi]x, dw at
+        either knot dQ = [E J_r(-h w_mid) (-h / 2) dw]x Q; vee of the skew part is linear in the vector."""
+        lay = self.layout
+        w_mid = 0.5 * (x["w"][1:] + x["w"][:-1])
+        E = _exp(-self.h * w_mid)
+        Q = E @ R[1:] @ np.swapaxes(R[:-1], -1, -2)
+        left = np.stack([_vee_skew(B @ Q) for B in _BASIS_SKEW], -1)  # (K-1, 3, 3): u -> vee skew([u]x Q)
+        right = np.stack([_vee_skew(Q @ B) for B in _BASIS_SKEW], -1)  # u -> vee skew(Q [u]x)
+        dw = left @ E @ _right_jacobian(-self.h * w_mid) * (-0.5 * self.h)
+        Jl = np.zeros((self.K - 1, 3, lay.width))
+        Jr = np.zeros_like(Jl)
+        Jl[:, :, lay.slice("phi")] = -right @ R[:-1] @ J_r[:-1]
+        Jr[:, :, lay.slice("phi")] = left @ E @ R[1:] @ J_r[1:]
+        Jl[:, :, lay.slice("w")] = Jr[:, :, lay.slice("w")] = dw
+        return Jl, Jr
 
 
 class _SegmentConstraint:
     """Drake's evaluator for a segment's nonlinear rows (knot rows, then pair rows) over all its knots'
-    variables, knot after knot: float input gives the values, AutoDiffXd input values and gradient."""
+    variables, knot after knot: float input gives the values, AutoDiffXd input values and gradient, the
+    analytic Jacobian scattered into the binding's sparsity pattern (SpaceSegmentRows.knot_mask and pair_mask
+    per knot). Drake's solvers pass identity input gradients, which skip the chain rule's product."""
 
     def __init__(self, rows: SpaceSegmentRows):
         self.rows = rows
         K, W = rows.K, rows.layout.width
-        self.num_knot_rows = rows.knot_bounds()[0].shape[1]
-        self.shape = (K * self.num_knot_rows + 3 * (K - 1), K * W)
+        knot = rows.knot_mask()
+        self.num_knot_rows = knot.shape[0]
+        Rk = self.num_knot_rows
+        self.shape = (K * Rk + 3 * (K - 1), K * W)
+        # (binding row, binding column, flat index into the knot or pair Jacobians) of every entry
+        k, r, c = np.nonzero(np.broadcast_to(knot, (K,) + knot.shape))
+        pk, pr, pc = np.nonzero(np.broadcast_to(rows.pair_mask(), (K - 1, 3, W)))
+        self.knot_entries = (k * Rk + r, k * W + c, (k * Rk + r) * W + c)
+        base = K * Rk
+        self.pair_entries = (base + 3 * pk + pr, pk * W + pc, (pk * 3 + pr) * W + pc)
 
     def values(self, Z) -> np.ndarray:
         return np.concatenate([self.rows.knot_values(Z)[0].ravel(), self.rows.pair_values(Z).ravel()])
 
     def jacobian(self, Z) -> tuple[np.ndarray, np.ndarray]:
         rows, Jk, pair, Jl, Jr = self.rows.jacobians(Z)
-        K, W, Rk = self.rows.K, self.rows.layout.width, self.num_knot_rows
         J = np.zeros(self.shape)
-        for k in range(K):
-            J[k * Rk : (k + 1) * Rk, k * W : (k + 1) * W] = Jk[k]
-        base = K * Rk
-        for k in range(K - 1):
-            J[base + 3 * k : base + 3 * k + 3, k * W : (k + 1) * W] = Jl[k]
-            J[base + 3 * k : base + 3 * k + 3, (k + 1) * W : (k + 2) * W] = Jr[k]
+        r, c, source = self.knot_entries
+        J[r, c] = Jk.reshape(-1)[source]
+        r, c, source = self.pair_entries
+        J[r, c] = Jl.reshape(-1)[source]
+        J[r, c + self.rows.layout.width] = Jr.reshape(-1)[source]
         return np.concatenate([rows.ravel(), pair.ravel()]), J
 
     def sparsity(self) -> list[tuple[int, int]]:
-        K, W, Rk = self.rows.K, self.rows.layout.width, self.num_knot_rows
-        out = [(k * Rk + r, k * W + c) for k in range(K) for r in range(Rk) for c in range(W)]
-        base = K * Rk
-        out += [(base + 3 * k + r, k * W + c) for k in range(K - 1) for r in range(3) for c in range(2 * W)]
-        return out
+        r, c, _ = self.knot_entries
+        pr, pc, _ = self.pair_entries
+        W = self.rows.layout.width
+        rows = np.concatenate([r, pr, pr])
+        cols = np.concatenate([c, pc, pc + W])
+        return list(zip(rows.tolist(), cols.tolist()))
 
     def __call__(self, z):
         W = self.rows.layout.width
@@ -468,6 +729,9 @@ class SpaceSegmentResult:
     iterations: int
     solve_time_s: float
     build_time_s: float
+    cpu_time_s: float  # s of this process's CPU time, build and solve (wall time counts other processes' too)
+    link_rows: bool  # solved again with the link rows (the first solve had a link over 1 mm inside the box)
+    pid: int  # the process that solved it
     t: np.ndarray  # (K,) s from the segment's start
     x: np.ndarray  # (K, 7)
     v: np.ndarray  # (K, 6)
@@ -536,10 +800,24 @@ def _lifted(start, end, s: float, half, gap: float) -> np.ndarray:
     return max(hi, 1.0) * point
 
 
-def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
-    """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess."""
+@dataclass(frozen=True)
+class SpaceSegmentProgram:
+    """One segment's program, its initial guess set (_guess)."""
+
+    prog: MathematicalProgram
+    z: np.ndarray  # (K, width) the knots' variables
+    rows: SpaceSegmentRows
+    binding: object  # the nonlinear rows (_SegmentConstraint) over z, knot after knot
+    build_time_s: float
+
+
+def build_space_segment(
+    scene, fingers, spec: SegmentSpec, mu: float, links: bool = False, start: np.ndarray | None = None
+) -> SpaceSegmentProgram:
+    """One segment's program (see the module's doc), with the link rows or not, from `start` (K, width), else
+    from its guess."""
     t0 = time.perf_counter()
-    rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT)
+    rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links)
     lay, K = rows.layout, rows.K
     prog = MathematicalProgram()
     z = prog.NewContinuousVariables(K, lay.width, "z")
@@ -595,16 +873,41 @@ def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: Ci
     for k in range(K - 1):
         Q = np.block([[np.eye(nq), -np.eye(nq)], [-np.eye(nq), np.eye(nq)]]) * 2 * WEIGHT_JOINT_STEP
         prog.AddQuadraticCost(Q, np.zeros(2 * nq), np.concatenate([var["q"][k], var["q"][k + 1]]), is_convex=True)
-    guess = _guess(rows)
-    build = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    result = IpoptSolver().Solve(prog, guess.ravel(), ipopt_options(config))
-    solve_time = time.perf_counter() - t1
-    Z = result.GetSolution(z).reshape(K, lay.width)
-    return _segment_arrays(rows, Z, result, build, solve_time)
+    # by name: Drake orders a matrix's variables column-major
+    prog.SetInitialGuess(z, _guess(rows) if start is None else start)
+    return SpaceSegmentProgram(prog, z, rows, binding, time.perf_counter() - t0)
 
 
-def _segment_arrays(rows: SpaceSegmentRows, Z, result, build: float, solve_time: float) -> SpaceSegmentResult:
+def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
+    """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess; `scene` a
+    SpaceScene or its SpaceHandModel, `fingers` the chains of space_fingers."""
+    cpu = time.process_time()
+    build, solve_time, Z = 0.0, 0.0, None
+    for links in (False, True):
+        program = build_space_segment(scene, fingers, spec, mu, links, Z)
+        t0 = time.perf_counter()
+        result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
+        build, solve_time = build + program.build_time_s, solve_time + time.perf_counter() - t0
+        Z = result.GetSolution(program.z)
+        if not result.is_success() or link_depth(program.rows, Z) <= LINK_PENETRATION_TOL:
+            break
+    times = (build, solve_time, time.process_time() - cpu)
+    return _segment_arrays(program.rows, Z, result, times)
+
+
+def link_depth(rows: SpaceSegmentRows, Z) -> float:
+    """m, how deep the deepest link capsule reaches into the box over the knots Z (0: none does), as the physics
+    check measures it (geometry.segment_box_distances)."""
+    x = rows.split(Z)
+    R = rows.rotations(x["phi"])
+    ends = rows.hand.chain(x["q"])[4]
+    e_B = np.einsum("kji,kflej->kflei", R, ends - x["p"][:, None, None, None, :])
+    depth = rows.hand.link_radius - segment_box_distances(rows.half, e_B[..., 0, :], e_B[..., 1, :])
+    return float(max(depth.max(), 0.0))
+
+
+def _segment_arrays(rows: SpaceSegmentRows, Z, result, times: tuple[float, float, float]) -> SpaceSegmentResult:
+    """The arrays of a solved segment; `times` (build, solve, CPU) in s."""
     x = rows.split(Z)
     R = rows.rotations(x["phi"])
     _, taus, tips = rows.knot_values(Z)
@@ -617,8 +920,11 @@ def _segment_arrays(rows: SpaceSegmentRows, Z, result, build: float, solve_time:
         success=bool(result.is_success()),
         status=details.ConvertStatusToString(),
         iterations=-1,
-        solve_time_s=solve_time,
-        build_time_s=build,
+        build_time_s=times[0],
+        solve_time_s=times[1],
+        cpu_time_s=times[2],
+        link_rows=rows.links,
+        pid=os.getpid(),
         t=rows.h * np.arange(rows.K),
         x=np.hstack([matrix_quaternions(R), p]),
         v=np.hstack([x["w"], x["v"]]),

@@ -165,12 +165,12 @@ def run_space(args) -> int:
     from trajectotree.cli.common import in_option_terms, scene_overrides
     from trajectotree.config import Config, ConfigError, load_config
     from trajectotree.io import folder_lock
+    from trajectotree.planning.keyframes import check_workers
     from trajectotree.planning.spatial import plan_space, save_space_plan
     from trajectotree.scene.spatial import build_space_scene
 
     goal = space_goal(args)
-    if args.html:
-        raise ConfigError("--html takes a planar hand only so far")
+    workers = check_workers(args.segment_workers, "--segment-workers")
     if args.method != "trajectotree":
         raise ConfigError(field="--method", value=args.method, problem="takes a planar hand only so far",
                           valid="trajectotree for a hand in space")  # fmt: skip
@@ -184,6 +184,8 @@ def run_space(args) -> int:
     w, x, y, z = goal
     default = f"plan_space_{w:+.3f}_{x:+.3f}_{y:+.3f}_{z:+.3f}"
     out = check_output_dir("--out", args.out or default, (PLAN_JSON, PLAN_NPZ))
+    if args.html:  # it may go into --out, which save_space_plan creates before the playback is written
+        check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
     scene = build_space_scene(
         args.hand,
         mu=scene_config.mu,
@@ -191,9 +193,13 @@ def run_space(args) -> int:
         mass=scene_config.box_mass if "box_mass" in overrides else None,
     )
     with folder_lock(out, "--out", "trajectotree plan"):
-        result = plan_space(scene, goal, config)
+        result = plan_space(scene, goal, config, workers)
         removed = remove_derived_files(out)
         save_space_plan(result, out, config)
+        if args.html and result.trajectory is not None:
+            from trajectotree.execution.space_playback import write_space_plan_html
+
+            write_space_plan_html(scene, result.trajectory.arrays(), args.html, title=f"TrajectoTree: {out.name}")
     if removed:
         print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces", file=sys.stderr)
     if args.json:
@@ -218,4 +224,6 @@ def run_space(args) -> int:
             f"{c.newton_euler_moment_Nm:.1e} N m, cones {c.friction_cone_N:.1e} N"
         )
     print(f"wrote {out}/plan.json" + (f" and {out}/plan.npz" if result.trajectory is not None else ""))
+    if args.html:
+        print(f"playback: {args.html}" if result.trajectory is not None else "playback: not written (no trajectory)")
     return 0

@@ -49,15 +49,22 @@ def register(subparsers) -> None:
 
 
 def draw_plan(scene, plan, path: str) -> None:
-    """The keyframes of `plan` (figures.figure_keyframes), written atomically."""
+    """The keyframes of `plan` (figures.figure_keyframes; in space figures.space.figure_space_keyframes), written
+    atomically."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from trajectotree.contact_plan import SpaceContactPlan
     from trajectotree.figures.run import figure_keyframes, save_figure
 
-    fig = figure_keyframes(scene, plan)
+    if isinstance(plan, SpaceContactPlan):
+        from trajectotree.figures.space import figure_space_keyframes
+
+        fig = figure_space_keyframes(scene, plan)
+    else:
+        fig = figure_keyframes(scene, plan)
     try:
         save_figure(fig, path, dpi=110)
     finally:
@@ -135,7 +142,7 @@ def run_space(args) -> int:
 
     goal = space_goal(args)
     if args.figure:
-        raise ConfigError("--figure takes a planar hand only so far")
+        check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
     config = load_config(args.config) if getattr(args, "config", None) else Config()
     overrides = scene_overrides(args)
     try:
@@ -150,6 +157,8 @@ def run_space(args) -> int:
         mass=scene_config.box_mass if "box_mass" in overrides else None,
     )
     plan = find_space_contact_plan(scene, goal, config.search, mu)
+    if args.figure and plan.success:
+        draw_plan(scene, plan, args.figure)
     if args.json:
         print_json(plan.to_json())
         return 0
@@ -179,4 +188,6 @@ def run_space(args) -> int:
             stance += f", resists {node.stance_push_capacity:.2f} N"
         print(f"  node {n}: quat [{quat}]  switching finger {moved}  contacts (B) {contacts}{stance}")
         print(f"          q {' '.join(f'{v:+.3f}' for v in node.q.ravel())} rad")
+    if args.figure:
+        print(f"figure: {args.figure}" if plan.success else "figure: not drawn (no plan)")
     return 0

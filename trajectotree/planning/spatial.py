@@ -1,5 +1,6 @@
 """Planning for a hand in space: the contact search in space (search.tree, find_space_contact_plan), then the
-keyframes formulation in space (cito.spatial: one IPOPT program per segment), the segments joined at their
+keyframes formulation in space (cito.spatial: one IPOPT program per segment, the segments independent, their
+ends the search's nodes: solved at once in the segment pool of keyframes.py), the segments joined at their
 nodes into one trajectory, checked from its arrays alone (planning.physics.check_space_physics) and written as
 plan.npz (results.SPACE_TRAJECTORY_ARRAYS) and plan.json (the object, the integration rule, the check,
 the solve report per segment and the contact sequence).
@@ -8,16 +9,27 @@ the solve report per segment and the contact sequence).
 from __future__ import annotations
 
 import json
+import os
+import threading
 import time
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from trajectotree.cito.spatial import segment_spec, solve_space_segment, space_fingers
-from trajectotree.config import Config, config_to_dict, mu_plan
+from trajectotree.cito.spatial import (
+    SegmentSpec,
+    SpaceHandModel,
+    SpaceSegmentResult,
+    hand_model,
+    segment_spec,
+    solve_space_segment,
+)
+from trajectotree.config import CitoConfig, Config, config_to_dict, mu_plan
 from trajectotree.contact_plan import SpaceContactPlan
 from trajectotree.geometry import quaternion_angle
+from trajectotree.planning.keyframes import kept_pool, kill_pool, local_pool
 from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
 from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
 from trajectotree.search.tree import find_space_contact_plan
@@ -40,7 +52,7 @@ class SpacePlanResult:
     final_error_rad: float  # the angle from the last knot's orientation to the goal (nan: nothing solved)
     segments: tuple[dict, ...]  # per segment: success, status, build and solve times
     search_time_s: float
-    solve_time_s: float
+    solve_time_s: float  # s of wall time, the segments' programs (at once on the segment pool)
     total_time_s: float
 
     def to_json(self) -> dict:
@@ -75,9 +87,52 @@ def object_model(scene) -> SpaceObjectModel:
     )
 
 
-def plan_space(scene, goal_quaternion, config: Config) -> SpacePlanResult:
+@dataclass(frozen=True)
+class SpaceSegmentTask:
+    """One segment's program (plain values: it pickles to a worker process)."""
+
+    model: SpaceHandModel
+    spec: SegmentSpec
+    mu: float  # the planning friction mu_plan
+    cito: CitoConfig
+
+
+def solve_space_task(task: SpaceSegmentTask) -> SpaceSegmentResult:
+    """A worker's entry point: one segment's program built and solved in this process."""
+    return solve_space_segment(task.model, task.model.chains, task.spec, task.mu, task.cito)
+
+
+def solve_space_segments(tasks: list[SpaceSegmentTask], workers: int | None) -> list[SpaceSegmentResult]:
+    """The tasks' results in order: in this process (workers 1 or one task), else on local processes as
+    keyframes.run_pieces does: from the main thread on the pool it keeps (kept_pool: one process per core,
+    `workers` None), from another on a pool of `workers` started for these tasks and shut down after."""
+    size = (os.cpu_count() or 1) if workers is None else workers
+    if min(len(tasks), size) <= 1:
+        return [solve_space_task(t) for t in tasks]
+    kept = threading.current_thread() is threading.main_thread()
+    pool = kept_pool(size, os.getpid()) if kept else local_pool(min(len(tasks), size))
+    try:
+        futures = [pool.submit(solve_space_task, t) for t in tasks]
+        results = [f.result() for f in futures]
+    except BrokenProcessPool:
+        if not kept:
+            raise
+        kept_pool.cache_clear()  # a kept pool whose worker died since (killed from outside): a new one
+        return solve_space_segments(tasks, workers)
+    except BaseException:
+        # interrupted or failed: shutdown() alone would wait for the running solves
+        kill_pool(pool)
+        kept_pool.cache_clear()
+        raise
+    if not kept:
+        pool.shutdown()
+    return results
+
+
+def plan_space(scene, goal_quaternion, config: Config, workers: int | None = None) -> SpacePlanResult:
     """Plans the cube of the hand in space `scene` (scene.spatial.SpaceScene) from its start pose to the unit
-    quaternion `goal_quaternion`: Algorithm 1 in space, then each segment's program, one after another."""
+    quaternion `goal_quaternion`: Algorithm 1 in space, then the segments' programs, at once on `workers`
+    local processes (None: one per core; 1: one after another in this process, solve_space_segments)."""
     t0 = time.perf_counter()
     mu = mu_plan(config.scene, config.search)
     goal = tuple(float(v) for v in goal_quaternion)
@@ -97,12 +152,15 @@ def plan_space(scene, goal_quaternion, config: Config) -> SpacePlanResult:
             total_time_s=time.perf_counter() - t0,
             **common,
         )
-    fingers = space_fingers(scene)
+    t1 = time.perf_counter()
+    hand = hand_model(scene)
     nodes = contact_plan.nodes
-    results = [
-        solve_space_segment(scene, fingers, segment_spec(scene, fingers, a, b), mu, config.cito)
+    tasks = [
+        SpaceSegmentTask(hand, segment_spec(hand, hand.chains, a, b), mu, config.cito)
         for a, b in zip(nodes[:-1], nodes[1:])
     ]
+    results = solve_space_segments(tasks, workers)
+    solve_time = time.perf_counter() - t1
     trajectory = join_segments(scene, results)
     check = check_space_physics(trajectory.arrays(), model, mu)
     error = quaternion_angle(trajectory.x[-1, :4], np.asarray(goal))
@@ -123,10 +181,12 @@ def plan_space(scene, goal_quaternion, config: Config) -> SpacePlanResult:
                 "status": r.status,
                 "build_time_s": r.build_time_s,
                 "solve_time_s": r.solve_time_s,
+                "cpu_time_s": r.cpu_time_s,
+                "pid": r.pid,
             }
             for r in results
         ),
-        solve_time_s=float(sum(r.build_time_s + r.solve_time_s for r in results)),
+        solve_time_s=solve_time,
         total_time_s=time.perf_counter() - t0,
         **common,
     )
