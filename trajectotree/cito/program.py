@@ -57,6 +57,9 @@ class ProgramSpec:
     static_knots: tuple = ()
     # the pairs of fingers (i, j) kept apart by finger rows at the free knots (fingers.near_pairs; () : none)
     finger_pairs: tuple = ()
+    # joint angles (2F each) the finger rows admit besides the fixed end knots: the search's nodes, which a
+    # joint program's pinned knots reach without fixing them (its rows held 1 mm where a node had less)
+    finger_nodes: tuple = ()
 
     @property
     def num_knots(self) -> int:
@@ -257,7 +260,8 @@ def _add_finger_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: FingerRows
     knots = link_knots(spec)
     if not knots:
         return None
-    lower, upper = rows.bounds(clearance, [spec.q0] + ([spec.q_end] if spec.last_knot_fixed else []))
+    fixed = [spec.q0] + ([spec.q_end] if spec.last_knot_fixed else []) + list(spec.finger_nodes)
+    lower, upper = rows.bounds(clearance, fixed)
     evaluator = _BatchConstraint(rows, np.full(len(knots), lower.size), rows.block_size, [rows.sparsity()] * len(knots))
     binding = prog.AddConstraint(
         evaluator, np.tile(lower, len(knots)), np.tile(upper, len(knots)), v.q[knots].ravel(), description="fingers"

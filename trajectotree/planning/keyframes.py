@@ -176,7 +176,8 @@ def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogOb
     t0 = time.perf_counter()
     body = BodyParams(scene, task.cito.sdf_sharpness, mu=task.mu)
     spec = piece_spec(task.plan, task.first, task.last, radius=scene.tip_radius, config=task.cito)
-    spec = dataclasses.replace(spec, finger_pairs=finger_pairs(task, scene))
+    q_nodes = tuple(node.q for node in task.plan.nodes[task.first : task.last + 1])  # a retry's middle nodes too
+    spec = dataclasses.replace(spec, finger_pairs=finger_pairs(task, scene), finger_nodes=q_nodes)
     program = build_program(task.cito, spec, body)
     sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
     guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)

@@ -180,7 +180,8 @@ def plan_request(
     if method == "trajectotree":
         spec = transition_spec(contact_plan, radius=scene.tip_radius, config=config.cito)
         q_nodes = [node.q for node in contact_plan.nodes]  # the fingers kept apart: cito/fingers.py
-        spec = dataclasses.replace(spec, finger_pairs=near_pairs(scene.fingers, q_nodes, scene.tip_radius))
+        pairs = near_pairs(scene.fingers, q_nodes, scene.tip_radius)
+        spec = dataclasses.replace(spec, finger_pairs=pairs, finger_nodes=tuple(q_nodes))
     else:
         node0 = contact_plan.nodes[0]
         path = (
