@@ -78,8 +78,8 @@ def test_declared_sparsity_is_the_support_of_the_derivative(rows):
 
 
 def test_one_knot_paths_agree_with_the_batch(rows):
-    """A knot's rows alone and in a batch are the same numbers (the scalar values_one, which
-    LinkRows.bounds uses, to rounding: math's exp and log against numpy's)."""
+    """program._KnotCache serves a knot from a batch or alone: the same numbers (the scalar
+    values_one to rounding: math's exp and log against numpy's)."""
     Z = random_knots(rows, 4, seed=4)
     val, jac = rows.evaluate(Z, True)
     for k in range(4):
@@ -132,16 +132,11 @@ def test_rows_at_the_free_knots_and_none_when_off(scene):
     assert link_knots(piece) == list(range(1, piece.num_knots - 1))  # both ends fixed at the nodes
     assert link_knots(joint) == list(range(1, joint.num_knots))  # only x_0, q_0 fixed
     program = build_program(CONFIG.cito, piece, body)
-    rows = LinkRows(body, piece.num_knots)
-    assert program.link_binding.evaluator().get_description() == "links"
-    assert program.link_binding.evaluator().num_constraints() == rows.num_rows[0] * len(link_knots(piece))
-    names = [v.get_name() for v in program.link_binding.variables()]
-    knots = [int(name.split("(")[1].split(",")[0]) for name in names]  # x(k, j), q(k, j)
-    assert sorted(set(knots)) == link_knots(piece)
+    assert [b.evaluator().get_description() for b in program.link_bindings] == [f"links{k}" for k in link_knots(piece)]
     off = build_program(dataclasses.replace(CONFIG.cito, link_rows=False), piece, body)
-    assert off.link_binding is None
+    assert off.link_bindings == []
     assert not any(b.evaluator().get_description().startswith("links") for b in off.prog.GetAllConstraints())
-    assert len(off.prog.GetAllConstraints()) == len(program.prog.GetAllConstraints()) - 1
+    assert len(off.prog.GetAllConstraints()) == len(program.prog.GetAllConstraints()) - len(program.link_bindings)
 
 
 def test_link_config_is_checked():

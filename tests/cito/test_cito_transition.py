@@ -69,11 +69,10 @@ def test_programs_have_the_expected_size(scene, plan):
     prog = build_program(CONFIG, spec, body(scene, CONFIG))
     K = spec.num_knots
     assert prog.prog.num_vars() == 53 * K
-    assert len(prog.knot_row_offsets) == K + 1
-    # 11 body rows per knot, 4 per pinned finger, 6 per free finger, in one binding over every knot.
+    assert len(prog.knot_bindings) == K
+    # 11 body rows per knot, 4 per pinned finger, 6 per free finger.
     assert (
-        prog.knot_binding.evaluator().num_constraints()
-        == prog.knot_row_offsets[-1]
+        sum(b.evaluator().num_constraints() for b in prog.knot_bindings)
         == 11 * K + 4 * spec.pinned.sum() + 6 * (~spec.pinned).sum()
     )
     general = general_spec(x0=[0, 0, 0], q0=np.zeros(8), object_path=plan.object_path, config=CONFIG)
@@ -119,9 +118,8 @@ def test_switch_clearance_lifts_the_switching_finger_mid_move(scene, plan):
     np.testing.assert_allclose(spec.clearance, expected, atol=1e-15)
     assert not spec.clearance[spec.pinned].any()  # not even sin(pi) * h at the arrival knot: it may push there
     program = build_program(config, spec, body(scene, config))
-    offsets, all_lower = program.knot_row_offsets, program.knot_binding.evaluator().lower_bound()
-    for k in range(spec.num_knots):
-        lower = all_lower[offsets[k] : offsets[k + 1]]
+    for k, binding in enumerate(program.knot_bindings):
+        lower = binding.evaluator().lower_bound()
         free_row = program.rows.row_start[k, 2]
         assert lower[free_row] == pytest.approx(expected[k, 2] if 0 < k < M else 0.0)
         assert np.count_nonzero(lower) == (1 if 0 < k < M else 0)

@@ -5,16 +5,19 @@ Knots k = 0..K-1, dt apart. Linear parts go through Drake's native sparse linear
 constraints and bounds: trapezoidal collocation (x_{k+1} = x_k + dt/2 (xd_k + xd_{k+1}),
 the same for xd/xdd, q/qd, qd/qdd), the friction cone mu_plan lambda_n >= |lambda_t|,
 lambda_n >= 0, slack >= 0, joint and torque limits, fixed x_0 and q_0, rest knots.
-The nonlinear rows of every knot (knot.KnotRows) form one Python constraint over all the
-knots' variables, evaluated vectorized with its analytic, block-diagonal sparse Jacobian; the
-link rows (links.LinkRows, unless `cito.link_rows` is off) another over the pose and joints of
-every knot whose pose or joints are free (_BatchConstraint), and so do the finger-finger rows
-(fingers.FingerRows) of the spec's `finger_pairs` over those knots' joints.
+The nonlinear rows of a knot (knot.KnotRows) form one Python constraint per knot
+with an analytic Jacobian and its sparsity pattern; the link rows (links.LinkRows, unless
+`cito.link_rows` is off) another per knot whose pose or joints are free, with a cache of their own,
+and so do the finger-finger rows (fingers.FingerRows) of the spec's `finger_pairs`.
 
-Speed: IPOPT crosses into Python once per evaluation of each of the two constraints. Per-knot
-constraints (13 per segment) cost Drake and pybind more in AutoDiff marshalling per call than one
-batch costs in its wider gradients: on 9 segments of goal 0.861 the solves took 1.56 s instead of
-1.85 s in the same iterations (issue 35).
+Speed: IPOPT evaluates a Python constraint per knot; each call crosses into Python.
+All knots are evaluated at once (vectorized) when the first knot asks for its
+Jacobian at a full decision vector the cache knows: the one Drake passes to a
+visualization callback whenever IPOPT evaluates the cost, or the one the knots'
+value calls just assembled (_KnotCache); the other knots' Jacobians are then cache
+hits. A knot whose variables match neither is evaluated on its own, so results
+never depend on the call order. Trial-point values (asked before the cost) come
+from the scalar values_one.
 Costs are many small native quadratic costs: Drake differentiates every cost
 binding with AutoDiff over its own variables, which is cubic in their number.
 """
@@ -22,7 +25,7 @@ binding with AutoDiff over its own variables, which is cubic in their number.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -77,51 +80,81 @@ class CitoProgram:
     variables: CitoVariables
     rows: KnotRows
     spec: ProgramSpec
-    knot_binding: object  # the knot rows of every knot, one binding (_BatchConstraint)
-    knot_row_offsets: np.ndarray  # (K + 1,) knot k's rows are the binding's offsets[k]:offsets[k + 1]
-    link_binding: object | None = None  # links.py's rows of every free knot, one binding (None when off)
-    finger_binding: object | None = None  # fingers.py's rows of every free knot, one binding (None: no pairs)
+    knot_bindings: list = field(default_factory=list)
+    link_bindings: list = field(default_factory=list)  # links.py's rows per free knot ([] when off)
+    finger_bindings: list = field(default_factory=list)  # fingers.py's rows per free knot ([] when none)
     build_time_s: float = 0.0
 
 
-class _BatchConstraint:
-    """Drake's evaluator for the rows of a batch of knots as one constraint over all their
-    variables (knot after knot, `width` each): float input gives the values, AutoDiffXd input the
-    values and the gradient, each from one vectorized evaluation of every knot (rows.evaluate:
-    KnotRows or LinkRows), the analytic Jacobian scattered into the binding's sparsity pattern
-    (knot k's `patterns[k]`, block-diagonal). Knot k's rows are the first num_rows[k] of its batch
-    row. Drake's solvers pass identity input gradients, which skip the chain rule's product."""
+class _KnotCache:
+    """All knots' values and Jacobians at one full decision vector (Z, val, jac), evaluated
+    in one batch when a knot first asks for it there. The vectors it may evaluate: the one
+    Drake passes to the visualization callback at every cost evaluation (`primed`), and
+    the knots' latest float-path inputs (`seen`: IPOPT asks for every knot's values at a
+    point before its Jacobians there, at the start and after a restoration). Batch rows
+    equal one-knot evaluations bit for bit (LinkRows' to rounding: its values_one uses math's exp
+    and log), so which vector served a knot never matters."""
 
-    def __init__(self, rows, num_rows: np.ndarray, width: int, patterns: list[list[tuple[int, int]]]):
-        self.rows, self.width = rows, width
-        num_rows = np.asarray(num_rows, dtype=int)
-        depth = int(num_rows.max())  # rows of a knot in the batch's arrays
-        self.valid = np.flatnonzero(np.arange(depth)[None, :] < num_rows[:, None])  # into the (K, depth) values
-        self.offsets = np.concatenate([[0], np.cumsum(num_rows)])  # knot k's first row in the binding
-        entries = np.array([(k, r, c) for k, pattern in enumerate(patterns) for r, c in pattern], dtype=int)
-        kk, rr, cc = entries.T
-        self.pattern_rows, self.pattern_cols = self.offsets[kk] + rr, kk * width + cc
-        self.source = (kk * depth + rr) * width + cc  # into the (K, depth, width) Jacobians
-        self.shape = (int(self.offsets[-1]), len(num_rows) * width)
+    def __init__(self, rows, num_knots: int, width: int):
+        self.rows, self.num_knots, self.width = rows, num_knots, width  # rows: KnotRows (its knot size), or LinkRows
+        self.Z = self.val = self.jac = None
+        self.primed = None
+        self.seen = np.full((num_knots, width), np.nan)
 
-    def sparsity(self) -> list[tuple[int, int]]:
-        return list(zip(self.pattern_rows.tolist(), self.pattern_cols.tolist()))
+    def prime(self, values: np.ndarray) -> None:
+        """Visualization callback: remember the vector; rejected trial points are never evaluated."""
+        self.primed = np.array(values, dtype=float).reshape(self.num_knots, self.width)
 
-    def jacobian(self, Z: np.ndarray):
-        """(values (rows,), Jacobian (rows, variables), dense) at the knots' values Z (K, width)."""
-        val, jac = self.rows.evaluate(Z, True)
-        J = np.zeros(self.shape)
-        J[self.pattern_rows, self.pattern_cols] = jac.reshape(-1)[self.source]
-        return val.reshape(-1)[self.valid], J
+    def _evaluate(self, Z: np.ndarray) -> None:
+        self.val, self.jac = self.rows.evaluate(Z, True)
+        self.Z = Z
+
+    def primed_rows(self, k: int, z: np.ndarray):
+        """Knot k's batch (values, Jacobian) when z is its part of the primed vector, else None."""
+        if self.primed is None or not np.array_equal(self.primed[k], z):
+            return None
+        if self.Z is not self.primed:
+            self._evaluate(self.primed)
+        return self.val[k], self.jac[k]
+
+    def any_rows(self, k: int, z: np.ndarray):
+        """Knot k's batch (values, Jacobian) at z from the evaluated, primed or seen vector, else None."""
+        if self.Z is not None and np.array_equal(self.Z[k], z):
+            return self.val[k], self.jac[k]
+        found = self.primed_rows(k, z)
+        if found is None and np.array_equal(self.seen[k], z):
+            self._evaluate(self.seen.copy())
+            found = self.val[k], self.jac[k]
+        return found
+
+
+class _KnotConstraint:
+    """Drake's evaluator for knot k: float input gives values, AutoDiffXd input gives
+    values and gradients (analytic Jacobian times the input's gradient). Float values
+    are the batch's at the primed vector, else values_one's (the numbers IPOPT has always
+    seen: the two differ in the last bit)."""
+
+    def __init__(self, cache: _KnotCache, k: int):
+        self.cache, self.k = cache, k
+        self.single = cache.rows.knot(k)
+        self.n = int(self.single.num_rows[0])
+
+    def _values(self, z: np.ndarray) -> np.ndarray:
+        self.cache.seen[self.k] = z
+        found = self.cache.primed_rows(self.k, z)
+        return found[0][: self.n] if found is not None else self.single.values_one(z)
+
+    def _rows(self, z: np.ndarray):
+        found = self.cache.any_rows(self.k, z)
+        if found is None:
+            found = tuple(a[0] for a in self.single.evaluate(z[None], True))
+        return found[0][: self.n], found[1][: self.n]
 
     def __call__(self, z):
         if z.dtype == object:
-            val, J = self.jacobian(ExtractValue(z)[:, 0].reshape(-1, self.width))
-            G = ExtractGradient(z)
-            identity = G.shape == (J.shape[1],) * 2 and np.count_nonzero(G) == G.shape[0] and np.all(G.diagonal() == 1)
-            return InitializeAutoDiff(val, J if identity else sp.csr_matrix(J) @ G)[:, 0]
-        Z = np.asarray(z, dtype=float).reshape(-1, self.width)
-        return self.rows.evaluate(Z, False)[0].reshape(-1)[self.valid]
+            val, jac = self._rows(ExtractValue(z)[:, 0])
+            return InitializeAutoDiff(val, jac @ ExtractGradient(z))[:, 0]
+        return self._values(np.asarray(z, dtype=float))
 
 
 def _collocation(prog, a: np.ndarray, b: np.ndarray, dt: float):
@@ -201,21 +234,20 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
     for name in lo:
         prog.AddBoundingBoxConstraint(lo[name].ravel(), hi[name].ravel(), getattr(v, name).ravel())
 
-    knots = _BatchConstraint(rows, rows.num_rows, body.layout.block.size, rows.sparsities())
-    bounds = [rows.bounds(k, spec.clearance[k]) for k in range(K)]
-    binding = prog.AddConstraint(
-        knots,
-        np.concatenate([lower for lower, _ in bounds]),
-        np.concatenate([upper for _, upper in bounds]),
-        v.stacked().ravel(),
-        description="knots",
-    )
-    binding.evaluator().SetGradientSparsityPattern(knots.sparsity())
-    link_binding = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else None
-    finger_binding = (
+    cache = _KnotCache(rows, K, body.layout.block.size)
+    prog.AddVisualizationCallback(cache.prime, v.stacked().ravel())
+    bindings = []
+    for k, pattern in enumerate(rows.sparsities()):
+        evaluator = _KnotConstraint(cache, k)
+        lower, upper = rows.bounds(k, spec.clearance[k])
+        binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
+        binding.evaluator().SetGradientSparsityPattern(pattern)
+        bindings.append(binding)
+    link_bindings = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else []
+    finger_bindings = (
         _add_finger_rows(prog, v, spec, FingerRows(body, spec.finger_pairs, K), config.link_clearance)
         if spec.finger_pairs
-        else None
+        else []
     )
     _add_costs(prog, v, spec, config)
     return CitoProgram(
@@ -223,10 +255,9 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         variables=v,
         rows=rows,
         spec=spec,
-        knot_binding=binding,
-        knot_row_offsets=knots.offsets,
-        link_binding=link_binding,
-        finger_binding=finger_binding,
+        knot_bindings=bindings,
+        link_bindings=link_bindings,
+        finger_bindings=finger_bindings,
         build_time_s=time.perf_counter() - t0,
     )
 
@@ -238,36 +269,37 @@ def link_knots(spec: ProgramSpec) -> list[int]:
     return list(range(1, spec.num_knots - 1 if spec.last_knot_fixed else spec.num_knots))
 
 
-def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, clearance: float):
-    """links.py's rows of every knot of `link_knots`, on their pose and joints, as one binding (None: no such knot)."""
-    knots = link_knots(spec)
-    if not knots:
-        return None
-    blocks = np.concatenate([v.x, v.q], axis=1)[knots]  # (knots, link size)
+def _add_link_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: LinkRows, clearance: float) -> list:
+    """links.py's rows, one binding per knot of `link_knots` on its pose and joints, served by
+    a cache of their own (primed by a second visualization callback over every knot's x, q)."""
+    blocks = np.concatenate([v.x, v.q], axis=1)  # (K, link size)
+    cache = _KnotCache(rows, spec.num_knots, rows.link_size)
+    prog.AddVisualizationCallback(cache.prime, blocks.ravel())
     fixed = [(spec.x0, spec.q0)] + ([(spec.x_end, spec.q_end)] if spec.last_knot_fixed else [])
     lower, upper = rows.bounds(clearance, fixed)
-    evaluator = _BatchConstraint(rows, np.full(len(knots), lower.size), rows.link_size, [rows.sparsity()] * len(knots))
-    binding = prog.AddConstraint(
-        evaluator, np.tile(lower, len(knots)), np.tile(upper, len(knots)), blocks.ravel(), description="links"
-    )
-    binding.evaluator().SetGradientSparsityPattern(evaluator.sparsity())
-    return binding
+    pattern = rows.sparsity()
+    bindings = []
+    for k in link_knots(spec):
+        binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, blocks[k], description=f"links{k}")
+        binding.evaluator().SetGradientSparsityPattern(pattern)
+        bindings.append(binding)
+    return bindings
 
 
-def _add_finger_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: FingerRows, clearance: float):
-    """fingers.py's rows of every knot of `link_knots`, on their joints, as one binding (None: no such knot),
-    as _add_link_rows."""
-    knots = link_knots(spec)
-    if not knots:
-        return None
+def _add_finger_rows(prog, v: CitoVariables, spec: ProgramSpec, rows: FingerRows, clearance: float) -> list:
+    """fingers.py's rows, one binding per knot of `link_knots` on its joints, served by a cache of
+    their own (primed by a visualization callback over every knot's q), as _add_link_rows."""
+    cache = _KnotCache(rows, spec.num_knots, rows.block_size)
+    prog.AddVisualizationCallback(cache.prime, v.q.ravel())
     fixed = [spec.q0] + ([spec.q_end] if spec.last_knot_fixed else []) + list(spec.finger_nodes)
     lower, upper = rows.bounds(clearance, fixed)
-    evaluator = _BatchConstraint(rows, np.full(len(knots), lower.size), rows.block_size, [rows.sparsity()] * len(knots))
-    binding = prog.AddConstraint(
-        evaluator, np.tile(lower, len(knots)), np.tile(upper, len(knots)), v.q[knots].ravel(), description="fingers"
-    )
-    binding.evaluator().SetGradientSparsityPattern(evaluator.sparsity())
-    return binding
+    pattern = rows.sparsity()
+    bindings = []
+    for k in link_knots(spec):
+        binding = prog.AddConstraint(_KnotConstraint(cache, k), lower, upper, v.q[k], description=f"fingers{k}")
+        binding.evaluator().SetGradientSparsityPattern(pattern)
+        bindings.append(binding)
+    return bindings
 
 
 def _add_costs(prog, v: CitoVariables, spec: ProgramSpec, config: CitoConfig) -> None:
