@@ -8,8 +8,9 @@ that is smooth and one-to-one within pi of N_k, and the bound keeps it far from 
 add a nonlinear equality per knot). Per knot the variables are
 
     phi, p (m), w, v (the angular and linear velocity in W), F, T (the fingers' total force and moment about
-    the centre, in W), L (the angular momentum R I_B R^T w, W), lambda (each finger's m pyramid-edge
-    magnitudes, N: its force on the object f_B = sum_e lambda_e e_e in B), q (rad, finger-major).
+    the centre, in W), L (the angular momentum R I_B R^T w, W, in units of the cube's largest principal
+    inertia), lambda (each finger's m pyramid-edge magnitudes, N: its force on the object f_B = sum_e lambda_e e_e
+    in B), q (rad, finger-major).
 
 The rule between knots is results.SPACE_INTEGRATION (trapezoidal), which the physics check redoes:
 linear rows p[k+1] - p[k] = h v_mid, m (v[k+1] - v[k]) = h (F_mid + m g), L[k+1] - L[k] = h T_mid; one
@@ -436,6 +437,8 @@ class SpaceSegmentRows:
             [sum(np.square(scene.object.size)) - e * e for e in scene.object.size]
         ) / 12  # fmt: skip
         self.half = scene.object.half
+        # kg m^2: L is in units of the cube's largest principal inertia (rad/s), its row's gradients near one
+        self.momentum_unit = float(np.max(np.diag(self.inertia)))
         self.r, self.g = scene.tip_radius, scene.gravity
         self.tau_max = scene.tau_max
         self.mu = mu
@@ -477,7 +480,7 @@ class SpaceSegmentRows:
     def _rows(self, x, R, f_B, f_W, tips, taus):
         force = x["F"] - f_W.sum(1)
         moment = x["T"] - np.einsum("kij,kj->ki", R, np.cross(self.p_BC, f_B).sum(1))
-        momentum = x["L"] - np.einsum("kij,jl,kml,km->ki", R, self.inertia, R, x["w"])
+        momentum = x["L"] - np.einsum("kij,jl,kml,km->ki", R, self.inertia, R, x["w"]) / self.momentum_unit
         targets = x["p"][:, None, :] + np.einsum("kij,kfj->kfi", R, self.p_BC + self.r * self.n_B)
         pins = (tips - targets).reshape(self.K, -1)
         clearance = np.zeros(self.K)
@@ -601,8 +604,8 @@ class SpaceSegmentRows:
             Jk[:, row : row + 3, lay.slice(name)] = eye
         # momentum L - R I R^T w: with a = R^T w, d(R I a) = R ([I a]x - I [a]x) J_r dphi + R I R^T dw
         a = np.einsum("kji,kj->ki", R, x["w"])
-        Jk[:, 6:9, phi] = R @ (_skew(a @ self.inertia) - self.inertia @ _skew(a)) @ J_r
-        Jk[:, 6:9, lay.slice("w")] = -R @ self.inertia @ np.swapaxes(R, -1, -2)
+        Jk[:, 6:9, phi] = R @ (_skew(a @ self.inertia) - self.inertia @ _skew(a)) @ J_r / self.momentum_unit
+        Jk[:, 6:9, lay.slice("w")] = -R @ self.inertia @ np.swapaxes(R, -1, -2) / self.momentum_unit
         edges_W = np.einsum("kij,kfej->kfei", R, self.edges_B)  # (K, F, m, 3)
         moments_W = np.einsum("kij,kfej->kfei", R, np.cross(self.p_BC[:, :, None, :], self.edges_B))
         lam0, q0 = lay.slice("lam").start, lay.slice("q").start
@@ -750,7 +753,9 @@ def _guess(rows: SpaceSegmentRows) -> np.ndarray:
     Z = np.zeros((K, lay.width))
     Z[:, lay.slice("p")] = spec.p
     Z[:, lay.slice("w")] = rows.w_nominal
-    Z[:, lay.slice("L")] = np.einsum("kij,jl,kml,km->ki", rows.N, rows.inertia, rows.N, rows.w_nominal)
+    Z[:, lay.slice("L")] = (
+        np.einsum("kij,jl,kml,km->ki", rows.N, rows.inertia, rows.N, rows.w_nominal) / rows.momentum_unit
+    )
     tau_frac = np.linspace(0.0, 1.0, K)[:, None, None]
     q = (1 - tau_frac) * spec.q_a + tau_frac * spec.q_b
     targets = spec.p + np.einsum("kij,kfj->kfi", rows.N, rows.p_BC + rows.r * rows.n_B)
@@ -832,7 +837,8 @@ def build_space_segment(
         g = np.array([0.0, 0.0, -h * m * rows.g])
         prog.AddLinearEqualityConstraint(np.hstack([-m * eye, m * eye, -h / 2 * eye, -h / 2 * eye]), g, vk)
         lk = np.concatenate([var["L"][k], var["L"][k + 1], var["T"][k], var["T"][k + 1]])
-        prog.AddLinearEqualityConstraint(np.hstack([-eye, eye, -h / 2 * eye, -h / 2 * eye]), np.zeros(3), lk)
+        u = rows.momentum_unit
+        prog.AddLinearEqualityConstraint(np.hstack([-u * eye, u * eye, -h / 2 * eye, -h / 2 * eye]), np.zeros(3), lk)
     prog.AddBoundingBoxConstraint(-PHI_BOUND, PHI_BOUND, var["phi"][1:-1].ravel())
     for name, value in (("phi", np.zeros(3)), ("p", spec.p), ("w", np.zeros(3)), ("v", np.zeros(3))):
         prog.AddBoundingBoxConstraint(value, value, var[name][0])
