@@ -95,8 +95,11 @@ def test_a_replan_threshold_at_or_below_zero_is_refused(field, value):
 
 @pytest.fixture(scope="module")
 def moved_start():
-    """Node 4 of the search's plan for 0.9 rad, the object 5 mm right and 0.1 rad further turned and the
-    fingers re-solved onto the same contacts: a state measured off the plan."""
+    """Node 7 of the search's plan for 0.9 rad, the object 5 mm right and 0.1 rad further turned and the
+    fingers re-solved onto the same contacts: a state measured off the plan. Node 4, used before the
+    fingers were kept apart, is now a grasp whose finger 2 cannot reach its contact so moved; node 5
+    reaches, but from it the replan at friction 0.6 finds no plan (finger 0 out of reach, the others
+    no closure)."""
     from trajectotree.geometry import box_to_world, rotation_2d
     from trajectotree.scene.dynamics import HandModel
     from trajectotree.scene.plant import build_scene
@@ -105,7 +108,7 @@ def moved_start():
 
     config = Config()
     scene = build_scene(config.scene)
-    node = find_contact_plan(scene, 0.9, config.search).nodes[4]
+    node = find_contact_plan(scene, 0.9, config.search).nodes[7]
     pose = node.object_pose + np.array([0.005, 0.0, 0.1])
     hand = HandModel.from_scene(scene)
     tips = [box_to_world(pose, node.p_BC[i]) + scene.tip_radius * rotation_2d(pose[2]) @ node.n_B[i] for i in range(4)]

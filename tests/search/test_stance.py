@@ -1,6 +1,6 @@
 """The holding-force cap of the search (search.max_stance_force, trajectotree.search.stance): the LP
-against closed forms on the box, a switch over the cap refused and counted, the one seed-0 box
-goal whose plan it changes, and the config's range."""
+against closed forms on the box, a switch over the cap refused and counted, a seed-0 box goal
+whose plan it changes, and the config's range."""
 
 import dataclasses
 import math
@@ -85,14 +85,16 @@ def test_a_switch_over_the_cap_is_refused_and_counted(scene):
     assert {child.switching_finger for *_, child in children} - {None} == movers
 
 
-@pytest.mark.slow  # two searches of a 2.2 rad turn (seconds; the cap's refusals are checked above)
-def test_the_cap_changes_the_plan_of_goal_2_246(scene):
-    """Seed 0's goal 2.246 is the one of the box's 60 whose plan the 10 N cap changes: without
-    it, one stance needs more than 10 N at an end of its transition (both searches in the paper's
-    order of children, search.push_capacity 0, as when the cap was measured)."""
+@pytest.mark.slow  # two searches of a 1.2 rad turn (about a second; the cap's refusals are checked above)
+def test_the_cap_changes_the_plan_of_goal_1_166(scene):
+    """Seed 0's goal 1.166 is one of the box's 60 whose plan the 10 N cap changes: without it, one
+    stance needs more than 10 N (121 N) at an end of its transition, with it at most 1.3 N (both
+    searches in the paper's order of children, search.push_capacity 0, as when the cap was measured).
+    Since the fingers are kept apart the cap changes 14 of the 60 plans; goal 2.246, pinned before,
+    is no longer one of them."""
     default = SearchConfig(push_capacity=0.0)
-    goal = float(sample_goals(60, 0)[12])
-    assert goal == pytest.approx(2.246, abs=1e-3)
+    goal = float(sample_goals(60, 0)[28])
+    assert goal == pytest.approx(1.166, abs=1e-3)
 
     def worst(plan, search):
         return max(
