@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import (
-    Cylinder,
+    Box,
     IllustrationProperties,
     MeshcatVisualizer,
     MeshcatVisualizerParams,
@@ -35,8 +35,9 @@ from trajectotree.io import write_bytes_atomic
 from trajectotree.scene.spatial import add_space_object
 
 FORCE_PATH = "/forces"
-SHAFT_RADIUS = 0.002  # m
-CAMERA_POSITION = (0.35, -0.35, 0.3)  # m, looking at the cube at the grasp point from the front right, above
+SHAFT_RADIUS = 0.002  # m, half the shaft's width
+CUBE_ALPHA = 0.45  # the cube's opacity in the playback
+CAMERA_POSITION = (0.2, -0.2, 0.16)  # m, looking at the cube at the grasp point from the front right, above
 
 
 def _color_fingertips(plant, scene_graph, hand, hand_file) -> None:
@@ -54,6 +55,18 @@ def _color_fingertips(plant, scene_graph, hand, hand_file) -> None:
                 scene_graph.AssignRole(plant.get_source_id(), g, properties)
 
 
+def _see_through(plant, scene_graph, instance) -> None:
+    """The cube's visuals at CUBE_ALPHA: the force shafts run from the fingertips into it."""
+    inspector = scene_graph.model_inspector()
+    for body in plant.GetBodyIndices(instance):
+        for g in plant.GetVisualGeometriesForBody(plant.get_body(body)):
+            properties = IllustrationProperties(inspector.GetIllustrationProperties(g))
+            rgba = properties.GetPropertyOrDefault("phong", "diffuse", Rgba(0.2, 0.45, 0.8, 1.0))
+            properties.UpdateProperty("phong", "diffuse", Rgba(rgba.r(), rgba.g(), rgba.b(), CUBE_ALPHA))
+            scene_graph.RemoveRole(plant.get_source_id(), g, Role.kIllustration)
+            scene_graph.AssignRole(plant.get_source_id(), g, properties)
+
+
 def _set_shaft(meshcat, i: int, tip, f, tip_radius: float, newtons_per_cm: float, time: float) -> None:
     """Finger i's shaft along its force f (3,) on the cube from its fingertip sphere's surface, |f| /
     newtons_per_cm cm long (at most ARROW_MAX_LENGTH, as the planar arrows), hidden below ARROW_MIN_FORCE."""
@@ -64,7 +77,7 @@ def _set_shaft(meshcat, i: int, tip, f, tip_radius: float, newtons_per_cm: float
         return
     u = np.asarray(f) / magnitude
     length = min(magnitude / newtons_per_cm / 100, ARROW_MAX_LENGTH)
-    R = RotationMatrix(np.column_stack(_frame(u)))  # a cylinder's axis is its frame's z: z along u
+    R = RotationMatrix(np.column_stack(_frame(u)))  # the shaft along its frame's z: z along u
     centre = np.asarray(tip) + (tip_radius + length / 2) * u
     meshcat.SetTransform(path, RigidTransform(R, centre), time)
     meshcat.SetProperty(f"{path}/<object>", "scale", [1.0, 1.0, length], time)
@@ -91,6 +104,7 @@ def write_space_plan_html(scene, arrays: dict, path: str | Path, *, title: str) 
     plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -scene.gravity])
     plant.Finalize()
     _color_fingertips(plant, scene_graph, model, hand_file)
+    _see_through(plant, scene_graph, instance)
     meshcat = start_meshcat()
     visualizer = MeshcatVisualizer.AddToBuilder(
         builder, scene_graph, meshcat, MeshcatVisualizerParams(publish_period=PUBLISH_PERIOD)
@@ -101,7 +115,10 @@ def write_space_plan_html(scene, arrays: dict, path: str | Path, *, title: str) 
     meshcat.SetCameraPose(np.array(CAMERA_POSITION), np.zeros(3))
     F = len(hand_file.fingers)
     for i in range(F):
-        meshcat.SetObject(f"{FORCE_PATH}/finger{i}", Cylinder(SHAFT_RADIUS, 1.0), Rgba(*finger_rgb(i), 1.0))
+        # a box, not a cylinder: Meshcat's cylinder turns its y-up geometry inside the object, so a scale along z
+        # would stretch its radius; a box's axes are Drake's (the planar arrows scale one so too)
+        shaft = Box(2 * SHAFT_RADIUS, 2 * SHAFT_RADIUS, 1.0)
+        meshcat.SetObject(f"{FORCE_PATH}/finger{i}", shaft, Rgba(*finger_rgb(i), 1.0))
     f_W, tips = np.asarray(arrays["f_W"]), np.asarray(arrays["p_W_tip"])
     newtons_per_cm = arrow_newtons_per_cm(f_W.reshape(-1, 3))
     tip_radius = scene.tip_radius
