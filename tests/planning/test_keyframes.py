@@ -260,19 +260,19 @@ def test_joint_retries_take_the_neighbours_and_merge_overlaps():
 
 
 @pytest.mark.slow
-def test_the_demo_goal_plans_physically_through_the_strict_retry():
-    """The demo's goal pi/2 (9 segments, ~7 s) on the paper-like search's plan (search.rolled_stances
-    false, search.max_stance_force 0, search.push_capacity 0; the default search's plan of pi/2 needs
-    no retry): with the default drift penalty a fixed finger of segment 5-6 pushes from 0.19 mm, and so does the
-    joint retry of nodes 4-7; the strict retry of those nodes passes. If a later change makes an
-    earlier attempt pass, update the kinds."""
+def test_the_demo_goal_plans_physically_on_the_paper_like_search():
+    """The demo's goal pi/2 (9 segments) on the paper-like search's plan (search.rolled_stances false,
+    search.max_stance_force 0, search.push_capacity 0). Before the fingers were kept apart its segment 5
+    needed the joint and then the strict retry of nodes 4-7; its plan now passes at the first attempt. No
+    seed-0 goal of the 39 tried since goes through the strict retry and passes (1.166 and 1.184 go through
+    it and still fail the check: an open fault, docs/measurements.md), so the strict retry's success is
+    pinned by no test now; test_a_failing_segment_is_retried_and_recorded pins its order."""
     config = Config(search=SearchConfig(rolled_stances=False, max_stance_force=0.0, push_capacity=0.0))
     result = plan(
         scene=build_scene(config.scene), goal=np.pi / 2, method="trajectotree", config=config, segment_workers=1
     )
     assert result.success and result.physics_check.passed, result.status
-    kinds = [r["kind"] for r in result.segments[5]["attempts"]]
-    assert kinds == ["keyframes", "joint", "strict"] and result.segments[5]["attempts"][-1]["nodes"] == [4, 7]
+    assert [r["kind"] for r in result.segments[5]["attempts"]] == ["keyframes"]
 
 
 def test_bad_input_is_refused(scene, tmp_path, capsys):
