@@ -558,7 +558,7 @@ def box_face_normals(half, p_B) -> np.ndarray:
 
 def segment_box_nearest(half, a_B, b_B, iterations: int = 60) -> np.ndarray:
     """(...) in [0, 1]: the fraction t along the segments a_B -> b_B (..., 3, in B) of their point of least
-    signed distance from the box (half-sizes `half`), by segment_box_distances' golden-section search, the
+    signed distance from the box (half-sizes `half`), by a golden-section search, the
     ends included."""
     a, b = np.asarray(a_B, dtype=float), np.asarray(b_B, dtype=float)
     ratio = (np.sqrt(5.0) - 1) / 2
@@ -578,18 +578,9 @@ def segment_box_nearest(half, a_B, b_B, iterations: int = 60) -> np.ndarray:
 
 def segment_box_distances(half, a_B, b_B, iterations: int = 60) -> np.ndarray:
     """(...) m, the least signed distance from the box (half-sizes `half`) of the points on the
-    segments a_B -> b_B (..., 3, in B). The signed distance from a convex set is convex along a
-    segment, so a golden-section search finds its least value (to 0.618^iterations of the length)."""
+    segments a_B -> b_B (..., 3, in B): the distance at segment_box_nearest's point. The signed distance
+    from a convex set is convex along a segment, so a golden-section search finds its least value (to
+    0.618^iterations of the length)."""
     a, b = np.asarray(a_B, dtype=float), np.asarray(b_B, dtype=float)
-    ratio = (np.sqrt(5.0) - 1) / 2
-    lo, hi = np.zeros(a.shape[:-1]), np.ones(a.shape[:-1])
-
-    def at(t):
-        return box_signed_distances(half, a + t[..., None] * (b - a))
-
-    for _ in range(iterations):
-        t1, t2 = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
-        left = at(t1) <= at(t2)
-        lo, hi = np.where(left, lo, t1), np.where(left, t2, hi)
-    ends = np.minimum(at(np.zeros_like(lo)), at(np.ones_like(lo)))
-    return np.minimum(at((lo + hi) / 2), ends)
+    t = segment_box_nearest(half, a, b, iterations)
+    return box_signed_distances(half, a + t[..., None] * (b - a))
