@@ -267,7 +267,8 @@ def child_rows(tree: Path, goals: list[float], methods: list[str]) -> dict:
     """scripts/plan_timing.py over `goals` with the package of `tree`, in a process of its own."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "rows.json"
-        command = [sys.executable, str(ROOT / "scripts" / "plan_timing.py"), "--goals", ",".join(map(str, goals))]
+        # --goals=...: argparse takes a value that starts with a minus sign for an option
+        command = [sys.executable, str(ROOT / "scripts" / "plan_timing.py"), f"--goals={','.join(map(str, goals))}"]
         command += ["--methods", ",".join(methods), "--out", str(out)]
         # cwd=tree: the child imports that tree's package whatever this one's path
         subprocess.run(command, env={**os.environ, "PYTHONPATH": str(tree)}, cwd=tree, check=True)
