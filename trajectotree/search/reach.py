@@ -140,10 +140,12 @@ def samples_refusal(fingers, samples, tip_radius: float, clearance: float, pairs
     return None
 
 
-def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float) -> Refusal | None:
+def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float, ends=None) -> Refusal | None:
     """samples_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear
-    (path_samples)."""
-    ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
+    (path_samples); `ends`: the pairs' gaps at both ends when known (the search memoizes them), else
+    computed here."""
+    if ends is None:
+        ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
     near, samples = path_samples(fingers, q_from, q_to, tip_radius, clearance, ends)
     return samples_refusal(fingers, samples, tip_radius, clearance, near) if near else None
 

@@ -87,7 +87,7 @@ from trajectotree.scene.spatial import START_POSE
 from trajectotree.scene.statics import edge_wrenches_W
 from trajectotree.search.grasp import FormClosure, SpatialClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
-from trajectotree.search.reach import Reachability, path_samples, samples_refusal
+from trajectotree.search.reach import Reachability, path_refusal
 from trajectotree.search.spatial_reach import SpatialReach, box_transform
 from trajectotree.search.stance import (
     SpatialHoldingLp,
@@ -210,7 +210,7 @@ class _Search:
         node's joint angles q (2F,), or on the straight joint-space path from its parent's (count 1);
         None when neither. The node's pair distances are memoized by depth and the two fingers'
         contacts (`gaps`: its siblings share the pairs of the fingers that do not move); the path is
-        sampled for the pairs it could bring that close only (reach.path_samples, samples_refusal)."""
+        sampled for the pairs it could bring that close only (reach.path_refusal)."""
         fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
         keys = self.gap_keys(node)
         missing = [pair for pair, key in keys.items() if key not in self.gaps]
@@ -224,8 +224,7 @@ class _Search:
             return None
         parent = self.gap_keys(node.parent)  # the parent passed: all its gaps are known
         ends = {pair: (self.gaps[parent[pair]], gap) for pair, gap in gaps.items()}
-        near, samples = path_samples(fingers, self.joints(node.parent), q, r, clearance, ends)
-        return samples_refusal(fingers, samples, r, clearance, near) if near else None
+        return path_refusal(fingers, self.joints(node.parent), q, r, clearance, ends)
 
     def gap_keys(self, node: _Node) -> dict[tuple[int, int], tuple]:
         """{(i, j): the key of `gaps`} for each pair of fingers i < j of `node`."""
