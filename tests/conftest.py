@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 # Pure computations the tests share across the session. Every command and search ranks the candidate
@@ -200,3 +201,21 @@ def resumed_sweep(tmp_path_factory):
     before = trial_files(out)
     rerun = subprocess.run(command + ["--workers", "2"], capture_output=True, text=True, timeout=900)
     return SimpleNamespace(out=out, before=before, rerun=rerun, command=command)
+
+
+def jacobian_against_differences(constraint, Z: np.ndarray):
+    """(J, numeric, pattern) of a segment constraint (values(Z), jacobian(Z), sparsity()) at Z: its
+    analytic Jacobian, central differences of its values (step 1e-6) and its declared sparsity as a
+    mask; asserts the two Jacobians agree to 1e-6 relative to the largest entry."""
+    _, J = constraint.jacobian(Z)
+    step = 1e-6
+    numeric = np.empty_like(J)
+    for j in range(Z.size):
+        d = np.zeros(Z.size)
+        d[j] = step
+        d = d.reshape(Z.shape)
+        numeric[:, j] = (constraint.values(Z + d) - constraint.values(Z - d)) / (2 * step)
+    assert np.abs(J - numeric).max() < 1e-6 * max(1.0, np.abs(J).max())
+    pattern = np.zeros(J.shape, dtype=bool)
+    pattern[tuple(np.array(constraint.sparsity()).T)] = True
+    return J, numeric, pattern

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import jacobian_against_differences
 
 from trajectotree.cito import spatial as sp
 from trajectotree.cli import main
@@ -55,17 +56,7 @@ def test_jacobian_against_central_differences(setting, segment):
     values = rows.knot_values(Z)[0]
     assert np.all(values >= lo - 1e-9) and np.all(values <= hi + 1e-9)  # the guess keeps the knot rows
     Z = Z + 1e-3 * np.random.default_rng(1).standard_normal(Z.shape)
-    _, J = constraint.jacobian(Z)
-    step = 1e-6
-    numeric = np.empty_like(J)
-    for j in range(Z.size):
-        d = np.zeros(Z.size)
-        d[j] = step
-        d = d.reshape(Z.shape)
-        numeric[:, j] = (constraint.values(Z + d) - constraint.values(Z - d)) / (2 * step)
-    assert np.abs(J - numeric).max() < 1e-6 * max(1.0, np.abs(J).max())
-    pattern = np.zeros(J.shape, dtype=bool)
-    pattern[tuple(np.array(constraint.sparsity()).T)] = True
+    J, numeric, pattern = jacobian_against_differences(constraint, Z)
     assert not np.any(J[~pattern])  # every entry within the declared sparsity
 
 

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import jacobian_against_differences
 from pydrake.solvers import IpoptSolver
 from scipy.spatial.transform import Rotation
 
@@ -81,17 +82,7 @@ def test_analytic_jacobian_in_its_sparsity(setting, rotated, links):
     if rotated:
         Z[:, rows.layout.slice("phi")] += rng.uniform(-0.25, 0.25, (rows.K, 3))
     assert np.any(rows.knot_values(Z)[0][:, rows.clearance_row] > 0)  # the clearance row is live
-    _, J = constraint.jacobian(Z)
-    step = 1e-6
-    numeric = np.empty_like(J)
-    for j in range(Z.size):
-        d = np.zeros(Z.size)
-        d[j] = step
-        d = d.reshape(Z.shape)
-        numeric[:, j] = (constraint.values(Z + d) - constraint.values(Z - d)) / (2 * step)
-    assert np.abs(J - numeric).max() < 1e-6 * max(1.0, np.abs(J).max())
-    pattern = np.zeros(J.shape, dtype=bool)
-    pattern[tuple(np.array(constraint.sparsity()).T)] = True
+    J, numeric, pattern = jacobian_against_differences(constraint, Z)
     assert not np.any(numeric[~pattern])  # the declared sparsity holds every entry
     assert pattern.sum() < 0.3 * pattern.size  # and is sparse: a knot row meets few of its knot's variables
 
