@@ -9,13 +9,15 @@ holds) median and p95 over every replan, and over those that gave a plan.
 executes the same saved plans (--plan-dirs) with that tree's code too, in the same run: each plan in a
 subprocess per tree (PYTHONPATH=TREE, or this tree), the trees alternating plan by plan so that a busy
 machine slows both alike; then the latency of each, side by side. Only the public API runs in them
-(trajectotree.load_plan, run_simulation), so any tree with executor grasp-replan takes part.
+(trajectotree.load_plan, run_simulation), so any tree that replans takes part: executor grasp-replan, or
+the older run_simulation(replan=True) of the trees before the executor was one typed value.
 
 Then, unless --replan-only, the open-loop path on the goals: planning (search + every segment at
 once, the default) and the open-loop execution, medians of wall-clock times (--open-loop-only: that
 part alone)."""
 
 import argparse
+import inspect
 import json
 import os
 import subprocess
@@ -29,6 +31,13 @@ GOALS = (2.95, -2.61, 1.57, -0.77, 0.05, -1.40, 2.20, -3.10)  # goals no default
 HERE = Path(__file__).resolve().parents[1]  # this tree
 
 
+def replanning_keywords(run_simulation) -> dict:
+    """run_simulation's keywords for replanning: the executor, or the older trees' replan flag."""
+    if "executor" in inspect.signature(run_simulation).parameters:
+        return {"executor": "grasp-replan"}
+    return {"replan": True}
+
+
 def replanned_runs(plans: list, sim_mu: float) -> list[dict]:
     """Each plan executed with replanning: {goal, dropped, mae_theta, final_theta, replans: [event JSON]}."""
     import trajectotree as tt
@@ -38,7 +47,7 @@ def replanned_runs(plans: list, sim_mu: float) -> list[dict]:
         if not result.success:
             runs.append({"goal": result.goal, "planned": False, "status": result.status})
             continue
-        run = tt.run_simulation(plan=result, sim_mu=sim_mu, executor="grasp-replan")
+        run = tt.run_simulation(plan=result, sim_mu=sim_mu, **replanning_keywords(tt.run_simulation))
         runs.append(
             {
                 "goal": result.goal,
