@@ -75,6 +75,24 @@ class SpaceReference:
         a["t"] = a["t"] - a["t"][0]
         return cls(**a)
 
+    @classmethod
+    def held(cls, pose, q, p_W_tip, p_W_C, f_W, duration: float) -> SpaceReference:
+        """A reference that holds the cube at rest at `pose` (7,) for `duration` s, the joints at q (F n,), each
+        fingertip centre at p_W_tip (F, 3) pushing with f_W (F, 3) at p_W_C (F, 3) (a static grasp, for tests)."""
+
+        def two(a):
+            return np.stack([np.asarray(a, dtype=float)] * 2)
+
+        return cls(
+            t=np.array([0.0, duration]),
+            x=two(pose),
+            v=np.zeros((2, 6)),
+            q=two(q),
+            f_W=two(f_W),
+            p_W_C=two(p_W_C),
+            p_W_tip=two(p_W_tip),
+        )
+
     @property
     def duration(self) -> float:
         return float(self.t[-1])
