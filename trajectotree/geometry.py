@@ -487,6 +487,24 @@ def matrix_quaternions(R) -> np.ndarray:
     return np.concatenate([np.cos(angle / 2), np.sin(angle / 2) * axis], axis=-1)
 
 
+def quaternion_product(q0, q1) -> np.ndarray:
+    """(4,) the quaternion q0 q1 ([w, x, y, z]): the rotation q1, then q0."""
+    w0, v0 = q0[0], np.asarray(q0[1:], dtype=float)
+    w1, v1 = q1[0], np.asarray(q1[1:], dtype=float)
+    return np.concatenate([[w0 * w1 - v0 @ v1], w0 * v1 + w1 * v0 + np.cross(v0, v1)])
+
+
+def quaternion_error_W(q_ref, q) -> np.ndarray:
+    """(3,) rad, in W: the rotation vector e that turns orientation q onto q_ref, R_ref = exp([e]x) R (unit
+    quaternions [w, x, y, z]), from the log map of R_ref^T R (the shorter way: q and -q are one rotation)."""
+    q_ref = np.asarray(q_ref, dtype=float)
+    d = quaternion_product(np.concatenate([q_ref[:1], -q_ref[1:]]), q)  # R_ref^T R
+    d = -d if d[0] < 0 else d
+    s = np.linalg.norm(d[1:])
+    phi = d[1:] * (2 * np.arctan2(s, d[0]) / s if s > 1e-12 else 2.0)  # log(R_ref^T R), in the reference's frame
+    return -quaternion_matrices(q_ref) @ phi
+
+
 def skew(v) -> np.ndarray:
     """(..., 3, 3) [v]x, the matrix of v x (.) for vectors v (..., 3)."""
     v = np.asarray(v)

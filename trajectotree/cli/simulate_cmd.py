@@ -330,6 +330,11 @@ def run(args) -> int:
 
 def simulate_into(args) -> int:
     """Executes the plan in PLAN_DIR, whose lock this command holds, and writes the run there."""
+    from trajectotree.cli.space_simulate import check_hand_fits_plan, is_space_plan, simulate_space_into
+
+    if is_space_plan(args.plan_dir):  # its own reader and Diagram
+        return simulate_space_into(args)
+    check_hand_fits_plan(args, space_plan=False)
     from trajectotree.execution.playback import object_noun, start_meshcat
     from trajectotree.execution.reference import reference_from_arrays
     from trajectotree.execution.run import run_simulation

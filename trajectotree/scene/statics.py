@@ -112,3 +112,27 @@ def finger_torques(J_WC, f_W, tau_gravity) -> np.ndarray:
     its contact point (J_WC (F, 3, n), the point's translational Jacobian) while holding its own
     weight (tau_gravity (F, n)): tau = tau_gravity + J^T f."""
     return np.asarray(tau_gravity) + np.einsum("fcj,fc->fj", J_WC, f_W)
+
+
+def cone_rows_3d(mu: float, num_fingers: int, num_facets: int) -> np.ndarray:
+    """(F m, 3F): the pyramid inscribed in each contact's friction cone, as rows <= 0 on lambda = (lambda_n,
+    lambda_1, lambda_2) per finger: cos b lambda_1 + sin b lambda_2 - mu cos(pi / m) lambda_n <= 0 for each facet,
+    b = 2 pi (e + 1/2) / m. The facets join the edges of pyramid_edges, so both describe one pyramid (the planar
+    cone_rows is its m = 2 section)."""
+    b = 2 * np.pi * (np.arange(num_facets) + 0.5) / num_facets
+    facet = np.column_stack([np.full(num_facets, -mu * np.cos(np.pi / num_facets)), np.cos(b), np.sin(b)])
+    return np.kron(np.eye(num_fingers), facet)
+
+
+def contact_torque_rows(J_WC, directions, rest, tau_max) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The joint torques that contact forces f_i = directions_i lambda_i add to `rest` (F, n: the fingers' weight and
+    springs), bounded by the motors' tau_max (F, n), for J_WC (F, 3, n) the contact points' translational Jacobians
+    and directions (F, 3, k) each force component's unit direction: (A (F n, F k) block-diagonal, lower (F n,),
+    upper (F n,)), lower <= A lambda <= upper. As the planar torque_rows (whose Jacobian is the fingertip centre's,
+    its lever added by hand), the bounds are widened to admit lambda = 0 where `rest` alone is beyond the motors."""
+    blocks = np.einsum("fcj,fck->fjk", J_WC, directions)  # (F, n, k): J_C^T D
+    A = np.zeros((blocks.shape[0] * blocks.shape[1], blocks.shape[0] * blocks.shape[2]))
+    for i, block in enumerate(blocks):
+        A[i * block.shape[0] : (i + 1) * block.shape[0], i * block.shape[1] : (i + 1) * block.shape[1]] = block
+    rest, tau_max = np.asarray(rest, dtype=float), np.asarray(tau_max, dtype=float)
+    return A, np.minimum(-tau_max - rest, 0.0).ravel(), np.maximum(tau_max - rest, 0.0).ravel()

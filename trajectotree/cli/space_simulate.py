@@ -1,0 +1,178 @@
+"""`trajectotree simulate PLAN_DIR` of a plan in space (plan.json `kind: space`, from `trajectotree plan --hand
+fingerpro4`): the plan executed open loop by the grasp controller in space (trajectotree.execution.space_run),
+written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan) and sim.json (dropped, the
+final orientation error in rad and position error in m, the executor). What space does not have yet (the closed
+loop, the other world, the playback files) is refused before anything is read or written."""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from trajectotree.cli.common import check_output_dir, print_json
+from trajectotree.cli.simulate_cmd import chosen_executor, execution_config
+from trajectotree.config import ConfigError, config_from_dict
+from trajectotree.io import SIM_JSON, SIM_NPZ, reading, require_files, write_bytes_atomic, write_json_atomic
+from trajectotree.scene.spatial import is_space_hand
+
+PLAN_JSON, PLAN_NPZ = "plan.json", "plan.npz"
+# m, how far a plan's contact points may lie off the surface of the cube plan.json names (a plan's own lie on it
+# to rounding; the arrays of another cube's plan miss it by millimetres), as the plane's simulate_cmd.FIT_TOL
+FIT_TOL = 1e-4
+# The options of `simulate` that a plan in space does not take yet, by their argparse names.
+NOT_YET = {
+    "html": "--html",
+    "gif": "--gif",
+    "forces": "--forces",
+    "meshcat": "--meshcat",
+    "closed_loop": "--closed-loop",
+    "replan": "--replan",
+    "friction_floor": "--friction-floor",
+    "sim_mu": "--sim-mu",
+    "sim_mass": "--sim-mass",
+    "push": "--push",
+}
+
+
+def is_space_plan(plan_dir: str | Path) -> bool:
+    """Whether PLAN_DIR's plan.json says it holds a plan in space (a missing or unreadable one: no, and the
+    planar reader names what is wrong with it)."""
+    try:
+        data = json.loads((Path(plan_dir) / PLAN_JSON).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(data, dict) and data.get("kind") == "space"
+
+
+def check_hand_fits_plan(args, space_plan: bool) -> None:
+    """ConfigError naming --hand and the plan's kind when --hand names a hand of the other kind (a hand in space
+    for a planar plan, or a planar hand for a plan in space)."""
+    if args.hand is None or is_space_hand(args.hand) == space_plan:
+        return
+    given, plan = ("a planar hand", "a plan in space") if space_plan else ("a hand in space", "a planar plan")
+    raise ConfigError(
+        f"--hand {args.hand!r} is {given}, but PLAN_DIR {str(args.plan_dir)!r} holds {plan}: a plan executes with "
+        "the hand it was made for (leave --hand out)"
+    )
+
+
+def refuse_not_yet(args) -> None:
+    """ConfigError naming the first option a plan in space does not take yet."""
+    given = [option for name, option in NOT_YET.items() if getattr(args, name, None) not in (None, False)]
+    if given:
+        raise ConfigError(
+            f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): open-loop "
+            "execution by the grasp controller only, so far"
+        )
+
+
+def read_space_plan(plan_dir: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """plan.json's data and plan.npz's arrays (their shapes checked against each other: planning.physics.
+    check_space_arrays); ConfigError naming the file and what is wrong."""
+    from trajectotree.planning.physics import check_space_arrays
+    from trajectotree.results import SPACE_TRAJECTORY_ARRAYS
+
+    folder = Path(plan_dir)
+    json_path, npz_path = folder / PLAN_JSON, folder / PLAN_NPZ
+    require_files((json_path, npz_path), "a plan folder holds plan.json and plan.npz (written by `trajectotree plan`)")
+    with reading(json_path):
+        data = json.loads(json_path.read_text())
+        if not isinstance(data.get("object"), dict) or not isinstance(data.get("config"), dict):
+            raise ValueError("a plan in space's plan.json names its object and its config")
+    with reading(npz_path), np.load(npz_path) as npz:
+        arrays = {name: np.array(npz[name]) for name in npz.files}
+    missing = [name for name in SPACE_TRAJECTORY_ARRAYS if name not in arrays]
+    if missing:
+        raise ConfigError(f"{str(npz_path)!r} lacks the array(s) {', '.join(missing)} of a plan in space")
+    try:
+        return data, check_space_arrays(arrays)
+    except ValueError as e:
+        raise ConfigError(f"{str(npz_path)!r}: {e}") from None
+
+
+def check_arrays_fit_scene(npz_path: Path, arrays: dict[str, np.ndarray], scene) -> None:
+    """ConfigError naming plan.npz and the mismatch when its arrays do not belong to the scene plan.json names:
+    its fingers and joints the hand's, every contact point on the cube's surface at the planned pose."""
+    from trajectotree.geometry import box_signed_distances, quaternion_matrices
+
+    F, joints = scene.num_fingers, scene.tau_max.size
+    if arrays["f_W"].shape[1] != F or arrays["q"].shape[1] != joints:
+        raise ConfigError(
+            f"{str(npz_path)!r} has {arrays['f_W'].shape[1]} fingers and {arrays['q'].shape[1]} joints; hand "
+            f"{scene.hand_file.source!r} has {F} and {joints}: put the plan.json and plan.npz of one plan together"
+        )
+    x = arrays["x"]
+    p_BC = np.einsum("kji,kfj->kfi", quaternion_matrices(x[:, :4]), arrays["p_W_C"] - x[:, None, 4:])
+    off = np.abs(box_signed_distances(scene.object.half, p_BC))
+    k, i = np.unravel_index(int(np.argmax(off)), off.shape)
+    if off[k, i] > FIT_TOL:
+        raise ConfigError(
+            f"{str(npz_path)!r}: its contact points lie up to {1e3 * off[k, i]:.2f} mm off the "
+            f"{' x '.join(f'{1e3 * s:g}' for s in scene.object.size)} mm cube plan.json names (finger {i} at knot "
+            f"{k}; a plan's own lie on its cube within {1e3 * FIT_TOL:g} mm): put the plan.json and plan.npz of one "
+            "plan together, or plan again"
+        )
+
+
+def save_space_sim(result, plan_dir: str | Path, plan_success: bool) -> dict:
+    """PLAN_DIR/sim.npz (the result's arrays) and sim.json (its summary, with `plan_success`), each written
+    atomically; returns the summary."""
+    buffer = io.BytesIO()
+    np.savez(buffer, **{name: getattr(result, name) for name in result.ARRAYS})
+    write_bytes_atomic(Path(plan_dir) / SIM_NPZ, buffer.getvalue())
+    summary = dict(result.to_json(), plan_success=plan_success)
+    write_json_atomic(Path(plan_dir) / SIM_JSON, summary)
+    return summary
+
+
+def simulate_space_into(args) -> int:
+    """`simulate` of the plan in space in PLAN_DIR, whose lock the command holds."""
+    from trajectotree.execution.space_control import SpaceReference
+    from trajectotree.execution.space_run import SPACE_EXECUTORS, simulate_space
+    from trajectotree.scene.spatial import build_space_scene
+
+    check_hand_fits_plan(args, space_plan=True)
+    refuse_not_yet(args)
+    check_output_dir("PLAN_DIR", args.plan_dir, (SIM_JSON, SIM_NPZ))
+    data, arrays = read_space_plan(args.plan_dir)
+    with reading(Path(args.plan_dir) / PLAN_JSON):
+        plan_config = config_from_dict(data["config"])
+    config = execution_config(args, plan_config)
+    executor = chosen_executor(args, config)
+    if executor not in SPACE_EXECUTORS:
+        raise ConfigError(
+            field="--executor",
+            value=executor.value,
+            problem="does not execute plans in space yet",
+            choices=tuple(e.value for e in SPACE_EXECUTORS),
+        )
+    cube = data["object"]
+    scene = build_space_scene(
+        config.scene.hand, mu=config.scene.mu, gravity=config.scene.gravity, size=cube["size"], mass=cube["mass"]
+    )
+    check_arrays_fit_scene(Path(args.plan_dir) / PLAN_NPZ, arrays, scene)
+    plan_success = bool(data.get("success"))
+    if not plan_success:
+        print(
+            f"trajectotree simulate: warning: the plan in {args.plan_dir} did not succeed ({data.get('status')!r}); "
+            "executing it anyway, sim.json records plan_success: false",
+            file=sys.stderr,
+        )
+    result = simulate_space(SpaceReference.from_arrays(arrays), config, scene, executor=executor)
+    summary = save_space_sim(result, args.plan_dir, plan_success)
+    if args.json:
+        print_json(summary)
+        return 0
+    outcome = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
+    print(
+        f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s ({executor.value}): {outcome}; final "
+        f"orientation error {np.degrees(summary['final_orientation_error_rad']):.2f} deg, position error "
+        f"{1e3 * summary['final_position_error_m']:.2f} mm (largest on the way "
+        f"{np.degrees(summary['max_orientation_error_rad']):.2f} deg, {1e3 * summary['max_position_error_m']:.2f} mm)"
+    )
+    print(f"wrote {Path(args.plan_dir) / SIM_JSON}, {Path(args.plan_dir) / SIM_NPZ}")
+    return 0

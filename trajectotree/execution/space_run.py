@@ -1,0 +1,219 @@
+"""Executing a plan in space in a full-dynamics Drake simulation (issue 37, open loop so far).
+
+The Diagram: a discrete MultibodyPlant (config.sim.time_step, as the plane's) with the hand in space and its cube
+on a quaternion floating joint (scene.spatial: the hand's model, add_space_object), gravity along -z; the executor
+(`add_space_executor`: one Executor value dispatched to the space grasp controller, trajectotree.execution.
+space_control, or zero torque), wired to the plant by port name; loggers of the plant's state and of each finger's
+simulated force on the cube. The run starts in the plan's first state at rest and lasts the plan and
+config.sim.settle_time of hold; `SpaceSimResult` is what it logged beside the plan at the same times, with the
+drop (the cube's centre config.sim.drop_distance off the plan's, the plane's rule) and the final errors.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, ContactResults, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+
+from trajectotree.config import Config, ConfigError
+from trajectotree.config.executor import Executor, parse_executor
+from trajectotree.execution.executor import control_friction
+from trajectotree.execution.in_effect import PLAN_PORT, PlanInEffect, add_plan_source
+from trajectotree.execution.space_control import SpaceGraspController, SpaceReference, space_schedule
+from trajectotree.geometry import quaternion_matrices, rotation_angles
+from trajectotree.scene.spatial import SpaceScene, add_space_object
+
+SPACE_EXECUTORS = (Executor.GRASP, Executor.NONE)  # the executors a plan in space has so far
+
+
+def space_plan_in_effect(reference: SpaceReference, config: Config, scene: SpaceScene) -> PlanInEffect:
+    """The PlanInEffect of a plan in space: its reference and the controller's schedule of it, at the controller's
+    rate to the run's end (the plan, then config.sim.settle_time of hold)."""
+    gains = config.controller
+    schedule = space_schedule(
+        reference,
+        tip_radius=scene.tip_radius,
+        period=1.0 / gains.rate_hz,
+        duration=reference.duration + config.sim.settle_time,
+        ramp_time=gains.grasp.ramp_time,
+        contact_distance=gains.grasp.contact_distance,
+    )
+    return PlanInEffect(reference, schedule, config.scene.mu)
+
+
+def add_space_executor(
+    builder: DiagramBuilder,
+    plant,
+    reference: SpaceReference,
+    config: Config,
+    scene: SpaceScene,
+    *,
+    executor: Executor | str = Executor.GRASP,
+    name: str = "executor",
+):
+    """Adds the executor `executor` of the plan in space `reference` to `builder` as one Diagram named `name`, for
+    the caller's finalized `plant` (its actuation in the order of `scene`'s hand, the plan's scene). Inputs by
+    name: `box_state` (13: the cube's [qw, qx, qy, qz, px, py, pz] and [w_W, v_W], rad/s, m/s) and `hand_state`
+    (2 F n: [q rad; v rad/s], finger-major); outputs: `actuation` (F n joint torques, N m) and, for grasp, `plan`
+    (the PlanInEffect followed). ConfigError for an executor that space does not have yet (SPACE_EXECUTORS)."""
+    executor = parse_executor(executor)
+    inner = DiagramBuilder()
+    match executor:
+        case Executor.GRASP:
+            controller = inner.AddNamedSystem(
+                "grasp_controller", SpaceGraspController(scene, config.controller, mu=control_friction(config))
+            )
+            source = add_plan_source(inner, space_plan_in_effect(reference, config, scene))
+            inner.Connect(source.get_output_port(), controller.plan_port)
+            inner.ExportInput(controller.box_state_port, "box_state")
+            inner.ExportInput(controller.hand_state_port, "hand_state")
+            inner.ExportOutput(controller.actuation_port, "actuation")
+            inner.ExportOutput(source.get_output_port(), PLAN_PORT)
+        case Executor.NONE:
+            zero = inner.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
+            inner.ExportOutput(zero.get_output_port(), "actuation")
+        case _:
+            raise ConfigError(
+                field="executor",
+                value=executor.value,
+                problem="does not execute plans in space yet",
+                choices=tuple(e.value for e in SPACE_EXECUTORS),
+            )
+    return builder.AddNamedSystem(name, inner.Build())
+
+
+class SpaceFingertipForces(LeafSystem):
+    """Input port `contact_results` (the plant's); output port `f_W` (3F, finger-major): the force of each finger's
+    links (fingertip sphere included) on the cube, in W, summed over their point contacts."""
+
+    def __init__(self, plant, hand, box, scene: SpaceScene):
+        super().__init__()
+        self._num_fingers = scene.num_fingers
+        self._finger_of_body = {
+            plant.GetJointByName(joint, hand).child_body().index(): i
+            for i, finger in enumerate(scene.hand_file.fingers)
+            for joint in finger.joints
+        }
+        self._box_body = plant.GetBodyByName("box", box).index()
+        self.contact_results_port = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
+        self.DeclareVectorOutputPort("f_W", 3 * self._num_fingers, self.CalcForces)
+
+    def CalcForces(self, context, output):
+        results = self.contact_results_port.Eval(context)
+        f_W = np.zeros((self._num_fingers, 3))
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            a, b = info.bodyA_index(), info.bodyB_index()
+            if b == self._box_body and a in self._finger_of_body:
+                f_W[self._finger_of_body[a]] += info.contact_force()  # the force on body B, in W
+            elif a == self._box_body and b in self._finger_of_body:
+                f_W[self._finger_of_body[b]] -= info.contact_force()
+        output.SetFromVector(f_W.ravel())
+
+
+@dataclass(frozen=True)
+class SpaceSimResult:
+    """A run of a plan in space: what was logged (sim.npz) and its summary (sim.json)."""
+
+    t: np.ndarray  # (T,) s
+    x: np.ndarray  # (T, 7) the cube's simulated pose [qw, qx, qy, qz, px, py, pz] in W (plan.npz's layout)
+    x_plan: np.ndarray  # (T, 7) the planned pose at the same times
+    q: np.ndarray  # (T, F n) rad, the joints, finger-major
+    f_W: np.ndarray  # (T, F, 3) N, each finger's simulated force on the cube, in W
+    f_W_plan: np.ndarray  # (T, F, 3) N, the planned forces at the same times
+    executor: str
+    dropped: bool  # the cube's centre went sim.drop_distance off the plan's
+    drop_time_s: float | None
+    orientation_error_rad: np.ndarray  # (T,) the angle between the simulated and the planned orientation
+    position_error_m: np.ndarray  # (T,) the distance between the simulated and the planned centre
+    sim_time_s: float  # s of wall time the simulation took
+
+    ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
+
+    def to_json(self) -> dict:
+        return {
+            "kind": "space",
+            "executor": self.executor,
+            "dropped": self.dropped,
+            "drop_time_s": self.drop_time_s,
+            "duration_s": float(self.t[-1]),
+            "final_orientation_error_rad": float(self.orientation_error_rad[-1]),
+            "final_position_error_m": float(self.position_error_m[-1]),
+            "max_orientation_error_rad": float(self.orientation_error_rad.max()),
+            "max_position_error_m": float(self.position_error_m.max()),
+            "sim_time_s": self.sim_time_s,
+        }
+
+
+def pose_errors(x, x_plan) -> tuple[np.ndarray, np.ndarray]:
+    """(angle rad (T,), distance m (T,)) between the poses x and x_plan (T, 7)."""
+    R, R_plan = quaternion_matrices(x[:, :4]), quaternion_matrices(x_plan[:, :4])
+    angle = rotation_angles(np.swapaxes(R_plan, -1, -2) @ R)
+    return angle, np.linalg.norm(x[:, 4:] - x_plan[:, 4:], axis=1)
+
+
+def simulate_space(
+    reference: SpaceReference, config: Config, scene: SpaceScene, *, executor: Executor | str = Executor.GRASP
+) -> SpaceSimResult:
+    """Runs the plan in space `reference` (the plan of `scene`: its hand, cube and friction, and the controller's
+    model) with `executor` for its length and config.sim.settle_time; the log beside the plan."""
+    executor = parse_executor(executor)
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
+    (hand,) = Parser(plant).AddModels(scene.hand_file.model)
+    box = add_space_object(plant, scene.object)
+    plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -scene.gravity])
+    plant.Finalize()
+    added = add_space_executor(builder, plant, reference, config, scene, executor=executor)
+    plant_ports = {"box_state": plant.get_state_output_port(box), "hand_state": plant.get_state_output_port(hand)}
+    for i in range(added.num_input_ports()):  # by name, as executor.connect_executor
+        builder.Connect(plant_ports[added.get_input_port(i).get_name()], added.get_input_port(i))
+    builder.Connect(added.GetOutputPort("actuation"), plant.get_actuation_input_port())
+    forces = builder.AddNamedSystem("fingertip_forces", SpaceFingertipForces(plant, hand, box, scene))
+    builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
+    triggers = {TriggerType.kPeriodic, TriggerType.kForced}
+    state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
+    force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    plant.SetPositions(plant_context, box, reference.x[0])
+    plant.SetPositions(plant_context, hand, reference.q[0])
+    simulator = Simulator(diagram, context)
+    end = reference.duration + config.sim.settle_time
+    start = time.perf_counter()
+    simulator.AdvanceTo(end)
+    sim_time = time.perf_counter() - start
+    logs = [logger.FindLog(simulator.get_context()) for logger in (state_logger, force_logger)]
+    if logs[0].sample_times()[-1] < end - 1e-9:  # the periodic log can miss the end by rounding
+        for logger in (state_logger, force_logger):
+            logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
+    t, states = logs[0].sample_times().copy(), logs[0].data().T
+    x = states[:, plant.GetPositionsFromArray(box, np.arange(plant.num_positions())).astype(int)]
+    q = states[:, plant.GetPositionsFromArray(hand, np.arange(plant.num_positions())).astype(int)]
+    x_plan = reference.pose_at(t)
+    angle, distance = pose_errors(x, x_plan)
+    off = np.flatnonzero(distance > config.sim.drop_distance)
+    return SpaceSimResult(
+        t=t,
+        x=x,
+        x_plan=x_plan,
+        q=q,
+        f_W=logs[1].data().T.reshape(len(t), scene.num_fingers, 3).copy(),
+        f_W_plan=reference.forces_at(t),
+        executor=executor.value,
+        dropped=len(off) > 0,
+        drop_time_s=float(t[off[0]]) if len(off) else None,
+        orientation_error_rad=angle,
+        position_error_m=distance,
+        sim_time_s=sim_time,
+    )
