@@ -10,6 +10,11 @@ workers), which other processes on a shared machine disturb less than the wall t
     python scripts/bench_space.py --goals 5 --first 2
     python scripts/bench_space.py --axis-aligned
     python scripts/bench_space.py --workers 1    # the segments one after another in this process
+    python scripts/bench_space.py --goals 3 --cito 3   # and general CITO (cito, cito-warm) on the first 3 goals
+
+With `--cito N` the first N goals are also planned by general CITO in space (planning.spatial.plan_space_cito: cold
+from the search's best initial grasp, and warm from the TrajectoTree plan just made, whose time its total includes),
+in the same run, and the ratio of the medians of their planning times over TrajectoTree's is printed.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from scipy.spatial.transform import Rotation
 
 from trajectotree.config import Config
 from trajectotree.geometry import quaternion_angle
-from trajectotree.planning.spatial import plan_space
+from trajectotree.planning.spatial import plan_space, plan_space_cito
 from trajectotree.scene.spatial import START_POSE, build_space_scene
 
 
@@ -41,6 +46,7 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=0, help="start at this goal of the list")
     parser.add_argument("--axis-aligned", action="store_true", help="the 23 axis-aligned orientations instead")
     parser.add_argument("--workers", type=int, default=None, help="segment workers (default: one per core)")
+    parser.add_argument("--cito", type=int, default=0, metavar="N", help="general CITO too on the first N goals")
     args = parser.parse_args()
     config = Config()
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
@@ -50,6 +56,7 @@ def main() -> None:
         goals = Rotation.random(args.goals, random_state=args.seed).as_quat(scalar_first=True)
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores", flush=True)
     times, searched, checked, planned, cpu = [], 0, 0, 0, []
+    baselines = {"cito": [], "cito-warm": []}  # per method, (time s, planned) of the goals CITO ran on
     for k in range(args.first, len(goals)):
         goal = goals[k]
         t0 = time.perf_counter()
@@ -69,6 +76,17 @@ def main() -> None:
             f"final error {error:.3f} deg" + ("" if result.success else f": {result.status[:200]}"),
             flush=True,
         )
+        if k - args.first < args.cito:
+            for method, runs in baselines.items():
+                run = plan_space_cito(
+                    scene, goal, config, method, args.workers, result if method == "cito-warm" else None
+                )
+                runs.append((run.total_time_s, run.success, times[-1]))
+                print(
+                    f"  {method}: {'planned' if run.success else 'NOT PLANNED'} in {run.total_time_s:.1f} s (program "
+                    f"{run.solve_time_s:.1f} s)" + ("" if run.success else f": {run.status[:200]}"),
+                    flush=True,
+                )
     t = np.array(times)
     n = len(t)
     print(
@@ -76,6 +94,14 @@ def main() -> None:
         f"time mean {t.mean():.1f} s, median {np.median(t):.1f} s, p90 {np.percentile(t, 90):.1f} s, "
         f"max {t.max():.1f} s; segments' CPU per goal mean {np.mean(cpu):.1f} s"
     )
+    for method, runs in baselines.items():
+        if runs:
+            mine, ok, theirs = np.array(runs).T
+            print(
+                f"{method} on the first {len(runs)} goals: planned {int(ok.sum())}/{len(runs)}, time median "
+                f"{np.median(mine):.1f} s against TrajectoTree's {np.median(theirs):.1f} s on the same goals: "
+                f"ratio of medians {np.median(mine) / np.median(theirs):.1f}x"
+            )
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

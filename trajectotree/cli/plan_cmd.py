@@ -166,14 +166,12 @@ def run_space(args) -> int:
     from trajectotree.config import Config, ConfigError, load_config
     from trajectotree.io import folder_lock
     from trajectotree.planning.keyframes import check_workers
-    from trajectotree.planning.spatial import plan_space, save_space_plan
+    from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
     from trajectotree.scene.spatial import build_space_scene
 
     goal = space_goal(args)
     workers = check_workers(args.segment_workers, "--segment-workers")
-    if args.method != "trajectotree":
-        raise ConfigError(field="--method", value=args.method, problem="takes a planar hand only so far",
-                          valid="trajectotree for a hand in space")  # fmt: skip
+    method = check_method(args.method)
     config = load_config(args.config) if getattr(args, "config", None) else Config()
     overrides = scene_overrides(args)
     try:
@@ -182,7 +180,7 @@ def run_space(args) -> int:
         raise in_option_terms(e, args) from None
     config = dataclasses.replace(config, scene=scene_config)
     w, x, y, z = goal
-    default = f"plan_space_{w:+.3f}_{x:+.3f}_{y:+.3f}_{z:+.3f}"
+    default = f"plan_space_{'' if method == 'trajectotree' else method + '_'}{w:+.3f}_{x:+.3f}_{y:+.3f}_{z:+.3f}"
     out = check_output_dir("--out", args.out or default, (PLAN_JSON, PLAN_NPZ))
     if args.html:  # it may go into --out, which save_space_plan creates before the playback is written
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
@@ -193,13 +191,21 @@ def run_space(args) -> int:
         mass=scene_config.box_mass if "box_mass" in overrides else None,
     )
     with folder_lock(out, "--out", "trajectotree plan"):
-        result = plan_space(scene, goal, config, workers)
+        if method == "trajectotree":
+            result = plan_space(scene, goal, config, workers)
+        else:
+            result = plan_space_cito(scene, goal, config, method, workers)
         removed = remove_derived_files(out)
         save_space_plan(result, out, config)
         if args.html and result.trajectory is not None:
             from trajectotree.execution.space_playback import write_space_plan_html
 
-            write_space_plan_html(scene, result.trajectory.arrays(), args.html, title=f"TrajectoTree: {out.name}")
+            write_space_plan_html(
+                scene,
+                result.trajectory.arrays(),
+                args.html,
+                title=f"{'TrajectoTree' if method == 'trajectotree' else method}: {out.name}",
+            )
     if removed:
         print(f"removed {', '.join(removed)} from {out}: they belonged to the plan this one replaces", file=sys.stderr)
     if args.json:
@@ -207,13 +213,14 @@ def run_space(args) -> int:
         return 0
     status, details = reason_lines(result.status)
     print(
-        f"trajectotree in space: goal quaternion [{w:+.4f}, {x:+.4f}, {y:+.4f}, {z:+.4f}], "
+        f"{method} in space: goal quaternion [{w:+.4f}, {x:+.4f}, {y:+.4f}, {z:+.4f}], "
         f"{len(result.contact_plan.nodes)} nodes, {'succeeded' if result.success else 'FAILED'} ({status})"
     )
     for line in details:
         print(f"  {line}")
     print(
-        f"time: search {result.search_time_s:.2f} s, segments {result.solve_time_s:.2f} s, "
+        f"time: {'search' if method != 'cito-warm' else 'TrajectoTree (warm start)'} {result.search_time_s:.2f} s, "
+        f"{'segments' if method == 'trajectotree' else 'program'} {result.solve_time_s:.2f} s, "
         f"total {result.total_time_s:.2f} s"
     )
     if result.physics_check is not None:

@@ -22,8 +22,11 @@ from trajectotree.cito.spatial import (
     SegmentSpec,
     SpaceHandModel,
     SpaceSegmentResult,
+    cito_cold_start,
+    cito_warm_start,
     hand_model,
     segment_spec,
+    solve_space_cito,
     solve_space_segment,
 )
 from trajectotree.config import CitoConfig, Config, config_to_dict, mu_plan
@@ -32,7 +35,7 @@ from trajectotree.geometry import quaternion_angle
 from trajectotree.planning.keyframes import kept_pool, kill_pool, local_pool
 from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
 from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
-from trajectotree.search.tree import find_space_contact_plan
+from trajectotree.search.tree import find_space_contact_plan, space_initial_grasp
 
 GOAL_TOLERANCE = np.radians(2.0)  # rad, how close to its goal orientation a plan in space ends to count
 
@@ -54,10 +57,12 @@ class SpacePlanResult:
     search_time_s: float
     solve_time_s: float  # s of wall time, the segments' programs (at once on the segment pool)
     total_time_s: float
+    method: str = "trajectotree"  # or general CITO's "cito" and "cito-warm" (plan_space_cito)
 
     def to_json(self) -> dict:
         return {
             "kind": "space",
+            "method": self.method,
             "goal_quaternion": [float(v) for v in self.goal],
             "success": self.success,
             "status": self.status,
@@ -160,12 +165,18 @@ def plan_space(scene, goal_quaternion, config: Config, workers: int | None = Non
         for a, b in zip(nodes[:-1], nodes[1:])
     ]
     results = solve_space_segments(tasks, workers)
-    solve_time = time.perf_counter() - t1
+    return _checked(scene, results, time.perf_counter() - t1, t0, common)
+
+
+def _checked(scene, results, solve_time: float, t0: float, common: dict) -> SpacePlanResult:
+    """The result of solved programs (SpaceSegmentResult, one per segment or general CITO's one): joined, checked
+    from the arrays, within GOAL_TOLERANCE of the goal or failing with the reasons; `t0` when planning began."""
     trajectory = join_segments(scene, results)
-    check = check_space_physics(trajectory.arrays(), model, mu)
-    error = quaternion_angle(trajectory.x[-1, :4], np.asarray(goal))
+    check = check_space_physics(trajectory.arrays(), common["object_model"], common["mu_plan"])
+    error = quaternion_angle(trajectory.x[-1, :4], np.asarray(common["goal"]))
     failed = [i for i, r in enumerate(results) if not r.success]
-    reasons = [f"segment {i}: {results[i].status}" for i in failed]
+    name = "segment {}" if common.get("method", "trajectotree") == "trajectotree" else common["method"] + " program"
+    reasons = [f"{name.format(i)}: {results[i].status}" for i in failed]
     reasons += [] if check.passed else ["physics check: " + check.reason]
     if error > GOAL_TOLERANCE:
         reasons.append(f"ends {np.degrees(error):.2f} deg from the goal (limit {np.degrees(GOAL_TOLERANCE):g} deg)")
@@ -190,6 +201,50 @@ def plan_space(scene, goal_quaternion, config: Config, workers: int | None = Non
         total_time_s=time.perf_counter() - t0,
         **common,
     )
+
+
+def plan_space_cito(
+    scene, goal_quaternion, config: Config, method: str, workers: int | None = None, warm: SpacePlanResult | None = None
+) -> SpacePlanResult:
+    """General CITO in space (cito.spatial.SpaceCitoRows: one program over the whole horizon, no contact plan), the
+    plane's baselines in space: "cito" from the search's best initial grasp held along the straight slerp
+    (search.tree.space_initial_grasp: no tree search, its time counted as the search's), "cito-warm" from
+    TrajectoTree's plan's trajectory (`warm`, else planned here by plan_space on `workers`: its whole time is
+    the search's). A program IPOPT does not solve, or whose plan fails the physics check or ends off the goal,
+    is a result with the reason; the result's contact_plan is the initial grasp's or the warm start's."""
+    t0 = time.perf_counter()
+    mu = mu_plan(config.scene, config.search)
+    goal = tuple(float(v) for v in goal_quaternion)
+    if method == "cito":
+        contact_plan = space_initial_grasp(scene, goal, config.search, mu)
+    else:
+        warm = plan_space(scene, goal, config, workers) if warm is None else warm
+        contact_plan = warm.contact_plan
+    search_time = time.perf_counter() - t0 if warm is None else warm.total_time_s
+    model = object_model(scene)
+    common = dict(
+        goal=goal, contact_plan=contact_plan, object_model=model, mu_plan=mu, search_time_s=search_time, method=method
+    )
+    if not contact_plan.success or (warm is not None and warm.trajectory is None):
+        return SpacePlanResult(
+            success=False,
+            status=("search: " + contact_plan.reason) if warm is None else ("warm start: " + warm.status),
+            trajectory=None,
+            physics_check=None,
+            final_error_rad=float("nan"),
+            segments=(),
+            solve_time_s=0.0,
+            total_time_s=search_time,
+            **common,
+        )
+    t1 = time.perf_counter()
+    hand = hand_model(scene)
+    if warm is None:
+        spec, start = cito_cold_start(hand, hand.chains, contact_plan.nodes[0], goal, mu)
+    else:
+        spec, start = cito_warm_start(hand, hand.chains, warm.trajectory, mu)
+    result = solve_space_cito(hand, hand.chains, spec, mu, config.cito, start)
+    return _checked(scene, [result], time.perf_counter() - t1, t1 - search_time, common)
 
 
 def join_segments(scene, results) -> SpaceTrajectory:

@@ -1004,3 +1004,24 @@ def find_space_contact_plan(scene, goal_quaternion, config: SearchConfig, mu: fl
         refused=tuple(search.refused.most_common(5)),
     )
     return SpaceContactPlan(success=False, refusal=refusal, **common)
+
+
+def space_initial_grasp(scene, goal_quaternion, config: SearchConfig, mu: float) -> SpaceContactPlan:
+    """A one-node SpaceContactPlan holding the search's best-ranked initial grasp for the goal (_SpaceSearch.roots,
+    no tree search), for general CITO in space, as the plane's `cito` takes the initial-grasp chooser's first
+    choice; or, when no grasp at the start qualifies, why."""
+    t0 = time.perf_counter()
+    goal = tuple(float(v) for v in goal_quaternion)
+    search = _SpaceSearch(scene, goal, config, mu)
+    roots = search.roots()
+    stats = SearchStats(
+        lp_calls=search.lp_calls,
+        ik_calls=search.reach.ik_calls,
+        time_s=time.perf_counter() - t0,
+        initial_grasp_candidates=len(roots),
+    )
+    common = dict(goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION)
+    if roots:
+        return SpaceContactPlan(success=True, nodes=search.plan_nodes(roots[0]), **common)
+    refusal = NoPlan(0, 0, 0, None, None, mu, tuple(search.refused.most_common(5)))
+    return SpaceContactPlan(success=False, refusal=refusal, **common)
