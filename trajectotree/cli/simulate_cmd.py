@@ -330,7 +330,8 @@ def run(args) -> int:
 
 def simulate_into(args) -> int:
     """Executes the plan in PLAN_DIR, whose lock this command holds, and writes the run there."""
-    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.meshcat_scene import start_meshcat
+    from trajectotree.execution.playback_page import object_noun
     from trajectotree.execution.reference import reference_from_arrays
     from trajectotree.execution.run import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure

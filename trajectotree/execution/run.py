@@ -10,7 +10,7 @@ from pydrake.geometry import Meshcat
 
 from trajectotree.config import Config, ConfigError
 from trajectotree.config.executor import Executor, parse_executor
-from trajectotree.execution import playback
+from trajectotree.execution.gif import write_gif
 from trajectotree.execution.reference import reference_from_plan
 from trajectotree.execution.simulate import (
     Conditions,
@@ -78,7 +78,7 @@ def run_simulation(
         segment_workers=segment_workers,
     )
     if gif_path is not None:
-        playback.write_gif(
+        write_gif(
             scene,
             result.t,
             result.x,

@@ -54,7 +54,7 @@ from trajectotree.config import (
     check_range,
 )
 from trajectotree.config.executor import Executor
-from trajectotree.execution import metrics, playback
+from trajectotree.execution import force_arrows, meshcat_scene, metrics, playback_page
 from trajectotree.execution.executor import CLOSED_LOOP_OUTPUTS, ExecutorSystems, add_executor, connect_executor
 from trajectotree.execution.reference import Reference
 from trajectotree.figures.legend import arrow_newtons_per_cm
@@ -269,8 +269,8 @@ def build_execution_diagram(
         }
     visualizer = None
     if meshcat is not None:
-        visualizer = playback.add_visualizer(builder, plant, scene_graph, hand, description, meshcat)
-        playback.add_force_arrows_system(
+        visualizer = meshcat_scene.add_visualizer(builder, plant, scene_graph, hand, description, meshcat)
+        force_arrows.add_force_arrows_system(
             builder, plant, scene_graph, hand, description, meshcat, forces.get_output_port(), arrow_scale(reference)
         )
     return ExecutionDiagram(
@@ -384,7 +384,7 @@ def simulate_reference(
     `segment_workers`) for the plan's length plus the settle time (a replanned run's: the plan in effect's
     at the end); the log it records, evaluated by trajectotree.execution.metrics, with the replans."""
     if html_path is not None and meshcat is None:
-        meshcat = playback.start_meshcat()
+        meshcat = meshcat_scene.start_meshcat()
     execution = build_execution_diagram(
         reference,
         config,
@@ -397,28 +397,28 @@ def simulate_reference(
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:
-        playback.set_planar_view(meshcat)
-        playback.add_plan_ghost(meshcat, config.scene)
-        meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
+        meshcat_scene.set_planar_view(meshcat)
+        meshcat_scene.add_plan_ghost(meshcat, config.scene)
+        meshcat.SetTransform(meshcat_scene.PLAN_GHOST_PATH, meshcat_scene.pose_transform(reference.x[0]))
         animation = execution.visualizer.StartRecording()
     log = record_log(execution, simulator, conditions.to_json(config.scene))
     result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity, conditions.push_speed(config.scene))
     result = dataclasses.replace(result, replans=execution.executor.replans(simulator.get_context()))
     if meshcat is not None:
         followed = execution.executor.reference_in_effect(simulator.get_context())
-        frame_times = np.arange(0.0, execution.end_s(simulator.get_context()) + 1e-9, playback.PUBLISH_PERIOD)
-        playback.animate_plan_ghost(animation, frame_times, followed.object_pose_at(frame_times))
+        frame_times = np.arange(0.0, execution.end_s(simulator.get_context()) + 1e-9, meshcat_scene.PUBLISH_PERIOD)
+        meshcat_scene.animate_plan_ghost(animation, frame_times, followed.object_pose_at(frame_times))
         if html_path is not None:
-            playback.save_recording_html(
+            playback_page.save_recording_html(
                 meshcat,
                 execution.visualizer,
                 html_path,
                 drop_time_s=result.drop_time_s,
-                legend=playback.simulated_legend(
+                legend=playback_page.simulated_legend(
                     config.scene, arrow_scale(reference), execution.hand_description.num_fingers
                 ),
-                noun=playback.object_noun(config.scene),
-                labels=playback.finger_labels(execution.plant, execution.hand, execution.hand_description),
+                noun=playback_page.object_noun(config.scene),
+                labels=playback_page.finger_labels(execution.plant, execution.hand, execution.hand_description),
             )
         else:
             execution.visualizer.StopRecording()
