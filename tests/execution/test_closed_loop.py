@@ -12,7 +12,8 @@ from trajectotree.config import Config, ConfigError, ControllerGains, EstimatorG
 from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.run import run_simulation
-from trajectotree.execution.simulate import Conditions, Push, simulate_reference
+from trajectotree.execution.simulate import simulate_reference
+from trajectotree.execution.world import Conditions, Push
 from trajectotree.io import load_sim, save_sim
 from trajectotree.results import CLOSED_LOOP_ARRAYS
 from trajectotree.scene.plant import build_scene

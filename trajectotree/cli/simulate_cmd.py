@@ -254,7 +254,7 @@ def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
     here so that bad values stop the command before anything is written: a push must start
     before the run ends (the plan's `plan_duration_s` and sim.settle_time), or it never acts."""
     from trajectotree.config import check_range
-    from trajectotree.execution.simulate import Conditions, parse_push
+    from trajectotree.execution.world import Conditions, parse_push
 
     if args.sim_mu is not None:
         check_range("--sim-mu", args.sim_mu, 0.0, MAX_MU, low_open=True)

@@ -56,7 +56,7 @@ class ConditionSpec:
 
     def simulation_kwargs(self, condition: str, config: Config, plan_duration_s: float) -> dict:
         """The `run_simulation` keyword arguments (sim_mu, sim_mass, push) of `condition`."""
-        from trajectotree.execution.simulate import Push
+        from trajectotree.execution.world import Push
 
         mu, mass_factor, push = self.worlds()[check_condition(condition, self)]
         kwargs = {}
