@@ -50,8 +50,8 @@ from tqdm import tqdm
 
 from trajectotree.config import FORMULATIONS, Config, config_to_dict, load_config
 from trajectotree.experiments.sweep import sample_goals
-from trajectotree.planning.keyframes import local_pool, prepare_worker
 from trajectotree.planning.planners import METHODS, plan
+from trajectotree.planning.segment_pool import local_pool, prepare_worker
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.initial_grasp import GraspTables
 

@@ -1,5 +1,5 @@
 """How hard each plan's grasp can push back against a push, at the time the sweep's push
-conditions push it (experiments.executions.middle_of_middle_segment): the hardest push along
+conditions push it (experiments.conditions.middle_of_middle_segment): the hardest push along
 --direction that the fingers holding at that time resist while they also hold the box's weight,
 each within the grasp controller's force bound (controller.grasp.max_normal_force), the joint motors'
 tau_max (beside gravity on the links) and friction cones at mu: the LP the search orders its
@@ -20,7 +20,7 @@ import numpy as np
 from trajectotree.execution.fingers import HandKinematics
 from trajectotree.execution.in_effect import execution_schedule
 from trajectotree.execution.reference import reference_from_plan
-from trajectotree.experiments.executions import middle_of_middle_segment
+from trajectotree.experiments.conditions import middle_of_middle_segment
 from trajectotree.geometry import rotation_2d
 from trajectotree.io import load_plan
 from trajectotree.scene.plant import build_scene

@@ -241,7 +241,7 @@ class SimLog:
     f_W_plan: np.ndarray  # (T, 4, 2) N, planned force of each finger on the box at the same times
     sim_time_s: float  # s, wall-clock time of the simulation
     controller: str  # which executor ran (config.CONTROLLERS, or "none": zero torque)
-    conditions: dict  # simulate.Conditions.to_json() of the simulated world
+    conditions: dict  # execution.world.Conditions.to_json() of the simulated world
     # What the closed loop watched and estimated (sim.npz's CLOSED_LOOP_ARRAYS besides SIM_ARRAYS, sim.json's
     # "closed_loop" summary); None: an open-loop run, whose sim.npz holds SIM_ARRAYS alone
     closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)

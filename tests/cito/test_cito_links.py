@@ -14,7 +14,8 @@ from trajectotree.cito.program import build_program, link_knots
 from trajectotree.cito.transition import piece_spec, transition_spec
 from trajectotree.config import CitoConfig, Config, ConfigError, ObjectConfig, SceneConfig, mu_plan
 from trajectotree.geometry import rotation_2d
-from trajectotree.planning.keyframes import PieceTask, solve_piece, solve_segments
+from trajectotree.planning.keyframes import solve_segments
+from trajectotree.planning.piece import PieceTask, solve_piece
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 from trajectotree.search.reach import Reachability, rectangles_overlap_polygon
 from trajectotree.search.tree import find_contact_plan

@@ -12,7 +12,8 @@ from trajectotree.config import Config, ConfigError, ControllerGains, EstimatorG
 from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.run import run_simulation
-from trajectotree.execution.simulate import Conditions, Push, simulate_reference
+from trajectotree.execution.simulate import simulate_reference
+from trajectotree.execution.world import Conditions, Push
 from trajectotree.io import load_sim, save_sim
 from trajectotree.results import CLOSED_LOOP_ARRAYS
 from trajectotree.scene.plant import build_scene
@@ -210,7 +211,7 @@ def test_a_planned_goal_pushed_mid_segment_with_3_n_is_held_closed_loop():
     """Goal 2.2 pushed along +x with 3 N for 0.2 s in the middle of its middle segment (finger 1
     mid-swing, the three others holding), as the sweep's push-3N condition does: the closed loop
     holds it and ends on the goal (main's reflex, squeeze and gains alone, lost the box)."""
-    from trajectotree.experiments.executions import middle_of_middle_segment
+    from trajectotree.experiments.conditions import middle_of_middle_segment
     from trajectotree.planning.planners import plan
 
     result = plan(goal=2.2)

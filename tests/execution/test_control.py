@@ -181,7 +181,7 @@ def test_grasp_controller_holds_a_three_finger_grasp_for_two_seconds(three_finge
 @pytest.mark.slow
 def test_grasp_controller_recovers_from_a_push(three_finger_hold):
     """0.2 N sideways (40 % of the box's weight) for 0.2 s: the box is knocked away and comes back."""
-    from trajectotree.execution.simulate import Conditions, Push
+    from trajectotree.execution.world import Conditions, Push
 
     push = Push(force=(0.2, 0.0), time_s=0.5, duration_s=0.2)
     result = simulate_reference(

@@ -12,17 +12,13 @@ import pytest
 
 from trajectotree.config import Config, SceneConfig
 from trajectotree.config.executor import Executor
-from trajectotree.execution.playback import (
-    ARROW_HEAD,
-    ARROW_Z,
-    VIEW_HALF_WIDTH,
-    finger_css,
-    finger_labels,
-    finger_rgb,
-    write_plan_html,
-)
+from trajectotree.execution.force_arrows import ARROW_HEAD, ARROW_Z
+from trajectotree.execution.meshcat_scene import VIEW_HALF_WIDTH, finger_css
+from trajectotree.execution.playback import write_plan_html
+from trajectotree.execution.playback_page import finger_labels
 from trajectotree.execution.reference import Reference, static_hold_reference
 from trajectotree.execution.simulate import simulate_reference
+from trajectotree.figures.legend import finger_rgb
 from trajectotree.figures.run import arrow_newtons_per_cm, arrow_scale_text, force_arrow
 from trajectotree.scene.plant import NUM_FINGERS, build_scene
 

@@ -13,7 +13,8 @@ from trajectotree.config import Config, ConfigError, with_values
 from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import reference_from_plan, static_hold_reference
 from trajectotree.execution.replan import HOLD_RAMP, Phase
-from trajectotree.execution.simulate import Conditions, build_execution_diagram
+from trajectotree.execution.simulate import build_execution_diagram
+from trajectotree.execution.world import Conditions
 from trajectotree.results import ReplanReason
 from trajectotree.scene.plant import build_scene
 

@@ -11,20 +11,14 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, config_to_dict
 from trajectotree.config.executor import Executor
-from trajectotree.experiments.executions import (
-    CONDITIONS,
-    ConditionSpec,
-    check_condition,
-    execution_dir,
+from trajectotree.experiments.conditions import CONDITIONS, ConditionSpec, check_condition, middle_of_middle_segment
+from trajectotree.experiments.execution_report import (
     execution_markdown,
     execution_summary,
-    middle_of_middle_segment,
-    pending_executions,
     refused_markdown,
     refused_replans,
-    run_executions,
-    torn_executions,
 )
+from trajectotree.experiments.executions import execution_dir, pending_executions, run_executions, torn_executions
 
 
 def test_push_starts_in_the_middle_of_the_middle_segment():

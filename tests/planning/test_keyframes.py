@@ -15,9 +15,10 @@ from trajectotree.cito.transition import piece_spec
 from trajectotree.cli import main
 from trajectotree.config import CitoConfig, Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.io import load_plan, save_plan
-from trajectotree.planning.keyframes import _neighbour_ranges, local_pool, stitch
+from trajectotree.planning.keyframes import _neighbour_ranges, stitch
 from trajectotree.planning.physics import ObjectModel, check_physics
 from trajectotree.planning.planners import plan
+from trajectotree.planning.segment_pool import local_pool
 from trajectotree.results import TRAJECTORY_ARRAYS
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.tree import find_contact_plan

@@ -9,8 +9,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from trajectotree.config import Config
-from trajectotree.planning.keyframes import kept_pool, kill_pool
+from trajectotree.planning.segment_pool import kept_pool
 from trajectotree.planning.spatial import plan_space
+from trajectotree.planning.workers import kill_pool
 from trajectotree.scene.spatial import START_POSE, build_space_scene
 
 ABOUT_Z = Rotation.from_rotvec([0.0, 0.0, np.radians(30.0)])

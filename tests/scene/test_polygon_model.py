@@ -17,6 +17,7 @@ from trajectotree.config.executor import Executor
 from trajectotree.execution.reference import static_hold_reference
 from trajectotree.execution.simulate import simulate_reference
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.friction import set_friction
 from trajectotree.scene.plant import add_polygon_object, box_sdf, build_scene, prism_inertia, prism_points
 from trajectotree.search.initial_grasp import initial_grasp_candidates
 
@@ -60,11 +61,12 @@ def test_a_square_plate_turned_45_degrees_has_the_box_inertia():
 
 def test_the_box_through_the_polygon_builder_equals_box_sdf():
     """The box's corners given to add_polygon_object (a ConvexPolygon without the box's closed
-    forms) give the same mass, inertia and friction as box.sdf."""
+    forms) give the same mass, inertia and friction (set as add_hand_and_box sets both) as box.sdf."""
     config = SceneConfig(box_width=0.16, box_height=0.08, box_mass=0.12, mu=0.4)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
     instance = add_polygon_object(plant, config, ConvexPolygon(ConvexPolygon.box(0.16, 0.08).vertices))
+    set_friction(plant, scene_graph, instance, config.mu)
     plant.Finalize()
     body = plant.GetBodyByName("box", instance)
     box = build_scene(config)
@@ -77,7 +79,11 @@ def test_the_box_through_the_polygon_builder_equals_box_sdf():
     assert body.default_mass() == object_body(box).default_mass() == 0.12
     (gid,) = plant.GetCollisionGeometriesForBody(body)
     friction = scene_graph.model_inspector().GetProximityProperties(gid).GetProperty("material", "coulomb_friction")
-    assert friction.static_friction() == friction.dynamic_friction() == 0.4
+    (box_gid,) = box.plant.GetCollisionGeometriesForBody(object_body(box))
+    box_friction = (
+        box.scene_graph.model_inspector().GetProximityProperties(box_gid).GetProperty("material", "coulomb_friction")
+    )
+    assert friction.static_friction() == friction.dynamic_friction() == box_friction.static_friction() == 0.4
 
 
 @pytest.mark.parametrize("vertices", [TRIANGLE, QUAD])

@@ -85,7 +85,7 @@ def plan_summary(result) -> dict:
 
 
 def print_summary(summary: dict, out: Path, noun: str) -> None:
-    """The text summary; `noun` names the object in the simulation line (playback.object_noun).
+    """The text summary; `noun` names the object in the simulation line (playback_page.object_noun).
     Each time says what it is: wall-clock time, or process time summed over the keyframes'
     segment programs (which run in parallel, so their sum may exceed the total)."""
     from trajectotree.cli.common import reason_lines
@@ -149,7 +149,8 @@ def demo_into(args, request, out: Path) -> int:
     """Plans the checked request, executes and draws the plan, into `out`, whose lock this command holds."""
     from trajectotree.cli.search_cmd import draw_plan
     from trajectotree.cli.simulate_cmd import save_sim_json_with_plan_status
-    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.meshcat_scene import start_meshcat
+    from trajectotree.execution.playback_page import object_noun
     from trajectotree.execution.run import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure, segment_spans
     from trajectotree.io import save_plan, save_sim, write_json_atomic

@@ -79,7 +79,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.io import folder_lock, load_start
-    from trajectotree.planning.keyframes import check_workers
+    from trajectotree.planning.segment_pool import check_workers
     from trajectotree.scene.plant import build_scene
     from trajectotree.scene.spatial import is_space_hand
 
@@ -165,7 +165,7 @@ def run_space(args) -> int:
     from trajectotree.cli.common import in_option_terms, scene_overrides
     from trajectotree.config import Config, ConfigError, load_config
     from trajectotree.io import folder_lock
-    from trajectotree.planning.keyframes import check_workers
+    from trajectotree.planning.segment_pool import check_workers
     from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
     from trajectotree.scene.spatial import build_space_scene
 

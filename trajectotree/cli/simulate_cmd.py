@@ -254,7 +254,7 @@ def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
     here so that bad values stop the command before anything is written: a push must start
     before the run ends (the plan's `plan_duration_s` and sim.settle_time), or it never acts."""
     from trajectotree.config import check_range
-    from trajectotree.execution.simulate import Conditions, parse_push
+    from trajectotree.execution.world import Conditions, parse_push
 
     if args.sim_mu is not None:
         check_range("--sim-mu", args.sim_mu, 0.0, MAX_MU, low_open=True)
@@ -335,7 +335,8 @@ def simulate_into(args) -> int:
     if is_space_plan(args.plan_dir):  # its own reader and Diagram
         return simulate_space_into(args)
     check_hand_fits_plan(args, space_plan=False)
-    from trajectotree.execution.playback import object_noun, start_meshcat
+    from trajectotree.execution.meshcat_scene import start_meshcat
+    from trajectotree.execution.playback_page import object_noun
     from trajectotree.execution.reference import reference_from_arrays
     from trajectotree.execution.run import run_simulation
     from trajectotree.figures.run import figure_finger_forces, save_figure

@@ -22,11 +22,8 @@ from trajectotree.cli.common import (
 )
 from trajectotree.config import CONTROLLERS, ConfigError, check_controller
 from trajectotree.config.executor import executor_of
-from trajectotree.experiments.executions import (
-    CONDITIONS,
-    check_condition,
-    run_executions,
-)
+from trajectotree.experiments.conditions import CONDITIONS, check_condition
+from trajectotree.experiments.executions import run_executions
 from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
 
 
@@ -59,7 +56,7 @@ def register(subparsers) -> None:
         nargs="+",
         metavar="CONDITION",
         help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
-        "default: nominal): see `trajectotree.experiments.executions`",
+        "default: nominal): see `trajectotree.experiments.conditions`",
     )
     p.add_argument(
         "--closed-loop",

@@ -10,15 +10,10 @@ from pydrake.geometry import Meshcat
 
 from trajectotree.config import Config, ConfigError
 from trajectotree.config.executor import Executor, parse_executor
-from trajectotree.execution import playback
+from trajectotree.execution.gif import write_gif
 from trajectotree.execution.reference import reference_from_plan
-from trajectotree.execution.simulate import (
-    Conditions,
-    Push,
-    arrow_scale,
-    parse_push,
-    simulate_reference,
-)
+from trajectotree.execution.simulate import arrow_scale, simulate_reference
+from trajectotree.execution.world import Conditions, Push, parse_push
 from trajectotree.figures.legend import controller_text
 from trajectotree.io import GIF_SUFFIXES, HTML_SUFFIXES, check_output_file
 from trajectotree.results import PlanResult, SimResult
@@ -78,7 +73,7 @@ def run_simulation(
         segment_workers=segment_workers,
     )
     if gif_path is not None:
-        playback.write_gif(
+        write_gif(
             scene,
             result.t,
             result.x,

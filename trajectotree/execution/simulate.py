@@ -13,9 +13,8 @@ loggers of the plant state and of each finger's simulated force on the box
 `SimLog` (the logs beside the plan at the same times), which
 `trajectotree.execution.metrics.evaluate` turns into the `SimResult` the functions here return.
 
-`Conditions` change the simulated world only, never what the controller assumes:
-the friction coefficient (sim_mu), the box mass (sim_mass: model mismatch) and a
-push, a force on the box in W for SimConfig.push_duration seconds.
+`Conditions` (trajectotree.execution.world) change the simulated world only, never what the
+controller assumes: the friction coefficient, the box mass and a push.
 
 The run starts in the plan's initial state (x_0, q_0, at rest). Fingers collide with
 each other like any other bodies (only each finger's own adjacent links are filtered,
@@ -33,131 +32,25 @@ from pathlib import Path
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import Meshcat
-from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
     ContactResults,
-    ExternallyAppliedSpatialForce,
     MultibodyPlantConfig,
 )
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, TriggerType
 from pydrake.systems.primitives import LogVectorOutput
 
-from trajectotree.config import (
-    MAX_BOX_MASS,
-    MAX_MU,
-    MIN_BOX_MASS,
-    Config,
-    ConfigError,
-    check_length,
-    check_range,
-)
+from trajectotree.config import Config
 from trajectotree.config.executor import Executor
-from trajectotree.execution import metrics, playback
+from trajectotree.execution import force_arrows, meshcat_scene, metrics, playback_page
 from trajectotree.execution.executor import CLOSED_LOOP_OUTPUTS, ExecutorSystems, add_executor, connect_executor
 from trajectotree.execution.reference import Reference
+from trajectotree.execution.world import NOMINAL, Conditions, PushSource
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.results import ClosedLoopLog, PlanResult, SimLog, SimResult
 from trajectotree.scene.hand import HandDescription, finger_bodies, hand_file, read_hand
 from trajectotree.scene.plant import add_hand_and_box
-
-
-@dataclass(frozen=True)
-class Push:
-    """A force on the box's centre, in W, from time_s for duration_s."""
-
-    force: tuple[float, float]  # N, (f_x, f_y) in W
-    time_s: float  # s, when it starts
-    duration_s: float = 0.2  # s, how long it acts
-
-    def __post_init__(self):
-        check_length("push force", self.force, 2, "f_x N, f_y N")
-        for i, f in enumerate(self.force):
-            check_range("push force", f, -100.0, 100.0, index=(i,))
-        check_range("push time", self.time_s, 0.0, None)
-        check_range("push duration", self.duration_s, 0.0, 10.0, low_open=True)
-
-
-def parse_push(text: str, duration_s: float = 0.2) -> Push:
-    """A Push from "FX,FY@T" (N, N, s), e.g. "0.2,0@3.5"; ConfigError naming the text."""
-    try:
-        force, at = str(text).split("@")
-        fx, fy = (float(v) for v in force.split(","))
-        start = float(at)
-    except ValueError:
-        raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, e.g. 0.2,0@3.5)") from None
-    try:
-        return Push(force=(fx, fy), time_s=start, duration_s=duration_s)
-    except ConfigError as e:
-        raise ConfigError(f"push {text!r}: {e}") from None
-
-
-@dataclass(frozen=True)
-class Conditions:
-    """The simulated world where it differs from the plan's; the controller keeps the plan's values."""
-
-    mu: float | None = None  # friction coefficient of the simulated plant (None: the scene's)
-    mass: float | None = None  # kg, box mass of the simulated plant (None: the scene's)
-    push: Push | None = None  # a push on the box, or none
-
-    def __post_init__(self):
-        if self.mu is not None:
-            check_range("sim_mu", self.mu, 0.0, MAX_MU, low_open=True)
-        if self.mass is not None:
-            check_range("sim_mass", self.mass, MIN_BOX_MASS, MAX_BOX_MASS)
-
-    def scene(self, scene_config):
-        """The simulated plant's SceneConfig."""
-        changes = {k: v for k, v in (("mu", self.mu), ("box_mass", self.mass)) if v is not None}
-        if self.mass is not None and scene_config.object_inertia is not None:  # the same body, heavier
-            changes["object_inertia"] = scene_config.inertia_zz(self.mass)
-        return dataclasses.replace(scene_config, **changes)
-
-    def push_speed(self, scene_config) -> float:
-        """m/s, the most speed the push can give the simulated object: its impulse over the object's mass."""
-        if self.push is None:
-            return 0.0
-        return float(np.hypot(*self.push.force)) * self.push.duration_s / self.scene(scene_config).box_mass
-
-    def to_json(self, scene_config) -> dict:
-        sim = self.scene(scene_config)
-        push = (
-            None
-            if self.push is None
-            else {"force": list(self.push.force), "time_s": self.push.time_s, "duration_s": self.push.duration_s}
-        )
-        return {
-            "sim_mu": sim.mu,
-            "sim_mass": sim.box_mass,
-            "plan_mu": scene_config.mu,
-            "plan_mass": scene_config.box_mass,
-            "push": push,
-        }
-
-
-class PushSource(LeafSystem):
-    """Output port `spatial_forces` (list of ExternallyAppliedSpatialForce, for the
-    plant's applied-spatial-force input): the push on the box while it acts, else none."""
-
-    def __init__(self, plant, box, push: Push):
-        super().__init__()
-        self._body = plant.GetBodyByName("box", box).index()
-        self._push = push
-        self.spatial_forces_port = self.DeclareAbstractOutputPort(
-            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self.CalcForces
-        )
-
-    def CalcForces(self, context, output):
-        push, t = self._push, context.get_time()
-        forces = []
-        if push.time_s <= t < push.time_s + push.duration_s:
-            applied = ExternallyAppliedSpatialForce()
-            applied.body_index = self._body
-            applied.p_BoBq_B = np.zeros(3)  # at the box origin, its centre of mass
-            applied.F_Bq_W = SpatialForce(np.zeros(3), np.array([push.force[0], push.force[1], 0.0]))
-            forces.append(applied)
-        output.set_value(forces)
 
 
 class FingertipForces(LeafSystem):
@@ -226,7 +119,7 @@ def build_execution_diagram(
     *,
     executor: Executor | None = None,
     meshcat: Meshcat | None = None,
-    conditions: Conditions = Conditions(),
+    conditions: Conditions = NOMINAL,
     plan: PlanResult | None = None,
     segment_workers: int | None = None,
 ) -> ExecutionDiagram:
@@ -269,8 +162,8 @@ def build_execution_diagram(
         }
     visualizer = None
     if meshcat is not None:
-        visualizer = playback.add_visualizer(builder, plant, scene_graph, hand, description, meshcat)
-        playback.add_force_arrows_system(
+        visualizer = meshcat_scene.add_visualizer(builder, plant, scene_graph, hand, description, meshcat)
+        force_arrows.add_force_arrows_system(
             builder, plant, scene_graph, hand, description, meshcat, forces.get_output_port(), arrow_scale(reference)
         )
     return ExecutionDiagram(
@@ -375,7 +268,7 @@ def simulate_reference(
     meshcat: Meshcat | None = None,
     html_path: str | Path | None = None,
     realtime_rate: float = 0.0,
-    conditions: Conditions = Conditions(),
+    conditions: Conditions = NOMINAL,
     plan: PlanResult | None = None,
     segment_workers: int | None = None,
 ) -> SimResult:
@@ -384,7 +277,7 @@ def simulate_reference(
     `segment_workers`) for the plan's length plus the settle time (a replanned run's: the plan in effect's
     at the end); the log it records, evaluated by trajectotree.execution.metrics, with the replans."""
     if html_path is not None and meshcat is None:
-        meshcat = playback.start_meshcat()
+        meshcat = meshcat_scene.start_meshcat()
     execution = build_execution_diagram(
         reference,
         config,
@@ -397,28 +290,28 @@ def simulate_reference(
     simulator = Simulator(execution.diagram, execution.initial_context(reference))
     simulator.set_target_realtime_rate(realtime_rate)
     if meshcat is not None:
-        playback.set_planar_view(meshcat)
-        playback.add_plan_ghost(meshcat, config.scene)
-        meshcat.SetTransform(playback.PLAN_GHOST_PATH, playback.pose_transform(reference.x[0]))
+        meshcat_scene.set_planar_view(meshcat)
+        meshcat_scene.add_plan_ghost(meshcat, config.scene)
+        meshcat.SetTransform(meshcat_scene.PLAN_GHOST_PATH, meshcat_scene.pose_transform(reference.x[0]))
         animation = execution.visualizer.StartRecording()
     log = record_log(execution, simulator, conditions.to_json(config.scene))
     result = metrics.evaluate(log, config.sim.drop_distance, config.scene.gravity, conditions.push_speed(config.scene))
     result = dataclasses.replace(result, replans=execution.executor.replans(simulator.get_context()))
     if meshcat is not None:
         followed = execution.executor.reference_in_effect(simulator.get_context())
-        frame_times = np.arange(0.0, execution.end_s(simulator.get_context()) + 1e-9, playback.PUBLISH_PERIOD)
-        playback.animate_plan_ghost(animation, frame_times, followed.object_pose_at(frame_times))
+        frame_times = np.arange(0.0, execution.end_s(simulator.get_context()) + 1e-9, meshcat_scene.PUBLISH_PERIOD)
+        meshcat_scene.animate_plan_ghost(animation, frame_times, followed.object_pose_at(frame_times))
         if html_path is not None:
-            playback.save_recording_html(
+            playback_page.save_recording_html(
                 meshcat,
                 execution.visualizer,
                 html_path,
                 drop_time_s=result.drop_time_s,
-                legend=playback.simulated_legend(
+                legend=playback_page.simulated_legend(
                     config.scene, arrow_scale(reference), execution.hand_description.num_fingers
                 ),
-                noun=playback.object_noun(config.scene),
-                labels=playback.finger_labels(execution.plant, execution.hand, execution.hand_description),
+                noun=playback_page.object_noun(config.scene),
+                labels=playback_page.finger_labels(execution.plant, execution.hand, execution.hand_description),
             )
         else:
             execution.visualizer.StopRecording()

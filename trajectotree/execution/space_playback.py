@@ -23,7 +23,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
 
-from trajectotree.execution.playback import PUBLISH_PERIOD, finger_css, start_meshcat
+from trajectotree.execution.meshcat_scene import PUBLISH_PERIOD, finger_css, start_meshcat
 from trajectotree.figures.legend import (
     ARROW_MAX_LENGTH,
     ARROW_MIN_FORCE,

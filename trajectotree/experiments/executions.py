@@ -5,18 +5,8 @@ and this module executes every saved plan again for each (executor, condition) p
 resumably: `trials/<key>/exec/<executor>_<condition>/sim.json` (+ `sim.npz`; config.executor.Executor's
 names). Adding an executor or a condition to a finished sweep runs only the new executions.
 
-The conditions (`ConditionSpec`):
-- `nominal`: the plan's world;
-- `mismatch`: friction `mismatch_mu` (0.55 against the plan's 0.7) and the box mass scaled
-  by `mismatch_mass_factor` (+20 %) in the simulated plant only; the controller keeps the
-  plan's values;
-- `push`: a lateral force `push_force` (0.2 N along +x in W, 40 % of the default box's
-  weight) on the box for `SimConfig.push_duration` (0.2 s), starting in the middle of the
-  plan's middle segment (a switching finger is off the box there when the segment has one);
-- the harder worlds of the closed loop, named by their values: `friction-0.4` and
-  `friction-0.3` (`friction_mus`: the simulated friction alone), `mass-x2` (`mass_factors`:
-  the simulated box mass over the planned one), `push-3N` and `push-6N` (`push_forces`: N
-  along +x in W, timed like `push`).
+The conditions are trajectotree.experiments.conditions'; the executions' tables,
+trajectotree.experiments.execution_report's.
 
 Executions with the closed loop (the executor `grasp-closed-loop`: the grasp controller with the contact
 watch, the estimates and the reflexes, trajectotree.execution.closed_loop) are kept and listed apart,
@@ -37,102 +27,14 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-import numpy as np
-
-from trajectotree.config import (
-    Config,
-    ConfigError,
-    ControllerGains,
-    SimConfig,
-    check_range,
-)
+from trajectotree.config import ConfigError, ControllerGains, SimConfig
 from trajectotree.config.executor import Executor, parse_executor
+from trajectotree.experiments.conditions import CONDITIONS, DEFAULT_SPEC, ConditionSpec, check_condition
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
 from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
 from trajectotree.planning.workers import kill_pool, process_pool
-from trajectotree.results import FINAL_THETA_TOLERANCE  # rad, "final orientation held" in the execution table
 
 EXEC_DIR = "exec"
-
-
-@dataclass(frozen=True)
-class ConditionSpec:
-    """What the named robustness conditions change in the simulated world."""
-
-    mismatch_mu: float = 0.55  # friction coefficient of the simulated plant under `mismatch`
-    mismatch_mass_factor: float = 1.2  # 1, simulated box mass / planned box mass under `mismatch`
-    push_force: tuple[float, float] = (0.2, 0.0)  # N, (f_x, f_y) in W of the push under `push`
-    friction_mus: tuple[float, ...] = (0.4, 0.3)  # friction coefficients of the conditions friction-<mu>
-    mass_factors: tuple[float, ...] = (2.0,)  # 1, simulated / planned box mass of the conditions mass-x<factor>
-    push_forces: tuple[float, ...] = (3.0, 6.0)  # N, along +x in W, of the conditions push-<force>N
-
-    def __post_init__(self):
-        check_range("mismatch_mu", self.mismatch_mu, 0.0, 5.0, low_open=True)
-        check_range("mismatch_mass_factor", self.mismatch_mass_factor, 0.0, 100.0, low_open=True)
-        for i, f in enumerate(self.push_force):
-            check_range(f"push_force[{i}]", f, -100.0, 100.0)
-        for i, mu in enumerate(self.friction_mus):
-            check_range("friction_mus", mu, 0.0, 5.0, low_open=True, index=(i,))
-        for i, factor in enumerate(self.mass_factors):
-            check_range("mass_factors", factor, 0.0, 100.0, low_open=True, index=(i,))
-        for i, f in enumerate(self.push_forces):
-            check_range("push_forces", f, -100.0, 100.0, index=(i,))
-
-    def worlds(self) -> dict[str, tuple[float | None, float | None, tuple[float, float] | None]]:
-        """{condition name: (simulated friction, simulated / planned mass, push force (N, N) in W)},
-        None where the plan's world holds; in the order the tables list them."""
-        worlds = {
-            "nominal": (None, None, None),
-            "mismatch": (self.mismatch_mu, self.mismatch_mass_factor, None),
-            "push": (None, None, tuple(self.push_force)),
-        }
-        worlds |= {f"friction-{mu:g}": (mu, None, None) for mu in self.friction_mus}
-        worlds |= {f"mass-x{factor:g}": (None, factor, None) for factor in self.mass_factors}
-        return worlds | {f"push-{f:g}N": (None, None, (f, 0.0)) for f in self.push_forces}
-
-    def simulation_kwargs(self, condition: str, config: Config, plan_duration_s: float) -> dict:
-        """The `run_simulation` keyword arguments (sim_mu, sim_mass, push) of `condition`."""
-        from trajectotree.execution.simulate import Push
-
-        mu, mass_factor, push = self.worlds()[check_condition(condition, self)]
-        kwargs = {}
-        if mu is not None:
-            kwargs["sim_mu"] = mu
-        if mass_factor is not None:
-            kwargs["sim_mass"] = mass_factor * config.scene.box_mass
-        if push is not None:
-            kwargs["push"] = Push(
-                force=push,
-                time_s=middle_of_middle_segment(config, plan_duration_s),
-                duration_s=config.sim.push_duration,
-            )
-        return kwargs
-
-
-CONDITIONS = tuple(ConditionSpec().worlds())  # the default spec's condition names
-
-
-def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
-    """s, the middle of segment floor((N-1)/2) of a plan with N nodes of equal-length segments
-    (a plan's config holds its N; without one, N - 1 is the duration over a segment's)."""
-    nodes = config.search.num_nodes
-    if nodes is None:
-        nodes = round(plan_duration_s / (config.cito.knots_per_segment * config.cito.dt)) + 1
-    segments = max(nodes - 1, 1)
-    length = plan_duration_s / segments
-    return (segments // 2 + 0.5) * length
-
-
-def check_condition(condition: str, spec: ConditionSpec | None = None) -> str:
-    """`condition` if `spec` (default: the default spec) names it; ConfigError naming it otherwise."""
-    names = CONDITIONS if spec is None else tuple(spec.worlds())
-    if condition not in names:
-        raise ConfigError(field="condition", value=condition, problem="is unknown", choices=names)
-    return condition
-
-
-# The executors of the tables, in their order (a condition's open loop, closed loop and replanning together).
-EXECUTORS = tuple(e.value for e in (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.GRASP_REPLAN, Executor.PAPER))
 PAPER_EXECUTORS = (Executor.GRASP, Executor.PAPER)  # the paper's: its controller and eq. 20, open loop
 
 
@@ -282,7 +184,7 @@ def run_executions(
     *,
     executors=PAPER_EXECUTORS,
     conditions=CONDITIONS,
-    spec: ConditionSpec = ConditionSpec(),
+    spec: ConditionSpec = DEFAULT_SPEC,
     methods=None,
     gains: ControllerGains | None = None,
     sim: SimConfig | None = None,
@@ -395,116 +297,3 @@ def collect_executions(sweep_dir: str | Path, rows: list[dict]) -> list[dict]:
                     }
                 )
     return records
-
-
-def execution_summary(records: list[dict], methods: list[str]) -> list[dict]:
-    """One row per (method, condition, executor), in the order of `methods`, CONDITIONS and EXECUTORS
-    (so a condition's open loop, closed loop and replanning rows stand together): executions, drops,
-    mean absolute errors, the mean final error and how many ended within 3 deg of the planned final
-    orientation; replans, how many gave a new plan, and their latency's median and 95th percentile."""
-
-    def order(names, name) -> int:
-        return names.index(name) if name in names else len(names)
-
-    keys = sorted(
-        {(r["method"], r["controller"], r["condition"]) for r in records},
-        key=lambda k: (order(methods, k[0]), order(CONDITIONS, k[2]), k[2], order(EXECUTORS, k[1])),
-    )
-    table = []
-    for method, controller, condition in keys:
-        mine = [r for r in records if (r["method"], r["controller"], r["condition"]) == (method, controller, condition)]
-
-        def mean(values) -> float:
-            return float(np.mean(values))
-
-        replans = [e for r in mine for e in r.get("replans") or ()]
-        latency = [e["latency_s"] for e in replans]
-        table.append(
-            {
-                "method": method,
-                "controller": controller,
-                "condition": condition,
-                "executed": len(mine),
-                "dropped": sum(bool(r["dropped"]) for r in mine),
-                "mae_x": mean([r["mae_x"] for r in mine]),
-                "mae_y": mean([r["mae_y"] for r in mine]),
-                "mae_theta": mean([r["mae_theta"] for r in mine]),
-                "final_x": mean([abs(r["final_error"][0]) for r in mine]),
-                "final_y": mean([abs(r["final_error"][1]) for r in mine]),
-                "final_theta": mean([abs(r["final_error"][2]) for r in mine]),
-                "final_theta_within_3deg": sum(abs(r["final_error"][2]) <= FINAL_THETA_TOLERANCE for r in mine),
-                "replans": len(replans),
-                "new_plans": sum(bool(e.get("planned")) for e in replans),
-                "latency_median_s": float(np.median(latency)) if latency else None,
-                "latency_p95_s": float(np.percentile(latency, 95)) if latency else None,
-            }
-        )
-    return table
-
-
-def execution_markdown(table: list[dict], labels: dict[str, str]) -> str:
-    lines = [
-        "| method | controller | condition | executed | dropped | MAE x [mm] | MAE y [mm] | MAE theta [rad] "
-        "| final error x / y [mm], theta [rad] | final theta within 3 deg | replans (new plans) "
-        "| latency median / p95 [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for s in table:
-        latency = "-"
-        if s["latency_median_s"] is not None:
-            latency = f"{s['latency_median_s']:.3f} / {s['latency_p95_s']:.3f}"
-        lines.append(
-            f"| {labels.get(s['method'], s['method'])} | {s['controller']} | {s['condition']} | "
-            f"{s['executed']} | {s['dropped']} ({s['dropped'] / s['executed']:.0%}) | "
-            f"{1e3 * s['mae_x']:.2f} | {1e3 * s['mae_y']:.2f} | {s['mae_theta']:.3f} | "
-            f"{1e3 * s['final_x']:.2f} / {1e3 * s['final_y']:.2f}, {s['final_theta']:.3f} | "
-            f"{s['final_theta_within_3deg']}/{s['executed']} | "
-            + (f"{s['replans']} ({s['new_plans']})" if s["replans"] else "-")
-            + f" | {latency} |"
-        )
-    return "\n".join(lines) + "\n"
-
-
-def refused_replans(records: list[dict]) -> list[dict]:
-    """Every replan that gave no plan, per execution (method, goal, condition): when, the outcome
-    (sim.json's replans' outcome: no_plan, search_deadline, start_refused, first_segment_failed) and the
-    planner's reason, ordered by method, condition and goal."""
-    rows = [
-        {
-            "method": r["method"],
-            "goal": r["goal"],
-            "controller": r["controller"],
-            "condition": r["condition"],
-            "time_s": e["time_s"],
-            "mu": e["mu"],
-            "outcome": e.get("outcome", "unknown"),
-            "status": e.get("status", ""),
-        }
-        for r in records
-        for e in r.get("replans") or ()
-        if not e.get("planned")
-    ]
-    return sorted(
-        rows,
-        key=lambda row: (
-            row["method"],
-            CONDITIONS.index(row["condition"]) if row["condition"] in CONDITIONS else len(CONDITIONS),
-            row["goal"],
-            row["time_s"],
-        ),
-    )
-
-
-def refused_markdown(rows: list[dict], labels: dict[str, str]) -> str:
-    """The replans without a plan, per goal: the search's (or the start's) reason, as a person reads it."""
-    lines = [
-        "| method | goal [rad] | condition | at [s] | friction estimate | outcome | reason |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for row in rows:
-        reason = row["status"].replace("|", "/")
-        lines.append(
-            f"| {labels.get(row['method'], row['method'])} | {row['goal']:+.3f} | {row['condition']} | "
-            f"{row['time_s']:.2f} | {row['mu']:.3f} | {row['outcome'].replace('_', ' ')} | {reason} |"
-        )
-    return "\n".join(lines) + "\n"

@@ -392,13 +392,13 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
 def _execution_report(sweep_dir: Path, rows: list[dict], methods: list[str], out: Path) -> tuple[str | None, dict]:
     """executions.md / .csv (drops and errors per method, controller and condition) and one
     Fig. 3 per controller from its nominal executions, when the sweep has executions."""
-    from trajectotree.experiments.executions import (
-        collect_executions,
+    from trajectotree.experiments.execution_report import (
         execution_markdown,
         execution_summary,
         refused_markdown,
         refused_replans,
     )
+    from trajectotree.experiments.executions import collect_executions
 
     records = collect_executions(sweep_dir, rows)
     if not records:

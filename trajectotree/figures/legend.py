@@ -1,6 +1,6 @@
 """What the pictures of a run share and need no plotting library for: each finger's colour, the force
 arrows' scale (one per run, stated in every picture), each arrow's ends and the controllers' names. The PNG figures
-(trajectotree.figures.run), Meshcat and the HTML playback (trajectotree.execution.playback) and the
+(trajectotree.figures.run), Meshcat and the HTML playback (trajectotree.execution.playback_page) and the
 simulation's arrow scale all read them here, so building a simulation loads no matplotlib.
 """
 

@@ -42,8 +42,8 @@ from trajectotree.config import Config, ConfigError, mu_plan, with_segments
 from trajectotree.contact_plan import ContactNode, ContactPlan
 from trajectotree.geometry import box_to_world
 from trajectotree.planning.keyframes import plan_keyframes
-from trajectotree.planning.keyframes import trajectory as segment_trajectory
 from trajectotree.planning.physics import ObjectModel, check_physics
+from trajectotree.planning.piece import trajectory as segment_trajectory
 from trajectotree.planning.request import PlanRequest, as_config, check_plan_request
 from trajectotree.planning.start import begin_at
 from trajectotree.refusal import Refusal, RefusalKind
@@ -87,7 +87,7 @@ def plan(
     is warned of (trajectotree.planning.request: the checks the CLI makes). A `contact_plan` may be given
     for the methods that use one (the search is then skipped; its time counts 0).
     TrajectoTree's keyframes formulation solves its segments on `segment_executor` (e.g. a
-    persistent keyframes.local_pool, or a Dask Client's get_executor()), else on
+    persistent segment_pool.local_pool, or a Dask Client's get_executor()), else on
     `segment_workers` local processes (1: serially in this process, as a sweep's trial
     does; None: one per segment, at most one per core). `grasp_tables` keeps the ranked
     initial grasps for the next plan (without it the search ranks them, inside its time);

@@ -19,7 +19,7 @@ from pathlib import Path
 from trajectotree.cito.hand import check_cito_hand
 from trajectotree.config import MIN_BOX_MASS, Config, ConfigError, GoalPose, config_from_dict, load_config, mu_plan
 from trajectotree.io import load_start
-from trajectotree.planning.keyframes import check_workers
+from trajectotree.planning.segment_pool import check_workers
 from trajectotree.planning.start import start_config
 from trajectotree.results import check_goal, check_method
 from trajectotree.scene.plant import Scene, build_scene, describe_object

@@ -1,6 +1,6 @@
 """Planning for a hand in space: the contact search in space (search.tree, find_space_contact_plan), then the
 keyframes formulation in space (cito.spatial: one IPOPT program per segment, the segments independent, their
-ends the search's nodes: solved at once in the segment pool of keyframes.py), the segments joined at their
+ends the search's nodes: solved at once in the segment pool of segment_pool.py), the segments joined at their
 nodes into one trajectory, checked from its arrays alone (planning.physics.check_space_physics) and written as
 plan.npz (results.SPACE_TRAJECTORY_ARRAYS) and plan.json (the object, the integration rule, the check,
 the solve report per segment and the contact sequence).
@@ -32,8 +32,9 @@ from trajectotree.cito.spatial import (
 from trajectotree.config import CitoConfig, Config, config_to_dict, mu_plan
 from trajectotree.contact_plan import SpaceContactPlan
 from trajectotree.geometry import quaternion_angle
-from trajectotree.planning.keyframes import kept_pool, kill_pool, local_pool
 from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
+from trajectotree.planning.segment_pool import kept_pool, local_pool
+from trajectotree.planning.workers import kill_pool
 from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
 from trajectotree.search.tree import find_space_contact_plan, space_initial_grasp
 
@@ -109,7 +110,7 @@ def solve_space_task(task: SpaceSegmentTask) -> SpaceSegmentResult:
 
 def solve_space_segments(tasks: list[SpaceSegmentTask], workers: int | None) -> list[SpaceSegmentResult]:
     """The tasks' results in order: in this process (workers 1 or one task), else on local processes as
-    keyframes.run_pieces does: from the main thread on the pool it keeps (kept_pool: one process per core,
+    segment_pool.run_pieces does: from the main thread on the pool it keeps (kept_pool: one process per core,
     `workers` None), from another on a pool of `workers` started for these tasks and shut down after."""
     size = (os.cpu_count() or 1) if workers is None else workers
     if min(len(tasks), size) <= 1:

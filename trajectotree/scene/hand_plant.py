@@ -6,49 +6,26 @@ and checks the fingers' names and chains (HandError naming the finger, the joint
 
 from __future__ import annotations
 
-import re
-from pathlib import Path
-
 import numpy as np
-from pydrake.geometry import RoleAssign, SceneGraph
+from pydrake.geometry import SceneGraph
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame
 
+from trajectotree.scene.friction import set_friction
 from trajectotree.scene.hand_file import MODELS_DIR, HandFile
 
 ADDED_TIP_FRAME = "trajectotree_tip{i}"  # the frame add_hand adds at a fingertip sphere's centre (tip_xyz given)
-MU_TAGS = (
-    r"<drake:mu_dynamic>[^<]*</drake:mu_dynamic>",
-    r"<drake:mu_static>[^<]*</drake:mu_static>",
-)
-
-
-def _sdf_with_friction(text: str, mu: float) -> str | None:
-    """The SDF text with every collision's friction set to mu, when every <collision> carries
-    Drake's two friction tags (as the project's own models do); None otherwise."""
-    collisions = len(re.findall(r"<collision[\s>]", text))
-    if collisions == 0 or any(len(re.findall(tag, text)) != collisions for tag in MU_TAGS):
-        return None
-    text = re.sub(MU_TAGS[0], f"<drake:mu_dynamic>{mu!r}</drake:mu_dynamic>", text)
-    return re.sub(MU_TAGS[1], f"<drake:mu_static>{mu!r}</drake:mu_static>", text)
 
 
 def _parse_model(plant: MultibodyPlant, hand: HandFile, mu: float, scene_graph: SceneGraph | None):
-    """Parses the model into `plant` with fingertip-and-link friction mu (Drake combines the two
-    coefficients of a contact pair; equal values keep mu). A local SDF that states its friction
-    on every collision has it rewritten in its text; any other model gets it through SceneGraph's
-    proximity properties, which needs `scene_graph` when the plant registers geometry."""
+    """Parses the model into `plant` with fingertip-and-link friction mu (friction.set_friction: it
+    needs `scene_graph` when the plant registers geometry)."""
     parser = Parser(plant)
     parser.package_map().Add("trajectotree", str(MODELS_DIR))
-    text = None
-    if not hand.model.startswith("package://") and hand.model.lower().endswith(".sdf"):
-        text = _sdf_with_friction(Path(hand.model).read_text(), mu)
     try:
-        if text is not None:
-            instances = parser.AddModelsFromString(text, "sdf")
-        elif hand.model.startswith("package://"):
+        if hand.model.startswith("package://"):
             instances = parser.AddModels(url=hand.model)
         else:
             instances = parser.AddModels(hand.model)
@@ -57,15 +34,7 @@ def _parse_model(plant: MultibodyPlant, hand: HandFile, mu: float, scene_graph: 
     if len(instances) != 1:
         raise hand.error(f"its model {hand.model} holds {len(instances)} models; give a file with one")
     (instance,) = instances
-    if text is None and plant.geometry_source_is_registered():
-        if scene_graph is None:
-            raise ValueError(f"hand {hand.source}: pass the plant's scene_graph to set the model's friction")
-        inspector = scene_graph.model_inspector()
-        for b in plant.GetBodyIndices(instance):
-            for g in plant.GetCollisionGeometriesForBody(plant.get_body(b)):
-                props = inspector.GetProximityProperties(g)
-                props.UpdateProperty("material", "coulomb_friction", CoulombFriction(mu, mu))
-                scene_graph.AssignRole(plant.get_source_id(), g, props, RoleAssign.kReplace)
+    set_friction(plant, scene_graph, instance, mu)
     return instance
 
 

@@ -20,15 +20,16 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from pydrake.geometry import AddContactMaterial, Convex, ProximityProperties, SceneGraph
+from pydrake.geometry import Convex, ProximityProperties, SceneGraph
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import JacobianWrtVariable, PlanarJoint, RotationalInertia, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import SceneConfig
 from trajectotree.geometry import ConvexPolygon
+from trajectotree.scene.friction import set_friction
 from trajectotree.scene.hand import (  # noqa: F401 (FingerGeometry, LinkRectangle: their old home)
     JOINTS_PER_FINGER,
     MODELS_DIR,
@@ -52,14 +53,9 @@ def _sub(text: str, pattern: str, value: str) -> str:
     return new
 
 
-def _set_friction(text: str, mu: float) -> str:
-    text = _sub(text, r"<drake:mu_dynamic>[^<]*</drake:mu_dynamic>", f"<drake:mu_dynamic>{mu!r}</drake:mu_dynamic>")
-    return _sub(text, r"<drake:mu_static>[^<]*</drake:mu_static>", f"<drake:mu_static>{mu!r}</drake:mu_static>")
-
-
 def box_sdf(config: SceneConfig) -> str:
-    """box.sdf with the size, mass, inertia and friction of `config` (the size of its
-    `object.vertices` when they are an axis-aligned rectangle)."""
+    """box.sdf with the size, mass and inertia of `config` (the size of its `object.vertices` when
+    they are an axis-aligned rectangle); add_hand_and_box sets its friction (friction.set_friction)."""
     a, b = config.shape.box_half  # (w/2, h/2): of box_width x box_height, or of the rectangle given as a polygon
     w, h, d, m = 2 * a, 2 * b, config.box_depth, config.box_mass
     ixx, iyy, izz = m * (h * h + d * d) / 12, m * (w * w + d * d) / 12, m * (w * w + h * h) / 12
@@ -71,7 +67,7 @@ def box_sdf(config: SceneConfig) -> str:
     text = _sub(text, r"<ixx>[^<]*</ixx>", f"<ixx>{ixx!r}</ixx>")
     text = _sub(text, r"<iyy>[^<]*</iyy>", f"<iyy>{iyy!r}</iyy>")
     text = _sub(text, r"<izz>[^<]*</izz>", f"<izz>{izz!r}</izz>")
-    return _set_friction(text, config.mu)
+    return text
 
 
 # The object's colour and opacity (box.sdf's diffuse), for the polygon model too.
@@ -99,16 +95,14 @@ def add_polygon_object(plant: MultibodyPlant, config: SceneConfig, shape: Convex
     """Adds the object `shape` (default config.shape) as model instance and body "box" (the
     names every caller looks up): a convex prism of depth scene.box_depth (drake Convex from
     the corners, in memory: its visual mesh travels in Meshcat's messages), mass
-    scene.box_mass, uniform density (prism_inertia; I_zz scene.object_inertia when set), friction
-    scene.mu on its collision geometry (box.sdf's proximity properties). Returns its ModelInstanceIndex."""
+    scene.box_mass, uniform density (prism_inertia; I_zz scene.object_inertia when set); its friction
+    as the box's, set by add_hand_and_box (friction.set_friction). Returns its ModelInstanceIndex."""
     shape = config.shape if shape is None else shape
     instance = plant.AddModelInstance("box")
     inertia = prism_inertia(shape, config.box_mass, config.box_depth, config.object_inertia)
     body = plant.AddRigidBody("box", instance, inertia)
     prism = Convex(prism_points(shape, config.box_depth), "object polygon")
-    proximity = ProximityProperties()
-    AddContactMaterial(friction=CoulombFriction(config.mu, config.mu), properties=proximity)
-    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", proximity)  # box::collision
+    plant.RegisterCollisionGeometry(body, RigidTransform(), prism, "collision", ProximityProperties())  # box::collision
     plant.RegisterVisualGeometry(body, RigidTransform(), prism, "visual", OBJECT_RGBA)
     return instance
 
@@ -117,8 +111,8 @@ def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig, scene_graph: Sc
     """Adds the hand `config.hand` (trajectotree.scene.hand: its model, welds and plane) and the
     object (planar joint in the x-y plane) to an unfinalized plant, sets gravity. Returns (hand,
     box) model instances. The box (or a polygon that is an axis-aligned rectangle) comes from
-    box.sdf, any other polygon from add_polygon_object. `scene_graph` (the plant's) is needed for
-    a hand model whose friction is not written in its SDF text (hand.add_hand)."""
+    box.sdf, any other polygon from add_polygon_object; both models' friction config.mu
+    (friction.set_friction: `scene_graph`, the plant's, is needed when the plant registers geometry)."""
     hand = add_hand(plant, hand_file(config.hand), config.mu, scene_graph)
     parser = Parser(plant)
     parser.package_map().Add("trajectotree", str(MODELS_DIR))
@@ -126,6 +120,7 @@ def add_hand_and_box(plant: MultibodyPlant, config: SceneConfig, scene_graph: Sc
         (box,) = parser.AddModelsFromString(box_sdf(config), "sdf")
     else:
         box = add_polygon_object(plant, config)
+    set_friction(plant, scene_graph, box, config.mu)
     plant.AddJoint(PlanarJoint("box_planar", plant.world_frame(), plant.GetFrameByName("box", box)))
     plant.mutable_gravity_field().set_gravity_vector([0.0, -config.gravity, 0.0])
     return hand, box

@@ -94,7 +94,9 @@ class SpaceScene:
         return out
 
     def gravity_torques(self, q) -> np.ndarray:
-        """(F, n) N m, the joint torques that hold the fingers still against their own weight at q (F, n)."""
+        """(F, n) N m, the joint torques that hold the fingers still against their own weight at q (F, n).
+        From the plant by design: a finger in space is any chain of n joints, with no closed form here
+        (the planar hands' one home is scene.dynamics.HandModel.gravity_forces)."""
         context = self.plant.CreateDefaultContext()
         self.plant.SetPositions(context, self.positions(START_POSE, q))
         # CalcGravityGeneralizedForces is gravity's generalized force; the motors cancel it

@@ -18,7 +18,8 @@ Each limit is one LP per grasp or stance (maximize the weight W over the cone-ed
 magnitudes x >= 0: E x = (0, W, 0) the wrench that holds the object, |J_C^T f - tau_g| <=
 tau_max at every joint, sum lambda_n <= cap), each built once and solved per grasp or stance
 (Clp, through Drake). J_C is the contact point's Jacobian on the finger's
-second link; tau_g the links' generalized gravity forces from the plant. The object's mass
+second link; tau_g the links' generalized gravity forces in closed form (scene.dynamics.HandModel,
+the plant's CalcGravityGeneralizedForces to 1e-16 N m on the planar hands). The object's mass
 enters neither: the limits are weights, divided by scene.gravity into kg.
 """
 
@@ -31,6 +32,7 @@ from pydrake.solvers import ClpSolver, MathematicalProgram, SolverOptions
 
 from trajectotree.config import SearchConfig, mu_plan
 from trajectotree.geometry import rotation_2d
+from trajectotree.scene.dynamics import HandModel
 from trajectotree.scene.kinematics import K90
 from trajectotree.scene.plant import Scene
 from trajectotree.search.initial_grasp import GraspCandidates, initial_grasp_candidates, stance_fingers
@@ -127,26 +129,10 @@ def _contact_terms(scene: Scene, pose: np.ndarray, arclengths: np.ndarray, q: np
     elbows = np.stack([f.elbow(q[:, i]) for i, f in enumerate(scene.fingers)], axis=1)  # (G, 4, 2)
     columns = np.stack([(p_WC - bases) @ K90.T, (p_WC - elbows) @ K90.T], axis=2)  # (G, 4, joint, 2)
     torque = np.einsum("gfja,gfea->gfje", columns, edges)
-    tau_g = _gravity_torques(scene, arclengths, q)
+    tau_g = HandModel.from_scene(scene).gravity_forces(q.reshape(len(q), -1))  # (G, 4, 2)
     tau_max = np.array([f.tau_max for f in scene.fingers])  # (4, 2)
     slack = np.stack([tau_max + tau_g, tau_max - tau_g], axis=-1)
     return edges, torque, moment, slack
-
-
-def _gravity_torques(scene: Scene, arclengths: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """tau_g (G, 4, 2): the generalized gravity forces on each finger's joints at q, from the
-    plant, once per distinct contact of each finger (a finger's own links alone load its joints)."""
-    plant, context = scene.plant, scene.plant.CreateDefaultContext()
-    out = np.empty(q.shape)
-    v = scene.hand_v_indices
-    for i in range(scene.num_fingers):
-        contacts, where, index = np.unique(arclengths[:, i], return_index=True, return_inverse=True)
-        values = np.empty((len(contacts), 2))
-        for k, g in enumerate(where):
-            plant.SetPositions(context, scene.positions(scene.config.initial_pose, q[g].ravel()))
-            values[k] = plant.CalcGravityGeneralizedForces(context)[v[2 * i : 2 * i + 2]]
-        out[:, i] = values[index.ravel()]
-    return out
 
 
 def _heaviest(edges, torque, moment, slack, fingers: np.ndarray, cap: float) -> np.ndarray:

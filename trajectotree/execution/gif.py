@@ -1,0 +1,83 @@
+"""A run as a matplotlib GIF for places without WebGL: the object and hand on x, y axes, each fingertip
+in its finger's colour and each finger's force on the object as an arrow, at one scale per run that
+the GIF states. matplotlib is imported only when a GIF is written.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from trajectotree.execution.meshcat_scene import VIEW_HALF_WIDTH
+from trajectotree.execution.playback_page import object_noun
+from trajectotree.figures.legend import arrow_newtons_per_cm, arrow_scale_text
+
+GIF_DPI = 120  # the GIF's frames: 552 px wide, its labels readable on a README page
+
+
+def write_gif(
+    scene,
+    times,
+    object_poses,
+    joint_angles,
+    path: str | Path,
+    *,
+    planned_poses=None,
+    forces=None,
+    newtons_per_cm: float | None = None,
+    fps: float = 10.0,
+    title: str | None = None,
+) -> None:
+    """A matplotlib GIF (PillowWriter, no ffmpeg) of the object and hand on x, y axes in m, the
+    fingers numbered and coloured as in the figures, the planned pose as a dashed outline, each
+    finger's force on the object (`forces` (T, 4, 2)) as an arrow at `newtons_per_cm` (default:
+    arrow_newtons_per_cm of the forces), the time of each frame and a `title` above it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    from trajectotree.figures.run import plot_run_frame
+
+    times = np.asarray(times)
+    frames = np.unique(np.searchsorted(times, np.arange(times[0], times[-1] + 1e-9, 1.0 / fps)).clip(0, len(times) - 1))
+    if forces is not None and newtons_per_cm is None:
+        newtons_per_cm = arrow_newtons_per_cm(forces)
+    noun = object_noun(scene.config)
+    notes = ([f"dashed: planned {noun} pose"] if planned_poses is not None else []) + (
+        [f"arrows: each finger's force on the {noun}, {arrow_scale_text(newtons_per_cm)}"] if forces is not None else []
+    )
+    fig, ax = plt.subplots(figsize=(4.6, 4.6 + 0.18 * len(notes)))
+
+    def draw(k):
+        ax.clear()
+        clock = f"t = {times[k]:.2f} s of {times[-1]:.2f} s"
+        plot_run_frame(
+            ax,
+            scene,
+            object_poses[k],
+            joint_angles[k],
+            half_width=VIEW_HALF_WIDTH,
+            planned_pose=None if planned_poses is None else planned_poses[k],
+            forces=None if forces is None else forces[k],
+            newtons_per_cm=newtons_per_cm,
+            title=f"{title}\n{clock}" if title else clock,
+        )
+
+    if notes:
+        fig.text(0.5, 0.01, "\n".join(notes), ha="center", va="bottom", fontsize=7.5, color="0.25")
+    draw(frames[0])
+    fig.tight_layout(rect=(0, 0.045 * len(notes), 1, 1))
+    animation = FuncAnimation(fig, draw, frames=frames)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp.gif")
+    try:
+        animation.save(tmp, writer=PillowWriter(fps=fps), dpi=GIF_DPI)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+        plt.close(fig)

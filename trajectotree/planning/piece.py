@@ -1,0 +1,163 @@
+"""One piece of a keyframes plan: the program of nodes first..last (a segment, or a retry's range)
+built and solved in one process (`solve_piece`, a worker's entry point), its arrays physics-checked.
+A task and its result are plain values, so that they pickle to any executor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+import os
+import resource
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from trajectotree.cito.fingers import near_pairs
+from trajectotree.cito.guess import plan_guess
+from trajectotree.cito.knot import BodyParams
+from trajectotree.cito.program import build_program
+from trajectotree.cito.solve import LogObserver, solve, violations
+from trajectotree.cito.transition import piece_spec
+from trajectotree.cito.variables import CitoVariables
+from trajectotree.config import CitoConfig, SceneConfig
+from trajectotree.contact_plan import ContactPlan
+from trajectotree.planning.physics import ObjectModel, check_physics, contact_points
+from trajectotree.results import PhysicsCheck, Trajectory
+from trajectotree.scene.plant import Scene, build_scene
+
+WORKER_SCENES = 4  # scenes a worker process keeps built (a pool usually serves the plans of one scene)
+
+
+@dataclass(frozen=True)
+class PieceTask:
+    """One program of nodes first..last (plain values: it pickles to any executor)."""
+
+    scene: SceneConfig
+    cito: CitoConfig
+    mu: float  # the planning friction mu_plan
+    plan: ContactPlan
+    first: int
+    last: int
+    kind: str  # "keyframes", "restart" (from `guess`), "links" (with the link rows),
+    #                                   "joint" (with the neighbours)
+    #                                   or "strict" (a joint one, pinned fingers keyframes.STRICT_PINNING times harder)
+    guess: np.ndarray | None = None  # (K, KNOT_SIZE) initial guess (None: the plan's guess)
+    # s, a time.perf_counter() value on this machine (the process that made the task, or a worker beside it)
+    # at which IPOPT stops, for a solve with a deadline; None: never
+    deadline: float | None = None
+
+
+@dataclass(frozen=True)
+class PieceResult:
+    first: int
+    last: int
+    kind: str
+    success: bool  # IPOPT converged and the piece's arrays pass the physics check
+    converged: bool
+    status: str
+    iterations: int
+    cost: float
+    build_time_s: float
+    solve_time_s: float
+    trajectory: Trajectory
+    check: PhysicsCheck
+    violations: dict
+    timing: dict
+    solution: np.ndarray  # (K, KNOT_SIZE) the last iterate, for a restart
+    max_rss_mb: float  # MB, peak resident memory of the process that solved it
+    pid: int
+    # s (time.perf_counter in the planning process), when the planning process had this result (run_pieces):
+    # a first-segment-first plan times each segment's readiness from it
+    finished_s: float = float("nan")
+
+    def record(self) -> dict:
+        return {
+            "kind": self.kind,
+            "nodes": [self.first, self.last],
+            "success": self.success,
+            "status": self.status,
+            "iterations": self.iterations,
+            "time_s": self.build_time_s + self.solve_time_s,
+            "max_rss_mb": self.max_rss_mb,
+            "pid": self.pid,
+        }
+
+
+def trajectory(program, sol, scene: Scene) -> Trajectory:
+    """The plan.npz arrays of a solution; p_W_C from the planned contacts (pinned) and
+    the box points nearest the fingertips (free)."""
+    spec, kin = program.spec, program.rows.kinematics(sol.stacked())
+    p_BC_planned = spec.c_B - scene.tip_radius * spec.n_B  # c_B is the fingertip centre's target
+    c = scene.config
+    p_W_C = contact_points(sol.x, kin.p_WF, spec.pinned, p_BC_planned, c.shape)
+    return Trajectory(
+        t=np.arange(spec.num_knots) * spec.dt,
+        x=sol.x,
+        xdot=sol.xd,
+        q=sol.q,
+        qdot=sol.qd,
+        tau=sol.tau,
+        lambda_n=sol.lambda_n,
+        lambda_t=sol.lambda_t,
+        f_W=kin.f_W,
+        p_W_tip=kin.p_WF,
+        p_W_C=p_W_C,
+    )
+
+
+@functools.lru_cache(maxsize=WORKER_SCENES)
+def worker_scene(config: SceneConfig) -> Scene:
+    """The scene a worker process solves `config`'s pieces in, built on its first piece and kept
+    for the next ones (a forked worker inherits the ones its parent built)."""
+    return build_scene(config)
+
+
+def finger_pairs(task: PieceTask, scene: Scene) -> tuple:
+    """The pairs of fingers the piece's program keeps apart by finger rows: those that come near each
+    other on the straight joint-space path between its nodes (cito.fingers.near_pairs), every pair in a
+    "links" retry (it follows an attempt whose links or fingers overlapped)."""
+    if task.kind == "links":
+        return tuple(itertools.combinations(range(scene.num_fingers), 2))
+    q_nodes = [node.q for node in task.plan.nodes[task.first : task.last + 1]]
+    return near_pairs(scene.fingers, q_nodes, scene.tip_radius)
+
+
+def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogObserver | None = None) -> PieceResult:
+    """Builds and solves one piece in this process: in `scene` (built from task.scene), else in
+    this process's worker_scene (a worker's entry point); `log_observer` watches its IPOPT solve."""
+    scene = worker_scene(task.scene) if scene is None else scene
+    t0 = time.perf_counter()
+    body = BodyParams(scene, task.cito.sdf_sharpness, mu=task.mu)
+    spec = piece_spec(task.plan, task.first, task.last, radius=scene.tip_radius, config=task.cito)
+    q_nodes = tuple(node.q for node in task.plan.nodes[task.first : task.last + 1])  # a retry's middle nodes too
+    spec = dataclasses.replace(spec, finger_pairs=finger_pairs(task, scene), finger_nodes=q_nodes)
+    program = build_program(task.cito, spec, body)
+    sub = dataclasses.replace(task.plan, nodes=task.plan.nodes[task.first : task.last + 1])
+    guess = plan_guess(program.rows, spec, sub) if task.guess is None else CitoVariables.from_stacked(task.guess)
+    build_time = time.perf_counter() - t0
+    left = None if task.deadline is None else task.deadline - time.perf_counter()  # after the build
+    outcome = solve(program, guess, task.cito, log_observer, left)
+    arrays = trajectory(program, outcome.solution, scene)
+    check = check_physics(arrays.arrays(), ObjectModel.from_scene(scene), body.mu)
+    return PieceResult(
+        first=task.first,
+        last=task.last,
+        kind=task.kind,
+        success=outcome.success and check.passed,
+        converged=outcome.success,
+        status=outcome.status,
+        iterations=outcome.iterations,
+        cost=outcome.cost,
+        build_time_s=build_time,
+        solve_time_s=outcome.solve_time_s,
+        trajectory=arrays,
+        check=check,
+        violations=violations(program, outcome.solution, scene),
+        timing=outcome.timing,
+        solution=outcome.solution.stacked(),
+        max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        pid=os.getpid(),
+    )
