@@ -44,6 +44,8 @@ def space_plan_in_effect(reference: SpaceReference, config: Config, scene: Space
         duration=reference.duration + config.sim.settle_time,
         ramp_time=gains.grasp.ramp_time,
         contact_distance=gains.grasp.contact_distance,
+        half=scene.object.half,
+        swing_lift=gains.grasp.swing_lift,
     )
     return PlanInEffect(reference, schedule, config.scene.mu)
 
