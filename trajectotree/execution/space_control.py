@@ -178,16 +178,24 @@ class SwingTiming:
     carry: np.ndarray  # (T,) 1 -> 0 from its lift-off hold to its landing hold, 0 outside swings
 
 
+def _minimum_jerk(u) -> np.ndarray:
+    """The minimum-jerk rest-to-rest profile 0 -> 1 at u in [0, 1]."""
+    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
+
+
 def swing_timing(times, t_knots, in_contact, p_knots, ramp_time: float, lift: SwingLift) -> SwingTiming:
     """A finger's SwingTiming at `times` (T,) for the plan's knots t_knots (K,), whether it touches at each (K,)
-    bool and where its tip is (K, 3) m in B. Within a swing (lo, hi) its force budget ramps out over the first
-    `hold` s (ramp_time, at most a quarter of the swing) while it rises straight off its lift-off point (the
-    lift-off hold), and ramps in over the last ones while it descends onto its landing point; in between it travels
-    the plan's path through its knots, lifted fully (`lift`: the edges that seed-0 goal 1's path crosses lie near
-    its ends), from rest to rest at a minimum-jerk rate along the lifted path's length: the plan fixes a free finger
-    at its knots only, and its own time law moved a fingertip 23 mm in the 0.1 s after lift-off (seed-0 goal 1),
-    which a fingerpro4 finger (0.6 kg of links, 0.396 N m motors) lagged, cutting the cube's edge. In a swing
-    without a lift-off or a landing (the plan's ends): its own time, the budget as reference.swing_profile."""
+    bool and where its tip is (K, 3) m in B. A swing (lo, hi) has five stages of `hold` s (ramp_time, at most a
+    sixth of the swing) but the third: its force budget ramps out on its lift-off point (the lift-off hold); it
+    rises straight off it; it travels the plan's path through its knots, lifted fully (`lift`: the edges that
+    seed-0 goal 1's path crosses lie near its ends), at a minimum-jerk rate along the lifted path's length; it
+    descends straight onto its landing point; its budget ramps in there. Each move is from rest to rest: the plan
+    fixes a free finger at its knots only, and its own time law moved a fingertip 23 mm in the 0.1 s after
+    lift-off (seed-0 goal 1), which a fingerpro4 finger (0.6 kg of links, 0.396 N m motors) lagged, cutting the
+    cube's edge. It loads and unloads on the cube alone: a budget that rose while the finger descended had the
+    QP push a finger still in the air, which struck the cube at 0.3 m/s (seed-0 goal 3's second landing, 10 deg
+    off). In a swing without a lift-off or a landing (the plan's ends): its own time, the budget as
+    reference.swing_profile."""
     times = np.asarray(times, dtype=float)
     intervals = swing_intervals(t_knots, in_contact)
     scale, phase = swing_profile(times, [iv for iv in intervals if not np.all(np.isfinite(iv))], ramp_time)
@@ -196,19 +204,20 @@ def swing_timing(times, t_knots, in_contact, p_knots, ramp_time: float, lift: Sw
     for lo, hi in intervals:
         if not np.isfinite(lo) or not np.isfinite(hi):
             continue
-        hold = min(ramp_time, (hi - lo) / 4)
+        hold = min(ramp_time, (hi - lo) / 6)
         scale = np.minimum(scale, swing_profile(times, [(lo, hi)], hold)[0])
         u = np.linspace(0.0, 1.0, PATH_SAMPLES + 1)
         path = lift(_linear(t_knots, p_knots, lo + u * (hi - lo)), np.ones_like(u))
         length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
         inside = (times > lo) & (times < hi)
-        tau = np.clip((times[inside] - lo - hold) / (hi - lo - 2 * hold), 0.0, 1.0)
-        covered = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
+        tau = np.clip((times[inside] - lo - 2 * hold) / (hi - lo - 4 * hold), 0.0, 1.0)
+        covered = _minimum_jerk(tau)
         at = np.interp(covered * length[-1], length, u) if length[-1] > 1e-9 else covered
         travel = np.column_stack([np.interp(at, u, path[:, c]) for c in range(3)])
-        ends = np.where((tau <= 0.0)[:, None], path[0], path[-1])
-        height = np.minimum(times[inside] - lo, hi - times[inside]) / hold if hold > 0 else np.ones(len(tau))
-        rise = lift(ends, np.minimum(height, 1.0))  # in the holds: straight off or onto the cube
+        ends = np.where((tau <= 0.0)[:, None], *_linear(t_knots, p_knots, np.array([lo, hi]))[:, None])
+        edge = np.minimum(times[inside] - lo, hi - times[inside])  # s from the nearer end
+        height = np.clip(edge / hold - 1.0, 0.0, 1.0) if hold > 0 else np.ones(len(tau))
+        rise = lift(ends, _minimum_jerk(height))  # on the plan's point in the holds, straight off or onto it
         p_B[inside] = np.where(((tau > 0.0) & (tau < 1.0))[:, None], travel, rise)
         carry[inside] = 1.0 - at
         holding = inside & (times < lo + hold)
