@@ -65,4 +65,6 @@ def test_seed0_goal3_is_executed_close_to_its_plan(tmp_path):
     summary = json.loads((plan / "sim.json").read_text())
     assert not summary["dropped"]
     assert np.degrees(summary["max_orientation_error_rad"]) < 5.0
-    assert np.degrees(summary["final_orientation_error_rad"]) < 0.5
+    assert summary["final_orientation_error_deg"] == pytest.approx(np.degrees(summary["final_orientation_error_rad"]))
+    assert summary["final_orientation_error_deg"] < 0.5
+    assert summary["within_15deg"] and summary["within_0p4rad"]
