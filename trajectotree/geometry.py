@@ -574,6 +574,16 @@ def box_face_normals(half, p_B) -> np.ndarray:
     return n
 
 
+def box_outward_directions(half, p_B) -> np.ndarray:
+    """(..., 3) unit vectors in B that carry points p_B (..., 3) away from the box of half-sizes `half` (3,)
+    centred at B's origin: from the nearest surface point through the point where it lies outside, the outward
+    normal of the nearest face where it lies inside or on the surface."""
+    p = np.asarray(p_B, dtype=float)
+    outside = p - np.clip(p, -np.asarray(half, dtype=float), np.asarray(half, dtype=float))
+    length = np.linalg.norm(outside, axis=-1, keepdims=True)
+    return np.where(length > 1e-12, outside / np.maximum(length, 1e-12), box_face_normals(half, p))
+
+
 def segment_box_nearest(half, a_B, b_B, iterations: int = 60) -> np.ndarray:
     """(...) in [0, 1]: the fraction t along the segments a_B -> b_B (..., 3, in B) of their point of least
     signed distance from the box (half-sizes `half`), by a golden-section search, the

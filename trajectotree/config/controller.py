@@ -79,6 +79,10 @@ class GraspGains:
     # Drake's gripper (with min_normal_force 1.5 N) it ends 10 of 12 goals within 3e-4 rad but drops the other 2
     # (docs/results.md).
     hand_dynamics: bool = flag(False)
+    # in space, a moving fingertip tracks its path as a critically damped second-order system of this bandwidth
+    # through the finger's own inertia (execution.space_control): a spring of tip_kp on a fingerpro4 finger (its
+    # links 0.6 kg) lagged 10-20 mm behind a lift-off and pushed the tip along the face where it pulled it up
+    swing_bandwidth: float = ranged(30.0, "rad/s", 0.0, 100.0)
 
     def __post_init__(self):
         check_fields(self, "controller.grasp")

@@ -38,6 +38,8 @@ from trajectotree.execution.in_effect import declare_plan_input
 from trajectotree.execution.reference import swing_intervals, swing_profile
 from trajectotree.geometry import (
     box_face_normals,
+    box_outward_directions,
+    box_signed_distances,
     matrix_quaternions,
     quaternion_error_W,
     quaternion_matrices,
@@ -53,6 +55,7 @@ from trajectotree.scene.statics import (
 )
 
 CONE_FACETS = 8  # the QP's pyramid per cone, as the planner's (cito.spatial.PYRAMID_EDGES)
+SINGULAR_DAMPING = 0.01  # m, of the moving fingertips' damped least-squares accelerations (a tenth of a link)
 BOX_STATE_SIZE = 13  # the quaternion floating joint's [qw, qx, qy, qz, px, py, pz, w_W (3), v_W (3)]
 
 
@@ -144,6 +147,85 @@ def _linear(t, values, times) -> np.ndarray:
     return out.reshape((len(times),) + values.shape[1:])
 
 
+PATH_SAMPLES = 200  # per swing: the lifted path's samples whose length the finger's travel follows
+
+
+@dataclass(frozen=True)
+class SwingLift:
+    """Lifts a swinging fingertip centre off a cube of half-sizes `half` (3,) m: to at least height x lift m of gap
+    (the sphere of tip_radius m to the surface), away from the nearest surface point, as the plane's
+    reference.grasp_schedule; the plan keeps its fingertips clear at the knots alone."""
+
+    half: tuple[float, float, float]
+    tip_radius: float
+    lift: float
+
+    def __call__(self, p_B, height) -> np.ndarray:
+        """(..., 3) the points p_B (..., 3) lifted to `height` (...) in [0, 1] (nan: not lifted)."""
+        gap = box_signed_distances(self.half, p_B) - self.tip_radius
+        extra = np.nan_to_num(np.maximum(self.lift * np.asarray(height) - gap, 0.0))
+        return p_B + extra[..., None] * box_outward_directions(self.half, p_B)
+
+
+@dataclass(frozen=True)
+class SwingTiming:
+    """One finger's swings on the control grid (T,), for swing_timing."""
+
+    scale: np.ndarray  # (T,) its force budget: 1 holding, 0 moving
+    p_B: np.ndarray  # (T, 3) m, its fingertip centre's target in the planned cube frame
+    lifting: np.ndarray  # (T,) bool, in the lift-off hold of a swing
+    lift_off_knot: np.ndarray  # (T,) int, the knot of the swing's lift-off in its lift-off hold, -1 elsewhere
+    carry: np.ndarray  # (T,) 1 -> 0 from its lift-off hold to its landing hold, 0 outside swings
+
+
+def _minimum_jerk(u) -> np.ndarray:
+    """The minimum-jerk rest-to-rest profile 0 -> 1 at u in [0, 1]."""
+    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
+
+
+def swing_timing(times, t_knots, in_contact, p_knots, ramp_time: float, lift: SwingLift) -> SwingTiming:
+    """A finger's SwingTiming at `times` (T,) for the plan's knots t_knots (K,), whether it touches at each (K,)
+    bool and where its tip is (K, 3) m in B. A swing (lo, hi) has five stages of `hold` s (ramp_time, at most a
+    sixth of the swing) but the third: its force budget ramps out on its lift-off point (the lift-off hold); it
+    rises straight off it; it travels the plan's path through its knots, lifted fully (`lift`: the edges that
+    seed-0 goal 1's path crosses lie near its ends), at a minimum-jerk rate along the lifted path's length; it
+    descends straight onto its landing point; its budget ramps in there. Each move is from rest to rest: the plan
+    fixes a free finger at its knots only, and its own time law moved a fingertip 23 mm in the 0.1 s after
+    lift-off (seed-0 goal 1), which a fingerpro4 finger (0.6 kg of links, 0.396 N m motors) lagged, cutting the
+    cube's edge. It loads and unloads on the cube alone: a budget that rose while the finger descended had the
+    QP push a finger still in the air, which struck the cube at 0.3 m/s (seed-0 goal 3's second landing, 10 deg
+    off). In a swing without a lift-off or a landing (the plan's ends): its own time, the budget as
+    reference.swing_profile."""
+    times = np.asarray(times, dtype=float)
+    intervals = swing_intervals(t_knots, in_contact)
+    scale, phase = swing_profile(times, [iv for iv in intervals if not np.all(np.isfinite(iv))], ramp_time)
+    p_B = lift(_linear(t_knots, p_knots, times), np.sin(np.pi * phase))
+    lifting, lift_off_knot, carry = np.zeros(len(times), dtype=bool), np.full(len(times), -1), np.zeros(len(times))
+    for lo, hi in intervals:
+        if not np.isfinite(lo) or not np.isfinite(hi):
+            continue
+        hold = min(ramp_time, (hi - lo) / 6)
+        scale = np.minimum(scale, swing_profile(times, [(lo, hi)], hold)[0])
+        u = np.linspace(0.0, 1.0, PATH_SAMPLES + 1)
+        path = lift(_linear(t_knots, p_knots, lo + u * (hi - lo)), np.ones_like(u))
+        length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        inside = (times > lo) & (times < hi)
+        tau = np.clip((times[inside] - lo - 2 * hold) / (hi - lo - 4 * hold), 0.0, 1.0)
+        covered = _minimum_jerk(tau)
+        at = np.interp(covered * length[-1], length, u) if length[-1] > 1e-9 else covered
+        travel = np.column_stack([np.interp(at, u, path[:, c]) for c in range(3)])
+        ends = np.where((tau <= 0.0)[:, None], *_linear(t_knots, p_knots, np.array([lo, hi]))[:, None])
+        edge = np.minimum(times[inside] - lo, hi - times[inside])  # s from the nearer end
+        height = np.clip(edge / hold - 1.0, 0.0, 1.0) if hold > 0 else np.ones(len(tau))
+        rise = lift(ends, _minimum_jerk(height))  # on the plan's point in the holds, straight off or onto it
+        p_B[inside] = np.where(((tau > 0.0) & (tau < 1.0))[:, None], travel, rise)
+        carry[inside] = 1.0 - at
+        holding = inside & (times < lo + hold)
+        lifting |= holding
+        lift_off_knot[holding] = int(np.argmin(np.abs(t_knots - lo)))
+    return SwingTiming(scale, p_B, lifting, lift_off_knot, carry)
+
+
 @dataclass(frozen=True)
 class SpaceSchedule:
     """What the SpaceGraspController tracks, sampled at its control times n * period and held after the plan."""
@@ -155,8 +237,12 @@ class SpaceSchedule:
     wrench: np.ndarray  # (N, 6) [N; N m] the plan's contact wrench on the cube about its centre, in W
     p_BF: np.ndarray  # (N, F, 3) m, the fingertip centres in the planned cube frame B
     v_BF: np.ndarray  # (N, F, 3) m/s, their rates in B
+    a_BF: np.ndarray  # (N, F, 3) m/s^2, their accelerations in B
     f_B: np.ndarray  # (N, F, 3) N, the planned fingertip forces in B
     force_scale: np.ndarray  # (N, F) 1 holding, 0 moving, ramped over ramp_time around lift-off and landing
+    lifting: np.ndarray  # (N, F) bool: in the lift-off hold of a swing (swing_timing)
+    unload_force: np.ndarray  # (N, F) N, in the lift-off hold the plan's force at lift-off, inf elsewhere
+    carry: np.ndarray  # (N, F) the share of its lift-off offset a swinging finger's target keeps (swing_timing)
 
     def index(self, t: float) -> int:
         return min(int(round(t / self.period)), len(self.x) - 1)
@@ -170,8 +256,13 @@ def space_schedule(
     duration: float,
     ramp_time: float,
     contact_distance: float,
+    half,
+    swing_lift: float,
 ) -> SpaceSchedule:
-    """The SpaceSchedule of `reference` on the control grid 0, period, ... <= duration."""
+    """The SpaceSchedule of `reference` on the control grid 0, period, ... <= duration, for a cube of half-sizes
+    `half` (3,) m: each finger's swings as swing_timing, lifted to at least swing_lift sin(pi phase) m off the
+    cube (SwingLift: the path between the plan's knots may cut through it, 5 mm into an edge on seed-0 goal 1's
+    first lift-off)."""
     t = reference.t
     times = np.arange(int(np.floor(duration / period + 1e-9)) + 1) * period
     motion = reference.motion_at(times)
@@ -180,12 +271,23 @@ def space_schedule(
     p_BF_knots = np.einsum("kji,kfj->kfi", R_knots, reference.p_W_tip - p_knots)
     f_B_knots = np.einsum("kji,kfj->kfi", R_knots, reference.f_W)
     wrench_knots = wrenches_W(reference.p_W_C - p_knots, reference.f_W).sum(axis=1)  # (K, 6)
-    p_BF = _linear(t, p_BF_knots, times)
-    v_BF = np.gradient(p_BF, times, axis=0) if len(times) > 1 else np.zeros_like(p_BF)
     touching = reference.touching(tip_radius, contact_distance)
-    scale = np.column_stack(
-        [swing_profile(times, swing_intervals(t, touching[:, i]), ramp_time)[0] for i in range(reference.num_fingers)]
+    F = reference.num_fingers
+    lift = SwingLift(tuple(float(h) for h in half), tip_radius, swing_lift)
+    swings = [swing_timing(times, t, touching[:, i], p_BF_knots[:, i], ramp_time, lift) for i in range(F)]
+    scale, lifting, carry = (
+        np.column_stack([getattr(w, name) for w in swings]) for name in ("scale", "lifting", "carry")
     )
+    p_BF = np.stack([w.p_B for w in swings], axis=1)
+    plan_force = np.linalg.norm(reference.f_W, axis=-1)  # (K, F)
+    unload = np.column_stack(
+        [
+            np.where(w.lift_off_knot >= 0, plan_force[np.maximum(w.lift_off_knot, 0), i], np.inf)
+            for i, w in enumerate(swings)
+        ]
+    )
+    v_BF = np.gradient(p_BF, times, axis=0) if len(times) > 1 else np.zeros_like(p_BF)
+    a_BF = np.gradient(v_BF, times, axis=0) if len(times) > 1 else np.zeros_like(p_BF)
     return SpaceSchedule(
         period=period,
         x=motion["x"],
@@ -194,8 +296,12 @@ def space_schedule(
         wrench=_linear(t, wrench_knots, times),
         p_BF=p_BF,
         v_BF=v_BF,
+        a_BF=a_BF,
         f_B=_linear(t, f_B_knots, times),
         force_scale=scale,
+        lifting=lifting,
+        unload_force=unload,
+        carry=carry,
     )
 
 
@@ -283,16 +389,23 @@ class SpaceGraspController(LeafSystem):
         self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * nq)
         self.plan_port = declare_plan_input(self)
         state = self.DeclareDiscreteState(B.shape[1])
+        self._offset_state = self.DeclareDiscreteState(3 * self._num_fingers)  # swing_offsets, m in B
         self.DeclarePeriodicDiscreteUpdateEvent(1.0 / gains.rate_hz, 0.0, self.UpdateActuation)
         self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
 
     def UpdateActuation(self, context, discrete_state):
         schedule = self.plan_port.Eval(context).schedule
-        u = self.compute_actuation(
-            schedule, context.get_time(), self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
+        offsets = context.get_discrete_state(self._offset_state).get_value().reshape(-1, 3)
+        u, offsets = self.compute_actuation(
+            schedule,
+            context.get_time(),
+            self.box_state_port.Eval(context),
+            self.hand_state_port.Eval(context),
+            offsets,
         )
-        discrete_state.set_value(u)
+        discrete_state.get_mutable_vector(0).set_value(u)
+        discrete_state.get_mutable_vector(self._offset_state).set_value(offsets.ravel())
         return EventStatus.Succeeded()
 
     def _own_joints(self, J) -> np.ndarray:
@@ -329,6 +442,32 @@ class SpaceGraspController(LeafSystem):
         )
         return self._own_joints(J[..., self._hand_v])
 
+    def tracking_torques(self, q, qdot, J_WF, a_target, error, rate_error) -> np.ndarray:
+        """(F, n) N m that move each fingertip at a_target (F, 3) m/s^2 plus a critically damped correction of
+        its position and rate errors (F, 3) at gains.grasp.swing_bandwidth, through its finger's own inertia: M J^+
+        (a - Jdot qdot) + C qdot, J^+ damped least squares (near a straight finger the inverse is unbounded). The
+        controller's context holds q; qdot is set here."""
+        w = self.gains.grasp.swing_bandwidth
+        plant, context = self._plant, self._context
+        plant.SetVelocities(context, self._hand, qdot)
+        F, n = self._num_fingers, self._joints_per_finger
+        blocks = np.arange(F * n).reshape(F, n)
+        M = plant.CalcMassMatrix(context)[np.ix_(self._hand_v, self._hand_v)]
+        M = np.array([M[np.ix_(b, b)] for b in blocks])  # (F, n, n): the fingers are separate chains
+        coriolis = plant.CalcBiasTerm(context)[self._hand_v].reshape(F, n)
+        world = plant.world_frame()
+        bias = np.array(
+            [
+                plant.CalcBiasTranslationalAcceleration(context, JacobianWrtVariable.kV, f, np.zeros(3), world, world)
+                for f in self._tips
+            ]
+        )[..., 0]
+        plant.SetVelocities(context, self._hand, np.zeros_like(qdot))
+        a = a_target + w**2 * error + 2.0 * w * rate_error - bias
+        JJt = J_WF @ np.swapaxes(J_WF, 1, 2) + SINGULAR_DAMPING**2 * np.eye(3)
+        qdd = np.einsum("fcj,fc->fj", J_WF, np.linalg.solve(JJt, a[..., None])[..., 0])
+        return np.einsum("fij,fj->fi", M, qdd) + coriolis
+
     def gravity_torques(self) -> np.ndarray:
         """(F, n) N m, the torques that hold the links up at the controller's context's joints."""
         tau = -self._plant.CalcGravityGeneralizedForces(self._context)[self._hand_v]
@@ -344,8 +483,11 @@ class SpaceGraspController(LeafSystem):
         angular = R @ self._I_B @ R.T @ (g.object_kp * e_R + g.object_kd * (s.w[n] - w))
         return s.wrench[n] + np.concatenate([linear, angular])
 
-    def compute_actuation(self, s: SpaceSchedule, t: float, box_state, hand_state) -> np.ndarray:
-        """The actuation at time t following the schedule `s`, for the measured cube and hand states."""
+    def compute_actuation(self, s: SpaceSchedule, t: float, box_state, hand_state, offsets) -> tuple:
+        """(the actuation, the next swing offsets (F, 3) m in B) at time t following the schedule `s`, for the
+        measured cube and hand states and the swing offsets: each finger's drift off its planned point along the
+        face at the end of its lift-off hold, which its target carries on its swing (s.carry), so that it moves from
+        where it lifted off rather than jumping back along the face (12 mm on seed-0 goal 1's first swing)."""
         g = self.gains.grasp
         n = s.index(t)
         nq = len(hand_state) // 2
@@ -354,16 +496,25 @@ class SpaceGraspController(LeafSystem):
         R = quaternion_matrices(quat)
         p_WF, J_WF, poses = self.fingertips(q)
         v_WF = np.einsum("fcj,fj->fc", J_WF, qdot.reshape(self._num_fingers, -1))
-        r_BF = s.p_BF[n] @ R.T  # the targets, from the measured cube's centre
+        r_BF = (s.p_BF[n] + s.carry[n][:, None] * offsets) @ R.T  # the targets, from the measured cube's centre
         p_target = p + r_BF
         v_target = v + np.cross(w, r_BF) + s.v_BF[n] @ R.T
         scale = s.force_scale[n]
-        # A holding fingertip is force-controlled: its spring fades with its force budget (as in the plane, where a
-        # spring anchored to the cube fought the friction force as the sphere rolled); the moving one follows its path.
-        spring = g.tip_kp * (1.0 - scale)[:, None] * (p_target - p_WF) + g.tip_kd * (v_target - v_WF)
-        rest = self.gravity_torques() + np.einsum("fcj,fc->fj", J_WF, spring)
         # The measured contacts: on the cube's face nearest each fingertip, tip_radius from its centre.
         n_W = box_face_normals(self._half, (p_WF - p) @ R) @ R.T
+        # A holding fingertip is force-controlled: its spring fades with its force budget (as in the plane, where a
+        # spring anchored to the cube fought the friction force as the sphere rolled); the moving one follows its path.
+        # A sphere that held rolls off its planned point (12 mm over 3 s on seed-0 goal 1): while it unloads, its
+        # spring lifts it off the face where it is, for pulled along the face it would drag the cube by friction.
+        error = p_target - p_WF
+        along_n = np.sum(error * n_W, axis=1, keepdims=True) * n_W
+        lifting = s.lifting[n][:, None]
+        offsets = np.where(lifting, offsets - (error - along_n) @ R, offsets)  # drift along the face, in B
+        error = np.where(lifting, along_n, error)
+        spring = g.tip_kp * (1.0 - scale)[:, None] * error + g.tip_kd * (v_target - v_WF)
+        a_target = s.a_BF[n] @ R.T
+        rest = self.gravity_torques() + np.einsum("fcj,fc->fj", J_WF, spring)
+        rest += (1.0 - scale)[:, None] * self.tracking_torques(q, qdot, J_WF, a_target, error, v_target - v_WF)
         r_W = p_WF - self._tip_radius * n_W - p
         t1, t2 = tangent_basis(n_W)
         D = np.stack([-n_W, t1, t2], axis=-1)  # (F, 3, 3): each force component's direction
@@ -374,9 +525,9 @@ class SpaceGraspController(LeafSystem):
             self.desired_wrench(s, n, box_state),
             lambda_plan,
             scale * g.min_normal_force,
-            scale * g.max_normal_force,
+            scale * np.minimum(g.max_normal_force, np.maximum(s.unload_force[n], g.min_normal_force)),
             contact_torque_rows(J_WC, D, rest, self._tau_max),
         )
         f_W = np.einsum("fck,fk->fc", D, lam)
         tau = rest + np.einsum("fcj,fc->fj", J_WC, f_W)
-        return self._u_from_tau @ tau.ravel()
+        return self._u_from_tau @ tau.ravel(), offsets

@@ -11,6 +11,7 @@ drop (the cube's centre config.sim.drop_distance off the plan's, the plane's rul
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -31,6 +32,9 @@ from trajectotree.geometry import quaternion_matrices, rotation_angles
 from trajectotree.scene.spatial import SpaceScene, add_space_object
 
 SPACE_EXECUTORS = (Executor.GRASP, Executor.NONE)  # the executors a plan in space has so far
+# rad: the field's two success criteria for a reorientation in space, a run without a drop that ends within 15 deg
+# or within 0.4 rad (22.9 deg) of its goal (sim.json within_15deg, within_0p4rad)
+SUCCESS_ANGLES = (("within_15deg", math.radians(15.0)), ("within_0p4rad", 0.4))
 
 
 def space_plan_in_effect(reference: SpaceReference, config: Config, scene: SpaceScene) -> PlanInEffect:
@@ -44,6 +48,8 @@ def space_plan_in_effect(reference: SpaceReference, config: Config, scene: Space
         duration=reference.duration + config.sim.settle_time,
         ramp_time=gains.grasp.ramp_time,
         contact_distance=gains.grasp.contact_distance,
+        half=scene.object.half,
+        swing_lift=gains.grasp.swing_lift,
     )
     return PlanInEffect(reference, schedule, config.scene.mu)
 
@@ -140,13 +146,18 @@ class SpaceSimResult:
     ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
 
     def to_json(self) -> dict:
+        """sim.json: the drop, the errors at the end (against the plan's end, its goal where it succeeded) and
+        the largest on the way, and whether the run meets each of SUCCESS_ANGLES (a dropped run meets neither)."""
+        final = float(self.orientation_error_rad[-1])
         return {
             "kind": "space",
             "executor": self.executor,
             "dropped": self.dropped,
             "drop_time_s": self.drop_time_s,
             "duration_s": float(self.t[-1]),
-            "final_orientation_error_rad": float(self.orientation_error_rad[-1]),
+            "final_orientation_error_rad": final,
+            "final_orientation_error_deg": float(np.degrees(final)),
+            **{name: not self.dropped and final <= angle for name, angle in SUCCESS_ANGLES},
             "final_position_error_m": float(self.position_error_m[-1]),
             "max_orientation_error_rad": float(self.orientation_error_rad.max()),
             "max_position_error_m": float(self.position_error_m.max()),
