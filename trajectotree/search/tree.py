@@ -837,8 +837,8 @@ class _SpaceSearch:
     # -- GetNeighbors ---------------------------------------------------------------------------
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
         """The children of `node`, best first: no switch, then each free finger's moves (its stance's push
-        capacity, larger first), each finger's new contacts freeing more fingers (freedom), then facing it
-        more squarely, first."""
+        capacity, larger first), each finger's new contacts on faces turned to its base before those turned
+        away, then freeing more fingers (freedom), then facing it more squarely, first."""
         depth = node.depth + 1
         held = {i: self.finger_reach(depth, i, c, node.q[i]) for i, c in enumerate(node.contacts)}
         stuck = [i for i, r in held.items() if not r.reachable]
@@ -868,14 +868,16 @@ class _SpaceSearch:
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]]
             facing, moves = self.facing(depth, finger), []
-            for c in np.flatnonzero(facing > 0.0):  # a face turned away from the finger: its links meet the box
+            for c in range(len(self.p_BC)):
                 if c == node.contacts[finger]:
                     continue
                 if np.min(np.linalg.norm(others - self.p_BF[c], axis=1)) < 2 * self.scene.tip_radius:
                     continue  # the fingertip spheres would overlap
                 contacts = list(node.contacts)
                 contacts[finger] = int(c)
-                moves.append((-self.freedom(contacts), -facing[c], tuple(contacts)))
+                # a face turned away from the finger's base is no dead end: the bottom face and faces tilted
+                # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
+                moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
                 out.append(_SpaceChild(node, contacts, finger, q_held, torque, push))
         return out
