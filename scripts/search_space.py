@@ -5,6 +5,7 @@ re-checks a plan's nodes: closure, holding within the motors, Drake's signed dis
 
     python scripts/search_space.py                # 30 goals, seed 0
     python scripts/search_space.py --goals 5 --seed 1
+    python scripts/search_space.py --axis-aligned   # the cube's 23 rotations but the identity
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import argparse
 import time
 
 import numpy as np
+from bench_space import axis_aligned_goals
 from scipy.spatial.transform import Rotation
 
 from trajectotree.config import Config, mu_plan
@@ -25,11 +27,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--goals", type=int, default=30)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--axis-aligned", action="store_true", help="the 23 axis-aligned orientations instead")
     args = parser.parse_args()
     config = Config()
     mu = mu_plan(config.scene, config.search)
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
-    goals = Rotation.random(args.goals, random_state=args.seed).as_quat(scalar_first=True)
+    if args.axis_aligned:
+        goals = axis_aligned_goals()
+    else:
+        goals = Rotation.random(args.goals, random_state=args.seed).as_quat(scalar_first=True)
     times, planned = [], 0
     for k, goal in enumerate(goals):
         t0 = time.perf_counter()

@@ -697,7 +697,8 @@ class _Grid:
 # rad, the largest rotation between two nodes. One finger switches per node, so the segments bound the
 # switches: of the 30 seed-0 goals of scripts/search_space.py, 30 deg planned 23 (turns over 120 deg need
 # more switches than 4-6 segments give), 20 deg 28 (docs/measurements.md), and 15 deg, on the 7 that 30 deg
-# missed, planned 5 as 20 deg did, in more time per goal (each node costs reach and stance checks). A held
+# missed, planned 5 as 20 deg did, in more time per goal (each node costs reach and stance checks); measured
+# before every face was a move's candidate, with which 20 deg plans all 30 and the 23 axis-aligned goals. A held
 # contact (at most the 6.5 cm cube's half-diagonal, 5.6 cm, from the centre) moves at most 2 cm between nodes,
 # where reach and clearance are checked; a 180 deg goal takes 9 segments.
 SPACE_MAX_SEGMENT_ROTATION = math.radians(20.0)
@@ -837,8 +838,8 @@ class _SpaceSearch:
     # -- GetNeighbors ---------------------------------------------------------------------------
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
         """The children of `node`, best first: no switch, then each free finger's moves (its stance's push
-        capacity, larger first), each finger's new contacts freeing more fingers (freedom), then facing it
-        more squarely, first."""
+        capacity, larger first), each finger's new contacts on faces turned to its base before those turned
+        away, then freeing more fingers (freedom), then facing it more squarely, first."""
         depth = node.depth + 1
         held = {i: self.finger_reach(depth, i, c, node.q[i]) for i, c in enumerate(node.contacts)}
         stuck = [i for i, r in held.items() if not r.reachable]
@@ -868,14 +869,16 @@ class _SpaceSearch:
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]]
             facing, moves = self.facing(depth, finger), []
-            for c in np.flatnonzero(facing > 0.0):  # a face turned away from the finger: its links meet the box
+            for c in range(len(self.p_BC)):
                 if c == node.contacts[finger]:
                     continue
                 if np.min(np.linalg.norm(others - self.p_BF[c], axis=1)) < 2 * self.scene.tip_radius:
                     continue  # the fingertip spheres would overlap
                 contacts = list(node.contacts)
                 contacts[finger] = int(c)
-                moves.append((-self.freedom(contacts), -facing[c], tuple(contacts)))
+                # a face turned away from the finger's base is no dead end: the bottom face and faces tilted
+                # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
+                moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
                 out.append(_SpaceChild(node, contacts, finger, q_held, torque, push))
         return out
