@@ -11,6 +11,7 @@ workers), which other processes on a shared machine disturb less than the wall t
     python scripts/bench_space.py --axis-aligned
     python scripts/bench_space.py --workers 1    # the segments one after another in this process
     python scripts/bench_space.py --goals 3 --cito 3   # and general CITO (cito, cito-warm) on the first 3 goals
+    python scripts/bench_space.py --goals 3 --cito 3 --cito-methods cito   # cold CITO only
 
 With `--cito N` the first N goals are also planned by general CITO in space (planning.spatial.plan_space_cito: cold
 from the search's best initial grasp, and warm from the TrajectoTree plan just made, whose time its total includes),
@@ -47,6 +48,13 @@ def main() -> None:
     parser.add_argument("--axis-aligned", action="store_true", help="the 23 axis-aligned orientations instead")
     parser.add_argument("--workers", type=int, default=None, help="segment workers (default: one per core)")
     parser.add_argument("--cito", type=int, default=0, metavar="N", help="general CITO too on the first N goals")
+    parser.add_argument(
+        "--cito-methods",
+        nargs="+",
+        default=["cito", "cito-warm"],
+        choices=["cito", "cito-warm"],
+        help="which of general CITO's methods --cito runs (default: both)",
+    )
     args = parser.parse_args()
     config = Config()
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
@@ -56,7 +64,7 @@ def main() -> None:
         goals = Rotation.random(args.goals, random_state=args.seed).as_quat(scalar_first=True)
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores", flush=True)
     times, searched, checked, planned, cpu = [], 0, 0, 0, []
-    baselines = {"cito": [], "cito-warm": []}  # per method, (time s, planned) of the goals CITO ran on
+    baselines = {m: [] for m in args.cito_methods}  # per method, (time s, planned) of the goals CITO ran on
     for k in range(args.first, len(goals)):
         goal = goals[k]
         t0 = time.perf_counter()
