@@ -41,7 +41,7 @@ from trajectotree.results import (
     SimResult,
     Trajectory,
 )
-from trajectotree.start import StartState
+from trajectotree.start import SpaceStartState, StartState
 
 SIM_JSON = "sim.json"
 SIM_NPZ = "sim.npz"
@@ -475,9 +475,9 @@ def save_start(start: StartState, path: str | Path) -> None:
     write_json_atomic(path, start.to_json())
 
 
-def load_start(path: str | Path, name: str = "--start") -> StartState:
-    """A start state from its JSON file; ConfigError naming the file (after `name`, e.g. the option
-    that gave it) when it cannot be read as one."""
+def load_start(path: str | Path, name: str = "--start", *, space: bool = False) -> StartState | SpaceStartState:
+    """A start state from its JSON file (`space`: a hand in space's, SpaceStartState); ConfigError naming the
+    file (after `name`, e.g. the option that gave it) when it cannot be read as one."""
     path = Path(path)
     try:
         data = json.loads(path.read_bytes().decode("utf-8"))
@@ -487,7 +487,8 @@ def load_start(path: str | Path, name: str = "--start") -> StartState:
         raise ConfigError(f"{name} {str(path)!r} is a folder; give a start.json file") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ConfigError(f"{name} {str(path)!r} is not a JSON start state ({e})") from None
-    return StartState.from_json(data, where=f"{name} {str(path)!r}")
+    kind = SpaceStartState if space else StartState
+    return kind.from_json(data, where=f"{name} {str(path)!r}")
 
 
 def cannot_create_in(folder: Path) -> str | None:

@@ -180,3 +180,76 @@ def _json_numbers(where: str, key: str, values) -> tuple:
         if not _is_number(v):
             raise ConfigError(f"{where}: {key}[{i}] = {json.dumps(v, default=repr)} must be a number")
     return tuple(float(v) for v in values)
+
+
+# -- in space --------------------------------------------------------------------------------------
+MIN_QUATERNION_NORM = 1e-6  # an orientation quaternion shorter than this names no rotation (rounding decides it)
+
+
+@dataclass(frozen=True)
+class SpaceStartState:
+    """A measured state of a hand in space to plan from (start.json with a 7-entry object_pose): the cube at
+    rest in a grasp of every finger. The quaternion is normalized; planning.start checks the rest."""
+
+    object_pose: tuple[float, ...]  # (7,) [qw, qx, qy, qz, px, py, pz] in W (m), Drake's floating-body positions
+    q: tuple[float, ...]  # (J,) rad, the hand's joint angles, finger-major
+    object_velocity: tuple[float, ...] = (0.0,) * 6  # (6,) [w_W (rad/s), v_W (m/s)], as plan.npz's v
+    # (F, 3) m, each finger's contact point in the cube's frame B; None: derived from the fingertips
+    contacts: tuple[tuple[float, float, float], ...] | None = None
+
+    def __post_init__(self):
+        pose = _vector("start.object_pose", self.object_pose, 7)
+        norm = math.sqrt(sum(v * v for v in pose[:4]))
+        if norm < MIN_QUATERNION_NORM:
+            raise ConfigError(
+                f"start.object_pose[0:4] = {list(pose[:4])} has norm {norm:g}; valid: a quaternion qw qx qy qz "
+                f"of norm at least {MIN_QUATERNION_NORM:g} (it is normalized)"
+            )
+        object.__setattr__(self, "object_pose", tuple(v / norm for v in pose[:4]) + pose[4:])
+        object.__setattr__(self, "q", _vector("start.q", self.q))
+        object.__setattr__(self, "object_velocity", _vector("start.object_velocity", self.object_velocity, 6))
+        if self.contacts is not None:  # one per finger: planning.start checks the count against the hand
+            if len(self.contacts) == 0:
+                raise ConfigError("start.contacts = [] must have one [x, y, z] (m, in the cube's frame) per finger")
+            rows = tuple(_vector(f"start.contacts[{i}]", c, 3) for i, c in enumerate(self.contacts))
+            object.__setattr__(self, "contacts", rows)
+
+    def to_json(self) -> dict:
+        return {
+            "object_pose": [float(v) for v in self.object_pose],
+            "object_velocity": [float(v) for v in self.object_velocity],
+            "q": [float(v) for v in self.q],
+            "contacts": None if self.contacts is None else [[float(v) for v in c] for c in self.contacts],
+        }
+
+    @staticmethod
+    def from_json(data, where: str = "start.json") -> SpaceStartState:
+        if not isinstance(data, dict):
+            raise ConfigError(
+                f"{where}: a start state in space is a JSON object with object_pose [qw, qx, qy, qz, px, py, pz], "
+                f"q (and optionally object_velocity, contacts); got {type(data).__name__}"
+            )
+        unknown = set(data) - {"object_pose", "object_velocity", "q", "contacts"}
+        if unknown:
+            raise ConfigError(
+                f"{where}: unknown key(s) {sorted(unknown)}; valid for a hand in space: object_pose, "
+                "object_velocity, q, contacts"
+            )
+        for key in ("object_pose", "q"):
+            if key not in data:
+                raise ConfigError(f"{where}: missing {key!r}")
+        velocity, contacts = data.get("object_velocity"), data.get("contacts")
+        if contacts is not None and not isinstance(contacts, list):
+            raise ConfigError(f"{where}: contacts = {contacts!r} must be a list of [x, y, z] (m), one per finger")
+        fields = dict(
+            object_pose=_json_numbers(where, "object_pose", data["object_pose"]),
+            q=_json_numbers(where, "q", data["q"]),
+            object_velocity=(0.0,) * 6 if velocity is None else _json_numbers(where, "object_velocity", velocity),
+            contacts=None
+            if contacts is None
+            else tuple(_json_numbers(where, f"contacts[{i}]", c) for i, c in enumerate(contacts)),
+        )
+        try:
+            return SpaceStartState(**fields)
+        except ConfigError as e:  # a size, a NaN or a zero quaternion: named with the file it came from
+            raise ConfigError(f"{where}: {e}") from None

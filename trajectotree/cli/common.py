@@ -59,8 +59,9 @@ SIZE_RANGE = interval(0.0, MAX_OBJECT_SIZE, low_open=True)  # m, of a side, a ra
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")  # what matplotlib writes here and browsers show
 
 
-def add_scene_options(group, config_help: str = "YAML file with any Config fields") -> None:
-    """--config and the scene options on top of it (scene_overrides reads them)."""
+def add_scene_options(group, config_help: str = "YAML file with any Config fields", *, space: bool = False) -> None:
+    """--config and the scene options on top of it (scene_overrides reads them); with `space`, --box-size takes
+    W H for a planar hand or X Y Z for a hand in space (scene_overrides and cli.space_options check the count)."""
     group.add_argument("--config", metavar="FILE.yaml", help=config_help)
     group.add_argument(
         "--config-text",
@@ -68,13 +69,23 @@ def add_scene_options(group, config_help: str = "YAML file with any Config field
         help="YAML with any Config fields, applied after --config's file, e.g. "
         "'{controller: {grasp: {tip_kp: 80}}}' (a field it does not name keeps its value)",
     )
-    group.add_argument(
-        "--box-size",
-        nargs=2,
-        type=float,
-        metavar=("W", "H"),
-        help=f"the object is a box of this width and height, m, each in {SIZE_RANGE}",
-    )
+    if space:
+        group.add_argument(
+            "--box-size",
+            nargs="+",
+            type=float,
+            metavar="SIZE",
+            help=f"the object is a box of this width and height W H (a planar hand), or X Y Z (a hand in space), m, "
+            f"each in {SIZE_RANGE}",
+        )
+    else:
+        group.add_argument(
+            "--box-size",
+            nargs=2,
+            type=float,
+            metavar=("W", "H"),
+            help=f"the object is a box of this width and height, m, each in {SIZE_RANGE}",
+        )
     group.add_argument(
         "--polygon",
         metavar='"X,Y X,Y ..."',
@@ -154,7 +165,7 @@ def scene_overrides(args: argparse.Namespace) -> dict:
     except ConfigError as e:
         raise in_option_terms(e, args) from None
     if getattr(args, "box_size", None) is not None:
-        scene["box_width"], scene["box_height"] = args.box_size
+        scene["box_width"], scene["box_height"] = planar_box_size(args)
         scene["object"] = ObjectConfig()
     if getattr(args, "mass", None) is not None:
         scene["box_mass"] = args.mass
@@ -163,6 +174,19 @@ def scene_overrides(args: argparse.Namespace) -> dict:
     if getattr(args, "hand", None) is not None:
         scene["hand"] = args.hand
     return scene
+
+
+def planar_box_size(args: argparse.Namespace) -> tuple[float, float]:
+    """--box-size W H; ConfigError naming another count (a command that also takes a hand in space reads any)."""
+    if len(args.box_size) != 2:
+        raise ConfigError(
+            field="--box-size",
+            value=list(args.box_size),
+            problem=f"has {len(args.box_size)} values; the hand {args.hand or DEFAULT_HAND!r} is planar",
+            valid="W H (2, m) for a planar hand; X Y Z (3, m) for a hand in space (--hand fingerpro4)",
+            label="valid",
+        )
+    return args.box_size[0], args.box_size[1]
 
 
 def add_goal_options(parser: argparse.ArgumentParser) -> None:
@@ -198,9 +222,13 @@ def check_goal_workspace(scene, config: Config, goal, args: argparse.Namespace, 
     check_goal_position(scene, config.search, goal, name, start=start)
 
 
-def add_config_options(parser: argparse.ArgumentParser, *, segments: bool = True, formulation: bool = False) -> None:
+def add_config_options(
+    parser: argparse.ArgumentParser, *, segments: bool = True, formulation: bool = False, space: bool = False
+) -> None:
+    """The scene options (add_scene_options; `space`: the command takes a hand in space too), --segments and
+    --formulation."""
     group = parser.add_argument_group("scene and planner settings (override --config)")
-    add_scene_options(group)
+    add_scene_options(group, space=space)
     if segments:
         group.add_argument("--segments", type=int, metavar="S", help=SEGMENTS_HELP)
     if formulation:

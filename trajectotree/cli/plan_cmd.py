@@ -6,7 +6,6 @@ IPOPT's status (exit code 0)."""
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -50,7 +49,7 @@ def register(subparsers) -> None:
         metavar="METHOD",
         help=f"planner (default: trajectotree; valid: {', '.join(METHODS)})",
     )
-    add_config_options(p, formulation=True)
+    add_config_options(p, formulation=True, space=True)
     p.add_argument(
         "--start",
         metavar="FILE.json",
@@ -162,37 +161,26 @@ def remove_derived_files(out: Path) -> list[str]:
 def run_space(args) -> int:
     """`trajectotree plan` for a hand in space: the contact search and the keyframes programs in space, written as
     plan.npz and plan.json (trajectotree.planning.spatial)."""
-    from trajectotree.cli.common import in_option_terms, scene_overrides
-    from trajectotree.config import Config, ConfigError, load_config
+    from trajectotree.cli.space_options import build_args_scene, check_space_graspable, space_config
     from trajectotree.io import folder_lock
     from trajectotree.planning.segment_pool import check_workers
     from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
-    from trajectotree.scene.spatial import build_space_scene
 
     goal = space_goal(args)
     workers = check_workers(args.segment_workers, "--segment-workers")
     method = check_method(args.method)
-    config = load_config(args.config) if getattr(args, "config", None) else Config()
-    overrides = scene_overrides(args)
-    try:
-        scene_config = dataclasses.replace(config.scene, **overrides)
-    except ConfigError as e:
-        raise in_option_terms(e, args) from None
-    config = dataclasses.replace(config, scene=scene_config)
+    config = space_config(args)
     w, x, y, z = goal
     default = f"plan_space_{'' if method == 'trajectotree' else method + '_'}{w:+.3f}_{x:+.3f}_{y:+.3f}_{z:+.3f}"
     out = check_output_dir("--out", args.out or default, (PLAN_JSON, PLAN_NPZ))
     if args.html:  # it may go into --out, which save_space_plan creates before the playback is written
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
-    scene = build_space_scene(
-        args.hand,
-        mu=scene_config.mu,
-        gravity=scene_config.gravity,
-        mass=scene_config.box_mass if "box_mass" in overrides else None,
-    )
+    scene = build_args_scene(args, config)
+    check_space_graspable(scene, config, args)
+    start = space_start(args, scene, config, method)
     with folder_lock(out, "--out", "trajectotree plan"):
         if method == "trajectotree":
-            result = plan_space(scene, goal, config, workers)
+            result = plan_space(scene, goal, config, workers, start)
         else:
             result = plan_space_cito(scene, goal, config, method, workers)
         removed = remove_derived_files(out)
@@ -234,3 +222,25 @@ def run_space(args) -> int:
     if args.html:
         print(f"playback: {args.html}" if result.trajectory is not None else "playback: not written (no trajectory)")
     return 0
+
+
+def space_start(args, scene, config, method: str):
+    """--start's SpaceStartState, checked against the scene before any planning (planning.start.space_start_root:
+    StartRefused, exit 2, naming the finger or joint, the value and the limit), or None without --start."""
+    from trajectotree.config import ConfigError
+    from trajectotree.io import load_start
+    from trajectotree.planning.start import space_start_root
+
+    if args.start is None:
+        return None
+    if method != "trajectotree":
+        raise ConfigError(
+            field="--method",
+            value=method,
+            problem="plans a hand in space from the hand's initial grasp only",
+            valid="--method trajectotree with --start (its search roots at the start's grasp)",
+            label="valid",
+        )
+    start = load_start(args.start, space=True)
+    space_start_root(scene, start, config)
+    return start

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -20,7 +19,7 @@ def register(subparsers) -> None:
         help="build the hand and object plant, summarize it, tell whether the hand can grasp the object",
         description=__doc__,
     )
-    add_config_options(p, segments=False)
+    add_config_options(p, segments=False, space=True)
     p.add_argument(
         "--figure",
         metavar="FILE.png",
@@ -313,25 +312,11 @@ def space_summary(scene) -> dict:
 
 def run_space(args) -> int:
     """`trajectotree scene` for a hand in space: the plant's summary and each finger's reach."""
-    from trajectotree.cli.common import in_option_terms, scene_overrides
-    from trajectotree.config import Config, ConfigError, load_config
-    from trajectotree.scene.spatial import build_space_scene
+    from trajectotree.cli.space_options import build_args_scene, space_config
     from trajectotree.search.spatial_reach import CLEARANCE
 
-    if args.figure or args.rotations:
-        raise ConfigError("--figure and --rotations take a planar hand only so far")
-    config = load_config(args.config) if getattr(args, "config", None) else Config()
-    overrides = scene_overrides(args)
-    try:
-        scene_config = dataclasses.replace(config.scene, **overrides)
-    except ConfigError as e:
-        raise in_option_terms(e, args) from None
-    scene = build_space_scene(
-        args.hand,
-        mu=scene_config.mu,
-        gravity=scene_config.gravity,
-        mass=scene_config.box_mass if "box_mass" in overrides else None,
-    )
+    config = space_config(args)
+    scene = build_args_scene(args, config)
     summary = space_summary(scene)
     if args.json:
         print_json(summary)

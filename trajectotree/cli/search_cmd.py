@@ -34,7 +34,7 @@ def register(subparsers) -> None:
     )
     add_goal_options(p)
     add_space_goal_options(p)
-    add_config_options(p)
+    add_config_options(p, space=True)
     p.add_argument(
         "--figure",
         metavar="FILE.png",
@@ -135,27 +135,17 @@ def run(args) -> int:
 # -- a hand in space ------------------------------------------------------------------------------
 def run_space(args) -> int:
     """`trajectotree search` for a hand in space: Algorithm 1 in space toward the goal orientation."""
-    from trajectotree.cli.common import in_option_terms, scene_overrides
-    from trajectotree.config import Config, ConfigError, load_config, mu_plan
-    from trajectotree.scene.spatial import build_space_scene
+    from trajectotree.cli.space_options import build_args_scene, check_space_graspable, space_config
+    from trajectotree.config import mu_plan
     from trajectotree.search.tree import find_space_contact_plan
 
     goal = space_goal(args)
     if args.figure:
         check_output_file("--figure", args.figure, FIGURE_SUFFIXES)
-    config = load_config(args.config) if getattr(args, "config", None) else Config()
-    overrides = scene_overrides(args)
-    try:
-        scene_config = dataclasses.replace(config.scene, **overrides)
-    except ConfigError as e:
-        raise in_option_terms(e, args) from None
-    mu = mu_plan(scene_config, config.search)
-    scene = build_space_scene(
-        args.hand,
-        mu=scene_config.mu,
-        gravity=scene_config.gravity,
-        mass=scene_config.box_mass if "box_mass" in overrides else None,
-    )
+    config = space_config(args)
+    mu = mu_plan(config.scene, config.search)
+    scene = build_args_scene(args, config)
+    check_space_graspable(scene, config, args)
     plan = find_space_contact_plan(scene, goal, config.search, mu)
     if args.figure and plan.success:
         draw_plan(scene, plan, args.figure)

@@ -34,9 +34,11 @@ from trajectotree.contact_plan import SpaceContactPlan
 from trajectotree.geometry import quaternion_angle
 from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
 from trajectotree.planning.segment_pool import kept_pool, local_pool
+from trajectotree.planning.start import space_start_root
 from trajectotree.planning.workers import kill_pool
 from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
 from trajectotree.search.tree import find_space_contact_plan, space_initial_grasp
+from trajectotree.start import SpaceStartState
 
 GOAL_TOLERANCE = np.radians(2.0)  # rad, how close to its goal orientation a plan in space ends to count
 
@@ -59,6 +61,7 @@ class SpacePlanResult:
     solve_time_s: float  # s of wall time, the segments' programs (at once on the segment pool)
     total_time_s: float
     method: str = "trajectotree"  # or general CITO's "cito" and "cito-warm" (plan_space_cito)
+    start: dict | None = None  # the measured start it planned from (start.SpaceStartState.to_json), if any
 
     def to_json(self) -> dict:
         return {
@@ -76,7 +79,7 @@ class SpacePlanResult:
             "solve_time_s": self.solve_time_s,
             "total_time_s": self.total_time_s,
             "contact_plan": self.contact_plan.to_json(),
-        }
+        } | ({} if self.start is None else {"start": self.start})
 
 
 def object_model(scene) -> SpaceObjectModel:
@@ -135,17 +138,24 @@ def solve_space_segments(tasks: list[SpaceSegmentTask], workers: int | None) -> 
     return results
 
 
-def plan_space(scene, goal_quaternion, config: Config, workers: int | None = None) -> SpacePlanResult:
-    """Plans the cube of the hand in space `scene` (scene.spatial.SpaceScene) from its start pose to the unit
-    quaternion `goal_quaternion`: Algorithm 1 in space, then the segments' programs, at once on `workers`
-    local processes (None: one per core; 1: one after another in this process, solve_space_segments)."""
+def plan_space(
+    scene, goal_quaternion, config: Config, workers: int | None = None, start: SpaceStartState | None = None
+) -> SpacePlanResult:
+    """Plans the cube of the hand in space `scene` (scene.spatial.SpaceScene) from its start pose (or the measured
+    `start`, checked by planning.start.space_start_root: StartRefused before any planning) to the unit quaternion
+    `goal_quaternion`: Algorithm 1 in space, rooted at the start's grasp when given, then the segments' programs,
+    at once on `workers` local processes (None: one per core; 1: one after another in this process,
+    solve_space_segments). The first knot is the start's state, its joints refined onto the contacts
+    (cito.spatial.segment_spec: each fingertip moves at most planning.start.SPACE_TOUCH_DISTANCE)."""
     t0 = time.perf_counter()
     mu = mu_plan(config.scene, config.search)
     goal = tuple(float(v) for v in goal_quaternion)
-    contact_plan = find_space_contact_plan(scene, goal, config.search, mu)
+    root = None if start is None else space_start_root(scene, start, config)
+    contact_plan = find_space_contact_plan(scene, goal, config.search, mu, root)
     search_time = time.perf_counter() - t0
     model = object_model(scene)
     common = dict(goal=goal, contact_plan=contact_plan, object_model=model, mu_plan=mu, search_time_s=search_time)
+    common["start"] = None if start is None else start.to_json()
     if not contact_plan.success:
         return SpacePlanResult(
             success=False,

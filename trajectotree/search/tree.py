@@ -721,6 +721,17 @@ def space_object_path(
 
 
 @dataclass(frozen=True)
+class SpaceRoot:
+    """A measured grasp the search in space roots at (planning.start.space_start_root checks it): the cube's pose,
+    the joint angles and each finger's contact, in closure at mu_plan."""
+
+    pose: np.ndarray  # (7,) [qw, qx, qy, qz, px, py, pz] in W
+    q: np.ndarray  # (F, n) rad
+    p_BC: np.ndarray  # (F, 3) m, each finger's contact on its face, in B
+    faces: tuple[int, ...]  # each contact's face (geometry.BOX_FACE_NORMALS order)
+
+
+@dataclass(frozen=True)
 class _SpaceNode:
     depth: int
     contacts: tuple[int, ...]  # per finger, its contact's index in the grid (face * per face + cell)
@@ -746,14 +757,18 @@ class _SpaceChild:
 class _SpaceSearch:
     """One run of Algorithm 1 in space; holds the reach, closure and holding caches and the counters."""
 
-    def __init__(self, scene, goal_quaternion, config: SearchConfig, mu: float):
-        self.scene, self.config, self.mu = scene, config, mu
-        self.poses = space_object_path(goal_quaternion)
+    def __init__(self, scene, goal_quaternion, config: SearchConfig, mu: float, root: SpaceRoot | None = None):
+        self.scene, self.config, self.mu, self.root = scene, config, mu, root
+        self.poses = space_object_path(goal_quaternion, START_POSE if root is None else root.pose)
         p_BC, n_B = box_face_grid(scene.object.half, SPACE_GRID_PER_SIDE, scene.tip_radius)
         per_face = p_BC.shape[1]
         self.p_BC = p_BC.reshape(-1, 3)
         self.n_B = np.repeat(n_B, per_face, axis=0)
         self.face = np.repeat(np.arange(len(n_B)), per_face)
+        if root is not None:  # the measured contacts join the candidates, after the grid's
+            self.p_BC = np.vstack([self.p_BC, root.p_BC])
+            self.n_B = np.vstack([self.n_B, n_B[list(root.faces)]])
+            self.face = np.concatenate([self.face, root.faces])
         self.p_BF = self.p_BC + scene.tip_radius * self.n_B
         self.reach = SpatialReach(scene)
         self.closure = SpatialClosure(mu, half_size=float(max(scene.object.half)), num_edges=PYRAMID_EDGES)
@@ -893,7 +908,12 @@ class _SpaceSearch:
         """Initial grasps at the start pose, best first: each finger's SPACE_ROOT_CHOICES reachable contacts
         facing it most squarely, combined; distinct contacts in closure at mu_plan that free a finger at least,
         links clear, held by the four within the motors; those that free more fingers, then resist harder
-        pushes, first."""
+        pushes, first. With a measured `root`, that grasp alone, whatever it frees and holds (the tree decides)."""
+        if self.root is not None:
+            contacts = tuple(range(len(self.p_BC) - self.scene.num_fingers, len(self.p_BC)))
+            q = np.asarray(self.root.q, dtype=float)
+            torque, push = self.holding(0, contacts, tuple(range(self.scene.num_fingers)), q)
+            return [_SpaceNode(0, contacts, q, None, None, torque, push)]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -970,13 +990,15 @@ class _SpaceSearch:
         )
 
 
-def find_space_contact_plan(scene, goal_quaternion, config: SearchConfig, mu: float) -> SpaceContactPlan:
+def find_space_contact_plan(
+    scene, goal_quaternion, config: SearchConfig, mu: float, root: SpaceRoot | None = None
+) -> SpaceContactPlan:
     """Algorithm 1 in space: a contact sequence for the hand in space `scene` (scene.spatial.SpaceScene)
-    turning its box from the start pose to the unit quaternion `goal_quaternion` [w, x, y, z], at
-    friction mu (mu_plan), or why none was found."""
+    turning its box from the start pose (or the measured `root`'s pose and grasp) to the unit quaternion
+    `goal_quaternion` [w, x, y, z], at friction mu (mu_plan), or why none was found."""
     t0 = time.perf_counter()
     goal = tuple(float(v) for v in goal_quaternion)
-    search = _SpaceSearch(scene, goal, config, mu)
+    search = _SpaceSearch(scene, goal, config, mu, root)
     roots = search.roots()
     leaf, last, searched = None, None, 0
     for root in roots:
