@@ -85,8 +85,17 @@ def test_formulation_keyframes_is_what_space_plans_with_and_is_no_ignored_option
 def test_box_size_mass_and_mu_reach_the_scene_in_space(capsys):
     argv = ["scene", *SPACE, "--box-size", "0.08", "0.07", "0.06", "--mass", "0.2", "--mu", "0.8", "--json"]
     assert main(argv) == 0
-    o = json.loads(capsys.readouterr().out)["object"]
+    report = json.loads(capsys.readouterr().out)
+    o = report["object"]
     assert o["size_m"] == [0.08, 0.07, 0.06] and o["mass_kg"] == 0.2 and o["mu"] == 0.8
+    assert report["initial_grasps"]["count"] > 0
+
+
+def test_the_scene_command_reports_a_box_without_an_initial_grasp(capsys):
+    assert main(["scene", *SPACE, "--box-size", "0.02", "0.02", "0.02"]) == 0  # a report, not a plan: no refusal
+    assert "initial grasps at the grasp point" in capsys.readouterr().out.splitlines()[-1]
+    assert main(["scene", *SPACE, "--box-size", "0.02", "0.02", "0.02", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["initial_grasps"]["count"] == 0
 
 
 def test_config_text_reaches_a_hand_in_space(capsys):
@@ -98,6 +107,7 @@ def test_config_text_reaches_a_hand_in_space(capsys):
     "argv, needles",
     [
         ([*SPACE, "--box-size", "0.3", "0.3"], ("--box-size = [0.3, 0.3] has 2 values", "X Y Z (3, m) for a hand")),
+        ([*SPACE, "--box-size", "0.3"], ("--box-size = [0.3] has 1 value;",)),
         (["--box-size", "0.1", "0.1", "0.1"], ("--box-size = [0.1, 0.1, 0.1] has 3 values", "'planar_hand' is planar")),
         ([*SPACE, "--box-size", "0.1", "0", "0.1"], ("--box-size[1] = 0.0 is out of range; valid range: (0, 0.3]",)),
         ([*SPACE, "--box-size", "0.1", "nan", "0.1"], ("--box-size[1] = nan is not a finite number",)),

@@ -176,13 +176,17 @@ def scene_overrides(args: argparse.Namespace) -> dict:
     return scene
 
 
+def count_text(count: int) -> str:
+    return f"{count} value{'' if count == 1 else 's'}"
+
+
 def planar_box_size(args: argparse.Namespace) -> tuple[float, float]:
     """--box-size W H; ConfigError naming another count (a command that also takes a hand in space reads any)."""
     if len(args.box_size) != 2:
         raise ConfigError(
             field="--box-size",
             value=list(args.box_size),
-            problem=f"has {len(args.box_size)} values; the hand {args.hand or DEFAULT_HAND!r} is planar",
+            problem=f"has {count_text(len(args.box_size))}; the hand {args.hand or DEFAULT_HAND!r} is planar",
             valid="W H (2, m) for a planar hand; X Y Z (3, m) for a hand in space (--hand fingerpro4)",
             label="valid",
         )

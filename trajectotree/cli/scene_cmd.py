@@ -310,6 +310,18 @@ def space_summary(scene) -> dict:
     }
 
 
+def space_initial_grasps(scene, config) -> dict:
+    """How many initial grasps the search finds at the grasp point (search.tree.space_initial_grasp, the check
+    `search` and `plan` refuse a box by: cli.space_options.check_space_graspable), at mu_plan."""
+    from trajectotree.config import mu_plan
+    from trajectotree.scene.spatial import START_POSE
+    from trajectotree.search.tree import space_initial_grasp
+
+    mu = mu_plan(config.scene, config.search)
+    plan = space_initial_grasp(scene, START_POSE[:4], config.search, mu)
+    return {"count": plan.stats.initial_grasp_candidates, "mu_plan": mu}
+
+
 def run_space(args) -> int:
     """`trajectotree scene` for a hand in space: the plant's summary and each finger's reach."""
     from trajectotree.cli.space_options import build_args_scene, space_config
@@ -317,7 +329,7 @@ def run_space(args) -> int:
 
     config = space_config(args)
     scene = build_args_scene(args, config)
-    summary = space_summary(scene)
+    summary = space_summary(scene) | {"initial_grasps": space_initial_grasps(scene, config)}
     if args.json:
         print_json(summary)
         return 0
@@ -341,4 +353,9 @@ def run_space(args) -> int:
         print(f"  {i:6d}  " + "  ".join(f"{c:3d}" for c in row))
     per_face = ", ".join(f"{name} {k}" for name, k in zip(reach["faces"], reach["fingers_per_face"]))
     print(f"fingers reaching each face: {per_face}")
+    grasps = summary["initial_grasps"]
+    print(
+        f"initial grasps at the grasp point (the search's roots at mu_plan {grasps['mu_plan']:.3g}): "
+        + (str(grasps["count"]) if grasps["count"] else "NONE: `search` and `plan` refuse this box")
+    )
     return 0

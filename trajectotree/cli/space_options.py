@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-from trajectotree.cli.common import in_option_terms, layered_config
+from trajectotree.cli.common import count_text, in_option_terms, layered_config
 from trajectotree.config import MAX_OBJECT_SIZE, Config, ConfigError, check_range
 
 # The planar options each command takes that a hand in space has no use for (argparse dests): the object's
@@ -23,8 +23,8 @@ PLANAR_ONLY = {
 # What a hand in space plans with (cito.spatial: one program per segment); --formulation naming it is no ignored option.
 SPACE_FORMULATION = "keyframes"
 # m per side, the cubes fingerpro4 has an initial grasp of (check_space_graspable's check), measured by
-# scripts/space_box_sizes.py: every cube from 5 to 300 mm in 1 mm steps, 94 g, the default friction: 25-280 mm, one range
-# (the check took 0.24 s median, 2.5 s at most, on the loaded 2 cores).
+# scripts/space_box_sizes.py: every cube from 5 to 300 mm in 1 mm steps, 94 g, the default friction: one range,
+# 25-280 mm (the check took 0.24 s median, 2.5 s at most, on the loaded 2 cores).
 FINGERPRO4_CUBES_M = (0.025, 0.28)
 SPACE_SIZE_COUNT = 3  # --box-size X Y Z for a hand in space, W H (2) for a planar one
 
@@ -74,7 +74,7 @@ def box_size(args: argparse.Namespace) -> tuple[float, float, float] | None:
         raise ConfigError(
             field="--box-size",
             value=list(size),
-            problem=f"has {len(size)} values; the hand {args.hand!r} is in space",
+            problem=f"has {count_text(len(size))}; the hand {args.hand!r} is in space",
             valid="X Y Z (3, m) for a hand in space; W H (2, m) for a planar hand",
             label="valid",
         )
