@@ -159,37 +159,50 @@ def remove_derived_files(out: Path) -> list[str]:
 
 
 # -- a hand in space ------------------------------------------------------------------------------
+def space_config(args):
+    """(the Config of a plan in space: --config's, else the defaults, with the scene options on top; the scene
+    options given, scene_overrides); ConfigError in the options' terms."""
+    from trajectotree.cli.common import in_option_terms, scene_overrides
+    from trajectotree.config import Config, ConfigError, load_config
+
+    config = load_config(args.config) if getattr(args, "config", None) else Config()
+    overrides = scene_overrides(args)
+    try:
+        return dataclasses.replace(config, scene=dataclasses.replace(config.scene, **overrides)), overrides
+    except ConfigError as e:
+        raise in_option_terms(e, args) from None
+
+
+def space_scene(args, config, overrides: dict):
+    """The hand in space --hand names and its cube (its YAML's, the mass --mass's where given), `config`'s
+    friction and gravity."""
+    from trajectotree.scene.spatial import build_space_scene
+
+    return build_space_scene(
+        args.hand,
+        mu=config.scene.mu,
+        gravity=config.scene.gravity,
+        mass=config.scene.box_mass if "box_mass" in overrides else None,
+    )
+
+
 def run_space(args) -> int:
     """`trajectotree plan` for a hand in space: the contact search and the keyframes programs in space, written as
     plan.npz and plan.json (trajectotree.planning.spatial)."""
-    from trajectotree.cli.common import in_option_terms, scene_overrides
-    from trajectotree.config import Config, ConfigError, load_config
     from trajectotree.io import folder_lock
     from trajectotree.planning.segment_pool import check_workers
     from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
-    from trajectotree.scene.spatial import build_space_scene
 
     goal = space_goal(args)
     workers = check_workers(args.segment_workers, "--segment-workers")
     method = check_method(args.method)
-    config = load_config(args.config) if getattr(args, "config", None) else Config()
-    overrides = scene_overrides(args)
-    try:
-        scene_config = dataclasses.replace(config.scene, **overrides)
-    except ConfigError as e:
-        raise in_option_terms(e, args) from None
-    config = dataclasses.replace(config, scene=scene_config)
+    config, overrides = space_config(args)
     w, x, y, z = goal
     default = f"plan_space_{'' if method == 'trajectotree' else method + '_'}{w:+.3f}_{x:+.3f}_{y:+.3f}_{z:+.3f}"
     out = check_output_dir("--out", args.out or default, (PLAN_JSON, PLAN_NPZ))
     if args.html:  # it may go into --out, which save_space_plan creates before the playback is written
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
-    scene = build_space_scene(
-        args.hand,
-        mu=scene_config.mu,
-        gravity=scene_config.gravity,
-        mass=scene_config.box_mass if "box_mass" in overrides else None,
-    )
+    scene = space_scene(args, config, overrides)
     with folder_lock(out, "--out", "trajectotree plan"):
         if method == "trajectotree":
             result = plan_space(scene, goal, config, workers)

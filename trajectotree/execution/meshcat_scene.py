@@ -147,8 +147,11 @@ def add_space_visualizer(
 
 
 def set_space_view(meshcat: Meshcat) -> None:
-    """Meshcat's perspective camera at CAMERA_POSITION, looking at the grasp point (W's origin)."""
+    """Meshcat's perspective camera at CAMERA_POSITION, looking at the grasp point (W's origin), without Meshcat's
+    grid and axes: the grid's plane z = 0 runs through the cube, the axes from its centre."""
     meshcat.SetCameraPose(np.array(CAMERA_POSITION), np.zeros(3))
+    for path in ("/Grid", "/Axes"):
+        meshcat.SetProperty(path, "visible", False)
 
 
 def add_plan_ghost(meshcat: Meshcat, config: SceneConfig) -> None:
