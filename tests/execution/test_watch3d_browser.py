@@ -203,3 +203,20 @@ def test_the_fingertips_and_arrows_are_drawn_in_the_fingers_colours(page, demo):
     page.page.evaluate(
         "() => { viewer.scene_tree.find(['drake', 'visualizer', 'box']).object.visible = true; viewer.set_dirty(); }"
     )
+
+
+def test_a_live_meshcat_shows_the_run_in_space_and_changes_nothing_in_it(demo):
+    """simulate --meshcat's path (MeshcatVisualizer and the arrows in the Diagram, in real time): Meshcat holds the
+    hand, the cube, the plan's edges and each finger's arrow, and the run logs what the demo's run logged."""
+    from trajectotree.config import config_from_dict
+    from trajectotree.execution.meshcat_scene import start_meshcat
+    from trajectotree.execution.space_control import SpaceReference
+    from trajectotree.execution.space_run import simulate_space
+
+    config = config_from_dict(json.loads((demo.out / "plan.json").read_text())["config"])
+    meshcat = start_meshcat()
+    run = simulate_space(SpaceReference.from_arrays(demo.plan), config, demo.scene, meshcat=meshcat)
+    paths = ["/drake/visualizer/box", "/drake/visualizer/fingerpro4", "/plan/box"]
+    assert all(meshcat.HasPath(p) for p in paths + [f"/forces/finger{i}" for i in range(demo.scene.num_fingers)])
+    for name in run.ARRAYS:
+        np.testing.assert_array_equal(getattr(run, name), demo.sim[name], err_msg=name)
