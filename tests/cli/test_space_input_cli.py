@@ -30,6 +30,8 @@ SPACE_USED = {
     | {"figure", "json"},
     "plan": {"goal", "goal_pose", "goal_quat", "goal_rpy", "method", "config", "config_text", "box_size", "mass"}
     | {"mu", "hand", "start", "segment_workers", "out", "json", "html"},
+    "demo": {"goal", "goal_quat", "goal_rpy", "config", "config_text", "box_size", "mass", "mu", "hand", "out"}
+    | {"meshcat", "json"},
 }
 # A value for each planar-only option (the goal options are space_goal's: "is a planar goal")
 PLANAR_VALUES = {
@@ -70,7 +72,12 @@ def test_every_option_is_used_or_refused(command):
 def test_a_planar_option_on_a_hand_in_space_exits_2_naming_it(tmp_path, capsys, command, dest):
     option, out = "--" + dest.replace("_", "-"), tmp_path / "out"
     argv = [command, *SPACE, option, *PLANAR_VALUES[dest]]
-    argv += {"scene": [], "search": HALF_TURN_ABOUT_Z, "plan": [*HALF_TURN_ABOUT_Z, "--out", str(out)]}[command]
+    argv += {
+        "scene": [],
+        "search": HALF_TURN_ABOUT_Z,
+        "plan": [*HALF_TURN_ABOUT_Z, "--out", str(out)],
+        "demo": [*HALF_TURN_ABOUT_Z, "--out", str(out)],
+    }[command]
     _refused(capsys, argv, f"{option} = ", "is a planar hand's option; the hand 'fingerpro4' is in space")
     assert not out.exists() and not (tmp_path / "model.png").exists()
 
@@ -145,9 +152,9 @@ def test_a_box_too_heavy_to_hold_names_the_mass(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_demo_refuses_a_hand_in_space(tmp_path, capsys):
+def test_demo_refuses_a_box_the_hand_cannot_grasp(tmp_path, capsys):
     out = tmp_path / "demo"
-    _refused(capsys, ["demo", *SPACE, "--out", str(out)], "fingerpro4", "is a hand in space")
+    _refused(capsys, ["demo", *SPACE, "--box-size", "0.29", "0.29", "0.29", "--out", str(out)], "--box-size = ")
     assert not out.exists()
 
 

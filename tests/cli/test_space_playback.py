@@ -1,6 +1,6 @@
 """`trajectotree plan --hand fingerpro4 --html`: the planned trajectory in space recorded into a self-contained
-Meshcat page (execution.space_playback), its legend at the plan's force scale; a bad --html path exits 2 before the
-search, writing nothing."""
+Meshcat page (execution.playback.write_space_plan_html), its legend at the plan's force scale; a bad --html path
+exits 2 before the search, writing nothing."""
 
 import numpy as np
 import pytest

@@ -9,6 +9,10 @@ plan.json + plan.npz (the plan), sim.json + sim.npz (the run and its tracking er
 keyframes.png (the contact sequence), playback.html (Meshcat playback of the run, opens
 offline in any browser), forces.png (each finger's simulated vs planned force on the object)
 and summary.json (the numbers printed at the end).
+
+With a hand in space (--hand fingerpro4) it turns the cube a quarter turn about the horizontal x axis
+(--goal-rpy 1.5708 0 0, or the goal --goal-rpy or --goal-quat give), executes the plan open loop with
+the grasp controller in space and writes the same files, and run.gif (the run on 3D axes).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from trajectotree.cli.common import (
 )
 from trajectotree.cli.progress import ipopt_progress
 from trajectotree.cli.progress import wanted as progress_wanted
+from trajectotree.cli.space_goal import add_space_goal_options, refuse_space_goal_on_planar_hand, space_goal
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ
 from trajectotree.results import check_goal, outcome_text
 
@@ -34,9 +39,11 @@ KEYFRAMES = "keyframes.png"
 PLAYBACK = "playback.html"
 FORCES = "forces.png"
 SUMMARY = "summary.json"
+GIF = "run.gif"  # in space only: the plane's README GIF is made by scripts, not by the demo
 # Written only when planning gets that far: removed first, so a rerun into the same
 # folder never leaves an older run's files beside the new plan.
-DERIVED_FILES = (SIM_JSON, SIM_NPZ, KEYFRAMES, PLAYBACK, FORCES, SUMMARY)
+DERIVED_FILES = (SIM_JSON, SIM_NPZ, KEYFRAMES, PLAYBACK, FORCES, SUMMARY, GIF)
+SPACE_GOAL_RPY = (1.5708, 0.0, 0.0)  # rad, a hand in space's default goal: a quarter turn about the horizontal x
 
 
 def register(subparsers) -> None:
@@ -54,12 +61,12 @@ def register(subparsers) -> None:
     p.add_argument(
         "--goal",
         type=float,
-        default=math.pi / 2,
         metavar="RAD",
         help="goal orientation of the object, rad in W, any number within +-20 pi (default: pi/2)",
     )
+    add_space_goal_options(p)  # default for a hand in space: --goal-rpy 1.5708 0 0
     p.add_argument("--json", action="store_true", help="print summary.json instead of the text summary")
-    add_config_options(p, formulation=True)
+    add_config_options(p, formulation=True, space=True)
     p.set_defaults(run=run)
 
 
@@ -134,8 +141,12 @@ def print_summary(summary: dict, out: Path, noun: str) -> None:
 def run(args) -> int:
     from trajectotree.io import folder_lock
     from trajectotree.scene.plant import build_scene
+    from trajectotree.scene.spatial import is_space_hand
 
-    goal = check_goal(args.goal, "--goal")
+    if args.hand is not None and is_space_hand(args.hand):
+        return run_space(args)
+    refuse_space_goal_on_planar_hand(args)
+    goal = check_goal(math.pi / 2 if args.goal is None else args.goal, "--goal")
     config = config_from_args(args)
     out = check_output_dir("--out", args.out, (PLAN_JSON, PLAN_NPZ, *DERIVED_FILES))
     scene = build_scene(config.scene)
@@ -197,3 +208,139 @@ def demo_into(args, request, out: Path) -> int:
     if meshcat is not None and sys.stdin.isatty():
         input("Meshcat shows the recording; press Enter to exit. ")
     return 0
+
+
+# -- a hand in space ------------------------------------------------------------------------------
+def run_space(args) -> int:
+    """The demo with a hand in space: every input checked (the goal, the config, the executor, the folder)
+    before planning."""
+    from pydrake.math import RollPitchYaw
+
+    from trajectotree.cli.space_options import build_args_scene, check_space_graspable, space_config
+    from trajectotree.config import ConfigError
+    from trajectotree.config.executor import Executor
+    from trajectotree.execution.space_run import SPACE_EXECUTORS
+    from trajectotree.io import folder_lock
+
+    given = any(getattr(args, name) is not None for name in ("goal", "goal_quat", "goal_rpy"))
+    goal = space_goal(args) if given else RollPitchYaw(SPACE_GOAL_RPY).ToQuaternion().wxyz()
+    config = space_config(args)
+    if Executor(config.sim.controller) not in SPACE_EXECUTORS:
+        raise ConfigError(
+            field="sim.controller",
+            value=config.sim.controller,
+            problem="does not execute plans in space yet",
+            choices=tuple(e.value for e in SPACE_EXECUTORS),
+        )
+    out = check_output_dir("--out", args.out, (PLAN_JSON, PLAN_NPZ, *DERIVED_FILES))
+    scene = build_args_scene(args, config)
+    check_space_graspable(scene, config, args)
+    with folder_lock(out, "--out", "trajectotree demo"):  # no `plan` or `simulate` writes there meanwhile
+        return space_demo_into(args, scene, goal, config, out)
+
+
+def space_demo_into(args, scene, goal, config, out: Path) -> int:
+    """Plans the turn to `goal` (a unit quaternion) of the cube of `scene`, executes the plan and draws it, into
+    `out`, whose lock this command holds."""
+    from trajectotree.cli.search_cmd import draw_plan
+    from trajectotree.cli.space_simulate import save_space_sim, write_space_gif
+    from trajectotree.execution.meshcat_scene import start_meshcat
+    from trajectotree.execution.space_control import SpaceReference
+    from trajectotree.execution.space_run import simulate_space
+    from trajectotree.figures.run import figure_finger_forces, save_figure
+    from trajectotree.io import write_json_atomic
+    from trajectotree.planning.spatial import plan_space, save_space_plan
+
+    meshcat = start_meshcat() if args.meshcat else None
+    log = sys.stderr if args.json else sys.stdout
+    if meshcat is not None:
+        print(f"Meshcat: {meshcat.web_url()} (open it now; the run plays once the plan is ready)", file=log, flush=True)
+    print(f"planning a {quaternion_degrees(goal):.1f} deg turn of the cube with TrajectoTree ...", file=log, flush=True)
+    result = plan_space(scene, goal, config)
+    for name in DERIVED_FILES:  # the lock made `out` and removes it, still empty, if the plan is interrupted
+        (out / name).unlink(missing_ok=True)
+    save_space_plan(result, out, config)
+    files = [PLAN_JSON] + ([PLAN_NPZ] if result.trajectory is not None else [])
+    if result.contact_plan.success:
+        draw_plan(scene, result.contact_plan, str(out / KEYFRAMES))
+        files.append(KEYFRAMES)
+    sim = None
+    if result.trajectory is not None:
+        print("simulating the plan with the grasp controller in space ...", file=log, flush=True)
+        reference = SpaceReference.from_arrays(result.trajectory.arrays())
+        run = simulate_space(reference, config, scene, meshcat=meshcat, html_path=out / PLAYBACK)
+        sim = save_space_sim(run, out, result.success)
+        save_figure(figure_finger_forces(run, goal=list(result.goal), noun="cube"), out / FORCES)
+        write_space_gif(run, reference, scene, out / GIF)
+        files += [SIM_JSON, SIM_NPZ, PLAYBACK, FORCES, GIF]
+    summary = {"object": "cube", "plan": space_plan_summary(result), "simulation": sim, "files": files + [SUMMARY]}
+    write_json_atomic(out / SUMMARY, summary)
+    if args.json:
+        print_json(summary)
+    else:
+        print_space_summary(summary, out)
+    if meshcat is not None and sys.stdin.isatty():
+        input("Meshcat shows the recording; press Enter to exit. ")
+    return 0
+
+
+def quaternion_degrees(quaternion) -> float:
+    """deg, the angle of the rotation of a unit quaternion [w, x, y, z]."""
+    return math.degrees(2 * math.acos(min(abs(float(quaternion[0])), 1.0)))
+
+
+def space_plan_summary(result) -> dict:
+    """The numbers of a plan in space the demo prints and keeps in summary.json."""
+    check = result.physics_check
+    return {
+        "method": result.method,
+        "goal_quaternion": [float(v) for v in result.goal],
+        "success": result.success,
+        "status": result.status,
+        "search_time_s": result.search_time_s,
+        "solve_time_s": result.solve_time_s,
+        "total_time_s": result.total_time_s,
+        "final_error_rad": result.to_json()["final_error_rad"],
+        "physics_check_passed": None if check is None else bool(check.passed),
+        "switching_fingers": [n.switching_finger for n in result.contact_plan.nodes],
+        "segment_programs": len(result.segments),
+    }
+
+
+def print_space_summary(summary: dict, out: Path) -> None:
+    """The text summary of the demo in space, as the plane's (print_summary): each time wall-clock."""
+    from trajectotree.cli.common import reason_lines
+
+    p, s = summary["plan"], summary["simulation"]
+    w, x, y, z = p["goal_quaternion"]
+    switches = " ".join("-" if f is None else str(f) for f in p["switching_fingers"][1:])
+    print(
+        f"TrajectoTree demo in space: turn the cube by {quaternion_degrees(p['goal_quaternion']):.1f} deg "
+        f"(goal quaternion [{w:+.4f}, {x:+.4f}, {y:+.4f}, {z:+.4f}])"
+    )
+    print(f"  contact search  {p['search_time_s']:6.2f} s wall     switching fingers per segment: {switches or 'none'}")
+    status, details = reason_lines(p["status"])
+    print(
+        f"  CITO (IPOPT)    {p['solve_time_s']:6.2f} s wall     its {p['segment_programs']} segment programs; {status}"
+    )
+    for line in details:
+        print(f"      {line}")
+    check = {True: "physics check passed", False: "physics check FAILED", None: "no physics check"}
+    error = "" if p["final_error_rad"] is None else f", {math.degrees(p['final_error_rad']):.3f} deg from the goal"
+    print(
+        f"  total planning  {p['total_time_s']:6.2f} s wall     "
+        f"{'succeeded' if p['success'] else 'FAILED'}: {check[p['physics_check_passed']]}{error}"
+    )
+    if s is not None:
+        outcome = f"DROPPED at {s['drop_time_s']:.2f} s" if s["dropped"] else "held"
+        print(
+            f"  simulation      {s['sim_time_s']:6.2f} s wall     {s['duration_s']:.1f} s simulated, {outcome}; final "
+            f"orientation error {s['final_orientation_error_deg']:.2f} deg, position error "
+            f"{1e3 * s['final_position_error_m']:.2f} mm (largest on the way "
+            f"{math.degrees(s['max_orientation_error_rad']):.2f} deg, {1e3 * s['max_position_error_m']:.2f} mm)"
+        )
+    else:
+        print("  simulation      skipped: no trajectory to execute")
+    print(f"files in {out}/: " + ", ".join(summary["files"]))
+    if PLAYBACK in summary["files"]:
+        print(f"open {out / PLAYBACK} in a browser to watch the run (offline, any browser)")

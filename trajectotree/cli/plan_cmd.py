@@ -186,7 +186,7 @@ def run_space(args) -> int:
         removed = remove_derived_files(out)
         save_space_plan(result, out, config)
         if args.html and result.trajectory is not None:
-            from trajectotree.execution.space_playback import write_space_plan_html
+            from trajectotree.execution.playback import write_space_plan_html
 
             write_space_plan_html(
                 scene,

@@ -1,4 +1,4 @@
-"""The scene options of a hand in space on the command line (`scene`, `search` and `plan` with --hand
+"""The scene options of a hand in space on the command line (`scene`, `search`, `plan` and `demo` with --hand
 fingerpro4 or a description of kind: space): --box-size X Y Z (m), --mass and --mu reach the scene; every option
 only a planar hand uses is refused by name (exit 2), never ignored; and a box the hand has no initial grasp of
 is refused before any planning (check_space_graspable)."""
@@ -19,6 +19,7 @@ PLANAR_ONLY = {
     "scene": (*PLANAR_SHAPES, "figure", "rotations"),
     "search": (*PLANAR_SHAPES, "segments"),
     "plan": (*PLANAR_SHAPES, "segments", "formulation"),
+    "demo": (*PLANAR_SHAPES, "segments", "formulation"),
 }
 # What a hand in space plans with (cito.spatial: one program per segment); --formulation naming it is no ignored option.
 SPACE_FORMULATION = "keyframes"
@@ -62,6 +63,8 @@ def space_help(command: str) -> str:
         "search": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --figure, --json",
         "plan": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --method, --start, --segment-workers, "
         f"--formulation {SPACE_FORMULATION}, --out, --json, --html",
+        "demo": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --formulation {SPACE_FORMULATION}, --out, "
+        "--meshcat, --json",
     }[command]
 
 

@@ -1,8 +1,9 @@
 """`trajectotree simulate PLAN_DIR` of a plan in space (plan.json `kind: space`, from `trajectotree plan --hand
 fingerpro4`): the plan executed open loop by the grasp controller in space (trajectotree.execution.space_run),
 written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan) and sim.json (dropped, the
-final orientation error in rad and position error in m, the executor). What space does not have yet (the closed
-loop, the other world, the playback files) is refused before anything is read or written."""
+final orientation error in rad and position error in m, the executor); optionally watched as the plane's run is
+(--meshcat live, --html the self-contained playback, --gif, --forces the forces figure). What space does not have
+yet (the closed loop, the other world) is refused before anything is read or written."""
 
 from __future__ import annotations
 
@@ -25,10 +26,6 @@ PLAN_JSON, PLAN_NPZ = "plan.json", "plan.npz"
 FIT_TOL = 1e-4
 # The options of `simulate` that a plan in space does not take yet, by their argparse names.
 NOT_YET = {
-    "html": "--html",
-    "gif": "--gif",
-    "forces": "--forces",
-    "meshcat": "--meshcat",
     "closed_loop": "--closed-loop",
     "replan": "--replan",
     "friction_floor": "--friction-floor",
@@ -66,7 +63,7 @@ def refuse_not_yet(args) -> None:
     if given:
         raise ConfigError(
             f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): open-loop "
-            "execution by the grasp controller only, so far"
+            "execution by the grasp controller in the plan's world only, so far"
         )
 
 
@@ -162,17 +159,62 @@ def simulate_space_into(args) -> int:
             "executing it anyway, sim.json records plan_success: false",
             file=sys.stderr,
         )
-    result = simulate_space(SpaceReference.from_arrays(arrays), config, scene, executor=executor)
+    meshcat = None
+    if args.meshcat:
+        from trajectotree.execution.meshcat_scene import start_meshcat
+
+        meshcat = start_meshcat()
+        print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
+    reference = SpaceReference.from_arrays(arrays)
+    result = simulate_space(reference, config, scene, executor=executor, meshcat=meshcat, html_path=args.html)
     summary = save_space_sim(result, args.plan_dir, plan_success)
+    write_space_pictures(args, result, reference, scene, data.get("goal_quaternion"))
     if args.json:
         print_json(summary)
-        return 0
-    outcome = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
-    print(
-        f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s ({executor.value}): {outcome}; final "
-        f"orientation error {np.degrees(summary['final_orientation_error_rad']):.2f} deg, position error "
-        f"{1e3 * summary['final_position_error_m']:.2f} mm (largest on the way "
-        f"{np.degrees(summary['max_orientation_error_rad']):.2f} deg, {1e3 * summary['max_position_error_m']:.2f} mm)"
-    )
-    print(f"wrote {Path(args.plan_dir) / SIM_JSON}, {Path(args.plan_dir) / SIM_NPZ}")
+    else:
+        outcome = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
+        print(
+            f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s ({executor.value}): {outcome}; "
+            f"final orientation error {np.degrees(summary['final_orientation_error_rad']):.2f} deg, position error "
+            f"{1e3 * summary['final_position_error_m']:.2f} mm (largest on the way "
+            f"{np.degrees(summary['max_orientation_error_rad']):.2f} deg, "
+            f"{1e3 * summary['max_position_error_m']:.2f} mm)"
+        )
+        print(
+            f"wrote {Path(args.plan_dir) / SIM_JSON}, {Path(args.plan_dir) / SIM_NPZ}"
+            + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)
+        )
+    if meshcat is not None and sys.stdin.isatty():
+        input("Meshcat shows the recording; press Enter to exit. ")
     return 0
+
+
+def write_space_pictures(args, result, reference, scene, goal) -> None:
+    """--gif (the run on 3D axes) and --forces (each finger's simulated vs planned force on the cube, titled with
+    the plan's `goal` quaternion) of a run in space, its arrows at the plan's scale."""
+    if args.gif:
+        write_space_gif(result, reference, scene, args.gif)
+    if args.forces:
+        from trajectotree.figures.run import figure_finger_forces, save_figure
+
+        save_figure(figure_finger_forces(result, goal=goal, noun="cube"), args.forces)
+
+
+def write_space_gif(result, reference, scene, path) -> None:
+    """The run in space as a GIF (execution.gif on 3D axes): the cube as simulated, the planned cube dashed, the
+    simulated forces at the plan's arrow scale."""
+    from trajectotree.execution.gif import write_gif
+    from trajectotree.execution.space_run import space_arrow_scale
+    from trajectotree.figures.legend import controller_text
+
+    write_gif(
+        scene,
+        result.t,
+        result.x,
+        result.q,
+        path,
+        planned_poses=result.x_plan,
+        forces=result.f_W,
+        newtons_per_cm=space_arrow_scale(reference),
+        title=f"simulated run, {controller_text(result.controller)}",
+    )

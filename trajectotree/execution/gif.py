@@ -1,6 +1,6 @@
-"""A run as a matplotlib GIF for places without WebGL: the object and hand on x, y axes, each fingertip
-in its finger's colour and each finger's force on the object as an arrow, at one scale per run that
-the GIF states. matplotlib is imported only when a GIF is written.
+"""A run as a matplotlib GIF for places without WebGL: the object and hand on x, y axes (in space: on 3D axes,
+trajectotree.figures.space), each fingertip in its finger's colour and each finger's force on the object as an
+arrow, at one scale per run that the GIF states. matplotlib is imported only when a GIF is written.
 """
 
 from __future__ import annotations
@@ -32,8 +32,10 @@ def write_gif(
 ) -> None:
     """A matplotlib GIF (PillowWriter, no ffmpeg) of the object and hand on x, y axes in m, the
     fingers numbered and coloured as in the figures, the planned pose as a dashed outline, each
-    finger's force on the object (`forces` (T, 4, 2)) as an arrow at `newtons_per_cm` (default:
-    arrow_newtons_per_cm of the forces), the time of each frame and a `title` above it."""
+    finger's force on the object (`forces` (T, F, 2)) as an arrow at `newtons_per_cm` (default:
+    arrow_newtons_per_cm of the forces), the time of each frame and a `title` above it. A run in space
+    (`scene` a scene.spatial.SpaceScene, poses (T, 7), forces (T, F, 3)) on 3D axes in one view of the plan
+    (figures.space.plot_space_frame), the planned cube's edges dashed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -41,31 +43,34 @@ def write_gif(
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     from trajectotree.figures.run import plot_run_frame
+    from trajectotree.figures.space import plot_space_frame, view_bounds
 
     times = np.asarray(times)
     frames = np.unique(np.searchsorted(times, np.arange(times[0], times[-1] + 1e-9, 1.0 / fps)).clip(0, len(times) - 1))
     if forces is not None and newtons_per_cm is None:
         newtons_per_cm = arrow_newtons_per_cm(forces)
-    noun = object_noun(scene.config)
+    space = np.shape(object_poses)[-1] == 7  # [qw, qx, qy, qz, px, py, pz]: a run in space
+    noun = "cube" if space else object_noun(scene.config)
     notes = ([f"dashed: planned {noun} pose"] if planned_poses is not None else []) + (
         [f"arrows: each finger's force on the {noun}, {arrow_scale_text(newtons_per_cm)}"] if forces is not None else []
     )
-    fig, ax = plt.subplots(figsize=(4.6, 4.6 + 0.18 * len(notes)))
+    fig, ax = plt.subplots(figsize=(4.6, 4.6 + 0.18 * len(notes)), subplot_kw={"projection": "3d"} if space else {})
+    if space:  # one view for every frame, of the plan (a dropped cube falls out of it)
+        centre, half = view_bounds(scene, object_poses[:1] if planned_poses is None else planned_poses, joint_angles)
 
     def draw(k):
         ax.clear()
         clock = f"t = {times[k]:.2f} s of {times[-1]:.2f} s"
-        plot_run_frame(
-            ax,
-            scene,
-            object_poses[k],
-            joint_angles[k],
-            half_width=VIEW_HALF_WIDTH,
+        common = dict(
             planned_pose=None if planned_poses is None else planned_poses[k],
             forces=None if forces is None else forces[k],
             newtons_per_cm=newtons_per_cm,
             title=f"{title}\n{clock}" if title else clock,
         )
+        if space:
+            plot_space_frame(ax, scene, object_poses[k], joint_angles[k], centre=centre, half=half, **common)
+        else:
+            plot_run_frame(ax, scene, object_poses[k], joint_angles[k], half_width=VIEW_HALF_WIDTH, **common)
 
     if notes:
         fig.text(0.5, 0.01, "\n".join(notes), ha="center", va="bottom", fontsize=7.5, color="0.25")

@@ -1,5 +1,5 @@
 """Playing given poses back without physics: the plan's trajectory (object, hand and each finger's
-planned force on the object) recorded into a self-contained Meshcat HTML page.
+planned force on the object) recorded into a self-contained Meshcat HTML page, in the plane and in space.
 """
 
 from __future__ import annotations
@@ -13,14 +13,22 @@ from pydrake.systems.framework import DiagramBuilder
 
 from trajectotree.config import Config
 from trajectotree.execution.force_arrows import add_force_arrows, set_force_arrows
-from trajectotree.execution.meshcat_scene import PUBLISH_PERIOD, add_visualizer, set_planar_view, start_meshcat
+from trajectotree.execution.meshcat_scene import (
+    PUBLISH_PERIOD,
+    add_space_visualizer,
+    add_visualizer,
+    set_planar_view,
+    start_meshcat,
+)
 from trajectotree.execution.playback_page import (
     LEGEND_BOX,
     LEGEND_LINKS,
+    LEGEND_SPACE_LINKS,
     arrows_legend,
     finger_labels,
     object_noun,
     save_recording_html,
+    space_finger_labels,
 )
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.scene.hand import hand_file, read_hand
@@ -92,3 +100,42 @@ def write_plan_html(plan, config: Config, path: str | Path, meshcat: Meshcat | N
     q = np.stack([np.interp(times, reference.t, reference.q[:, j]) for j in range(reference.q.shape[1])], axis=1)
     forces = reference.forces_at(times)
     write_pose_html(config, times, poses, q, path, meshcat, forces=forces, newtons_per_cm=arrow_newtons_per_cm(forces))
+
+
+def write_space_plan_html(scene, arrays: dict, path: str | Path, *, title: str, meshcat: Meshcat | None = None) -> None:
+    """Plays a plan in space (its arrays, results.SPACE_TRAJECTORY_ARRAYS) of the hand and cube of `scene`
+    (scene.spatial.SpaceScene, whose hand description and object a plant of its own is built from) in a
+    self-contained HTML file at `path`: each knot published at its time, each finger's planned force on the cube
+    as an arrow at the plan's scale."""
+    from pydrake.multibody.parsing import Parser
+
+    from trajectotree.scene.spatial import add_space_object
+
+    meshcat = meshcat or start_meshcat()
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
+    (hand,) = Parser(plant).AddModels(scene.hand_file.model)
+    box = add_space_object(plant, scene.object)
+    plant.Finalize()
+    visualizer = add_space_visualizer(builder, plant, scene_graph, hand, box, scene.hand_file, meshcat)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    f_W, tips = np.asarray(arrays["f_W"], dtype=float), np.asarray(arrays["p_W_tip"], dtype=float)
+    newtons_per_cm = arrow_newtons_per_cm(f_W)
+    add_force_arrows(meshcat, scene.num_fingers, dimensions=3)
+    visualizer.StartRecording(set_transforms_while_recording=False)
+    for k, t in enumerate(np.asarray(arrays["t"], dtype=float)):
+        context.SetTime(t)
+        plant.SetPositions(plant_context, box, np.asarray(arrays["x"][k], dtype=float))
+        plant.SetPositions(plant_context, hand, np.asarray(arrays["q"][k], dtype=float))
+        diagram.ForcedPublish(context)
+        set_force_arrows(meshcat, tips[k], f_W[k], scene.tip_radius, newtons_per_cm, t)
+    legend = (
+        (LEGEND_BOX[0], "cube (planned pose)"),
+        LEGEND_SPACE_LINKS,
+        arrows_legend(newtons_per_cm, "planned", scene.num_fingers, "cube"),
+    )
+    save_recording_html(
+        meshcat, visualizer, path, title=title, legend=legend, noun="cube", labels=space_finger_labels(scene)
+    )

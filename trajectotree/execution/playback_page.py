@@ -1,6 +1,6 @@
-"""The playback page: Meshcat's self-contained HTML (`StaticHtml()` inlines every script, no network)
-with a title, a time readout and bar (the drop marked), a legend of the object, the plan outline, the
-links and the force arrows, and each finger's number at its base.
+"""The playback page, in the plane and in space: Meshcat's self-contained HTML (`StaticHtml()` inlines every
+script, no network) with a title, a time readout and bar (the drop marked), a legend of the object, the plan
+outline, the links and the force arrows, and each finger's number at its base.
 
 Facts this module relies on (measured with drake 1.51): a recording reaches the HTML only after
 `PublishRecording()`.
@@ -25,6 +25,7 @@ from trajectotree.scene.hand import HandDescription
 LEGEND_BOX = ("background: rgb(51, 115, 204)", "box")
 LEGEND_PLANNED = ("border: 2px solid rgb(26, 178, 51)", "planned box pose (outline)")
 LEGEND_LINKS = ("background: rgb(89, 89, 102); height: 5px", "finger links")
+LEGEND_SPACE_LINKS = ("background: rgb(102, 102, 115); height: 5px", "finger links")  # fingerpro4.sdf's grey
 
 
 def object_noun(config: SceneConfig) -> str:
@@ -49,10 +50,17 @@ def arrows_legend(newtons_per_cm: float, which: str, num_fingers: int, noun: str
 
 
 def simulated_legend(config: SceneConfig, newtons_per_cm: float | None = None, num_fingers: int = 0):
-    """The simulated run's legend, naming the object by object_noun; with the arrows' scale, their
-    entry (for `num_fingers` fingers)."""
-    noun = object_noun(config)
-    entries = [(LEGEND_BOX[0], noun), (LEGEND_PLANNED[0], f"planned {noun} pose (outline)"), LEGEND_LINKS]
+    """The simulated run's legend in the plane, naming the object by object_noun; with the arrows' scale,
+    their entry (for `num_fingers` fingers)."""
+    return run_legend(object_noun(config), "outline", newtons_per_cm, num_fingers)
+
+
+def run_legend(
+    noun: str, ghost: str, newtons_per_cm: float | None = None, num_fingers: int = 0, links=LEGEND_LINKS
+) -> tuple:
+    """A simulated run's legend: the object (`noun`), its planned pose drawn as `ghost` ("outline", "edges"),
+    the finger `links` (CSS swatch, text) and, with the arrows' scale, their entry (for `num_fingers` fingers)."""
+    entries = [(LEGEND_BOX[0], noun), (LEGEND_PLANNED[0], f"planned {noun} pose ({ghost})"), links]
     if newtons_per_cm is not None:
         entries.append(arrows_legend(newtons_per_cm, "simulated", num_fingers, noun))
     return tuple(entries)
@@ -73,10 +81,22 @@ def finger_labels(plant, hand, description: HandDescription, *, offset: float = 
     return labels
 
 
+def space_finger_labels(scene, *, offset: float = 0.03):
+    """(text, CSS colour, x, y, z) of each finger's number of a hand in space (scene.spatial.SpaceScene), `offset`
+    m outside its first joint (horizontally, away from the vertical through W's origin: the grasp point)."""
+    labels = []
+    for i, finger in enumerate(scene.fingers):
+        base = np.asarray(finger.p_W_joint[0], dtype=float)
+        out = np.array([base[0], base[1], 0.0]) / max(float(np.hypot(base[0], base[1])), 1e-9)
+        x, y, z = base + offset * out
+        labels.append((str(i), finger_css(i), float(x), float(y), float(z)))
+    return labels
+
+
 PAGE_SCRIPT = """
 (function () {
   const HALF = %(half)s, DROP = %(drop)s, NOUN = %(noun)s;  // m, half-width of the view; s, drop time or null
-  const LABELS = %(labels)s;  // [text, CSS colour, x m, y m]: the finger numbers, at their bases in W
+  const LABELS = %(labels)s;  // [text, CSS colour, x m, y m(, z m)]: the finger numbers, at their bases in W
   function ready() { return window.viewer && viewer.animator && viewer.camera; }
   function now() { return viewer.animator.actions.reduce((t, a) => Math.max(t, a.time), 0); }
   function centre() {  // Meshcat widens its orthographic view to the right only: keep the hand centred
@@ -92,7 +112,7 @@ PAGE_SCRIPT = """
     c.updateMatrixWorld();
     root.updateMatrixWorld();
     LABELS.forEach(function (label, k) {
-      const v = root.localToWorld(new MeshCat.THREE.Vector3(label[2], label[3], 0)).project(c);
+      const v = root.localToWorld(new MeshCat.THREE.Vector3(label[2], label[3], label[4] || 0)).project(c);
       const e = document.getElementById("tt-label-" + k);
       e.style.left = (r.left + (v.x + 1) / 2 * r.width) + "px";
       e.style.top = (r.top + (1 - v.y) / 2 * r.height) + "px";
@@ -156,7 +176,8 @@ def decorate_page(
     """Meshcat's static page with `title` (tab and overlay), a time readout and bar (the
     drop, if any, marked in red), a legend of (CSS swatch, text) entries after the line of
     fingertip colours (one per label), the `labels` (text, CSS colour, x, y) at their points of the plane
-    (finger_labels), and the planar view kept centred in any window shape."""
+    (finger_labels) or (text, CSS colour, x, y, z) in space (space_finger_labels), and an orthographic (planar)
+    view kept centred in any window shape."""
     drop = "null" if drop_time_s is None else f"{float(drop_time_s):.6f}"
     marker = "" if drop_time_s is None else '<div id="tt-drop"></div>'
     note = "" if drop_time_s is None else '<div id="tt-drop-note"></div>'
@@ -165,7 +186,7 @@ def decorate_page(
     )
     marks = "".join(
         f'<div class="tt-label" id="tt-label-{k}" style="color: {escape(color)}">{escape(text)}</div>'
-        for k, (text, color, _, _) in enumerate(labels)
+        for k, (text, color, *_) in enumerate(labels)
     )
     script = PAGE_SCRIPT % {
         "half": VIEW_HALF_WIDTH,

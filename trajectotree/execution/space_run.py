@@ -7,6 +7,9 @@ space_control, or zero torque), wired to the plant by port name; loggers of the 
 simulated force on the cube. The run starts in the plan's first state at rest and lasts the plan and
 config.sim.settle_time of hold; `SpaceSimResult` is what it logged beside the plan at the same times, with the
 drop (the cube's centre config.sim.drop_distance off the plan's, the plane's rule) and the final errors.
+Optionally a Meshcat visualizer, as the plane's (trajectotree.execution.simulate): the hand and cube as simulated,
+the planned cube's edges, each finger's simulated force on the cube as an arrow, live and into the recording that
+becomes the self-contained playback page.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
+from pydrake.geometry import Meshcat
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, ContactResults, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
@@ -25,9 +29,11 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from trajectotree.config import Config, ConfigError
 from trajectotree.config.executor import Executor, parse_executor
+from trajectotree.execution import force_arrows, meshcat_scene, playback_page
 from trajectotree.execution.executor import control_friction
 from trajectotree.execution.in_effect import PLAN_PORT, PlanInEffect, add_plan_source
 from trajectotree.execution.space_control import SpaceGraspController, SpaceReference, space_schedule
+from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.geometry import quaternion_matrices, rotation_angles
 from trajectotree.scene.spatial import SpaceScene, add_space_object
 
@@ -145,6 +151,16 @@ class SpaceSimResult:
 
     ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
 
+    @property
+    def controller(self) -> str:
+        """The controller that ran (the plane's name: figures.legend.controller_text)."""
+        return Executor(self.executor).controller
+
+    @property
+    def conditions(self) -> dict:
+        """The simulated world where it differs from the plan's, as the plane's SimLog: none in space yet."""
+        return {}
+
     def to_json(self) -> dict:
         """sim.json: the drop, the errors at the end (against the plan's end, its goal where it succeeded) and
         the largest on the way, and whether the run meets each of SUCCESS_ANGLES (a dropped run meets neither)."""
@@ -173,13 +189,24 @@ def pose_errors(x, x_plan) -> tuple[np.ndarray, np.ndarray]:
 
 
 def simulate_space(
-    reference: SpaceReference, config: Config, scene: SpaceScene, *, executor: Executor | str = Executor.GRASP
+    reference: SpaceReference,
+    config: Config,
+    scene: SpaceScene,
+    *,
+    executor: Executor | str = Executor.GRASP,
+    meshcat: Meshcat | None = None,
+    html_path=None,
 ) -> SpaceSimResult:
     """Runs the plan in space `reference` (the plan of `scene`: its hand, cube and friction, and the controller's
-    model) with `executor` for its length and config.sim.settle_time; the log beside the plan."""
+    model) with `executor` for its length and config.sim.settle_time; the log beside the plan. With `meshcat`
+    (live: the run in real time) or `html_path` (the recording, as a self-contained page), the run drawn in
+    Meshcat."""
     executor = parse_executor(executor)
+    live = meshcat is not None
+    if html_path is not None and meshcat is None:
+        meshcat = meshcat_scene.start_meshcat()
     builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
     (hand,) = Parser(plant).AddModels(scene.hand_file.model)
     box = add_space_object(plant, scene.object)
     plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -scene.gravity])
@@ -194,6 +221,14 @@ def simulate_space(
     triggers = {TriggerType.kPeriodic, TriggerType.kForced}
     state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
+    visualizer = None
+    if meshcat is not None:
+        visualizer = meshcat_scene.add_space_visualizer(
+            builder, plant, scene_graph, hand, box, scene.hand_file, meshcat
+        )
+        force_arrows.add_space_force_arrows_system(
+            builder, plant, hand, scene, meshcat, forces.get_output_port(), space_arrow_scale(reference)
+        )
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)
@@ -201,6 +236,11 @@ def simulate_space(
     plant.SetPositions(plant_context, hand, reference.q[0])
     simulator = Simulator(diagram, context)
     end = reference.duration + config.sim.settle_time
+    if visualizer is not None:
+        simulator.set_target_realtime_rate(1.0 if live else 0.0)  # a live view at the run's pace, as the plane's
+        meshcat_scene.add_space_plan_ghost(meshcat, scene.object.size)
+        meshcat.SetTransform(meshcat_scene.PLAN_GHOST_PATH, meshcat_scene.pose_transform(reference.x[0]))
+        animation = visualizer.StartRecording()
     start = time.perf_counter()
     simulator.AdvanceTo(end)
     sim_time = time.perf_counter() - start
@@ -214,7 +254,7 @@ def simulate_space(
     x_plan = reference.pose_at(t)
     angle, distance = pose_errors(x, x_plan)
     off = np.flatnonzero(distance > config.sim.drop_distance)
-    return SpaceSimResult(
+    result = SpaceSimResult(
         t=t,
         x=x,
         x_plan=x_plan,
@@ -227,4 +267,35 @@ def simulate_space(
         orientation_error_rad=angle,
         position_error_m=distance,
         sim_time_s=sim_time,
+    )
+    if visualizer is not None:
+        frame_times = np.arange(0.0, end + 1e-9, meshcat_scene.PUBLISH_PERIOD)
+        meshcat_scene.animate_plan_ghost(animation, frame_times, reference.pose_at(frame_times))
+        save_space_recording(meshcat, visualizer, html_path, result, reference, scene)
+    return result
+
+
+def space_arrow_scale(reference: SpaceReference) -> float:
+    """The force arrows' scale (N per cm) of a run of `reference`: the plan's, as the plane's simulate.arrow_scale,
+    so that the run's playback, the plan's and the GIF share it."""
+    return arrow_newtons_per_cm(reference.f_W)
+
+
+def save_space_recording(meshcat, visualizer, html_path, result: SpaceSimResult, reference, scene) -> None:
+    """The run's recording published to `meshcat` and, at `html_path` (None: not written), its playback page:
+    titled as the plane's, the drop marked, a legend that says the arrows are the simulated forces."""
+    if html_path is None:
+        visualizer.StopRecording()
+        visualizer.PublishRecording()
+        return
+    playback_page.save_recording_html(
+        meshcat,
+        visualizer,
+        html_path,
+        drop_time_s=result.drop_time_s,
+        legend=playback_page.run_legend(
+            "cube", "edges", space_arrow_scale(reference), scene.num_fingers, links=playback_page.LEGEND_SPACE_LINKS
+        ),
+        noun="cube",
+        labels=playback_page.space_finger_labels(scene),
     )

@@ -37,11 +37,12 @@ def arrow_scale_text(newtons_per_cm: float) -> str:
 
 
 def force_arrow(tip, f, tip_radius: float, newtons_per_cm: float):
-    """(start, end) in W of the arrow of force f (2,) of a finger on the object, or None for
-    |f| < ARROW_MIN_FORCE: from the fingertip sphere's surface in the force's direction (where
-    it touches the object) along f, |f| / newtons_per_cm cm long, capped at ARROW_MAX_LENGTH."""
+    """(start, end) in W of the arrow of force f (2,) in the plane or (3,) in space of a finger on the object,
+    or None for |f| < ARROW_MIN_FORCE: from the fingertip sphere's surface (its centre `tip`, (2,) or (3,)) in the
+    force's direction (where it touches the object) along f, |f| / newtons_per_cm cm long, capped at
+    ARROW_MAX_LENGTH."""
     f = np.asarray(f, dtype=float)
-    magnitude = float(np.hypot(*f))
+    magnitude = float(np.linalg.norm(f))
     if magnitude < ARROW_MIN_FORCE:
         return None
     direction = f / magnitude

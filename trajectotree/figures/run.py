@@ -193,7 +193,7 @@ def figure_model(scene, q=None, reachable=None, note: str | None = None):
 
 def plot_finger_force(ax, t, f_sim, f_plan, *, color=None, drop_time=None):
     """Magnitudes |f| of one finger's simulated (solid) and planned (dashed) force on the
-    box over time; f_sim, f_plan (T, 2). After a drop, if any, the time is shaded grey."""
+    box over time; f_sim, f_plan (T, 2) or (T, 3). After a drop, if any, the time is shaded grey."""
     (sim,) = ax.plot(t, np.linalg.norm(f_sim, axis=1), color=color, lw=1.2, label="simulated |f|")
     (plan,) = ax.plot(t, np.linalg.norm(f_plan, axis=1), color=sim.get_color(), lw=1.2, ls="--", label="planned |f|")
     artists = [sim, plan]
@@ -410,25 +410,36 @@ def world_text(conditions: dict) -> str | None:
     return ", ".join(parts) or None
 
 
-def forces_title(result, goal: float | None = None) -> str:
-    """The forces figure's title: what it shows, the goal (if a finite number: a plan.json's
-    may be anything), the controller and any simulated world that differs from the plan's."""
-    known = isinstance(goal, (int, float)) and not isinstance(goal, bool) and math.isfinite(goal)
-    run = ([f"goal θ = {goal:+.3f} rad ({math.degrees(goal):+.1f}°)"] if known else []) + [
-        controller_text(result.controller)
-    ]
+def goal_text(goal) -> str | None:
+    """The goal as the figures state it: a planar rotation θ (a finite number) or a goal quaternion in space
+    ([w, x, y, z], four finite numbers, with its angle); None for anything else (a plan.json's may be anything)."""
+    if isinstance(goal, (int, float)) and not isinstance(goal, bool) and math.isfinite(goal):
+        return f"goal θ = {goal:+.3f} rad ({math.degrees(goal):+.1f}°)"
+    quaternion = np.asarray(goal, dtype=float) if isinstance(goal, (list, tuple, np.ndarray)) else np.zeros(0)
+    if quaternion.shape != (4,) or not np.isfinite(quaternion).all() or np.linalg.norm(quaternion) == 0:
+        return None
+    angle = 2 * math.acos(min(abs(quaternion[0]) / np.linalg.norm(quaternion), 1.0))
+    w, x, y, z = quaternion
+    return f"goal quaternion [{w:+.3f}, {x:+.3f}, {y:+.3f}, {z:+.3f}] (a {math.degrees(angle):.1f}° turn)"
+
+
+def forces_title(result, goal=None, noun: str = "box") -> str:
+    """The forces figure's title: what it shows (the force on the `noun`), the goal (goal_text), the
+    controller and any simulated world that differs from the plan's."""
+    stated = goal_text(goal)
+    run = ([stated] if stated else []) + [controller_text(result.controller)]
     world = world_text(result.conditions)
-    return "force of each finger on the box, magnitude |f|\n" + ", ".join(run) + (f"; {world}" if world else "")
+    return f"force of each finger on the {noun}, magnitude |f|\n" + ", ".join(run) + (f"; {world}" if world else "")
 
 
-def figure_finger_forces(result, segments=None, goal: float | None = None):
-    """Each finger's simulated vs planned force magnitude |f| on the box over one executed
-    plan (a SimResult), on one shared scale: where the run leaves the plan's contact forces,
-    and when. `segments` (segment_spans) marks the segments and each finger's switches, and a
-    closed-loop run's slip intervals are hatched; the title names the plan's `goal` rotation
-    (rad), the controller and the simulated world (forces_title). The scale covers the plan and
-    the run up to the drop: a fallen box squeezed between the fingers does not set it (clipped
-    in the grey span)."""
+def figure_finger_forces(result, segments=None, goal=None, noun: str = "box"):
+    """Each finger's simulated vs planned force magnitude |f| on the box (the `noun`) over one executed
+    plan (a SimResult, or a SpaceSimResult: forces (T, F, 2) or (T, F, 3)), on one shared scale: where
+    the run leaves the plan's contact forces, and when. `segments` (segment_spans) marks the segments and
+    each finger's switches, and a closed-loop run's slip intervals are hatched; the title names the plan's
+    `goal` (rad, or a quaternion in space), the controller and the simulated world (forces_title). The
+    scale covers the plan and the run up to the drop: a fallen box squeezed between the fingers does not
+    set it (clipped in the grey span)."""
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
@@ -466,7 +477,7 @@ def figure_finger_forces(result, segments=None, goal: float | None = None):
         bbox_to_anchor=(0.5, 1 - 0.5 / height),
         frameon=False,
     )
-    fig.suptitle(forces_title(result, goal), fontsize=10, y=1 - 0.05 / height)
+    fig.suptitle(forces_title(result, goal, noun), fontsize=10, y=1 - 0.05 / height)
     axes[-1].set_xlabel("time [s]")
     fig.tight_layout(rect=(0, 0, 1, 1 - (0.1 + 0.17 * math.ceil(len(handles) / 3)) / height))
     return fig
