@@ -42,7 +42,7 @@ class TiedPool(ProcessPoolExecutor):
     Its workers are started by the thread that submits (all at the first submit when forked, one
     per submit when spawned), and PR_SET_PDEATHSIG fires when that *thread* ends: the thread that
     submits must outlive the pool. The package's pools are made, used and killed or shut down
-    within one call of one thread (segment_pool.run_pieces, executions.run_executions), which cannot
+    within one call of one thread (segment_pool.run_on_pool, executions.run_executions), which cannot
     end before them; a pool from segment_pool.local_pool passed to plan() is the caller's to submit to
     from a thread that lives as long (the main thread always does)."""
 
