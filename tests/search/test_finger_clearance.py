@@ -14,11 +14,11 @@ import pytest
 from trajectotree.config import Config, with_segments
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.results import check_goal
-from trajectotree.scene.finger_clearance import pair_distances
+from trajectotree.scene.finger_clearance import closest_fingers, fingers_clear, pair_distances
 from trajectotree.scene.hand import finger_bodies
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.initial_grasp import grasp_joints, initial_grasp_candidates
-from trajectotree.search.reach import Reachability, fingers_refusal, path_refusal
+from trajectotree.search.reach import Reachability, path_refusal
 from trajectotree.search.tree import _Node, _Search, choose_initial_grasp, find_contact_plan
 
 # Grid grasps (arclengths, m) of the default box: the best-ranked initial grasp before fingers were
@@ -105,7 +105,7 @@ def test_the_straight_path_between_two_clear_stances_is_tested_too(scene):
     end = start.copy()
     end[2] = 0.5  # finger 1's first joint turned from -0.66 rad: it swings through another finger on the way
     for q in (start, end):
-        assert fingers_refusal(scene.fingers, q[None], r, clearance) is None
+        assert fingers_clear(closest_fingers(scene.fingers, q[None], r).distance, clearance)
     refusal = path_refusal(scene.fingers, start, end, r, clearance)
     assert refusal == Refusal(RefusalKind.FINGERS_COLLIDE, fingers=refusal.fingers, limit=clearance, count=1)
     assert 1 in refusal.fingers

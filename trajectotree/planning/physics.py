@@ -150,46 +150,28 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
     cone = float(np.maximum(np.abs(lt) - mu * ln, -ln).max())
     gap = box.shape.signed_distances(poses_world_to_box(x, a["p_W_tip"])) - box.tip_radius  # (K, 4)
     force = np.linalg.norm(f, axis=-1)
-    away = np.where(gap > GAP_TOL, force, 0.0)
-    k, i = np.unravel_index(int(np.argmax(away)), away.shape)
-    worst = float(away[k, i])
-    k_deep, i_deep = np.unravel_index(int(np.argmin(gap)), gap.shape)
-    penetration = max(0.0, -float(gap[k_deep, i_deep]))
+    away = _Largest.of(np.where(gap > GAP_TOL, force, 0.0))
+    k, i, worst = away.knot, away.finger, away.value
+    deep = _Largest.of(-gap)
     if box.fingers is None:
-        link_depth, k_link, i_link = float("nan"), -1, -1
+        link = _Largest(float("nan"), -1, -1)
         apart = ClosestFingers(float("nan"), -1, ())
     else:
         apart = closest_fingers(box.fingers, arrays["q"], box.tip_radius)
-        links = link_penetrations(x, arrays["q"], box.fingers, box.shape).max(axis=2)  # (K, 4)
-        k_link, i_link = np.unravel_index(int(np.argmax(links)), links.shape)
-        link_depth = float(links[k_link, i_link])
-        k_link, i_link = (int(k_link), int(i_link)) if link_depth > 0 else (-1, -1)
+        link = _Largest.of(link_penetrations(x, arrays["q"], box.fingers, box.shape).max(axis=2)).located()
     off_surface = float(np.abs(box.shape.signed_distances(poses_world_to_box(x, a["p_W_C"]))).max())
-    reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
-    if worst > FORCE_TOL:
-        reasons.append(
-            f"finger {i} pushes the box with {worst:.3g} N from {1e3 * gap[k, i]:.2f} mm away at knot {k} "
-            f"(limit {FORCE_TOL} N beyond {1e3 * GAP_TOL:g} mm)"
-        )
-    if penetration > PENETRATION_TOL:
-        reasons.append(
-            f"finger {i_deep} sinks {1e3 * penetration:.2f} mm into the box at knot {k_deep} "
-            f"(limit {1e3 * PENETRATION_TOL:g} mm)"
-        )
-    if link_depth > LINK_PENETRATION_TOL:
-        reasons.append(
-            f"a link of finger {i_link} overlaps the box by {1e3 * link_depth:.2f} mm at knot {k_link} "
-            f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)"
-        )
+    reasons = [
+        *_non_finite_reason(a),
+        *_force_reason(away, float(gap[k, i]), GAP_TOL),
+        *_penetration_reason(deep),
+        *_link_reason(link, "overlaps the box by {:.2f} mm"),
+    ]
     if -apart.distance > FINGER_OVERLAP_TOL:
         reasons.append(
             f"fingers {apart.fingers[0]} and {apart.fingers[1]} overlap by {-1e3 * apart.distance:.2f} mm at knot "
             f"{apart.knot} (limit {1e3 * FINGER_OVERLAP_TOL:g} mm)"
         )
-    if cone > CONE_TOL:
-        reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
-    if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
-        reasons.append(f"Newton-Euler residual {ne_force:.3g} N, {ne_moment:.3g} N m (limit {NEWTON_EULER_TOL:g})")
+    reasons += [*_cone_reason(cone, mu), *_newton_euler_reason(ne_force, ne_moment)]
     return PhysicsCheck(
         newton_euler_force_N=ne_force,
         newton_euler_moment_Nm=ne_moment,
@@ -200,10 +182,10 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
         force_at_distance_finger=int(i) if worst > 0 else -1,
         force_at_distance_gap_m=float(gap[k, i]) if worst > 0 else 0.0,
         contact_point_off_surface_m=off_surface,
-        penetration_m=penetration,
-        link_penetration_m=link_depth,
-        link_penetration_knot=k_link,
-        link_penetration_finger=i_link,
+        penetration_m=max(0.0, deep.value),
+        link_penetration_m=link.value,
+        link_penetration_knot=link.knot,
+        link_penetration_finger=link.finger,
         passed=not reasons,
         reason="; ".join(reasons),
         finger_distance_m=apart.distance,
@@ -327,37 +309,20 @@ def check_space_physics(arrays, box: SpaceObjectModel, mu: float) -> SpacePhysic
     force = np.linalg.norm(f, axis=-1)
     gap = box_signed_distances(box.half, in_B(a["p_W_tip"])) - box.tip_radius  # (K, F)
     off = np.abs(box_signed_distances(box.half, p_BC))
-    away = np.where((gap > SPACE_GAP_TOL) | (off > SPACE_GAP_TOL), force, 0.0)
-    k, i = np.unravel_index(int(np.argmax(away)), away.shape)
-    worst = float(away[k, i])
-    k_deep, i_deep = np.unravel_index(int(np.argmin(gap)), gap.shape)
-    penetration = max(0.0, -float(gap[k_deep, i_deep]))
+    away = _Largest.of(np.where((gap > SPACE_GAP_TOL) | (off > SPACE_GAP_TOL), force, 0.0))
+    k, i, worst = away.knot, away.finger, away.value
+    deep = _Largest.of(-gap)
     ends = in_B(a["p_W_links"])
     depth = np.asarray(box.link_radii) - segment_box_distances(box.half, ends[..., 0, :], ends[..., 1, :])
-    links = np.maximum(depth, 0.0).max(axis=2)  # (K, F)
-    k_link, i_link = np.unravel_index(int(np.argmax(links)), links.shape)
-    link_depth = float(links[k_link, i_link])
-    k_link, i_link = (int(k_link), int(i_link)) if link_depth > 0 else (-1, -1)
-    reasons = [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
-    if worst > FORCE_TOL:
-        reasons.append(
-            f"finger {i} pushes the box with {worst:.3g} N from {1e3 * max(gap[k, i], off[k, i]):.2f} mm away at "
-            f"knot {k} (limit {FORCE_TOL} N beyond {1e3 * SPACE_GAP_TOL:g} mm)"
-        )
-    if penetration > PENETRATION_TOL:
-        reasons.append(
-            f"finger {i_deep} sinks {1e3 * penetration:.2f} mm into the box at knot {k_deep} "
-            f"(limit {1e3 * PENETRATION_TOL:g} mm)"
-        )
-    if link_depth > LINK_PENETRATION_TOL:
-        reasons.append(
-            f"a link of finger {i_link} is {1e3 * link_depth:.2f} mm inside the box at knot {k_link} "
-            f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)"
-        )
-    if cone > CONE_TOL:
-        reasons.append(f"friction cone violated by {cone:.3g} N (mu {mu:g})")
-    if max(ne_force, ne_moment) > NEWTON_EULER_TOL:
-        reasons.append(f"Newton-Euler residual {ne_force:.3g} N, {ne_moment:.3g} N m (limit {NEWTON_EULER_TOL:g})")
+    link = _Largest.of(np.maximum(depth, 0.0).max(axis=2)).located()
+    reasons = [
+        *_non_finite_reason(a),
+        *_force_reason(away, float(max(gap[k, i], off[k, i])), SPACE_GAP_TOL),
+        *_penetration_reason(deep),
+        *_link_reason(link, "is {:.2f} mm inside the box"),
+        *_cone_reason(cone, mu),
+        *_newton_euler_reason(ne_force, ne_moment),
+    ]
     if max(angle_off, position_off) > KINEMATICS_TOL:
         reasons.append(
             f"the poses stray {angle_off:.3g} rad and {position_off:.3g} m from the integration rule "
@@ -373,12 +338,75 @@ def check_space_physics(arrays, box: SpaceObjectModel, mu: float) -> SpacePhysic
         force_at_distance_finger=int(i) if worst > 0 else -1,
         force_at_distance_gap_m=float(max(gap[k, i], off[k, i])) if worst > 0 else 0.0,
         contact_point_off_surface_m=float(off.max()),
-        penetration_m=penetration,
-        link_penetration_m=link_depth,
-        link_penetration_knot=k_link,
-        link_penetration_finger=i_link,
+        penetration_m=max(0.0, deep.value),
+        link_penetration_m=link.value,
+        link_penetration_knot=link.knot,
+        link_penetration_finger=link.finger,
         passed=not reasons,
         reason="; ".join(reasons),
         kinematics_rad=angle_off,
         kinematics_m=position_off,
     )
+
+
+# -- the reasons a check fails, worded alike in the plane and in space ------------------------------
+@dataclass(frozen=True)
+class _Largest:
+    """The largest of a (K, F) array of per-knot, per-finger values, with its knot and finger."""
+
+    value: float
+    knot: int
+    finger: int
+
+    @staticmethod
+    def of(values: np.ndarray) -> _Largest:
+        k, i = np.unravel_index(int(np.argmax(values)), values.shape)
+        return _Largest(float(values[k, i]), int(k), int(i))
+
+    def located(self) -> _Largest:
+        """This, its knot and finger -1 where the value is not positive (nothing found)."""
+        return self if self.value > 0 else _Largest(self.value, -1, -1)
+
+
+def _non_finite_reason(a: dict[str, np.ndarray]) -> list[str]:
+    return [] if all(np.all(np.isfinite(v)) for v in a.values()) else ["the plan arrays hold non-finite values"]
+
+
+def _force_reason(away: _Largest, distance: float, gap_tol: float) -> list[str]:
+    """The largest force of a fingertip off the box, `distance` m off, over FORCE_TOL."""
+    if not away.value > FORCE_TOL:
+        return []
+    return [
+        f"finger {away.finger} pushes the box with {away.value:.3g} N from {1e3 * distance:.2f} mm away at "
+        f"knot {away.knot} (limit {FORCE_TOL} N beyond {1e3 * gap_tol:g} mm)"
+    ]
+
+
+def _penetration_reason(deep: _Largest) -> list[str]:
+    """The deepest fingertip (`deep`: the largest negated gap) sunk beyond PENETRATION_TOL."""
+    if not deep.value > PENETRATION_TOL:
+        return []
+    return [
+        f"finger {deep.finger} sinks {1e3 * deep.value:.2f} mm into the box at knot {deep.knot} "
+        f"(limit {1e3 * PENETRATION_TOL:g} mm)"
+    ]
+
+
+def _link_reason(link: _Largest, how: str) -> list[str]:
+    """The deepest link beyond LINK_PENETRATION_TOL; `how` words its depth in mm ({} its place)."""
+    if not link.value > LINK_PENETRATION_TOL:
+        return []
+    return [
+        f"a link of finger {link.finger} {how.format(1e3 * link.value)} at knot {link.knot} "
+        f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)"
+    ]
+
+
+def _cone_reason(cone: float, mu: float) -> list[str]:
+    return [f"friction cone violated by {cone:.3g} N (mu {mu:g})"] if cone > CONE_TOL else []
+
+
+def _newton_euler_reason(force: float, moment: float) -> list[str]:
+    if not max(force, moment) > NEWTON_EULER_TOL:
+        return []
+    return [f"Newton-Euler residual {force:.3g} N, {moment:.3g} N m (limit {NEWTON_EULER_TOL:g})"]

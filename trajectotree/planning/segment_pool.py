@@ -11,14 +11,19 @@ import multiprocessing
 import os
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import Executor
 from concurrent.futures.process import BrokenProcessPool
+from typing import TypeVar
 
 from trajectotree.cito.solve import LogObserver
 from trajectotree.config import SceneConfig, check_integer
 from trajectotree.planning.piece import PieceResult, PieceTask, solve_piece, worker_scene
 from trajectotree.planning.workers import TiedPool, kill_pool, process_pool
 from trajectotree.scene.plant import Scene
+
+Task = TypeVar("Task")
+Result = TypeVar("Result")
 
 # Local worker processes start by fork where the platform has it: a child inherits the loaded
 # Drake and the parent's scene (tens of ms), where spawn re-imports Drake and rebuilds the scene
@@ -66,20 +71,34 @@ def run_pieces(
         return [_received(solve_piece(t, scene, log_observer)) for t in tasks]
     for t in tasks:  # a forked worker inherits the scene built here
         worker_scene(t.scene)
+    return run_on_pool(solve_piece, tasks, size, _received)
+
+
+def _as_is(result):
+    """A result as it came (run_on_pool's default: nothing to stamp)."""
+    return result
+
+
+def run_on_pool(
+    solve: Callable[[Task], Result], tasks: list[Task], size: int, received: Callable[[Result], Result] = _as_is
+) -> list[Result]:
+    """`solve` of each of the tasks (two or more) on local processes, the results in order, each passed
+    to `received` once this process has it: from the main thread on the pool it keeps (kept_pool of `size`
+    processes), from another on a pool of at most `size` started for these tasks and shut down after."""
     kept = threading.current_thread() is threading.main_thread()
-    pool = kept_pool(size, os.getpid()) if kept else local_pool(workers)
+    pool = kept_pool(size, os.getpid()) if kept else local_pool(min(len(tasks), size))
     try:
         # Not pool.map: interrupted, its iterator cancels the queued futures, and Python 3.11's pool,
         # broken by kill_pool, then sets an exception on a cancelled future in its management thread,
         # which prints an InvalidStateError traceback (fixed in 3.12: cpython gh-107219).
-        futures = [pool.submit(solve_piece, t) for t in tasks]
-        results = [_received(f.result()) for f in futures]  # in order, each once it is done
+        futures = [pool.submit(solve, t) for t in tasks]
+        results = [received(f.result()) for f in futures]  # in order, each once it is done
     except BrokenProcessPool:
         if not kept:
             raise
         # a kept pool whose worker died since (killed from outside): the next call starts a new one
         kept_pool.cache_clear()
-        return run_pieces(tasks, None, workers, scene, log_observer)
+        return run_on_pool(solve, tasks, size, received)
     except BaseException:
         # Interrupted (Ctrl-C, or SIGTERM turned into KeyboardInterrupt by the CLI) or failed:
         # shutdown() alone would wait for the running solves, minutes deep in IPOPT.
@@ -98,7 +117,7 @@ def kept_pool(workers: int, pid: int) -> TiedPool:
     the main thread's: a pool's workers die with the thread that started them (workers.TiedPool),
     and the main thread lives as long as the process. Keyed by pid, so a forked child makes its own.
     Python's exit shuts it down, as does its eviction by a call for another size (once collected);
-    run_pieces kills it when a solve is interrupted or fails."""
+    run_on_pool kills it when a solve is interrupted or fails."""
     return local_pool(workers)
 
 

@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 import time
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,9 +31,8 @@ from trajectotree.config import CitoConfig, Config, config_to_dict, mu_plan
 from trajectotree.contact_plan import SpaceContactPlan
 from trajectotree.geometry import quaternion_angle
 from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
-from trajectotree.planning.segment_pool import kept_pool, local_pool
+from trajectotree.planning.segment_pool import run_on_pool
 from trajectotree.planning.start import space_start_root
-from trajectotree.planning.workers import kill_pool
 from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
 from trajectotree.search.tree import find_space_contact_plan, space_initial_grasp
 from trajectotree.start import SpaceStartState
@@ -113,29 +110,12 @@ def solve_space_task(task: SpaceSegmentTask) -> SpaceSegmentResult:
 
 def solve_space_segments(tasks: list[SpaceSegmentTask], workers: int | None) -> list[SpaceSegmentResult]:
     """The tasks' results in order: in this process (workers 1 or one task), else on local processes as
-    segment_pool.run_pieces does: from the main thread on the pool it keeps (kept_pool: one process per core,
+    segment_pool.run_on_pool runs them: from the main thread on the pool it keeps (one process per core,
     `workers` None), from another on a pool of `workers` started for these tasks and shut down after."""
     size = (os.cpu_count() or 1) if workers is None else workers
     if min(len(tasks), size) <= 1:
         return [solve_space_task(t) for t in tasks]
-    kept = threading.current_thread() is threading.main_thread()
-    pool = kept_pool(size, os.getpid()) if kept else local_pool(min(len(tasks), size))
-    try:
-        futures = [pool.submit(solve_space_task, t) for t in tasks]
-        results = [f.result() for f in futures]
-    except BrokenProcessPool:
-        if not kept:
-            raise
-        kept_pool.cache_clear()  # a kept pool whose worker died since (killed from outside): a new one
-        return solve_space_segments(tasks, workers)
-    except BaseException:
-        # interrupted or failed: shutdown() alone would wait for the running solves
-        kill_pool(pool)
-        kept_pool.cache_clear()
-        raise
-    if not kept:
-        pool.shutdown()
-    return results
+    return run_on_pool(solve_space_task, tasks, size)
 
 
 def plan_space(

@@ -12,7 +12,7 @@ search.initial_grid_step) to the fingers such that each contact is at least
 scene.corner_margin from a corner and reachable at the initial pose (closed-form IK with
 the link collision test, trajectotree.search.reach), no two fingers come within
 search.finger_clearance of each other there (their link boxes and fingertip spheres at the
-closed-form joint angles, trajectotree.search.reach.fingers_refusal), and at least
+closed-form joint angles, trajectotree.scene.finger_clearance.fingers_clear), and at least
 one finger may let go (the other three are in frictional form closure at mu_plan, which
 also puts the grasp itself in closure). Ranked by their worst three-finger stance among the
 fingers that may let go (largest required_mu, smallest first), then by more free fingers,

@@ -12,9 +12,9 @@ Two stages keep the search cheap:
   would fail too: this is an exact filter.
 - `solve` runs Drake IK seeded with the closed-form answer and keeps its joint angles.
 
-Fingers against each other (`fingers_refusal`): the same exact planar geometry between two
-fingers' link boxes and fingertip spheres (trajectotree.scene.finger_clearance), at a node's
-joint angles and sampled on the straight joint-space path from its parent, kept at least
+Fingers against each other (`path_refusal`): the same exact planar geometry between two
+fingers' link boxes and fingertip spheres (trajectotree.scene.finger_clearance), sampled on the
+straight joint-space path from a node's parent (a node's own joint angles: search.tree), kept at least
 search.finger_clearance apart, since the simulation's fingers collide (trajectotree.search.tree).
 
 Collision test (links vs object): an exact planar separating-axis test between the object's
@@ -36,7 +36,6 @@ from pydrake.solvers import SnoptSolver
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.finger_clearance import (
-    closest_fingers,
     fingers_clear,
     interpolate_joints,
     pair_distances,
@@ -95,16 +94,6 @@ def rectangles_overlap_polygon(
         mid = np.einsum("ka,ka->k", c, axis)
         overlap &= (mid - half < proj.max(axis=1)) & (mid + half > proj.min(axis=1))
     return overlap
-
-
-def fingers_refusal(fingers, q, tip_radius: float, clearance: float, *, on_path: bool = False) -> Refusal | None:
-    """FINGERS_COLLIDE naming the two fingers that come closest, when any two of `fingers` come
-    within `clearance` m of each other at joint angles q (K, 2F) (None when none do); on_path: q
-    samples the path to a node (the refusal's count 1)."""
-    closest = closest_fingers(fingers, q, tip_radius)
-    if fingers_clear(closest.distance, clearance):
-        return None
-    return Refusal(RefusalKind.FINGERS_COLLIDE, fingers=closest.fingers, limit=clearance, count=1 if on_path else None)
 
 
 def path_samples(fingers, q_from, q_to, tip_radius: float, clearance: float, ends):
