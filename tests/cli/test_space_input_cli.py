@@ -29,7 +29,7 @@ SPACE_USED = {
     "search": {"goal", "goal_pose", "goal_quat", "goal_rpy", "config", "config_text", "box_size", "mass", "mu", "hand"}
     | {"figure", "json"},
     "plan": {"goal", "goal_pose", "goal_quat", "goal_rpy", "method", "config", "config_text", "box_size", "mass"}
-    | {"mu", "hand", "start", "segment_workers", "out", "json", "html"},
+    | {"mu", "hand", "start", "segment_workers", "out", "json", "html", "formulation"},
     "demo": {"goal", "goal_quat", "goal_rpy", "config", "config_text", "box_size", "mass", "mu", "hand", "out"}
     | {"meshcat", "json"},
 }

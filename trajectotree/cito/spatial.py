@@ -1347,3 +1347,107 @@ def cito_warm_start(scene, fingers, trajectory, mu: float):
     )
     rows = SpaceCitoRows(scene, fingers, spec, mu, SPACE_DT)
     return spec, cito_knots(rows, p, trajectory.v[:, 3:], q, trajectory.f_W)
+
+
+# -- the joint formulation in space: the search's segments in one program ---------------------------------------
+@dataclass(frozen=True)
+class SpaceJointProgram:
+    """The joint formulation's program: the segments' knots in one z, a node both one segment's last knot and the
+    next one's first (joint_knots), the nodes free but the start and the goal."""
+
+    prog: MathematicalProgram
+    z: np.ndarray  # (S (K - 1) + 1, width)
+    rows: tuple[SpaceSegmentRows, ...]  # per segment, over its knots of z
+    build_time_s: float
+
+
+def joint_knots(rows) -> list[slice]:
+    """Each segment's knots in the joint program's z: segment s's first is segment s - 1's last."""
+    step = rows[0].K - 1
+    return [slice(s * step, s * step + r.K) for s, r in enumerate(rows)]
+
+
+def _joint_bounds(rows: SpaceSegmentRows, s: int, num_segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """Segment s's knot rows' bounds in the joint program: its first knot's rows are segment s - 1's last knot's
+    (the same node, contacts and pyramids), left to that segment (unbounded: no redundant equality rows); a
+    node inside the horizon is free, its links held off the box as the free knots' are."""
+    lo, hi = rows.knot_bounds()
+    if s > 0:
+        lo[0], hi[0] = -np.inf, np.inf
+    if rows.links and s < num_segments - 1:
+        lo[-1, rows.clearance_row + 1 :] = rows.hand.link_radius.ravel()
+    return lo, hi
+
+
+def build_space_joint(
+    scene, fingers, specs: list[SegmentSpec], mu: float, links: bool = False, start: np.ndarray | None = None
+) -> SpaceJointProgram:
+    """The joint formulation in space (the paper's): one program over the whole horizon with the search's contact
+    plan: each segment's rows (SpaceSegmentRows: its contacts, its switching finger lifted) over its knots, the
+    rule between every two knots, the start and the goal pinned as a segment's ends are (pose, rest, static,
+    joints), every node between them free (phi within PHI_BOUND, moving, its joints within their limits); the
+    segment program's costs once per knot. From `start` (knots, width), else from the segments' guesses."""
+    t0 = time.perf_counter()
+    rows = tuple(SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links) for spec in specs)
+    lay, knots, m = rows[0].layout, joint_knots(rows), scene.object.mass
+    K = knots[-1].stop
+    prog = MathematicalProgram()
+    z = prog.NewContinuousVariables(K, lay.width, "z")
+    var = {name: z[:, lay.slice(name)] for name in (*_NAMES, "lam", "q")}
+    for r, knot in zip(rows, knots):
+        _add_rule(prog, {name: v[knot] for name, v in var.items()}, r, m)
+    prog.AddBoundingBoxConstraint(-PHI_BOUND, PHI_BOUND, var["phi"][1:-1].ravel())
+    for end, p in ((0, specs[0].p), (-1, specs[-1].p)):
+        for name, value in (("phi", np.zeros(3)), ("p", p), ("w", np.zeros(3)), ("v", np.zeros(3))):
+            prog.AddBoundingBoxConstraint(value, value, var[name][end])
+        prog.AddBoundingBoxConstraint(np.r_[0.0, 0.0, m * rows[0].g], np.r_[0.0, 0.0, m * rows[0].g], var["F"][end])
+        prog.AddBoundingBoxConstraint(np.zeros(3), np.zeros(3), var["T"][end])
+    lam_hi = np.full((K, lay.num_fingers, lay.edges), np.inf)
+    for spec, knot in zip(specs, knots):
+        if spec.switching is not None:
+            lam_hi[knot.start + 1 : knot.stop - 1, spec.switching] = 0.0
+    prog.AddBoundingBoxConstraint(np.zeros(lam_hi.size), lam_hi.ravel(), var["lam"].ravel())
+    lower = np.concatenate([c.q_lower for c in scene.fingers])
+    upper = np.concatenate([c.q_upper for c in scene.fingers])
+    prog.AddBoundingBoxConstraint(np.tile(lower, K - 2), np.tile(upper, K - 2), var["q"][1:-1].ravel())
+    prog.AddBoundingBoxConstraint(specs[0].q_a.ravel(), specs[0].q_a.ravel(), var["q"][0])
+    prog.AddBoundingBoxConstraint(specs[-1].q_b.ravel(), specs[-1].q_b.ravel(), var["q"][-1])
+    for s, (r, knot) in enumerate(zip(rows, knots)):
+        constraint = _SegmentConstraint(r)
+        lo, hi = _joint_bounds(r, s, len(rows))
+        pair = np.zeros(3 * (r.K - 1))
+        binding = prog.AddConstraint(
+            constraint,
+            np.concatenate([lo.ravel(), pair]),
+            np.concatenate([hi.ravel(), pair]),
+            z[knot].ravel(),
+            description=f"space segment {s}",
+        )
+        binding.evaluator().SetGradientSparsityPattern(constraint.sparsity())
+    _add_costs(prog, var, lay, K)
+    if start is None:
+        start = np.concatenate([_guess(rows[0]), *(_guess(r)[1:] for r in rows[1:])])
+    prog.SetInitialGuess(z, start)
+    return SpaceJointProgram(prog, z, rows, time.perf_counter() - t0)
+
+
+def solve_space_joint(
+    scene, fingers, specs: list[SegmentSpec], mu: float, config: CitoConfig
+) -> list[SpaceSegmentResult]:
+    """The joint formulation built and solved by IPOPT (cito.solve's options), as a segment is, again with the link
+    rows from its solution when a link then reaches over 1 mm into the box; the solution as one
+    SpaceSegmentResult per segment (each with the one program's status and times)."""
+    cpu = time.process_time()
+    build, solve_time, Z = 0.0, 0.0, None
+    for links in (False, True):
+        program = build_space_joint(scene, fingers, specs, mu, links, Z)
+        t0 = time.perf_counter()
+        result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
+        build, solve_time = build + program.build_time_s, solve_time + time.perf_counter() - t0
+        Z = result.GetSolution(program.z)
+        knots = joint_knots(program.rows)
+        depth = max(link_depth(r, Z[k]) for r, k in zip(program.rows, knots))
+        if not result.is_success() or depth <= LINK_PENETRATION_TOL:
+            break
+    times = (build, solve_time, time.process_time() - cpu)
+    return [_segment_arrays(r, Z[k], result, times) for r, k in zip(program.rows, knots)]

@@ -18,11 +18,13 @@ PLANAR_SHAPES = ("polygon", "circle", "ellipse")
 PLANAR_ONLY = {
     "scene": (*PLANAR_SHAPES, "figure", "rotations"),
     "search": (*PLANAR_SHAPES, "segments"),
-    "plan": (*PLANAR_SHAPES, "segments", "formulation"),
+    "plan": (*PLANAR_SHAPES, "segments"),
     "demo": (*PLANAR_SHAPES, "segments", "formulation"),
 }
 # What a hand in space plans with (cito.spatial: one program per segment); --formulation naming it is no ignored option.
 SPACE_FORMULATION = "keyframes"
+# What `plan` with a hand in space takes as --formulation (cito.formulation): the keyframes programs or the joint one.
+SPACE_PLAN_FORMULATIONS = (SPACE_FORMULATION, "joint")
 # m per side, the cubes fingerpro4 has an initial grasp of (check_space_graspable's check), measured by
 # scripts/space_box_sizes.py: every cube from 5 to 300 mm in 1 mm steps, 94 g, the default friction: one range,
 # 25-280 mm (the check took 0.24 s median, 2.5 s at most, on the loaded 2 cores).
@@ -62,7 +64,7 @@ def space_help(command: str) -> str:
         "scene": f"{scene}, --json",
         "search": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --figure, --json",
         "plan": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --method, --start, --segment-workers, "
-        f"--formulation {SPACE_FORMULATION}, --out, --json, --html",
+        f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --json, --html",
         "demo": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --formulation {SPACE_FORMULATION}, --out, "
         "--meshcat, --json",
     }[command]
@@ -92,12 +94,17 @@ def space_config(args: argparse.Namespace) -> Config:
     refuse_planar_options(args)
     config = layered_config(args, Config())
     overrides = {"hand": args.hand}
+    cito = {} if getattr(args, "formulation", None) is None else {"formulation": args.formulation}
     if getattr(args, "mass", None) is not None:
         overrides["box_mass"] = args.mass
     if getattr(args, "mu", None) is not None:
         overrides["mu"] = args.mu
     try:
-        return dataclasses.replace(config, scene=dataclasses.replace(config.scene, **overrides))
+        return dataclasses.replace(
+            config,
+            scene=dataclasses.replace(config.scene, **overrides),
+            cito=dataclasses.replace(config.cito, **cito),
+        )
     except ConfigError as e:
         raise in_option_terms(e, args) from None
 

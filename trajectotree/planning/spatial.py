@@ -25,6 +25,7 @@ from trajectotree.cito.spatial import (
     hand_model,
     segment_spec,
     solve_space_cito,
+    solve_space_joint,
     solve_space_segment,
 )
 from trajectotree.config import CitoConfig, Config, config_to_dict, mu_plan
@@ -58,12 +59,14 @@ class SpacePlanResult:
     solve_time_s: float  # s of wall time, the segments' programs (at once on the segment pool)
     total_time_s: float
     method: str = "trajectotree"  # or general CITO's "cito" and "cito-warm" (plan_space_cito)
+    formulation: str = "keyframes"  # TrajectoTree's (cito.formulation): a program per segment, or "joint": one
     start: dict | None = None  # the measured start it planned from (start.SpaceStartState.to_json), if any
 
     def to_json(self) -> dict:
         return {
             "kind": "space",
             "method": self.method,
+            "formulation": self.formulation,
             "goal_quaternion": [float(v) for v in self.goal],
             "success": self.success,
             "status": self.status,
@@ -135,6 +138,7 @@ def plan_space(
     search_time = time.perf_counter() - t0
     model = object_model(scene)
     common = dict(goal=goal, contact_plan=contact_plan, object_model=model, mu_plan=mu, search_time_s=search_time)
+    common["formulation"] = config.cito.formulation
     common["start"] = None if start is None else start.to_json()
     if not contact_plan.success:
         return SpacePlanResult(
@@ -151,11 +155,11 @@ def plan_space(
     t1 = time.perf_counter()
     hand = hand_model(scene)
     nodes = contact_plan.nodes
-    tasks = [
-        SpaceSegmentTask(hand, segment_spec(hand, hand.chains, a, b), mu, config.cito)
-        for a, b in zip(nodes[:-1], nodes[1:])
-    ]
-    results = solve_space_segments(tasks, workers)
+    specs = [segment_spec(hand, hand.chains, a, b) for a, b in zip(nodes[:-1], nodes[1:])]
+    if config.cito.formulation == "joint":
+        results = solve_space_joint(hand, hand.chains, specs, mu, config.cito)
+    else:
+        results = solve_space_segments([SpaceSegmentTask(hand, spec, mu, config.cito) for spec in specs], workers)
     return _checked(scene, results, time.perf_counter() - t1, t0, common)
 
 
@@ -165,8 +169,11 @@ def _checked(scene, results, solve_time: float, t0: float, common: dict) -> Spac
     trajectory = join_segments(scene, results)
     check = check_space_physics(trajectory.arrays(), common["object_model"], common["mu_plan"])
     error = quaternion_angle(trajectory.x[-1, :4], np.asarray(common["goal"]))
-    failed = [i for i, r in enumerate(results) if not r.success]
-    name = "segment {}" if common.get("method", "trajectotree") == "trajectotree" else common["method"] + " program"
+    trajectotree = common.get("method", "trajectotree") == "trajectotree"
+    joint = trajectotree and common.get("formulation") == "joint"  # one program: its solve reported once
+    reports = results[:1] if joint else results
+    failed = [i for i, r in enumerate(reports) if not r.success]
+    name = "joint program" if joint else "segment {}" if trajectotree else common["method"] + " program"
     reasons = [f"{name.format(i)}: {results[i].status}" for i in failed]
     reasons += [] if check.passed else ["physics check: " + check.reason]
     if error > GOAL_TOLERANCE:
@@ -186,7 +193,7 @@ def _checked(scene, results, solve_time: float, t0: float, common: dict) -> Spac
                 "cpu_time_s": r.cpu_time_s,
                 "pid": r.pid,
             }
-            for r in results
+            for r in reports
         ),
         solve_time_s=solve_time,
         total_time_s=time.perf_counter() - t0,
@@ -216,6 +223,7 @@ def plan_space_cito(
     common = dict(
         goal=goal, contact_plan=contact_plan, object_model=model, mu_plan=mu, search_time_s=search_time, method=method
     )
+    common["formulation"] = "joint"  # one program over the horizon, as the plane's baselines record
     if not contact_plan.success or (warm is not None and warm.trajectory is None):
         return SpacePlanResult(
             success=False,
