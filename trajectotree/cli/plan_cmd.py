@@ -208,7 +208,7 @@ def run_space(args) -> int:
         print(f"  {line}")
     print(
         f"time: {'search' if method != 'cito-warm' else 'TrajectoTree (warm start)'} {result.search_time_s:.2f} s, "
-        f"{'segments' if method == 'trajectotree' else 'program'} {result.solve_time_s:.2f} s, "
+        f"{'segments' if result.formulation == 'keyframes' else 'program'} {result.solve_time_s:.2f} s, "
         f"total {result.total_time_s:.2f} s"
     )
     if result.physics_check is not None:
