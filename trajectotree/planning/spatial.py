@@ -3,7 +3,9 @@ keyframes formulation in space (cito.spatial: one IPOPT program per segment, the
 ends the search's nodes: solved at once in the segment pool of segment_pool.py), the segments joined at their
 nodes into one trajectory, checked from its arrays alone (planning.physics.check_space_physics) and written as
 plan.npz (results.SPACE_TRAJECTORY_ARRAYS) and plan.json (the object, the integration rule, the check,
-the solve report per segment and the contact sequence).
+the solve report per segment and the contact sequence). With cito.formulation joint (`plan --formulation joint`)
+the segments are one program instead (cito.spatial.solve_space_joint: the nodes free but the start and the goal),
+reported as one solve.
 """
 
 from __future__ import annotations
