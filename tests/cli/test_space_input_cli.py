@@ -31,6 +31,7 @@ SPACE_USED = {
     "plan": {"goal", "goal_pose", "goal_quat", "goal_rpy", "method", "config", "config_text", "box_size", "mass"}
     | {"mu", "hand", "start", "segment_workers", "out", "json", "html", "formulation"},
     "demo": {"goal", "goal_quat", "goal_rpy", "config", "config_text", "box_size", "mass", "mu", "hand", "out"}
+    | {"formulation"}
     | {"meshcat", "json"},
 }
 # A value for each planar-only option (the goal options are space_goal's: "is a planar goal")

@@ -19,7 +19,7 @@ PLANAR_ONLY = {
     "scene": (*PLANAR_SHAPES, "figure", "rotations"),
     "search": (*PLANAR_SHAPES, "segments"),
     "plan": (*PLANAR_SHAPES, "segments"),
-    "demo": (*PLANAR_SHAPES, "segments", "formulation"),
+    "demo": (*PLANAR_SHAPES, "segments"),
 }
 # What a hand in space plans with (cito.spatial: one program per segment); --formulation naming it is no ignored option.
 SPACE_FORMULATION = "keyframes"
@@ -65,8 +65,8 @@ def space_help(command: str) -> str:
         "search": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --figure, --json",
         "plan": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --method, --start, --segment-workers, "
         f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --json, --html",
-        "demo": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, --formulation {SPACE_FORMULATION}, --out, "
-        "--meshcat, --json",
+        "demo": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, "
+        f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --meshcat, --json",
     }[command]
 
 
