@@ -78,6 +78,7 @@ def test_a_planar_option_on_a_hand_in_space_exits_2_naming_it(tmp_path, capsys, 
         "search": HALF_TURN_ABOUT_Z,
         "plan": [*HALF_TURN_ABOUT_Z, "--out", str(out)],
         "demo": [*HALF_TURN_ABOUT_Z, "--out", str(out)],
+        "sweep": ["--out", str(out)],
     }[command]
     _refused(capsys, argv, f"{option} = ", "is a planar hand's option; the hand 'fingerpro4' is in space")
     assert not out.exists() and not (tmp_path / "model.png").exists()

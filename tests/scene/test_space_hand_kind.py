@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-from trajectotree.cli import main
 from trajectotree.scene.hand_file import (
     PLANAR,
     SPACE,
@@ -67,11 +66,12 @@ def test_the_space_reader_refuses_a_planar_hand():
 
 
 @pytest.mark.parametrize("given_as", ["name", "file"])
-def test_a_planar_command_refuses_a_hand_in_space_naming_it(tmp_path, capsys, given_as):
+def test_the_planar_path_refuses_a_hand_in_space_naming_it(tmp_path, given_as):
+    # the Python API's planar planner reads its hand through hand_file, as every planar-only path does
+    import trajectotree as tt
+
     hand = "fingerpro4" if given_as == "name" else str(space_yaml(tmp_path))
-    out = tmp_path / "demo"  # demo, simulate and sweep are planar only so far
-    assert main(["demo", "--hand", hand, "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "Traceback" not in err
-    assert f"hand {hand}: is a hand in space (kind: space): only `trajectotree scene`, `search` and `plan`" in err
-    assert not out.exists()
+    with pytest.raises(HandError) as info:
+        tt.plan(goal=0.5, config={"scene": {"hand": hand}})
+    message = str(info.value)
+    assert f"hand {hand}: is a hand in space (kind: space): only `trajectotree scene`, `search`, `plan`" in message

@@ -17,13 +17,18 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from trajectotree.experiments.report import REPORT_DIR, make_report, table_markdown
+    from trajectotree.experiments.report import REPORT_DIR, make_report, space_table_markdown, table_markdown
 
     out = args.out or str(Path(args.sweep_dir) / REPORT_DIR)
     check_output_dir("--out" if args.out else "the report folder (default: SWEEP_DIR/report)", out)
     files, table = make_report(args.sweep_dir, out)
     if args.json:
         print_json({"files": files.__dict__, "table": table})
+        return 0
+    if files.kind == "space":
+        print(space_table_markdown(table), end="")
+        print(f"figures: none for a sweep in space ({files.table_md} says why)")
+        print(f"table: {files.table_md}, {files.table_csv}")
         return 0
     print(table_markdown(table), end="")
     print(f"Fig. 2 (planning time, cost): {', '.join(files.figure_time_cost)}")

@@ -20,6 +20,7 @@ PLANAR_ONLY = {
     "search": (*PLANAR_SHAPES, "segments"),
     "plan": (*PLANAR_SHAPES, "segments"),
     "demo": (*PLANAR_SHAPES, "segments"),
+    "sweep": (*PLANAR_SHAPES, "segments", "formulation"),
 }
 # What a hand in space plans with (cito.spatial: one program per segment); --formulation naming it is no ignored option.
 SPACE_FORMULATION = "keyframes"
@@ -67,6 +68,8 @@ def space_help(command: str) -> str:
         f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --json, --html",
         "demo": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, "
         f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --meshcat, --json",
+        "sweep": f"--goals, --seed, --max-goal, --methods, {scene}, --formulation {SPACE_FORMULATION}, --out, "
+        "--workers, --scheduler, --time-limit, --retry-errors, --json",
     }[command]
 
 

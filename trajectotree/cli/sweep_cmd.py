@@ -1,8 +1,9 @@
 """`trajectotree sweep`: the paper's experiment, random goals x methods, resumable and parallel.
 
-Goals are drawn uniformly in [-pi, pi] from --seed. Each (goal, method) trial plans in
-its own process (and executes the plan in simulation with --simulate); finished trials are
-written atomically under OUT/trials/, so a killed sweep rerun with the same command skips
+Goals are drawn uniformly in [-pi, pi] from --seed; for a hand in space (--hand fingerpro4) they are
+orientations uniform over SO(3) (at most --max-goal from the start), planned only (no --simulate yet).
+Each (goal, method) trial plans in its own process (and executes the plan in simulation with --simulate);
+finished trials are written atomically under OUT/trials/, so a killed sweep rerun with the same command skips
 them. Trials run on local worker processes (--workers) or on a Dask cluster
 (--scheduler tcp://HOST:8786, needs the `distributed` extra and trajectotree installed on
 the workers). Then: trajectotree report OUT.
@@ -34,7 +35,12 @@ def register(subparsers) -> None:
     p.add_argument("--goals", type=int, default=60, help="number of goal rotations (default: 60, as in the paper)")
     p.add_argument("--seed", type=int, default=0, help="seed of the goal sampler (default: 0)")
     p.add_argument(
-        "--max-goal", type=float, default=math.pi, metavar="RAD", help="goals are uniform in [-RAD, RAD] (default: pi)"
+        "--max-goal",
+        type=float,
+        default=math.pi,
+        metavar="RAD",
+        help="goals are uniform in [-RAD, RAD]; in space, uniform over the orientations at most RAD from the "
+        "start (default: pi, all of SO(3))",
     )
     p.add_argument(
         "--methods",
@@ -107,11 +113,19 @@ def register(subparsers) -> None:
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    add_config_options(p, formulation=True)
+    add_config_options(p, formulation=True, space=True)
     p.set_defaults(run=run)
 
 
+# The execution options, which a sweep in space refuses by name (executions in space: issue #37).
+EXECUTION_OPTIONS = ("simulate", "controllers", "conditions", "closed_loop", "replan")
+
+
 def run(args) -> int:
+    from trajectotree.scene.spatial import is_space_hand
+
+    if args.hand is not None and is_space_hand(args.hand):
+        return run_space(args)
     check_output_dir("--out", args.out)
     spec = SweepSpec(
         goals=args.goals,
@@ -170,5 +184,52 @@ def run(args) -> int:
                 f"{' '.join(conditions or ['nominal'])}); "
                 "the report tabulates them in executions.md"
             )
+        print(f"next: trajectotree report {args.out}")
+    return 0
+
+
+def run_space(args) -> int:
+    """`trajectotree sweep` with a hand in space: goal orientations x methods, planned (planning.spatial) and stored
+    as the planar sweep stores its trials; the execution options are refused by name before any work."""
+    from trajectotree.cli.space_options import (
+        box_size,
+        build_args_scene,
+        check_space_graspable,
+        option_name,
+        space_config,
+    )
+    from trajectotree.experiments.sweep import SpaceSweepObject
+
+    for dest in EXECUTION_OPTIONS:
+        if getattr(args, dest):
+            raise ConfigError(
+                f"{option_name(dest)}: executions of plans in space are not part of a sweep yet (issue #37); "
+                f"the hand {args.hand!r} is in space: run the sweep without it"
+            )
+    config = space_config(args)
+    check_output_dir("--out", args.out)
+    spec = SweepSpec(
+        goals=args.goals,
+        seed=args.seed,
+        methods=tuple(args.methods),
+        config=config,
+        max_goal=args.max_goal,
+        time_limit_s=args.time_limit,
+        space=SpaceSweepObject(size=box_size(args), mass=args.mass),
+    )
+    check_space_graspable(build_args_scene(args, config), config, args)
+    summary = run_sweep(
+        spec,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        scheduler_timeout_s=args.scheduler_timeout,
+        retry_errors=args.retry_errors,
+        progress=not args.no_progress,
+    )
+    if args.json:
+        print_json(summary.__dict__)
+    else:
+        print(summary.line())
         print(f"next: trajectotree report {args.out}")
     return 0

@@ -47,12 +47,13 @@ BAND_LABEL = f"shaded: {100 * CONFIDENCE:g} % CI of the mean (Student t, across 
 
 @dataclass(frozen=True)
 class ReportFiles:
-    figure_time_cost: tuple[str, str]  # PNG, PDF
+    figure_time_cost: tuple[str, str] | None  # PNG, PDF; None for a sweep in space (its summary says why)
     figure_tracking: tuple[str, str] | None
     table_md: str
     table_csv: str
     executions_md: str | None = None  # per method, controller and condition (trajectotree.experiments.executions)
     figure_tracking_by_controller: dict = field(default_factory=dict)  # controller -> (PNG, PDF), nominal runs
+    kind: str = "plane"  # "space": a sweep of a hand in space (space_table_markdown's table)
 
 
 def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
@@ -352,6 +353,67 @@ def _staged(out: Path) -> Iterator[Path]:
         raise
 
 
+def space_method_summary(rows: list[dict], method: str) -> dict:
+    """A method's planning in space: planned (searched, solved, checked, within the goal tolerance), checked,
+    within 2 deg, and the planning time (every trial that returned a plan result) with its median's ratio
+    over TrajectoTree's."""
+    mine = [r for r in rows if r["method"] == method]
+    times = _values(mine, "total_time_s")
+    reference = _values([r for r in rows if r["method"] == REFERENCE], "total_time_s")
+    errors = [r.get("final_error_deg") for r in mine]
+    median = float(np.median(times)) if times.size else None
+    return {
+        "method": method,
+        "label": METHOD_LABELS.get(method, method),
+        "trials": len(mine),
+        "errors": sum(r.get("error") is not None for r in mine),
+        "planned": sum(bool(r.get("success")) for r in mine),
+        "checked": sum(bool(r.get("check_passed")) for r in mine),
+        "within_2_deg": sum(e is not None and e <= SPACE_GOAL_TOLERANCE_DEG for e in errors),
+        "mean_time_s": float(times.mean()) if times.size else None,
+        "median_time_s": median,
+        "p90_time_s": float(np.percentile(times, 90)) if times.size else None,
+        "median_ratio": None
+        if method == REFERENCE or median is None or not reference.size
+        else median / float(np.median(reference)),
+    }
+
+
+def space_table_markdown(table: list[dict]) -> str:
+    header = (
+        "| method | trials | errors | planned | checked | within 2 deg | mean time [s] | median time [s] "
+        "| p90 time [s] | median / TrajectoTree's |"
+    )
+    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    for s in table:
+        cells = [
+            s["label"],
+            str(s["trials"]),
+            str(s["errors"]),
+            *(f"{s[k]}/{s['trials']}" for k in ("planned", "checked", "within_2_deg")),
+            _fmt(s["mean_time_s"], ".2f"),
+            _fmt(s["median_time_s"], ".2f"),
+            _fmt(s["p90_time_s"], ".2f"),
+            "-" if s["method"] == REFERENCE else _fmt(s["median_ratio"], ".1f", "x"),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+SPACE_GOAL_TOLERANCE_DEG = 2.0  # deg, planning.spatial.GOAL_TOLERANCE (that module imports Drake; this one does not)
+SPACE_TABLE_NOTES = """
+A sweep of a hand in space (planning only). Planned: the search found a contact sequence, every program
+solved, the plan passed the 3D physics check (planning.physics.check_space_physics) and ends within 2 deg
+of its goal orientation. Checked: the plan's arrays passed that check. Within 2 deg: the last knot's
+orientation is at most 2 deg from the goal. Planning time = search + the programs (a trial's segments one
+after another in its process), over every trial that returned a plan result; median / TrajectoTree's is
+the ratio of the method's median planning time over TrajectoTree's, over all their trials.
+The planar report's Fig. 2 (box plots of time and cost) and Fig. 3 (tracking errors) are not drawn for a
+sweep in space: the programs in space report no cost, and plans in space are not executed in a sweep yet
+(issue #37).
+"""
+
+
 def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tuple[ReportFiles, list[dict]]:
     """Writes the figures and the table (default: SWEEP_DIR/report/), whole or not at all
     (ConfigError naming an unreadable input, nothing written); returns their paths and the
@@ -366,6 +428,8 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     out = Path(out_dir) if out_dir is not None else sweep_dir / REPORT_DIR
     if out.exists() and not out.is_dir():
         raise ConfigError(f"the report folder {str(out)!r} is an existing file; remove it or give --out DIR")
+    if "space" in manifest:
+        return _space_report(rows, methods, out)
     with _staged(out) as stage:
         table = summary_table(rows, methods)
         write_bytes_atomic(stage / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())
@@ -385,6 +449,22 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
         table_csv=str(out / "summary.csv"),
         executions_md=None if executions_md is None else str(out / Path(executions_md).name),
         figure_tracking_by_controller={c: final(paths) for c, paths in fig3_by_controller.items()},
+    )
+    return files, table
+
+
+def _space_report(rows: list[dict], methods: list[str], out: Path) -> tuple[ReportFiles, list[dict]]:
+    """summary.md (the table and SPACE_TABLE_NOTES) and summary.csv of a sweep in space, whole or not at all."""
+    table = [space_method_summary(rows, m) for m in methods]
+    with _staged(out) as stage:
+        write_bytes_atomic(stage / "summary.md", (space_table_markdown(table) + SPACE_TABLE_NOTES).encode())
+        write_bytes_atomic(stage / "summary.csv", table_csv(table).encode())
+    files = ReportFiles(
+        figure_time_cost=None,
+        figure_tracking=None,
+        table_md=str(out / "summary.md"),
+        table_csv=str(out / "summary.csv"),
+        kind="space",
     )
     return files, table
 

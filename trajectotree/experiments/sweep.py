@@ -66,6 +66,22 @@ def sample_goals(count: int, seed: int, max_abs: float = math.pi) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-max_abs, max_abs, count)
 
 
+def sample_space_goals(count: int, seed: int, max_angle: float = math.pi) -> np.ndarray:
+    """(count, 4) goal orientations [w, x, y, z] uniform over SO(3) with `seed` (scipy's Rotation.random, as
+    scripts/bench_space.py draws them), or, with max_angle (rad) under pi, uniform over the rotations at most
+    max_angle from the start orientation (the identity): the uniform ones drawn in turn, those beyond it rejected."""
+    from scipy.spatial.transform import Rotation
+
+    if max_angle >= math.pi:
+        return Rotation.random(count, random_state=seed).as_quat(scalar_first=True)
+    rng = np.random.default_rng(seed)
+    kept = np.empty((0, 4))
+    while len(kept) < count:  # the accepted share is (a - sin a) / pi: 4e-4 at 0.2 rad, 1e5 draws a batch
+        batch = Rotation.random(100_000, random_state=rng)
+        kept = np.vstack([kept, batch[batch.magnitude() <= max_angle].as_quat(scalar_first=True)])
+    return kept[:count]
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     """What a sweep computes; equal specs give identical trials (its manifest)."""
@@ -75,8 +91,9 @@ class SweepSpec:
     methods: tuple[str, ...] = METHODS  # planners to compare
     simulate: bool = False  # execute every plan that has a trajectory
     config: Config = field(default_factory=Config)
-    max_goal: float = math.pi  # rad, goals are uniform in [-max_goal, max_goal]
+    max_goal: float = math.pi  # rad, goals are uniform in [-max_goal, max_goal] (space: at most max_goal from start)
     time_limit_s: float = 1800.0  # s, per trial (plan + simulation); a trial past it is killed
+    space: SpaceSweepObject | None = None  # a hand in space (config.scene.hand) and its box; None: planar
 
     def __post_init__(self):
         check_integer("--goals", self.goals, 1, 100000)
@@ -91,16 +108,24 @@ class SweepSpec:
         check_range("--max-goal", self.max_goal, 0.0, math.pi, low_open=True)
         check_range("--time-limit", self.time_limit_s, 0.0, None, low_open=True)
 
+        if self.space is not None and self.simulate:
+            raise ConfigError("--simulate: executions of plans in space are not part of a sweep yet (issue #37)")
+
     def goal_values(self) -> np.ndarray:
+        """(goals,) rad for a planar hand, (goals, 4) quaternions [w, x, y, z] for a hand in space."""
+        if self.space is not None:
+            return sample_space_goals(self.goals, self.seed, self.max_goal)
         return sample_goals(self.goals, self.seed, self.max_goal)
 
     def manifest(self) -> dict:
-        return {
+        # a planar sweep's manifest has no "space" key, so sweeps made before hands in space resume as they were
+        space = {} if self.space is None else {"space": self.space.to_json()}
+        return space | {
             "format": MANIFEST_FORMAT,
             "goals": self.goals,
             "seed": self.seed,
             "max_goal": self.max_goal,
-            "goal_values": [float(g) for g in self.goal_values()],
+            "goal_values": self.goal_values().tolist(),
             "methods": list(self.methods),
             "simulate": self.simulate,
             "time_limit_s": self.time_limit_s,
@@ -114,15 +139,27 @@ class SweepSpec:
             TrialTask(
                 key=trial_key(i, m),
                 goal_index=i,
-                goal=float(g),
+                goal=g.tolist(),
                 method=m,
                 simulate=self.simulate,
                 config=config,
                 time_limit_s=self.time_limit_s,
+                space=None if self.space is None else self.space.to_json(),
             )
             for i, g in enumerate(self.goal_values())
             for m in self.methods
         ]
+
+
+@dataclass(frozen=True)
+class SpaceSweepObject:
+    """The box a sweep in space plans: its size (x, y, z) m and mass kg as given, else (None) the hand's own."""
+
+    size: tuple[float, float, float] | None = None
+    mass: float | None = None
+
+    def to_json(self) -> dict:
+        return {"size": None if self.size is None else [float(v) for v in self.size], "mass": self.mass}
 
 
 def trial_key(goal_index: int, method: str) -> str:

@@ -150,10 +150,12 @@ def read_row(trial_dir: Path) -> dict:
 
 def check_trial(trial_dir: Path) -> dict:
     """A finished trial's row, once its array files read back whole: plan.npz (a row without
-    an error has one), sim.npz (a simulated row has one) and any other .npz there.
+    an error has one, unless its plan_arrays is false), sim.npz (a simulated row has one) and any other .npz there.
     CorruptTrialError naming the first unreadable file."""
     row = read_row(trial_dir)
-    promised = ([PLAN_NPZ] if row.get("error") is None else []) + ([SIM_NPZ] if row.get("simulated") else [])
+    # a trial in space whose search found no contact sequence has no plan.npz: its row says so (plan_arrays)
+    planned = row.get("error") is None and row.get("plan_arrays", True)
+    promised = ([PLAN_NPZ] if planned else []) + ([SIM_NPZ] if row.get("simulated") else [])
     for name in sorted(set(promised) | {p.name for p in trial_dir.glob("*.npz")}):
         problem = npz_problem(trial_dir / name)
         if problem:

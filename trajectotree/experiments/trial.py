@@ -16,6 +16,7 @@ pickled: each child builds its own scene. The cost is one interpreter start per 
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import signal
@@ -27,7 +28,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from trajectotree.io import PLAN_JSON, SIM_JSON
+from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON
 
 # Row fields, in the order of trials.jsonl and the CSV table.
 PLAN_FIELDS = (
@@ -49,6 +50,9 @@ ROW_FIELDS = (
     + SIM_FIELDS
     + ("trial_wall_s", "error")
 )
+# A trial in space adds these (plan.json's check and final error; plan_arrays: whether plan.npz was written, which a
+# plan whose search found no contact sequence has not).
+SPACE_FIELDS = ("check_passed", "final_error_deg", "plan_arrays")
 ROW_FILE = "trial.json"
 LOG_FILE = "log.txt"
 STDERR_TAIL_CHARS = 4000
@@ -61,11 +65,12 @@ class TrialTask:
 
     key: str  # "<goal index>_<method>", the trial's directory name
     goal_index: int  # index into the sweep's goals
-    goal: float  # rad, goal rotation
+    goal: float | list[float]  # rad, goal rotation; in space the goal quaternion [w, x, y, z]
     method: str  # "trajectotree" | "cito" | "cito-warm"
     simulate: bool  # execute the plan in simulation
     config: dict  # trajectotree.config.config_to_dict(Config)
     time_limit_s: float  # s, wall clock for plan + simulation; the child is killed beyond it
+    space: dict | None = None  # a hand in space: its box (sweep.SpaceSweepObject.to_json); None: planar
 
 
 @dataclass(frozen=True)
@@ -108,7 +113,7 @@ class TrialChildren:
 
 
 def empty_row(task: TrialTask) -> dict:
-    row = dict.fromkeys(ROW_FIELDS)
+    row = dict.fromkeys(ROW_FIELDS + (() if task.space is None else SPACE_FIELDS))
     row.update(key=task.key, goal_index=task.goal_index, goal=task.goal, method=task.method, simulated=False)
     return row
 
@@ -129,10 +134,43 @@ def row_from_files(task: TrialTask, out_dir: Path) -> dict:
     return row
 
 
+def space_row_from_files(task: TrialTask, out_dir: Path) -> dict:
+    """A trial in space's row, read back from the plan.json planning.spatial.save_space_plan wrote."""
+    row = empty_row(task)
+    plan_json = json.loads((out_dir / PLAN_JSON).read_text())
+    row.update({k: plan_json.get(k) for k in PLAN_FIELDS})
+    check, error = plan_json.get("physics_check"), plan_json.get("final_error_rad")
+    row["converged"] = bool(plan_json["segments"]) and all(s["success"] for s in plan_json["segments"])
+    row["check_passed"] = None if check is None else bool(check["passed"])
+    row["final_error_deg"] = None if error is None else math.degrees(error)
+    row["plan_arrays"] = (out_dir / PLAN_NPZ).is_file()
+    row["switching_fingers"] = [n.get("switching_finger") for n in plan_json["contact_plan"]["contact_sequence"]]
+    return row
+
+
+def run_space_trial(task: TrialTask, out_dir: Path) -> dict:
+    """Plans the task's goal quaternion with a hand in space (planning.spatial: plan_space, or plan_space_cito for
+    the baselines), its segments one after another in this process, and writes plan.json (and plan.npz)."""
+    from trajectotree.config import config_from_dict
+    from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
+    from trajectotree.scene.spatial import build_space_scene
+
+    config = config_from_dict(task.config)
+    scene = build_space_scene(config.scene.hand, mu=config.scene.mu, gravity=config.scene.gravity, **task.space)
+    if task.method == "trajectotree":
+        result = plan_space(scene, task.goal, config, workers=1)
+    else:
+        result = plan_space_cito(scene, task.goal, config, task.method, workers=1)
+    save_space_plan(result, out_dir, config)
+    return space_row_from_files(task, out_dir)
+
+
 def run_trial(task: TrialTask, out_dir: Path) -> dict:
     """Plans (and executes) the task in this process, writing plan.json/.npz (and
     sim.json/.npz) into out_dir. Returns the row. Normal failures (no contact plan,
     IPOPT not converged, a drop) are results in the files, not exceptions."""
+    if task.space is not None:
+        return run_space_trial(task, out_dir)
     from trajectotree.config import config_from_dict
     from trajectotree.io import save_plan, save_sim
     from trajectotree.planning.planners import plan

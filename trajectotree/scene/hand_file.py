@@ -53,7 +53,11 @@ PLANAR, SPACE = "planar", "space"  # the kinds of hand a description names (Hand
 # three hold while one moves: two point contacts alone cannot resist a torque about the line through them
 MIN_SPACE_FINGERS = 4
 # the commands that take each kind of hand, for the refusal of the other kind
-TAKEN_BY = {PLANAR: "every command", SPACE: "only `trajectotree scene`, `search` and `plan` take it so far"}
+TAKEN_BY = {
+    PLANAR: "every command",
+    SPACE: "only `trajectotree scene`, `search`, `plan`, `demo`, `simulate` (open loop) and `sweep` (planning) "
+    "take it so far",
+}
 
 
 class HandError(ConfigError):

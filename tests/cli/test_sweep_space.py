@@ -1,0 +1,109 @@
+"""`trajectotree sweep` and `report` with a hand in space (issue #36 item 6): goal orientations uniform over SO(3),
+each planned in its own trial process and stored as the planar sweep stores its trials (resumable), the report's
+summary per method; bad input and the execution options (issue #37) exit 2 naming the value before anything is
+written."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from trajectotree.cli import main
+from trajectotree.experiments.sweep import sample_space_goals
+
+SPACE = ["--hand", "fingerpro4"]
+# 2 goals at most 0.3 rad (17 deg) from the start: each plans in about 2 s on one core
+SMALL = ["--goals", "2", "--seed", "0", "--max-goal", "0.3", "--methods", "trajectotree", "cito-warm"]
+
+
+def test_goals_are_scipys_uniform_rotations_and_max_goal_bounds_their_angle():
+    default = sample_space_goals(5, 3)
+    assert np.array_equal(default, Rotation.random(5, random_state=3).as_quat(scalar_first=True))
+    near = sample_space_goals(4, 3, 0.3)
+    angles = Rotation.from_quat(near, scalar_first=True).magnitude()
+    assert near.shape == (4, 4) and np.all(angles <= 0.3) and np.all(angles > 0.0)
+    assert np.array_equal(near, sample_space_goals(4, 3, 0.3))  # the seed decides them
+
+
+def _sweep(out, *extra) -> subprocess.CompletedProcess:
+    argv = ["sweep", *SPACE, *SMALL, "--workers", "2", "--no-progress", "--out", str(out), *extra]
+    return subprocess.run([sys.executable, "-m", "trajectotree.cli", *argv], capture_output=True, text=True)
+
+
+@pytest.mark.slow
+def test_sweep_in_space_plans_resumes_and_reports(tmp_path):
+    out = tmp_path / "sweep"
+    first = _sweep(out)
+    assert first.returncode == 0, first.stderr
+    assert "4/4 trials done (4 now, 0 before)" in first.stdout
+    manifest = json.loads((out / "manifest.json").read_text())
+    goals = np.array(manifest["goal_values"])
+    assert manifest["space"] == {"size": None, "mass": None} and goals.shape == (2, 4)
+    assert np.allclose(goals, sample_space_goals(2, 0, 0.3))
+    for key in ("0000_trajectotree", "0000_cito-warm", "0001_trajectotree", "0001_cito-warm"):
+        folder = out / "trials" / key
+        row = json.loads((folder / "trial.json").read_text())
+        plan = json.loads((folder / "plan.json").read_text())
+        assert plan["kind"] == "space" and plan["method"] == key[5:]
+        assert np.allclose(row["goal"], plan["goal_quaternion"])
+        assert row["plan_arrays"] == (folder / "plan.npz").is_file()
+        assert row["check_passed"] == plan["physics_check"]["passed"]
+        assert row["final_error_deg"] == pytest.approx(math.degrees(plan["final_error_rad"]))
+        assert row["success"] == plan["success"] and row["total_time_s"] == plan["total_time_s"]
+    tree_rows = [json.loads((out / "trials" / f"000{i}_trajectotree" / "trial.json").read_text()) for i in (0, 1)]
+    assert all(r["success"] and r["check_passed"] and r["final_error_deg"] <= 2.0 for r in tree_rows)
+
+    again = _sweep(out)  # resumed: every trial finished, none rerun
+    assert again.returncode == 0, again.stderr
+    assert "4/4 trials done (0 now, 4 before)" in again.stdout
+    assert json.loads((out / "trials" / "0000_trajectotree" / "trial.json").read_text()) == tree_rows[0]
+
+    other = _sweep(out, "--mass", "0.05")  # another box is another sweep: refused, nothing touched
+    assert other.returncode == 2 and "space.mass: None there, 0.05 now" in other.stderr
+
+    report = subprocess.run(
+        [sys.executable, "-m", "trajectotree.cli", "report", str(out)], capture_output=True, text=True
+    )
+    assert report.returncode == 0, report.stderr
+    summary = (out / "report" / "summary.md").read_text()
+    assert "| TrajectoTree | 2 | 0 | 2/2 | 2/2 | 2/2 |" in summary
+    assert "are not drawn for a\nsweep in space" in summary
+    csv_lines = (out / "report" / "summary.csv").read_text().splitlines()
+    assert csv_lines[0].split(",")[:7] == ["method", "label", "trials", "errors", "planned", "checked", "within_2_deg"]
+    assert [line.split(",")[0] for line in csv_lines[1:]] == ["trajectotree", "cito-warm"]
+    ratio = float(csv_lines[2].split(",")[-1])  # cito-warm's median over TrajectoTree's, from the trials' times
+    times = {
+        m: np.median(
+            [json.loads((out / "trials" / f"000{i}_{m}" / "trial.json").read_text())["total_time_s"] for i in (0, 1)]
+        )
+        for m in ("trajectotree", "cito-warm")
+    }
+    assert ratio == pytest.approx(times["cito-warm"] / times["trajectotree"])
+    assert not list((out / "report").glob("*.png"))
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--simulate"], "--simulate: executions of plans in space are not part of a sweep yet (issue #37)"),
+        (["--controllers", "grasp"], "--controllers: executions of plans in space are not part of a sweep yet"),
+        (["--closed-loop"], "--closed-loop: executions of plans in space are not part of a sweep yet"),
+        (["--max-goal", "4"], "--max-goal"),
+        (["--goals", "0"], "--goals"),
+        (["--methods", "rrt"], "--methods: unknown method 'rrt'"),
+        (["--box-size", "0.06", "0.06"], "--box-size = [0.06, 0.06] has 2 values; the hand 'fingerpro4' is in space"),
+        (["--box-size", "0.3", "0.3", "0.3"], "--box-size = 0.3 0.3 0.3 m"),
+        (["--segments", "3"], "--segments = 3 is a planar hand's option; the hand 'fingerpro4' is in space"),
+    ],
+)
+def test_bad_input_exits_2_naming_it_and_writes_nothing(tmp_path, capsys, extra, message):
+    out = tmp_path / "sweep"
+    assert main(["sweep", *SPACE, "--goals", "2", "--out", str(out), "--no-progress", *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("trajectotree sweep: error: ") and message in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists()
