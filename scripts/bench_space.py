@@ -28,16 +28,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from trajectotree.config import Config
+from trajectotree.experiments.sweep import axis_aligned_goals
 from trajectotree.geometry import quaternion_angle
 from trajectotree.planning.spatial import plan_space, plan_space_cito
 from trajectotree.scene.spatial import START_POSE, build_space_scene
-
-
-def axis_aligned_goals() -> np.ndarray:
-    """(23, 4) [w, x, y, z]: the cube's rotations but the identity, applied to the start orientation in W."""
-    start = Rotation.from_quat(START_POSE[:4], scalar_first=True)
-    group = [r for r in Rotation.create_group("O") if r.magnitude() > 1e-9]
-    return np.array([(r * start).as_quat(scalar_first=True) for r in group])
 
 
 def main() -> None:

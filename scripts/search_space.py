@@ -14,10 +14,10 @@ import argparse
 import time
 
 import numpy as np
-from bench_space import axis_aligned_goals
 from scipy.spatial.transform import Rotation
 
 from trajectotree.config import Config, mu_plan
+from trajectotree.experiments.sweep import axis_aligned_goals
 from trajectotree.geometry import quaternion_angle
 from trajectotree.scene.spatial import START_POSE, build_space_scene
 from trajectotree.search.tree import find_space_contact_plan

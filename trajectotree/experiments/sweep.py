@@ -82,6 +82,18 @@ def sample_space_goals(count: int, seed: int, max_angle: float = math.pi) -> np.
     return kept[:count]
 
 
+def axis_aligned_goals() -> np.ndarray:
+    """(23, 4) [w, x, y, z]: the cube's 24 rotations but the identity (MuJoCo MPC's task), applied to the start
+    orientation in W."""
+    from scipy.spatial.transform import Rotation
+
+    from trajectotree.scene.spatial import START_POSE
+
+    start = Rotation.from_quat(START_POSE[:4], scalar_first=True)
+    group = [r for r in Rotation.create_group("O") if r.magnitude() > 1e-9]
+    return np.array([(r * start).as_quat(scalar_first=True) for r in group])
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     """What a sweep computes; equal specs give identical trials (its manifest)."""
