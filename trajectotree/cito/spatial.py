@@ -437,9 +437,7 @@ class SpaceSegmentRows:
         # 1/m: the squared gap's row divided by twice the largest gap, so that its gradient is about one, as the
         # pins' (20 segments of three seed-0 goals: 887 IPOPT iterations in all, 1046 unscaled)
         self.clearance_scale = 1.0 / (2 * (scene.tip_radius + SWITCH_CLEARANCE))
-        self.inertia = scene.object.mass * np.diag(
-            [sum(np.square(scene.object.size)) - e * e for e in scene.object.size]
-        ) / 12  # fmt: skip
+        self.inertia = scene.object.inertia
         self.half = scene.object.half
         # kg m^2: L is in units of the cube's largest principal inertia (rad/s), its row's gradients near one
         self.momentum_unit = float(np.max(np.diag(self.inertia)))
@@ -1000,9 +998,7 @@ class SpaceCitoRows(SpaceSegmentRows):
         self.pinned = np.zeros((self.K, F), dtype=bool)
         self.gap_row, self.product_row, self.torque_row = 9, 9 + F, 9 + 2 * F
         self.link_row = self.torque_row + F * n
-        self.inertia = scene.object.mass * np.diag(
-            [sum(np.square(scene.object.size)) - e * e for e in scene.object.size]
-        ) / 12  # fmt: skip
+        self.inertia = scene.object.inertia
         self.half = scene.object.half
         self.momentum_unit = float(np.max(np.diag(self.inertia)))
         self.r, self.g = scene.tip_radius, scene.gravity

@@ -151,15 +151,7 @@ def run(args) -> int:
         executors = [executor_of(c, closed_loop=args.closed_loop, replan=args.replan) for c in controllers]
     except ConfigError as e:
         raise (e.as_option("--controllers") if args.controllers else e) from None
-    summary = run_sweep(
-        spec,
-        args.out,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        scheduler_timeout_s=args.scheduler_timeout,
-        retry_errors=args.retry_errors,
-        progress=not args.no_progress,
-    )
+    summary = run_sweep_of_args(spec, args)
     ran = (
         run_executions(
             args.out,
@@ -218,7 +210,18 @@ def run_space(args) -> int:
         space=SpaceSweepObject(size=box_size(args), mass=args.mass),
     )
     check_space_graspable(build_args_scene(args, config), config, args)
-    summary = run_sweep(
+    summary = run_sweep_of_args(spec, args)
+    if args.json:
+        print_json(summary.__dict__)
+    else:
+        print(summary.line())
+        print(f"next: trajectotree report {args.out}")
+    return 0
+
+
+def run_sweep_of_args(spec, args):
+    """run_sweep of `spec` with the command line's workers, scheduler, retries and progress."""
+    return run_sweep(
         spec,
         args.out,
         workers=args.workers,
@@ -227,9 +230,3 @@ def run_space(args) -> int:
         retry_errors=args.retry_errors,
         progress=not args.no_progress,
     )
-    if args.json:
-        print_json(summary.__dict__)
-    else:
-        print(summary.line())
-        print(f"next: trajectotree report {args.out}")
-    return 0

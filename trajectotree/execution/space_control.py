@@ -366,8 +366,7 @@ class SpaceGraspController(LeafSystem):
         self._tips = [scene.tip_frame(i) for i in range(scene.num_fingers)]
         self._tip_radius, self._half = scene.tip_radius, scene.object.half
         self._mass = scene.object.mass
-        size = np.asarray(scene.object.size)
-        self._I_B = scene.object.mass * np.diag([np.sum(size**2) - s * s for s in size]) / 12  # a uniform box
+        self._I_B = scene.object.inertia
         self._tau_max = scene.tau_max
         self._num_fingers, self._joints_per_finger = scene.tau_max.shape
         joints = [plant.GetJointByName(n, scene.hand) for f in scene.hand_file.fingers for n in f.joints]

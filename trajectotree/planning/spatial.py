@@ -86,12 +86,10 @@ class SpacePlanResult:
 
 def object_model(scene) -> SpaceObjectModel:
     """The object and radii the check needs, from a SpaceScene (a uniform box's inertia about its centre)."""
-    size = np.asarray(scene.object.size, dtype=float)
-    inertia = scene.object.mass * np.diag([np.sum(size**2) - s * s for s in size]) / 12
     return SpaceObjectModel(
-        size=tuple(float(s) for s in size),
+        size=tuple(float(s) for s in scene.object.size),
         mass=scene.object.mass,
-        inertia=inertia,
+        inertia=scene.object.inertia,
         gravity=scene.gravity,
         tip_radius=scene.tip_radius,
         link_radii=tuple(c.radius for c in scene.link_capsules()[0]),

@@ -47,6 +47,12 @@ class SpaceObject:
     def half(self) -> np.ndarray:
         return np.array(self.size) / 2
 
+    @property
+    def inertia(self) -> np.ndarray:
+        """(3, 3) kg m^2, the uniform box's rotational inertia about its centre in its own frame."""
+        size = np.asarray(self.size, dtype=float)
+        return self.mass * np.diag([np.sum(size**2) - s * s for s in size]) / 12
+
 
 def add_space_object(plant: MultibodyPlant, box: SpaceObject):
     """Adds the box (body "box", model instance "box") on a quaternion floating joint "box_floating"
