@@ -89,11 +89,11 @@ def test_the_scene_command_reports_each_fingers_faces_and_workspace(capsys):
     assert np.all(low < high)
 
 
-def test_the_planar_commands_refuse_a_hand_in_space(tmp_path, capsys):
-    out = tmp_path / "sweep"
-    assert main(["sweep", "--hand", "fingerpro4", "--goals", "2", "--out", str(out)]) == 2
+def test_what_a_hand_in_space_cannot_do_yet_is_refused(tmp_path, capsys):
+    out = tmp_path / "sweep"  # a sweep in space plans; executing its plans is issue 37's
+    assert main(["sweep", "--hand", "fingerpro4", "--goals", "2", "--simulate", "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "fingerpro4" in err and "hand in space" in err and "Traceback" not in err
+    assert "--simulate" in err and "Traceback" not in err
     assert not out.exists()
     assert main(["plan", "--hand", "fingerpro4", "--goal", "0.3", "--out", str(out)]) == 2  # a planar goal
     assert "--goal = 0.3 is a planar goal; valid: --goal-quat W X Y Z or --goal-rpy R P Y" in capsys.readouterr().err
