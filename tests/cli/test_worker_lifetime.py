@@ -62,10 +62,21 @@ def forked_workers(pid: int) -> list[int]:
     return [p for p in session_processes(pid) if int(_stat(p)[1]) == pid and command and cmdline(p) == command]
 
 
+def _as_from_a_shell() -> None:
+    """In the child before it runs: the stop signals' default disposition and none blocked, as a shell starts a
+    command, whatever this test process's state (the state another test left in a shared xdist worker is
+    inherited across fork and exec: the Ctrl-C tests timed out in the full suite, never alone)."""
+    for stop in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(stop, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_SETMASK, [])
+
+
 def start(args: list[str], stderr_path: Path) -> subprocess.Popen:
     """`args` in a session of its own, its stderr into a file (a surviving worker would hold a pipe open)."""
     with open(stderr_path, "w") as stderr:
-        return subprocess.Popen(args, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr)
+        return subprocess.Popen(
+            args, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr, preexec_fn=_as_from_a_shell
+        )
 
 
 def wait_for_workers(child: subprocess.Popen, log: Path, count: int = 2) -> list[int]:
@@ -190,6 +201,7 @@ def start_pool_script(start_method: str, log: Path) -> tuple[subprocess.Popen, l
         child = subprocess.Popen(
             [sys.executable, "-c", POOL_SCRIPT, start_method],
             start_new_session=True,
+            preexec_fn=_as_from_a_shell,
             stdout=subprocess.PIPE,
             stderr=stderr,
             text=True,
