@@ -409,7 +409,6 @@ def replanned_run(tmp_path_factory):
     return SimpleNamespace(path=path, result=run, plan=result)
 
 
-# The run before the page: with the browser started first, the run's planner hung (no chromium left running).
 def test_a_replanned_run_writes_its_playback(replanned_run, pages):
     page = pages.open(replanned_run.path)
     run, (event,) = replanned_run.result, replanned_run.result.replans
