@@ -904,18 +904,29 @@ def build_space_segment(
 def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
     """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess; `scene` a
     SpaceScene or its SpaceHandModel, `fingers` the chains of space_fingers."""
+    program, result, Z, times = solve_with_link_retry(
+        lambda links, Z: build_space_segment(scene, fingers, spec, mu, links, Z),
+        lambda program, Z: link_depth(program.rows, Z),
+        config,
+    )
+    return _segment_arrays(program.rows, Z, result, times)
+
+
+def solve_with_link_retry(build, depth, config: CitoConfig, Z=None):
+    """IPOPT (cito.solve's options) on build(links=False, Z), then once more on build(True, its solution) when
+    depth(program, solution) (m, the deepest link in the box) exceeds LINK_PENETRATION_TOL; (the last program,
+    its result, its solution, (build s, solve s, CPU s) of both). Segments, the joint program and CITO alike."""
     cpu = time.process_time()
-    build, solve_time, Z = 0.0, 0.0, None
+    build_s = solve_s = 0.0
     for links in (False, True):
-        program = build_space_segment(scene, fingers, spec, mu, links, Z)
+        program = build(links, Z)
         t0 = time.perf_counter()
         result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
-        build, solve_time = build + program.build_time_s, solve_time + time.perf_counter() - t0
+        build_s, solve_s = build_s + program.build_time_s, solve_s + time.perf_counter() - t0
         Z = result.GetSolution(program.z)
-        if not result.is_success() or link_depth(program.rows, Z) <= LINK_PENETRATION_TOL:
+        if not result.is_success() or depth(program, Z) <= LINK_PENETRATION_TOL:
             break
-    times = (build, solve_time, time.process_time() - cpu)
-    return _segment_arrays(program.rows, Z, result, times)
+    return program, result, Z, (build_s, solve_s, time.process_time() - cpu)
 
 
 def link_depth(rows: SpaceSegmentRows, Z) -> float:
@@ -1250,17 +1261,13 @@ def build_space_cito(scene, fingers, spec: CitoSpec, mu: float, start: np.ndarra
 def solve_space_cito(scene, fingers, spec: CitoSpec, mu: float, config: CitoConfig, start) -> SpaceSegmentResult:
     """General CITO in space built and solved by IPOPT (cito.solve's options) from `start` (K, width); as the
     segments are, again with the link rows from the solution when a link then reaches over 1 mm into the box."""
-    cpu = time.process_time()
-    build, solve_time, Z = 0.0, 0.0, np.asarray(start, dtype=float)
-    for links in (False, True):
-        program = build_space_cito(scene, fingers, spec, mu, Z, links)
-        t0 = time.perf_counter()
-        result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
-        build, solve_time = build + program.build_time_s, solve_time + time.perf_counter() - t0
-        Z = result.GetSolution(program.z)
-        if not result.is_success() or link_depth(program.rows, Z) <= LINK_PENETRATION_TOL:
-            break
-    return _segment_arrays(program.rows, Z, result, (build, solve_time, time.process_time() - cpu))
+    program, result, Z, times = solve_with_link_retry(
+        lambda links, Z: build_space_cito(scene, fingers, spec, mu, Z, links),
+        lambda program, Z: link_depth(program.rows, Z),
+        config,
+        np.asarray(start, dtype=float),
+    )
+    return _segment_arrays(program.rows, Z, result, times)
 
 
 def cito_knots(rows: SpaceCitoRows, p, v, q, f_W) -> np.ndarray:
@@ -1433,17 +1440,9 @@ def solve_space_joint(
     """The joint formulation built and solved by IPOPT (cito.solve's options), as a segment is, again with the link
     rows from its solution when a link then reaches over 1 mm into the box; the solution as one
     SpaceSegmentResult per segment (each with the one program's status and times)."""
-    cpu = time.process_time()
-    build, solve_time, Z = 0.0, 0.0, None
-    for links in (False, True):
-        program = build_space_joint(scene, fingers, specs, mu, links, Z)
-        t0 = time.perf_counter()
-        result = IpoptSolver().Solve(program.prog, None, ipopt_options(config))
-        build, solve_time = build + program.build_time_s, solve_time + time.perf_counter() - t0
-        Z = result.GetSolution(program.z)
-        knots = joint_knots(program.rows)
-        depth = max(link_depth(r, Z[k]) for r, k in zip(program.rows, knots))
-        if not result.is_success() or depth <= LINK_PENETRATION_TOL:
-            break
-    times = (build, solve_time, time.process_time() - cpu)
-    return [_segment_arrays(r, Z[k], result, times) for r, k in zip(program.rows, knots)]
+    program, result, Z, times = solve_with_link_retry(
+        lambda links, Z: build_space_joint(scene, fingers, specs, mu, links, Z),
+        lambda program, Z: max(link_depth(r, Z[k]) for r, k in zip(program.rows, joint_knots(program.rows))),
+        config,
+    )
+    return [_segment_arrays(r, Z[k], result, times) for r, k in zip(program.rows, joint_knots(program.rows))]
