@@ -74,7 +74,6 @@ def test_a_planar_plan_with_a_hand_in_space_exits_2(tiny_plan, capsys):
     [
         (["--executor", "grasp-closed-loop"], "--executor = 'grasp-closed-loop' does not execute plans in space yet"),
         (["--closed-loop"], "--closed-loop does not work with a plan in space yet"),
-        (["--sim-mu", "0.4"], "--sim-mu does not work with a plan in space yet"),
     ],
 )
 def test_what_space_does_not_have_yet_exits_2(space_plan, capsys, options, named):

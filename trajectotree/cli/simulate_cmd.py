@@ -130,7 +130,8 @@ def register(subparsers) -> None:
     world.add_argument(
         "--push",
         metavar="FX,FY@T",
-        help="push the object with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s",
+        help="push the object with force (FX, FY) N in W for sim.push_duration (0.2 s) from time T s; a plan in "
+        "space takes FX,FY,FZ@T",
     )
     p.set_defaults(run=run)
 
@@ -249,9 +250,9 @@ def save_sim_json_with_plan_status(result, plan_dir: str, plan_success: bool) ->
     return summary
 
 
-def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
-    """run_simulation's keyword arguments for --sim-mu, --sim-mass and --push, checked
-    here so that bad values stop the command before anything is written: a push must start
+def world_conditions(args, config: Config, plan_duration_s: float, components: int = 2) -> dict:
+    """run_simulation's keyword arguments for --sim-mu, --sim-mass and --push (of `components` forces: 3 for a plan
+    in space), checked here so that bad values stop the command before anything is written: a push must start
     before the run ends (the plan's `plan_duration_s` and sim.settle_time), or it never acts."""
     from trajectotree.config import check_range
     from trajectotree.execution.world import Conditions, parse_push
@@ -260,7 +261,7 @@ def world_conditions(args, config: Config, plan_duration_s: float) -> dict:
         check_range("--sim-mu", args.sim_mu, 0.0, MAX_MU, low_open=True)
     if args.sim_mass is not None:
         check_range("--sim-mass", args.sim_mass, MIN_BOX_MASS, MAX_BOX_MASS)
-    push = None if args.push is None else parse_push(args.push, config.sim.push_duration)
+    push = None if args.push is None else parse_push(args.push, config.sim.push_duration, components)
     run_s = plan_duration_s + config.sim.settle_time
     if push is not None and push.time_s >= run_s - 1e-9:  # the knot times' rounding: 1.2 + 0.5 s is 1.7000000000000002
         raise ConfigError(

@@ -2,12 +2,12 @@
 fingerpro4`): the plan executed open loop by the grasp controller in space (trajectotree.execution.space_run),
 written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan) and sim.json (dropped, the
 final orientation error in rad and position error in m, the executor); optionally watched as the plane's run is
-(--meshcat live, --html the self-contained playback, --gif, --forces the forces figure). What space does not have
-yet (the closed loop, the other world) is refused before anything is read or written."""
+(--meshcat live, --html the self-contained playback, --gif, --forces the forces figure), in the plan's world or
+another (--sim-mu, --sim-mass, --push FX,FY,FZ@T: the controller keeps the plan's values). What space does not have
+yet (the closed loop) is refused before anything is read or written."""
 
 from __future__ import annotations
 
-import io
 import json
 import sys
 from pathlib import Path
@@ -15,23 +15,21 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cli.common import check_output_dir, print_json
-from trajectotree.cli.simulate_cmd import chosen_executor, execution_config
+from trajectotree.cli.simulate_cmd import chosen_executor, execution_config, world_conditions
 from trajectotree.config import ConfigError, config_from_dict
-from trajectotree.io import SIM_JSON, SIM_NPZ, reading, require_files, write_bytes_atomic, write_json_atomic
+from trajectotree.execution.space_plan import (
+    check_arrays_fit_scene,
+    read_space_plan,
+    save_space_sim,
+)
+from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ, reading
 from trajectotree.scene.spatial import is_space_hand
 
-PLAN_JSON, PLAN_NPZ = "plan.json", "plan.npz"
-# m, how far a plan's contact points may lie off the surface of the cube plan.json names (a plan's own lie on it
-# to rounding; the arrays of another cube's plan miss it by millimetres), as the plane's simulate_cmd.FIT_TOL
-FIT_TOL = 1e-4
 # The options of `simulate` that a plan in space does not take yet, by their argparse names.
 NOT_YET = {
     "closed_loop": "--closed-loop",
     "replan": "--replan",
     "friction_floor": "--friction-floor",
-    "sim_mu": "--sim-mu",
-    "sim_mass": "--sim-mass",
-    "push": "--push",
 }
 
 
@@ -63,67 +61,8 @@ def refuse_not_yet(args) -> None:
     if given:
         raise ConfigError(
             f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): open-loop "
-            "execution by the grasp controller in the plan's world only, so far"
+            "execution by the grasp controller, so far"
         )
-
-
-def read_space_plan(plan_dir: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
-    """plan.json's data and plan.npz's arrays (their shapes checked against each other: planning.physics.
-    check_space_arrays); ConfigError naming the file and what is wrong."""
-    from trajectotree.planning.physics import check_space_arrays
-    from trajectotree.results import SPACE_TRAJECTORY_ARRAYS
-
-    folder = Path(plan_dir)
-    json_path, npz_path = folder / PLAN_JSON, folder / PLAN_NPZ
-    require_files((json_path, npz_path), "a plan folder holds plan.json and plan.npz (written by `trajectotree plan`)")
-    with reading(json_path):
-        data = json.loads(json_path.read_text())
-        if not isinstance(data.get("object"), dict) or not isinstance(data.get("config"), dict):
-            raise ValueError("a plan in space's plan.json names its object and its config")
-    with reading(npz_path), np.load(npz_path) as npz:
-        arrays = {name: np.array(npz[name]) for name in npz.files}
-    missing = [name for name in SPACE_TRAJECTORY_ARRAYS if name not in arrays]
-    if missing:
-        raise ConfigError(f"{str(npz_path)!r} lacks the array(s) {', '.join(missing)} of a plan in space")
-    try:
-        return data, check_space_arrays(arrays)
-    except ValueError as e:
-        raise ConfigError(f"{str(npz_path)!r}: {e}") from None
-
-
-def check_arrays_fit_scene(npz_path: Path, arrays: dict[str, np.ndarray], scene) -> None:
-    """ConfigError naming plan.npz and the mismatch when its arrays do not belong to the scene plan.json names:
-    its fingers and joints the hand's, every contact point on the cube's surface at the planned pose."""
-    from trajectotree.geometry import box_signed_distances, quaternion_matrices
-
-    F, joints = scene.num_fingers, scene.tau_max.size
-    if arrays["f_W"].shape[1] != F or arrays["q"].shape[1] != joints:
-        raise ConfigError(
-            f"{str(npz_path)!r} has {arrays['f_W'].shape[1]} fingers and {arrays['q'].shape[1]} joints; hand "
-            f"{scene.hand_file.source!r} has {F} and {joints}: put the plan.json and plan.npz of one plan together"
-        )
-    x = arrays["x"]
-    p_BC = np.einsum("kji,kfj->kfi", quaternion_matrices(x[:, :4]), arrays["p_W_C"] - x[:, None, 4:])
-    off = np.abs(box_signed_distances(scene.object.half, p_BC))
-    k, i = np.unravel_index(int(np.argmax(off)), off.shape)
-    if off[k, i] > FIT_TOL:
-        raise ConfigError(
-            f"{str(npz_path)!r}: its contact points lie up to {1e3 * off[k, i]:.2f} mm off the "
-            f"{' x '.join(f'{1e3 * s:g}' for s in scene.object.size)} mm cube plan.json names (finger {i} at knot "
-            f"{k}; a plan's own lie on its cube within {1e3 * FIT_TOL:g} mm): put the plan.json and plan.npz of one "
-            "plan together, or plan again"
-        )
-
-
-def save_space_sim(result, plan_dir: str | Path, plan_success: bool) -> dict:
-    """PLAN_DIR/sim.npz (the result's arrays) and sim.json (its summary, with `plan_success`), each written
-    atomically; returns the summary."""
-    buffer = io.BytesIO()
-    np.savez(buffer, **{name: getattr(result, name) for name in result.ARRAYS})
-    write_bytes_atomic(Path(plan_dir) / SIM_NPZ, buffer.getvalue())
-    summary = dict(result.to_json(), plan_success=plan_success)
-    write_json_atomic(Path(plan_dir) / SIM_JSON, summary)
-    return summary
 
 
 def simulate_space_into(args) -> int:
@@ -152,6 +91,7 @@ def simulate_space_into(args) -> int:
         config.scene.hand, mu=config.scene.mu, gravity=config.scene.gravity, size=cube["size"], mass=cube["mass"]
     )
     check_arrays_fit_scene(Path(args.plan_dir) / PLAN_NPZ, arrays, scene)
+    conditions = space_world(args, config, float(arrays["t"][-1] - arrays["t"][0]))
     plan_success = bool(data.get("success"))
     if not plan_success:
         print(
@@ -166,13 +106,19 @@ def simulate_space_into(args) -> int:
         meshcat = start_meshcat()
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
     reference = SpaceReference.from_arrays(arrays)
-    result = simulate_space(reference, config, scene, executor=executor, meshcat=meshcat, html_path=args.html)
+    result = simulate_space(
+        reference, config, scene, executor=executor, conditions=conditions, meshcat=meshcat, html_path=args.html
+    )
     summary = save_space_sim(result, args.plan_dir, plan_success)
     write_space_pictures(args, result, reference, scene, data.get("goal_quaternion"))
     if args.json:
         print_json(summary)
     else:
+        from trajectotree.figures.run import world_text
+
         outcome = f"DROPPED at {result.drop_time_s:.2f} s" if result.dropped else "held"
+        world = world_text(result.conditions)
+        outcome += f" ({world})" if world else ""
         print(
             f"simulated {summary['duration_s']:.2f} s in {result.sim_time_s:.1f} s ({executor.value}): {outcome}; "
             f"final orientation error {np.degrees(summary['final_orientation_error_rad']):.2f} deg, position error "
@@ -187,6 +133,15 @@ def simulate_space_into(args) -> int:
     if meshcat is not None and sys.stdin.isatty():
         input("Meshcat shows the recording; press Enter to exit. ")
     return 0
+
+
+def space_world(args, config, plan_duration_s: float):
+    """The simulated world of --sim-mu, --sim-mass and --push FX,FY,FZ@T (execution.world's Conditions), checked as
+    the plane's (simulate_cmd.world_conditions) before anything is written."""
+    from trajectotree.execution.world import Conditions
+
+    world = world_conditions(args, config, plan_duration_s, components=3)
+    return Conditions(mu=world["sim_mu"], mass=world["sim_mass"], push=world["push"])
 
 
 def write_space_pictures(args, result, reference, scene, goal) -> None:

@@ -7,6 +7,8 @@ space_control, or zero torque), wired to the plant by port name; loggers of the 
 simulated force on the cube. The run starts in the plan's first state at rest and lasts the plan and
 config.sim.settle_time of hold; `SpaceSimResult` is what it logged beside the plan at the same times, with the
 drop (the cube's centre config.sim.drop_distance off the plan's, the plane's rule) and the final errors.
+The simulated world may differ from the plan's (trajectotree.execution.world's Conditions: the plant's friction,
+the cube's mass, a push on its centre in W); the controller keeps the plan's values.
 Optionally a Meshcat visualizer, as the plane's (trajectotree.execution.simulate): the hand and cube as simulated,
 the planned cube's edges, each finger's simulated force on the cube as an arrow, live and into the recording that
 becomes the self-contained playback page.
@@ -33,8 +35,10 @@ from trajectotree.execution import force_arrows, meshcat_scene, playback_page
 from trajectotree.execution.executor import control_friction
 from trajectotree.execution.in_effect import PLAN_PORT, PlanInEffect, add_plan_source
 from trajectotree.execution.space_control import SpaceGraspController, SpaceReference, space_schedule
+from trajectotree.execution.world import NOMINAL, Conditions, PushSource
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.geometry import quaternion_matrices, rotation_angles
+from trajectotree.scene.friction import set_friction
 from trajectotree.scene.spatial import SpaceScene, add_space_object
 
 SPACE_EXECUTORS = (Executor.GRASP, Executor.NONE)  # the executors a plan in space has so far
@@ -148,6 +152,7 @@ class SpaceSimResult:
     orientation_error_rad: np.ndarray  # (T,) the angle between the simulated and the planned orientation
     position_error_m: np.ndarray  # (T,) the distance between the simulated and the planned centre
     sim_time_s: float  # s of wall time the simulation took
+    world: dict  # the simulated world against the plan's (Conditions.world_json: friction, mass kg, push)
 
     ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
 
@@ -158,8 +163,8 @@ class SpaceSimResult:
 
     @property
     def conditions(self) -> dict:
-        """The simulated world where it differs from the plan's, as the plane's SimLog: none in space yet."""
-        return {}
+        """The simulated world against the plan's, as the plane's SimLog's (figures.run.world_text)."""
+        return self.world
 
     def to_json(self) -> dict:
         """sim.json: the drop, the errors at the end (against the plan's end, its goal where it succeeded) and
@@ -178,6 +183,7 @@ class SpaceSimResult:
             "max_orientation_error_rad": float(self.orientation_error_rad.max()),
             "max_position_error_m": float(self.position_error_m.max()),
             "sim_time_s": self.sim_time_s,
+            "conditions": self.world,
         }
 
 
@@ -194,13 +200,15 @@ def simulate_space(
     scene: SpaceScene,
     *,
     executor: Executor | str = Executor.GRASP,
+    conditions: Conditions = NOMINAL,
     meshcat: Meshcat | None = None,
     html_path=None,
 ) -> SpaceSimResult:
     """Runs the plan in space `reference` (the plan of `scene`: its hand, cube and friction, and the controller's
-    model) with `executor` for its length and config.sim.settle_time; the log beside the plan. With `meshcat`
-    (live: the run in real time) or `html_path` (the recording, as a self-contained page), the run drawn in
-    Meshcat."""
+    model) with `executor` for its length and config.sim.settle_time in the simulated world `conditions` (the
+    plant's friction between the fingers and the cube, the cube's mass, a push on its centre); the log beside the
+    plan. With `meshcat` (live: the run in real time) or `html_path` (the recording, as a self-contained page),
+    the run drawn in Meshcat."""
     executor = parse_executor(executor)
     live = meshcat is not None
     if html_path is not None and meshcat is None:
@@ -208,7 +216,11 @@ def simulate_space(
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=config.sim.time_step), builder)
     (hand,) = Parser(plant).AddModels(scene.hand_file.model)
-    box = add_space_object(plant, scene.object)
+    simulated = conditions.simulated_object(scene.object)
+    box = add_space_object(plant, simulated)
+    # Drake combines the two sides' coefficients of a contact (2 a b / (a + b)): the hand's the cube's, so that the
+    # fingers touch the cube with `simulated.mu` whatever the hand's model file says (0.7 for fingerpro4).
+    set_friction(plant, scene_graph, hand, simulated.mu)
     plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -scene.gravity])
     plant.Finalize()
     added = add_space_executor(builder, plant, reference, config, scene, executor=executor)
@@ -216,6 +228,9 @@ def simulate_space(
     for i in range(added.num_input_ports()):  # by name, as executor.connect_executor
         builder.Connect(plant_ports[added.get_input_port(i).get_name()], added.get_input_port(i))
     builder.Connect(added.GetOutputPort("actuation"), plant.get_actuation_input_port())
+    if conditions.push is not None:
+        pusher = builder.AddNamedSystem("push", PushSource(plant, box, conditions.push))
+        builder.Connect(pusher.spatial_forces_port, plant.get_applied_spatial_force_input_port())
     forces = builder.AddNamedSystem("fingertip_forces", SpaceFingertipForces(plant, hand, box, scene))
     builder.Connect(plant.get_contact_results_output_port(), forces.contact_results_port)
     triggers = {TriggerType.kPeriodic, TriggerType.kForced}
@@ -267,6 +282,7 @@ def simulate_space(
         orientation_error_rad=angle,
         position_error_m=distance,
         sim_time_s=sim_time,
+        world=conditions.world_json(scene.object.mu, scene.object.mass),
     )
     if visualizer is not None:
         frame_times = np.arange(0.0, end + 1e-9, meshcat_scene.PUBLISH_PERIOD)

@@ -1,12 +1,13 @@
 """The simulated world where it differs from the plan's (`Conditions`): the friction coefficient
 (sim_mu), the box mass (sim_mass: model mismatch) and a push, a force on the box in W for
-SimConfig.push_duration seconds (`Push`, applied by the `PushSource` system). The controller never
-sees them: it keeps the plan's values.
+SimConfig.push_duration seconds (`Push`, applied by the `PushSource` system: (f_x, f_y) in the plane,
+(f_x, f_y, f_z) in space). The controller never sees them: it keeps the plan's values.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,28 +23,38 @@ from trajectotree.config import MAX_BOX_MASS, MAX_MU, MIN_BOX_MASS, ConfigError,
 class Push:
     """A force on the box's centre, in W, from time_s for duration_s."""
 
-    force: tuple[float, float]  # N, (f_x, f_y) in W
+    force: tuple[float, ...]  # N, (f_x, f_y) in W for a planar plan, (f_x, f_y, f_z) for a plan in space
     time_s: float  # s, when it starts
     duration_s: float = 0.2  # s, how long it acts
 
     def __post_init__(self):
-        check_length("push force", self.force, 2, "f_x N, f_y N")
+        check_length("push force", self.force, 3 if len(self.force) == 3 else 2, "f_x N, f_y N[, f_z N in space]")
         for i, f in enumerate(self.force):
             check_range("push force", f, -100.0, 100.0, index=(i,))
         check_range("push time", self.time_s, 0.0, None)
         check_range("push duration", self.duration_s, 0.0, 10.0, low_open=True)
 
 
-def parse_push(text: str, duration_s: float = 0.2) -> Push:
-    """A Push from "FX,FY@T" (N, N, s), e.g. "0.2,0@3.5"; ConfigError naming the text."""
+# The push's spelling per force components (2: a planar plan, 3: a plan in space): the form and what it says.
+PUSH_FORMS = {
+    2: "FX,FY@T (force in N in W, start time in s, e.g. 0.2,0@3.5)",
+    3: "FX,FY,FZ@T (a plan in space is pushed in 3D: force in N in W, start time in s, e.g. 1,0,0@2.5)",
+}
+
+
+def parse_push(text: str, duration_s: float = 0.2, components: int = 2) -> Push:
+    """A Push from "FX,FY@T" (N, N, s), e.g. "0.2,0@3.5", or with components=3 (a plan in space) "FX,FY,FZ@T";
+    ConfigError naming the text and the form."""
     try:
         force, at = str(text).split("@")
-        fx, fy = (float(v) for v in force.split(","))
+        values = tuple(float(v) for v in force.split(","))
         start = float(at)
+        if len(values) != components:
+            raise ValueError(f"{len(values)} force components")
     except ValueError:
-        raise ConfigError(f"push {text!r} is not FX,FY@T (force in N in W, start time in s, e.g. 0.2,0@3.5)") from None
+        raise ConfigError(f"push {text!r} is not {PUSH_FORMS[components]}") from None
     try:
-        return Push(force=(fx, fy), time_s=start, duration_s=duration_s)
+        return Push(force=values, time_s=start, duration_s=duration_s)
     except ConfigError as e:
         raise ConfigError(f"push {text!r}: {e}") from None
 
@@ -62,6 +73,11 @@ class Conditions:
         if self.mass is not None:
             check_range("sim_mass", self.mass, MIN_BOX_MASS, MAX_BOX_MASS)
 
+    def simulated_object(self, box):
+        """The simulated plant's object in space (a scene.spatial.SpaceObject: its mu and mass replaced)."""
+        changes = {k: v for k, v in (("mu", self.mu), ("mass", self.mass)) if v is not None}
+        return dataclasses.replace(box, **changes)
+
     def scene(self, scene_config):
         """The simulated plant's SceneConfig."""
         changes = {k: v for k, v in (("mu", self.mu), ("box_mass", self.mass)) if v is not None}
@@ -73,20 +89,23 @@ class Conditions:
         """m/s, the most speed the push can give the simulated object: its impulse over the object's mass."""
         if self.push is None:
             return 0.0
-        return float(np.hypot(*self.push.force)) * self.push.duration_s / self.scene(scene_config).box_mass
+        return math.hypot(*self.push.force) * self.push.duration_s / self.scene(scene_config).box_mass
 
     def to_json(self, scene_config) -> dict:
-        sim = self.scene(scene_config)
+        return self.world_json(scene_config.mu, scene_config.box_mass)
+
+    def world_json(self, plan_mu: float, plan_mass: float) -> dict:
+        """sim.json's `conditions`: the simulated and the planned friction and mass (kg), and the push."""
         push = (
             None
             if self.push is None
             else {"force": list(self.push.force), "time_s": self.push.time_s, "duration_s": self.push.duration_s}
         )
         return {
-            "sim_mu": sim.mu,
-            "sim_mass": sim.box_mass,
-            "plan_mu": scene_config.mu,
-            "plan_mass": scene_config.box_mass,
+            "sim_mu": plan_mu if self.mu is None else self.mu,
+            "sim_mass": plan_mass if self.mass is None else self.mass,
+            "plan_mu": plan_mu,
+            "plan_mass": plan_mass,
             "push": push,
         }
 
@@ -113,6 +132,8 @@ class PushSource(LeafSystem):
             applied = ExternallyAppliedSpatialForce()
             applied.body_index = self._body
             applied.p_BoBq_B = np.zeros(3)  # at the box origin, its centre of mass
-            applied.F_Bq_W = SpatialForce(np.zeros(3), np.array([push.force[0], push.force[1], 0.0]))
+            f_W = np.zeros(3)  # a planar push has no f_z
+            f_W[: len(push.force)] = push.force
+            applied.F_Bq_W = SpatialForce(np.zeros(3), f_W)
             forces.append(applied)
         output.set_value(forces)
