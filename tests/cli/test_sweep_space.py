@@ -89,9 +89,8 @@ def test_sweep_in_space_plans_resumes_and_reports(tmp_path):
 @pytest.mark.parametrize(
     "extra, message",
     [
-        (["--simulate"], "--simulate: executions of plans in space are not part of a sweep yet (issue #37)"),
-        (["--controllers", "grasp"], "--controllers: executions of plans in space are not part of a sweep yet"),
-        (["--closed-loop"], "--closed-loop: executions of plans in space are not part of a sweep yet"),
+        (["--closed-loop"], "--controllers grasp --closed-loop: the executor 'grasp-closed-loop' does not execute"),
+        (["--conditions", "push-6N"], "condition = 'push-6N' is unknown"),
         (["--max-goal", "4"], "--max-goal"),
         (["--goals", "0"], "--goals"),
         (["--methods", "rrt"], "--methods: unknown method 'rrt'"),

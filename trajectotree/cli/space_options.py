@@ -68,8 +68,9 @@ def space_help(command: str) -> str:
         f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --json, --html",
         "demo": f"--goal-quat W X Y Z or --goal-rpy R P Y, {scene}, "
         f"--formulation {' or '.join(SPACE_PLAN_FORMULATIONS)}, --out, --meshcat, --json",
-        "sweep": f"--goals, --seed, --max-goal, --methods, {scene}, --formulation {SPACE_FORMULATION}, --out, "
-        "--workers, --scheduler, --time-limit, --retry-errors, --json",
+        "sweep": f"--goals, --seed, --max-goal, --axis-aligned, --methods, {scene}, --formulation {SPACE_FORMULATION}, "
+        "--simulate, --controllers, --conditions, --closed-loop, --out, --workers, --scheduler, --time-limit, "
+        "--retry-errors, --json",
     }[command]
 
 

@@ -1,7 +1,9 @@
 """`trajectotree sweep`: the paper's experiment, random goals x methods, resumable and parallel.
 
 Goals are drawn uniformly in [-pi, pi] from --seed; for a hand in space (--hand fingerpro4) they are
-orientations uniform over SO(3) (at most --max-goal from the start), planned only (no --simulate yet).
+orientations uniform over SO(3) (at most --max-goal from the start), or with --axis-aligned the cube's 23
+axis-aligned orientations; its plans execute as the plane's (--simulate, --controllers and --conditions: the
+worlds of a sweep in space are nominal, mismatch, push, friction-0.4, mass-x1.5 and push-1N).
 Each (goal, method) trial plans in its own process (and executes the plan in simulation with --simulate);
 finished trials are written atomically under OUT/trials/, so a killed sweep rerun with the same command skips
 them. Trials run on local worker processes (--workers) or on a Dask cluster
@@ -23,16 +25,29 @@ from trajectotree.cli.common import (
 )
 from trajectotree.config import CONTROLLERS, ConfigError, check_controller
 from trajectotree.config.executor import executor_of
-from trajectotree.experiments.conditions import CONDITIONS, check_condition
+from trajectotree.experiments.conditions import CONDITIONS, SPACE_CONDITIONS, SPACE_SPEC, check_condition
 from trajectotree.experiments.executions import run_executions
-from trajectotree.experiments.sweep import METHODS, SweepSpec, run_sweep
+from trajectotree.experiments.sweep import AXIS_ALIGNED_GOALS, METHODS, SweepSpec, run_sweep
+
+DEFAULT_GOALS = 60  # the paper's
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "sweep", help="run the paper's experiment (random goals x methods), resumable", description=__doc__
     )
-    p.add_argument("--goals", type=int, default=60, help="number of goal rotations (default: 60, as in the paper)")
+    p.add_argument(
+        "--goals",
+        type=int,
+        help=f"number of goal rotations (default: {DEFAULT_GOALS}, as in the paper; with --axis-aligned the first "
+        f"GOALS of them, default all {AXIS_ALIGNED_GOALS})",
+    )
+    p.add_argument(
+        "--axis-aligned",
+        action="store_true",
+        help=f"a hand in space: the goals are the cube's {AXIS_ALIGNED_GOALS} axis-aligned orientations (the "
+        "rotations taking the cube onto itself) instead of random ones",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the goal sampler (default: 0)")
     p.add_argument(
         "--max-goal",
@@ -61,8 +76,8 @@ def register(subparsers) -> None:
         "--conditions",
         nargs="+",
         metavar="CONDITION",
-        help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; "
-        "default: nominal): see `trajectotree.experiments.conditions`",
+        help=f"robustness conditions of those executions (valid: {', '.join(CONDITIONS)}; in space: "
+        f"{', '.join(SPACE_CONDITIONS)}; default: nominal): see `trajectotree.experiments.conditions`",
     )
     p.add_argument(
         "--closed-loop",
@@ -117,18 +132,18 @@ def register(subparsers) -> None:
     p.set_defaults(run=run)
 
 
-# The execution options, which a sweep in space refuses by name (executions in space: issue #37).
-EXECUTION_OPTIONS = ("simulate", "controllers", "conditions", "closed_loop", "replan")
-
-
 def run(args) -> int:
     from trajectotree.scene.spatial import is_space_hand
 
     if args.hand is not None and is_space_hand(args.hand):
         return run_space(args)
+    if args.axis_aligned:
+        raise ConfigError(
+            "--axis-aligned: the axis-aligned orientations are goals of a hand in space (--hand fingerpro4)"
+        )
     check_output_dir("--out", args.out)
     spec = SweepSpec(
-        goals=args.goals,
+        goals=DEFAULT_GOALS if args.goals is None else args.goals,
         seed=args.seed,
         methods=tuple(args.methods),
         simulate=args.simulate,
@@ -182,41 +197,78 @@ def run(args) -> int:
 
 def run_space(args) -> int:
     """`trajectotree sweep` with a hand in space: goal orientations x methods, planned (planning.spatial) and stored
-    as the planar sweep stores its trials; the execution options are refused by name before any work."""
-    from trajectotree.cli.space_options import (
-        box_size,
-        build_args_scene,
-        check_space_graspable,
-        option_name,
-        space_config,
-    )
+    as the planar sweep stores its trials, each plan executed open loop with --simulate and then by the executors of
+    --controllers (with --closed-loop, --replan) in the worlds of --conditions (conditions.SPACE_SPEC); every
+    option is checked before any work."""
+    from trajectotree.cli.space_options import box_size, build_args_scene, check_space_graspable, space_config
     from trajectotree.experiments.sweep import SpaceSweepObject
 
-    for dest in EXECUTION_OPTIONS:
-        if getattr(args, dest):
-            raise ConfigError(
-                f"{option_name(dest)}: executions of plans in space are not part of a sweep yet (issue #37); "
-                f"the hand {args.hand!r} is in space: run the sweep without it"
-            )
     config = space_config(args)
+    conditions = [check_condition(c, SPACE_SPEC) for c in args.conditions or ()]
+    executors = space_executors(args, config, bool(conditions))
     check_output_dir("--out", args.out)
+    default_goals = AXIS_ALIGNED_GOALS if args.axis_aligned else DEFAULT_GOALS
     spec = SweepSpec(
-        goals=args.goals,
+        goals=default_goals if args.goals is None else args.goals,
         seed=args.seed,
         methods=tuple(args.methods),
+        simulate=args.simulate,
         config=config,
         max_goal=args.max_goal,
         time_limit_s=args.time_limit,
         space=SpaceSweepObject(size=box_size(args), mass=args.mass),
+        axis_aligned=args.axis_aligned,
     )
     check_space_graspable(build_args_scene(args, config), config, args)
     summary = run_sweep_of_args(spec, args)
+    ran = (
+        run_executions(
+            args.out,
+            executors=executors,
+            conditions=conditions or ["nominal"],
+            spec=SPACE_SPEC,
+            gains=spec.config.controller,
+            sim=spec.config.sim,
+            workers=args.workers,
+            progress=not args.no_progress,
+        )
+        if executors
+        else None
+    )
     if args.json:
-        print_json(summary.__dict__)
+        print_json({**summary.__dict__, "executions_run": ran})
     else:
         print(summary.line())
+        if ran is not None:
+            print(
+                f"executions: {ran} run ({' '.join(e.value for e in executors)} x "
+                f"{' '.join(conditions or ['nominal'])}); the report tabulates them in executions.md"
+            )
         print(f"next: trajectotree report {args.out}")
     return 0
+
+
+def space_executors(args, config, conditions: bool) -> list:
+    """The executors of --controllers (with --closed-loop, --replan; the config's controller when only those or
+    --conditions are given), each one a plan in space has (execution.space_run.SPACE_EXECUTORS); ConfigError
+    naming one it has not yet."""
+    from trajectotree.execution.space_run import SPACE_EXECUTORS
+
+    controllers = [check_controller(c) for c in args.controllers or ()]
+    if (conditions or args.closed_loop or args.replan) and not controllers:
+        controllers = [config.sim.controller]
+    try:
+        executors = [executor_of(c, closed_loop=args.closed_loop, replan=args.replan) for c in controllers]
+    except ConfigError as e:
+        raise (e.as_option("--controllers") if args.controllers else e) from None
+    for executor in executors:
+        if executor not in SPACE_EXECUTORS:
+            loop = " --replan" if args.replan else " --closed-loop" if args.closed_loop else ""
+            raise ConfigError(
+                f"--controllers {' '.join(controllers)}{loop}: the executor {executor.value!r} does not execute "
+                f"plans in space yet; valid: {', '.join(e.value for e in SPACE_EXECUTORS)}"
+            )
+    return executors
 
 
 def run_sweep_of_args(spec, args):

@@ -10,6 +10,9 @@
   `friction-0.3` (`friction_mus`: the simulated friction alone), `mass-x2` (`mass_factors`:
   the simulated box mass over the planned one), `push-3N` and `push-6N` (`push_forces`: N
   along +x in W, timed like `push`).
+A sweep in space has the same named worlds but its own harder ones (`SPACE_SPEC`, issue #37's acceptance):
+`friction-0.4`, `mass-x1.5` and `push-1N` (a horizontal 1 N along +x in W, timed like `push`); its pushes act on
+the cube's centre with f_z 0 (`ConditionSpec.space_world`).
 """
 
 from __future__ import annotations
@@ -54,6 +57,25 @@ class ConditionSpec:
         worlds |= {f"mass-x{factor:g}": (None, factor, None) for factor in self.mass_factors}
         return worlds | {f"push-{f:g}N": (None, None, (f, 0.0)) for f in self.push_forces}
 
+    def space_world(self, condition: str, config: Config, mass_kg: float, plan_duration_s: float, segments: int):
+        """The simulated world (execution.world.Conditions) of `condition` for a plan in space of a `mass_kg` cube
+        lasting `plan_duration_s` over `segments` segments: a push is horizontal, in the middle of the middle
+        segment as the plane's (middle_of_middle), for config.sim.push_duration."""
+        from trajectotree.execution.world import Conditions, Push
+
+        mu, mass_factor, push = self.worlds()[check_condition(condition, self)]
+        return Conditions(
+            mu=mu,
+            mass=None if mass_factor is None else mass_factor * mass_kg,
+            push=None
+            if push is None
+            else Push(
+                force=(*push, 0.0),
+                time_s=middle_of_middle(segments, plan_duration_s),
+                duration_s=config.sim.push_duration,
+            ),
+        )
+
     def simulation_kwargs(self, condition: str, config: Config, plan_duration_s: float) -> dict:
         """The `run_simulation` keyword arguments (sim_mu, sim_mass, push) of `condition`."""
         from trajectotree.execution.world import Push
@@ -75,6 +97,10 @@ class ConditionSpec:
 
 DEFAULT_SPEC = ConditionSpec()  # frozen: a default argument every caller may share
 CONDITIONS = tuple(DEFAULT_SPEC.worlds())  # the default spec's condition names
+# A sweep in space's: the issue's acceptance worlds (friction 0.4 against the plan's 0.7, a 1 N horizontal push,
+# the cube 50 % heavier) beside the shared nominal, mismatch and push.
+SPACE_SPEC = ConditionSpec(friction_mus=(0.4,), mass_factors=(1.5,), push_forces=(1.0,))
+SPACE_CONDITIONS = tuple(SPACE_SPEC.worlds())
 
 
 def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
@@ -83,7 +109,11 @@ def middle_of_middle_segment(config: Config, plan_duration_s: float) -> float:
     nodes = config.search.num_nodes
     if nodes is None:
         nodes = round(plan_duration_s / (config.cito.knots_per_segment * config.cito.dt)) + 1
-    segments = max(nodes - 1, 1)
+    return middle_of_middle(max(nodes - 1, 1), plan_duration_s)
+
+
+def middle_of_middle(segments: int, plan_duration_s: float) -> float:
+    """s, the middle of segment floor(segments/2) (from 0) of a plan of `segments` equal-length segments."""
     length = plan_duration_s / segments
     return (segments // 2 + 0.5) * length
 

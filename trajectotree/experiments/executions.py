@@ -12,6 +12,9 @@ Executions with the closed loop (the executor `grasp-closed-loop`: the grasp con
 watch, the estimates and the reflexes, trajectotree.execution.closed_loop) are kept and listed apart,
 beside the open-loop `grasp`; those that also replan from the measured state (trajectotree.execution.replan)
 as `grasp-replan`.
+
+A sweep in space's plans (plan.json `kind: space`) execute the same way, by trajectotree.execution.space_run in
+the worlds of conditions.SPACE_SPEC (`execute_space`), with the executors space has (space_run.SPACE_EXECUTORS).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from trajectotree.config import ConfigError, ControllerGains, SimConfig
 from trajectotree.config.executor import Executor, parse_executor
 from trajectotree.experiments.conditions import CONDITIONS, DEFAULT_SPEC, ConditionSpec, check_condition
 from trajectotree.experiments.sweep_store import TRIALS_DIR, sweep_lock
-from trajectotree.io import PLAN_JSON, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
+from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ, npz_problem, write_bytes_atomic
 from trajectotree.planning.workers import kill_pool, process_pool
 
 EXEC_DIR = "exec"
@@ -61,6 +64,8 @@ class ExecutionTask:
 def execute(task: ExecutionTask) -> dict:
     """Loads the trial's plan, executes it, writes sim.json + sim.npz into its execution
     folder; returns sim.json's content."""
+    if is_space_trial(Path(task.trial_dir)):
+        return execute_space(task)
     from trajectotree.execution.run import run_simulation
     from trajectotree.io import load_plan, save_sim
 
@@ -81,6 +86,30 @@ def execute(task: ExecutionTask) -> dict:
     out = task.folder
     save_sim(result, out)
     return read_execution(out)
+
+
+def is_space_trial(trial_dir: Path) -> bool:
+    """Whether the trial's plan.json holds a plan in space (an unreadable one: no)."""
+    try:
+        return json.loads((trial_dir / PLAN_JSON).read_text()).get("kind") == "space"
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def execute_space(task: ExecutionTask) -> dict:
+    """execute() of a plan in space: its reference and scene from the trial's folder, the executor's gains and
+    simulation settings on the plan's config, the condition's world (ConditionSpec.space_world) in the plant."""
+    from trajectotree.execution.space_plan import load_space_plan, save_space_sim
+    from trajectotree.execution.space_run import simulate_space
+
+    plan = load_space_plan(task.trial_dir)
+    config = replace(plan.config, controller=task.gains or plan.config.controller, sim=task.sim or plan.config.sim)
+    world = task.spec.space_world(
+        task.condition, config, plan.scene.object.mass, plan.reference.duration, plan.segments
+    )
+    result = simulate_space(plan.reference, config, plan.scene, executor=task.executor, conditions=world)
+    save_space_sim(result, task.folder, plan.success)
+    return read_execution(task.folder)
 
 
 def read_execution(folder: Path) -> dict:
@@ -129,7 +158,9 @@ def pending_executions(
             plan = json.loads((trial_dir / PLAN_JSON).read_text())
         except (json.JSONDecodeError, OSError):
             continue  # not a finished trial (the sweep names and recomputes a corrupt one)
-        if not plan.get("iterations") or (methods is not None and plan.get("method") not in methods):
+        # a plan in space has a trajectory where plan.npz was written (planning.spatial.save_space_plan)
+        solved = (trial_dir / PLAN_NPZ).is_file() if plan.get("kind") == "space" else plan.get("iterations")
+        if not solved or (methods is not None and plan.get("method") not in methods):
             continue  # nothing was solved (no trajectory to execute), or not asked for
         # Compared as saved: a key the plan's file lacks (saved before the field existed) loads as
         # today's default, but the sweep's simulation did not run with it.
@@ -143,7 +174,7 @@ def pending_executions(
                 if execution_problem(task.folder) is None or (
                     same_settings
                     and not executor.closed_loop
-                    and _reuse_sweep_simulation(trial_dir, executor.controller, condition, task.folder)
+                    and _reuse_sweep_simulation(trial_dir, executor, condition, task.folder)
                 ):
                     continue
                 tasks.append(task)
@@ -155,8 +186,9 @@ def _as_saved(settings) -> dict:
     return json.loads(json.dumps(asdict(settings)))
 
 
-def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, out: Path) -> bool:
-    """Copies the trial's own sim.json/sim.npz into `out` when they are this nominal execution."""
+def _reuse_sweep_simulation(trial_dir: Path, executor: Executor, condition: str, out: Path) -> bool:
+    """Copies the trial's own sim.json/sim.npz into `out` when they are this nominal open-loop execution (a
+    planar sim.json names its controller, one in space its executor)."""
     try:
         sim = json.loads((trial_dir / SIM_JSON).read_text())
     except (OSError, json.JSONDecodeError):
@@ -168,7 +200,7 @@ def _reuse_sweep_simulation(trial_dir: Path, controller: str, condition: str, ou
     )
     if (
         condition != "nominal"
-        or sim.get("controller") != controller
+        or sim.get("executor", sim.get("controller")) != executor.value
         or sim.get("closed_loop") is not None  # a closed-loop run (an open-loop sim.json has None or lacks it)
         or not nominal
         or npz_problem(trial_dir / SIM_NPZ) is not None  # a torn copy would pass for a finished execution

@@ -82,6 +82,9 @@ def sample_space_goals(count: int, seed: int, max_angle: float = math.pi) -> np.
     return kept[:count]
 
 
+AXIS_ALIGNED_GOALS = 23  # the cube's rotation group (24) but the identity
+
+
 def axis_aligned_goals() -> np.ndarray:
     """(23, 4) [w, x, y, z]: the cube's 24 rotations but the identity (MuJoCo MPC's task), applied to the start
     orientation in W."""
@@ -106,6 +109,7 @@ class SweepSpec:
     max_goal: float = math.pi  # rad, goals are uniform in [-max_goal, max_goal] (space: at most max_goal from start)
     time_limit_s: float = 1800.0  # s, per trial (plan + simulation); a trial past it is killed
     space: SpaceSweepObject | None = None  # a hand in space (config.scene.hand) and its box; None: planar
+    axis_aligned: bool = False  # in space: the first `goals` of the 23 axis-aligned orientations, not random ones
 
     def __post_init__(self):
         check_integer("--goals", self.goals, 1, 100000)
@@ -119,12 +123,15 @@ class SweepSpec:
             raise ConfigError(f"--methods {' '.join(self.methods)} names a method twice")
         check_range("--max-goal", self.max_goal, 0.0, math.pi, low_open=True)
         check_range("--time-limit", self.time_limit_s, 0.0, None, low_open=True)
-
-        if self.space is not None and self.simulate:
-            raise ConfigError("--simulate: executions of plans in space are not part of a sweep yet (issue #37)")
+        if self.axis_aligned:
+            if self.space is None:
+                raise ConfigError("--axis-aligned: the axis-aligned orientations are goals of a hand in space")
+            check_integer("--goals", self.goals, 1, AXIS_ALIGNED_GOALS)
 
     def goal_values(self) -> np.ndarray:
         """(goals,) rad for a planar hand, (goals, 4) quaternions [w, x, y, z] for a hand in space."""
+        if self.axis_aligned:
+            return axis_aligned_goals()[: self.goals]
         if self.space is not None:
             return sample_space_goals(self.goals, self.seed, self.max_goal)
         return sample_goals(self.goals, self.seed, self.max_goal)
@@ -132,6 +139,7 @@ class SweepSpec:
     def manifest(self) -> dict:
         # a planar sweep's manifest has no "space" key, so sweeps made before hands in space resume as they were
         space = {} if self.space is None else {"space": self.space.to_json()}
+        space |= {"axis_aligned": True} if self.axis_aligned else {}  # random goals' manifests as they were
         return space | {
             "format": MANIFEST_FORMAT,
             "goals": self.goals,

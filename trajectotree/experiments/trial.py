@@ -53,6 +53,9 @@ ROW_FIELDS = (
 # A trial in space adds these (plan.json's check and final error; plan_arrays: whether plan.npz was written, which a
 # plan whose search found no contact sequence has not).
 SPACE_FIELDS = ("check_passed", "final_error_deg", "plan_arrays")
+# ... and with --simulate its open-loop run's (sim.json of execution.space_run; dropped, drop_time_s and sim_time_s
+# are SIM_FIELDS): the final orientation error (rad) and position error (m), and the field's two success criteria.
+SPACE_SIM_FIELDS = ("final_orientation_error_rad", "final_position_error_m", "within_15deg", "within_0p4rad")
 ROW_FILE = "trial.json"
 LOG_FILE = "log.txt"
 STDERR_TAIL_CHARS = 4000
@@ -113,7 +116,7 @@ class TrialChildren:
 
 
 def empty_row(task: TrialTask) -> dict:
-    row = dict.fromkeys(ROW_FIELDS + (() if task.space is None else SPACE_FIELDS))
+    row = dict.fromkeys(ROW_FIELDS + (() if task.space is None else SPACE_FIELDS + SPACE_SIM_FIELDS))
     row.update(key=task.key, goal_index=task.goal_index, goal=task.goal, method=task.method, simulated=False)
     return row
 
@@ -145,12 +148,19 @@ def space_row_from_files(task: TrialTask, out_dir: Path) -> dict:
     row["final_error_deg"] = None if error is None else math.degrees(error)
     row["plan_arrays"] = (out_dir / PLAN_NPZ).is_file()
     row["switching_fingers"] = [n.get("switching_finger") for n in plan_json["contact_plan"]["contact_sequence"]]
+    sim_path = out_dir / SIM_JSON
+    if sim_path.is_file():
+        sim_json = json.loads(sim_path.read_text())
+        row.update({k: sim_json.get(k) for k in ("dropped", "drop_time_s", "sim_time_s", *SPACE_SIM_FIELDS)})
+        row["simulated"] = True
     return row
 
 
 def run_space_trial(task: TrialTask, out_dir: Path) -> dict:
     """Plans the task's goal quaternion with a hand in space (planning.spatial: plan_space, or plan_space_cito for
-    the baselines), its segments one after another in this process, and writes plan.json (and plan.npz)."""
+    the baselines), its segments one after another in this process, and writes plan.json (and plan.npz); with
+    `simulate`, executes a plan with arrays open loop in its own world (execution.space_run) into sim.json and
+    sim.npz."""
     from trajectotree.config import config_from_dict
     from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
     from trajectotree.scene.spatial import build_space_scene
@@ -162,6 +172,12 @@ def run_space_trial(task: TrialTask, out_dir: Path) -> dict:
     else:
         result = plan_space_cito(scene, task.goal, config, task.method, workers=1)
     save_space_plan(result, out_dir, config)
+    if task.simulate and (out_dir / PLAN_NPZ).is_file():
+        from trajectotree.execution.space_plan import load_space_plan, save_space_sim
+        from trajectotree.execution.space_run import simulate_space
+
+        plan = load_space_plan(out_dir, config)
+        save_space_sim(simulate_space(plan.reference, config, plan.scene), out_dir, plan.success)
     return space_row_from_files(task, out_dir)
 
 
