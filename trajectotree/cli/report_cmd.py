@@ -27,8 +27,12 @@ def run(args) -> int:
         return 0
     if files.kind == "space":
         print(space_table_markdown(table), end="")
-        print(f"figures: none for a sweep in space ({files.table_md} says why)")
         print(f"table: {files.table_md}, {files.table_csv}")
+        if files.executions_md:
+            print(f"executions: {files.executions_md} (per method, executor and world)")
+            print(f"final orientation error per goal and world: {', '.join(files.figure_final_error)}")
+        else:
+            print("executions: none, the sweep ran without --simulate or --controllers")
         return 0
     print(table_markdown(table), end="")
     print(f"Fig. 2 (planning time, cost): {', '.join(files.figure_time_cost)}")

@@ -54,6 +54,7 @@ class ReportFiles:
     executions_md: str | None = None  # per method, controller and condition (trajectotree.experiments.executions)
     figure_tracking_by_controller: dict = field(default_factory=dict)  # controller -> (PNG, PDF), nominal runs
     kind: str = "plane"  # "space": a sweep of a hand in space (space_table_markdown's table)
+    figure_final_error: tuple[str, str] | None = None  # space: each goal's final orientation error per world
 
 
 def load_sweep(sweep_dir: str | Path) -> tuple[dict, list[dict]]:
@@ -409,8 +410,8 @@ orientation is at most 2 deg from the goal. Planning time = search + the program
 after another in its process), over every trial that returned a plan result; median / TrajectoTree's is
 the ratio of the method's median planning time over TrajectoTree's, over all their trials.
 The planar report's Fig. 2 (box plots of time and cost) and Fig. 3 (tracking errors) are not drawn for a
-sweep in space: the programs in space report no cost, and plans in space are not executed in a sweep yet
-(issue #37).
+sweep in space: the programs in space report no cost, and its executions are in executions.md (with
+`sweep --simulate` or `--controllers`), each goal's final orientation error per world in fig_final_error.
 """
 
 
@@ -429,7 +430,7 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     if out.exists() and not out.is_dir():
         raise ConfigError(f"the report folder {str(out)!r} is an existing file; remove it or give --out DIR")
     if "space" in manifest:
-        return _space_report(rows, methods, out)
+        return _space_report(sweep_dir, rows, methods, out)
     with _staged(out) as stage:
         table = summary_table(rows, methods)
         write_bytes_atomic(stage / "summary.md", (table_markdown(table) + TABLE_NOTES).encode())
@@ -453,18 +454,37 @@ def make_report(sweep_dir: str | Path, out_dir: str | Path | None = None) -> tup
     return files, table
 
 
-def _space_report(rows: list[dict], methods: list[str], out: Path) -> tuple[ReportFiles, list[dict]]:
-    """summary.md (the table and SPACE_TABLE_NOTES) and summary.csv of a sweep in space, whole or not at all."""
+def _space_report(sweep_dir: Path, rows: list[dict], methods: list[str], out: Path) -> tuple[ReportFiles, list[dict]]:
+    """summary.md (the table and SPACE_TABLE_NOTES) and summary.csv of a sweep in space and, when its plans were
+    executed, executions.md / .csv (per method, executor and world) and fig_final_error; whole or not at all."""
+    from trajectotree.experiments.space_report import (
+        SPACE_EXECUTION_NOTES,
+        figure_final_errors,
+        space_execution_markdown,
+        space_execution_summary,
+        space_records,
+    )
+
     table = [space_method_summary(rows, m) for m in methods]
+    records = space_records(sweep_dir, rows)
+    figure = None
     with _staged(out) as stage:
         write_bytes_atomic(stage / "summary.md", (space_table_markdown(table) + SPACE_TABLE_NOTES).encode())
         write_bytes_atomic(stage / "summary.csv", table_csv(table).encode())
+        if records:
+            executions = space_execution_summary(records, methods)
+            text = space_execution_markdown(executions, METHOD_LABELS) + SPACE_EXECUTION_NOTES
+            write_bytes_atomic(stage / "executions.md", text.encode())
+            write_bytes_atomic(stage / "executions.csv", table_csv(executions).encode())
+            figure = _save(figure_final_errors(records, methods, METHOD_LABELS), stage / "fig_final_error")
     files = ReportFiles(
         figure_time_cost=None,
         figure_tracking=None,
         table_md=str(out / "summary.md"),
         table_csv=str(out / "summary.csv"),
+        executions_md=str(out / "executions.md") if records else None,
         kind="space",
+        figure_final_error=None if figure is None else tuple(str(out / Path(p).name) for p in figure),
     )
     return files, table
 
