@@ -129,7 +129,7 @@ def figure_final_errors(records: list[dict], methods: list[str], labels: dict[st
         key=lambda k: (_order(SPACE_CONDITIONS, k[1]), k[1], _order(EXECUTORS, k[0])),
     )
     goals = sorted({r["goal_index"] for r in records})
-    fig, axes = plt.subplots(len(methods), 1, figsize=(max(6.0, 0.3 * len(goals) + 3), 3.2 * len(methods)))
+    fig, axes = plt.subplots(len(methods), 1, figsize=(max(6.0, 0.3 * len(goals) + 3), 3.8 * len(methods)))
     axes = np.atleast_1d(axes)
     colors = plt.get_cmap("tab10")
     width = 0.7 / len(series)  # goal indices apart by 1: each series beside the others within a goal's slot
@@ -159,6 +159,7 @@ def figure_final_errors(records: list[dict], methods: list[str], labels: dict[st
             f"{labels.get(method, method)}: final orientation error per goal and world (x: dropped)", fontsize=9
         )
         ax.grid(alpha=0.3, which="both", axis="y")
-        ax.legend(fontsize=7, loc="upper left", ncol=min(len(series), 3))
+        # below the panel: above it the drops lie near 180 deg
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.28), ncol=min(len(series), 4), frameon=False)
     fig.tight_layout()
     return fig
