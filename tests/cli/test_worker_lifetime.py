@@ -18,8 +18,9 @@ from trajectotree.planning.workers import _start_worker
 
 # The tester's command: a goal of 10 rad has ~35 segments, far more than the workers, so segments
 # are queued behind the running ones when the stop comes (where Python 3.11's pool printed its
-# InvalidStateError traceback). Two workers whatever the machine's cores, so they stay queued.
-LONG_PLAN = ["plan", "--goal", "10"]
+# InvalidStateError traceback). Two workers whatever the machine's cores, so they stay queued. The search gets
+# ten minutes instead of its 30 s of wall clock: on a loaded machine it ran out, planned nothing and started no worker.
+LONG_PLAN = ["plan", "--goal", "10", "--config-text", "{search: {time_budget_s: 600}}"]
 WORKERS = ["--segment-workers", "2"]
 GONE_WITHIN_S = 5.0  # s, a killed parent's workers must be gone by then (the kernel kills them at once)
 
