@@ -3,21 +3,18 @@ lies on the plan's point wherever its force budget is above zero, and moves cont
 and landing holds once aimed at the lifted path's ends, lift m off the cube: the target jumped 8 mm off at lift-off
 and stayed up until the landing, so the rising budget had the QP push a finger still in the air, which struck the
 cube at 0.3 m/s; seed-0 goal 3 (139 deg) went 47 deg off its plan on the way (10 deg with the holds on the cube
-but descending while loading), 3.6 deg before the lifted swings."""
-
-import json
+but descending while loading), 3.6 deg before the lifted swings. Its execution end to end is in the 30 SO(3)
+goals' acceptance sweep (docs/measurements.md), not here: planning and executing it took 30-65 s of the suite."""
 
 import numpy as np
 import pytest
 
-from trajectotree.cli import main
 from trajectotree.execution.space_control import SwingLift, swing_timing
 from trajectotree.geometry import box_signed_distances
 
 HALF = (0.0325, 0.0325, 0.0325)  # m, fingerpro4's cube
 TIP_RADIUS, LIFT, RAMP = 0.01, 0.008, 0.1  # m, m, s
 PERIOD = 0.002  # s, the controller's
-GOAL_3 = ["--goal-quat", "0.351268", "0.801165", "0.128091", "0.467267"]  # seed-0 SO(3) goal 3, 138.9 deg
 
 
 def _two_swings():
@@ -54,19 +51,3 @@ def test_the_target_moves_continuously_through_each_swing(timing):
     assert step.max() < 1e-3  # m per 2 ms: 0.5 m/s (84 mm of lifted path in 0.5 s); the jump off was LIFT
     gap = box_signed_distances(HALF, w.p_B) - TIP_RADIUS
     assert gap.max() == pytest.approx(LIFT, abs=1e-3)  # it does rise
-
-
-@pytest.mark.slow  # plans and executes seed-0 goal 3: ~30 s
-def test_seed0_goal3_is_executed_close_to_its_plan(tmp_path):
-    """The reproducer: 47 deg off on the way with the holds aimed off the cube. Its contact plan changed since
-    every face became a move's candidate (8 nodes): held, 1.6 deg from the goal at the end, 28.6 deg off on the way
-    (docs/measurements.md), so the bound on the way is the field's 15 deg criterion's twice, not the old plan's 5."""
-    plan = tmp_path / "g3"
-    assert main(["plan", "--hand", "fingerpro4", *GOAL_3, "--out", str(plan), "--segment-workers", "1"]) == 0
-    assert main(["simulate", str(plan)]) == 0
-    summary = json.loads((plan / "sim.json").read_text())
-    assert not summary["dropped"]
-    assert np.degrees(summary["max_orientation_error_rad"]) < 30.0
-    assert summary["final_orientation_error_deg"] == pytest.approx(np.degrees(summary["final_orientation_error_rad"]))
-    assert summary["final_orientation_error_deg"] < 2.0
-    assert summary["within_15deg"] and summary["within_0p4rad"]
