@@ -1,9 +1,11 @@
 """`trajectotree simulate PLAN_DIR` of a plan in space (plan.json `kind: space`, from `trajectotree plan --hand
-fingerpro4`): the plan executed open loop by the grasp controller in space (trajectotree.execution.space_run),
-written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan) and sim.json (dropped, the
-final orientation error in rad and position error in m, the executor); optionally watched as the plane's run is
-(--meshcat live, --html the self-contained playback, --gif, --forces the forces figure). What space does not have
-yet (the closed loop, the other world) is refused before anything is read or written."""
+fingerpro4`): the plan executed by the grasp controller in space (trajectotree.execution.space_run), open loop or
+closed loop (--executor grasp-closed-loop, or --closed-loop), written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan
+(K, 7), q, f_W (K, F, 3), f_W_plan; closed loop also the plane's CLOSED_LOOP_ARRAYS) and sim.json (dropped, the
+final orientation error in rad and position error in m, the executor; closed loop the final estimates); optionally
+watched as the plane's run is (--meshcat live, --html the self-contained playback, --gif, --forces the forces
+figure). What space does not have yet (replanning, the other world) is refused before anything is read or
+written."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cli.common import check_output_dir, print_json
-from trajectotree.cli.simulate_cmd import chosen_executor, execution_config
+from trajectotree.cli.simulate_cmd import chosen_executor, closed_loop_line, execution_config
 from trajectotree.config import ConfigError, config_from_dict
 from trajectotree.io import SIM_JSON, SIM_NPZ, reading, require_files, write_bytes_atomic, write_json_atomic
 from trajectotree.scene.spatial import is_space_hand
@@ -26,9 +28,7 @@ PLAN_JSON, PLAN_NPZ = "plan.json", "plan.npz"
 FIT_TOL = 1e-4
 # The options of `simulate` that a plan in space does not take yet, by their argparse names.
 NOT_YET = {
-    "closed_loop": "--closed-loop",
     "replan": "--replan",
-    "friction_floor": "--friction-floor",
     "sim_mu": "--sim-mu",
     "sim_mass": "--sim-mass",
     "push": "--push",
@@ -62,8 +62,8 @@ def refuse_not_yet(args) -> None:
     given = [option for name, option in NOT_YET.items() if getattr(args, name, None) not in (None, False)]
     if given:
         raise ConfigError(
-            f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): open-loop "
-            "execution by the grasp controller in the plan's world only, so far"
+            f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): execution by "
+            "the grasp controller, open or closed loop, in the plan's world only, so far"
         )
 
 
@@ -116,10 +116,11 @@ def check_arrays_fit_scene(npz_path: Path, arrays: dict[str, np.ndarray], scene)
 
 
 def save_space_sim(result, plan_dir: str | Path, plan_success: bool) -> dict:
-    """PLAN_DIR/sim.npz (the result's arrays) and sim.json (its summary, with `plan_success`), each written
-    atomically; returns the summary."""
+    """PLAN_DIR/sim.npz (the result's arrays, a closed-loop run's estimates too) and sim.json (its summary, with
+    `plan_success`), each written atomically; returns the summary."""
     buffer = io.BytesIO()
-    np.savez(buffer, **{name: getattr(result, name) for name in result.ARRAYS})
+    arrays = {name: getattr(result, name) for name in result.ARRAYS}
+    np.savez(buffer, **arrays, **({} if result.closed_loop is None else result.closed_loop.arrays()))
     write_bytes_atomic(Path(plan_dir) / SIM_NPZ, buffer.getvalue())
     summary = dict(result.to_json(), plan_success=plan_success)
     write_json_atomic(Path(plan_dir) / SIM_JSON, summary)
@@ -180,6 +181,8 @@ def simulate_space_into(args) -> int:
             f"{np.degrees(summary['max_orientation_error_rad']):.2f} deg, "
             f"{1e3 * summary['max_position_error_m']:.2f} mm)"
         )
+        if result.closed_loop is not None:
+            print(closed_loop_line(summary["closed_loop"], config.scene.mu, scene.object.mass))
         print(
             f"wrote {Path(args.plan_dir) / SIM_JSON}, {Path(args.plan_dir) / SIM_NPZ}"
             + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)
