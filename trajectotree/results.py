@@ -218,6 +218,17 @@ class ClosedLoopLog:
     def arrays(self) -> dict[str, np.ndarray]:
         return {name: getattr(self, name) for name in CLOSED_LOOP_ARRAYS}
 
+    @classmethod
+    def from_logged(cls, data: dict[str, np.ndarray]) -> ClosedLoopLog:
+        """The log of the closed loop's output ports' samples, {name: (T, size)}: the flags as bools, the
+        one-value outputs as (T,)."""
+        data = dict(data)
+        for name in ("in_contact", "slipping"):
+            data[name] = data[name] > 0.5
+        for name in ("mu_estimate", "mass_estimate", "reflex"):
+            data[name] = data[name][:, 0]
+        return cls(**data)
+
     def to_json(self, t: np.ndarray) -> dict:
         """sim.json's "closed_loop": the final estimates, how long each finger slid and the reflex was on."""
         dt = np.diff(t, append=t[-1])  # each sample stands for the time to the next

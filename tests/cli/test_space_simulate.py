@@ -72,8 +72,8 @@ def test_a_planar_plan_with_a_hand_in_space_exits_2(tiny_plan, capsys):
 @pytest.mark.parametrize(
     "options, named",
     [
-        (["--executor", "grasp-closed-loop"], "--executor = 'grasp-closed-loop' does not execute plans in space yet"),
-        (["--closed-loop"], "--closed-loop does not work with a plan in space yet"),
+        (["--executor", "grasp-replan"], "--executor = 'grasp-replan' does not execute plans in space yet"),
+        (["--replan"], "--replan does not work with a plan in space yet"),
     ],
 )
 def test_what_space_does_not_have_yet_exits_2(space_plan, capsys, options, named):

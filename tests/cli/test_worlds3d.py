@@ -83,8 +83,8 @@ def test_axis_aligned_goals_are_the_first_of_the_23():
             "--controllers paper: the executor 'paper' does not execute plans in space",
         ),
         (
-            [*SPACE, "--controllers", "grasp", "--closed-loop", "--conditions", "friction-0.4"],
-            "--controllers grasp --closed-loop: the executor 'grasp-closed-loop' does not execute plans in space yet",
+            [*SPACE, "--controllers", "grasp", "--replan", "--conditions", "friction-0.4"],
+            "--controllers grasp --replan: the executor 'grasp-replan' does not execute plans in space yet",
         ),
         ([*SPACE, "--axis-aligned", "--goals", "24"], "--goals = 24 is out of range; valid range: [1, 23]"),
         (["--axis-aligned"], "--axis-aligned: the axis-aligned orientations are goals of a hand in space"),

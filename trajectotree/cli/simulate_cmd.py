@@ -284,6 +284,17 @@ def final_error_line(summary: dict) -> str:
     return line
 
 
+def closed_loop_line(loop: dict, mu: float, mass: float) -> str:
+    """The line that sums up sim.json's "closed_loop" `loop` of a run of a plan that assumed friction `mu` and
+    the object's `mass` kg."""
+    return (
+        f"closed loop: friction estimate {loop['mu_estimate']:.3f} (plan {mu:g}), mass estimate "
+        f"{1e3 * loop['mass_estimate']:.1f} g (plan {1e3 * mass:g}), slipping "
+        + ", ".join(f"{s:.2f}" for s in loop["slipping_s"])
+        + f" s per finger, reflex on {loop['reflex_s']:.2f} s"
+    )
+
+
 def named_executor(args) -> Executor | None:
     """The executor --executor names (None: not given); ConfigError for a name that is no executor, or
     beside the older options that name a part of one (--controller, --closed-loop, --replan)."""
@@ -403,12 +414,7 @@ def simulate_into(args) -> int:
         print(final_error_line(summary))
         loop = summary["closed_loop"]
         if loop is not None:
-            print(
-                f"closed loop: friction estimate {loop['mu_estimate']:.3f} (plan {config.scene.mu:g}), mass estimate "
-                f"{1e3 * loop['mass_estimate']:.1f} g (plan {1e3 * config.scene.box_mass:g}), slipping "
-                + ", ".join(f"{s:.2f}" for s in loop["slipping_s"])
-                + f" s per finger, reflex on {loop['reflex_s']:.2f} s"
-            )
+            print(closed_loop_line(loop, config.scene.mu, config.scene.box_mass))
         for e in result.replans:
             print(
                 f"replan at {e.time_s:.2f} s ({e.reason.value}; friction {e.mu:.3f}, mass {1e3 * e.mass:.1f} g): "

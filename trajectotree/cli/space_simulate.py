@@ -1,10 +1,11 @@
 """`trajectotree simulate PLAN_DIR` of a plan in space (plan.json `kind: space`, from `trajectotree plan --hand
-fingerpro4`): the plan executed open loop by the grasp controller in space (trajectotree.execution.space_run),
-written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan) and sim.json (dropped, the
-final orientation error in rad and position error in m, the executor); optionally watched as the plane's run is
-(--meshcat live, --html the self-contained playback, --gif, --forces the forces figure), in the plan's world or
-another (--sim-mu, --sim-mass, --push FX,FY,FZ@T: the controller keeps the plan's values). What space does not have
-yet (the closed loop) is refused before anything is read or written."""
+fingerpro4`): the plan executed by the grasp controller in space (trajectotree.execution.space_run), open loop or
+closed loop (--executor grasp-closed-loop, or --closed-loop), written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan
+(K, 7), q, f_W (K, F, 3), f_W_plan; closed loop also the plane's CLOSED_LOOP_ARRAYS) and sim.json (dropped, the
+final orientation error in rad and position error in m, the executor; closed loop the final estimates); optionally
+watched as the plane's run is (--meshcat live, --html the self-contained playback, --gif, --forces the forces
+figure), in the plan's world or another (--sim-mu, --sim-mass, --push FX,FY,FZ@T: the controller keeps the plan's
+values). What space does not have yet (replanning) is refused before anything is read or written."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cli.common import check_output_dir, print_json
-from trajectotree.cli.simulate_cmd import chosen_executor, execution_config, world_conditions
+from trajectotree.cli.simulate_cmd import chosen_executor, closed_loop_line, execution_config, world_conditions
 from trajectotree.config import ConfigError, config_from_dict
 from trajectotree.execution.space_plan import (
     check_arrays_fit_scene,
@@ -29,7 +30,6 @@ from trajectotree.scene.spatial import is_space_hand
 NOT_YET = {
     "closed_loop": "--closed-loop",
     "replan": "--replan",
-    "friction_floor": "--friction-floor",
 }
 
 
@@ -60,8 +60,8 @@ def refuse_not_yet(args) -> None:
     given = [option for name, option in NOT_YET.items() if getattr(args, name, None) not in (None, False)]
     if given:
         raise ConfigError(
-            f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): open-loop "
-            "execution by the grasp controller, so far"
+            f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): execution by "
+            "the grasp controller, open or closed loop, so far"
         )
 
 
@@ -126,6 +126,8 @@ def simulate_space_into(args) -> int:
             f"{np.degrees(summary['max_orientation_error_rad']):.2f} deg, "
             f"{1e3 * summary['max_position_error_m']:.2f} mm)"
         )
+        if result.closed_loop is not None:
+            print(closed_loop_line(summary["closed_loop"], config.scene.mu, scene.object.mass))
         print(
             f"wrote {Path(args.plan_dir) / SIM_JSON}, {Path(args.plan_dir) / SIM_NPZ}"
             + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)

@@ -5,6 +5,12 @@ Five LeafSystems, each with its results in discrete state behind named output po
 a replanner can read them as the controller does), all periodic at ControllerGains.rate_hz
 but the ObjectMonitor, which samples every plant step:
 
+One class of each for both dimensions: an `ObjectLayout` says where the object's pose and velocity lie in its
+joint's state and which of its generalized velocities (and forces) translate it, the planar joint's
+(`PLANAR_OBJECT`: [x, y, theta] and their rates; a wrench f_x, f_y, torque) or the quaternion floating joint's
+(`SPACE_OBJECT`: [qw, qx, qy, qz, px, py, pz] and [w_W, v_W]; a wrench [torque; force] in W). Sizes below are the
+plane's, with the layout's in brackets where space differs.
+
 - `ContactMonitor` reads the plant's `contact_results` and the measured `box_state` and
   reports per finger `in_contact`, `slipping` (the relative tangential velocity at a contact
   point above controller.estimators.slip_speed while the finger pushes at least slip_min_force),
@@ -32,6 +38,7 @@ system reads the others' state as of their last update, as sampled controllers d
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,7 +48,7 @@ from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
 from trajectotree.execution.in_effect import declare_plan_input
-from trajectotree.geometry import wrap_angle
+from trajectotree.geometry import quaternion_error_W, wrap_angle
 from trajectotree.scene.hand import HandDescription, finger_bodies
 
 # N, a finger pushing less is out of contact: a contact that opens leaves forces of 1e-18 N, whose
@@ -56,6 +63,68 @@ STEADY_NORMAL_FORCE = 0.05
 STEADY_APPROACH_SPEED = 2e-4
 
 
+def planar_pose_error(box_state, schedule, n: int) -> np.ndarray:
+    """(3,) the planar object's measured - planned pose at sample n of a GraspSchedule: m, m, rad (wrapped)."""
+    error = box_state[:3] - schedule.X[n]
+    error[2] = wrap_angle(error[2])
+    return error
+
+
+def space_pose_error(box_state, schedule, n: int) -> np.ndarray:
+    """(6,) the cube's measured - planned pose at sample n of a SpaceSchedule, in its velocities' layout: the
+    rotation vector (rad, in W) that turns the planned orientation onto the measured one, then the centre's offset
+    (m, in W)."""
+    quat = box_state[:4] / np.linalg.norm(box_state[:4])
+    return np.concatenate([-quaternion_error_W(schedule.x[n, :4], quat), box_state[4:7] - schedule.x[n, 4:]])
+
+
+@dataclass(frozen=True)
+class ObjectLayout:
+    """The object's state as its joint lays it out: `num_positions` positions, then `num_velocities` velocities
+    (the plant's generalized contact forces on it have the velocities' layout), `linear` the [start, stop) of the
+    velocities that translate it (the rest turn it), `vertical` the index of the one along gravity (up), and
+    `pose_error` (box_state, schedule, sample) -> the measured - planned pose in the velocities' layout."""
+
+    num_positions: int
+    num_velocities: int
+    linear: tuple[int, int]
+    vertical: int
+    pose_error: Callable[..., np.ndarray]
+
+    @property
+    def state_size(self) -> int:
+        return self.num_positions + self.num_velocities
+
+    @property
+    def dimension(self) -> int:
+        """2 in the plane, 3 in space: the translations' (and a contact force's) dimension."""
+        return self.linear[1] - self.linear[0]
+
+    def velocity(self, box_state) -> np.ndarray:
+        return box_state[self.num_positions :]
+
+    def translational(self, values) -> np.ndarray:
+        """The translational components of velocities, accelerations or generalized forces in this layout."""
+        return values[self.linear[0] : self.linear[1]]
+
+    def gravity_W(self, gravity: float) -> np.ndarray:
+        """(dimension,) m/s^2, gravity's acceleration along the translations."""
+        g = np.zeros(self.dimension)
+        g[self.vertical - self.linear[0]] = -gravity
+        return g
+
+    def error_scale(self, torque_length: float) -> np.ndarray:
+        """(num_velocities,) what turns a pose error into metres: 1 for the translations, torque_length m for
+        the angles (an angle at the object's rim)."""
+        scale = np.full(self.num_velocities, torque_length)
+        scale[self.linear[0] : self.linear[1]] = 1.0
+        return scale
+
+
+PLANAR_OBJECT = ObjectLayout(3, 3, (0, 2), 1, planar_pose_error)  # the planar joint: gravity along -y
+SPACE_OBJECT = ObjectLayout(7, 6, (3, 6), 5, space_pose_error)  # the quaternion floating joint: gravity along -z
+
+
 def low_pass_step(previous, target, gain: float):
     """One step of a discrete first-order low-pass filter: `gain` (0..1, the sample period over the
     time constant, at most 1) of the way from `previous` to `target`."""
@@ -67,7 +136,7 @@ class FingerContacts:
     """What the point contacts between the hand and the box say, per finger (F,) and in total."""
 
     normal_force: np.ndarray  # (F,) N, each finger's push along the box's inward normals
-    tangential_force: np.ndarray  # (F, 2) N, its force on the box along the faces, in W
+    tangential_force: np.ndarray  # (F, 2 [3]) N, its force on the box along the faces, in W
     slip_speed: np.ndarray  # (F,) m/s, the fastest relative tangential velocity at its contact points
     approach_speed: np.ndarray  # (F,) m/s, the fastest rate at which one of them opens or closes (|separation speed|)
 
@@ -82,11 +151,14 @@ class FingerContacts:
         return np.divide(tangential, self.normal_force, out=np.zeros(len(tangential)), where=self.in_contact)
 
 
-def finger_contacts(results: ContactResults, finger_of_body: dict, box_body, num_fingers: int) -> FingerContacts:
+def finger_contacts(
+    results: ContactResults, finger_of_body: dict, box_body, num_fingers: int, dimension: int = 2
+) -> FingerContacts:
     """FingerContacts of `num_fingers` fingers from the plant's point-pair contact results;
-    `finger_of_body` maps the body index of each finger link to its finger."""
+    `finger_of_body` maps the body index of each finger link to its finger; `dimension` 2 keeps the forces'
+    components in the plane (x, y), 3 all of them."""
     normal = np.zeros(num_fingers)
-    tangential = np.zeros((num_fingers, 2))
+    tangential = np.zeros((num_fingers, dimension))
     slip = np.zeros(num_fingers)
     approach = np.zeros(num_fingers)
     for k in range(results.num_point_pair_contacts()):
@@ -100,7 +172,7 @@ def finger_contacts(results: ContactResults, finger_of_body: dict, box_body, num
             continue
         push = -float(f_box @ n_out)
         normal[i] += push
-        tangential[i] += (f_box + push * n_out)[:2]
+        tangential[i] += (f_box + push * n_out)[:dimension]
         slip[i] = max(slip[i], info.slip_speed())
         approach[i] = max(approach[i], abs(info.separation_speed()))
     return FingerContacts(normal_force=normal, tangential_force=tangential, slip_speed=slip, approach_speed=approach)
@@ -136,38 +208,51 @@ class PeriodicSystem(LeafSystem):
         raise NotImplementedError
 
 
+def planar_finger_of_body(plant, hand, description: HandDescription) -> dict:
+    """{body index: finger} of every link of each finger of a planar hand (description's order)."""
+    return {body.index(): i for i, f in enumerate(description.fingers) for body in finger_bodies(plant, hand, f)}
+
+
 class ContactMonitor(PeriodicSystem):
-    """Input ports `contact_results` (the plant's), `box_state` (6: x, y, theta and their
-    rates) and `plan` (the PlanInEffect, trajectotree.execution.in_effect). Output ports, per finger
+    """Input ports `contact_results` (the plant's), `box_state` (6 [13]: the object's joint state, `layout`'s)
+    and `plan` (the PlanInEffect, trajectotree.execution.in_effect). Output ports, per finger
     (F each): `in_contact` (1/0), `slipping` (1/0),
     `force_ratio`, `normal_force` (N), `slip_speed` and `approach_speed` (m/s: how fast a
-    contact point slides, and opens or closes); and the box's `tracking_error` (3: measured -
-    planned pose, theta wrapped)."""
+    contact point slides, and opens or closes); and the box's `tracking_error` (3 [6]: measured -
+    planned pose, layout.pose_error: theta wrapped in the plane). `finger_of_body` maps the body index of each
+    finger link of the caller's plant to its finger (planar_finger_of_body), `box_body` is the object's."""
 
-    def __init__(self, plant, hand, box, description: HandDescription, gains: ControllerGains):
-        self._num_fingers = description.num_fingers
+    def __init__(
+        self,
+        finger_of_body: dict,
+        box_body,
+        num_fingers: int,
+        gains: ControllerGains,
+        layout: ObjectLayout = PLANAR_OBJECT,
+    ):
+        self._num_fingers = num_fingers
         four = np.zeros(self._num_fingers)
         outputs = {"in_contact": four, "slipping": four, "force_ratio": four, "normal_force": four}
         outputs |= {"slip_speed": four, "approach_speed": four}
-        super().__init__(1.0 / gains.rate_hz, outputs | {"tracking_error": np.zeros(3)})
-        self.gains = gains
-        self._finger_of_body = {
-            body.index(): i for i, f in enumerate(description.fingers) for body in finger_bodies(plant, hand, f)
-        }
-        self._box_body = plant.GetBodyByName("box", box).index()
+        super().__init__(1.0 / gains.rate_hz, outputs | {"tracking_error": np.zeros(layout.num_velocities)})
+        self.gains, self.layout = gains, layout
+        self._finger_of_body, self._box_body = dict(finger_of_body), box_body
         self.contact_results_port = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults())
         )
-        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
+        self.box_state_port = self.DeclareVectorInputPort("box_state", layout.state_size)
         self.plan_port = declare_plan_input(self)
 
     def update(self, context) -> dict:
         s, g = self.plan_port.Eval(context).schedule, self.gains
         contacts = finger_contacts(
-            self.contact_results_port.Eval(context), self._finger_of_body, self._box_body, self._num_fingers
+            self.contact_results_port.Eval(context),
+            self._finger_of_body,
+            self._box_body,
+            self._num_fingers,
+            self.layout.dimension,
         )
-        error = self.box_state_port.Eval(context)[:3] - s.X[s.index(context.get_time())]
-        error[2] = wrap_angle(error[2])
+        error = self.layout.pose_error(self.box_state_port.Eval(context), s, s.index(context.get_time()))
         return {
             "in_contact": contacts.in_contact,
             "slipping": (contacts.normal_force >= g.estimators.slip_min_force)
@@ -181,28 +266,33 @@ class ContactMonitor(PeriodicSystem):
 
 
 class ObjectMonitor(PeriodicSystem):
-    """Input ports `box_state` (6) and `box_contact_forces` (3: the plant's generalized contact
-    forces on the box, f_x N, f_y N in W and the torque N m). Output ports, sampled together
-    at the plant's step: `acceleration` (3, the box's measured velocity change over the step
-    / the step) and `contact_force` (3, the contact forces of that step). At the plant's step,
+    """Input ports `box_state` (6 [13]) and `box_contact_forces` (3 [6]: the plant's generalized contact
+    forces on the box, f_x N, f_y N in W and the torque N m [the torque and the force in W]). Output ports, sampled
+    together at the plant's step: `acceleration` (3 [6], the box's measured velocity change over the step
+    / the step) and `contact_force` (3 [6], the contact forces of that step). At the plant's step,
     not the control rate: the plant reports the contact forces of the step that led to the
     measured state, so the velocity change over one step is exactly what they, gravity (and a
     push) explain; over two steps a finger landing's force, which alternates between them,
     left 2-3 N unexplained for 4 ms."""
 
-    def __init__(self, time_step: float):
-        three = np.zeros(3)
+    def __init__(self, time_step: float, layout: ObjectLayout = PLANAR_OBJECT):
+        three = np.zeros(layout.num_velocities)
         super().__init__(
             time_step, {"acceleration": three, "contact_force": three}, {"velocity": three, "started": 0.0}
         )
-        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
-        self.box_contact_forces_port = self.DeclareVectorInputPort("box_contact_forces", 3)
+        self.layout = layout
+        self.box_state_port = self.DeclareVectorInputPort("box_state", layout.state_size)
+        self.box_contact_forces_port = self.DeclareVectorInputPort("box_contact_forces", layout.num_velocities)
 
     def update(self, context) -> dict:
-        velocity = self.box_state_port.Eval(context)[3:]
+        velocity = self.layout.velocity(self.box_state_port.Eval(context))
         # No velocity before the first update: the first acceleration is zero, not a jump from rest.
         started = self.state(context, "started")[0] > 0.0
-        accel = (velocity - self.state(context, "velocity")) / self.period if started else np.zeros(3)
+        accel = (
+            (velocity - self.state(context, "velocity")) / self.period
+            if started
+            else np.zeros(self.layout.num_velocities)
+        )
         return {
             "acceleration": accel,
             "contact_force": self.box_contact_forces_port.Eval(context),
@@ -212,16 +302,16 @@ class ObjectMonitor(PeriodicSystem):
 
 
 class FrictionEstimator(PeriodicSystem):
-    """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (4 each,
-    ContactMonitor's), `tracking_error` (3, ContactMonitor's), `reflex` (1, PushReflex's) and `plan` (the
+    """Input ports `slipping`, `force_ratio`, `normal_force` and `approach_speed` (F each,
+    ContactMonitor's), `tracking_error` (3 [6], ContactMonitor's), `reflex` (1, PushReflex's) and `plan` (the
     PlanInEffect, whose schedule says when the plan loads a finger).
     Output port `mu_estimate` (1): the friction the plan assumed, `mu_assumed` (its scene.mu; not the
     search's planning friction config.mu_plan), until a contact has slid
     steadily for gains.estimators.slip_confirm_time, then the least median ratio |f_t| / f_n over such a
     slide's last slip_confirm_time, never below gains.estimators.friction_floor and never raised.
     A slide sample counts while no reflex is on and the box is within
-    gains.estimators.friction_evidence_error of the plan (its position, and its angle times
-    `torque_length`), when the plan loads the finger fully (its schedule's force_scale 1), it
+    gains.estimators.friction_evidence_error of the plan (its position, and its angles times
+    `torque_length`: layout.error_scale), when the plan loads the finger fully (its schedule's force_scale 1), it
     pushes with at least gains.estimators.friction_evidence_force, its normal force changed by at most
     STEADY_NORMAL_FORCE since the last sample and its contact neither opens nor closes faster
     than STEADY_APPROACH_SPEED: in Drake's lagged contact model (friction bounded by the
@@ -232,7 +322,14 @@ class FrictionEstimator(PeriodicSystem):
     pushes at 0.7, 0.26-0.38 at 0.3-0.4). The median, not the mean: single steady ratios still
     lie up to 0.05 below or 0.02 above it."""
 
-    def __init__(self, mu_assumed: float, torque_length: float, num_fingers: int, gains: ControllerGains):
+    def __init__(
+        self,
+        mu_assumed: float,
+        torque_length: float,
+        num_fingers: int,
+        gains: ControllerGains,
+        layout: ObjectLayout = PLANAR_OBJECT,
+    ):
         period = 1.0 / gains.rate_hz
         # Samples in slip_confirm_time (at least one); a period's rounding must not drop one.
         self._window = max(int(np.floor(gains.estimators.slip_confirm_time / period + 1e-9)), 1)
@@ -250,9 +347,9 @@ class FrictionEstimator(PeriodicSystem):
         self.normal_force_port = self.DeclareVectorInputPort("normal_force", self._num_fingers)
         self.approach_speed_port = self.DeclareVectorInputPort("approach_speed", self._num_fingers)
         self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
-        self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", 3)
+        self.tracking_error_port = self.DeclareVectorInputPort("tracking_error", layout.num_velocities)
         self.plan_port = declare_plan_input(self)
-        self._scale = np.array([1.0, 1.0, torque_length])  # rad -> m at the box's rim
+        self._scale = layout.error_scale(torque_length)  # rad -> m at the box's rim
 
     def update(self, context) -> dict:
         normal = self.normal_force_port.Eval(context)
@@ -283,15 +380,15 @@ class FrictionEstimator(PeriodicSystem):
 
 
 class MassEstimator(PeriodicSystem):
-    """Input ports `contact_force` (3, the hand's force on the box in W and its torque) and
-    `acceleration` (3, the box's; both ObjectMonitor's). Output port `mass_estimate` (1, kg):
-    the plan's mass, low-pass filtered (gains.estimators.mass_time_constant) towards f_y / (g + a_y)
-    whenever |(a_x, a_y)| < gains.estimators.mass_accel_max, within gains.estimators.mass_estimate_range x the
-    plan's mass."""
+    """Input ports `contact_force` (3 [6], the hand's force on the box in W and its torque) and
+    `acceleration` (3 [6], the box's; both ObjectMonitor's). Output port `mass_estimate` (1, kg):
+    the plan's mass, low-pass filtered (gains.estimators.mass_time_constant) towards f_up / (g + a_up) (y up in the
+    plane, z in space) whenever the box's translational acceleration is below gains.estimators.mass_accel_max,
+    within gains.estimators.mass_estimate_range x the plan's mass."""
 
-    def __init__(self, mass_plan: float, gravity: float, gains: ControllerGains):
+    def __init__(self, mass_plan: float, gravity: float, gains: ControllerGains, layout: ObjectLayout = PLANAR_OBJECT):
         super().__init__(1.0 / gains.rate_hz, {"mass_estimate": mass_plan})
-        self.gains, self._gravity = gains, gravity
+        self.gains, self._gravity, self.layout = gains, gravity, layout
         self._range = (
             gains.estimators.mass_estimate_range[0] * mass_plan,
             gains.estimators.mass_estimate_range[1] * mass_plan,
@@ -299,22 +396,23 @@ class MassEstimator(PeriodicSystem):
         self._gain = min(
             self.period / gains.estimators.mass_time_constant, 1.0
         )  # the filter's step towards a measurement
-        self.contact_force_port = self.DeclareVectorInputPort("contact_force", 3)
-        self.acceleration_port = self.DeclareVectorInputPort("acceleration", 3)
+        self.contact_force_port = self.DeclareVectorInputPort("contact_force", layout.num_velocities)
+        self.acceleration_port = self.DeclareVectorInputPort("acceleration", layout.num_velocities)
 
     def update(self, context) -> dict:
-        accel, support = self.acceleration_port.Eval(context), self.contact_force_port.Eval(context)[1]
+        up = self.layout.vertical
+        accel, support = self.acceleration_port.Eval(context), self.contact_force_port.Eval(context)[up]
         # Not held up (the first sample, before any contact force, among them): nothing to weigh.
-        if np.linalg.norm(accel[:2]) >= self.gains.estimators.mass_accel_max or support <= 0.0:
+        if np.linalg.norm(self.layout.translational(accel)) >= self.gains.estimators.mass_accel_max or support <= 0.0:
             return {}
         mass = self.state(context, "mass_estimate")[0]
-        measured = support / (self._gravity + accel[1])
+        measured = support / (self._gravity + accel[up])
         return {"mass_estimate": float(np.clip(low_pass_step(mass, measured, self._gain), *self._range))}
 
 
 class PushReflex(PeriodicSystem):
-    """Input ports `acceleration` and `contact_force` (3 each, the box's: ObjectMonitor's) and
-    `mass_estimate` (1). Output ports `disturbance` (2, N in W): the force on the box
+    """Input ports `acceleration` and `contact_force` (3 [6] each, the box's: ObjectMonitor's) and
+    `mass_estimate` (1). Output ports `disturbance` (2 [3], N in W): the force on the box
     that the hand's measured force and gravity do not explain, m a - f - m g; and `reflex`
     (1): 1 once |disturbance| has exceeded gains.push_reflex.force for reflex_confirm_time, held
     while it does and gains.push_reflex.hold s after, then falling linearly to 0 over
@@ -323,22 +421,24 @@ class PushReflex(PeriodicSystem):
     and a finger landing jolts it by 40 m/s^2 for a few ms, which its measured force
     explains."""
 
-    def __init__(self, gravity: float, gains: ControllerGains):
+    def __init__(self, gravity: float, gains: ControllerGains, layout: ObjectLayout = PLANAR_OBJECT):
         period = 1.0 / gains.rate_hz
         self._confirm = max(int(np.floor(gains.push_reflex.confirm_time / period + 1e-9)), 1)  # samples
         internal = {"pushed_samples": 0.0, "quiet_time": np.inf}
-        super().__init__(period, {"disturbance": np.zeros(2), "reflex": 0.0}, internal)
-        self.gains = gains
-        self._gravity_W = np.array([0.0, -gravity])
-        self.acceleration_port = self.DeclareVectorInputPort("acceleration", 3)
-        self.contact_force_port = self.DeclareVectorInputPort("contact_force", 3)
+        super().__init__(period, {"disturbance": np.zeros(layout.dimension), "reflex": 0.0}, internal)
+        self.gains, self.layout = gains, layout
+        self._gravity_W = layout.gravity_W(gravity)
+        self.acceleration_port = self.DeclareVectorInputPort("acceleration", layout.num_velocities)
+        self.contact_force_port = self.DeclareVectorInputPort("contact_force", layout.num_velocities)
         self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
 
     def update(self, context) -> dict:
         g = self.gains
         mass = self.mass_estimate_port.Eval(context)[0]
-        accel = self.acceleration_port.Eval(context)[:2]
-        disturbance = mass * (accel - self._gravity_W) - self.contact_force_port.Eval(context)[:2]
+        accel = self.layout.translational(self.acceleration_port.Eval(context))
+        disturbance = mass * (accel - self._gravity_W) - self.layout.translational(
+            self.contact_force_port.Eval(context)
+        )
         pushed = np.linalg.norm(disturbance) > g.push_reflex.force
         samples = self.state(context, "pushed_samples")[0] + 1.0 if pushed else 0.0
         quiet = 0.0 if samples >= self._confirm else self.state(context, "quiet_time")[0] + self.period

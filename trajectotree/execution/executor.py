@@ -147,42 +147,39 @@ def add_grasp_controller(builder, scene: Scene, config: Config, plan_output) -> 
     builder.ExportOutput(controller.actuation_port, "actuation")
 
 
-def add_closed_loop_grasp(
-    builder, plant, hand, box, description: HandDescription, scene: Scene, config: Config, mu_assumed: float
+def add_estimators(
+    builder,
+    finger_of_body: dict,
+    box_body,
+    num_fingers: int,
+    time_step: float,
+    config: Config,
+    *,
+    mass: float,
+    torque_length: float,
+    layout: closed_loop.ObjectLayout = closed_loop.PLANAR_OBJECT,
 ) -> dict:
-    """The ClosedLoopGraspController and around it the contact and object monitors, the friction and
-    mass estimators, the push reflex (trajectotree.execution.closed_loop), the landing reflex and the
-    cones' friction (trajectotree.execution.reflexes), wired to each other and to the exported inputs.
-    mu_assumed: the friction the plan assumes at the start, where the cones start. Returns the systems
-    whose input `plan` the caller connects, by name."""
+    """The closed loop's systems between the plant and a grasp controller, for an object of `layout` (either
+    dimension): the cones' friction (reflexes.ConeFriction), the contact and object monitors, the friction and mass
+    estimators and the push reflex (closed_loop), wired to each other (export_inputs exports the inputs they share
+    with the controller), the plant's `time_step` s the object monitor's period. The plan's scene (config.scene)
+    gives the friction they start at and the gravity, `mass` kg is the plan's object's; `torque_length` m turns
+    the pose error's angles into metres (FrictionEstimator). Returns them by name: cones, monitor, motion,
+    friction, mass, reflex."""
     gains, scene_config = config.controller, config.scene
-    controller = builder.AddNamedSystem(
-        "grasp_controller", ClosedLoopGraspController(scene, gains, mu=control_friction(config))
-    )
-    landing = builder.AddNamedSystem("landing_reflex", LandingReflex(scene, gains))
-    cones = builder.AddNamedSystem("cone_friction", ConeFriction(gains, mu_assumed=mu_assumed))
+    cones = builder.AddNamedSystem("cone_friction", ConeFriction(gains, mu_assumed=scene_config.mu))
     monitor = builder.AddNamedSystem(
-        "contact_monitor", closed_loop.ContactMonitor(plant, hand, box, description, gains)
+        "contact_monitor", closed_loop.ContactMonitor(finger_of_body, box_body, num_fingers, gains, layout)
     )
-    motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(plant.time_step()))
+    motion = builder.AddNamedSystem("object_monitor", closed_loop.ObjectMonitor(time_step, layout))
     friction = builder.AddNamedSystem(
         "friction_estimator",
-        closed_loop.FrictionEstimator(scene_config.mu, scene_config.shape.circumradius, scene.num_fingers, gains),
+        closed_loop.FrictionEstimator(scene_config.mu, torque_length, num_fingers, gains, layout),
     )
     mass = builder.AddNamedSystem(
-        "mass_estimator", closed_loop.MassEstimator(scene_config.box_mass, scene_config.gravity, gains)
+        "mass_estimator", closed_loop.MassEstimator(mass, scene_config.gravity, gains, layout)
     )
-    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene_config.gravity, gains))
-    box_state = [controller.box_state_port, landing.box_state_port, monitor.box_state_port, motion.box_state_port]
-    for name, ports in (
-        ("box_state", box_state),
-        ("hand_state", [controller.hand_state_port, landing.hand_state_port]),
-        ("contact_results", [monitor.contact_results_port]),
-        ("box_contact_forces", [motion.box_contact_forces_port]),
-    ):
-        index = builder.ExportInput(ports[0], name)
-        for port in ports[1:]:
-            builder.ConnectInput(index, port)
+    reflex = builder.AddNamedSystem("push_reflex", closed_loop.PushReflex(scene_config.gravity, gains, layout))
     for source, target, name in (
         (monitor, friction, "slipping"),
         (monitor, friction, "force_ratio"),
@@ -196,27 +193,86 @@ def add_closed_loop_grasp(
         (motion, reflex, "contact_force"),
         (mass, reflex, "mass_estimate"),
         (friction, cones, "mu_estimate"),
-        (friction, landing, "mu_estimate"),
-        (reflex, landing, "reflex"),
-        (cones, controller, "friction"),
-        (landing, controller, "clocks"),
-        (mass, controller, "mass_estimate"),
-        (reflex, controller, "reflex"),
-        (reflex, controller, "disturbance"),
     ):
         builder.Connect(source.GetOutputPort(name), target.GetInputPort(name))
-    builder.ExportOutput(controller.actuation_port, "actuation")
+    return {"cones": cones, "monitor": monitor, "motion": motion, "friction": friction, "mass": mass, "reflex": reflex}
+
+
+def export_inputs(builder, ports: dict) -> None:
+    """Exports each list of input ports of `ports` ({name: [ports]}) as one input of that name."""
+    for name, targets in ports.items():
+        index = builder.ExportInput(targets[0], name)
+        for port in targets[1:]:
+            builder.ConnectInput(index, port)
+
+
+def connect_estimates(builder, loop: dict, controller) -> None:
+    """Feeds the estimates of `loop` (add_estimators') to a closed-loop grasp controller's inputs of the same
+    names (the cones' `friction`, `mass_estimate`, `reflex`, `disturbance`)."""
+    for source, name in (
+        (loop["cones"], "friction"),
+        (loop["mass"], "mass_estimate"),
+        (loop["reflex"], "reflex"),
+        (loop["reflex"], "disturbance"),
+    ):
+        builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
+
+
+def export_estimates(builder, loop: dict) -> None:
+    """Exports the outputs of `loop` (add_estimators') that a ClosedLoopLog records (CLOSED_LOOP_OUTPUTS)."""
     for name in ClosedLoopLog.MONITOR_ARRAYS:
-        builder.ExportOutput(monitor.GetOutputPort(name), name)
-    builder.ExportOutput(friction.GetOutputPort("mu_estimate"), "mu_estimate")
-    builder.ExportOutput(mass.GetOutputPort("mass_estimate"), "mass_estimate")
+        builder.ExportOutput(loop["monitor"].GetOutputPort(name), name)
+    builder.ExportOutput(loop["friction"].GetOutputPort("mu_estimate"), "mu_estimate")
+    builder.ExportOutput(loop["mass"].GetOutputPort("mass_estimate"), "mass_estimate")
     for name in ("disturbance", "reflex"):
-        builder.ExportOutput(reflex.GetOutputPort(name), name)
+        builder.ExportOutput(loop["reflex"].GetOutputPort(name), name)
+
+
+def add_closed_loop_grasp(
+    builder, plant, hand, box, description: HandDescription, scene: Scene, config: Config
+) -> dict:
+    """The ClosedLoopGraspController and around it the closed loop's estimators (add_estimators) and the landing
+    reflex (trajectotree.execution.reflexes), wired to each other and to the exported inputs. Returns the systems
+    whose input `plan` the caller connects, by name."""
+    gains = config.controller
+    controller = builder.AddNamedSystem(
+        "grasp_controller", ClosedLoopGraspController(scene, gains, mu=control_friction(config))
+    )
+    landing = builder.AddNamedSystem("landing_reflex", LandingReflex(scene, gains))
+    finger_of_body = closed_loop.planar_finger_of_body(plant, hand, description)
+    box_body = plant.GetBodyByName("box", box).index()
+    loop = add_estimators(
+        builder,
+        finger_of_body,
+        box_body,
+        scene.num_fingers,
+        plant.time_step(),
+        config,
+        mass=config.scene.box_mass,
+        torque_length=config.scene.shape.circumradius,
+    )
+    monitor, motion = loop["monitor"], loop["motion"]
+    box_state = [controller.box_state_port, landing.box_state_port, monitor.box_state_port, motion.box_state_port]
+    export_inputs(
+        builder,
+        {
+            "box_state": box_state,
+            "hand_state": [controller.hand_state_port, landing.hand_state_port],
+            "contact_results": [monitor.contact_results_port],
+            "box_contact_forces": [motion.box_contact_forces_port],
+        },
+    )
+    for source, name in ((loop["friction"], "mu_estimate"), (loop["reflex"], "reflex")):
+        builder.Connect(source.GetOutputPort(name), landing.GetInputPort(name))
+    builder.Connect(landing.GetOutputPort("clocks"), controller.GetInputPort("clocks"))
+    connect_estimates(builder, loop, controller)
+    builder.ExportOutput(controller.actuation_port, "actuation")
+    export_estimates(builder, loop)
     return {
-        "followers": (controller, landing, monitor, friction),
+        "followers": (controller, landing, monitor, loop["friction"]),
         "monitor": monitor,
-        "friction": friction,
-        "mass": mass,
+        "friction": loop["friction"],
+        "mass": loop["mass"],
     }
 
 
@@ -296,7 +352,7 @@ def add_executor(
             inner.ExportOutput(source.get_output_port(), PLAN_PORT)
         case Executor.GRASP_CLOSED_LOOP | Executor.GRASP_REPLAN:
             description = read_hand(plant, scene_graph, hand, hand_file(config.scene.hand))
-            loop = add_closed_loop_grasp(inner, plant, hand, box, description, scene, config, config.scene.mu)
+            loop = add_closed_loop_grasp(inner, plant, hand, box, description, scene, config)
             initial = plan_in_effect(reference, config, scene, config.scene.mu)
             if executor.replans:
                 replanner = add_replanner(inner, plan, config, initial, loop, segment_workers)

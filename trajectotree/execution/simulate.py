@@ -233,11 +233,7 @@ def collected_log(
     closed = None
     if execution.closed_loop_loggers is not None:
         data = {name: log_of(logger).data().T.copy() for name, logger in execution.closed_loop_loggers.items()}
-        for name in ("in_contact", "slipping"):
-            data[name] = data[name] > 0.5
-        for name in ("mu_estimate", "mass_estimate", "reflex"):
-            data[name] = data[name][:, 0]
-        closed = ClosedLoopLog(**data)
+        closed = ClosedLoopLog.from_logged(data)
     return SimLog(
         t=t,
         x=x,

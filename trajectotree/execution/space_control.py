@@ -34,6 +34,7 @@ from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
+from trajectotree.execution.control import Estimates
 from trajectotree.execution.in_effect import declare_plan_input
 from trajectotree.execution.reference import swing_intervals, swing_profile
 from trajectotree.geometry import (
@@ -321,18 +322,26 @@ class SpaceGraspForceQp:
         self._cost = self._prog.AddQuadraticCost(np.eye(n), np.zeros(n), z, is_convex=True)
         self._bounds = self._prog.AddBoundingBoxConstraint(np.zeros(n), np.zeros(n), z)
         rows = cone_rows_3d(mu, num_fingers, CONE_FACETS)
-        self._prog.AddLinearConstraint(rows, np.full(len(rows), -np.inf), np.zeros(len(rows)), z)
+        self._cone = self._prog.AddLinearConstraint(rows, np.full(len(rows), -np.inf), np.zeros(len(rows)), z)
         m = num_fingers * num_joints
         self._torque = self._prog.AddLinearConstraint(np.zeros((m, n)), np.full(m, -np.inf), np.full(m, np.inf), z)
         self._W = wrench_weight * np.diag([1.0, 1.0, 1.0] + [1.0 / torque_length**2] * 3)
         self._solver, self._options = ClarabelSolver(), SolverOptions()
 
-    def solve(self, G, wrench, lambda_plan, lo, hi, torque) -> np.ndarray:
+    def set_friction(self, mu: float) -> None:
+        """The cones' friction coefficient from the next solve on."""
+        if mu != self._mu:
+            rows = cone_rows_3d(mu, self._num_fingers, CONE_FACETS)
+            self._cone.evaluator().UpdateCoefficients(rows, np.full(len(rows), -np.inf), np.zeros(len(rows)))
+            self._mu = mu
+
+    def solve(self, G, wrench, lambda_plan, lo, hi, torque, torque_weight: float = 1.0) -> np.ndarray:
         """lambda (F, 3) for G (6, 3F), the wrench (6,), the plan's lambda (F, 3), the normal-force bounds lo, hi
-        (F,) and torque = (A, lower, upper) (contact_torque_rows). Falls back to the plan's forces, clipped to the
-        bounds and the cones' circle, if the solver fails."""
+        (F,) and torque = (A, lower, upper) (contact_torque_rows); `torque_weight` multiplies the weight of the
+        wrench's torque residual. Falls back to the plan's forces, clipped to the bounds and the cones' circle, if
+        the solver fails."""
         z_plan = np.ravel(lambda_plan)
-        GtW = G.T @ self._W
+        GtW = G.T @ (self._W * np.repeat([1.0, torque_weight], 3))  # W diagonal: its torque columns scaled
         self._cost.evaluator().UpdateCoefficients(2.0 * (GtW @ G + np.eye(len(z_plan))), -2.0 * (GtW @ wrench + z_plan))
         t_max = self._mu * np.asarray(hi)
         self._bounds.evaluator().set_bounds(
@@ -366,6 +375,8 @@ class SpaceGraspController(LeafSystem):
         self._tips = [scene.tip_frame(i) for i in range(scene.num_fingers)]
         self._tip_radius, self._half = scene.tip_radius, scene.object.half
         self._mass = scene.object.mass
+        self.planned = Estimates(mu=mu, mass=scene.object.mass, reflex=0.0, disturbance=np.zeros(3))
+        self._friction_safety = mu / scene.object.mu  # the cones' fraction of the friction the plan assumed
         self._I_B = scene.object.inertia
         self._tau_max = scene.tau_max
         self._num_fingers, self._joints_per_finger = scene.tau_max.shape
@@ -393,6 +404,10 @@ class SpaceGraspController(LeafSystem):
         self.DeclareInitializationDiscreteUpdateEvent(self.UpdateActuation)
         self.actuation_port = self.DeclareStateOutputPort("actuation", state)
 
+    def estimates(self, context) -> Estimates:
+        """What the controller assumes now: the plan's friction (its cones') and mass, no push."""
+        return self.planned
+
     def UpdateActuation(self, context, discrete_state):
         schedule = self.plan_port.Eval(context).schedule
         offsets = context.get_discrete_state(self._offset_state).get_value().reshape(-1, 3)
@@ -402,6 +417,7 @@ class SpaceGraspController(LeafSystem):
             self.box_state_port.Eval(context),
             self.hand_state_port.Eval(context),
             offsets,
+            self.estimates(context),
         )
         discrete_state.get_mutable_vector(0).set_value(u)
         discrete_state.get_mutable_vector(self._offset_state).set_value(offsets.ravel())
@@ -472,22 +488,35 @@ class SpaceGraspController(LeafSystem):
         tau = -self._plant.CalcGravityGeneralizedForces(self._context)[self._hand_v]
         return tau.reshape(self._num_fingers, -1)
 
-    def desired_wrench(self, s: SpaceSchedule, n: int, box_state) -> np.ndarray:
-        """(6,) [N; N m] in W about the cube's centre: the plan's contact wrench at sample n and the pose feedback."""
-        g = self.gains.grasp
+    def desired_wrench(self, s: SpaceSchedule, n: int, box_state, estimates: Estimates | None = None) -> np.ndarray:
+        """(6,) [N; N m] in W about the cube's centre: the plan's contact wrench at sample n and the pose feedback,
+        for the `estimates`' mass (the plan's wrench and the cube's inertia scale with it: the same cube, denser),
+        cancelling their disturbance; the push reflex raises the gains (kd with the square root of kp: the same
+        damping ratio, a faster response), as the plane's (control.GraspController.desired_acceleration)."""
+        g, reflex = self.gains.grasp, self.gains.push_reflex
+        estimates = self.planned if estimates is None else estimates
+        boost = 1.0 + estimates.reflex * (reflex.gain - 1.0)
+        kp, kd = boost * g.object_kp, np.sqrt(boost) * g.object_kd
+        scale = estimates.mass / self._mass
         quat, p, w, v = box_state[:4], box_state[4:7], box_state[7:10], box_state[10:13]
         R = quaternion_matrices(quat)
         e_R = quaternion_error_W(s.x[n, :4], quat / np.linalg.norm(quat))
-        linear = self._mass * (g.object_kp * (s.x[n, 4:] - p) + g.object_kd * (s.v[n] - v))
-        angular = R @ self._I_B @ R.T @ (g.object_kp * e_R + g.object_kd * (s.w[n] - w))
-        return s.wrench[n] + np.concatenate([linear, angular])
+        linear = estimates.mass * (kp * (s.x[n, 4:] - p) + kd * (s.v[n] - v))
+        angular = R @ (self._I_B * scale) @ R.T @ (kp * e_R + kd * (s.w[n] - w))
+        wrench = s.wrench[n] * scale + np.concatenate([linear, angular])
+        wrench[:3] -= reflex.disturbance_feedforward * estimates.disturbance
+        return wrench
 
-    def compute_actuation(self, s: SpaceSchedule, t: float, box_state, hand_state, offsets) -> tuple:
+    def compute_actuation(
+        self, s: SpaceSchedule, t: float, box_state, hand_state, offsets, estimates: Estimates | None = None
+    ) -> tuple:
         """(the actuation, the next swing offsets (F, 3) m in B) at time t following the schedule `s`, for the
         measured cube and hand states and the swing offsets: each finger's drift off its planned point along the
         face at the end of its lift-off hold, which its target carries on its swing (s.carry), so that it moves from
-        where it lifted off rather than jumping back along the face (12 mm on seed-0 goal 1's first swing)."""
+        where it lifted off rather than jumping back along the face (12 mm on seed-0 goal 1's first swing).
+        `estimates`: what it assumes of the world (None: the plan's)."""
         g = self.gains.grasp
+        estimates = self.planned if estimates is None else estimates
         n = s.index(t)
         nq = len(hand_state) // 2
         q, qdot = hand_state[:nq], hand_state[nq:]
@@ -519,14 +548,60 @@ class SpaceGraspController(LeafSystem):
         D = np.stack([-n_W, t1, t2], axis=-1)  # (F, 3, 3): each force component's direction
         J_WC = self.contact_jacobians(poses, -self._tip_radius * n_W)
         lambda_plan = np.einsum("fck,fc->fk", D, s.f_B[n] @ R.T) * scale[:, None]
-        lam = self._qp.solve(
+        lam = self.grasp_forces(
             grasp_matrix_3d_W(r_W, n_W),
-            self.desired_wrench(s, n, box_state),
+            self.desired_wrench(s, n, box_state, estimates),
             lambda_plan,
             scale * g.min_normal_force,
             scale * np.minimum(g.max_normal_force, np.maximum(s.unload_force[n], g.min_normal_force)),
             contact_torque_rows(J_WC, D, rest, self._tau_max),
+            estimates,
+            scale,
         )
         f_W = np.einsum("fck,fk->fc", D, lam)
         tau = rest + np.einsum("fcj,fc->fj", J_WC, f_W)
         return self._u_from_tau @ tau.ravel(), offsets
+
+    def grasp_forces(self, G, wrench, lambda_plan, lo, hi, torque, estimates: Estimates, scale) -> np.ndarray:
+        """lambda (F, 3), the fingertips' (normal, tangential 1, 2) forces that make `wrench` (SpaceGraspForceQp)
+        within the normal-force bounds lo, hi (F,) N and the motors (`torque`), at the friction the QP was built
+        with; the open loop's `estimates` and force budgets `scale` (F,) change nothing."""
+        return self._qp.solve(G, wrench, lambda_plan, lo, hi, torque)
+
+
+class SpaceClosedLoopGraspController(SpaceGraspController):
+    """The grasp controller in space fed by the closed loop (trajectotree.execution.closed_loop with its
+    SPACE_OBJECT layout), as the plane's ClosedLoopGraspController. Input ports as SpaceGraspController's, and
+    `friction` (1: the friction estimate its cones follow, reflexes.ConeFriction's), `mass_estimate` (1, kg),
+    `reflex` (1, 0..1) and `disturbance` (3, N in W). Output port `actuation` as SpaceGraspController's. Its cones
+    are at the estimate times the open loop's safety fraction, its desired wrench is the estimated mass's and
+    cancels the measured disturbance at once; the push reflex raises the object gains and the QP's target squeeze
+    (gains.push_reflex.squeeze, a target, not a bound), puts its cones at push_reflex.friction_safety x the
+    estimate and weights its torque residual by push_reflex.torque_weight. No landing reflex: the planar one runs
+    a swing ahead along the plane's schedule, which space's five-stage swings (swing_timing) do not share."""
+
+    def __init__(self, scene: SpaceScene, gains: ControllerGains, *, mu: float):
+        super().__init__(scene, gains, mu=mu)
+        self.friction_port = self.DeclareVectorInputPort("friction", 1)
+        self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
+        self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
+        self.disturbance_port = self.DeclareVectorInputPort("disturbance", 3)
+
+    def estimates(self, context) -> Estimates:
+        return Estimates(
+            mu=float(self.friction_port.Eval(context)[0]),
+            mass=float(self.mass_estimate_port.Eval(context)[0]),
+            reflex=float(self.reflex_port.Eval(context)[0]),
+            disturbance=np.array(self.disturbance_port.Eval(context)),
+        )
+
+    def grasp_forces(self, G, wrench, lambda_plan, lo, hi, torque, estimates: Estimates, scale) -> np.ndarray:
+        """As SpaceGraspController's, at the estimated friction and, during the push reflex, with the squeeze as
+        the QP's target push (its least the plan's) and the torque residual weighted."""
+        pr = self.gains.push_reflex
+        safety = self._friction_safety + estimates.reflex * max(pr.friction_safety - self._friction_safety, 0.0)
+        self._qp.set_friction(safety * estimates.mu)
+        target = np.array(lambda_plan, dtype=float)
+        target[:, 0] = np.maximum(target[:, 0], estimates.reflex * np.minimum(scale * pr.squeeze, hi))
+        weight = 1.0 + estimates.reflex * (pr.torque_weight - 1.0)
+        return self._qp.solve(G, wrench, target, lo, hi, torque, torque_weight=weight)

@@ -79,10 +79,11 @@ def check_arrays_fit_scene(npz_path: Path, arrays: dict[str, np.ndarray], scene)
 
 
 def save_space_sim(result, plan_dir: str | Path, plan_success: bool) -> dict:
-    """PLAN_DIR/sim.npz (the result's arrays) and sim.json (its summary, with `plan_success`), each written
-    atomically; returns the summary."""
+    """PLAN_DIR/sim.npz (the result's arrays, a closed-loop run's estimates too) and sim.json (its summary, with
+    `plan_success`), each written atomically; returns the summary."""
     buffer = io.BytesIO()
-    np.savez(buffer, **{name: getattr(result, name) for name in result.ARRAYS})
+    arrays = {name: getattr(result, name) for name in result.ARRAYS}
+    np.savez(buffer, **arrays, **({} if result.closed_loop is None else result.closed_loop.arrays()))
     write_bytes_atomic(Path(plan_dir) / SIM_NPZ, buffer.getvalue())
     summary = dict(result.to_json(), plan_success=plan_success)
     write_json_atomic(Path(plan_dir) / SIM_JSON, summary)

@@ -1,14 +1,15 @@
-"""Executing a plan in space in a full-dynamics Drake simulation (issue 37, open loop so far).
+"""Executing a plan in space in a full-dynamics Drake simulation (issue 37), open or closed loop.
 
 The Diagram: a discrete MultibodyPlant (config.sim.time_step, as the plane's) with the hand in space and its cube
-on a quaternion floating joint (scene.spatial: the hand's model, add_space_object), gravity along -z; the executor
+on a quaternion floating joint (scene.spatial: the hand's model, add_space_object), gravity along -z, optionally in
+a world the plan did not assume (world.Conditions: the friction, the cube's mass, a horizontal push); the executor
 (`add_space_executor`: one Executor value dispatched to the space grasp controller, trajectotree.execution.
-space_control, or zero torque), wired to the plant by port name; loggers of the plant's state and of each finger's
-simulated force on the cube. The run starts in the plan's first state at rest and lasts the plan and
-config.sim.settle_time of hold; `SpaceSimResult` is what it logged beside the plan at the same times, with the
-drop (the cube's centre config.sim.drop_distance off the plan's, the plane's rule) and the final errors.
-The simulated world may differ from the plan's (trajectotree.execution.world's Conditions: the plant's friction,
-the cube's mass, a push on its centre in W); the controller keeps the plan's values.
+space_control, open loop or fed by the closed loop's monitors, estimators and push reflex, trajectotree.execution.
+closed_loop with its SPACE_OBJECT layout, or zero torque), wired to the plant by port name; loggers of the plant's
+state, of each finger's simulated force on the cube and, closed loop, of the estimates. The run starts in the
+plan's first state at rest and lasts the plan and config.sim.settle_time of hold; `SpaceSimResult` is what it
+logged beside the plan at the same times, with the drop (the cube's centre config.sim.drop_distance off the
+plan's, the plane's rule) and the final errors. The controller keeps the plan's values in any world.
 Optionally a Meshcat visualizer, as the plane's (trajectotree.execution.simulate): the hand and cube as simulated,
 the planned cube's edges, each finger's simulated force on the cube as an arrow, live and into the recording that
 becomes the self-contained playback page.
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -32,16 +33,30 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 from trajectotree.config import Config, ConfigError
 from trajectotree.config.executor import Executor, parse_executor
 from trajectotree.execution import force_arrows, meshcat_scene, playback_page
-from trajectotree.execution.executor import control_friction
+from trajectotree.execution.closed_loop import SPACE_OBJECT
+from trajectotree.execution.executor import (
+    CLOSED_LOOP_OUTPUTS,
+    add_estimators,
+    connect_estimates,
+    control_friction,
+    export_estimates,
+    export_inputs,
+)
 from trajectotree.execution.in_effect import PLAN_PORT, PlanInEffect, add_plan_source
-from trajectotree.execution.space_control import SpaceGraspController, SpaceReference, space_schedule
+from trajectotree.execution.space_control import (
+    SpaceClosedLoopGraspController,
+    SpaceGraspController,
+    SpaceReference,
+    space_schedule,
+)
 from trajectotree.execution.world import NOMINAL, Conditions, PushSource
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.geometry import quaternion_matrices, rotation_angles
+from trajectotree.results import ClosedLoopLog
 from trajectotree.scene.friction import set_friction
 from trajectotree.scene.spatial import SpaceScene, add_space_object
 
-SPACE_EXECUTORS = (Executor.GRASP, Executor.NONE)  # the executors a plan in space has so far
+SPACE_EXECUTORS = (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.NONE)  # the executors a plan in space has
 # rad: the field's two success criteria for a reorientation in space, a run without a drop that ends within 15 deg
 # or within 0.4 rad (22.9 deg) of its goal (sim.json within_15deg, within_0p4rad)
 SUCCESS_ANGLES = (("within_15deg", math.radians(15.0)), ("within_0p4rad", 0.4))
@@ -64,6 +79,56 @@ def space_plan_in_effect(reference: SpaceReference, config: Config, scene: Space
     return PlanInEffect(reference, schedule, config.scene.mu)
 
 
+def space_finger_of_body(plant, hand, scene: SpaceScene) -> dict:
+    """{body index in `plant`: finger} of every link of each finger of the hand in space (model instance `hand`
+    of `plant`, `scene`'s hand), its fingertip sphere's included."""
+    return {
+        plant.GetJointByName(joint, hand).child_body().index(): i
+        for i, finger in enumerate(scene.hand_file.fingers)
+        for joint in finger.joints
+    }
+
+
+def add_space_closed_loop(builder, plant, plan: PlanInEffect, config: Config, scene: SpaceScene) -> None:
+    """The SpaceClosedLoopGraspController following `plan` and around it the closed loop's monitors, estimators and
+    push reflex for the cube (executor.add_estimators with closed_loop.SPACE_OBJECT), for the caller's `plant`
+    holding `scene`'s hand and cube (model instances of the same names, as simulate_space adds them); the inputs
+    and outputs add_space_executor names exported."""
+    controller = builder.AddNamedSystem(
+        "grasp_controller", SpaceClosedLoopGraspController(scene, config.controller, mu=control_friction(config))
+    )
+    hand = plant.GetModelInstanceByName(scene.plant.GetModelInstanceName(scene.hand))
+    box_body = plant.GetBodyByName("box", plant.GetModelInstanceByName("box")).index()
+    loop = add_estimators(
+        builder,
+        space_finger_of_body(plant, hand, scene),
+        box_body,
+        scene.num_fingers,
+        plant.time_step(),
+        config,
+        mass=scene.object.mass,
+        torque_length=float(np.linalg.norm(scene.object.half)),  # m, the QP's: the cube's half diagonal
+        layout=SPACE_OBJECT,
+    )
+    monitor, motion = loop["monitor"], loop["motion"]
+    export_inputs(
+        builder,
+        {
+            "box_state": [controller.box_state_port, monitor.box_state_port, motion.box_state_port],
+            "hand_state": [controller.hand_state_port],
+            "contact_results": [monitor.contact_results_port],
+            "box_contact_forces": [motion.box_contact_forces_port],
+        },
+    )
+    connect_estimates(builder, loop, controller)
+    source = add_plan_source(builder, plan)
+    for follower in (controller, monitor, loop["friction"]):
+        builder.Connect(source.get_output_port(), follower.plan_port)
+    builder.ExportOutput(controller.actuation_port, "actuation")
+    export_estimates(builder, loop)
+    builder.ExportOutput(source.get_output_port(), PLAN_PORT)
+
+
 def add_space_executor(
     builder: DiagramBuilder,
     plant,
@@ -75,10 +140,17 @@ def add_space_executor(
     name: str = "executor",
 ):
     """Adds the executor `executor` of the plan in space `reference` to `builder` as one Diagram named `name`, for
-    the caller's finalized `plant` (its actuation in the order of `scene`'s hand, the plan's scene). Inputs by
-    name: `box_state` (13: the cube's [qw, qx, qy, qz, px, py, pz] and [w_W, v_W], rad/s, m/s) and `hand_state`
-    (2 F n: [q rad; v rad/s], finger-major); outputs: `actuation` (F n joint torques, N m) and, for grasp, `plan`
-    (the PlanInEffect followed). ConfigError for an executor that space does not have yet (SPACE_EXECUTORS)."""
+    the caller's finalized `plant` (its actuation in the order of `scene`'s hand, the plan's scene; the hand's and
+    the cube's model instances named as in `scene`'s plant). Inputs by name: `box_state` (13: the cube's [qw, qx,
+    qy, qz, px, py, pz] and [w_W, v_W], rad/s, m/s), `hand_state` (2 F n: [q rad; v rad/s], finger-major) and,
+    closed loop, `contact_results` (the plant's) and `box_contact_forces` (6: the plant's generalized contact
+    forces on the cube, [torque N m; force N] in W); outputs: `actuation` (F n joint torques, N m), for grasp and
+    grasp-closed-loop `plan` (the PlanInEffect followed) and, closed loop, the estimates and the monitors' outputs
+    (executor.CLOSED_LOOP_OUTPUTS: `mu_estimate`, `mass_estimate` kg, `reflex` 0..1, `disturbance` (3, N in W),
+    per finger `in_contact`, `slipping`, `force_ratio`, `slip_speed` m/s, and `tracking_error` (6: the rotation
+    vector rad and the offset m from the planned pose to the measured one, in W)). The controller assumes the
+    plan's scene whatever the plant's. ConfigError for an executor that space does not have yet
+    (SPACE_EXECUTORS)."""
     executor = parse_executor(executor)
     inner = DiagramBuilder()
     match executor:
@@ -92,6 +164,8 @@ def add_space_executor(
             inner.ExportInput(controller.hand_state_port, "hand_state")
             inner.ExportOutput(controller.actuation_port, "actuation")
             inner.ExportOutput(source.get_output_port(), PLAN_PORT)
+        case Executor.GRASP_CLOSED_LOOP:
+            add_space_closed_loop(inner, plant, space_plan_in_effect(reference, config, scene), config, scene)
         case Executor.NONE:
             zero = inner.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
             inner.ExportOutput(zero.get_output_port(), "actuation")
@@ -112,11 +186,7 @@ class SpaceFingertipForces(LeafSystem):
     def __init__(self, plant, hand, box, scene: SpaceScene):
         super().__init__()
         self._num_fingers = scene.num_fingers
-        self._finger_of_body = {
-            plant.GetJointByName(joint, hand).child_body().index(): i
-            for i, finger in enumerate(scene.hand_file.fingers)
-            for joint in finger.joints
-        }
+        self._finger_of_body = space_finger_of_body(plant, hand, scene)
         self._box_body = plant.GetBodyByName("box", box).index()
         self.contact_results_port = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults())
@@ -153,6 +223,9 @@ class SpaceSimResult:
     position_error_m: np.ndarray  # (T,) the distance between the simulated and the planned centre
     sim_time_s: float  # s of wall time the simulation took
     world: dict  # the simulated world against the plan's (Conditions.world_json: friction, mass kg, push)
+    # What the closed loop watched and estimated (sim.npz's CLOSED_LOOP_ARRAYS besides ARRAYS, sim.json's
+    # "closed_loop"), as the plane's SimLog; None: an open-loop run
+    closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)
 
     ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
 
@@ -184,6 +257,7 @@ class SpaceSimResult:
             "max_position_error_m": float(self.position_error_m.max()),
             "sim_time_s": self.sim_time_s,
             "conditions": self.world,
+            **({} if self.closed_loop is None else {"closed_loop": self.closed_loop.to_json(self.t)}),
         }
 
 
@@ -224,7 +298,12 @@ def simulate_space(
     plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -scene.gravity])
     plant.Finalize()
     added = add_space_executor(builder, plant, reference, config, scene, executor=executor)
-    plant_ports = {"box_state": plant.get_state_output_port(box), "hand_state": plant.get_state_output_port(hand)}
+    plant_ports = {
+        "box_state": plant.get_state_output_port(box),
+        "hand_state": plant.get_state_output_port(hand),
+        "contact_results": plant.get_contact_results_output_port(),
+        "box_contact_forces": plant.get_generalized_contact_forces_output_port(box),
+    }
     for i in range(added.num_input_ports()):  # by name, as executor.connect_executor
         builder.Connect(plant_ports[added.get_input_port(i).get_name()], added.get_input_port(i))
     builder.Connect(added.GetOutputPort("actuation"), plant.get_actuation_input_port())
@@ -236,6 +315,12 @@ def simulate_space(
     triggers = {TriggerType.kPeriodic, TriggerType.kForced}
     state_logger = LogVectorOutput(plant.get_state_output_port(), builder, triggers, config.sim.log_period)
     force_logger = LogVectorOutput(forces.get_output_port(), builder, triggers, config.sim.log_period)
+    closed_loop_loggers = {}
+    if executor.closed_loop:
+        closed_loop_loggers = {
+            name: LogVectorOutput(added.GetOutputPort(name), builder, triggers, config.sim.log_period)
+            for name in CLOSED_LOOP_OUTPUTS
+        }
     visualizer = None
     if meshcat is not None:
         visualizer = meshcat_scene.add_space_visualizer(
@@ -259,9 +344,10 @@ def simulate_space(
     start = time.perf_counter()
     simulator.AdvanceTo(end)
     sim_time = time.perf_counter() - start
-    logs = [logger.FindLog(simulator.get_context()) for logger in (state_logger, force_logger)]
+    loggers = [state_logger, force_logger, *closed_loop_loggers.values()]
+    logs = [logger.FindLog(simulator.get_context()) for logger in loggers]
     if logs[0].sample_times()[-1] < end - 1e-9:  # the periodic log can miss the end by rounding
-        for logger in (state_logger, force_logger):
+        for logger in loggers:
             logger.ForcedPublish(logger.GetMyContextFromRoot(simulator.get_context()))
     t, states = logs[0].sample_times().copy(), logs[0].data().T
     x = states[:, plant.GetPositionsFromArray(box, np.arange(plant.num_positions())).astype(int)]
@@ -283,6 +369,11 @@ def simulate_space(
         position_error_m=distance,
         sim_time_s=sim_time,
         world=conditions.world_json(scene.object.mu, scene.object.mass),
+        closed_loop=ClosedLoopLog.from_logged(
+            {name: log.data().T.copy() for name, log in zip(closed_loop_loggers, logs[2:])}
+        )
+        if closed_loop_loggers
+        else None,
     )
     if visualizer is not None:
         frame_times = np.arange(0.0, end + 1e-9, meshcat_scene.PUBLISH_PERIOD)
