@@ -81,7 +81,13 @@ from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats, Spa
 from trajectotree.geometry import BOX_FACE_NAMES, box_face_grid, quaternion_angle, quaternion_slerp
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
-from trajectotree.scene.finger_clearance import fingers_clear, pair_distances
+from trajectotree.scene.finger_clearance import (
+    FingerCapsules,
+    FingerShapes,
+    finger_shapes,
+    fingers_clear,
+    shapes_pair_distances,
+)
 from trajectotree.scene.plant import Scene
 from trajectotree.scene.spatial import START_POSE
 from trajectotree.scene.statics import edge_wrenches_W
@@ -128,6 +134,7 @@ class _Search:
         self.mu_plan = mu_plan(scene.config, config)
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
+        self.capsules = FingerCapsules.of(scene.fingers, self.reach.tip_radius)  # the path tests' bounds
         self.bound = SwitchBound(scene, self.reach, self.poses, config)
         self.stance = StanceChecks(
             scene,
@@ -144,6 +151,7 @@ class _Search:
         self.expanded = self.generated = self.backups = 0
         self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
         self.gaps: dict[tuple, float] = {}  # (depth, i, s_i, j, s_j) -> m, two fingers' distance at a node
+        self.shapes: dict[tuple, FingerShapes] = {}  # (depth, i, s_i) -> finger i's shapes at a node
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
@@ -214,7 +222,8 @@ class _Search:
         fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
         keys = self.gap_keys(node)
         missing = [pair for pair, key in keys.items() if key not in self.gaps]
-        for pair, d in pair_distances(fingers, q[None], r, pairs=missing).items():
+        shapes = {i: self.finger_shapes(node, i, q) for i in sorted({i for pair in missing for i in pair})}
+        for pair, d in shapes_pair_distances(shapes, missing, r).items():
             self.gaps[keys[pair]] = float(d[0])
         gaps = {pair: self.gaps[key] for pair, key in keys.items()}
         closest = min(gaps, key=gaps.get, default=None)
@@ -224,7 +233,17 @@ class _Search:
             return None
         parent = self.gap_keys(node.parent)  # the parent passed: all its gaps are known
         ends = {pair: (self.gaps[parent[pair]], gap) for pair, gap in gaps.items()}
-        return path_refusal(fingers, self.joints(node.parent), q, r, clearance, ends)
+        return path_refusal(fingers, self.joints(node.parent), q, r, clearance, ends, self.capsules)
+
+    def finger_shapes(self, node: _Node, finger: int, q: np.ndarray) -> FingerShapes:
+        """Finger `finger`'s collision shapes at the node's joint angles q (2F,), memoized by depth and
+        its contact (`shapes`: the node's siblings share those of the fingers that do not move)."""
+        key = (node.depth, finger, node.arclengths[finger])
+        if key not in self.shapes:
+            self.shapes[key] = finger_shapes(
+                self.scene.fingers[finger], q[None, 2 * finger : 2 * finger + 2], self.reach.tip_radius
+            )
+        return self.shapes[key]
 
     def gap_keys(self, node: _Node) -> dict[tuple[int, int], tuple]:
         """{(i, j): the key of `gaps`} for each pair of fingers i < j of `node`."""
