@@ -264,8 +264,8 @@ class _Search:
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
-        """(switches it needs to the goal, (push shortfall, heuristic), child) for each candidate child
-        that passes the cheap exact tests."""
+        """(switches it needs to the goal, heuristic, child) for each candidate child that passes the
+        cheap exact tests (push_order adds the push shortfall of its stance)."""
         depth = node.depth + 1
         # fingers whose contact is out of reach at the next pose must move now (same children,
         # fewer tests: with two of them there is no child at all)
@@ -289,7 +289,7 @@ class _Search:
                     moved = list(node.arclengths)
                     moved[i] = s
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left, stances, shortfalls = [], self.config.num_nodes - 2 - node.depth, {}, {}
+        out, steps_left, stances = [], self.config.num_nodes - 2 - node.depth, {}
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
@@ -307,11 +307,20 @@ class _Search:
             if stances[finger]:
                 self.refused[stances[finger]] += 1
                 continue
-            if finger not in shortfalls:
-                shortfalls[finger] = self.push_shortfall(node, depth, finger)
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
-            out.append((switches, (shortfalls[finger], h), _Node(depth, arclengths, finger, node)))
+            out.append((switches, h, _Node(depth, arclengths, finger, node)))
         return out
+
+    def push_order(self, node: _Node, children) -> list[tuple[int, tuple[float, float], _Node]]:
+        """(switches, (push shortfall, heuristic), child) for `node`'s children (neighbors' rows, those
+        the tree takes): SelectNode's order among them. The shortfall is that of the stance holding the
+        object while the child's finger moves; children of one finger share it, so it orders only
+        children of different fingers, and the DFS never compares a child with any node but its
+        siblings at its depth (it takes the deepest node first: none of another parent is open there
+        while one of these is). With one finger among them, it is not computed (0)."""
+        fingers = {child.switching_finger for *_, child in children}
+        shortfalls = {f: self.push_shortfall(node, node.depth + 1, f) if len(fingers) > 1 else 0.0 for f in fingers}
+        return [(switches, (shortfalls[child.switching_finger], h), child) for switches, h, child in children]
 
     def push_shortfall(self, node: _Node, depth: int, finger: int | None) -> float:
         """N by which the stance holding the object while `finger` moves from `node` to the child
@@ -419,14 +428,12 @@ class _Search:
                 continue
             if node.depth == target:
                 return node, None
-            for switches, order, child in self.neighbors(node):
-                state = (child.depth, child.arclengths)
-                if state not in inserted and state not in self.dead:
-                    inserted.add(state)
-                    self.generated += 1
-                    heapq.heappush(
-                        open_set, (-child.depth, (switches if toward_goal else 0, order), next(counter), child)
-                    )
+            states = ((row, (row[2].depth, row[2].arclengths)) for row in self.neighbors(node))
+            children = [row for row, state in states if state not in inserted and state not in self.dead]
+            for switches, order, child in self.push_order(node, children):
+                inserted.add((child.depth, child.arclengths))
+                self.generated += 1
+                heapq.heappush(open_set, (-child.depth, (switches if toward_goal else 0, order), next(counter), child))
         self.dead |= inserted  # the whole tree was searched: none of its states reaches `target`, nor the goal
         return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded - expanded0)
 
