@@ -169,7 +169,8 @@ class StanceChecks:
         self.push_lps = {
             k: PushCapacityLp(k, mu_plan, push_normal_force) for k in (scene.num_fingers - 1, scene.num_fingers)
         }
-        self._push: dict[tuple, float] = {}  # (depth, ((finger, arclength), ...)) -> N
+        self._push: dict[tuple, float] = {}  # (depth, ((finger, arclength), ...), direction) -> N
+        self._push_rows: dict[tuple, tuple] = {}  # (depth, ((finger, arclength), ...)) -> push_rows'
         self.corner_gap = corner_gap
         self.table = angles
         self.boundary: ConvexPolygon = scene.config.shape
@@ -243,14 +244,32 @@ class StanceChecks:
         """N, the hardest push along +-x and +-y in W that the stance holding the object while
         `finger` (None: none, all hold) moves from `node` to the child at `depth` resists at both
         ends of its transition, at its planned contacts (PushCapacityLp at mu_plan)."""
+        return min(self.push_values(node, depth, finger))
+
+    def push_values(self, node, depth: int, finger: int | None):
+        """push_capacity's LP values (N), one per end of the transition and direction of PUSH_DIRECTIONS,
+        each solved as it is iterated (memoized): their least is push_capacity, and a caller that needs
+        only to know that it is below some value may stop early (trajectotree.search.tree's push order)."""
         stance = tuple(range(self.scene.num_fingers)) if finger is None else self.stances[finger]
         held = tuple((j, node.arclengths[j]) for j in stance)
-        return min(self.stance_push_capacity(held, d) for d in (node.depth, depth))
+        for d in (node.depth, depth):
+            for n in range(len(PUSH_DIRECTIONS)):
+                yield self.push_along(held, d, n)
 
-    def stance_push_capacity(self, held: tuple[tuple[int, float], ...], depth: int) -> float:
-        """N, push_capacity of fingers `held` ((finger, arclength), ...) at pose x*_depth; memoized."""
-        key = (depth, held)
+    def push_along(self, held: tuple[tuple[int, float], ...], depth: int, direction: int) -> float:
+        """N, the hardest push along PUSH_DIRECTIONS[direction] that fingers `held` ((finger, arclength), ...)
+        resist at pose x*_depth; memoized."""
+        key = (depth, held, direction)
         if key not in self._push:
+            G, torque, w_hold = self.push_rows(held, depth)
+            self._push[key] = self.push_lps[len(held)].solve(G, torque, w_hold, PUSH_DIRECTIONS[direction])
+        return self._push[key]
+
+    def push_rows(self, held: tuple[tuple[int, float], ...], depth: int) -> tuple:
+        """(G, (A, lower, upper), w_hold): PushCapacityLp's coefficients for fingers `held` at pose x*_depth
+        (its arguments but the direction); memoized."""
+        key = (depth, held)
+        if key not in self._push_rows:
             fingers = [j for j, _ in held]
             R = rotation_2d(self.poses[depth][2])
             p_BC, n_B = self.boundary.points(np.array([s for _, s in held]))
@@ -263,10 +282,8 @@ class StanceChecks:
             tau_max = np.array([self.scene.fingers[j].tau_max for j in fingers])
             A, lower, upper, _ = torque_rows(J_WF, n_W, perp(n_W), self.reach.tip_radius, gravity, tau_max)
             G = grasp_matrix_W(p_BC @ R.T, n_W)
-            w_hold = np.array([0.0, self.weight, 0.0])
-            lp = self.push_lps[len(held)]
-            self._push[key] = min(lp.solve(G, (A, lower, upper), w_hold, u) for u in PUSH_DIRECTIONS)
-        return self._push[key]
+            self._push_rows[key] = (G, (A, lower, upper), np.array([0.0, self.weight, 0.0]))
+        return self._push_rows[key]
 
     # -- holding force ------------------------------------------------------------------------
     def too_heavy(self, node, depth: int, finger: int) -> Refusal | None:

@@ -67,7 +67,6 @@ A plan from the coarse grid's first root is unchanged.
 
 from __future__ import annotations
 
-import heapq
 import itertools
 import math
 import time
@@ -311,23 +310,18 @@ class _Search:
             out.append((switches, h, _Node(depth, arclengths, finger, node)))
         return out
 
-    def push_order(self, node: _Node, children) -> list[tuple[int, tuple[float, float], _Node]]:
-        """(switches, (push shortfall, heuristic), child) for `node`'s children (neighbors' rows, those
-        the tree takes): SelectNode's order among them. The shortfall is that of the stance holding the
-        object while the child's finger moves; children of one finger share it, so it orders only
-        children of different fingers, and the DFS never compares a child with any node but its
-        siblings at its depth (it takes the deepest node first: none of another parent is open there
-        while one of these is). With one finger among them, it is not computed (0)."""
-        fingers = {child.switching_finger for *_, child in children}
-        shortfalls = {f: self.push_shortfall(node, node.depth + 1, f) if len(fingers) > 1 else 0.0 for f in fingers}
-        return [(switches, (shortfalls[child.switching_finger], h), child) for switches, h, child in children]
+    def siblings(self, node: _Node, children, toward_goal: bool) -> _Siblings:
+        """`node`'s children (neighbors' rows, those the tree takes) as the window's open set at their depth,
+        in SelectNode's order: switches needed first when `toward_goal`, then their stance's push shortfall
+        (push_shortfall), then the heuristic, then as generated."""
+        rows = [(switches if toward_goal else 0, h, child) for switches, h, child in children]
+        return _Siblings(rows, lambda finger: self.push_shortfall(node, node.depth + 1, finger))
 
-    def push_shortfall(self, node: _Node, depth: int, finger: int | None) -> float:
+    def push_shortfall(self, node: _Node, depth: int, finger: int | None) -> _Shortfall:
         """N by which the stance holding the object while `finger` moves from `node` to the child
-        at `depth` falls short of resisting search.push_capacity (0 when it does, or when it is 0)."""
-        if not self.config.push_capacity:
-            return 0.0
-        return max(0.0, self.config.push_capacity - self.stance.push_capacity(node, depth, finger))
+        at `depth` falls short of resisting search.push_capacity (0 when it does, or when it is 0),
+        its LPs solved as far as the order needs them."""
+        return _Shortfall(self.config.push_capacity, self.stance.push_values(node, depth, finger))
 
     def stance_refused(self, node: _Node, depth: int, finger: int | None) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
@@ -409,8 +403,7 @@ class _Search:
         least push shortfall, then lowest heuristic), with at most `budget` expansions.
         `toward_goal` (a window short of the goal, which it cannot test): children needing fewer
         contact switches to the goal (switch_bound) come first, then the same order."""
-        counter = itertools.count()
-        open_set = [(-anchor.depth, (0, (0.0, 0.0)), next(counter), anchor)]
+        open_set = [_Siblings([(0, 0.0, anchor)], None)]  # one set of siblings per depth, the deepest last
         inserted = {(anchor.depth, anchor.arclengths)}
         expanded0 = self.expanded
         while open_set:
@@ -418,7 +411,9 @@ class _Search:
                 return None, Refusal(RefusalKind.NODE_BUDGET, count=budget)
             if time.perf_counter() - t0 > self.config.time_budget_s:
                 return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
-            *_, node = heapq.heappop(open_set)  # SelectNode
+            node = open_set[-1].pop()  # SelectNode: the deepest open node
+            if not open_set[-1]:
+                open_set.pop()
             self.expanded += 1
             dead_end = self.infeasibility(node)
             if dead_end:
@@ -430,10 +425,10 @@ class _Search:
                 return node, None
             states = ((row, (row[2].depth, row[2].arclengths)) for row in self.neighbors(node))
             children = [row for row, state in states if state not in inserted and state not in self.dead]
-            for switches, order, child in self.push_order(node, children):
-                inserted.add((child.depth, child.arclengths))
-                self.generated += 1
-                heapq.heappush(open_set, (-child.depth, (switches if toward_goal else 0, order), next(counter), child))
+            if children:
+                inserted.update((child.depth, child.arclengths) for *_, child in children)
+                self.generated += len(children)
+                open_set.append(self.siblings(node, children, toward_goal))
         self.dead |= inserted  # the whole tree was searched: none of its states reaches `target`, nor the goal
         return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded - expanded0)
 
@@ -482,6 +477,68 @@ class _Search:
             initial_grasps_searched=roots,
             initial_grasp_candidates=candidates,
         )
+
+
+class _Shortfall:
+    """A stance's push shortfall (N, _Search.push_shortfall) with its LP values (StanceChecks.push_values)
+    solved one at a time as the order needs them: `lower` bounds it from below, and is it once `exact`."""
+
+    def __init__(self, capacity: float, values):
+        self.capacity, self.values = capacity, values
+        self.least = math.inf  # N, the least of the values solved so far
+        self.exact = not capacity  # no push asked for: 0
+
+    def lower(self) -> float:
+        return max(0.0, self.capacity - self.least)
+
+    def refine(self) -> None:
+        """Solves the next value (exact when none is left)."""
+        value = next(self.values, None)
+        if value is None:
+            self.exact = True
+        else:
+            self.least = min(self.least, value)
+
+
+class _Siblings:
+    """The open children of one node, taken best first in SelectNode's order: (switches, push shortfall,
+    heuristic, as generated), rows (switches, heuristic, child) given in the order generated. The window
+    holds one such set per depth, the deepest last: the DFS takes the deepest open node, so while a node's
+    children are open no other node's are at their depth, and its heap of old ordered every node by this
+    key after its depth alone. Children of one finger share their stance's shortfall (`shortfall(finger)`, a
+    _Shortfall), so it only orders children of different fingers, and is computed only as far as that
+    needs: never with one finger, and of a finger that comes later only until its lower bound sets it behind."""
+
+    def __init__(self, rows, shortfall):
+        self.shortfall, self.shortfalls = shortfall, {}
+        self.groups: dict[int | None, list] = {}  # finger -> its children's (switches, h, n, child), best last
+        for n, (switches, h, child) in enumerate(rows):
+            self.groups.setdefault(child.switching_finger, []).append((switches, h, n, child))
+        for group in self.groups.values():
+            group.sort(key=lambda row: row[:3], reverse=True)
+
+    def __bool__(self) -> bool:
+        return bool(self.groups)
+
+    def pop(self) -> _Node:
+        """The best child, taken out."""
+        heads = {finger: group[-1] for finger, group in self.groups.items()}
+        least = min(head[0] for head in heads.values())
+        tied = [finger for finger, head in heads.items() if head[0] == least]
+        while len(tied) > 1:
+            for finger in tied:
+                if finger not in self.shortfalls:
+                    self.shortfalls[finger] = self.shortfall(finger)
+            best = min(tied, key=lambda f: (self.shortfalls[f].lower(), *heads[f][1:3]))
+            if self.shortfalls[best].exact:  # no other's shortfall can be below its lower bound
+                tied = [best]
+            else:
+                self.shortfalls[best].refine()
+        group = self.groups[tied[0]]
+        *_, child = group.pop()
+        if not group:
+            del self.groups[tied[0]]
+        return child
 
 
 def _refuses_the_move(refusal: Refusal) -> bool:
