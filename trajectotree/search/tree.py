@@ -264,7 +264,7 @@ class _Search:
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
         """(switches it needs to the goal, heuristic, child) for each candidate child that passes the
-        cheap exact tests (push_order adds the push shortfall of its stance)."""
+        cheap exact tests (`siblings` orders them, with the push shortfall of their stances)."""
         depth = node.depth + 1
         # fingers whose contact is out of reach at the next pose must move now (same children,
         # fewer tests: with two of them there is no child at all)
