@@ -57,18 +57,30 @@ def test_push_capacity_of_box_stances_matches_closed_forms():
 
 def test_children_come_in_order_of_their_stances_push_shortfall(scene):
     grasp = (0.54, 0.12, 0.36, 0.48)
-    for target in (0.0, 6.0):
-        search = _Search(scene, -1.0, SearchConfig(initial_arclengths=grasp, friction_safety=1.0, push_capacity=target))
-        search.plan_switch_bounds([{a} for a in grasp])
-        root = _Node(0, grasp, None, None)
-        children = search.neighbors(root)
-        assert {child.switching_finger for *_, child in children} - {None}
-        shortfalls = []
-        for _, (shortfall, _), child in children:
-            resisted = search.stance.push_capacity(root, 1, child.switching_finger)
-            assert shortfall == (max(0.0, target - resisted) if target else 0.0)
-            shortfalls.append(shortfall)
-        assert max(shortfalls) > 0.0 if target else max(shortfalls) == 0.0  # this grasp's stances resist < 6 N
+    # toward goal 1.0 fingers 2 and 3 may switch, or none; toward -1.0 finger 0 alone, whose children's order
+    # the shortfall they all share cannot change
+    for goal, movers in ((1.0, {2, 3, None}), (-1.0, {0})):
+        for target in (0.0, 6.0):
+            config = SearchConfig(initial_arclengths=grasp, friction_safety=1.0, push_capacity=target)
+            search = _Search(scene, goal, config)
+            search.plan_switch_bounds([{a} for a in grasp])
+            root = _Node(0, grasp, None, None)
+            rows = search.neighbors(root)
+            assert {child.switching_finger for *_, child in rows} == movers
+
+            siblings = search.siblings(root, rows, toward_goal=False)
+            popped = [siblings.pop() for _ in rows]
+            assert not siblings
+            # every LP solved (after the pops, which solve them only as far as the order needs), as the
+            # heap of old ordered them
+            resisted = {f: search.stance.push_capacity(root, 1, f) for f in movers}
+            shortfall = {f: max(0.0, target - resisted[f]) if target else 0.0 for f in movers}
+            expected = sorted(rows, key=lambda row: (shortfall[row[2].switching_finger], row[1], rows.index(row)))
+            assert popped == [child for *_, child in expected]
+            if not target:
+                assert set(shortfall.values()) == {0.0}
+            elif len(movers) > 1:  # the stances toward 1.0 resist < 6 N: their shortfall orders the children
+                assert len(set(shortfall.values())) > 1
 
 
 def test_the_push_order_strengthens_the_weakest_stance_of_goal_minus_0_731(scene):

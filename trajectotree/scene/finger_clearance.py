@@ -111,11 +111,21 @@ def pair_distances(fingers, q, tip_radius: float, pairs=None) -> dict[tuple[int,
     kind of shape pair (the search asks at every node it visits)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     pairs = list(itertools.combinations(range(len(fingers)), 2)) if pairs is None else list(pairs)
+    used = sorted({i for pair in pairs for i in pair})  # only the fingers asked about: the shapes cost most
+    shapes = {i: finger_shapes(fingers[i], q[:, 2 * i : 2 * i + 2], tip_radius) for i in used}
+    return shapes_pair_distances(shapes, pairs, tip_radius)
+
+
+def shapes_pair_distances(
+    shapes: dict[int, FingerShapes], pairs, tip_radius: float
+) -> dict[tuple[int, int], np.ndarray]:
+    """pair_distances of fingers whose shapes (at the same K configurations) are given, {finger: FingerShapes}
+    (the search keeps each finger's at each of its contacts: a node's siblings share three of them)."""
+    pairs = list(pairs)
     if not pairs:
         return {}
-    used = sorted({i for pair in pairs for i in pair})  # only the fingers asked about: the shapes cost most
-    shapes = [finger_shapes(fingers[i], q[:, 2 * i : 2 * i + 2], tip_radius) for i in used]
-    index = {finger: n for n, finger in enumerate(used)}
+    used = sorted({i for pair in pairs for i in pair})
+    shapes, index = [shapes[i] for i in used], {finger: n for n, finger in enumerate(used)}
     if len({len(s.links) for s in shapes}) > 1:  # fingers boxed differently: pair by pair
         return {(i, j): shapes_distance(shapes[index[i]], shapes[index[j]]) for i, j in pairs}
     a, b = (np.array([index[i] for i in side]) for side in zip(*pairs))
@@ -134,52 +144,116 @@ def pair_distances(fingers, q, tip_radius: float, pairs=None) -> dict[tuple[int,
 
 def _to_segments(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(...) m, the distance of points p to segments a b (all (..., 2), broadcast)."""
-    e = b - a
-    t = np.clip(np.sum((p - a) * e, axis=-1) / np.sum(e * e, axis=-1), 0.0, 1.0)
-    return np.linalg.norm(p - a - t[..., None] * e, axis=-1)
+    e, rel = b - a, p - a
+    t = np.clip(np.sum(rel * e, axis=-1) / np.sum(e * e, axis=-1), 0.0, 1.0)
+    off = rel - t[..., None] * e
+    return np.hypot(off[..., 0], off[..., 1])
 
 
 def _between_segments(a0, a1, b0, b1) -> np.ndarray:
     """(...) m, the distance between segments a0 a1 and b0 b1 (all (..., 2), broadcast): 0 where
-    they cross, else the least distance of an end of either to the other."""
-
-    def side(p, q, r):  # the sign of r's side of the line p q
-        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
-
-    ends = np.minimum(
-        np.minimum(_to_segments(a0, b0, b1), _to_segments(a1, b0, b1)),
-        np.minimum(_to_segments(b0, a0, a1), _to_segments(b1, a0, a1)),
-    )
-    crossing = (side(a0, a1, b0) * side(a0, a1, b1) < 0) & (side(b0, b1, a0) * side(b0, b1, a1) < 0)
-    return np.where(crossing, 0.0, ends)
+    they cross, else the least distance of an end of either to the other. The four end-to-segment
+    distances and the four sides (of an end, to the other's line) share their differences, all
+    in one stack (the calls' overhead dominates at the search's sizes)."""
+    ends = np.stack(np.broadcast_arrays(a0, a1, b0, b1))  # (4, ..., 2)
+    start = ends[[2, 2, 0, 0]]  # a0 and a1 against segment b, b0 and b1 against segment a
+    e, rel = ends[[3, 3, 1, 1]] - start, ends - start
+    side = e[..., 0] * rel[..., 1] - e[..., 1] * rel[..., 0]  # the sign of each end's side of the other's line
+    t = np.clip(np.sum(rel * e, axis=-1) / np.sum(e * e, axis=-1), 0.0, 1.0)
+    off = rel - t[..., None] * e
+    crossing = (side[0] * side[1] < 0) & (side[2] * side[3] < 0)
+    return np.where(crossing, 0.0, np.hypot(off[..., 0], off[..., 1]).min(axis=0))
 
 
 def pair_lower_bounds(fingers, q, tip_radius: float, pairs) -> dict[tuple[int, int], np.ndarray]:
-    """{(i, j): (K,) m} for each of `pairs` at joint angles q (K, 2F): where not negative, at most
-    pair_distances' (to rounding, 2e-16 m), at about 40 % of its cost (each link box replaced by the
-    capsule that contains it, its long axis between the middles of its ends, radius its half
-    width, as CITO's finger rows do); where negative, some shapes' capsules overlap and only the
-    sign means anything. Fingers boxed differently get pair_distances' own."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    pairs = list(pairs)
-    used = sorted({i for pair in pairs for i in pair})
-    shapes = [finger_shapes(fingers[i], q[:, 2 * i : 2 * i + 2], tip_radius) for i in used]
-    if not pairs or len({len(s.links) for s in shapes}) > 1:
-        return pair_distances(fingers, q, tip_radius, pairs)
-    index = {finger: n for n, finger in enumerate(used)}
-    a, b = (np.array([index[i] for i in side]) for side in zip(*pairs))
-    tips = np.stack([s.tip for s in shapes], axis=1)  # (K, F', 2)
-    d = np.linalg.norm(tips[:, a] - tips[:, b], axis=-1) - 2 * tip_radius  # (K, P)
-    if shapes[0].links:
-        boxes = np.stack([np.stack(s.links, axis=1) for s in shapes], axis=1)  # (K, F', L, 4, 2)
-        start, end = 0.5 * (boxes[..., 0, :] + boxes[..., 1, :]), 0.5 * (boxes[..., 2, :] + boxes[..., 3, :])
-        width = 0.5 * np.linalg.norm(boxes[..., 1, :] - boxes[..., 0, :], axis=-1)  # (K, F', L)
-        for tip, other in ((tips[:, a], b), (tips[:, b], a)):  # each fingertip against the other's links
-            gap = _to_segments(tip[:, :, None], start[:, other], end[:, other]) - width[:, other]
-            d = np.minimum(d, gap.min(axis=-1) - tip_radius)
+    """FingerCapsules(fingers, tip_radius).lower_bounds(q, pairs), the capsules built for this call."""
+    return FingerCapsules.of(fingers, tip_radius).lower_bounds(q, pairs)
+
+
+@dataclass(frozen=True)
+class FingerCapsules:
+    """The fingers' shapes with each link box replaced by the capsule that contains it (its long axis
+    between the middles of its ends, radius its half width, as CITO's finger rows do), as arrays over
+    the fingers: built once (FingerCapsules.of), then `lower_bounds` costs a few dozen array operations
+    for all fingers and samples together (the search tests every move's path with it)."""
+
+    fingers: tuple  # the FingerGeometry of each finger
+    tip_radius: float  # m
+    base: np.ndarray  # (F, 2) m, p_W of joint 1
+    psi: np.ndarray  # (F,) rad
+    l1: np.ndarray  # (F,) m
+    l2: np.ndarray  # (F,) m
+    links: tuple[
+        int, ...
+    ]  # the links with a box (0: link 1 in joint 1's frame, 1: link 2 in joint 2's), alike on every finger
+    axis_J: np.ndarray  # (F, len(links), 2, 2) m, each capsule's axis ends in its joint's frame J
+    width: np.ndarray  # (F, len(links)) m, each capsule's radius
+    uniform: bool  # every finger has a box on the same links (else lower_bounds gives pair_distances')
+
+    @staticmethod
+    def of(fingers, tip_radius: float) -> FingerCapsules:
+        fingers = tuple(fingers)
+        boxed = {tuple(n for n, box in enumerate(f.link_boxes) if box is not None) for f in fingers}
+        links = min(boxed)
+        axis, width = [], []
+        for f in fingers:
+            boxes = [f.link_boxes[n] for n in links] if len(boxed) == 1 else []
+            axis.append([_capsule_axis(box) for box in boxes])
+            width.append([box.half_width for box in boxes])
+        return FingerCapsules(
+            fingers=fingers,
+            tip_radius=float(tip_radius),
+            base=np.array([f.p_W_base for f in fingers], dtype=float),
+            psi=np.array([f.psi for f in fingers], dtype=float),
+            l1=np.array([f.l1 for f in fingers], dtype=float),
+            l2=np.array([f.l2 for f in fingers], dtype=float),
+            links=links if len(boxed) == 1 else (),
+            axis_J=np.array(axis, dtype=float).reshape(len(fingers), -1, 2, 2),
+            width=np.array(width, dtype=float).reshape(len(fingers), -1),
+            uniform=len(boxed) == 1,
+        )
+
+    def lower_bounds(self, q, pairs) -> dict[tuple[int, int], np.ndarray]:
+        """{(i, j): (K,) m} for each of `pairs` at joint angles q (K, 2F): where not negative, at most
+        pair_distances' (to rounding, 2e-16 m), at a fraction of its cost; where negative, some
+        shapes' capsules overlap and only the sign means anything. Fingers boxed differently get
+        pair_distances' own."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        pairs = list(pairs)
+        if not pairs or not self.uniform:
+            return pair_distances(self.fingers, q, self.tip_radius, pairs)
+        a, b = (np.array(side) for side in zip(*pairs))
+        a1 = self.psi + q[:, 0::2]  # (K, F) absolute angles of link 1, then link 2
+        angles = np.stack([a1, a1 + q[:, 1::2]], axis=-1)  # (K, F, 2)
+        c, s = np.cos(angles), np.sin(angles)
+        elbow = self.base + self.l1[:, None] * np.stack([c[..., 0], s[..., 0]], axis=-1)  # (K, F, 2)
+        tips = elbow + self.l2[:, None] * np.stack([c[..., 1], s[..., 1]], axis=-1)
+        gap = tips[:, a] - tips[:, b]
+        d = np.hypot(gap[..., 0], gap[..., 1]) - 2 * self.tip_radius  # (K, P)
+        if not self.links:
+            return {pair: d[:, n] for n, pair in enumerate(pairs)}
+        link = np.array(self.links)
+        origin = np.stack([np.broadcast_to(self.base, elbow.shape), elbow], axis=2)[:, :, link]  # (K, F, L, 2)
+        c, s = c[:, :, link, None], s[:, :, link, None]  # (K, F, L, 1): over the axis' two ends
+        ax, ay = self.axis_J[..., 0], self.axis_J[..., 1]  # (F, L, 2)
+        ends = origin[..., None, :] + np.stack([c * ax - s * ay, s * ax + c * ay], axis=-1)  # (K, F, L, 2, 2)
+        start, end = ends[..., 0, :], ends[..., 1, :]
+        # each fingertip against the other finger's capsules, both ways in one call
+        points = np.concatenate([tips[:, a], tips[:, b]], axis=1)[:, :, None]  # (K, 2P, 1, 2)
+        other = np.concatenate([b, a])
+        gap = _to_segments(points, start[:, other], end[:, other]) - self.width[other]  # (K, 2P, L)
+        tip_gap = gap.min(axis=-1) - self.tip_radius
+        d = np.minimum(d, np.minimum(tip_gap[:, : len(pairs)], tip_gap[:, len(pairs) :]))
         links = _between_segments(start[:, a, :, None], end[:, a, :, None], start[:, b, None], end[:, b, None])
-        d = np.minimum(d, (links - width[:, a, :, None] - width[:, b, None]).min(axis=(-2, -1)))
-    return {pair: d[:, n] for n, pair in enumerate(pairs)}
+        widths = self.width[a][:, :, None] + self.width[b][:, None, :]  # (P, L, L)
+        d = np.minimum(d, (links - widths).min(axis=(-2, -1)))
+        return {pair: d[:, n] for n, pair in enumerate(pairs)}
+
+
+def _capsule_axis(box) -> list[list[float]]:
+    """The ends of a LinkRectangle's capsule axis in its joint's frame: the middles of its two ends."""
+    c, s = np.cos(box.angle_JG), np.sin(box.angle_JG)
+    return [[box.p_JG[0] + c * x, box.p_JG[1] + s * x] for x in (box.half_length, -box.half_length)]
 
 
 def sweep_bound(finger, q_from, q_to, tip_radius: float) -> float:

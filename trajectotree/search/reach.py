@@ -36,10 +36,10 @@ from pydrake.solvers import SnoptSolver
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
 from trajectotree.refusal import Refusal, RefusalKind
 from trajectotree.scene.finger_clearance import (
+    FingerCapsules,
     fingers_clear,
     interpolate_joints,
     pair_distances,
-    pair_lower_bounds,
     sweep_bound,
 )
 from trajectotree.scene.kinematics import first_solution
@@ -114,11 +114,15 @@ def path_samples(fingers, q_from, q_to, tip_radius: float, clearance: float, end
     return near, interpolate_joints(np.stack([q_from, q_to]), steps)[1:-1]
 
 
-def samples_refusal(fingers, samples, tip_radius: float, clearance: float, pairs) -> Refusal | None:
+def samples_refusal(
+    fingers, samples, tip_radius: float, clearance: float, pairs, capsules: FingerCapsules | None = None
+) -> Refusal | None:
     """FINGERS_COLLIDE (count 1: on the path to a node) naming a pair of `pairs` that comes within
     `clearance` m at one of the joint angles `samples` (S, 2F), None when none does: the exact
-    distance only where the capsules' cheaper bound (pair_lower_bounds) does not already clear them."""
-    bounds = pair_lower_bounds(fingers, samples, tip_radius, pairs)
+    distance only where the capsules' cheaper bound (`capsules`, the fingers' FingerCapsules, built
+    here when None) does not already clear them."""
+    capsules = FingerCapsules.of(fingers, tip_radius) if capsules is None else capsules
+    bounds = capsules.lower_bounds(samples, pairs)
     unsure = [pair for pair in pairs if bounds[pair].min() < clearance]
     if not unsure:
         return None
@@ -129,14 +133,16 @@ def samples_refusal(fingers, samples, tip_radius: float, clearance: float, pairs
     return None
 
 
-def path_refusal(fingers, q_from, q_to, tip_radius: float, clearance: float, ends=None) -> Refusal | None:
+def path_refusal(
+    fingers, q_from, q_to, tip_radius: float, clearance: float, ends=None, capsules: FingerCapsules | None = None
+) -> Refusal | None:
     """samples_refusal on the straight joint-space path from q_from to q_to (2F,), both ends clear
     (path_samples); `ends`: the pairs' gaps at both ends when known (the search memoizes them), else
-    computed here."""
+    computed here; `capsules`: the fingers' FingerCapsules when built already (the search's)."""
     if ends is None:
         ends = pair_distances(fingers, np.stack([q_from, q_to]), tip_radius)
     near, samples = path_samples(fingers, q_from, q_to, tip_radius, clearance, ends)
-    return samples_refusal(fingers, samples, tip_radius, clearance, near) if near else None
+    return samples_refusal(fingers, samples, tip_radius, clearance, near, capsules) if near else None
 
 
 class Reachability:

@@ -136,6 +136,17 @@ def weight_support_B(theta: float, weight: float) -> np.ndarray:
     return np.array([np.sin(theta) * weight, np.cos(theta) * weight, 0.0])
 
 
+def landed_depths(node, fingers) -> dict[int, int]:
+    """{finger: the depth of the node where it landed on its contact} for `fingers` of a search node (the
+    last on its path that it switched to, 0 when it never switched)."""
+    out, step = {}, node
+    while step is not None and len(out) < len(fingers):
+        if step.switching_finger in fingers and step.switching_finger not in out:
+            out[step.switching_finger] = step.depth
+        step = step.parent
+    return {j: out.get(j, 0) for j in fingers}
+
+
 class StanceChecks:
     """The rolled-stance and holding-force checks of one search (one object path)."""
 
@@ -158,7 +169,8 @@ class StanceChecks:
         self.push_lps = {
             k: PushCapacityLp(k, mu_plan, push_normal_force) for k in (scene.num_fingers - 1, scene.num_fingers)
         }
-        self._push: dict[tuple, float] = {}  # (depth, ((finger, arclength), ...)) -> N
+        self._push: dict[tuple, float] = {}  # (depth, ((finger, arclength), ...), direction) -> N
+        self._push_rows: dict[tuple, tuple] = {}  # (depth, ((finger, arclength), ...)) -> push_rows'
         self.corner_gap = corner_gap
         self.table = angles
         self.boundary: ConvexPolygon = scene.config.shape
@@ -167,6 +179,8 @@ class StanceChecks:
         self.stances = stance_fingers(scene.num_fingers)  # the holders while finger i switches
         self.lp = HoldingForceLp(scene.num_fingers - 1)
         self._force: dict[tuple, float] = {}  # (depth, stance arclengths) -> N
+        self._rolled: dict[tuple, tuple[list[float], bool]] = {}  # rolled_row's
+        self._rolled_closed: dict[tuple, bool] = {}  # the same rows -> their rolled contacts in closure at mu_plan
 
     # -- rolling contacts ---------------------------------------------------------------------
     def rolled(self, node, depth: int, finger: int | None) -> Refusal | None:
@@ -178,35 +192,38 @@ class StanceChecks:
         (grasp.in_closure_many, the exact test behind required_mu; the LP's 1e-3 N margin is not
         applied here)."""
         stance = tuple(range(self.scene.num_fingers)) if finger is None else self.stances[finger]
-        rolled = [self.rolled_arclengths(node, d, stance) for d in (node.depth, depth)]
-        landed = self.boundary.sides([node.arclengths[j] for j in stance])
-        for row in rolled:
-            if np.any(self.boundary.sides(row) != landed) or not np.all(
-                self.boundary.clear_of_sides_ends(row, self.corner_gap)
-            ):
-                return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance, limit=self.corner_gap)
-        p_BC, n_B = self.boundary.points(np.ravel(rolled))
-        A, B = closure_edges_parts(p_BC.reshape(2, len(stance), 2), n_B.reshape(2, len(stance), 2))
-        if not np.all(in_closure_many(A, B, self.mu_plan)):
+        landed = landed_depths(node, stance)
+        held = tuple((j, node.arclengths[j], landed[j]) for j in stance)
+        rows = [(d, held) for d in (node.depth, depth)]
+        if any(self.rolled_row(row)[1] for row in rows):
+            return Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance, limit=self.corner_gap)
+        missing = [row for row in rows if row not in self._rolled_closed]
+        if missing:  # both rows in one stack when neither is known
+            p_BC, n_B = self.boundary.points(np.ravel([self.rolled_row(row)[0] for row in missing]))
+            A, B = closure_edges_parts(
+                p_BC.reshape(len(missing), len(stance), 2), n_B.reshape(len(missing), len(stance), 2)
+            )
+            self._rolled_closed.update(zip(missing, in_closure_many(A, B, self.mu_plan).tolist()))
+        if not all(self._rolled_closed[row] for row in rows):
             return Refusal(RefusalKind.STANCE_ROLLED_OPEN, stance=stance, mu_plan=self.mu_plan)
         return None
 
-    def rolled_arclengths(self, node, depth: int, fingers) -> list[float]:
-        """The contacts of `fingers` (node's arclengths) at node `depth` >= node.depth, each
-        rolled by r times its second link's turn relative to the object since it landed."""
-        r = self.reach.tip_radius
-        out = []
-        for j in fingers:
-            s, step = node.arclengths[j], node
-            while step is not None and step.switching_finger != j:  # back to where finger j landed
-                step = step.parent
-            landed = 0 if step is None else step.depth
-            out.append(
-                arclength_key(
-                    self.boundary.perimeter, s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s))
-                )
+    def rolled_row(self, row: tuple) -> tuple[list[float], bool]:
+        """(the rolled contacts, whether one leaves its face or comes within corner_gap of a corner that
+        ends it) of a stance `row` = (depth, ((finger, arclength, depth it landed at), ...)), memoized:
+        stances reached by different paths share it (a third of the search's rows)."""
+        if row not in self._rolled:
+            depth, held = row
+            r, perimeter = self.reach.tip_radius, self.boundary.perimeter
+            rolled = [
+                arclength_key(perimeter, s + r * (self.link_turn(depth, j, s) - self.link_turn(landed, j, s)))
+                for j, s, landed in held
+            ]
+            off = np.any(self.boundary.sides(rolled) != self.boundary.sides([s for _, s, _ in held])) or not np.all(
+                self.boundary.clear_of_sides_ends(rolled, self.corner_gap)
             )
-        return out
+            self._rolled[row] = (rolled, bool(off))
+        return self._rolled[row]
 
     def link_turn(self, depth: int, finger: int, s: float) -> float:
         """Angle of `finger`'s second link relative to the object at node `depth` with its
@@ -227,14 +244,32 @@ class StanceChecks:
         """N, the hardest push along +-x and +-y in W that the stance holding the object while
         `finger` (None: none, all hold) moves from `node` to the child at `depth` resists at both
         ends of its transition, at its planned contacts (PushCapacityLp at mu_plan)."""
+        return min(self.push_values(node, depth, finger))
+
+    def push_values(self, node, depth: int, finger: int | None):
+        """push_capacity's LP values (N), one per end of the transition and direction of PUSH_DIRECTIONS,
+        each solved as it is iterated (memoized): their least is push_capacity, and a caller that needs
+        only to know that it is below some value may stop early (trajectotree.search.tree's push order)."""
         stance = tuple(range(self.scene.num_fingers)) if finger is None else self.stances[finger]
         held = tuple((j, node.arclengths[j]) for j in stance)
-        return min(self.stance_push_capacity(held, d) for d in (node.depth, depth))
+        for d in (node.depth, depth):
+            for n in range(len(PUSH_DIRECTIONS)):
+                yield self.push_along(held, d, n)
 
-    def stance_push_capacity(self, held: tuple[tuple[int, float], ...], depth: int) -> float:
-        """N, push_capacity of fingers `held` ((finger, arclength), ...) at pose x*_depth; memoized."""
-        key = (depth, held)
+    def push_along(self, held: tuple[tuple[int, float], ...], depth: int, direction: int) -> float:
+        """N, the hardest push along PUSH_DIRECTIONS[direction] that fingers `held` ((finger, arclength), ...)
+        resist at pose x*_depth; memoized."""
+        key = (depth, held, direction)
         if key not in self._push:
+            G, torque, w_hold = self.push_rows(held, depth)
+            self._push[key] = self.push_lps[len(held)].solve(G, torque, w_hold, PUSH_DIRECTIONS[direction])
+        return self._push[key]
+
+    def push_rows(self, held: tuple[tuple[int, float], ...], depth: int) -> tuple:
+        """(G, (A, lower, upper), w_hold): PushCapacityLp's coefficients for fingers `held` at pose x*_depth
+        (its arguments but the direction); memoized."""
+        key = (depth, held)
+        if key not in self._push_rows:
             fingers = [j for j, _ in held]
             R = rotation_2d(self.poses[depth][2])
             p_BC, n_B = self.boundary.points(np.array([s for _, s in held]))
@@ -247,10 +282,8 @@ class StanceChecks:
             tau_max = np.array([self.scene.fingers[j].tau_max for j in fingers])
             A, lower, upper, _ = torque_rows(J_WF, n_W, perp(n_W), self.reach.tip_radius, gravity, tau_max)
             G = grasp_matrix_W(p_BC @ R.T, n_W)
-            w_hold = np.array([0.0, self.weight, 0.0])
-            lp = self.push_lps[len(held)]
-            self._push[key] = min(lp.solve(G, (A, lower, upper), w_hold, u) for u in PUSH_DIRECTIONS)
-        return self._push[key]
+            self._push_rows[key] = (G, (A, lower, upper), np.array([0.0, self.weight, 0.0]))
+        return self._push_rows[key]
 
     # -- holding force ------------------------------------------------------------------------
     def too_heavy(self, node, depth: int, finger: int) -> Refusal | None:

@@ -67,7 +67,6 @@ A plan from the coarse grid's first root is unchanged.
 
 from __future__ import annotations
 
-import heapq
 import itertools
 import math
 import time
@@ -81,7 +80,13 @@ from trajectotree.contact_plan import ContactNode, ContactPlan, SearchStats, Spa
 from trajectotree.geometry import BOX_FACE_NAMES, box_face_grid, quaternion_angle, quaternion_slerp
 from trajectotree.refusal import AtRoot, NoPlan, Refusal, RefusalKind, SearchRefusal, on_grids
 from trajectotree.results import check_goal
-from trajectotree.scene.finger_clearance import fingers_clear, pair_distances
+from trajectotree.scene.finger_clearance import (
+    FingerCapsules,
+    FingerShapes,
+    finger_shapes,
+    fingers_clear,
+    shapes_pair_distances,
+)
 from trajectotree.scene.plant import Scene
 from trajectotree.scene.spatial import START_POSE
 from trajectotree.scene.statics import edge_wrenches_W
@@ -128,6 +133,7 @@ class _Search:
         self.mu_plan = mu_plan(scene.config, config)
         self.closure = FormClosure(self.boundary, self.mu_plan, config.min_closure_margin)
         self.reach = Reachability(scene)
+        self.capsules = FingerCapsules.of(scene.fingers, self.reach.tip_radius)  # the path tests' bounds
         self.bound = SwitchBound(scene, self.reach, self.poses, config)
         self.stance = StanceChecks(
             scene,
@@ -144,6 +150,7 @@ class _Search:
         self.expanded = self.generated = self.backups = 0
         self.overlaps: dict[tuple[float, float], bool] = {}  # (s, t) -> tips_overlap's pair test
         self.gaps: dict[tuple, float] = {}  # (depth, i, s_i, j, s_j) -> m, two fingers' distance at a node
+        self.shapes: dict[tuple, FingerShapes] = {}  # (depth, i, s_i) -> finger i's shapes at a node
         # [finger][depth][arclength] -> q2 (reachable only) / fewest switches to the end; s + D_cp
         self.joint2, self.min_switches, self.moves = self.bound.joint2, self.bound.min_switches, self.bound.moves
 
@@ -214,7 +221,8 @@ class _Search:
         fingers, r, clearance = self.scene.fingers, self.reach.tip_radius, self.config.finger_clearance
         keys = self.gap_keys(node)
         missing = [pair for pair, key in keys.items() if key not in self.gaps]
-        for pair, d in pair_distances(fingers, q[None], r, pairs=missing).items():
+        shapes = {i: self.finger_shapes(node, i, q) for i in sorted({i for pair in missing for i in pair})}
+        for pair, d in shapes_pair_distances(shapes, missing, r).items():
             self.gaps[keys[pair]] = float(d[0])
         gaps = {pair: self.gaps[key] for pair, key in keys.items()}
         closest = min(gaps, key=gaps.get, default=None)
@@ -224,7 +232,17 @@ class _Search:
             return None
         parent = self.gap_keys(node.parent)  # the parent passed: all its gaps are known
         ends = {pair: (self.gaps[parent[pair]], gap) for pair, gap in gaps.items()}
-        return path_refusal(fingers, self.joints(node.parent), q, r, clearance, ends)
+        return path_refusal(fingers, self.joints(node.parent), q, r, clearance, ends, self.capsules)
+
+    def finger_shapes(self, node: _Node, finger: int, q: np.ndarray) -> FingerShapes:
+        """Finger `finger`'s collision shapes at the node's joint angles q (2F,), memoized by depth and
+        its contact (`shapes`: the node's siblings share those of the fingers that do not move)."""
+        key = (node.depth, finger, node.arclengths[finger])
+        if key not in self.shapes:
+            self.shapes[key] = finger_shapes(
+                self.scene.fingers[finger], q[None, 2 * finger : 2 * finger + 2], self.reach.tip_radius
+            )
+        return self.shapes[key]
 
     def gap_keys(self, node: _Node) -> dict[tuple[int, int], tuple]:
         """{(i, j): the key of `gaps`} for each pair of fingers i < j of `node`."""
@@ -245,8 +263,8 @@ class _Search:
 
     # -- GetNeighbors ---------------------------------------------------------------------
     def neighbors(self, node: _Node):
-        """(switches it needs to the goal, (push shortfall, heuristic), child) for each candidate child
-        that passes the cheap exact tests."""
+        """(switches it needs to the goal, heuristic, child) for each candidate child that passes the
+        cheap exact tests (`siblings` orders them, with the push shortfall of their stances)."""
         depth = node.depth + 1
         # fingers whose contact is out of reach at the next pose must move now (same children,
         # fewer tests: with two of them there is no child at all)
@@ -270,7 +288,7 @@ class _Search:
                     moved = list(node.arclengths)
                     moved[i] = s
                     candidates.setdefault(tuple(moved), i)
-        out, steps_left, stances, shortfalls = [], self.config.num_nodes - 2 - node.depth, {}, {}
+        out, steps_left, stances = [], self.config.num_nodes - 2 - node.depth, {}
         for arclengths, finger in candidates.items():
             q2 = [self.joint2[i][depth].get(s) for i, s in enumerate(arclengths)]
             if None in q2:  # the moved finger's new contact is out of reach (closed form) or at a corner
@@ -288,18 +306,22 @@ class _Search:
             if stances[finger]:
                 self.refused[stances[finger]] += 1
                 continue
-            if finger not in shortfalls:
-                shortfalls[finger] = self.push_shortfall(node, depth, finger)
             h = sum(abs(v - self.config.nominal_joint2) for v in q2)  # the paper's heuristic
-            out.append((switches, (shortfalls[finger], h), _Node(depth, arclengths, finger, node)))
+            out.append((switches, h, _Node(depth, arclengths, finger, node)))
         return out
 
-    def push_shortfall(self, node: _Node, depth: int, finger: int | None) -> float:
+    def siblings(self, node: _Node, children, toward_goal: bool) -> _Siblings:
+        """`node`'s children (neighbors' rows, those the tree takes) as the window's open set at their depth,
+        in SelectNode's order: switches needed first when `toward_goal`, then their stance's push shortfall
+        (push_shortfall), then the heuristic, then as generated."""
+        rows = [(switches if toward_goal else 0, h, child) for switches, h, child in children]
+        return _Siblings(rows, lambda finger: self.push_shortfall(node, node.depth + 1, finger))
+
+    def push_shortfall(self, node: _Node, depth: int, finger: int | None) -> _Shortfall:
         """N by which the stance holding the object while `finger` moves from `node` to the child
-        at `depth` falls short of resisting search.push_capacity (0 when it does, or when it is 0)."""
-        if not self.config.push_capacity:
-            return 0.0
-        return max(0.0, self.config.push_capacity - self.stance.push_capacity(node, depth, finger))
+        at `depth` falls short of resisting search.push_capacity (0 when it does, or when it is 0),
+        its LPs solved as far as the order needs them."""
+        return _Shortfall(self.config.push_capacity, self.stance.push_values(node, depth, finger))
 
     def stance_refused(self, node: _Node, depth: int, finger: int | None) -> Refusal | None:
         """Why the stance holding the object while `finger` moves from `node` to the child at
@@ -381,8 +403,7 @@ class _Search:
         least push shortfall, then lowest heuristic), with at most `budget` expansions.
         `toward_goal` (a window short of the goal, which it cannot test): children needing fewer
         contact switches to the goal (switch_bound) come first, then the same order."""
-        counter = itertools.count()
-        open_set = [(-anchor.depth, (0, (0.0, 0.0)), next(counter), anchor)]
+        open_set = [_Siblings([(0, 0.0, anchor)], None)]  # one set of siblings per depth, the deepest last
         inserted = {(anchor.depth, anchor.arclengths)}
         expanded0 = self.expanded
         while open_set:
@@ -390,7 +411,9 @@ class _Search:
                 return None, Refusal(RefusalKind.NODE_BUDGET, count=budget)
             if time.perf_counter() - t0 > self.config.time_budget_s:
                 return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
-            *_, node = heapq.heappop(open_set)  # SelectNode
+            node = open_set[-1].pop()  # SelectNode: the deepest open node
+            if not open_set[-1]:
+                open_set.pop()
             self.expanded += 1
             dead_end = self.infeasibility(node)
             if dead_end:
@@ -400,14 +423,12 @@ class _Search:
                 continue
             if node.depth == target:
                 return node, None
-            for switches, order, child in self.neighbors(node):
-                state = (child.depth, child.arclengths)
-                if state not in inserted and state not in self.dead:
-                    inserted.add(state)
-                    self.generated += 1
-                    heapq.heappush(
-                        open_set, (-child.depth, (switches if toward_goal else 0, order), next(counter), child)
-                    )
+            states = ((row, (row[2].depth, row[2].arclengths)) for row in self.neighbors(node))
+            children = [row for row, state in states if state not in inserted and state not in self.dead]
+            if children:
+                inserted.update((child.depth, child.arclengths) for *_, child in children)
+                self.generated += len(children)
+                open_set.append(self.siblings(node, children, toward_goal))
         self.dead |= inserted  # the whole tree was searched: none of its states reaches `target`, nor the goal
         return None, Refusal(RefusalKind.TREE_EXHAUSTED, count=self.expanded - expanded0)
 
@@ -456,6 +477,68 @@ class _Search:
             initial_grasps_searched=roots,
             initial_grasp_candidates=candidates,
         )
+
+
+class _Shortfall:
+    """A stance's push shortfall (N, _Search.push_shortfall) with its LP values (StanceChecks.push_values)
+    solved one at a time as the order needs them: `lower` bounds it from below, and is it once `exact`."""
+
+    def __init__(self, capacity: float, values):
+        self.capacity, self.values = capacity, values
+        self.least = math.inf  # N, the least of the values solved so far
+        self.exact = not capacity  # no push asked for: 0
+
+    def lower(self) -> float:
+        return max(0.0, self.capacity - self.least)
+
+    def refine(self) -> None:
+        """Solves the next value (exact when none is left)."""
+        value = next(self.values, None)
+        if value is None:
+            self.exact = True
+        else:
+            self.least = min(self.least, value)
+
+
+class _Siblings:
+    """The open children of one node, taken best first in SelectNode's order: (switches, push shortfall,
+    heuristic, as generated), rows (switches, heuristic, child) given in the order generated. The window
+    holds one such set per depth, the deepest last: the DFS takes the deepest open node, so while a node's
+    children are open no other node's are at their depth, and its heap of old ordered every node by this
+    key after its depth alone. Children of one finger share their stance's shortfall (`shortfall(finger)`, a
+    _Shortfall), so it only orders children of different fingers, and is computed only as far as that
+    needs: never with one finger, and of a finger that comes later only until its lower bound sets it behind."""
+
+    def __init__(self, rows, shortfall):
+        self.shortfall, self.shortfalls = shortfall, {}
+        self.groups: dict[int | None, list] = {}  # finger -> its children's (switches, h, n, child), best last
+        for n, (switches, h, child) in enumerate(rows):
+            self.groups.setdefault(child.switching_finger, []).append((switches, h, n, child))
+        for group in self.groups.values():
+            group.sort(key=lambda row: row[:3], reverse=True)
+
+    def __bool__(self) -> bool:
+        return bool(self.groups)
+
+    def pop(self) -> _Node:
+        """The best child, taken out."""
+        heads = {finger: group[-1] for finger, group in self.groups.items()}
+        least = min(head[0] for head in heads.values())
+        tied = [finger for finger, head in heads.items() if head[0] == least]
+        while len(tied) > 1:
+            for finger in tied:
+                if finger not in self.shortfalls:
+                    self.shortfalls[finger] = self.shortfall(finger)
+            best = min(tied, key=lambda f: (self.shortfalls[f].lower(), *heads[f][1:3]))
+            if self.shortfalls[best].exact:  # no other's shortfall can be below its lower bound
+                tied = [best]
+            else:
+                self.shortfalls[best].refine()
+        group = self.groups[tied[0]]
+        *_, child = group.pop()
+        if not group:
+            del self.groups[tied[0]]
+        return child
 
 
 def _refuses_the_move(refusal: Refusal) -> bool:
