@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cli.common import check_output_dir, print_json
-from trajectotree.cli.simulate_cmd import chosen_executor, closed_loop_line, execution_config, world_conditions
+from trajectotree.cli.execution_options import chosen_executor, closed_loop_line, execution_config, world_conditions
 from trajectotree.config import ConfigError, config_from_dict
 from trajectotree.execution.space_plan import (
     check_arrays_fit_scene,
@@ -139,7 +139,7 @@ def simulate_space_into(args) -> int:
 
 def space_world(args, config, plan_duration_s: float):
     """The simulated world of --sim-mu, --sim-mass and --push FX,FY,FZ@T (execution.world's Conditions), checked as
-    the plane's (simulate_cmd.world_conditions) before anything is written."""
+    the plane's (execution_options.world_conditions) before anything is written."""
     from trajectotree.execution.world import Conditions
 
     world = world_conditions(args, config, plan_duration_s, components=3)
