@@ -107,15 +107,17 @@ def copy_plans(sweep: Path, dst: Path, tree: Path, goals: int | None, indices: l
     return dst / "trials"
 
 
+# `python -c` puts the working directory first on sys.path, ahead of PYTHONPATH: run from a checkout, both
+# "trees" imported that checkout's package. -P leaves it out, so each tree runs its own.
 def run_in(tree: Path, code: str, *args: str) -> None:
-    subprocess.run([sys.executable, "-c", code, *args], env=dict(os.environ, PYTHONPATH=str(tree)), check=True)
+    subprocess.run([sys.executable, "-P", "-c", code, *args], env=dict(os.environ, PYTHONPATH=str(tree)), check=True)
 
 
 def run_stage(trees: dict[str, tuple[Path, Path]], executor: str, condition: str) -> None:
     """The stage in every tree at once (a process each), until each has run all its trials."""
     procs = [
         subprocess.Popen(
-            [sys.executable, "-c", EXECUTE, str(trials), executor, condition],
+            [sys.executable, "-P", "-c", EXECUTE, str(trials), executor, condition],
             env=dict(os.environ, PYTHONPATH=str(tree)),
             stdout=subprocess.DEVNULL,
         )
