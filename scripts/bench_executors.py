@@ -3,6 +3,7 @@ and replanning latency per (executor, condition), both trees in the same run.
 
     python scripts/bench_executors.py SWEEP --out DIR --compare TREE \\
         [--stages grasp:nominal grasp-closed-loop:friction-0.4 grasp-replan:friction-0.4 ...] [--goals N]
+        [--trials I [I ...]]
 
 SWEEP is a sweep folder whose trials hold plans (`trajectotree sweep --methods trajectotree --out SWEEP`). Each
 tree gets its own copy of the plans under DIR/this and DIR/other (a tree from before the controller's settings were
@@ -90,9 +91,12 @@ for trial in sorted(p for p in trials.iterdir() if (p / "plan.npz").exists()):
 """
 
 
-def copy_plans(sweep: Path, dst: Path, tree: Path, goals: int | None) -> Path:
-    """dst/trials/<trial>/plan.{json,npz} for `tree` (plan.json rewritten by CONVERT in that tree); dst/trials."""
+def copy_plans(sweep: Path, dst: Path, tree: Path, goals: int | None, indices: list[int] | None = None) -> Path:
+    """dst/trials/<trial>/plan.{json,npz} for `tree` (plan.json rewritten by CONVERT in that tree), of the first
+    `goals` trials (None: all) or those numbered `indices` (the trial folders' leading number); dst/trials."""
     trials = sorted(p for p in (sweep / "trials").iterdir() if (p / "plan.npz").exists())[:goals]
+    if indices is not None:
+        trials = [p for p in trials if int(p.name[:4]) in indices]
     for trial in trials:
         out = dst / "trials" / trial.name
         if (out / "plan.json").exists():
@@ -103,15 +107,17 @@ def copy_plans(sweep: Path, dst: Path, tree: Path, goals: int | None) -> Path:
     return dst / "trials"
 
 
+# `python -c` puts the working directory first on sys.path, ahead of PYTHONPATH: run from a checkout, both
+# "trees" imported that checkout's package. -P leaves it out, so each tree runs its own.
 def run_in(tree: Path, code: str, *args: str) -> None:
-    subprocess.run([sys.executable, "-c", code, *args], env=dict(os.environ, PYTHONPATH=str(tree)), check=True)
+    subprocess.run([sys.executable, "-P", "-c", code, *args], env=dict(os.environ, PYTHONPATH=str(tree)), check=True)
 
 
 def run_stage(trees: dict[str, tuple[Path, Path]], executor: str, condition: str) -> None:
     """The stage in every tree at once (a process each), until each has run all its trials."""
     procs = [
         subprocess.Popen(
-            [sys.executable, "-c", EXECUTE, str(trials), executor, condition],
+            [sys.executable, "-P", "-c", EXECUTE, str(trials), executor, condition],
             env=dict(os.environ, PYTHONPATH=str(tree)),
             stdout=subprocess.DEVNULL,
         )
@@ -180,12 +186,13 @@ def main() -> None:
     parser.add_argument("--compare", type=Path, required=True, metavar="TREE", help="the other tree (a checkout)")
     parser.add_argument("--stages", nargs="+", default=DEFAULT_STAGES, metavar="EXECUTOR:CONDITION")
     parser.add_argument("--goals", type=int, default=None, help="the first N trials only")
+    parser.add_argument("--trials", type=int, nargs="+", default=None, metavar="I", help="these trials only (0-59)")
     args = parser.parse_args()
     trees = {
-        "this": (HERE, copy_plans(args.sweep, args.out / "this", HERE, args.goals)),
+        "this": (HERE, copy_plans(args.sweep, args.out / "this", HERE, args.goals, args.trials)),
         "other": (
             args.compare.resolve(),
-            copy_plans(args.sweep, args.out / "other", args.compare.resolve(), args.goals),
+            copy_plans(args.sweep, args.out / "other", args.compare.resolve(), args.goals, args.trials),
         ),
     }
     print(f"this: {HERE}; other: {trees['other'][0]}; load average {os.getloadavg()[0]:.2f}", flush=True)

@@ -298,18 +298,24 @@ class ReplanOutcome(enum.Enum):
         "the new plan's first segment was not solved within its deadline (controller.replan.first_segment_deadline_s): "
         "the old plan goes on"
     )
+    LATE = (
+        "the new plan, from the next node, was ready only after the hand would have reached that node: the old "
+        "plan goes on"
+    )
 
 
 @dataclass(frozen=True)
 class ReplanEvent:
     """One replan: when the state was measured, why, what the planner was told and what it gave."""
 
-    time_s: float  # s, simulated time of the measured state (a node of the executed plan)
+    time_s: float  # s, simulated time the replan was decided and the state measured (a node of the executed plan)
     reason: ReplanReason
     mu: float  # the friction coefficient the new plan assumes (the estimate)
     mass: float  # kg, the mass it assumes (the estimate)
-    latency_s: float  # s, wall-clock time from the measured state to the new plan's first segment (or the refusal)
-    takes_effect_s: float  # s, simulated time the new plan starts, or the old one resumes (time_s + latency_s)
+    latency_s: float  # s, wall-clock time from the replan's start to the new plan's first segment (or the refusal)
+    # s, simulated time the new plan starts, or the old one resumes: from the measured state time_s + latency_s (the
+    # hand held), from the next node that node's time (time_s for a refusal: the hand never stopped)
+    takes_effect_s: float
     outcome: ReplanOutcome
     status: str  # what a person reads: the planner's status, or why the start or the search was refused
     # why: the search's refusal (trajectotree.refusal; SEARCH_DEADLINE, NO_PLAN) or the start's
@@ -320,6 +326,9 @@ class ReplanEvent:
     segment_ready_s: tuple[float, ...] = ()
     compute_s: float = float("nan")  # s, wall-clock time of the whole replan (every segment of a new plan)
     search_s: float = float("nan")  # s, of latency_s, the contact search's (nan: none ran)
+    # s, simulated time of the state the new plan starts from: the next node's (its planned state) or time_s (the
+    # measured state); nan: not recorded
+    start_s: float = float("nan")
 
     @property
     def planned(self) -> bool:
@@ -341,6 +350,7 @@ class ReplanEvent:
             "segment_ready_s": [t if math.isfinite(t) else None for t in self.segment_ready_s],
             "compute_s": self.compute_s if math.isfinite(self.compute_s) else None,
             "search_s": self.search_s if math.isfinite(self.search_s) else None,
+            "start_s": self.start_s if math.isfinite(self.start_s) else None,
         }
 
 

@@ -393,7 +393,8 @@ def test_polygon_playback_draws_the_polygon(pages, triangle_html):
 @pytest.fixture(scope="module")
 def replanned_run(tmp_path_factory):
     """A two-segment plan (0.3 rad) executed with replanning in a world of friction 0.3, with a tracking
-    threshold that makes it replan at its node (1.2 s): its playback.html, GIF and result."""
+    threshold that makes it replan at its node (1.2 s), from the measured state (the next node is the goal):
+    its playback.html, GIF and result."""
     from trajectotree.config import with_values
     from trajectotree.execution.run import run_simulation
     from trajectotree.planning.planners import plan
@@ -401,7 +402,8 @@ def replanned_run(tmp_path_factory):
     result = plan(goal=0.3, config=with_values(Config(), {"search.num_nodes": 3}))
     assert result.success, result.status
     tight = {"controller.replan.theta_error": 1e-4, "controller.replan.position_error": 1e-5}
-    config = with_values(result.config, tight | {"controller.replan.max_replans": 1})
+    once = {"controller.replan.max_replans": 1, "controller.replan.measured_start_on_error": True}
+    config = with_values(result.config, tight | once)
     folder = tmp_path_factory.mktemp("playback")
     path, gif = folder / "playback.html", folder / "replan.gif"
     run = run_simulation(plan=result, config=config, executor="grasp-replan", sim_mu=0.3, html_path=path, gif_path=gif)

@@ -50,13 +50,15 @@ def test_grasp_replan_needs_the_plan_result_whose_goal_it_keeps():
 @pytest.fixture(scope="module")
 def short_plan():
     """A two-segment plan (0.3 rad, 2.4 s), executed with a tracking threshold every run exceeds at its node
-    (a replan at 1.2 s) and at most one replan."""
+    (a replan at 1.2 s), planned from the measured state with the hand holding (the next node is the goal:
+    tests/execution/test_replan_ahead.py plans from it) and at most one replan."""
     result = tt.plan(goal=0.3, config=with_values(Config(), {"search.num_nodes": 3}))
     assert result.success, result.status
     tight = {
         "controller.replan.theta_error": 1e-4,
         "controller.replan.position_error": 1e-5,
         "controller.replan.max_replans": 1,
+        "controller.replan.measured_start_on_error": True,
     }
     return result, with_values(result.config, tight)
 
@@ -117,7 +119,10 @@ def test_simulate_replans_and_writes_its_playback_and_run(tmp_path, short_plan, 
 
     plan, _ = short_plan
     save_plan(plan, tmp_path / "plan")
-    tight = "controller: {replan: {theta_error: 0.0001, position_error: 0.00001, max_replans: 1}}"
+    tight = (
+        "controller: {replan: {theta_error: 0.0001, position_error: 0.00001, max_replans: 1, "
+        "measured_start_on_error: true}}"
+    )
     html = tmp_path / "run.html"
     options = ["--executor", "grasp-replan", "--sim-mu", "0.3", "--config-text", tight, "--html", str(html)]
     assert main(["simulate", str(tmp_path / "plan"), *options, "--json"]) == 0

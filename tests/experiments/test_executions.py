@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.config import Config, ConfigError, config_to_dict
+from trajectotree.config import Config, ConfigError, config_to_dict, with_values
 from trajectotree.config.executor import Executor
 from trajectotree.experiments.conditions import CONDITIONS, ConditionSpec, check_condition, middle_of_middle_segment
 from trajectotree.experiments.execution_report import (
@@ -253,21 +253,27 @@ def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_ru
 @pytest.mark.slow
 def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path):
     """The same plans at friction 0.4 open loop and replanning: executions.md lists both per condition,
-    with the replans, and sim.json records each replan's typed outcome."""
+    with the replans, and sim.json records each replan's typed outcome. These plans have two segments: a
+    replan at node 1 has no next node to plan from but the goal, so it plans from the measured state, for a
+    tracking error past a threshold every run exceeds."""
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     # The cito-warm plans only, replanned by TrajectoTree (the command would execute every method's)
     run = functools.partial(run_executions, out, conditions=["friction-0.4"], methods=["cito-warm"], progress=False)
-    assert run(executors=[Executor.GRASP], workers=2) == 2 and run(executors=[Executor.GRASP_REPLAN], workers=2) == 2
+    tight = {"replan.theta_error": 1e-4, "replan.position_error": 1e-5, "replan.measured_start_on_error": True}
+    gains = with_values(Config().controller, tight)
+    assert run(executors=[Executor.GRASP], workers=2) == 2
+    assert run(executors=[Executor.GRASP_REPLAN], workers=2, gains=gains) == 2
     trials = [out / "trials" / f"{i:04d}_cito-warm" for i in (0, 1)]
     runs = [execution_dir(trial, Executor.GRASP_REPLAN, "friction-0.4") for trial in trials]
     replanned = [json.loads((folder / "sim.json").read_text()) for folder in runs]
     assert all(run["closed_loop"] is not None and run["conditions"]["sim_mu"] == 0.4 for run in replanned)
     events = [event for run in replanned for event in run["replans"]]
-    assert events  # at friction 0.4 a plan made for 0.7 no longer holds somewhere
+    assert events and all(event["reason"] == "tracking" for event in events)
     for event in events:
         assert event["outcome"] in ("planned", "partial", "start_refused", "search_deadline", "no_plan")
         assert event["latency_s"] > 0 and event["takes_effect_s"] == pytest.approx(event["time_s"] + event["latency_s"])
+        assert event["start_s"] == event["time_s"]  # the measured state's
     report = tmp_path / "report"
     assert main(["report", str(out), "--out", str(report)]) == 0
     table, _, refused = (report / "executions.md").read_text().partition("## Replans without a plan")

@@ -182,14 +182,15 @@ def test_planar_hand5_replans_at_friction_0_4_and_plans_from_a_state_of_its_run(
     run = tmp_path / "h5"
     assert main(["plan", "--hand", "planar_hand5", "--goal", "2", "--out", str(run)]) == 0
     capsys.readouterr()
-    # Deadlines no busy machine meets too late (as tests/execution/test_replan.py's): at the default 0.5 s search
-    # and 1 s first segment every replan ended first_segment_late under load; this test is about a replan that plans.
+    # Deadlines no busy machine meets too late (as tests/execution/test_replan.py's) for a replan from the measured
+    # state: at the default 0.5 s search and 1 s first segment every such replan ended first_segment_late under
+    # load. A friction replan plans from the next node, within the 1.2 s to it, which no setting lengthens.
     deadlines = "{controller: {replan: {search_deadline_s: 30, first_segment_deadline_s: 300}}}"
     assert main(["simulate", str(run), "--replan", "--sim-mu", "0.4", "--config-text", deadlines, "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert json.loads((run / "sim.json").read_text()) == summary
     assert not summary["dropped"], summary["replans"]
-    # the friction estimate falls below the plan's 0.7: the closed loop plans again from a measured 10-joint state
+    # the friction estimate falls below the plan's 0.7: the closed loop plans again from a 10-joint node state
     assert [r["outcome"] for r in summary["replans"]].count("planned") >= 1, summary["replans"]
     start = tmp_path / "start.json"
     assert main(["state", str(run), "--time", "2.4", "--out", str(start)]) == 0  # node 2 of 1.2 s segments

@@ -171,8 +171,9 @@ class LandingReflexGains:
 
 @dataclass(frozen=True)
 class ReplanConfig:
-    """When the closed loop plans again from the measured state (simulate --replan); checked at
-    the plan's nodes, where every finger holds the object at rest."""
+    """When the closed loop plans again (simulate --replan), and from where: checked at the plan's nodes,
+    where every finger holds the object at rest; the new plan starts at the next node's planned state,
+    or at the measured state with the hand holding (trajectotree.execution.replan)."""
 
     # tracking error in orientation past which the plan no longer holds (~3 deg)
     theta_error: float = ranged(0.05, "rad", 0.0, math.pi, low_open=True)
@@ -183,11 +184,18 @@ class ReplanConfig:
     mass_change: float = ranged(0.2, "1", 0.0, 10.0, low_open=True)
     # per run, so a task the hand cannot do ends rather than replans forever
     max_replans: int = ranged(4, "replans", 0, 100, integer=True)
-    # wall-clock budget of a replan's contact search (its search.time_budget_s): the hand holds while it runs, and a
-    # search without a plan by then is refused (the old plan goes on)
+    # A replan from the next node (the hand going on along its plan meanwhile) must be ready by the time the hand
+    # reaches that node: its search gets that time less this, kept for the first segment's IPOPT (0.28 s median,
+    # 0.56 s p95 on the 60 paper goals, 2 loaded cores), and the first segment that time.
+    first_segment_reserve_s: float = ranged(0.5, "s", 0.0, 60.0, low_open=True)
+    # a tracking error or a lost contact (the plan's next node may be wrong) plans from the measured state, the hand
+    # holding while the planner runs, rather than from the next node as a changed estimate does
+    measured_start_on_error: bool = flag(False)
+    # A replan from the measured state (the hand holding while the planner runs): wall-clock budget of its contact
+    # search (its search.time_budget_s); a search without a plan by then is refused (the old plan goes on).
     search_deadline_s: float = ranged(0.5, "s", 0.0, 60.0, low_open=True)
-    # the new plan's first segment must be solved (all its attempts) this long after the state was measured, the
-    # search included, or it is refused too: the hand holds no longer than about this, less than a segment lasts
+    # and its first segment must be solved (all its attempts) this long after the state was measured, the search
+    # included, or it is refused too: the hand holds no longer than about this, less than a segment lasts
     # (cito.knots_per_segment x cito.dt, 1.2 s)
     first_segment_deadline_s: float = ranged(1.0, "s", 0.0, 600.0, low_open=True)
 

@@ -1,34 +1,45 @@
 """Replanning during execution (executor grasp-replan): the `Replanner`, a system of the execution
-Diagram, plans again from the measured state when what the closed loop measures says the plan no longer
-holds, and swaps the new plan in; one Diagram and one Simulator run the whole execution.
+Diagram, plans again when what the closed loop measures says the plan no longer holds, and swaps the new
+plan in; one Diagram and one Simulator run the whole execution.
 
 The Replanner keeps the plan in effect in abstract state (a `Replanning`: the PlanInEffect, the nodes
-still to check, the friction and mass the plan assumes, the replans so far) and puts the PlanInEffect
-on its output port `plan`, which feeds the `plan` input of every system that follows the plan (the grasp
-controller, the landing reflex, the contact monitor and the friction estimator: execution.in_effect), so
-that a swap reaches them all at once. Its periodic unrestricted update (at controller.rate_hz) looks,
-at the first update at or after each node of the plan in effect (where every finger holds the object
-at rest, the moment a plan may start from), at the closed loop's estimates and monitor through its
+still to check, the friction and mass the plan assumes, the replans so far, a swap decided but not yet
+made) and puts the PlanInEffect on its output port `plan`, which feeds the `plan` input of every system
+that follows the plan (the grasp controller, the landing reflex, the contact monitor and the friction
+estimator: execution.in_effect), so that a swap reaches them all at once. Its periodic unrestricted
+update (at controller.rate_hz) looks, at the first update at or after each node of the plan in effect
+(where every finger holds the object at rest), at the closed loop's estimates and monitor through its
 input ports: when the friction estimate has fallen `friction_drop` below the plan's, the mass estimate
 is `mass_change` off the plan's, the object is `theta_error` or `position_error` off its planned pose,
-or a finger the plan holds with is out of contact, the planner runs from the measured state
-(trajectotree.planning.start) to the same goal, with the estimated friction and mass.
+or a finger the plan holds with is out of contact, the planner runs (trajectotree.planning.start) to
+the same goal, with the estimated friction and mass, from one of two starts:
+
+- The next node (the default): the hand goes on along its plan while the planner runs, and the new
+  plan starts from the plan in effect's next node, its planned state (every finger on the object, at
+  rest). The search gets the time to that node less controller.replan.first_segment_reserve_s, the
+  first segment the time to that node; a plan ready in time is swapped in at that node (the update at
+  or after it), and one that is not (ReplanOutcome.LATE) or no plan at all leaves the old plan going on,
+  which cost the hand nothing. A node followed only by the goal has nothing to plan from: no replan.
+- The measured state, the hand holding at the node while the planner runs (a plan that ended short of
+  its goal, and with controller.replan.measured_start_on_error a tracking error or a lost contact, for
+  which the next node may be wrong): the search gets search_deadline_s, the first segment must be ready
+  first_segment_deadline_s after the state was measured, and a refusal lets the old plan resume after
+  the same hold.
 
 Honest timing: the planner runs inside the update, so the simulated world stands still while it
-computes, and its wall-clock compute time is measured; the plan swapped in at the update's time
-t_switch holds the measured state (with the old plan's forces at the node) until t_switch + that time
-in simulated time, as the hand would hold while a real planner ran. The planner solves the new plan's
-first segment before the others (keyframes.solve_first_segment_first) and the new plan takes effect
-once that segment's measured compute time has passed; each later segment begins no earlier than its
-own measured readiness (the last attempt of it and of its two neighbours, whose joint retries could
-replace it), so the hand holds at a node while a segment is not ready. The search gets
-controller.replan.search_deadline_s, and the first segment must be ready within
-first_segment_deadline_s of the measured state. A start the planner refuses, a search without a plan
-(in time or at all) or a first segment that fails (or is not solved in time) is recorded with its typed
-reason (results.ReplanOutcome, the refusal) and the old plan resumes after the same hold; a plan whose
-later segment failed is executed up to that segment and planned again from there. The run ends at the
-end of the plan in effect (and config.sim.settle_time of hold): a swap moves it
-(executor.ExecutorSystems.advance_to_end).
+computes, and its wall-clock compute time (the search and the new plan's first segment, solved before
+the others: keyframes.solve_first_segment_first) is measured; a new plan never takes effect before that
+time has passed in simulated time after the update that started it. From the next node, a plan whose
+compute time exceeds the simulated time to that node is refused as late; from the measured state, the
+plan swapped in at the update's time t_switch holds the measured state (with the old plan's forces at
+the node) until t_switch + that time, as the hand would hold while a real planner ran. Each later
+segment begins no earlier than its own measured readiness (the last attempt of it and of its two
+neighbours, whose joint retries could replace it), counted from the same update, so the hand holds at a
+node while a segment is not ready. A start the planner refuses, a search without a plan (in time or at
+all) or a first segment that fails (or is not solved in time) is recorded with its typed reason
+(results.ReplanOutcome, the refusal); a plan whose later segment failed is executed up to that segment
+and planned again from there (from the measured state). The run ends at the end of the plan in effect
+(and config.sim.settle_time of hold): a swap moves it (executor.ExecutorSystems.advance_to_end).
 
 Against the phase-by-phase runs before (one Simulator per phase, its state copied across): a node is
 checked at the first control update at or after it (within one control period, 2 ms at 500 Hz), and a
@@ -105,19 +116,63 @@ def replan_reason(values: dict, assumed: SceneConfig, config: Config) -> ReplanR
     return None
 
 
+@dataclass(frozen=True)
+class Deadlines:
+    """A replan's wall-clock deadlines, s after it starts: its contact search's and its first segment's (all
+    its attempts, the search included)."""
+
+    search_s: float
+    first_segment_s: float
+
+
+# s, the least a search from the next node is given (when that node is nearer than first_segment_reserve_s): it
+# then refuses at once, as late
+MIN_SEARCH_S = 1e-3
+
+# The reasons for which the plan's next node may be wrong (the hand is off its plan).
+ERROR_REASONS = (ReplanReason.TRACKING, ReplanReason.CONTACT_LOST)
+
+
+@dataclass(frozen=True, eq=False)
+class Swap:
+    """A new plan decided at one update, which takes effect at `at_s` (the node it starts from): the `plan`
+    in effect from then, its `phase` and the scene it `assumed`."""
+
+    at_s: float  # s
+    plan: PlanInEffect
+    phase: Phase
+    assumed: SceneConfig
+
+
 @dataclass(frozen=True, eq=False)
 class Replanning:
     """The Replanner's state: the `plan` in effect, the `phase` (its nodes still to check), the scene
-    it `assumed` (the last new plan's estimates of friction and mass) and the `events` (each replan)."""
+    it `assumed` (the last new plan's estimates of friction and mass), the `events` (each replan) and the
+    `pending` swap (a new plan from the next node, not yet in effect)."""
 
     plan: PlanInEffect
     phase: Phase
     assumed: SceneConfig
     events: tuple[ReplanEvent, ...] = ()
+    pending: Swap | None = None
 
     def __deepcopy__(self, memo) -> Replanning:
         # Immutable: Drake copies abstract state at each unrestricted update; a copy shares it.
         return self
+
+    def at(self, t: float) -> Replanning:
+        """This state at `t`: the pending swap made once its node is reached."""
+        swap = self.pending
+        if swap is None or swap.at_s > t + 1e-9:
+            return self
+        return Replanning(swap.plan, swap.phase, swap.assumed, self.events)
+
+    def next_node_s(self, rest: Phase) -> float | None:
+        """s, the plan in effect's next node after a check whose later checks are `rest`: the next check, or
+        the end of a plan that ends short of its goal; None: the next node is the goal."""
+        if rest.checks:
+            return rest.checks[0]
+        return None if rest.ends_short_s is None else float(self.plan.reference.t[-1])
 
 
 class Replanner(LeafSystem):
@@ -161,48 +216,122 @@ class Replanner(LeafSystem):
         output.set_value(self.replanning(context).plan)
 
     def _Update(self, context, state):
-        now = self.replanning(context)
+        before = self.replanning(context)
         t = context.get_time()
+        now = before.at(t)
         checked, forced, rest = now.phase.due(t)
-        if not checked or len(now.events) >= self._config.controller.replan.max_replans:
+        if checked and len(now.events) < self._config.controller.replan.max_replans:
+            values = {name: port.Eval(context) for name, port in self._estimate_ports.items()}
+            reason = replan_reason(values, now.assumed, self._config) or forced
+            if reason is None:
+                now = dataclasses.replace(now, phase=rest)
+            elif forced is None and not self.holds_for(reason):
+                now = self.replanned_ahead(context, now, reason, rest)
+            else:
+                now = self.replanned(context, now, reason)
+        elif now is before:
             return EventStatus.DidNothing()
-        values = {name: port.Eval(context) for name, port in self._estimate_ports.items()}
-        reason = replan_reason(values, now.assumed, self._config) or forced
-        after = dataclasses.replace(now, phase=rest) if reason is None else self.replanned(context, now, reason)
-        state.get_mutable_abstract_state(self._state).set_value(after)
+        state.get_mutable_abstract_state(self._state).set_value(now)
         return EventStatus.Succeeded()
+
+    def holds_for(self, reason: ReplanReason) -> bool:
+        """A replan for `reason` plans from the measured state, the hand holding (else from the next node)."""
+        return self._config.controller.replan.measured_start_on_error and reason in ERROR_REASONS
 
     def measured_start(self, context) -> StartState:
         box, hand = self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
         return StartState(object_pose=tuple(box[:3]), q=tuple(hand[: self._num_joints]), object_velocity=tuple(box[3:]))
 
+    def estimates(self, context) -> tuple[float, float]:
+        """The friction and mass (kg) estimates now."""
+        return tuple(float(self._estimate_ports[name].Eval(context)[0]) for name in ("mu_estimate", "mass_estimate"))
+
+    def replanned_ahead(self, context, now: Replanning, reason: ReplanReason, rest: Phase) -> Replanning:
+        """The state after planning at this update for `reason` from the next node's planned state while the
+        hand goes on along its plan (the world stands still meanwhile): a new plan ready before the hand
+        reaches that node is swapped in there (pending until then); otherwise the old plan goes on."""
+        t, t_node = context.get_time(), now.next_node_s(rest)
+        if t_node is None:  # the next node is the goal: nothing left to plan
+            return dataclasses.replace(now, phase=rest)
+        lead, rules = t_node - t, self._config.controller.replan
+        deadlines = Deadlines(max(lead - rules.first_segment_reserve_s, MIN_SEARCH_S), lead)
+        start = node_state(now.plan.reference, t_node)
+        mu, mass = self.estimates(context)
+        event, new = replan(
+            self._plan, self._config, start, t, reason, mu, mass, self._scene, self._segment_workers, deadlines
+        )
+        event = dataclasses.replace(event, start_s=t_node)
+        if event.planned and event.latency_s > lead:
+            event, new = dataclasses.replace(event, outcome=ReplanOutcome.LATE), None
+        if new is None:  # the old plan goes on, the hand never stopped
+            return Replanning(now.plan, rest, now.assumed, now.events + (dataclasses.replace(event, takes_effect_s=t),))
+        event = dataclasses.replace(event, takes_effect_s=t_node)
+        following, phase = self.executed(new, event)
+        reference = joined(now.plan.reference, t_node, following)
+        swapped = plan_in_effect(reference, self._config, self._scene, new.config.scene.mu, now.plan.version + 1)
+        pending = Swap(t_node, swapped, phase, new.config.scene)
+        return Replanning(now.plan, rest, now.assumed, now.events + (event,), pending)
+
     def replanned(self, context, now: Replanning, reason: ReplanReason) -> Replanning:
-        """The state after planning again at this update for `reason` (the world stands still meanwhile)."""
+        """The state after planning again at this update for `reason` from the measured state, the hand
+        holding while the planner runs (the world stands still meanwhile)."""
         t_switch, scene, start = context.get_time(), self._scene, self.measured_start(context)
-        mu, mass = (float(self._estimate_ports[name].Eval(context)[0]) for name in ("mu_estimate", "mass_estimate"))
+        mu, mass = self.estimates(context)
         event, new = replan(self._plan, self._config, start, t_switch, reason, mu, mass, scene, self._segment_workers)
+        event = dataclasses.replace(event, start_s=t_switch)
         reference, assumed = now.plan.reference, now.assumed
         if event.planned:
-            m = new.config.cito.knots_per_segment
-            usable = next((k for k, r in enumerate(event.segment_ready_s) if not np.isfinite(r)), None)
-            arrays = new.trajectory.arrays()
-            if usable is not None:  # the segments before the failed one
-                arrays = {name: values[: usable * m + 1] for name, values in arrays.items()}
-            ready = [r - event.latency_s for r in event.segment_ready_s]
-            new_reference, arrivals = scheduled(reference_from_arrays(arrays, scene), m, ready)
-            reference = spliced(reference, t_switch, start, scene, new_reference, event.takes_effect_s)
-            arrivals = event.takes_effect_s + arrivals
-            if usable is None:
-                phase = Phase(tuple(arrivals[1:-1]))
-            else:  # planned again at the last node reached, once the failure is known
-                known = t_switch + event.compute_s
-                phase = Phase(tuple(arrivals[1:-1]), max(arrivals[-1], known))
+            following, phase = self.executed(new, event)
+            reference = spliced(reference, t_switch, start, scene, following, event.takes_effect_s)
             assumed = new.config.scene
         else:  # the hand held while the planner ran: the old plan resumes that much later
             reference = delayed(reference, t_switch, event.latency_s)
             phase = now.phase.after(t_switch, event.latency_s)
         swapped = plan_in_effect(reference, self._config, scene, assumed.mu, now.plan.version + 1)
         return Replanning(swapped, phase, assumed, now.events + (event,))
+
+    def executed(self, new: PlanResult, event: ReplanEvent) -> tuple[Reference, Phase]:
+        """The new plan of `event` as executed from event.takes_effect_s: its reference from 0 (each segment
+        beginning no earlier than it was ready, counted from event.time_s: scheduled; up to a failed one) and
+        its phase in absolute times (a plan that ends short plans again at its last node, once the failure
+        is known)."""
+        m = new.config.cito.knots_per_segment
+        usable = next((k for k, r in enumerate(event.segment_ready_s) if not np.isfinite(r)), None)
+        arrays = new.trajectory.arrays()
+        if usable is not None:  # the segments before the failed one
+            arrays = {name: values[: usable * m + 1] for name, values in arrays.items()}
+        offset = event.takes_effect_s - event.time_s
+        ready = [r - offset for r in event.segment_ready_s]
+        reference, arrivals = scheduled(reference_from_arrays(arrays, self._scene), m, ready)
+        arrivals = event.takes_effect_s + arrivals
+        if usable is None:
+            return reference, Phase(tuple(arrivals[1:-1]))
+        return reference, Phase(tuple(arrivals[1:-1]), max(arrivals[-1], event.time_s + event.compute_s))
+
+
+def node_state(reference: Reference, t: float) -> StartState:
+    """`reference`'s planned state at `t`, a node of it: every finger on the object, at rest."""
+    q = [np.interp(t, reference.t, reference.q[:, j]) for j in range(reference.q.shape[1])]
+    return StartState(object_pose=tuple(reference.object_pose_at([t])[0]), q=tuple(q))
+
+
+def joined(old: Reference, t_node: float, new: Reference) -> Reference:
+    """`old` up to `t_node` (a node of it), then `new`, which begins at that node's state, from `t_node`."""
+    keep = old.t < t_node - 1e-9
+
+    def cat(before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        return np.concatenate([before[keep], after])
+
+    return Reference(
+        t=np.concatenate([old.t[keep], t_node + new.t - new.t[0]]),
+        x=cat(old.x, new.x),
+        q=cat(old.q, new.q),
+        p_WF=cat(old.p_WF, new.p_WF),
+        v_WF=cat(old.v_WF, new.v_WF),
+        f_W=cat(old.f_W, new.f_W),
+        xdot=cat(_xdot(old), _xdot(new)),
+        p_WC=None if old.p_WC is None or new.p_WC is None else cat(old.p_WC, new.p_WC),
+    )
 
 
 def scheduled(new: Reference, knots_per_segment: int, ready: list[float]) -> tuple[Reference, np.ndarray]:
@@ -302,10 +431,13 @@ def replan(
     mass: float,
     scene: Scene,
     segment_workers: int | None,
+    deadlines: Deadlines | None = None,
 ) -> tuple[ReplanEvent, PlanResult | None]:
-    """Plans from the measured `start` to `plan`'s goal with the estimated friction and mass (the
-    search within controller.replan.search_deadline_s, the first segment first); the event and the new plan."""
+    """Plans from `start` (measured, or a node's planned state) to `plan`'s goal with the estimated friction
+    and mass, within `deadlines` (None: controller.replan's search_deadline_s and first_segment_deadline_s,
+    the hand holding), the first segment first; the event (at `t_switch`) and the new plan."""
     rules = config.controller.replan
+    deadlines = deadlines or Deadlines(rules.search_deadline_s, rules.first_segment_deadline_s)
     assumed = dataclasses.replace(
         config,
         scene=dataclasses.replace(
@@ -314,7 +446,7 @@ def replan(
             box_mass=mass,
             object_inertia=None if config.scene.object_inertia is None else config.scene.inertia_zz(mass),
         ),
-        search=dataclasses.replace(config.search, time_budget_s=rules.search_deadline_s),
+        search=dataclasses.replace(config.search, time_budget_s=deadlines.search_s),
     )
     first_first = config.cito.formulation == "keyframes"
     t0 = time.perf_counter()
@@ -326,7 +458,7 @@ def replan(
             scene=scene,  # the executed object's geometry, for the start's contacts (plan() rebuilds it from the start)
             segment_workers=segment_workers,
             first_segment_first=first_first,
-            first_segment_deadline_s=rules.first_segment_deadline_s if first_first else None,
+            first_segment_deadline_s=deadlines.first_segment_s if first_first else None,
         )
     except StartRefused as refused:  # the old plan goes on
         latency = time.perf_counter() - t0
@@ -337,7 +469,7 @@ def replan(
     total = time.perf_counter() - t0
     searched = new.contact_plan
     if not searched.success:
-        late = new.search_time_s >= rules.search_deadline_s or out_of_time(searched.refusal)
+        late = new.search_time_s >= deadlines.search_s or out_of_time(searched.refusal)
         outcome = ReplanOutcome.SEARCH_DEADLINE if late else ReplanOutcome.NO_PLAN
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
         return dataclasses.replace(event, refusal=searched.refusal, compute_s=total, search_s=new.search_time_s), None
@@ -345,7 +477,7 @@ def replan(
     # the joint formulation is one program: none of a failed one is executed
     if new.trajectory is None or not np.isfinite(ready[0]) or not (first_first or new.success):
         # ran out of time: segment 0's attempts came back no sooner than its deadline
-        late = first_first and ready[0] >= rules.first_segment_deadline_s
+        late = first_first and ready[0] >= deadlines.first_segment_s
         outcome = ReplanOutcome.FIRST_SEGMENT_LATE if late else ReplanOutcome.FIRST_SEGMENT_FAILED
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
         return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None

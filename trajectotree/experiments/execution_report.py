@@ -85,7 +85,7 @@ def execution_markdown(table: list[dict], labels: dict[str, str]) -> str:
 
 def refused_replans(records: list[dict]) -> list[dict]:
     """Every replan that gave no plan, per execution (method, goal, condition): when, the outcome
-    (sim.json's replans' outcome: no_plan, search_deadline, start_refused, first_segment_failed) and the
+    (sim.json's replans' outcome: no_plan, search_deadline, start_refused, first_segment_failed, late) and the
     planner's reason, ordered by method, condition and goal."""
     rows = [
         {

@@ -530,14 +530,15 @@ of the middle segment; `friction-MU`: friction MU; `mass-xF`: the box mass times
 along +x, timed like `push`). MAE: time means of |simulated - planned| box pose (held at its drop-time
 value after a drop), then means over executions. Final error: mean |error| at the end of the run.
 Replans: how often the closed loop planned again (in parentheses: how often a plan came back and took
-effect); latency: wall-clock time from the measured state to the new plan's first segment (or to the
-refusal), while the hand holds, median and 95th percentile over those replans.
+effect); latency: wall-clock time from the replan's start to the new plan's first segment (or to the
+refusal), while the hand goes on to the next node (or, from the measured state, holds), median and 95th
+percentile over those replans.
 """
 
 REFUSED_NOTES = """
 ## Replans without a plan
 
 Each replan that gave no new plan, per goal: the search refused at the estimated friction (no plan,
-or none within controller.replan.search_deadline_s), the planner refused the measured start (moving, a finger
-off, not in closure), or the new plan's first segment failed; the old plan went on.
+or none within its deadline), the planner refused the start (moving, a finger off, not in closure), the new
+plan's first segment failed, or the new plan was ready only after the node it starts from; the old plan went on.
 """
