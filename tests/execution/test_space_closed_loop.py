@@ -165,7 +165,7 @@ def test_the_space_executor_s_closed_loop_ports(scene, hold):
     inputs = {executor.get_input_port(i).get_name(): executor.get_input_port(i).size() for i in range(4)}
     assert inputs == {"box_state": 13, "hand_state": 24, "contact_results": 0, "box_contact_forces": 6}
     outputs = {executor.get_output_port(i).get_name() for i in range(executor.num_output_ports())}
-    assert outputs == {"actuation", "plan", "held_sample", *CLOSED_LOOP_ARRAYS}
+    assert outputs == {"actuation", "plan", *CLOSED_LOOP_ARRAYS}
     assert executor.GetOutputPort("disturbance").size() == 3 and executor.GetOutputPort("tracking_error").size() == 6
     with pytest.raises(ConfigError, match="executor = 'grasp-replan' does not execute plans in space yet"):
         add_space_executor(DiagramBuilder(), plant, hold, config, scene, executor="grasp-replan")

@@ -56,9 +56,6 @@ from trajectotree.results import ClosedLoopLog
 from trajectotree.scene.friction import set_friction
 from trajectotree.scene.spatial import SpaceScene, add_space_object
 
-HELD_PORT = (
-    "held_sample"  # the closed loop's: the schedule sample it holds (-1: none), SpaceClosedLoopGraspController's
-)
 SPACE_EXECUTORS = (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.NONE)  # the executors a plan in space has
 # rad: the field's two success criteria for a reorientation in space, a run without a drop that ends within 15 deg
 # or within 0.4 rad (22.9 deg) of its goal (sim.json within_15deg, within_0p4rad)
@@ -128,7 +125,6 @@ def add_space_closed_loop(builder, plant, plan: PlanInEffect, config: Config, sc
     for follower in (controller, monitor, loop["friction"]):
         builder.Connect(source.get_output_port(), follower.plan_port)
     builder.ExportOutput(controller.actuation_port, "actuation")
-    builder.ExportOutput(controller.held_port, HELD_PORT)
     export_estimates(builder, loop)
     builder.ExportOutput(source.get_output_port(), PLAN_PORT)
 
@@ -152,8 +148,7 @@ def add_space_executor(
     grasp-closed-loop `plan` (the PlanInEffect followed) and, closed loop, the estimates and the monitors' outputs
     (executor.CLOSED_LOOP_OUTPUTS: `mu_estimate`, `mass_estimate` kg, `reflex` 0..1, `disturbance` (3, N in W),
     per finger `in_contact`, `slipping`, `force_ratio`, `slip_speed` m/s, and `tracking_error` (6: the rotation
-    vector rad and the offset m from the planned pose to the measured one, in W), and `held_sample` (1: the schedule
-    sample the controller holds before a swing its cones cannot carry, -1 none)). The controller assumes the
+    vector rad and the offset m from the planned pose to the measured one, in W)). The controller assumes the
     plan's scene whatever the plant's. ConfigError for an executor that space does not have yet
     (SPACE_EXECUTORS)."""
     executor = parse_executor(executor)
@@ -231,9 +226,6 @@ class SpaceSimResult:
     # What the closed loop watched and estimated (sim.npz's CLOSED_LOOP_ARRAYS besides ARRAYS, sim.json's
     # "closed_loop"), as the plane's SimLog; None: an open-loop run
     closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)
-    # s of the plan where the closed loop held its node before a swing its cones could not carry (sim.json's
-    # "held_at_s"); None: it followed the plan to the end (and every open-loop run)
-    held_at_s: float | None = field(default=None, kw_only=True)
 
     ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
 
@@ -266,7 +258,6 @@ class SpaceSimResult:
             "sim_time_s": self.sim_time_s,
             "conditions": self.world,
             **({} if self.closed_loop is None else {"closed_loop": self.closed_loop.to_json(self.t)}),
-            **({} if self.held_at_s is None else {"held_at_s": self.held_at_s}),
         }
 
 
@@ -330,7 +321,6 @@ def simulate_space(
             name: LogVectorOutput(added.GetOutputPort(name), builder, triggers, config.sim.log_period)
             for name in CLOSED_LOOP_OUTPUTS
         }
-        held_logger = LogVectorOutput(added.GetOutputPort(HELD_PORT), builder, triggers, config.sim.log_period)
     visualizer = None
     if meshcat is not None:
         visualizer = meshcat_scene.add_space_visualizer(
@@ -355,8 +345,6 @@ def simulate_space(
     simulator.AdvanceTo(end)
     sim_time = time.perf_counter() - start
     loggers = [state_logger, force_logger, *closed_loop_loggers.values()]
-    if closed_loop_loggers:
-        loggers.append(held_logger)
     logs = [logger.FindLog(simulator.get_context()) for logger in loggers]
     if logs[0].sample_times()[-1] < end - 1e-9:  # the periodic log can miss the end by rounding
         for logger in loggers:
@@ -386,18 +374,12 @@ def simulate_space(
         )
         if closed_loop_loggers
         else None,
-        held_at_s=held_time(logs[-1].data()[0, -1], config) if closed_loop_loggers else None,
     )
     if visualizer is not None:
         frame_times = np.arange(0.0, end + 1e-9, meshcat_scene.PUBLISH_PERIOD)
         meshcat_scene.animate_plan_ghost(animation, frame_times, reference.pose_at(frame_times))
         save_space_recording(meshcat, visualizer, html_path, result, reference, scene)
     return result
-
-
-def held_time(sample: float, config: Config) -> float | None:
-    """s of the plan at the closed loop's held schedule `sample` (-1: none held: None)."""
-    return None if sample < 0 else sample / config.controller.rate_hz
 
 
 def space_arrow_scale(reference: SpaceReference) -> float:
