@@ -644,8 +644,8 @@ class SpaceClosedLoopGraspController(SpaceGraspController):
         return context.get_time() if held < 0 else held * s.period
 
     def swing_holds(self, reference: SpaceReference, s: SpaceSchedule, n: int, fingers, estimates: Estimates) -> bool:
-        """Whether the plan's grasp can make its contact wrench (for the estimated mass) inside the QP's cones
-        (cone_friction) within the motors from sample n until `fingers` carry their full force budget again, every
+        """Whether the plan's grasp can make its contact wrench (for the estimated mass) at the estimated friction
+        within the motors from sample n until `fingers` carry their full force budget again, every
         SWING_CHECK_PERIOD s: at the planned cube poses and joints (reference.q, linear between knots), by the
         controller's kinematics, the links' weight on the motors (stance_holds)."""
         end = n + 1 + np.argmax(np.all(s.force_scale[n + 1 :, fingers] >= 1.0, axis=1))
@@ -663,23 +663,17 @@ class SpaceClosedLoopGraspController(SpaceGraspController):
                 scale * g.min_normal_force,
                 scale * g.max_normal_force,
                 torque,
-                self.cone_friction(estimates),
+                estimates.mu,
             ):
                 return False
         return True
-
-    def cone_friction(self, estimates: Estimates) -> float:
-        """The friction of the QP's cones: the estimate times the open loop's safety fraction, raised towards
-        push_reflex.friction_safety with the push reflex."""
-        pr = self.gains.push_reflex
-        safety = self._friction_safety + estimates.reflex * max(pr.friction_safety - self._friction_safety, 0.0)
-        return safety * estimates.mu
 
     def grasp_forces(self, G, wrench, lambda_plan, lo, hi, torque, estimates: Estimates, scale) -> np.ndarray:
         """As SpaceGraspController's, at the estimated friction and, during the push reflex, with the squeeze as
         the QP's target push (its least the plan's) and the torque residual weighted."""
         pr = self.gains.push_reflex
-        self._qp.set_friction(self.cone_friction(estimates))
+        safety = self._friction_safety + estimates.reflex * max(pr.friction_safety - self._friction_safety, 0.0)
+        self._qp.set_friction(safety * estimates.mu)
         target = np.array(lambda_plan, dtype=float)
         target[:, 0] = np.maximum(target[:, 0], estimates.reflex * np.minimum(scale * pr.squeeze, hi))
         weight = 1.0 + estimates.reflex * (pr.torque_weight - 1.0)
