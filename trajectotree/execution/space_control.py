@@ -56,7 +56,6 @@ from trajectotree.scene.statics import (
 )
 
 CONE_FACETS = 8  # the QP's pyramid per cone, as the planner's (cito.spatial.PYRAMID_EDGES)
-SWING_CHECK_PERIOD = 0.05  # s, the planned stance samples a swing's check takes (a segment's knots are 0.1 s apart)
 SINGULAR_DAMPING = 0.01  # m, of the moving fingertips' damped least-squares accelerations (a tenth of a link)
 BOX_STATE_SIZE = 13  # the quaternion floating joint's [qw, qx, qy, qz, px, py, pz, w_W (3), v_W (3)]
 
@@ -358,24 +357,6 @@ class SpaceGraspForceQp:
         return np.column_stack([normal, tangential * np.minimum(1.0, self._mu * normal / size)[:, None]])
 
 
-def stance_holds(G, wrench, lo, hi, torque, mu: float) -> bool:
-    """Whether some fingertip forces lambda = (lambda_n, lambda_1, lambda_2) per finger make `wrench` (6,) exactly
-    with G (6, 3F), lambda_n in [lo, hi] (F,) N, inside the pyramids at `mu` (cone_rows_3d) and within the motors
-    (`torque`: contact_torque_rows' (A, lower, upper)): a feasibility LP, Clarabel's."""
-    F = G.shape[1] // 3
-    prog = MathematicalProgram()
-    z = prog.NewContinuousVariables(3 * F, "lambda")  # finger-major (n, 1, 2)
-    prog.AddLinearEqualityConstraint(G, wrench, z)
-    rows = cone_rows_3d(mu, F, CONE_FACETS)
-    prog.AddLinearConstraint(rows, np.full(len(rows), -np.inf), np.zeros(len(rows)), z)
-    free = np.full(F, np.inf)
-    prog.AddBoundingBoxConstraint(
-        np.column_stack([lo, -free, -free]).ravel(), np.column_stack([hi, free, free]).ravel(), z
-    )
-    prog.AddLinearConstraint(*torque, z)
-    return ClarabelSolver().Solve(prog).is_success()
-
-
 class SpaceGraspController(LeafSystem):
     """Object-level grasp control of a planned cube motion in space, open loop (the module doc). Input ports:
     `box_state` (13: the cube's quaternion floating joint [qw, qx, qy, qz, px m, py m, pz m, w_W rad/s (3),
@@ -432,7 +413,7 @@ class SpaceGraspController(LeafSystem):
         offsets = context.get_discrete_state(self._offset_state).get_value().reshape(-1, 3)
         u, offsets = self.compute_actuation(
             schedule,
-            self.followed_time(context, discrete_state),
+            context.get_time(),
             self.box_state_port.Eval(context),
             self.hand_state_port.Eval(context),
             offsets,
@@ -441,10 +422,6 @@ class SpaceGraspController(LeafSystem):
         discrete_state.get_mutable_vector(0).set_value(u)
         discrete_state.get_mutable_vector(self._offset_state).set_value(offsets.ravel())
         return EventStatus.Succeeded()
-
-    def followed_time(self, context, discrete_state) -> float:
-        """s, the time of the plan the actuation follows now: the context's (the closed loop may hold a node)."""
-        return context.get_time()
 
     def _own_joints(self, J) -> np.ndarray:
         """(F, 3, n): each finger's block of the hand Jacobians J (F, 3, F n) (the columns of its own joints)."""
@@ -479,17 +456,6 @@ class SpaceGraspController(LeafSystem):
             ]
         )
         return self._own_joints(J[..., self._hand_v])
-
-    def contacts(self, p_WF, poses, R, p) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The contacts of fingertips at p_WF (F, 3) (tip frames' poses `poses`) on the cube at R (3, 3), p (3,):
-        on the cube's face nearest each fingertip, tip_radius from its centre. (n_W (F, 3) the outward normals, r_W
-        (F, 3) the contact points from the cube's centre, D (F, 3, 3) each force component's direction (-n, t1, t2),
-        J_WC (F, 3, n) the contact points' Jacobians in each finger's own joints), all in W."""
-        n_W = box_face_normals(self._half, (p_WF - p) @ R) @ R.T
-        r_W = p_WF - self._tip_radius * n_W - p
-        t1, t2 = tangent_basis(n_W)
-        D = np.stack([-n_W, t1, t2], axis=-1)
-        return n_W, r_W, D, self.contact_jacobians(poses, -self._tip_radius * n_W)
 
     def tracking_torques(self, q, qdot, J_WF, a_target, error, rate_error) -> np.ndarray:
         """(F, n) N m that move each fingertip at a_target (F, 3) m/s^2 plus a critically damped correction of
@@ -562,7 +528,8 @@ class SpaceGraspController(LeafSystem):
         p_target = p + r_BF
         v_target = v + np.cross(w, r_BF) + s.v_BF[n] @ R.T
         scale = s.force_scale[n]
-        n_W, r_W, D, J_WC = self.contacts(p_WF, poses, R, p)  # the measured contacts
+        # The measured contacts: on the cube's face nearest each fingertip, tip_radius from its centre.
+        n_W = box_face_normals(self._half, (p_WF - p) @ R) @ R.T
         # A holding fingertip is force-controlled: its spring fades with its force budget (as in the plane, where a
         # spring anchored to the cube fought the friction force as the sphere rolled); the moving one follows its path.
         # A sphere that held rolls off its planned point (12 mm over 3 s on seed-0 goal 1): while it unloads, its
@@ -576,6 +543,10 @@ class SpaceGraspController(LeafSystem):
         a_target = s.a_BF[n] @ R.T
         rest = self.gravity_torques() + np.einsum("fcj,fc->fj", J_WF, spring)
         rest += (1.0 - scale)[:, None] * self.tracking_torques(q, qdot, J_WF, a_target, error, v_target - v_WF)
+        r_W = p_WF - self._tip_radius * n_W - p
+        t1, t2 = tangent_basis(n_W)
+        D = np.stack([-n_W, t1, t2], axis=-1)  # (F, 3, 3): each force component's direction
+        J_WC = self.contact_jacobians(poses, -self._tip_radius * n_W)
         lambda_plan = np.einsum("fck,fc->fk", D, s.f_B[n] @ R.T) * scale[:, None]
         lam = self.grasp_forces(
             grasp_matrix_3d_W(r_W, n_W),
@@ -615,8 +586,6 @@ class SpaceClosedLoopGraspController(SpaceGraspController):
         self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
         self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
         self.disturbance_port = self.DeclareVectorInputPort("disturbance", 3)
-        self._held_state = self.DeclareDiscreteState(np.array([-1.0]))  # the schedule sample held (-1: none)
-        self.held_port = self.DeclareStateOutputPort("held_sample", self._held_state)
 
     def estimates(self, context) -> Estimates:
         return Estimates(
@@ -625,48 +594,6 @@ class SpaceClosedLoopGraspController(SpaceGraspController):
             reflex=float(self.reflex_port.Eval(context)[0]),
             disturbance=np.array(self.disturbance_port.Eval(context)),
         )
-
-    def followed_time(self, context, discrete_state) -> float:
-        """The context's time, but from a swing whose stance the world cannot carry on: the node before its lift-off,
-        held to the end. At each lift-off (a finger's lift-off hold begins) the stance of the other fingers through
-        the swing is checked at the friction estimate (swing_holds); a stance that needs more drops the cube within
-        tenths of a second (25 of the 30 seed-0 SO(3) plans, planned at 0.49, have a three-finger stance that needs
-        0.40-0.50 within the 0.396 N m motors, whatever the forces), while the four fingers at the node hold it."""
-        held = int(context.get_discrete_state(self._held_state).get_value()[0])
-        plan = self.plan_port.Eval(context)
-        s = plan.schedule
-        if held < 0:
-            n = s.index(context.get_time())
-            lifting = np.flatnonzero(s.lifting[n] & ~s.lifting[max(n - 1, 0)])
-            if len(lifting) and not self.swing_holds(plan.reference, s, n, lifting, self.estimates(context)):
-                held = n - 1
-                discrete_state.get_mutable_vector(self._held_state).set_value([held])
-        return context.get_time() if held < 0 else held * s.period
-
-    def swing_holds(self, reference: SpaceReference, s: SpaceSchedule, n: int, fingers, estimates: Estimates) -> bool:
-        """Whether the plan's grasp can make its contact wrench (for the estimated mass) at the estimated friction
-        within the motors from sample n until `fingers` carry their full force budget again, every
-        SWING_CHECK_PERIOD s: at the planned cube poses and joints (reference.q, linear between knots), by the
-        controller's kinematics, the links' weight on the motors (stance_holds)."""
-        end = n + 1 + np.argmax(np.all(s.force_scale[n + 1 :, fingers] >= 1.0, axis=1))
-        samples = np.arange(n, end, max(int(round(SWING_CHECK_PERIOD / s.period)), 1))
-        q = _linear(reference.t, reference.q, samples * s.period)
-        g, mass_scale = self.gains.grasp, estimates.mass / self._mass
-        for m, q_m in zip(samples, q):
-            p_WF, _, poses = self.fingertips(q_m)
-            n_W, r_W, D, J_WC = self.contacts(p_WF, poses, quaternion_matrices(s.x[m, :4]), s.x[m, 4:])
-            torque = contact_torque_rows(J_WC, D, self.gravity_torques(), self._tau_max)
-            scale = s.force_scale[m]
-            if not stance_holds(
-                grasp_matrix_3d_W(r_W, n_W),
-                s.wrench[m] * mass_scale,
-                scale * g.min_normal_force,
-                scale * g.max_normal_force,
-                torque,
-                estimates.mu,
-            ):
-                return False
-        return True
 
     def grasp_forces(self, G, wrench, lambda_plan, lo, hi, torque, estimates: Estimates, scale) -> np.ndarray:
         """As SpaceGraspController's, at the estimated friction and, during the push reflex, with the squeeze as
