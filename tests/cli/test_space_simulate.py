@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from trajectotree.cli import main
+from trajectotree.config import ConfigError
 
 GOAL = ["--goal-rpy", "0.6", "0", "0"]  # rad: 34 deg about x
 
@@ -93,3 +94,14 @@ def test_arrays_of_another_cube_exit_2(space_plan, tmp_path, capsys):
     np.savez(plan / "plan.npz", **arrays)
     err = _refused(["simulate", str(plan)], plan, capsys)
     assert "plan.npz" in err and "mm off the 65 x 65 x 65 mm cube plan.json names" in err
+
+
+def test_the_closed_loop_shorthand_is_taken_for_a_plan_in_space_and_replanning_is_not():
+    # a merge left --closed-loop among the refused options while --executor grasp-closed-loop ran
+    from argparse import Namespace
+
+    from trajectotree.cli.space_simulate import refuse_not_yet
+
+    refuse_not_yet(Namespace(plan_dir="p", closed_loop=True, replan=False))
+    with pytest.raises(ConfigError, match="--replan does not work with a plan in space yet"):
+        refuse_not_yet(Namespace(plan_dir="p", closed_loop=False, replan=True))

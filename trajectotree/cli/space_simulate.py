@@ -27,10 +27,7 @@ from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ, reading
 from trajectotree.scene.spatial import is_space_hand
 
 # The options of `simulate` that a plan in space does not take yet, by their argparse names.
-NOT_YET = {
-    "closed_loop": "--closed-loop",
-    "replan": "--replan",
-}
+NOT_YET = {"replan": "--replan"}
 
 
 def is_space_plan(plan_dir: str | Path) -> bool:
