@@ -94,6 +94,7 @@ from trajectotree.search.grasp import FormClosure, SpatialClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
 from trajectotree.search.reach import Reachability, path_refusal
 from trajectotree.search.spatial_reach import SpatialReach, box_transform
+from trajectotree.search.spatial_rolling import lifted_swing, moved_joints, on_face, rolled_step
 from trajectotree.search.stance import (
     SpatialHoldingLp,
     SpatialPushLp,
@@ -823,6 +824,7 @@ class _SpaceNode:
     parent: _SpaceNode | None
     stance_torque: float | None = None  # N m
     push: float | None = None  # N
+    rolled: np.ndarray | None = None  # (F, 3) m in B, each fingertip rolled off its contact since it landed
 
 
 @dataclass(frozen=True)
@@ -835,6 +837,7 @@ class _SpaceChild:
     q_held: dict  # {finger: (n,)} the holding fingers' angles at the child's pose
     stance_torque: float
     push: float
+    rolled: np.ndarray  # (F, 3) m in B, the child's rolled offsets (_SpaceSearch.rolled_stance)
 
 
 class _SpaceSearch:
@@ -896,8 +899,12 @@ class _SpaceSearch:
         """(N m, N): the least largest joint torque with which `fingers` on `contacts` at angles q_rows
         hold the box at rest at pose `depth` (their own weight included), and the hardest push along
         +-x, +-y, +-z in W they resist within their motors."""
+        return self.holding_at(depth, self.p_BC[list(contacts)], self.n_B[list(contacts)], fingers, q_rows)
+
+    def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows) -> tuple[float, float]:
+        """holding's (N m, N) for `fingers` on the points p_BC (k, 3) m in B of the faces of outward normals n_B."""
         R = box_transform(self.poses[depth]).rotation().matrix()
-        p_WC, n_W = self.p_BC[list(contacts)] @ R.T, self.n_B[list(contacts)] @ R.T
+        p_WC, n_W = p_BC @ R.T, n_B @ R.T
         q = np.zeros((self.scene.num_fingers, len(self.scene.fingers[0].q_lower)))
         for i, row in zip(fingers, q_rows):
             q[i] = row
@@ -927,11 +934,41 @@ class _SpaceSearch:
                 return None, Refusal(RefusalKind.UNREACHABLE, fingers=(child.finger,), cause=reach.refusal)
             q[child.finger] = reach.q
         q = np.array(q.tolist(), dtype=float)
-        clash = self.reach.links_clear(self.poses[depth], q)
+        clash = self.reach.links_clear(self.poses[depth], q) or self.swing_clash(child, q)
         if clash:
             return None, clash
-        node = _SpaceNode(depth, child.contacts, q, child.finger, child.parent, child.stance_torque, child.push)
+        node = _SpaceNode(
+            depth, child.contacts, q, child.finger, child.parent, child.stance_torque, child.push, child.rolled
+        )
         return node, None
+
+    def swing_clash(self, child: _SpaceChild, q_child) -> Refusal | None:
+        """Why the moving finger's swing to `child` (joint angles q_child (F, n) at its pose) is refused (None when it
+        is not, or no finger moves): at a few points of its lifted path (spatial_rolling.lifted_swing, the cube on
+        the geodesic between the two poses) it comes within search.finger_clearance of another finger, the holders
+        where their fingertips have rolled to (the fingertip spheres of seed-0 goal 25's planned swing struck, executed,
+        where a holder had rolled 16 mm toward the swing's path). With search.rolled_stances false: no check."""
+        i, parent = child.finger, child.parent
+        if i is None or not self.config.rolled_stances:
+            return None
+        d0 = parent.depth
+        a_B = self.p_BF[parent.contacts[i]] + parent.rolled[i]
+        s, p_B = lifted_swing(a_B, self.p_BF[child.contacts[i]], self.scene.object.half, self.scene.tip_radius)
+        quats = quaternion_slerp(self.poses[d0][:4], self.poses[d0 + 1][:4], s)
+        tips_B = self.p_BF[list(parent.contacts)]
+        for k, (u, quat) in enumerate(zip(s, quats)):
+            pose = np.r_[quat, (1.0 - u) * self.poses[d0][4:] + u * self.poses[d0 + 1][4:]]
+            R = box_transform(pose).rotation().matrix()
+            targets = tips_B + (1.0 - u) * parent.rolled + u * child.rolled
+            targets[i] = p_B[k]
+            q_start = (1.0 - u) * parent.q + u * q_child
+            q = np.array(
+                [moved_joints(f, q0, pose[4:] + R @ t) for f, q0, t in zip(self.scene.fingers, q_start, targets)]
+            )
+            clash = self.reach.links_clear(pose, q)
+            if clash is not None and clash.kind == RefusalKind.FINGERS_COLLIDE and i in clash.fingers:
+                return replace(clash, count=1)
+        return None
 
     # -- GetNeighbors ---------------------------------------------------------------------------
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
@@ -958,14 +995,18 @@ class _SpaceSearch:
             if torque > self.tau_limit:
                 self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
                 continue
-            ranked.append((finger is not None, -push, finger, stance, torque, push))
+            rolled, rolled_torque, why = self.rolled_stance(node, depth, stance, held)
+            if why is not None:
+                self.refused[why] += 1
+                continue
+            ranked.append((finger is not None, -push, finger, stance, max(torque, rolled_torque), push, rolled))
         out = []
-        for _, _, finger, stance, torque, push in sorted(ranked, key=lambda r: r[:2]):
+        for _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:2]):
             q_held = {i: held[i].q for i in stance}
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled))
                 continue
-            others = self.p_BF[[node.contacts[i] for i in stance]]
+            others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
             for c in range(len(self.p_BC)):
                 if c == node.contacts[finger]:
@@ -978,8 +1019,39 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled))
         return out
+
+    def rolled_stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[np.ndarray, float, Refusal | None]:
+        """(the child's rolled offsets (F, 3) m in B, the largest joint torque (N m) with which `stance` holds the cube
+        at its rolled contacts, why it cannot (None when it can)) for the transition from `node` to the child at
+        `depth` in which `stance` holds at angles held[i].q (spatial_rolling): at both ends each rolled contact on its
+        face and search.rolled_corner_gap short of its edges (a sphere that rolls onto an edge pivots over it), the
+        stance in closure at mu_plan and held within the motors there. The finger that moves lands on its planned
+        point (offset 0). With search.rolled_stances false: no offsets, no checks."""
+        offsets = np.zeros_like(node.rolled)
+        if not self.config.rolled_stances:
+            return offsets, 0.0, None
+        R0, R1 = (box_transform(self.poses[d]).rotation().matrix() for d in (node.depth, depth))
+        fingers, r = self.scene.fingers, self.scene.tip_radius
+        for i in stance:
+            step = rolled_step(fingers[i], node.q[i], held[i].q, R0, R1, self.n_B[node.contacts[i]], r)
+            offsets[i] = node.rolled[i] + step
+        contacts, gap = [node.contacts[i] for i in stance], self.config.rolled_corner_gap
+        torque = 0.0
+        for d, rolled, q in ((node.depth, node.rolled, node.q), (depth, offsets, {i: held[i].q for i in stance})):
+            p_BC, n_B = self.p_BC[contacts] + rolled[list(stance)], self.n_B[contacts]
+            if not np.all(on_face(p_BC, n_B, self.scene.object.half, gap)):
+                return offsets, np.inf, Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance, limit=gap)
+            if not self.closure.check(p_BC, n_B).in_closure:
+                return offsets, np.inf, Refusal(RefusalKind.STANCE_ROLLED_OPEN, stance=stance, mu_plan=self.mu)
+            pose = self.poses[d]
+            p_WF = pose[4:] + (p_BC + r * n_B) @ box_transform(pose).rotation().matrix().T
+            q_rolled = [moved_joints(fingers[i], q[i], p) for i, p in zip(stance, p_WF)]
+            torque = max(torque, self.holding_at(d, p_BC, n_B, stance, q_rolled)[0])
+        if torque > self.tau_limit:
+            return offsets, torque, Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
+        return offsets, torque, None
 
     def freedom(self, contacts) -> int:
         """How many fingers of a grasp on `contacts` may let go (the other three in closure at mu_plan):
@@ -996,7 +1068,7 @@ class _SpaceSearch:
             contacts = tuple(range(len(self.p_BC) - self.scene.num_fingers, len(self.p_BC)))
             q = np.asarray(self.root.q, dtype=float)
             torque, push = self.holding(0, contacts, tuple(range(self.scene.num_fingers)), q)
-            return [_SpaceNode(0, contacts, q, None, None, torque, push)]
+            return [_SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)))]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -1019,7 +1091,8 @@ class _SpaceSearch:
             fingers = tuple(range(self.scene.num_fingers))
             torque, push = self.holding(0, contacts, fingers, q)
             if torque <= self.tau_limit:
-                out.append(((-freedom, -push), _SpaceNode(0, contacts, q, None, None, torque, push)))
+                node = _SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)))
+                out.append(((-freedom, -push), node))
             if len(out) == SPACE_MAX_ROOTS:
                 break
         return [node for _, node in sorted(out, key=lambda r: r[0])]
