@@ -53,11 +53,13 @@ def on_face(p_BC, n_B, half, gap: float) -> np.ndarray:
 
 
 def moved_joints(finger: SerialFinger, q, p_WF) -> np.ndarray:
-    """(n,) the joint angles near q (n,) that put the fingertip centre at p_WF (3,) m (Gauss-Newton from q, for a
-    target a few mm off; the joint limits not applied: a rolled fingertip is where the cube takes it)."""
+    """(..., n) the joint angles near q (..., n) that put the fingertip centre at p_WF (..., 3) m (Gauss-Newton from
+    q, for targets a few mm off; the joint limits not applied: a rolled fingertip is where the cube takes it)."""
     q = np.array(q, dtype=float)
     for _ in range(NEWTON_STEPS):
-        q += np.linalg.lstsq(finger.jacobian(q), p_WF - finger.fingertip(q), rcond=None)[0]
+        points, axes, tip = finger.frames(q)
+        J = np.swapaxes(np.cross(axes, tip[..., None, :] - points), -1, -2)  # (..., 3, n): SerialFinger.jacobian's
+        q += (np.linalg.pinv(J) @ (np.asarray(p_WF) - tip)[..., None])[..., 0]
     return q
 
 

@@ -955,16 +955,17 @@ class _SpaceSearch:
         a_B = self.p_BF[parent.contacts[i]] + parent.rolled[i]
         s, p_B = lifted_swing(a_B, self.p_BF[child.contacts[i]], self.scene.object.half, self.scene.tip_radius)
         quats = quaternion_slerp(self.poses[d0][:4], self.poses[d0 + 1][:4], s)
-        tips_B = self.p_BF[list(parent.contacts)]
-        for k, (u, quat) in enumerate(zip(s, quats)):
-            pose = np.r_[quat, (1.0 - u) * self.poses[d0][4:] + u * self.poses[d0 + 1][4:]]
-            R = box_transform(pose).rotation().matrix()
-            targets = tips_B + (1.0 - u) * parent.rolled + u * child.rolled
-            targets[i] = p_B[k]
-            q_start = (1.0 - u) * parent.q + u * q_child
-            q = np.array(
-                [moved_joints(f, q0, pose[4:] + R @ t) for f, q0, t in zip(self.scene.fingers, q_start, targets)]
-            )
+        poses = np.hstack([quats, (1.0 - s)[:, None] * self.poses[d0][4:] + s[:, None] * self.poses[d0 + 1][4:]])
+        R = np.array([box_transform(pose).rotation().matrix() for pose in poses])  # (S, 3, 3)
+        u = s[:, None, None]
+        targets_B = self.p_BF[list(parent.contacts)] + (1.0 - u) * parent.rolled + u * child.rolled  # (S, F, 3)
+        targets_B[:, i] = p_B
+        targets_W = poses[:, None, 4:] + np.einsum("sij,sfj->sfi", R, targets_B)
+        q_start = (1.0 - u) * parent.q + u * q_child  # (S, F, n)
+        q_all = np.stack(
+            [moved_joints(f, q_start[:, j], targets_W[:, j]) for j, f in enumerate(self.scene.fingers)], axis=1
+        )
+        for pose, q in zip(poses, q_all):
             clash = self.reach.links_clear(pose, q)
             if clash is not None and clash.kind == RefusalKind.FINGERS_COLLIDE and i in clash.fingers:
                 return replace(clash, count=1)
@@ -990,14 +991,17 @@ class _SpaceSearch:
                 self.refused[Refusal(RefusalKind.FINGER_HELD, fingers=(finger,), stance=stance, mu_plan=self.mu)] += 1
                 continue
             torque0, _ = self.holding(node.depth, contacts, stance, node.q[list(stance)])
+            if torque0 > self.tau_limit:
+                self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
+                continue
+            rolled, rolled_torque, why = self.rolled_stance(node, depth, stance, held)  # before the push's six LPs
+            if why is not None:
+                self.refused[why] += 1
+                continue
             torque1, push = self.holding(depth, contacts, stance, [held[i].q for i in stance])
             torque = max(torque0, torque1)
             if torque > self.tau_limit:
                 self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
-                continue
-            rolled, rolled_torque, why = self.rolled_stance(node, depth, stance, held)
-            if why is not None:
-                self.refused[why] += 1
                 continue
             ranked.append((finger is not None, -push, finger, stance, max(torque, rolled_torque), push, rolled))
         out = []
@@ -1038,17 +1042,21 @@ class _SpaceSearch:
             step = rolled_step(fingers[i], node.q[i], held[i].q, R0, R1, self.n_B[node.contacts[i]], r)
             offsets[i] = node.rolled[i] + step
         contacts, gap = [node.contacts[i] for i in stance], self.config.rolled_corner_gap
-        torque = 0.0
-        for d, rolled, q in ((node.depth, node.rolled, node.q), (depth, offsets, {i: held[i].q for i in stance})):
-            p_BC, n_B = self.p_BC[contacts] + rolled[list(stance)], self.n_B[contacts]
-            if not np.all(on_face(p_BC, n_B, self.scene.object.half, gap)):
+        ends = (node.depth, depth)
+        p_BC = np.stack([self.p_BC[contacts] + rolled[list(stance)] for rolled in (node.rolled, offsets)])  # (2, k, 3)
+        n_B = self.n_B[contacts]
+        for p in p_BC:
+            if not np.all(on_face(p, n_B, self.scene.object.half, gap)):
                 return offsets, np.inf, Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance, limit=gap)
-            if not self.closure.check(p_BC, n_B).in_closure:
+            if not self.closure.check(p, n_B).in_closure:
                 return offsets, np.inf, Refusal(RefusalKind.STANCE_ROLLED_OPEN, stance=stance, mu_plan=self.mu)
-            pose = self.poses[d]
-            p_WF = pose[4:] + (p_BC + r * n_B) @ box_transform(pose).rotation().matrix().T
-            q_rolled = [moved_joints(fingers[i], q[i], p) for i, p in zip(stance, p_WF)]
-            torque = max(torque, self.holding_at(d, p_BC, n_B, stance, q_rolled)[0])
+        poses = self.poses[list(ends)]
+        R = np.array([box_transform(pose).rotation().matrix() for pose in poses])
+        p_WF = poses[:, None, 4:] + np.einsum("eij,ekj->eki", R, p_BC + r * n_B)  # (2, k, 3) the rolled tip centres
+        q_rolled = np.stack(
+            [moved_joints(fingers[i], [node.q[i], held[i].q], p_WF[:, k]) for k, i in enumerate(stance)], axis=1
+        )
+        torque = max(self.holding_at(d, p, n_B, stance, q)[0] for d, p, q in zip(ends, p_BC, q_rolled))
         if torque > self.tau_limit:
             return offsets, torque, Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
         return offsets, torque, None
