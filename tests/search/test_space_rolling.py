@@ -16,7 +16,14 @@ from trajectotree.scene.kinematics import SerialFinger
 from trajectotree.scene.spatial import build_space_scene
 from trajectotree.scene.statics import edge_wrenches_W
 from trajectotree.search.spatial_reach import box_transform
-from trajectotree.search.spatial_rolling import link_rotations, moved_joints, on_face, rolled_step
+from trajectotree.search.spatial_rolling import (
+    chain,
+    chain_jacobian,
+    link_rotations,
+    moved_joints,
+    on_face,
+    rolled_step,
+)
 from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
 from trajectotree.search.tree import _SpaceSearch, find_space_contact_plan
 
@@ -151,3 +158,13 @@ def test_a_planned_quarter_turn_holds_within_the_motors_where_its_fingertips_rol
         if b.switching_finger is not None:
             rolled[b.switching_finger] = 0.0
     assert largest > 1e-3  # the fingertips do roll, by millimetres
+
+
+def test_the_chain_is_serial_fingers_kinematics(scene):
+    q = np.random.default_rng(0).uniform(-1.0, 1.0, (5, 3))
+    for finger in (FINGER, scene.fingers[1]):
+        points, axes, tip, R = chain(finger, q)
+        for mine, theirs in zip((points, axes, tip), finger.frames(q)):
+            np.testing.assert_allclose(mine, theirs, atol=1e-14)
+        np.testing.assert_allclose(chain_jacobian(points, axes, tip), finger.jacobian(q), atol=1e-14)
+        np.testing.assert_allclose(R, link_rotations(finger, q), atol=0.0)

@@ -94,7 +94,14 @@ from trajectotree.search.grasp import FormClosure, SpatialClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
 from trajectotree.search.reach import Reachability, path_refusal
 from trajectotree.search.spatial_reach import SpatialReach, box_transform
-from trajectotree.search.spatial_rolling import lifted_swing, moved_joints, on_face, rolled_step
+from trajectotree.search.spatial_rolling import (
+    chain,
+    chain_jacobian,
+    lifted_swing,
+    moved_joints,
+    on_face,
+    rolled_step,
+)
 from trajectotree.search.stance import (
     SpatialHoldingLp,
     SpatialPushLp,
@@ -901,14 +908,18 @@ class _SpaceSearch:
         +-x, +-y, +-z in W they resist within their motors."""
         return self.holding_at(depth, self.p_BC[list(contacts)], self.n_B[list(contacts)], fingers, q_rows)
 
-    def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows) -> tuple[float, float]:
-        """holding's (N m, N) for `fingers` on the points p_BC (k, 3) m in B of the faces of outward normals n_B."""
+    def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows, J=None) -> tuple[float, float]:
+        """holding's (N m, N) for `fingers` on the points p_BC (k, 3) m in B of the faces of outward normals n_B;
+        J (k, 3, n): the contact points' Jacobians where the caller has them."""
         R = box_transform(self.poses[depth]).rotation().matrix()
         p_WC, n_W = p_BC @ R.T, n_B @ R.T
         q = np.zeros((self.scene.num_fingers, len(self.scene.fingers[0].q_lower)))
         for i, row in zip(fingers, q_rows):
             q[i] = row
-        J = np.array([self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)])
+        if J is None:
+            J = np.array(
+                [self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)]
+            )
         W = edge_wrenches_W(p_WC, n_W, self.mu, PYRAMID_EDGES)
         A = spatial_torque_rows(J, n_W, self.mu, PYRAMID_EDGES)
         tau_g = self.scene.gravity_torques(q)[list(fingers)]
@@ -1053,10 +1064,16 @@ class _SpaceSearch:
         poses = self.poses[list(ends)]
         R = np.array([box_transform(pose).rotation().matrix() for pose in poses])
         p_WF = poses[:, None, 4:] + np.einsum("eij,ekj->eki", R, p_BC + r * n_B)  # (2, k, 3) the rolled tip centres
-        q_rolled = np.stack(
-            [moved_joints(fingers[i], [node.q[i], held[i].q], p_WF[:, k]) for k, i in enumerate(stance)], axis=1
+        q_rolled = [moved_joints(fingers[i], [node.q[i], held[i].q], p_WF[:, k]) for k, i in enumerate(stance)]
+        p_WC = poses[:, None, 4:] + np.einsum("eij,ekj->eki", R, p_BC)
+        J = np.stack(  # (2, k, 3, n) at the rolled contact points
+            [chain_jacobian(*chain(fingers[i], q)[:2], p_WC[:, k]) for k, (i, q) in enumerate(zip(stance, q_rolled))],
+            axis=1,
         )
-        torque = max(self.holding_at(d, p, n_B, stance, q)[0] for d, p, q in zip(ends, p_BC, q_rolled))
+        q_rolled = np.stack(q_rolled, axis=1)
+        torque = max(
+            self.holding_at(d, p, n_B, stance, q, J[e])[0] for e, (d, p, q) in enumerate(zip(ends, p_BC, q_rolled))
+        )
         if torque > self.tau_limit:
             return offsets, torque, Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
         return offsets, torque, None
