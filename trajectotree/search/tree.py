@@ -986,7 +986,8 @@ class _SpaceSearch:
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
         """The children of `node`, best first: no switch, then each free finger's moves (its stance's push
         capacity, larger first), each finger's new contacts on faces turned to its base before those turned
-        away, then freeing more fingers (freedom), then facing it more squarely, first."""
+        away, then freeing more fingers (freedom), then facing it more squarely, first. A stance holds the cube
+        within the motors at its planned contacts and at those its fingertips roll to (rolled_stance)."""
         depth = node.depth + 1
         held = {i: self.finger_reach(depth, i, c, node.q[i]) for i, c in enumerate(node.contacts)}
         stuck = [i for i, r in held.items() if not r.reachable]
