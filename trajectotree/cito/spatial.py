@@ -69,6 +69,11 @@ SPACE_INTERVALS = 10  # knots per segment - 1
 SPACE_DT = 0.1  # s between knots: a segment lasts 1 s
 PYRAMID_EDGES = 8  # as the search's stances, turned as theirs (SpaceSegmentRows.edges_B)
 SWITCH_CLEARANCE = 0.01  # m, the lifted fingertip's least gap at mid-segment (sin profile, as in the plane)
+# m, the least gap between the switching fingertip sphere and each other one on the lifted knots: the fingertips
+# of seed-0 goal 11's planned swing passed 10.9 mm apart centre to centre (the spheres 9 mm into each other) and
+# struck executed; 5 mm leaves room for the holders' rolling (a few mm a segment, search.spatial_rolling) and the
+# executed swing's lift (controller.grasp.swing_lift)
+TIP_GAP = 0.005
 WEIGHT_FORCE = 0.01  # per N^2 of edge magnitude
 WEIGHT_JOINT_STEP = 1.0  # per rad^2 of joint motion between knots
 WEIGHT_PHI = 1.0  # per rad^2 of correction
@@ -404,6 +409,8 @@ class SpaceSegmentRows:
         self.links = links  # with the link rows (each capsule's axis at least its radius off the box)
         F, n = scene.num_fingers, len(scene.fingers[0].q_lower)
         self.clearance_row = 9 + 3 * F + n * F
+        self.tip_row = self.clearance_row + 1  # F rows: the switching fingertip's squared distance from each
+        self.link_row = self.tip_row + F
         self.layout = _Layout(F, n, PYRAMID_EDGES)
         self.K, self.h = intervals + 1, dt
         s, self.rate = time_law(intervals)
@@ -437,6 +444,7 @@ class SpaceSegmentRows:
         # 1/m: the squared gap's row divided by twice the largest gap, so that its gradient is about one, as the
         # pins' (20 segments of three seed-0 goals: 887 IPOPT iterations in all, 1046 unscaled)
         self.clearance_scale = 1.0 / (2 * (scene.tip_radius + SWITCH_CLEARANCE))
+        self.tip_scale = 1.0 / (2 * (2 * scene.tip_radius + TIP_GAP))  # 1/m, the tip rows' likewise
         self.inertia = scene.object.inertia
         self.half = scene.object.half
         # kg m^2: L is in units of the cube's largest principal inertia (rad/s), its row's gradients near one
@@ -474,8 +482,9 @@ class SpaceSegmentRows:
         return x, R, f_B, f_W, n_W, kin
 
     def knot_values(self, Z):
-        """(rows (K, 9 + 3F + nF + 1): F, T, L balance, fingertip pins (3F), joint torques (nF), clearance (1)),
-        and the joint torques (K, F, n), the fingertip centres (K, F, 3)."""
+        """(rows (K, 9 + 3F + nF + 1 + F): F, T, L balance, fingertip pins (3F), joint torques (nF), clearance (1),
+        the switching fingertip's squared distance from each (F), then the links'), and the joint torques (K, F, n),
+        the fingertip centres (K, F, 3)."""
         x, R, f_B, f_W, n_W, (tips, taus) = self._knot(Z, False)
         return self._rows(x, R, f_B, f_W, tips, taus), taus, tips
 
@@ -486,10 +495,13 @@ class SpaceSegmentRows:
         targets = x["p"][:, None, :] + np.einsum("kij,kfj->kfi", R, self.p_BC + self.r * self.n_B)
         pins = (tips - targets).reshape(self.K, -1)
         clearance = np.zeros(self.K)
+        apart = np.zeros((self.K, self.layout.num_fingers))
         if self.spec.switching is not None:
             out = self._outside(R, tips[:, self.spec.switching] - x["p"])[1]
             clearance = np.sum(out * out, -1) * self.clearance_scale
-        rows = [force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]]
+            d = tips[:, self.spec.switching, None, :] - tips
+            apart = np.sum(d * d, -1) * self.tip_scale
+        rows = [force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None], apart]
         if self.links:
             rows.append(self._link_rows(x, R)[0].reshape(self.K, -1))
         return np.concatenate(rows, axis=1)
@@ -546,8 +558,13 @@ class SpaceSegmentRows:
         for k in range(self.K):
             pin = np.where(np.repeat(self.pinned[k], 3), 0.0, np.inf)
             gap = (self.r + self.clearance[k]) ** 2 * self.clearance_scale if self.clearance[k] > 0 else -np.inf
-            lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap]]))
-            hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf]]))
+            apart = np.full(F, -np.inf)
+            if self.clearance[k] > 0:  # the lifted knots: the ends are the nodes, whose fingers the search kept apart
+                apart = np.where(
+                    np.arange(F) == self.spec.switching, -np.inf, (2 * self.r + TIP_GAP) ** 2 * self.tip_scale
+                )
+            lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap], apart]))
+            hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf], np.full(F, np.inf)]))
             if self.links:  # on the free knots: the nodes' links the search kept 2 mm off
                 free = 0 < k < self.K - 1
                 lo[-1] = np.concatenate([lo[-1], self.hand.link_radius.ravel() if free else np.full(F * L, -np.inf)])
@@ -560,7 +577,7 @@ class SpaceSegmentRows:
         lay = self.layout
         F, n, m = lay.num_fingers, lay.joints, lay.edges
         L = self.hand.link_joint.shape[-1]
-        mask = np.zeros((self.clearance_row + 1 + (F * L if self.links else 0), lay.width), dtype=bool)
+        mask = np.zeros((self.link_row + (F * L if self.links else 0), lay.width), dtype=bool)
         mask[:, lay.slice("phi")] = True
         lam, q = lay.slice("lam").start, lay.slice("q").start
         for row, name in ((0, "F"), (3, "T"), (6, "L")):
@@ -581,9 +598,13 @@ class SpaceSegmentRows:
             s = self.spec.switching
             mask[c, lay.slice("p")] = True
             mask[c, q + n * s : q + n * (s + 1)] = True
+            for i in range(F):  # the switching fingertip's distance from finger i's
+                if i != s:
+                    mask[self.tip_row + i, q + n * s : q + n * (s + 1)] = True
+                    mask[self.tip_row + i, q + n * i : q + n * (i + 1)] = True
         if self.links:
             for i in range(F):  # finger i's capsules
-                rows = slice(c + 1 + L * i, c + 1 + L * (i + 1))
+                rows = slice(self.link_row + L * i, self.link_row + L * (i + 1))
                 mask[rows, lay.slice("phi")] = mask[rows, lay.slice("p")] = True
                 mask[rows, q + n * i : q + n * (i + 1)] = True
         return mask
@@ -633,6 +654,7 @@ class SpaceSegmentRows:
             Jk[:, tau_rows, phi] = tau_phi[:, i]
         if self.spec.switching is not None:
             self._clearance_columns(Jk, x, R, J_r, tips, J_tip)
+            self._tip_columns(Jk, tips, J_tip)
         if self.links:
             self._link_columns(Jk, x, R, J_r)
         return rows, Jk, self.pair_values(Z), *self._pair_jacobians(x, R, J_r)
@@ -649,11 +671,22 @@ class SpaceSegmentRows:
         Jk[:, c, lay.slice("p")] = -gR
         Jk[:, c, lay.slice("phi")] = np.einsum("ki,kij->kj", g, _skew(p_B) @ J_r)
 
+    def _tip_columns(self, Jk, tips, J_tip) -> None:
+        """The tip rows |d|^2 scaled, d = tip_s - tip_i (both in W, where a finger's joints alone move its tip)."""
+        lay, s, n = self.layout, self.spec.switching, self.layout.joints
+        q0 = lay.slice("q").start
+        for i in range(lay.num_fingers):
+            if i == s:
+                continue
+            g = 2 * self.tip_scale * (tips[:, s] - tips[:, i])  # (K, 3) d row / d tip_s
+            Jk[:, self.tip_row + i, q0 + n * s : q0 + n * (s + 1)] = np.einsum("kj,kjc->kc", g, J_tip[:, s])
+            Jk[:, self.tip_row + i, q0 + n * i : q0 + n * (i + 1)] = -np.einsum("kj,kjc->kc", g, J_tip[:, i])
+
     def _link_columns(self, Jk, x, R, J_r) -> None:
         lay = self.layout
         F, n, L = lay.num_fingers, lay.joints, self.hand.link_joint.shape[-1]
         _, dq, dp, dphi = self._link_rows(x, R, J_r)
-        first, q0 = self.clearance_row + 1, lay.slice("q").start
+        first, q0 = self.link_row, lay.slice("q").start
         for i in range(F):
             rows = slice(first + L * i, first + L * (i + 1))
             Jk[:, rows, q0 + n * i : q0 + n * (i + 1)] = dq[:, i]
@@ -1378,7 +1411,7 @@ def _joint_bounds(rows: SpaceSegmentRows, s: int, num_segments: int) -> tuple[np
     if s > 0:
         lo[0], hi[0] = -np.inf, np.inf
     if rows.links and s < num_segments - 1:
-        lo[-1, rows.clearance_row + 1 :] = rows.hand.link_radius.ravel()
+        lo[-1, rows.link_row :] = rows.hand.link_radius.ravel()
     return lo, hi
 
 

@@ -94,6 +94,14 @@ from trajectotree.search.grasp import FormClosure, SpatialClosure
 from trajectotree.search.initial_grasp import GraspTables, initial_grasp_candidates, stance_fingers
 from trajectotree.search.reach import Reachability, path_refusal
 from trajectotree.search.spatial_reach import SpatialReach, box_transform
+from trajectotree.search.spatial_rolling import (
+    chain,
+    chain_jacobian,
+    lifted_swing,
+    moved_joints,
+    on_face,
+    rolled_step,
+)
 from trajectotree.search.stance import (
     SpatialHoldingLp,
     SpatialPushLp,
@@ -823,6 +831,7 @@ class _SpaceNode:
     parent: _SpaceNode | None
     stance_torque: float | None = None  # N m
     push: float | None = None  # N
+    rolled: np.ndarray | None = None  # (F, 3) m in B, each fingertip rolled off its contact since it landed
 
 
 @dataclass(frozen=True)
@@ -835,6 +844,7 @@ class _SpaceChild:
     q_held: dict  # {finger: (n,)} the holding fingers' angles at the child's pose
     stance_torque: float
     push: float
+    rolled: np.ndarray  # (F, 3) m in B, the child's rolled offsets (_SpaceSearch.rolled_stance)
 
 
 class _SpaceSearch:
@@ -896,12 +906,20 @@ class _SpaceSearch:
         """(N m, N): the least largest joint torque with which `fingers` on `contacts` at angles q_rows
         hold the box at rest at pose `depth` (their own weight included), and the hardest push along
         +-x, +-y, +-z in W they resist within their motors."""
+        return self.holding_at(depth, self.p_BC[list(contacts)], self.n_B[list(contacts)], fingers, q_rows)
+
+    def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows, J=None) -> tuple[float, float]:
+        """holding's (N m, N) for `fingers` on the points p_BC (k, 3) m in B of the faces of outward normals n_B;
+        J (k, 3, n): the contact points' Jacobians where the caller has them."""
         R = box_transform(self.poses[depth]).rotation().matrix()
-        p_WC, n_W = self.p_BC[list(contacts)] @ R.T, self.n_B[list(contacts)] @ R.T
+        p_WC, n_W = p_BC @ R.T, n_B @ R.T
         q = np.zeros((self.scene.num_fingers, len(self.scene.fingers[0].q_lower)))
         for i, row in zip(fingers, q_rows):
             q[i] = row
-        J = np.array([self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)])
+        if J is None:
+            J = np.array(
+                [self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)]
+            )
         W = edge_wrenches_W(p_WC, n_W, self.mu, PYRAMID_EDGES)
         A = spatial_torque_rows(J, n_W, self.mu, PYRAMID_EDGES)
         tau_g = self.scene.gravity_torques(q)[list(fingers)]
@@ -927,17 +945,49 @@ class _SpaceSearch:
                 return None, Refusal(RefusalKind.UNREACHABLE, fingers=(child.finger,), cause=reach.refusal)
             q[child.finger] = reach.q
         q = np.array(q.tolist(), dtype=float)
-        clash = self.reach.links_clear(self.poses[depth], q)
+        clash = self.reach.links_clear(self.poses[depth], q) or self.swing_clash(child, q)
         if clash:
             return None, clash
-        node = _SpaceNode(depth, child.contacts, q, child.finger, child.parent, child.stance_torque, child.push)
+        node = _SpaceNode(
+            depth, child.contacts, q, child.finger, child.parent, child.stance_torque, child.push, child.rolled
+        )
         return node, None
+
+    def swing_clash(self, child: _SpaceChild, q_child) -> Refusal | None:
+        """Why the moving finger's swing to `child` (joint angles q_child (F, n) at its pose) is refused (None when it
+        is not, or no finger moves): at a few points of its lifted path (spatial_rolling.lifted_swing, the cube on
+        the geodesic between the two poses) it comes within search.finger_clearance of another finger, the holders
+        where their fingertips have rolled to (the fingertip spheres of seed-0 goal 25's planned swing struck, executed,
+        where a holder had rolled 16 mm toward the swing's path). With search.rolled_stances false: no check."""
+        i, parent = child.finger, child.parent
+        if i is None or not self.config.rolled_stances:
+            return None
+        d0 = parent.depth
+        a_B = self.p_BF[parent.contacts[i]] + parent.rolled[i]
+        s, p_B = lifted_swing(a_B, self.p_BF[child.contacts[i]], self.scene.object.half, self.scene.tip_radius)
+        quats = quaternion_slerp(self.poses[d0][:4], self.poses[d0 + 1][:4], s)
+        poses = np.hstack([quats, (1.0 - s)[:, None] * self.poses[d0][4:] + s[:, None] * self.poses[d0 + 1][4:]])
+        R = np.array([box_transform(pose).rotation().matrix() for pose in poses])  # (S, 3, 3)
+        u = s[:, None, None]
+        targets_B = self.p_BF[list(parent.contacts)] + (1.0 - u) * parent.rolled + u * child.rolled  # (S, F, 3)
+        targets_B[:, i] = p_B
+        targets_W = poses[:, None, 4:] + np.einsum("sij,sfj->sfi", R, targets_B)
+        q_start = (1.0 - u) * parent.q + u * q_child  # (S, F, n)
+        q_all = np.stack(
+            [moved_joints(f, q_start[:, j], targets_W[:, j]) for j, f in enumerate(self.scene.fingers)], axis=1
+        )
+        for pose, q in zip(poses, q_all):
+            clash = self.reach.links_clear(pose, q)
+            if clash is not None and clash.kind == RefusalKind.FINGERS_COLLIDE and i in clash.fingers:
+                return replace(clash, count=1)
+        return None
 
     # -- GetNeighbors ---------------------------------------------------------------------------
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
         """The children of `node`, best first: no switch, then each free finger's moves (its stance's push
         capacity, larger first), each finger's new contacts on faces turned to its base before those turned
-        away, then freeing more fingers (freedom), then facing it more squarely, first."""
+        away, then freeing more fingers (freedom), then facing it more squarely, first. A stance holds the cube
+        within the motors at its planned contacts and at those its fingertips roll to (rolled_stance)."""
         depth = node.depth + 1
         held = {i: self.finger_reach(depth, i, c, node.q[i]) for i, c in enumerate(node.contacts)}
         stuck = [i for i, r in held.items() if not r.reachable]
@@ -953,19 +1003,26 @@ class _SpaceSearch:
                 self.refused[Refusal(RefusalKind.FINGER_HELD, fingers=(finger,), stance=stance, mu_plan=self.mu)] += 1
                 continue
             torque0, _ = self.holding(node.depth, contacts, stance, node.q[list(stance)])
+            if torque0 > self.tau_limit:
+                self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
+                continue
+            rolled, rolled_torque, why = self.rolled_stance(node, depth, stance, held)  # before the push's six LPs
+            if why is not None:
+                self.refused[why] += 1
+                continue
             torque1, push = self.holding(depth, contacts, stance, [held[i].q for i in stance])
             torque = max(torque0, torque1)
             if torque > self.tau_limit:
                 self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
                 continue
-            ranked.append((finger is not None, -push, finger, stance, torque, push))
+            ranked.append((finger is not None, -push, finger, stance, max(torque, rolled_torque), push, rolled))
         out = []
-        for _, _, finger, stance, torque, push in sorted(ranked, key=lambda r: r[:2]):
+        for _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:2]):
             q_held = {i: held[i].q for i in stance}
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled))
                 continue
-            others = self.p_BF[[node.contacts[i] for i in stance]]
+            others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
             for c in range(len(self.p_BC)):
                 if c == node.contacts[finger]:
@@ -978,8 +1035,49 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled))
         return out
+
+    def rolled_stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[np.ndarray, float, Refusal | None]:
+        """(the child's rolled offsets (F, 3) m in B, the largest joint torque (N m) with which `stance` holds the cube
+        at its rolled contacts, why it cannot (None when it can)) for the transition from `node` to the child at
+        `depth` in which `stance` holds at angles held[i].q (spatial_rolling): at both ends each rolled contact on its
+        face and search.rolled_corner_gap short of its edges (a sphere that rolls onto an edge pivots over it), the
+        stance in closure at mu_plan and held within the motors there. The finger that moves lands on its planned
+        point (offset 0). With search.rolled_stances false: no offsets, no checks."""
+        offsets = np.zeros_like(node.rolled)
+        if not self.config.rolled_stances:
+            return offsets, 0.0, None
+        R0, R1 = (box_transform(self.poses[d]).rotation().matrix() for d in (node.depth, depth))
+        fingers, r = self.scene.fingers, self.scene.tip_radius
+        for i in stance:
+            step = rolled_step(fingers[i], node.q[i], held[i].q, R0, R1, self.n_B[node.contacts[i]], r)
+            offsets[i] = node.rolled[i] + step
+        contacts, gap = [node.contacts[i] for i in stance], self.config.rolled_corner_gap
+        ends = (node.depth, depth)
+        p_BC = np.stack([self.p_BC[contacts] + rolled[list(stance)] for rolled in (node.rolled, offsets)])  # (2, k, 3)
+        n_B = self.n_B[contacts]
+        for p in p_BC:
+            if not np.all(on_face(p, n_B, self.scene.object.half, gap)):
+                return offsets, np.inf, Refusal(RefusalKind.STANCE_ROLLS_OFF, stance=stance, limit=gap)
+            if not self.closure.check(p, n_B).in_closure:
+                return offsets, np.inf, Refusal(RefusalKind.STANCE_ROLLED_OPEN, stance=stance, mu_plan=self.mu)
+        poses = self.poses[list(ends)]
+        R = np.array([box_transform(pose).rotation().matrix() for pose in poses])
+        p_WF = poses[:, None, 4:] + np.einsum("eij,ekj->eki", R, p_BC + r * n_B)  # (2, k, 3) the rolled tip centres
+        q_rolled = [moved_joints(fingers[i], [node.q[i], held[i].q], p_WF[:, k]) for k, i in enumerate(stance)]
+        p_WC = poses[:, None, 4:] + np.einsum("eij,ekj->eki", R, p_BC)
+        J = np.stack(  # (2, k, 3, n) at the rolled contact points
+            [chain_jacobian(*chain(fingers[i], q)[:2], p_WC[:, k]) for k, (i, q) in enumerate(zip(stance, q_rolled))],
+            axis=1,
+        )
+        q_rolled = np.stack(q_rolled, axis=1)
+        torque = max(
+            self.holding_at(d, p, n_B, stance, q, J[e])[0] for e, (d, p, q) in enumerate(zip(ends, p_BC, q_rolled))
+        )
+        if torque > self.tau_limit:
+            return offsets, torque, Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
+        return offsets, torque, None
 
     def freedom(self, contacts) -> int:
         """How many fingers of a grasp on `contacts` may let go (the other three in closure at mu_plan):
@@ -996,7 +1094,7 @@ class _SpaceSearch:
             contacts = tuple(range(len(self.p_BC) - self.scene.num_fingers, len(self.p_BC)))
             q = np.asarray(self.root.q, dtype=float)
             torque, push = self.holding(0, contacts, tuple(range(self.scene.num_fingers)), q)
-            return [_SpaceNode(0, contacts, q, None, None, torque, push)]
+            return [_SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)))]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -1019,7 +1117,8 @@ class _SpaceSearch:
             fingers = tuple(range(self.scene.num_fingers))
             torque, push = self.holding(0, contacts, fingers, q)
             if torque <= self.tau_limit:
-                out.append(((-freedom, -push), _SpaceNode(0, contacts, q, None, None, torque, push)))
+                node = _SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)))
+                out.append(((-freedom, -push), node))
             if len(out) == SPACE_MAX_ROOTS:
                 break
         return [node for _, node in sorted(out, key=lambda r: r[0])]
