@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import linprog
 
-from trajectotree.cli.space_simulate import read_space_plan
 from trajectotree.config import config_from_dict
 from trajectotree.execution.executor import control_friction
 from trajectotree.execution.space_control import CONE_FACETS, SpaceGraspController, SpaceReference
+from trajectotree.execution.space_plan import read_space_plan
 from trajectotree.execution.space_run import space_plan_in_effect
 from trajectotree.geometry import box_face_normals, quaternion_matrices
 from trajectotree.scene.spatial import build_space_scene
@@ -78,8 +78,8 @@ def stance_needs(plan_dir: Path) -> np.ndarray:
     return np.array(rows)
 
 
-if __name__ == "__main__":
-    for plan_dir in map(Path, sys.argv[1:]):
+def main(argv: list[str]) -> int:
+    for plan_dir in map(Path, argv):
         needs = stance_needs(plan_dir)
         most = {k: np.max(needs[needs[:, 0] == k, 1], initial=-np.inf) for k in (4, 3)}  # -inf: no such stance
         print(
@@ -87,3 +87,8 @@ if __name__ == "__main__":
             f"time above 0.32: {np.mean(needs[:, 1] > 0.32):.2f}, above 0.40: {np.mean(needs[:, 1] > 0.40):.2f}",
             flush=True,
         )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

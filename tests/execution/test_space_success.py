@@ -29,6 +29,7 @@ def _result(final_deg: float, dropped: bool) -> SpaceSimResult:
         orientation_error_rad=np.radians([0.0, 0.5 * final_deg, final_deg]),
         position_error_m=np.array([0.0, 0.06 if dropped else 0.001, 0.001]),
         sim_time_s=1.0,
+        world={},  # the plan's world
     )
 
 
