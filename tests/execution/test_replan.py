@@ -132,6 +132,7 @@ def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_f
     np.testing.assert_allclose(new.trajectory.q[0], start.q, atol=1e-9)
     assert new.trajectory.x[-1, 2] == pytest.approx(1.2, abs=1e-9)  # the old plan's goal
     assert new.config.scene.mu == 0.6 and new.config.search.time_budget_s == rules.search_deadline_s
+    assert new.config.search.budget_clock == "wall"  # a deadline in the world, which does not wait
     ready = np.array(event.segment_ready_s)
     assert len(ready) == len(new.contact_plan.nodes) - 1 and np.all(np.isfinite(ready))
     assert event.latency_s == ready[0] and np.all(ready[1:] > ready[0]) and event.compute_s >= ready.max()

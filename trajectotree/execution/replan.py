@@ -446,7 +446,7 @@ def replan(
             box_mass=mass,
             object_inertia=None if config.scene.object_inertia is None else config.scene.inertia_zz(mass),
         ),
-        search=dataclasses.replace(config.search, time_budget_s=deadlines.search_s),
+        search=dataclasses.replace(config.search, time_budget_s=deadlines.search_s, budget_clock="wall"),
     )
     first_first = config.cito.formulation == "keyframes"
     t0 = time.perf_counter()

@@ -113,6 +113,31 @@ from trajectotree.search.stance import (
 from trajectotree.search.switch_bound import SwitchBound
 
 
+@dataclass(frozen=True)
+class SearchClock:
+    """When a search started: by the wall clock (the time it reports) and by the clock its budget counts
+    (search.budget_clock: "cpu", the search thread's CPU seconds, so a loaded machine plans as a quiet one; "wall",
+    for the replanner, whose world does not wait)."""
+
+    wall: float  # s, time.perf_counter() at the start
+    budget: float  # s, the budget's clock at the start
+    cpu: bool  # the budget counts this thread's CPU time
+
+    @classmethod
+    def start(cls, config: SearchConfig) -> SearchClock:
+        cpu = config.budget_clock == "cpu"
+        return cls(time.perf_counter(), time.thread_time() if cpu else time.perf_counter(), cpu)
+
+    def over(self, config: SearchConfig) -> bool:
+        """The search has spent more than config.time_budget_s on its budget's clock."""
+        now = time.thread_time() if self.cpu else time.perf_counter()
+        return now - self.budget > config.time_budget_s
+
+    def elapsed(self) -> float:
+        """s of wall clock since the start."""
+        return time.perf_counter() - self.wall
+
+
 def object_path(initial_pose, goal: GoalPose | float, num_nodes: int) -> np.ndarray:
     """(N, 3) poses x*_n from the initial pose to `goal`, linearly interpolated in x, y and theta:
     a GoalPose, or an orientation (rad in W) at the same position."""
@@ -375,7 +400,9 @@ class _Search:
         dead_end = (self.not_in_closure(start) if candidate else None) or self.unreachable(_Node(0, start, None, None))
         return Refusal(RefusalKind.INITIAL_GRASP, cause=dead_end) if dead_end else None
 
-    def run(self, start: tuple[float, ...], t0: float, budget: int, total: int) -> tuple[_Node | None, Refusal | None]:
+    def run(
+        self, start: tuple[float, ...], t0: SearchClock, budget: int, total: int
+    ) -> tuple[_Node | None, Refusal | None]:
         """Algorithm 1 from the root `start` (precheck passed): one DFS to the goal with at most
         `budget` expansions when the path has at most search.window_segments segments, else
         window by window (module doc), each window with at most `budget` expansions and all of
@@ -405,7 +432,7 @@ class _Search:
         return None, why
 
     def window(
-        self, anchor: _Node, target: int, t0: float, budget: int, toward_goal: bool
+        self, anchor: _Node, target: int, t0: SearchClock, budget: int, toward_goal: bool
     ) -> tuple[_Node | None, Refusal | None]:
         """A node at depth `target` below `anchor` by Algorithm 1's DFS (SelectNode: deepest, then
         least push shortfall, then lowest heuristic), with at most `budget` expansions.
@@ -417,7 +444,7 @@ class _Search:
         while open_set:
             if self.expanded - expanded0 >= budget:
                 return None, Refusal(RefusalKind.NODE_BUDGET, count=budget)
-            if time.perf_counter() - t0 > self.config.time_budget_s:
+            if t0.over(self.config):
                 return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
             node = open_set[-1].pop()  # SelectNode: the deepest open node
             if not open_set[-1]:
@@ -475,13 +502,13 @@ class _Search:
             stance_push_capacity=None if stance_push_capacity == -np.inf else stance_push_capacity,
         )
 
-    def stats(self, t0: float, roots: int = 0, candidates: int = 0) -> SearchStats:
+    def stats(self, t0: SearchClock, roots: int = 0, candidates: int = 0) -> SearchStats:
         return SearchStats(
             expanded=self.expanded,
             generated=self.generated,
             lp_calls=self.closure.lp_calls,
             ik_calls=self.reach.ik_calls,
-            time_s=time.perf_counter() - t0,
+            time_s=t0.elapsed(),
             initial_grasps_searched=roots,
             initial_grasp_candidates=candidates,
         )
@@ -663,13 +690,13 @@ def find_contact_plan(scene: Scene, goal, config: SearchConfig, tables: GraspTab
     search ranks them, inside its time)."""
     goal = check_goal(goal)
     config = with_segments(config, scene.config.initial_pose, goal)
-    t0 = time.perf_counter()
+    t0 = SearchClock.start(config)
     levels, grids = grid_levels(config), []
     while True:
         turned = False
         for n, level in enumerate(levels):
             left = config.max_expansions - sum(g.search.expanded for g in grids)
-            if left <= 0 or time.perf_counter() - t0 > config.time_budget_s:
+            if left <= 0 or t0.over(config):
                 break
             if n == len(grids):
                 grids.append(_Grid(scene, goal, level, tables))
@@ -689,14 +716,14 @@ def find_contact_plan(scene: Scene, goal, config: SearchConfig, tables: GraspTab
     )
 
 
-def _total_stats(grids: list[_Grid], t0: float) -> SearchStats:
+def _total_stats(grids: list[_Grid], t0: SearchClock) -> SearchStats:
     """The statistics of the grids' searches together (each grid ranks its own candidates)."""
     return SearchStats(
         expanded=sum(g.search.expanded for g in grids),
         generated=sum(g.search.generated for g in grids),
         lp_calls=sum(g.search.closure.lp_calls for g in grids),
         ik_calls=sum(g.search.reach.ik_calls for g in grids),
-        time_s=time.perf_counter() - t0,
+        time_s=t0.elapsed(),
         initial_grasps_searched=sum(g.searched for g in grids),
         initial_grasp_candidates=sum(len(g.roots) for g in grids),
     )
@@ -718,13 +745,13 @@ class _Grid:
         self.last: AtRoot | None = None
         self.done = not self.roots
 
-    def search_next_root(self, t0: float, budget: int) -> None:
+    def search_next_root(self, t0: SearchClock, budget: int) -> None:
         """Algorithm 1 from the next candidate that passes the precheck (those that fail it
         skipped), with at most `budget` expansions; `leaf` is the goal node when it found a plan,
         and `done` set when it did or no root is left (search.max_initial_grasps searched, the
         budget or the time spent)."""
         for root in self.pending:
-            if self.searched >= self.config.max_initial_grasps or time.perf_counter() - t0 > self.config.time_budget_s:
+            if self.searched >= self.config.max_initial_grasps or t0.over(self.config):
                 break
             why = self.search.precheck(root, candidate=self.config.initial_arclengths is None)
             if why:
@@ -740,7 +767,7 @@ class _Grid:
             return
         self.done = True
 
-    def plan(self, t0: float) -> ContactPlan:
+    def plan(self, t0: SearchClock) -> ContactPlan:
         """The plan from `leaf`, or why this grid found none."""
         search, goal = self.search, self.search.goal
         stats = search.stats(t0, self.searched, len(self.roots))
@@ -1123,14 +1150,14 @@ class _SpaceSearch:
                 break
         return [node for _, node in sorted(out, key=lambda r: r[0])]
 
-    def run(self, root: _SpaceNode, t0: float) -> tuple[_SpaceNode | None, Refusal | None]:
+    def run(self, root: _SpaceNode, t0: SearchClock) -> tuple[_SpaceNode | None, Refusal | None]:
         """Depth-first search from `root` to the last node, within search.max_expansions and time_budget_s."""
         goal = len(self.poses) - 1
         stack: list = [root]
         while stack:
             if self.expanded >= self.config.max_expansions:
                 return None, Refusal(RefusalKind.NODE_BUDGET, count=self.expanded)
-            if time.perf_counter() - t0 > self.config.time_budget_s:
+            if t0.over(self.config):
                 return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
             item = stack.pop()
             if isinstance(item, _SpaceChild):
@@ -1178,7 +1205,7 @@ def find_space_contact_plan(
     """Algorithm 1 in space: a contact sequence for the hand in space `scene` (scene.spatial.SpaceScene)
     turning its box from the start pose (or the measured `root`'s pose and grasp) to the unit quaternion
     `goal_quaternion` [w, x, y, z], at friction mu (mu_plan), or why none was found."""
-    t0 = time.perf_counter()
+    t0 = SearchClock.start(config)
     goal = tuple(float(v) for v in goal_quaternion)
     search = _SpaceSearch(scene, goal, config, mu, root)
     roots = search.roots()
@@ -1194,7 +1221,7 @@ def find_space_contact_plan(
         generated=search.generated,
         lp_calls=search.lp_calls,
         ik_calls=search.reach.ik_calls,
-        time_s=time.perf_counter() - t0,
+        time_s=t0.elapsed(),
         initial_grasps_searched=searched,
         initial_grasp_candidates=len(roots),
     )
@@ -1217,14 +1244,14 @@ def space_initial_grasp(scene, goal_quaternion, config: SearchConfig, mu: float)
     """A one-node SpaceContactPlan holding the search's best-ranked initial grasp for the goal (_SpaceSearch.roots,
     no tree search), for general CITO in space, as the plane's `cito` takes the initial-grasp chooser's first
     choice; or, when no grasp at the start qualifies, why."""
-    t0 = time.perf_counter()
+    t0 = SearchClock.start(config)
     goal = tuple(float(v) for v in goal_quaternion)
     search = _SpaceSearch(scene, goal, config, mu)
     roots = search.roots()
     stats = SearchStats(
         lp_calls=search.lp_calls,
         ik_calls=search.reach.ik_calls,
-        time_s=time.perf_counter() - t0,
+        time_s=t0.elapsed(),
         initial_grasp_candidates=len(roots),
     )
     common = dict(goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION)
