@@ -25,7 +25,13 @@ from trajectotree.cli.common import (
 )
 from trajectotree.config import CONTROLLERS, ConfigError, check_controller
 from trajectotree.config.executor import executor_of
-from trajectotree.experiments.conditions import CONDITIONS, SPACE_CONDITIONS, SPACE_SPEC, check_condition
+from trajectotree.experiments.conditions import (
+    CONDITIONS,
+    DEFAULT_SPEC,
+    SPACE_CONDITIONS,
+    SPACE_SPEC,
+    check_condition,
+)
 from trajectotree.experiments.executions import run_executions
 from trajectotree.experiments.sweep import AXIS_ALIGNED_GOALS, METHODS, SweepSpec, run_sweep
 
@@ -166,33 +172,8 @@ def run(args) -> int:
         executors = [executor_of(c, closed_loop=args.closed_loop, replan=args.replan) for c in controllers]
     except ConfigError as e:
         raise (e.as_option("--controllers") if args.controllers else e) from None
-    summary = run_sweep_of_args(spec, args)
-    ran = (
-        run_executions(
-            args.out,
-            executors=executors,
-            conditions=conditions or ["nominal"],
-            gains=spec.config.controller,
-            sim=spec.config.sim,
-            workers=args.workers,
-            progress=not args.no_progress,
-        )
-        if controllers
-        else None
-    )
-    if args.json:
-        print_json({**summary.__dict__, "executions_run": ran})
-    else:
-        print(summary.line())
-        if ran is not None:
-            loop = " closed loop, replanning" if args.replan else " closed loop" if args.closed_loop else ""
-            print(
-                f"executions: {ran} run ({' '.join(controllers)}{loop} x "
-                f"{' '.join(conditions or ['nominal'])}); "
-                "the report tabulates them in executions.md"
-            )
-        print(f"next: trajectotree report {args.out}")
-    return 0
+    loop = " closed loop, replanning" if args.replan else " closed loop" if args.closed_loop else ""
+    return sweep_then_execute(args, spec, executors, conditions, DEFAULT_SPEC, f"{' '.join(controllers)}{loop}")
 
 
 def run_space(args) -> int:
@@ -220,13 +201,19 @@ def run_space(args) -> int:
         axis_aligned=args.axis_aligned,
     )
     check_space_graspable(build_args_scene(args, config), config, args)
+    return sweep_then_execute(args, spec, executors, conditions, SPACE_SPEC, " ".join(e.value for e in executors))
+
+
+def sweep_then_execute(args, spec: SweepSpec, executors: list, conditions: list, worlds, label: str) -> int:
+    """Runs the sweep `spec`, then the pending executions of its plans by `executors` in `conditions` (of the
+    condition spec `worlds`; none given: nominal), and prints what was done (`label` names the executors)."""
     summary = run_sweep_of_args(spec, args)
     ran = (
         run_executions(
             args.out,
             executors=executors,
             conditions=conditions or ["nominal"],
-            spec=SPACE_SPEC,
+            spec=worlds,
             gains=spec.config.controller,
             sim=spec.config.sim,
             workers=args.workers,
@@ -241,8 +228,8 @@ def run_space(args) -> int:
         print(summary.line())
         if ran is not None:
             print(
-                f"executions: {ran} run ({' '.join(e.value for e in executors)} x "
-                f"{' '.join(conditions or ['nominal'])}); the report tabulates them in executions.md"
+                f"executions: {ran} run ({label} x {' '.join(conditions or ['nominal'])}); "
+                "the report tabulates them in executions.md"
             )
         print(f"next: trajectotree report {args.out}")
     return 0
