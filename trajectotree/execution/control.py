@@ -127,6 +127,36 @@ class Estimates:
         return cls(mu=mu, mass=mass, reflex=0.0)
 
 
+@dataclass(frozen=True)
+class EstimatePorts:
+    """The input ports through which a closed-loop controller (planar or in space) reads the closed loop's estimates:
+    `friction` (1, the friction its cones follow), `mass_estimate` (1, kg), `reflex` (1, 0..1), `disturbance` (N in W:
+    2 in the plane, 3 in space)."""
+
+    friction: object  # InputPort
+    mass: object
+    reflex: object
+    disturbance: object
+
+    @classmethod
+    def declare(cls, system: LeafSystem, disturbance_size: int) -> EstimatePorts:
+        """Declares the four ports on `system`, in this order."""
+        return cls(
+            system.DeclareVectorInputPort("friction", 1),
+            system.DeclareVectorInputPort("mass_estimate", 1),
+            system.DeclareVectorInputPort("reflex", 1),
+            system.DeclareVectorInputPort("disturbance", disturbance_size),
+        )
+
+    def read(self, context) -> Estimates:
+        return Estimates(
+            mu=float(self.friction.Eval(context)[0]),
+            mass=float(self.mass.Eval(context)[0]),
+            reflex=float(self.reflex.Eval(context)[0]),
+            disturbance=np.array(self.disturbance.Eval(context)),
+        )
+
+
 class GraspController(LeafSystem):
     """Object-level grasp control of a planned box motion, open loop (see the module doc).
     Input ports: `box_state` (6: x, y, theta and their rates, in W, the box's planar
@@ -327,19 +357,11 @@ class ClosedLoopGraspController(GraspController):
 
     def __init__(self, scene: Scene, gains: ControllerGains, *, mu: float):
         super().__init__(scene, gains, mu=mu)
-        self.friction_port = self.DeclareVectorInputPort("friction", 1)
-        self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
-        self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
-        self.disturbance_port = self.DeclareVectorInputPort("disturbance", 2)
+        self.estimate_ports = EstimatePorts.declare(self, disturbance_size=2)
         self.clocks_port = self.DeclareVectorInputPort("clocks", scene.num_fingers)
 
     def estimates(self, context) -> Estimates:
-        return Estimates(
-            mu=float(self.friction_port.Eval(context)[0]),
-            mass=float(self.mass_estimate_port.Eval(context)[0]),
-            reflex=float(self.reflex_port.Eval(context)[0]),
-            disturbance=np.array(self.disturbance_port.Eval(context)),
-        )
+        return self.estimate_ports.read(context)
 
     def clocks(self, context, schedule: GraspSchedule) -> np.ndarray:
         return self.clocks_port.Eval(context).astype(int)

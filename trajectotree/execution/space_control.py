@@ -34,7 +34,7 @@ from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import EventStatus, LeafSystem
 
 from trajectotree.config import ControllerGains
-from trajectotree.execution.control import Estimates
+from trajectotree.execution.control import EstimatePorts, Estimates
 from trajectotree.execution.in_effect import declare_plan_input
 from trajectotree.execution.reference import swing_intervals, swing_profile
 from trajectotree.geometry import (
@@ -582,18 +582,10 @@ class SpaceClosedLoopGraspController(SpaceGraspController):
 
     def __init__(self, scene: SpaceScene, gains: ControllerGains, *, mu: float):
         super().__init__(scene, gains, mu=mu)
-        self.friction_port = self.DeclareVectorInputPort("friction", 1)
-        self.mass_estimate_port = self.DeclareVectorInputPort("mass_estimate", 1)
-        self.reflex_port = self.DeclareVectorInputPort("reflex", 1)
-        self.disturbance_port = self.DeclareVectorInputPort("disturbance", 3)
+        self.estimate_ports = EstimatePorts.declare(self, disturbance_size=3)
 
     def estimates(self, context) -> Estimates:
-        return Estimates(
-            mu=float(self.friction_port.Eval(context)[0]),
-            mass=float(self.mass_estimate_port.Eval(context)[0]),
-            reflex=float(self.reflex_port.Eval(context)[0]),
-            disturbance=np.array(self.disturbance_port.Eval(context)),
-        )
+        return self.estimate_ports.read(context)
 
     def grasp_forces(self, G, wrench, lambda_plan, lo, hi, torque, estimates: Estimates, scale) -> np.ndarray:
         """As SpaceGraspController's, at the estimated friction and, during the push reflex, with the squeeze as
