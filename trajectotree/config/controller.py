@@ -191,8 +191,8 @@ class ReplanConfig:
     # a tracking error or a lost contact (the plan's next node may be wrong) plans from the measured state, the hand
     # holding while the planner runs, rather than from the next node as a changed estimate does
     measured_start_on_error: bool = flag(False)
-    # A replan from the measured state (the hand holding while the planner runs): wall-clock budget of its contact
-    # search (its search.time_budget_s); a search without a plan by then is refused (the old plan goes on).
+    # A replan's wall-clock budget for its contact search (its search.time_budget_s; from the next node at most
+    # this too, so the latency stays bounded); a search without a plan by then is refused (the old plan goes on).
     search_deadline_s: float = ranged(0.5, "s", 0.0, 60.0, low_open=True)
     # and its first segment must be solved (all its attempts) this long after the state was measured, the search
     # included, or it is refused too: the hand holds no longer than about this, less than a segment lasts

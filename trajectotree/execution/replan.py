@@ -17,9 +17,10 @@ the same goal, with the estimated friction and mass, from one of two starts:
 - The next node (the default): the hand goes on along its plan while the planner runs, and the new
   plan starts from the plan in effect's next node, its planned state (every finger on the object, at
   rest). The search gets the time to that node less controller.replan.first_segment_reserve_s, the
-  first segment the time to that node; a plan ready in time is swapped in at that node (the update at
-  or after it), and one that is not (ReplanOutcome.LATE) or no plan at all leaves the old plan going on,
-  which cost the hand nothing. A node followed only by the goal has nothing to plan from: no replan.
+  first segment the time to that node, neither more than a replan from the measured state gets; a plan
+  ready in time is swapped in at that node (the update at or after it), and one that is not
+  (ReplanOutcome.LATE) or no plan at all leaves the old plan going on, which cost the hand nothing.
+  A node followed only by the goal has nothing to plan from: no replan.
 - The measured state, the hand holding at the node while the planner runs (a plan that ended short of
   its goal, and with controller.replan.measured_start_on_error a tracking error or a lost contact, for
   which the next node may be wrong): the search gets search_deadline_s, the first segment must be ready
@@ -254,7 +255,12 @@ class Replanner(LeafSystem):
         if t_node is None:  # the next node is the goal: nothing left to plan
             return dataclasses.replace(now, phase=rest)
         lead, rules = t_node - t, self._config.controller.replan
-        deadlines = Deadlines(max(lead - rules.first_segment_reserve_s, MIN_SEARCH_S), lead)
+        # no more time than a replan from the measured state gets: a far node leaves slack before the swap
+        # rather than a longer latency
+        deadlines = Deadlines(
+            min(max(lead - rules.first_segment_reserve_s, MIN_SEARCH_S), rules.search_deadline_s),
+            min(lead, rules.first_segment_deadline_s),
+        )
         start = node_state(now.plan.reference, t_node)
         mu, mass = self.estimates(context)
         event, new = replan(
