@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from trajectotree.cli import main
-from trajectotree.config import ConfigError
 
 GOAL = ["--goal-rpy", "0.6", "0", "0"]  # rad: 34 deg about x
 
@@ -69,19 +68,6 @@ def test_a_planar_plan_with_a_hand_in_space_exits_2(tiny_plan, capsys):
     assert "--hand 'fingerpro4' is a hand in space" in err and "holds a planar plan" in err
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "options, named",
-    [
-        (["--executor", "grasp-replan"], "--executor = 'grasp-replan' does not execute plans in space yet"),
-        (["--replan"], "--replan does not work with a plan in space yet"),
-    ],
-)
-def test_what_space_does_not_have_yet_exits_2(space_plan, capsys, options, named):
-    err = _refused(["simulate", str(space_plan), *options], space_plan, capsys)
-    assert named in err
-
-
 @pytest.mark.slow  # the shared plan: ~6 s
 def test_arrays_of_another_cube_exit_2(space_plan, tmp_path, capsys):
     """plan.json beside the arrays of a plan of a 7.5 cm cube (its contacts moved 5 mm out): refused, naming plan.npz,
@@ -94,14 +80,3 @@ def test_arrays_of_another_cube_exit_2(space_plan, tmp_path, capsys):
     np.savez(plan / "plan.npz", **arrays)
     err = _refused(["simulate", str(plan)], plan, capsys)
     assert "plan.npz" in err and "mm off the 65 x 65 x 65 mm cube plan.json names" in err
-
-
-def test_the_closed_loop_shorthand_is_taken_for_a_plan_in_space_and_replanning_is_not():
-    # a merge left --closed-loop among the refused options while --executor grasp-closed-loop ran
-    from argparse import Namespace
-
-    from trajectotree.cli.space_simulate import refuse_not_yet
-
-    refuse_not_yet(Namespace(plan_dir="p", closed_loop=True, replan=False))
-    with pytest.raises(ConfigError, match="--replan does not work with a plan in space yet"):
-        refuse_not_yet(Namespace(plan_dir="p", closed_loop=False, replan=True))

@@ -89,7 +89,7 @@ def test_sweep_in_space_plans_resumes_and_reports(tmp_path):
 @pytest.mark.parametrize(
     "extra, message",
     [
-        (["--replan"], "--controllers grasp --replan: the executor 'grasp-replan' does not execute"),
+        (["--controllers", "paper"], "--controllers paper: the executor 'paper' does not execute"),
         (["--conditions", "push-6N"], "condition = 'push-6N' is unknown"),
         (["--max-goal", "4"], "--max-goal"),
         (["--goals", "0"], "--goals"),

@@ -82,10 +82,6 @@ def test_axis_aligned_goals_are_the_first_of_the_23():
             [*SPACE, "--controllers", "paper"],
             "--controllers paper: the executor 'paper' does not execute plans in space",
         ),
-        (
-            [*SPACE, "--controllers", "grasp", "--replan", "--conditions", "friction-0.4"],
-            "--controllers grasp --replan: the executor 'grasp-replan' does not execute plans in space yet",
-        ),
         ([*SPACE, "--axis-aligned", "--goals", "24"], "--goals = 24 is out of range; valid range: [1, 23]"),
         (["--axis-aligned"], "--axis-aligned: the axis-aligned orientations are goals of a hand in space"),
     ],

@@ -118,7 +118,7 @@ def moved_start():
 
 @pytest.mark.slow
 def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_first(moved_start):
-    from trajectotree.execution.replan import replan
+    from trajectotree.execution.replan import PlanePlanning, replan
 
     scene, start = moved_start
     config = Config()
@@ -126,7 +126,9 @@ def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_f
     # deadlines no busy machine meets too late: this test is about the plan, not the time it takes
     rules = ReplanConfig(search_deadline_s=30.0, first_segment_deadline_s=300.0)
     executing = dataclasses.replace(old.config, controller=dataclasses.replace(old.config.controller, replan=rules))
-    event, new = replan(old, executing, start, 4.8, ReplanReason.TRACKING, 0.6, 0.05, scene, segment_workers=1)
+    planning = PlanePlanning(old, executing, scene, segment_workers=1)
+    event, solved = replan(planning, start, 4.8, ReplanReason.TRACKING, 0.6, 0.05)
+    new = solved.new
     assert event.outcome is ReplanOutcome.PLANNED and event.planned, event.status
     np.testing.assert_allclose(new.trajectory.x[0], start.object_pose, atol=1e-9)  # the measured state
     np.testing.assert_allclose(new.trajectory.q[0], start.q, atol=1e-9)

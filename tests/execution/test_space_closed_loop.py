@@ -149,7 +149,7 @@ def test_a_horizontal_push_is_measured_and_cancelled(scene, hold):
 
 def test_the_space_executor_s_closed_loop_ports(scene, hold):
     """add_space_executor(executor="grasp-closed-loop"): the inputs the plant feeds and the estimates it exports, by
-    name, in the cube's sizes; an executor space lacks (grasp-replan) is a ConfigError naming it and the choices."""
+    name, in the cube's sizes; an executor space lacks (paper) is a ConfigError naming it and the choices."""
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 
@@ -167,8 +167,8 @@ def test_the_space_executor_s_closed_loop_ports(scene, hold):
     outputs = {executor.get_output_port(i).get_name() for i in range(executor.num_output_ports())}
     assert outputs == {"actuation", "plan", *CLOSED_LOOP_ARRAYS}
     assert executor.GetOutputPort("disturbance").size() == 3 and executor.GetOutputPort("tracking_error").size() == 6
-    with pytest.raises(ConfigError, match="executor = 'grasp-replan' does not execute plans in space yet"):
-        add_space_executor(DiagramBuilder(), plant, hold, config, scene, executor="grasp-replan")
+    with pytest.raises(ConfigError, match="executor = 'paper' does not execute plans in space yet"):
+        add_space_executor(DiagramBuilder(), plant, hold, config, scene, executor="paper")
 
 
 @pytest.fixture(scope="module")

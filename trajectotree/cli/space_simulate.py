@@ -1,11 +1,13 @@
 """`trajectotree simulate PLAN_DIR` of a plan in space (plan.json `kind: space`, from `trajectotree plan --hand
-fingerpro4`): the plan executed by the grasp controller in space (trajectotree.execution.space_run), open loop or
-closed loop (--executor grasp-closed-loop, or --closed-loop), written as PLAN_DIR/sim.npz (t, x (K, 7), x_plan
-(K, 7), q, f_W (K, F, 3), f_W_plan; closed loop also the plane's CLOSED_LOOP_ARRAYS) and sim.json (dropped, the
-final orientation error in rad and position error in m, the executor; closed loop the final estimates); optionally
+fingerpro4`): the plan executed by the grasp controller in space (trajectotree.execution.space_run), open loop,
+closed loop (--executor grasp-closed-loop, or --closed-loop) or closed loop replanning from the measured state
+(--executor grasp-replan, or --replan: trajectotree.execution.space_replan), written as PLAN_DIR/sim.npz (t,
+x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan; closed loop also the plane's CLOSED_LOOP_ARRAYS) and sim.json (dropped, the
+final orientation error in rad and position error in m, the executor; closed loop the final estimates; replanning
+the replans with their outcomes); optionally
 watched as the plane's run is (--meshcat live, --html the self-contained playback, --gif, --forces the forces
 figure), in the plan's world or another (--sim-mu, --sim-mass, --push FX,FY,FZ@T: the controller keeps the plan's
-values). What space does not have yet (replanning) is refused before anything is read or written."""
+values)."""
 
 from __future__ import annotations
 
@@ -25,9 +27,6 @@ from trajectotree.execution.space_plan import (
 )
 from trajectotree.io import PLAN_JSON, PLAN_NPZ, SIM_JSON, SIM_NPZ, reading
 from trajectotree.scene.spatial import is_space_hand
-
-# The options of `simulate` that a plan in space does not take yet, by their argparse names.
-NOT_YET = {"replan": "--replan"}
 
 
 def is_space_plan(plan_dir: str | Path) -> bool:
@@ -52,16 +51,6 @@ def check_hand_fits_plan(args, space_plan: bool) -> None:
     )
 
 
-def refuse_not_yet(args) -> None:
-    """ConfigError naming the first option a plan in space does not take yet."""
-    given = [option for name, option in NOT_YET.items() if getattr(args, name, None) not in (None, False)]
-    if given:
-        raise ConfigError(
-            f"{given[0]} does not work with a plan in space yet (PLAN_DIR {str(args.plan_dir)!r}): execution by "
-            "the grasp controller, open or closed loop, so far"
-        )
-
-
 def simulate_space_into(args) -> int:
     """`simulate` of the plan in space in PLAN_DIR, whose lock the command holds."""
     from trajectotree.execution.space_control import SpaceReference
@@ -69,7 +58,6 @@ def simulate_space_into(args) -> int:
     from trajectotree.scene.spatial import build_space_scene
 
     check_hand_fits_plan(args, space_plan=True)
-    refuse_not_yet(args)
     check_output_dir("PLAN_DIR", args.plan_dir, (SIM_JSON, SIM_NPZ))
     data, arrays = read_space_plan(args.plan_dir)
     with reading(Path(args.plan_dir) / PLAN_JSON):
@@ -104,7 +92,14 @@ def simulate_space_into(args) -> int:
         print(f"Meshcat: {meshcat.web_url()}", file=sys.stderr if args.json else sys.stdout, flush=True)
     reference = SpaceReference.from_arrays(arrays)
     result = simulate_space(
-        reference, config, scene, executor=executor, conditions=conditions, meshcat=meshcat, html_path=args.html
+        reference,
+        config,
+        scene,
+        executor=executor,
+        conditions=conditions,
+        meshcat=meshcat,
+        html_path=args.html,
+        goal=data.get("goal_quaternion"),
     )
     summary = save_space_sim(result, args.plan_dir, plan_success)
     write_space_pictures(args, result, reference, scene, data.get("goal_quaternion"))
@@ -125,6 +120,8 @@ def simulate_space_into(args) -> int:
         )
         if result.closed_loop is not None:
             print(closed_loop_line(summary["closed_loop"], config.scene.mu, scene.object.mass))
+        for line in replan_lines(result.replans):
+            print(line)
         print(
             f"wrote {Path(args.plan_dir) / SIM_JSON}, {Path(args.plan_dir) / SIM_NPZ}"
             + "".join(f", {p}" for p in (args.html, args.gif, args.forces) if p)
@@ -172,3 +169,13 @@ def write_space_gif(result, reference, scene, path) -> None:
         newtons_per_cm=space_arrow_scale(reference),
         title=f"simulated run, {controller_text(result.controller)}",
     )
+
+
+def replan_lines(replans) -> list[str]:
+    """A line per replan (results.ReplanEvent): when, why, the estimates it planned with, its outcome and times."""
+    return [
+        f"replan at {e.time_s:.2f} s ({e.reason.value}; friction {e.mu:.3f}, mass {1e3 * e.mass:.1f} g): "
+        f"{e.outcome.value}, after {e.latency_s:.2f} s (search {e.search_s:.2f} s)"
+        + ("" if e.planned else f" ({e.status})")
+        for e in replans
+    ]

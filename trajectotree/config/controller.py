@@ -198,6 +198,11 @@ class ReplanConfig:
     # included, or it is refused too: the hand holds no longer than about this, less than a segment lasts
     # (cito.knots_per_segment x cito.dt, 1.2 s)
     first_segment_deadline_s: float = ranged(1.0, "s", 0.0, 600.0, low_open=True)
+    # In space a plan (its search, then every segment at once) takes 5-30 s, far more than a segment lasts (1 s): a
+    # replan there always plans from the measured state, the hand holding, its search given this (wall clock) ...
+    space_search_deadline_s: float = ranged(30.0, "s", 0.0, 600.0, low_open=True)
+    # ... and the whole new plan this long after the state was measured, the search included, or it is refused
+    space_plan_deadline_s: float = ranged(60.0, "s", 0.0, 600.0, low_open=True)
 
     def __post_init__(self):
         check_fields(self, "controller.replan")

@@ -281,11 +281,16 @@ def add_replanner(builder, plan: PlanResult, config: Config, initial: PlanInEffe
     inputs) and the closed loop's estimates (the systems `loop` of add_closed_loop_grasp); its plan
     output feeds every system that follows the plan."""
     # Here, not at the top: the replanner loads the planner (search, cito), which no other executor needs.
-    from trajectotree.execution.replan import Replanner
+    from trajectotree.execution.replan import PlanePlanning, Replanner
 
-    replanner = builder.AddNamedSystem(
-        "replanner", Replanner(plan, config, build_scene(config.scene), initial, segment_workers)
-    )
+    planning = PlanePlanning(plan, config, build_scene(config.scene), segment_workers)
+    return connect_replanner(builder, Replanner(planning, initial), loop)
+
+
+def connect_replanner(builder, replanner: Replanner, loop: dict) -> Replanner:
+    """Adds `replanner` (either dimension's) to `builder`, reading the exported inputs `box_state` and
+    `hand_state` and the estimates of `loop` (the closed loop's systems: monitor, friction, mass)."""
+    replanner = builder.AddNamedSystem("replanner", replanner)
     builder.ConnectInput("box_state", replanner.box_state_port)
     builder.ConnectInput("hand_state", replanner.hand_state_port)
     for source, name in (

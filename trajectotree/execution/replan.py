@@ -100,21 +100,27 @@ def node_times(plan: PlanResult, start_s: float) -> np.ndarray:
     return start_s + np.asarray(plan.trajectory.t)[::m] - plan.trajectory.t[0]
 
 
-def replan_reason(values: dict, assumed: SceneConfig, config: Config) -> ReplanReason | None:
+def replan_reason(values: dict, assumed: SceneConfig, config: Config, off_plan=None) -> ReplanReason | None:
     """Why the plan in effect, which assumes the scene `assumed` (its friction and mass), no longer
     holds, from the closed loop's `values` now (mu_estimate, mass_estimate, tracking_error, in_contact;
-    None: it holds)."""
+    None: it holds); `off_plan` turns the tracking error into (rad, m) off the planned pose (None: the
+    plane's, planar_off_plan)."""
     rules = config.controller.replan
     if values["mu_estimate"][0] < assumed.mu - rules.friction_drop:
         return ReplanReason.FRICTION
     if abs(values["mass_estimate"][0] - assumed.box_mass) > rules.mass_change * assumed.box_mass:
         return ReplanReason.MASS
-    error = values["tracking_error"]
-    if abs(error[2]) > rules.theta_error or np.hypot(error[0], error[1]) > rules.position_error:
+    angle, distance = (off_plan or planar_off_plan)(values["tracking_error"])
+    if angle > rules.theta_error or distance > rules.position_error:
         return ReplanReason.TRACKING
     if np.any(values["in_contact"] < 0.5):
         return ReplanReason.CONTACT_LOST
     return None
+
+
+def planar_off_plan(error) -> tuple[float, float]:
+    """(rad, m) off the planned pose, of the plane's tracking error (3: m, m, rad)."""
+    return abs(error[2]), float(np.hypot(error[0], error[1]))
 
 
 @dataclass(frozen=True)
@@ -177,33 +183,36 @@ class Replanning:
 
 
 class Replanner(LeafSystem):
-    """Replans `plan` (a PlanResult: its goal; executed with `config`) during its execution (module doc).
-    Input ports: `box_state` (6: x m, y m, theta rad and their rates, the object's planar joint),
-    `hand_state` (4F: the hand's [q rad; v rad/s]), `mu_estimate` (1), `mass_estimate` (1, kg),
-    `tracking_error` (3: m, m, rad) and `in_contact` (F, 1/0), the closed loop's outputs of those names.
-    Output port `plan` (abstract: the PlanInEffect). `initial`: the plan in effect at the start (its
-    reference `plan`'s); the later segments of a new plan on `segment_workers` local processes (None: as
-    planning.planners.plan takes them)."""
+    """Replans, during its execution, the plan of `planning` (PlanePlanning, or in space execution.space_replan.
+    SpacePlanning: the planner, the goal, the executing config and the state's shape) (module doc).
+    Input ports: `box_state` (the object's joint state: in the plane 6, x m, y m, theta rad and their rates; in
+    space 13, [qw qx qy qz px py pz] and [w_W v_W]), `hand_state` (the hand's [q rad; v rad/s]), `mu_estimate`
+    (1), `mass_estimate` (1, kg), `tracking_error` (the plane's 3: m, m, rad; space's 6: rad, m) and `in_contact`
+    (F, 1/0), the closed loop's outputs of those names. Output port `plan` (abstract: the PlanInEffect).
+    `initial`: the plan in effect at the start."""
 
-    def __init__(
-        self, plan: PlanResult, config: Config, scene: Scene, initial: PlanInEffect, segment_workers: int | None
-    ):
+    def __init__(self, planning, initial: PlanInEffect):
         super().__init__()
-        self._plan, self._config, self._scene, self._segment_workers = plan, config, scene, segment_workers
-        self._num_joints = scene.num_hand_joints
-        start = Phase(tuple(node_times(plan, 0.0)[1:-1]))
-        self._state = self.DeclareAbstractState(AbstractValue.Make(Replanning(initial, start, plan.config.scene)))
-        self.box_state_port = self.DeclareVectorInputPort("box_state", 6)
-        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * scene.num_hand_joints)
+        self._planning, self._config = planning, planning.config
+        start = Phase(tuple(planning.node_times()[1:-1]))
+        self._state = self.DeclareAbstractState(
+            AbstractValue.Make(Replanning(initial, start, planning.first_assumed()))
+        )
+        self.box_state_port = self.DeclareVectorInputPort("box_state", planning.box_state_size)
+        self.hand_state_port = self.DeclareVectorInputPort("hand_state", 2 * planning.num_joints)
         self._estimate_ports = {
             name: self.DeclareVectorInputPort(name, size)
-            for name, size in (("mu_estimate", 1), ("mass_estimate", 1), ("tracking_error", 3))
+            for name, size in (
+                ("mu_estimate", 1),
+                ("mass_estimate", 1),
+                ("tracking_error", planning.tracking_error_size),
+            )
         }
-        self._estimate_ports["in_contact"] = self.DeclareVectorInputPort("in_contact", scene.num_fingers)
+        self._estimate_ports["in_contact"] = self.DeclareVectorInputPort("in_contact", planning.num_fingers)
         self.plan_port = self.DeclareAbstractOutputPort(
             PLAN_PORT, lambda: AbstractValue.Make(initial), self.CalcPlan, {self.abstract_state_ticket(self._state)}
         )
-        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / config.controller.rate_hz, 0.0, self._Update)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / self._config.controller.rate_hz, 0.0, self._Update)
 
     def replanning(self, context) -> Replanning:
         """The state in this system's `context`."""
@@ -223,7 +232,7 @@ class Replanner(LeafSystem):
         checked, forced, rest = now.phase.due(t)
         if checked and len(now.events) < self._config.controller.replan.max_replans:
             values = {name: port.Eval(context) for name, port in self._estimate_ports.items()}
-            reason = replan_reason(values, now.assumed, self._config) or forced
+            reason = replan_reason(values, now.assumed, self._config, self._planning.off_plan) or forced
             if reason is None:
                 now = dataclasses.replace(now, phase=rest)
             elif forced is None and not self.holds_for(reason):
@@ -236,12 +245,14 @@ class Replanner(LeafSystem):
         return EventStatus.Succeeded()
 
     def holds_for(self, reason: ReplanReason) -> bool:
-        """A replan for `reason` plans from the measured state, the hand holding (else from the next node)."""
+        """A replan for `reason` plans from the measured state, the hand holding (else from the next node):
+        always in space (its planner takes longer than a segment lasts)."""
+        if self._planning.always_holds:
+            return True
         return self._config.controller.replan.measured_start_on_error and reason in ERROR_REASONS
 
-    def measured_start(self, context) -> StartState:
-        box, hand = self.box_state_port.Eval(context), self.hand_state_port.Eval(context)
-        return StartState(object_pose=tuple(box[:3]), q=tuple(hand[: self._num_joints]), object_velocity=tuple(box[3:]))
+    def measured_start(self, context):
+        return self._planning.measured_start(self.box_state_port.Eval(context), self.hand_state_port.Eval(context))
 
     def estimates(self, context) -> tuple[float, float]:
         """The friction and mass (kg) estimates now."""
@@ -261,54 +272,53 @@ class Replanner(LeafSystem):
             min(max(lead - rules.first_segment_reserve_s, MIN_SEARCH_S), rules.search_deadline_s),
             min(lead, rules.first_segment_deadline_s),
         )
-        start = node_state(now.plan.reference, t_node)
+        planning = self._planning
+        start = planning.node_state(now.plan.reference, t_node)
         mu, mass = self.estimates(context)
-        event, new = replan(
-            self._plan, self._config, start, t, reason, mu, mass, self._scene, self._segment_workers, deadlines
-        )
+        event, solved = replan(planning, start, t, reason, mu, mass, deadlines)
         event = dataclasses.replace(event, start_s=t_node)
         if event.planned and event.latency_s > lead:
-            event, new = dataclasses.replace(event, outcome=ReplanOutcome.LATE), None
-        if new is None:  # the old plan goes on, the hand never stopped
+            event, solved = dataclasses.replace(event, outcome=ReplanOutcome.LATE), None
+        if solved is None:  # the old plan goes on, the hand never stopped
             return Replanning(now.plan, rest, now.assumed, now.events + (dataclasses.replace(event, takes_effect_s=t),))
         event = dataclasses.replace(event, takes_effect_s=t_node)
-        following, phase = self.executed(new, event)
-        reference = joined(now.plan.reference, t_node, following)
-        swapped = plan_in_effect(reference, self._config, self._scene, new.config.scene.mu, now.plan.version + 1)
-        pending = Swap(t_node, swapped, phase, new.config.scene)
+        following, phase = self.executed(solved.new, event)
+        reference = planning.joined(now.plan.reference, t_node, following)
+        swapped = planning.in_effect(reference, solved.assumed.mu, now.plan.version + 1)
+        pending = Swap(t_node, swapped, phase, solved.assumed)
         return Replanning(now.plan, rest, now.assumed, now.events + (event,), pending)
 
     def replanned(self, context, now: Replanning, reason: ReplanReason) -> Replanning:
         """The state after planning again at this update for `reason` from the measured state, the hand
         holding while the planner runs (the world stands still meanwhile)."""
-        t_switch, scene, start = context.get_time(), self._scene, self.measured_start(context)
+        t_switch, planning, start = context.get_time(), self._planning, self.measured_start(context)
         mu, mass = self.estimates(context)
-        event, new = replan(self._plan, self._config, start, t_switch, reason, mu, mass, scene, self._segment_workers)
+        event, solved = replan(planning, start, t_switch, reason, mu, mass)
         event = dataclasses.replace(event, start_s=t_switch)
         reference, assumed = now.plan.reference, now.assumed
         if event.planned:
-            following, phase = self.executed(new, event)
-            reference = spliced(reference, t_switch, start, scene, following, event.takes_effect_s)
-            assumed = new.config.scene
+            following, phase = self.executed(solved.new, event)
+            reference = planning.spliced(reference, t_switch, start, following, event.takes_effect_s)
+            assumed = solved.assumed
         else:  # the hand held while the planner ran: the old plan resumes that much later
-            reference = delayed(reference, t_switch, event.latency_s)
+            reference = planning.delayed(reference, t_switch, event.latency_s)
             phase = now.phase.after(t_switch, event.latency_s)
-        swapped = plan_in_effect(reference, self._config, scene, assumed.mu, now.plan.version + 1)
+        swapped = planning.in_effect(reference, assumed.mu, now.plan.version + 1)
         return Replanning(swapped, phase, assumed, now.events + (event,))
 
-    def executed(self, new: PlanResult, event: ReplanEvent) -> tuple[Reference, Phase]:
+    def executed(self, new, event: ReplanEvent) -> tuple[Reference, Phase]:
         """The new plan of `event` as executed from event.takes_effect_s: its reference from 0 (each segment
         beginning no earlier than it was ready, counted from event.time_s: scheduled; up to a failed one) and
         its phase in absolute times (a plan that ends short plans again at its last node, once the failure
         is known)."""
-        m = new.config.cito.knots_per_segment
+        m = self._planning.knots_per_segment(new)
         usable = next((k for k, r in enumerate(event.segment_ready_s) if not np.isfinite(r)), None)
         arrays = new.trajectory.arrays()
         if usable is not None:  # the segments before the failed one
             arrays = {name: values[: usable * m + 1] for name, values in arrays.items()}
         offset = event.takes_effect_s - event.time_s
         ready = [r - offset for r in event.segment_ready_s]
-        reference, arrivals = scheduled(reference_from_arrays(arrays, self._scene), m, ready)
+        reference, arrivals = self._planning.scheduled(self._planning.reference_of(arrays), m, ready)
         arrivals = event.takes_effect_s + arrivals
         if usable is None:
             return reference, Phase(tuple(arrivals[1:-1]))
@@ -340,13 +350,13 @@ def joined(old: Reference, t_node: float, new: Reference) -> Reference:
     )
 
 
-def scheduled(new: Reference, knots_per_segment: int, ready: list[float]) -> tuple[Reference, np.ndarray]:
-    """`new` (segments of knots_per_segment knots) as executed when its segment k may begin no earlier
-    than ready[k] s after segment 0 begins (ready[0] = 0, inf: never): where a segment is not ready at
-    its node the reference holds that node (a static grasp: zero velocities), and it ends at the first
-    segment that never is. Also the times the nodes are reached (node 0 at 0)."""
+def schedule_rows(t: np.ndarray, knots_per_segment: int, ready: list[float]) -> tuple[list, list, np.ndarray]:
+    """The knots (index into `t`, s from 0) of a plan whose segment k (knots_per_segment knots) may begin no
+    earlier than ready[k] s after segment 0 begins (ready[0] = 0, inf: never): where a segment is not ready at
+    its node that node repeats (held until it is), and it ends at the first segment that never is. Also the
+    times the nodes are reached (node 0 at 0)."""
     m = knots_per_segment
-    t = new.t - new.t[0]
+    t = t - t[0]
     index, times, arrivals = [0], [0.0], [0.0]
     for k, start in enumerate(ready):
         if not np.isfinite(start) or (k + 1) * m > len(t) - 1:
@@ -359,6 +369,14 @@ def scheduled(new: Reference, knots_per_segment: int, ready: list[float]) -> tup
             index.append(i)
             times.append(begin + t[i] - t[k * m])
         arrivals.append(times[-1])
+    return index, times, np.asarray(arrivals)
+
+
+def scheduled(new: Reference, knots_per_segment: int, ready: list[float]) -> tuple[Reference, np.ndarray]:
+    """`new` (segments of knots_per_segment knots) as executed when its segment k may begin no earlier
+    than ready[k] s after segment 0 begins (schedule_rows): where a segment is not ready at its node the
+    reference holds that node (a static grasp: zero velocities). Also the times the nodes are reached."""
+    index, times, arrivals = schedule_rows(new.t, knots_per_segment, ready)
     xdot = _xdot(new)
     held = Reference(
         t=np.asarray(times),
@@ -370,7 +388,7 @@ def scheduled(new: Reference, knots_per_segment: int, ready: list[float]) -> tup
         xdot=xdot[index],
         p_WC=None if new.p_WC is None else new.p_WC[index],
     )
-    return held, np.asarray(arrivals)
+    return held, arrivals
 
 
 def delayed(reference: Reference, t_switch: float, delay: float) -> Reference:
@@ -427,45 +445,130 @@ def _xdot(reference: Reference) -> np.ndarray:
     return reference.xdot if reference.xdot is not None else np.gradient(reference.x, reference.t, axis=0)
 
 
-def replan(
-    plan: PlanResult,
-    config: Config,
-    start: StartState,
-    t_switch: float,
-    reason: ReplanReason,
-    mu: float,
-    mass: float,
-    scene: Scene,
-    segment_workers: int | None,
-    deadlines: Deadlines | None = None,
-) -> tuple[ReplanEvent, PlanResult | None]:
-    """Plans from `start` (measured, or a node's planned state) to `plan`'s goal with the estimated friction
-    and mass, within `deadlines` (None: controller.replan's search_deadline_s and first_segment_deadline_s,
-    the hand holding), the first segment first; the event (at `t_switch`) and the new plan."""
-    rules = config.controller.replan
-    deadlines = deadlines or Deadlines(rules.search_deadline_s, rules.first_segment_deadline_s)
-    assumed = dataclasses.replace(
-        config,
-        scene=dataclasses.replace(
-            config.scene,
-            mu=mu,
-            box_mass=mass,
-            object_inertia=None if config.scene.object_inertia is None else config.scene.inertia_zz(mass),
-        ),
-        search=dataclasses.replace(config.search, time_budget_s=deadlines.search_s, budget_clock="wall"),
-    )
-    first_first = config.cito.formulation == "keyframes"
-    t0 = time.perf_counter()
-    try:
+@dataclass(frozen=True)
+class Solved:
+    """What a dimension's planner gave: the `new` plan, when each of its segments was ready (s after the
+    replan began, inf: never), whether its first segment came `late` (after its deadline), whether a plan that
+    failed is executed up to its failed segment (`partial`: segments planned apart) and the scene it
+    `assumed` (the estimated friction and mass)."""
+
+    new: object  # results.PlanResult or planning.spatial.SpacePlanResult
+    ready: tuple[float, ...]
+    late: bool
+    partial: bool
+    assumed: SceneConfig
+
+
+@dataclass(frozen=True, eq=False)
+class PlanePlanning:
+    """The Replanner's planner and plan in the plane: `plan` (a PlanResult: its goal) executed with `config` in
+    `scene`, a new plan's later segments on `segment_workers` local processes (None: as planning.planners.plan
+    takes them). Its object state is the planar joint's (6), its tracking error (3: m, m, rad)."""
+
+    plan: PlanResult
+    config: Config
+    scene: Scene
+    segment_workers: int | None
+
+    box_state_size = 6
+    tracking_error_size = 3
+    always_holds = False  # a changed estimate plans from the next node, the hand going on
+    off_plan = staticmethod(planar_off_plan)
+    node_state = staticmethod(node_state)
+    joined = staticmethod(joined)
+    delayed = staticmethod(delayed)
+
+    @property
+    def num_joints(self) -> int:
+        return self.scene.num_hand_joints
+
+    @property
+    def num_fingers(self) -> int:
+        return self.scene.num_fingers
+
+    def first_assumed(self) -> SceneConfig:
+        """The scene the first plan assumed."""
+        return self.plan.config.scene
+
+    def node_times(self) -> np.ndarray:
+        """s, the first plan's nodes."""
+        return node_times(self.plan, 0.0)
+
+    def deadlines(self) -> Deadlines:
+        """A replan's from the measured state (controller.replan)."""
+        rules = self.config.controller.replan
+        return Deadlines(rules.search_deadline_s, rules.first_segment_deadline_s)
+
+    def measured_start(self, box, hand) -> StartState:
+        return StartState(object_pose=tuple(box[:3]), q=tuple(hand[: self.num_joints]), object_velocity=tuple(box[3:]))
+
+    def solve(self, start: StartState, mu: float, mass: float, deadlines: Deadlines) -> Solved:
+        """Plans from `start` to the plan's goal with friction `mu` and mass `mass` kg within `deadlines`, the
+        first segment first (keyframes.solve_first_segment_first); StartRefused for a start it cannot plan from."""
+        config = self.config
+        assumed = dataclasses.replace(
+            config,
+            scene=dataclasses.replace(
+                config.scene,
+                mu=mu,
+                box_mass=mass,
+                object_inertia=None if config.scene.object_inertia is None else config.scene.inertia_zz(mass),
+            ),
+            search=dataclasses.replace(config.search, time_budget_s=deadlines.search_s, budget_clock="wall"),
+        )
+        first_first = config.cito.formulation == "keyframes"
+        t0 = time.perf_counter()
+        plan = self.plan
         new = make_plan(
             goal=plan.goal if plan.config.goal.theta is None else plan.config.goal,  # with its position
             start=start,
             config=assumed,
-            scene=scene,  # the executed object's geometry, for the start's contacts (plan() rebuilds it from the start)
-            segment_workers=segment_workers,
+            scene=self.scene,  # the executed object's geometry, for the start's contacts (plan() rebuilds it)
+            segment_workers=self.segment_workers,
             first_segment_first=first_first,
             first_segment_deadline_s=deadlines.first_segment_s if first_first else None,
         )
+        total = time.perf_counter() - t0
+        segments = max(len(new.contact_plan.nodes) - 1, 1)
+        ready = new.segment_ready_s if first_first else (total,) * segments
+        # ran out of time: segment 0's attempts came back no sooner than its deadline
+        late = first_first and bool(ready) and ready[0] >= deadlines.first_segment_s
+        # the joint formulation is one program: none of a failed one is executed
+        return Solved(new, tuple(ready), late, first_first, new.config.scene)
+
+    def knots_per_segment(self, new: PlanResult) -> int:
+        return new.config.cito.knots_per_segment
+
+    def reference_of(self, arrays: dict) -> Reference:
+        return reference_from_arrays(arrays, self.scene)
+
+    def in_effect(self, reference: Reference, mu: float, version: int) -> PlanInEffect:
+        return plan_in_effect(reference, self.config, self.scene, mu, version)
+
+    def scheduled(self, new: Reference, knots_per_segment: int, ready: list[float]) -> tuple[Reference, np.ndarray]:
+        return scheduled(new, knots_per_segment, ready)
+
+    def spliced(self, old: Reference, t_switch: float, start: StartState, new: Reference, t_new: float) -> Reference:
+        return spliced(old, t_switch, start, self.scene, new, t_new)
+
+
+def replan(
+    planning,
+    start,
+    t_switch: float,
+    reason: ReplanReason,
+    mu: float,
+    mass: float,
+    deadlines: Deadlines | None = None,
+) -> tuple[ReplanEvent, Solved | None]:
+    """Plans with `planning` (PlanePlanning or space_replan.SpacePlanning) from `start` (measured, or a node's
+    planned state) to its plan's goal with the estimated friction and mass, within `deadlines` (None: the
+    planning's own from the measured state, the hand holding); the event (at `t_switch`) and what was solved
+    (None: no plan to execute)."""
+    deadlines = deadlines or planning.deadlines()
+    t0 = time.perf_counter()
+    try:
+        solved = planning.solve(start, mu, mass, deadlines)
     except StartRefused as refused:  # the old plan goes on
         latency = time.perf_counter() - t0
         event = ReplanEvent(
@@ -473,23 +576,22 @@ def replan(
         )
         return dataclasses.replace(event, refusal=refused.refusal, compute_s=latency), None
     total = time.perf_counter() - t0
+    new = solved.new
     searched = new.contact_plan
     if not searched.success:
         late = new.search_time_s >= deadlines.search_s or out_of_time(searched.refusal)
         outcome = ReplanOutcome.SEARCH_DEADLINE if late else ReplanOutcome.NO_PLAN
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
         return dataclasses.replace(event, refusal=searched.refusal, compute_s=total, search_s=new.search_time_s), None
-    ready = new.segment_ready_s if first_first else (total,) * (len(searched.nodes) - 1)
-    # the joint formulation is one program: none of a failed one is executed
-    if new.trajectory is None or not np.isfinite(ready[0]) or not (first_first or new.success):
-        # ran out of time: segment 0's attempts came back no sooner than its deadline
-        late = first_first and ready[0] >= deadlines.first_segment_s
-        outcome = ReplanOutcome.FIRST_SEGMENT_LATE if late else ReplanOutcome.FIRST_SEGMENT_FAILED
+    ready = solved.ready
+    if new.trajectory is None or not np.isfinite(ready[0]) or not (solved.partial or new.success):
+        outcome = ReplanOutcome.FIRST_SEGMENT_LATE if solved.late else ReplanOutcome.FIRST_SEGMENT_FAILED
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
         return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None
     outcome = ReplanOutcome.PLANNED if new.success else ReplanOutcome.PARTIAL
     event = ReplanEvent(t_switch, reason, mu, mass, ready[0], t_switch + ready[0], outcome, new.status)
-    return dataclasses.replace(event, segment_ready_s=tuple(ready), compute_s=total, search_s=new.search_time_s), new
+    event = dataclasses.replace(event, segment_ready_s=tuple(ready), compute_s=total, search_s=new.search_time_s)
+    return event, solved
 
 
 def out_of_time(refusal) -> bool:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -36,8 +37,10 @@ from trajectotree.execution import force_arrows, meshcat_scene, playback_page
 from trajectotree.execution.closed_loop import SPACE_OBJECT
 from trajectotree.execution.executor import (
     CLOSED_LOOP_OUTPUTS,
+    ExecutorSystems,
     add_estimators,
     connect_estimates,
+    connect_replanner,
     control_friction,
     export_estimates,
     export_inputs,
@@ -52,19 +55,26 @@ from trajectotree.execution.space_control import (
 from trajectotree.execution.world import NOMINAL, Conditions, PushSource
 from trajectotree.figures.legend import arrow_newtons_per_cm
 from trajectotree.geometry import quaternion_matrices, rotation_angles
-from trajectotree.results import ClosedLoopLog
+from trajectotree.results import ClosedLoopLog, ReplanEvent
 from trajectotree.scene.friction import set_friction
 from trajectotree.scene.spatial import SpaceScene, add_space_object
 
-SPACE_EXECUTORS = (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.NONE)  # the executors a plan in space has
+if TYPE_CHECKING:
+    from trajectotree.execution.space_replan import SpacePlanning
+
+# the executors a plan in space has
+SPACE_EXECUTORS = (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.GRASP_REPLAN, Executor.NONE)
 # rad: the field's two success criteria for a reorientation in space, a run without a drop that ends within 15 deg
 # or within 0.4 rad (22.9 deg) of its goal (sim.json within_15deg, within_0p4rad)
 SUCCESS_ANGLES = (("within_15deg", math.radians(15.0)), ("within_0p4rad", 0.4))
 
 
-def space_plan_in_effect(reference: SpaceReference, config: Config, scene: SpaceScene) -> PlanInEffect:
+def space_plan_in_effect(
+    reference: SpaceReference, config: Config, scene: SpaceScene, *, mu_assumed: float | None = None, version: int = 0
+) -> PlanInEffect:
     """The PlanInEffect of a plan in space: its reference and the controller's schedule of it, at the controller's
-    rate to the run's end (the plan, then config.sim.settle_time of hold)."""
+    rate to the run's end (the plan, then config.sim.settle_time of hold), assuming friction `mu_assumed` (None:
+    config.scene.mu, the plan's), the `version`-th plan of the run (a replan's new plans: 1, 2, ...)."""
     gains = config.controller
     schedule = space_schedule(
         reference,
@@ -76,7 +86,7 @@ def space_plan_in_effect(reference: SpaceReference, config: Config, scene: Space
         half=scene.object.half,
         swing_lift=gains.grasp.swing_lift,
     )
-    return PlanInEffect(reference, schedule, config.scene.mu)
+    return PlanInEffect(reference, schedule, config.scene.mu if mu_assumed is None else mu_assumed, version)
 
 
 def space_finger_of_body(plant, hand, scene: SpaceScene) -> dict:
@@ -89,11 +99,14 @@ def space_finger_of_body(plant, hand, scene: SpaceScene) -> dict:
     }
 
 
-def add_space_closed_loop(builder, plant, plan: PlanInEffect, config: Config, scene: SpaceScene) -> None:
+def add_space_closed_loop(
+    builder, plant, plan: PlanInEffect, config: Config, scene: SpaceScene, planning: SpacePlanning | None = None
+) -> None:
     """The SpaceClosedLoopGraspController following `plan` and around it the closed loop's monitors, estimators and
     push reflex for the cube (executor.add_estimators with closed_loop.SPACE_OBJECT), for the caller's `plant`
     holding `scene`'s hand and cube (model instances of the same names, as simulate_space adds them); the inputs
-    and outputs add_space_executor names exported."""
+    and outputs add_space_executor names exported. With `planning`, the Replanner (execution.replan, named
+    `replanner`) replans it from the measured state and its output is the plan they follow."""
     controller = builder.AddNamedSystem(
         "grasp_controller", SpaceClosedLoopGraspController(scene, config.controller, mu=control_friction(config))
     )
@@ -121,12 +134,17 @@ def add_space_closed_loop(builder, plant, plan: PlanInEffect, config: Config, sc
         },
     )
     connect_estimates(builder, loop, controller)
-    source = add_plan_source(builder, plan)
+    if planning is None:
+        plan_output = add_plan_source(builder, plan).get_output_port()
+    else:
+        from trajectotree.execution.replan import Replanner
+
+        plan_output = connect_replanner(builder, Replanner(planning, plan), loop).plan_port
     for follower in (controller, monitor, loop["friction"]):
-        builder.Connect(source.get_output_port(), follower.plan_port)
+        builder.Connect(plan_output, follower.plan_port)
     builder.ExportOutput(controller.actuation_port, "actuation")
     export_estimates(builder, loop)
-    builder.ExportOutput(source.get_output_port(), PLAN_PORT)
+    builder.ExportOutput(plan_output, PLAN_PORT)
 
 
 def add_space_executor(
@@ -138,6 +156,8 @@ def add_space_executor(
     *,
     executor: Executor | str = Executor.GRASP,
     name: str = "executor",
+    goal=None,
+    segment_workers: int | None = None,
 ):
     """Adds the executor `executor` of the plan in space `reference` to `builder` as one Diagram named `name`, for
     the caller's finalized `plant` (its actuation in the order of `scene`'s hand, the plan's scene; the hand's and
@@ -149,8 +169,10 @@ def add_space_executor(
     (executor.CLOSED_LOOP_OUTPUTS: `mu_estimate`, `mass_estimate` kg, `reflex` 0..1, `disturbance` (3, N in W),
     per finger `in_contact`, `slipping`, `force_ratio`, `slip_speed` m/s, and `tracking_error` (6: the rotation
     vector rad and the offset m from the planned pose to the measured one, in W)). The controller assumes the
-    plan's scene whatever the plant's. ConfigError for an executor that space does not have yet
-    (SPACE_EXECUTORS)."""
+    plan's scene whatever the plant's. grasp-replan also replans toward the plan's `goal` (unit quaternion
+    [w, x, y, z]), a new plan's segments on `segment_workers` local processes (execution.space_replan; its
+    Replanner is the subsystem `replanner`: simulate it to ExecutorSystems.end_s, which a replan moves).
+    ConfigError for an executor that space does not have yet (SPACE_EXECUTORS) or grasp-replan without a goal."""
     executor = parse_executor(executor)
     inner = DiagramBuilder()
     match executor:
@@ -164,8 +186,15 @@ def add_space_executor(
             inner.ExportInput(controller.hand_state_port, "hand_state")
             inner.ExportOutput(controller.actuation_port, "actuation")
             inner.ExportOutput(source.get_output_port(), PLAN_PORT)
-        case Executor.GRASP_CLOSED_LOOP:
-            add_space_closed_loop(inner, plant, space_plan_in_effect(reference, config, scene), config, scene)
+        case Executor.GRASP_CLOSED_LOOP | Executor.GRASP_REPLAN:
+            planning = None
+            if executor.replans:
+                if goal is None:
+                    raise ConfigError("add_space_executor(executor='grasp-replan'): give goal= (the planner's goal)")
+                from trajectotree.execution.space_replan import SpacePlanning
+
+                planning = SpacePlanning(tuple(goal), reference, config, scene, segment_workers)
+            add_space_closed_loop(inner, plant, space_plan_in_effect(reference, config, scene), config, scene, planning)
         case Executor.NONE:
             zero = inner.AddNamedSystem("zero_torque", ConstantVectorSource(np.zeros(plant.num_actuators())))
             inner.ExportOutput(zero.get_output_port(), "actuation")
@@ -226,6 +255,7 @@ class SpaceSimResult:
     # What the closed loop watched and estimated (sim.npz's CLOSED_LOOP_ARRAYS besides ARRAYS, sim.json's
     # "closed_loop"), as the plane's SimLog; None: an open-loop run
     closed_loop: ClosedLoopLog | None = field(default=None, kw_only=True)
+    replans: tuple[ReplanEvent, ...] = field(default=(), kw_only=True)  # grasp-replan: each time it planned again
 
     ARRAYS = ("t", "x", "x_plan", "q", "f_W", "f_W_plan")
 
@@ -258,6 +288,7 @@ class SpaceSimResult:
             "sim_time_s": self.sim_time_s,
             "conditions": self.world,
             **({} if self.closed_loop is None else {"closed_loop": self.closed_loop.to_json(self.t)}),
+            **({"replans": [e.to_json() for e in self.replans]} if Executor(self.executor).replans else {}),
         }
 
 
@@ -277,12 +308,15 @@ def simulate_space(
     conditions: Conditions = NOMINAL,
     meshcat: Meshcat | None = None,
     html_path=None,
+    goal=None,
+    segment_workers: int | None = None,
 ) -> SpaceSimResult:
     """Runs the plan in space `reference` (the plan of `scene`: its hand, cube and friction, and the controller's
     model) with `executor` for its length and config.sim.settle_time in the simulated world `conditions` (the
     plant's friction between the fingers and the cube, the cube's mass, a push on its centre); the log beside the
     plan. With `meshcat` (live: the run in real time) or `html_path` (the recording, as a self-contained page),
-    the run drawn in Meshcat."""
+    the run drawn in Meshcat. grasp-replan replans toward `goal` (add_space_executor) and runs to the end of the
+    plan in effect; the log's planned values are those of the plans followed, the result lists the replans."""
     executor = parse_executor(executor)
     live = meshcat is not None
     if html_path is not None and meshcat is None:
@@ -297,7 +331,9 @@ def simulate_space(
     set_friction(plant, scene_graph, hand, simulated.mu)
     plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, -scene.gravity])
     plant.Finalize()
-    added = add_space_executor(builder, plant, reference, config, scene, executor=executor)
+    added = add_space_executor(
+        builder, plant, reference, config, scene, executor=executor, goal=goal, segment_workers=segment_workers
+    )
     plant_ports = {
         "box_state": plant.get_state_output_port(box),
         "hand_state": plant.get_state_output_port(hand),
@@ -335,15 +371,18 @@ def simulate_space(
     plant.SetPositions(plant_context, box, reference.x[0])
     plant.SetPositions(plant_context, hand, reference.q[0])
     simulator = Simulator(diagram, context)
-    end = reference.duration + config.sim.settle_time
+    replanner = added.GetSubsystemByName("replanner") if executor.replans else None
+    systems = ExecutorSystems(added, executor, reference, config.sim.settle_time, replanner)
     if visualizer is not None:
         simulator.set_target_realtime_rate(1.0 if live else 0.0)  # a live view at the run's pace, as the plane's
         meshcat_scene.add_space_plan_ghost(meshcat, scene.object.size)
         meshcat.SetTransform(meshcat_scene.PLAN_GHOST_PATH, meshcat_scene.pose_transform(reference.x[0]))
         animation = visualizer.StartRecording()
     start = time.perf_counter()
-    simulator.AdvanceTo(end)
+    systems.advance_to_end(simulator)
     sim_time = time.perf_counter() - start
+    end = systems.end_s(simulator.get_context())
+    followed = systems.reference_in_effect(simulator.get_context())
     loggers = [state_logger, force_logger, *closed_loop_loggers.values()]
     logs = [logger.FindLog(simulator.get_context()) for logger in loggers]
     if logs[0].sample_times()[-1] < end - 1e-9:  # the periodic log can miss the end by rounding
@@ -352,7 +391,7 @@ def simulate_space(
     t, states = logs[0].sample_times().copy(), logs[0].data().T
     x = states[:, plant.GetPositionsFromArray(box, np.arange(plant.num_positions())).astype(int)]
     q = states[:, plant.GetPositionsFromArray(hand, np.arange(plant.num_positions())).astype(int)]
-    x_plan = reference.pose_at(t)
+    x_plan = followed.pose_at(t)
     angle, distance = pose_errors(x, x_plan)
     off = np.flatnonzero(distance > config.sim.drop_distance)
     result = SpaceSimResult(
@@ -361,7 +400,7 @@ def simulate_space(
         x_plan=x_plan,
         q=q,
         f_W=logs[1].data().T.reshape(len(t), scene.num_fingers, 3).copy(),
-        f_W_plan=reference.forces_at(t),
+        f_W_plan=followed.forces_at(t),
         executor=executor.value,
         dropped=len(off) > 0,
         drop_time_s=float(t[off[0]]) if len(off) else None,
@@ -374,10 +413,11 @@ def simulate_space(
         )
         if closed_loop_loggers
         else None,
+        replans=systems.replans(simulator.get_context()),
     )
     if visualizer is not None:
         frame_times = np.arange(0.0, end + 1e-9, meshcat_scene.PUBLISH_PERIOD)
-        meshcat_scene.animate_plan_ghost(animation, frame_times, reference.pose_at(frame_times))
+        meshcat_scene.animate_plan_ghost(animation, frame_times, followed.pose_at(frame_times))
         save_space_recording(meshcat, visualizer, html_path, result, reference, scene)
     return result
 

@@ -107,7 +107,15 @@ def execute_space(task: ExecutionTask) -> dict:
     world = task.spec.space_world(
         task.condition, config, plan.scene.object.mass, plan.reference.duration, plan.segments
     )
-    result = simulate_space(plan.reference, config, plan.scene, executor=task.executor, conditions=world)
+    result = simulate_space(
+        plan.reference,
+        config,
+        plan.scene,
+        executor=task.executor,
+        conditions=world,
+        goal=plan.data.get("goal_quaternion"),
+        segment_workers=1,  # a replan's segments in this process: the sweep runs one execution per core
+    )
     save_space_sim(result, task.folder, plan.success)
     return read_execution(task.folder)
 
