@@ -157,9 +157,9 @@ class SpacePlanning:
             scene=scene_config,
             search=dataclasses.replace(self.config.search, time_budget_s=deadlines.search_s, budget_clock="wall"),
         )
-        scene = build_space_scene(
-            scene_config.hand, mu=mu, gravity=scene_config.gravity, size=tuple(cube.size), mass=mass
-        )
+        # the executed hand (its model file), whatever the config names: the plan's scene is the one executed
+        hand = self.scene.hand_file.source
+        scene = build_space_scene(hand, mu=mu, gravity=self.scene.gravity, size=tuple(cube.size), mass=mass)
         t0 = time.perf_counter()
         new = plan_space(scene, self.goal, assumed, self.segment_workers, start)
         total = time.perf_counter() - t0
