@@ -4,9 +4,9 @@ closed loop (--executor grasp-closed-loop, or --closed-loop) or closed loop repl
 (--executor grasp-replan, or --replan: trajectotree.execution.space_replan), written as PLAN_DIR/sim.npz (t,
 x (K, 7), x_plan (K, 7), q, f_W (K, F, 3), f_W_plan; closed loop also the plane's CLOSED_LOOP_ARRAYS) and
 sim.json (dropped, the final orientation error in rad and position error in m, the executor; closed loop the final
-estimates; replanning the replans with their outcomes); optionally watched as the plane's run is (--meshcat live, --html the self-contained playback, --gif, --forces the forces
-figure), in the plan's world or another (--sim-mu, --sim-mass, --push FX,FY,FZ@T: the controller keeps the plan's
-values)."""
+estimates; replanning the replans with their outcomes); optionally watched as the plane's run is (--meshcat live,
+--html the self-contained playback, --gif, --forces the forces figure), in the plan's world or another (--sim-mu,
+--sim-mass, --push FX,FY,FZ@T: the controller keeps the plan's values)."""
 
 from __future__ import annotations
 
