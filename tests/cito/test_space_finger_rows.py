@@ -9,7 +9,7 @@ import pytest
 from conftest import jacobian_against_differences
 
 from trajectotree.cito import spatial as sp
-from trajectotree.cito.space_fingers import FingerParts, SpaceFingerRows, all_part_pairs, near_parts
+from trajectotree.cito.space_fingers import CLEARANCE, FingerParts, SpaceFingerRows, all_part_pairs, near_parts
 from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import capsule_distances
 from trajectotree.planning.physics import check_space_physics
@@ -136,7 +136,7 @@ def test_segment_constraint_jacobian_with_every_pair(hand):
     assert not np.any(J[~pattern])
     lower, _ = rows.knot_bounds()
     apart = slice(rows.apart_row, rows.apart_row + len(pairs))
-    assert np.all(np.isinf(lower[[0, -1], apart])) and np.all(lower[1:-1, apart] <= 0.002)
+    assert np.all(np.isinf(lower[[0, -1], apart])) and np.all(lower[1:-1, apart] <= CLEARANCE)
 
 
 def test_the_check_refuses_fingers_inside_each_other(hand):

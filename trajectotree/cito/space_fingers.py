@@ -31,8 +31,10 @@ import numpy as np
 
 from trajectotree.geometry import capsule_distances, segment_segment_nearest
 
-# m, the least gap of two fingers' parts on the free knots: the search's search.finger_clearance at its nodes
-CLEARANCE = 0.002
+# m, the least gap of two fingers' parts on the free knots (less where a node already has them closer): the
+# executed swing strays 2-3 mm from the plan's path, and with 2 mm (the search's at its nodes) seed-0 goal 5's
+# fingertips met in simulation and dropped the cube; with 5 mm it held
+CLEARANCE = 0.005
 # m, a pair of parts gets a row when it comes within this over the guess's knots: the trajectory's swinging
 # finger leaves the guess's lifted path by about its 10 mm lift (cito.spatial.SWITCH_CLEARANCE), twice that
 NEAR_MARGIN = 0.02
