@@ -24,6 +24,10 @@ The link rows, on demand: a segment whose solution has a link capsule over 1 mm 
 check's limit, results.LINK_PENETRATION_TOL) is solved again from that solution with a row per capsule and free
 knot, the signed distance of its axis from the box at least its radius (the nearest point by golden-section
 search; 2 of the first 9 seed-0 goals had such a segment, 1.4 and 7 mm deep).
+The finger-finger rows (cito.space_fingers): each pair of two fingers' parts (link capsules, fingertip
+spheres) that comes within NEAR_MARGIN over the start keeps CLEARANCE apart on the free knots; a solution with
+two fingers over 1 mm inside each other is solved again with the pairs near it (the only rows keeping fingers
+apart: the switching fingertip's from the others' is one of their pairs).
 Complementarity by construction: the switching finger's lambda is zero on the interior knots, and it is
 pinned to its old contact at k = 0 and its new one at k = N. The ends are the nodes: pose, joints (refined
 by Newton's method to the contacts exactly) and rest. The costs are small quadratic ones: the forces, the
