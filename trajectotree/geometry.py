@@ -612,3 +612,32 @@ def segment_box_distances(half, a_B, b_B, iterations: int = 60) -> np.ndarray:
     a, b = np.asarray(a_B, dtype=float), np.asarray(b_B, dtype=float)
     t = segment_box_nearest(half, a, b, iterations)
     return box_signed_distances(half, a + t[..., None] * (b - a))
+
+
+def segment_segment_nearest(a0, a1, b0, b1) -> tuple[np.ndarray, np.ndarray]:
+    """(s (...), t (...)) in [0, 1]: the fractions along the segments a0 -> a1 and b0 -> b1 (..., 3) of a pair
+    of their nearest points, in closed form (Ericson, Real-Time Collision Detection 5.1.9); a segment whose
+    ends coincide is a point (its fraction 0), parallel segments get s = 0 and its nearest t."""
+    a0, a1, b0, b1 = (np.asarray(v, dtype=float) for v in (a0, a1, b0, b1))
+    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
+    a, e = np.sum(d1 * d1, -1), np.sum(d2 * d2, -1)
+    b, c, f = np.sum(d1 * d2, -1), np.sum(d1 * r, -1), np.sum(d2 * r, -1)
+    eps = 1e-18  # m^2: a segment shorter than 1 nm is a point
+
+    def ratio(num, den):
+        return np.clip(np.divide(num, den, out=np.zeros_like(num), where=den > eps), 0.0, 1.0)
+
+    denom = a * e - b * b  # >= 0, 0 for parallel segments
+    s = ratio(b * f - c * e, np.where(denom > eps * a * e, denom, 0.0))
+    s = np.where(e > eps, s, ratio(-c, a))  # b a point: a's point nearest it
+    t_free = np.divide(b * s + f, e, out=np.zeros_like(s), where=e > eps)
+    s = np.where(t_free < 0.0, ratio(-c, a), np.where(t_free > 1.0, ratio(b - c, a), s))
+    return s, np.clip(t_free, 0.0, 1.0)
+
+
+def capsule_distances(a0, a1, radius_a, b0, b1, radius_b) -> np.ndarray:
+    """(...) m, the signed distances between capsules (axis a0 -> a1 (..., 3) of radius radius_a, axis b0 -> b1
+    of radius radius_b): their axes' least distance less both radii (negative: how deep they overlap)."""
+    s, t = segment_segment_nearest(a0, a1, b0, b1)
+    gap = (a0 + s[..., None] * (a1 - a0)) - (b0 + t[..., None] * (b1 - b0))
+    return np.linalg.norm(gap, axis=-1) - radius_a - radius_b

@@ -138,6 +138,7 @@ def test_a_turning_cube_follows_the_rule(hold):
     R = np.array([so3_exp(w * h * k) for k in range(K)])
     quats = np.array([[np.cos(h * k / 2), 0.0, 0.0, np.sin(h * k / 2)] for k in range(K)])
     assert np.allclose(quaternion_matrices(quats), R)
+    apart = 0.1 * np.outer(np.arange(4), [1.0, 0.0, 0.0])
     free = {
         "t": h * np.arange(K),
         "x": np.hstack([quats, np.zeros((K, 3))]),
@@ -146,8 +147,9 @@ def test_a_turning_cube_follows_the_rule(hold):
         "tau": np.zeros((K, 12)),
         "f_W": np.zeros((K, 4, 3)),
         "p_W_C": np.tile([0.1, 0.1, 0.1], (K, 4, 1)),
-        "p_W_tip": np.tile([0.2, 0.2, 0.2], (K, 4, 1)),
-        "p_W_links": np.tile([0.3, 0.3, 0.3], (K, 4, 3, 2, 1)),
+        # the fingers 0.1 m apart along x, so that they do not overlap (the check's finger rule)
+        "p_W_tip": np.tile([0.2, 0.2, 0.2], (K, 4, 1)) + apart,
+        "p_W_links": np.tile([0.3, 0.3, 0.3], (K, 4, 3, 2, 1)) + apart[:, None, None],
     }
     weightless = SpaceObjectModel(**{**box.__dict__, "gravity": 0.0})
     check = check_space_physics(free, weightless, mu)

@@ -24,6 +24,10 @@ The link rows, on demand: a segment whose solution has a link capsule over 1 mm 
 check's limit, results.LINK_PENETRATION_TOL) is solved again from that solution with a row per capsule and free
 knot, the signed distance of its axis from the box at least its radius (the nearest point by golden-section
 search; 2 of the first 9 seed-0 goals had such a segment, 1.4 and 7 mm deep).
+The finger-finger rows (cito.space_fingers): each pair of two fingers' parts (link capsules, fingertip
+spheres) that comes within NEAR_MARGIN over the start keeps CLEARANCE apart on the free knots; a solution with
+two fingers over 1 mm inside each other is solved again with the pairs near it (the only rows keeping fingers
+apart: the switching fingertip's from the others' is one of their pairs).
 Complementarity by construction: the switching finger's lambda is zero on the interior knots, and it is
 pinned to its old contact at k = 0 and its new one at k = N. The ends are the nodes: pose, joints (refined
 by Newton's method to the contacts exactly) and rest. The costs are small quadratic ones: the forces, the
@@ -46,6 +50,13 @@ from pydrake.solvers import IpoptSolver, MathematicalProgram
 from scipy.optimize import nnls
 
 from trajectotree.cito.solve import ipopt_options
+from trajectotree.cito.space_fingers import (
+    CLEARANCE,
+    FingerParts,
+    SpaceFingerRows,
+    least_part_distance,
+    near_parts,
+)
 from trajectotree.config import CitoConfig
 from trajectotree.geometry import (
     BOX_FACE_NAMES,
@@ -69,11 +80,6 @@ SPACE_INTERVALS = 10  # knots per segment - 1
 SPACE_DT = 0.1  # s between knots: a segment lasts 1 s
 PYRAMID_EDGES = 8  # as the search's stances, turned as theirs (SpaceSegmentRows.edges_B)
 SWITCH_CLEARANCE = 0.01  # m, the lifted fingertip's least gap at mid-segment (sin profile, as in the plane)
-# m, the least gap between the switching fingertip sphere and each other one on the lifted knots: the fingertips
-# of seed-0 goal 11's planned swing passed 10.9 mm apart centre to centre (the spheres 9 mm into each other) and
-# struck executed; 5 mm leaves room for the holders' rolling (a few mm a segment, search.spatial_rolling) and the
-# executed swing's lift (controller.grasp.swing_lift)
-TIP_GAP = 0.005
 WEIGHT_FORCE = 0.01  # per N^2 of edge magnitude
 WEIGHT_JOINT_STEP = 1.0  # per rad^2 of joint motion between knots
 WEIGHT_PHI = 1.0  # per rad^2 of correction
@@ -403,14 +409,34 @@ def time_law(intervals: int) -> tuple[np.ndarray, np.ndarray]:
 class SpaceSegmentRows:
     """The nonlinear rows of one segment's program, vectorized over its knots (see the module's doc)."""
 
-    def __init__(self, scene, fingers, spec: SegmentSpec, mu: float, intervals: int, dt: float, links: bool = False):
+    def __init__(
+        self,
+        scene,
+        fingers,
+        spec: SegmentSpec,
+        mu: float,
+        intervals: int,
+        dt: float,
+        links: bool = False,
+        apart: np.ndarray | None = None,
+    ):
         self.scene, self.fingers, self.spec = scene, fingers, spec
         self.hand = _stacked(fingers)  # every finger at once
         self.links = links  # with the link rows (each capsule's axis at least its radius off the box)
         F, n = scene.num_fingers, len(scene.fingers[0].q_lower)
         self.clearance_row = 9 + 3 * F + n * F
-        self.tip_row = self.clearance_row + 1  # F rows: the switching fingertip's squared distance from each
-        self.link_row = self.tip_row + F
+        # the finger-finger rows of the part pairs `apart` (R, 4; space_fingers.near_parts), after the link rows
+        parts = FingerParts.of(self.hand, scene.tip_radius)
+        self.apart = SpaceFingerRows(parts, np.zeros((0, 4), dtype=int) if apart is None else np.asarray(apart))
+        self.apart_row = self.clearance_row + 1 + (F * self.hand.link_joint.shape[-1] if links else 0)
+        # m, each row's floor on the free knots: CLEARANCE, or less where a node (a fixed end knot, kept apart by
+        # the search's own test on the exact shapes) already has it closer
+        ends = [self.hand.chain(q[None]) for q in (spec.q_a, spec.q_b)]
+        self.apart_floor = np.min(
+            [np.full(self.apart.num_rows, CLEARANCE)]
+            + [self.apart.values(tip, link_ends)[0] for _, _, tip, _, link_ends in ends],
+            axis=0,
+        )
         self.layout = _Layout(F, n, PYRAMID_EDGES)
         self.K, self.h = intervals + 1, dt
         s, self.rate = time_law(intervals)
@@ -444,7 +470,6 @@ class SpaceSegmentRows:
         # 1/m: the squared gap's row divided by twice the largest gap, so that its gradient is about one, as the
         # pins' (20 segments of three seed-0 goals: 887 IPOPT iterations in all, 1046 unscaled)
         self.clearance_scale = 1.0 / (2 * (scene.tip_radius + SWITCH_CLEARANCE))
-        self.tip_scale = 1.0 / (2 * (2 * scene.tip_radius + TIP_GAP))  # 1/m, the tip rows' likewise
         self.inertia = scene.object.inertia
         self.half = scene.object.half
         # kg m^2: L is in units of the cube's largest principal inertia (rad/s), its row's gradients near one
@@ -482,9 +507,8 @@ class SpaceSegmentRows:
         return x, R, f_B, f_W, n_W, kin
 
     def knot_values(self, Z):
-        """(rows (K, 9 + 3F + nF + 1 + F): F, T, L balance, fingertip pins (3F), joint torques (nF), clearance (1),
-        the switching fingertip's squared distance from each (F), then the links'), and the joint torques (K, F, n),
-        the fingertip centres (K, F, 3)."""
+        """(rows (K, 9 + 3F + nF + 1): F, T, L balance, fingertip pins (3F), joint torques (nF), clearance (1)),
+        and the joint torques (K, F, n), the fingertip centres (K, F, 3)."""
         x, R, f_B, f_W, n_W, (tips, taus) = self._knot(Z, False)
         return self._rows(x, R, f_B, f_W, tips, taus), taus, tips
 
@@ -495,15 +519,14 @@ class SpaceSegmentRows:
         targets = x["p"][:, None, :] + np.einsum("kij,kfj->kfi", R, self.p_BC + self.r * self.n_B)
         pins = (tips - targets).reshape(self.K, -1)
         clearance = np.zeros(self.K)
-        apart = np.zeros((self.K, self.layout.num_fingers))
         if self.spec.switching is not None:
             out = self._outside(R, tips[:, self.spec.switching] - x["p"])[1]
             clearance = np.sum(out * out, -1) * self.clearance_scale
-            d = tips[:, self.spec.switching, None, :] - tips
-            apart = np.sum(d * d, -1) * self.tip_scale
-        rows = [force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None], apart]
+        rows = [force, moment, momentum, pins, taus.reshape(self.K, -1), clearance[:, None]]
         if self.links:
             rows.append(self._link_rows(x, R)[0].reshape(self.K, -1))
+        _, _, tip, _, link_ends = self.hand.chain(x["q"])
+        rows.append(self.apart.values(tip, link_ends))
         return np.concatenate(rows, axis=1)
 
     def _link_rows(self, x, R, J_r=None):
@@ -550,7 +573,9 @@ class SpaceSegmentRows:
         w_mid = 0.5 * (x["w"][1:] + x["w"][:-1])
         return _vee_skew(_exp(-self.h * w_mid) @ R[1:] @ np.swapaxes(R[:-1], -1, -2))
 
-    def knot_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def knot_bounds(self, free_last: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) (K, rows) of the knot rows; the link and finger-finger rows bound on the free knots
+        only (the inner ones, and the last where `free_last`: a node inside the joint program's horizon)."""
         F = self.layout.num_fingers
         n = self.layout.joints
         L = self.hand.link_joint.shape[-1]
@@ -558,17 +583,14 @@ class SpaceSegmentRows:
         for k in range(self.K):
             pin = np.where(np.repeat(self.pinned[k], 3), 0.0, np.inf)
             gap = (self.r + self.clearance[k]) ** 2 * self.clearance_scale if self.clearance[k] > 0 else -np.inf
-            apart = np.full(F, -np.inf)
-            if self.clearance[k] > 0:  # the lifted knots: the ends are the nodes, whose fingers the search kept apart
-                apart = np.where(
-                    np.arange(F) == self.spec.switching, -np.inf, (2 * self.r + TIP_GAP) ** 2 * self.tip_scale
-                )
-            lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap], apart]))
-            hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf], np.full(F, np.inf)]))
+            lo.append(np.concatenate([np.zeros(9), -pin, -self.tau_max.reshape(F * n), [gap]]))
+            hi.append(np.concatenate([np.zeros(9), pin, self.tau_max.reshape(F * n), [np.inf]]))
+            free = 0 < k < self.K - 1 or (free_last and k == self.K - 1)
             if self.links:  # on the free knots: the nodes' links the search kept 2 mm off
-                free = 0 < k < self.K - 1
                 lo[-1] = np.concatenate([lo[-1], self.hand.link_radius.ravel() if free else np.full(F * L, -np.inf)])
                 hi[-1] = np.concatenate([hi[-1], np.full(F * L, np.inf)])
+            lo[-1] = np.concatenate([lo[-1], self.apart_floor if free else np.full(self.apart.num_rows, -np.inf)])
+            hi[-1] = np.concatenate([hi[-1], np.full(self.apart.num_rows, np.inf)])
         return np.array(lo), np.array(hi)
 
     # -- the Jacobian ------------------------------------------------------------------------------
@@ -576,8 +598,7 @@ class SpaceSegmentRows:
         """(rows, width) bool: the variables of its own knot each knot row depends on."""
         lay = self.layout
         F, n, m = lay.num_fingers, lay.joints, lay.edges
-        L = self.hand.link_joint.shape[-1]
-        mask = np.zeros((self.link_row + (F * L if self.links else 0), lay.width), dtype=bool)
+        mask = np.zeros((self.apart_row + self.apart.num_rows, lay.width), dtype=bool)
         mask[:, lay.slice("phi")] = True
         lam, q = lay.slice("lam").start, lay.slice("q").start
         for row, name in ((0, "F"), (3, "T"), (6, "L")):
@@ -598,15 +619,15 @@ class SpaceSegmentRows:
             s = self.spec.switching
             mask[c, lay.slice("p")] = True
             mask[c, q + n * s : q + n * (s + 1)] = True
-            for i in range(F):  # the switching fingertip's distance from finger i's
-                if i != s:
-                    mask[self.tip_row + i, q + n * s : q + n * (s + 1)] = True
-                    mask[self.tip_row + i, q + n * i : q + n * (i + 1)] = True
         if self.links:
+            L = self.hand.link_joint.shape[-1]
             for i in range(F):  # finger i's capsules
-                rows = slice(self.link_row + L * i, self.link_row + L * (i + 1))
+                rows = slice(c + 1 + L * i, c + 1 + L * (i + 1))
                 mask[rows, lay.slice("phi")] = mask[rows, lay.slice("p")] = True
                 mask[rows, q + n * i : q + n * (i + 1)] = True
+        for r, (a, _, b, _) in enumerate(self.apart.pairs.tolist()):  # both fingers' joints
+            mask[self.apart_row + r, q + n * a : q + n * (a + 1)] = True
+            mask[self.apart_row + r, q + n * b : q + n * (b + 1)] = True
         return mask
 
     def pair_mask(self) -> np.ndarray:
@@ -654,10 +675,22 @@ class SpaceSegmentRows:
             Jk[:, tau_rows, phi] = tau_phi[:, i]
         if self.spec.switching is not None:
             self._clearance_columns(Jk, x, R, J_r, tips, J_tip)
-            self._tip_columns(Jk, tips, J_tip)
         if self.links:
             self._link_columns(Jk, x, R, J_r)
+        self._apart_columns(Jk, x)
         return rows, Jk, self.pair_values(Z), *self._pair_jacobians(x, R, J_r)
+
+    def _apart_columns(self, Jk, x) -> None:
+        """The finger-finger rows' columns: each row's two fingers' joints (space_fingers.SpaceFingerRows)."""
+        if not self.apart.num_rows:
+            return
+        n = self.layout.joints
+        points, axes, tip, _, link_ends = self.hand.chain(x["q"])
+        _, d_a, d_b = self.apart.jacobians(points, axes, tip, link_ends)
+        rows = self.apart_row + np.arange(self.apart.num_rows)[:, None]
+        q0, a, b = self.layout.slice("q").start, self.apart.pairs[:, 0], self.apart.pairs[:, 2]
+        Jk[:, rows, q0 + n * a[:, None] + np.arange(n)] = d_a
+        Jk[:, rows, q0 + n * b[:, None] + np.arange(n)] = d_b
 
     def _clearance_columns(self, Jk, x, R, J_r, tips, J_tip) -> None:
         """The clearance row sum(out^2), out = max(|p_B| - half, 0), p_B = R^T (tip - p): d p_B = R^T (J_tip dq
@@ -671,22 +704,11 @@ class SpaceSegmentRows:
         Jk[:, c, lay.slice("p")] = -gR
         Jk[:, c, lay.slice("phi")] = np.einsum("ki,kij->kj", g, _skew(p_B) @ J_r)
 
-    def _tip_columns(self, Jk, tips, J_tip) -> None:
-        """The tip rows |d|^2 scaled, d = tip_s - tip_i (both in W, where a finger's joints alone move its tip)."""
-        lay, s, n = self.layout, self.spec.switching, self.layout.joints
-        q0 = lay.slice("q").start
-        for i in range(lay.num_fingers):
-            if i == s:
-                continue
-            g = 2 * self.tip_scale * (tips[:, s] - tips[:, i])  # (K, 3) d row / d tip_s
-            Jk[:, self.tip_row + i, q0 + n * s : q0 + n * (s + 1)] = np.einsum("kj,kjc->kc", g, J_tip[:, s])
-            Jk[:, self.tip_row + i, q0 + n * i : q0 + n * (i + 1)] = -np.einsum("kj,kjc->kc", g, J_tip[:, i])
-
     def _link_columns(self, Jk, x, R, J_r) -> None:
         lay = self.layout
         F, n, L = lay.num_fingers, lay.joints, self.hand.link_joint.shape[-1]
         _, dq, dp, dphi = self._link_rows(x, R, J_r)
-        first, q0 = self.link_row, lay.slice("q").start
+        first, q0 = self.clearance_row + 1, lay.slice("q").start
         for i in range(F):
             rows = slice(first + L * i, first + L * (i + 1))
             Jk[:, rows, q0 + n * i : q0 + n * (i + 1)] = dq[:, i]
@@ -894,6 +916,8 @@ def build_space_segment(
     from its guess."""
     t0 = time.perf_counter()
     rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links)
+    start = _guess(rows) if start is None else start
+    rows = SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links, near_apart(rows, start))
     lay, K = rows.layout, rows.K
     prog = MathematicalProgram()
     z = prog.NewContinuousVariables(K, lay.width, "z")
@@ -930,8 +954,23 @@ def build_space_segment(
     binding.evaluator().SetGradientSparsityPattern(constraint.sparsity())
     _add_costs(prog, var, lay, K)
     # by name: Drake orders a matrix's variables column-major
-    prog.SetInitialGuess(z, _guess(rows) if start is None else start)
+    prog.SetInitialGuess(z, start)
     return SpaceSegmentProgram(prog, z, rows, binding, time.perf_counter() - t0)
+
+
+def near_apart(rows: SpaceSegmentRows, Z) -> np.ndarray:
+    """(R, 4): the pairs of two fingers' parts that come within space_fingers.NEAR_MARGIN of each other over
+    the knots Z (K, width): the program's start, its guess or a solution."""
+    _, _, tip, _, link_ends = rows.hand.chain(rows.split(Z)["q"])
+    return near_parts(rows.apart.parts, rows.apart.parts.ends(tip, link_ends))
+
+
+def finger_overlap(rows: SpaceSegmentRows, Z) -> float:
+    """m, how deep the deepest two parts of two fingers reach into each other over the knots Z (0: none do), as
+    the physics check measures it, every pair of parts (not only the program's rows)."""
+    _, _, tip, _, link_ends = rows.hand.chain(rows.split(Z)["q"])
+    ends = rows.apart.parts.ends(tip, link_ends)
+    return max(-least_part_distance(rows.apart.parts, ends), 0.0)
 
 
 def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
@@ -939,7 +978,7 @@ def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: Ci
     SpaceScene or its SpaceHandModel, `fingers` the chains of space_fingers."""
     program, result, Z, times = solve_with_link_retry(
         lambda links, Z: build_space_segment(scene, fingers, spec, mu, links, Z),
-        lambda program, Z: link_depth(program.rows, Z),
+        lambda program, Z: max(link_depth(program.rows, Z), finger_overlap(program.rows, Z)),
         config,
     )
     return _segment_arrays(program.rows, Z, result, times)
@@ -947,7 +986,8 @@ def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: Ci
 
 def solve_with_link_retry(build, depth, config: CitoConfig, Z=None):
     """IPOPT (cito.solve's options) on build(links=False, Z), then once more on build(True, its solution) when
-    depth(program, solution) (m, the deepest link in the box) exceeds LINK_PENETRATION_TOL; (the last program,
+    depth(program, solution) (m, the deepest link in the box or, in space's segments, two fingers' deepest
+    overlap, whose rows the rebuild picks again near that solution) exceeds LINK_PENETRATION_TOL; (the last program,
     its result, its solution, (build s, solve s, CPU s) of both). Segments, the joint program and CITO alike."""
     cpu = time.process_time()
     build_s = solve_s = 0.0
@@ -1407,11 +1447,9 @@ def _joint_bounds(rows: SpaceSegmentRows, s: int, num_segments: int) -> tuple[np
     """Segment s's knot rows' bounds in the joint program: its first knot's rows are segment s - 1's last knot's
     (the same node, contacts and pyramids), left to that segment (unbounded: no redundant equality rows); a
     node inside the horizon is free, its links held off the box as the free knots' are."""
-    lo, hi = rows.knot_bounds()
+    lo, hi = rows.knot_bounds(free_last=s < num_segments - 1)
     if s > 0:
         lo[0], hi[0] = -np.inf, np.inf
-    if rows.links and s < num_segments - 1:
-        lo[-1, rows.link_row :] = rows.hand.link_radius.ravel()
     return lo, hi
 
 
@@ -1425,7 +1463,14 @@ def build_space_joint(
     segment program's costs once per knot. From `start` (knots, width), else from the segments' guesses."""
     t0 = time.perf_counter()
     rows = tuple(SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links) for spec in specs)
-    lay, knots, m = rows[0].layout, joint_knots(rows), scene.object.mass
+    knots = joint_knots(rows)
+    if start is None:
+        start = np.concatenate([_guess(rows[0]), *(_guess(r)[1:] for r in rows[1:])])
+    rows = tuple(
+        SpaceSegmentRows(scene, fingers, spec, mu, SPACE_INTERVALS, SPACE_DT, links, near_apart(r, start[k]))
+        for spec, r, k in zip(specs, rows, knots)
+    )
+    lay, m = rows[0].layout, scene.object.mass
     K = knots[-1].stop
     prog = MathematicalProgram()
     z = prog.NewContinuousVariables(K, lay.width, "z")
@@ -1461,8 +1506,6 @@ def build_space_joint(
         )
         binding.evaluator().SetGradientSparsityPattern(constraint.sparsity())
     _add_costs(prog, var, lay, K)
-    if start is None:
-        start = np.concatenate([_guess(rows[0]), *(_guess(r)[1:] for r in rows[1:])])
     prog.SetInitialGuess(z, start)
     return SpaceJointProgram(prog, z, rows, time.perf_counter() - t0)
 
@@ -1475,7 +1518,9 @@ def solve_space_joint(
     SpaceSegmentResult per segment (each with the one program's status and times)."""
     program, result, Z, times = solve_with_link_retry(
         lambda links, Z: build_space_joint(scene, fingers, specs, mu, links, Z),
-        lambda program, Z: max(link_depth(r, Z[k]) for r, k in zip(program.rows, joint_knots(program.rows))),
+        lambda program, Z: max(
+            max(link_depth(r, Z[k]), finger_overlap(r, Z[k])) for r, k in zip(program.rows, joint_knots(program.rows))
+        ),
         config,
     )
     return [_segment_arrays(r, Z[k], result, times) for r, k in zip(program.rows, joint_knots(program.rows))]

@@ -27,7 +27,9 @@ object that plan.json names) the same rules in 3D: Newton-Euler under plan.json'
 (results.SPACE_INTEGRATION: trapezoidal, the rotation in angular momentum L = R I_B R^T w), the poses
 against that rule's kinematics, each force in its cone (|f_t| <= mu f_n about the normal of the face
 its contact lies on), no force from a fingertip sphere or contact point more than SPACE_GAP_TOL (1 mm)
-off the box, no sphere sunk nor link capsule inside it more than 1 mm.
+off the box, no sphere sunk nor link capsule inside it more than 1 mm, and no two fingers' collision shapes
+(their link capsules, p_W_links, and fingertip spheres, p_W_tip) inside each other more than
+FINGER_OVERLAP_TOL (space_finger_distance: the capsules' exact distances at the knots).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from trajectotree.geometry import (
     ConvexPolygon,
     box_face_normals,
     box_signed_distances,
+    capsule_distances,
     poses_box_to_world,
     poses_world_to_box,
     quaternion_matrices,
@@ -166,12 +169,7 @@ def check_physics(arrays, box: ObjectModel, mu: float) -> PhysicsCheck:
         *_penetration_reason(deep),
         *_link_reason(link, "overlaps the box by {:.2f} mm"),
     ]
-    if -apart.distance > FINGER_OVERLAP_TOL:
-        reasons.append(
-            f"fingers {apart.fingers[0]} and {apart.fingers[1]} overlap by {-1e3 * apart.distance:.2f} mm at knot "
-            f"{apart.knot} (limit {1e3 * FINGER_OVERLAP_TOL:g} mm)"
-        )
-    reasons += [*_cone_reason(cone, mu), *_newton_euler_reason(ne_force, ne_moment)]
+    reasons += [*_finger_reason(apart), *_cone_reason(cone, mu), *_newton_euler_reason(ne_force, ne_moment)]
     return PhysicsCheck(
         newton_euler_force_N=ne_force,
         newton_euler_moment_Nm=ne_moment,
@@ -286,6 +284,23 @@ def check_space_arrays(arrays) -> dict[str, np.ndarray]:
     return a
 
 
+def space_finger_distance(a, box: SpaceObjectModel) -> ClosestFingers:
+    """The closest two fingers come at the knots of the arrays `a`: the least signed distance between one's
+    parts (link capsules p_W_links (K, F, L, 2, 3) of radii box.link_radii, fingertip sphere p_W_tip (K, F, 3)
+    of radius box.tip_radius) and another's, with its knot and the two fingers."""
+    K, F = a["p_W_tip"].shape[:2]
+    if F < 2:
+        return ClosestFingers(float("inf"), -1, ())
+    ends = np.concatenate([a["p_W_links"], np.repeat(a["p_W_tip"][:, :, None, None, :], 2, axis=3)], axis=2)
+    radii = np.r_[box.link_radii, box.tip_radius]
+    i, j = np.triu_indices(F, 1)
+    A, B = ends[:, i, :, None], ends[:, j, None, :]  # (K, pairs, P, P, 2, 3) by broadcasting
+    gaps = capsule_distances(A[..., 0, :], A[..., 1, :], radii[:, None], B[..., 0, :], B[..., 1, :], radii[None, :])
+    least = gaps.reshape(K, len(i), -1).min(axis=-1)  # (K, pairs)
+    k, pair = np.unravel_index(int(np.argmin(least)), least.shape)
+    return ClosestFingers(float(least[k, pair]), int(k), (int(i[pair]), int(j[pair])))
+
+
 def check_space_physics(arrays, box: SpaceObjectModel, mu: float) -> SpacePhysicsCheck:
     """The check of a plan in space's arrays (plan.npz: results.SPACE_TRAJECTORY_ARRAYS, shapes checked by
     check_space_arrays) against the object `box` and friction `mu`."""
@@ -315,11 +330,13 @@ def check_space_physics(arrays, box: SpaceObjectModel, mu: float) -> SpacePhysic
     ends = in_B(a["p_W_links"])
     depth = np.asarray(box.link_radii) - segment_box_distances(box.half, ends[..., 0, :], ends[..., 1, :])
     link = _Largest.of(np.maximum(depth, 0.0).max(axis=2)).located()
+    apart = space_finger_distance(a, box)
     reasons = [
         *_non_finite_reason(a),
         *_force_reason(away, float(max(gap[k, i], off[k, i])), SPACE_GAP_TOL),
         *_penetration_reason(deep),
         *_link_reason(link, "is {:.2f} mm inside the box"),
+        *_finger_reason(apart),
         *_cone_reason(cone, mu),
         *_newton_euler_reason(ne_force, ne_moment),
     ]
@@ -346,6 +363,9 @@ def check_space_physics(arrays, box: SpaceObjectModel, mu: float) -> SpacePhysic
         reason="; ".join(reasons),
         kinematics_rad=angle_off,
         kinematics_m=position_off,
+        finger_distance_m=apart.distance,
+        finger_distance_knot=apart.knot,
+        finger_distance_fingers=apart.fingers,
     )
 
 
@@ -399,6 +419,16 @@ def _link_reason(link: _Largest, how: str) -> list[str]:
     return [
         f"a link of finger {link.finger} {how.format(1e3 * link.value)} at knot {link.knot} "
         f"(limit {1e3 * LINK_PENETRATION_TOL:g} mm)"
+    ]
+
+
+def _finger_reason(apart: ClosestFingers) -> list[str]:
+    """Two fingers overlapping deeper than FINGER_OVERLAP_TOL (`apart`: the closest two, NaN: unchecked)."""
+    if not -apart.distance > FINGER_OVERLAP_TOL:
+        return []
+    return [
+        f"fingers {apart.fingers[0]} and {apart.fingers[1]} overlap by {-1e3 * apart.distance:.2f} mm at knot "
+        f"{apart.knot} (limit {1e3 * FINGER_OVERLAP_TOL:g} mm)"
     ]
 
 
