@@ -74,7 +74,7 @@ class SearchConfig:
     # friction cones at the lesser of this x scene.mu and mu_plan, while the closure tests and CITO's cones keep
     # mu_plan: 0.5714 (about 4/7) makes plans whose stances hold at friction 0.4 when planned at 0.7 (the closed
     # loop's friction-0.4 world; on the 30 seed-0 SO(3) goals it took the closed loop's drops at 0.4 from 28 to
-    # 7 and at mass x1.5 from 5 to 0, at the cost of goals 17 and 21's plans within the search's budget:
+    # 7 and at mass x1.5 from 5 to 0, at the cost of goal 17's plan within the search's budget and goal 21's:
     # docs/measurements.md "Headroom in space's stances"). Equal to friction_safety: the stances at mu_plan, no
     # margin (the plane's search does not use it).
     space_stance_friction_safety: float = 0.5714
