@@ -150,8 +150,8 @@ _TEXT = {
     RefusalKind.STANCE_ROLLED_OPEN: lambda r: f"{_stance(r)} not in closure at mu_plan at its rolled contacts",
     RefusalKind.STANCE_TOO_HEAVY: lambda r: f"{_stance(r)} needs more than {r.limit:g} N to hold the object's weight",
     RefusalKind.STANCE_OVER_MOTORS: lambda r: (
-        f"{_stance(r)} needs more than the motors' {r.limit:g} N m at a joint to hold the object (their own weight "
-        "included)"
+        f"{_stance(r)} needs more than {r.limit:g} N m at a joint (search.space_torque_fraction of the motors' limit) "
+        "to hold the object (their own weight included)"
     ),
     RefusalKind.INITIAL_GRASP: lambda r: _caused(
         r, f"initial grasp {'not allowed' if r.cause and r.cause.kind in _NOT_ALLOWED else 'infeasible'}"

@@ -37,7 +37,10 @@ Stance checks (trajectotree.search.stance; not in the paper): each three-finger 
 object while a finger switches (all four when none does) must also be in closure at mu_plan, and
 short of the corners, where its sticking fingertips roll to (search.rolled_stances), and must
 carry the object's weight with at most search.max_stance_force newtons of total normal force at
-its planned contacts.
+its planned contacts. In space the stances (and the roots' four fingers) must hold the object at
+their planned and rolled contacts with every joint within search.space_torque_fraction of its
+motor's limit and with friction cones at search.space_stance_friction_safety x scene.mu (at most
+mu_plan): headroom for the closed loop in a heavier or more slippery world than the plan assumed.
 
 Push order (trajectotree.search.stance; not in the paper): among the children of a node, SelectNode
 takes first those whose holding fingers resist a push of search.push_capacity newtons along each of
@@ -896,7 +899,12 @@ class _SpaceSearch:
         self.hold_lps = {k: SpatialHoldingLp(k, PYRAMID_EDGES, n) for k in (3, 4)}
         self.push_lps = {k: SpatialPushLp(k, PYRAMID_EDGES, n, config.push_normal_force) for k in (3, 4)}
         self.w_hold = np.r_[0.0, 0.0, scene.object.mass * scene.gravity, 0.0, 0.0, 0.0]
-        self.tau_limit = float(np.min(scene.tau_max))
+        # N m, the torque a stance may use: search.space_torque_fraction of the weakest motor, the rest left to the
+        # closed loop for a heavier cube than planned
+        self.tau_limit = config.space_torque_fraction * float(np.min(scene.tau_max))
+        # the friction the stances hold the cube with (search.space_stance_friction_safety x the world's, at most
+        # mu_plan): a stance that holds at it holds where the world has that much less friction than planned
+        self.mu_hold = min(mu, config.space_stance_friction_safety * scene.object.mu)
         self._reach: dict[tuple, object] = {}
         self._closure: dict[tuple, object] = {}
         self.refused: Counter[Refusal] = Counter()
@@ -932,7 +940,7 @@ class _SpaceSearch:
     def holding(self, depth: int, contacts, fingers, q_rows) -> tuple[float, float]:
         """(N m, N): the least largest joint torque with which `fingers` on `contacts` at angles q_rows
         hold the box at rest at pose `depth` (their own weight included), and the hardest push along
-        +-x, +-y, +-z in W they resist within their motors."""
+        +-x, +-y, +-z in W they resist within their motors, both with friction cones at mu_hold."""
         return self.holding_at(depth, self.p_BC[list(contacts)], self.n_B[list(contacts)], fingers, q_rows)
 
     def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows, J=None) -> tuple[float, float]:
@@ -947,8 +955,8 @@ class _SpaceSearch:
             J = np.array(
                 [self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)]
             )
-        W = edge_wrenches_W(p_WC, n_W, self.mu, PYRAMID_EDGES)
-        A = spatial_torque_rows(J, n_W, self.mu, PYRAMID_EDGES)
+        W = edge_wrenches_W(p_WC, n_W, self.mu_hold, PYRAMID_EDGES)
+        A = spatial_torque_rows(J, n_W, self.mu_hold, PYRAMID_EDGES)
         tau_g = self.scene.gravity_torques(q)[list(fingers)]
         k = len(fingers)
         torque, _ = self.hold_lps[k].solve(W, A, tau_g, self.w_hold)

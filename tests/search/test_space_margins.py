@@ -1,0 +1,114 @@
+"""Headroom in the search in space's stances (issue 37: closed loop at mass x1.5 and friction 0.4):
+search.space_torque_fraction (a stance holds the cube within that fraction of the motors' limit) and
+search.space_stance_friction_safety (with cones at that x scene.mu); the search refuses a stance over either, the
+fields' bad values exit 2 naming the value and the range, and a plan with both margins keeps them at every stance."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from trajectotree.cli import main
+from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
+from trajectotree.refusal import RefusalKind
+from trajectotree.scene.spatial import build_space_scene
+from trajectotree.search.tree import _SpaceSearch, find_space_contact_plan
+
+QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
+TAU_MAX = 0.396  # N m, fingerpro4's motors
+
+
+@pytest.fixture(scope="module")
+def scene():
+    config = Config()
+    return build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
+
+
+def _search(scene, **margins) -> _SpaceSearch:
+    """The search for a quarter turn about x with `margins` set, the others at no margin."""
+    config = Config()
+    none = dict(space_torque_fraction=1.0, space_stance_friction_safety=config.search.friction_safety)
+    search = replace(config.search, **{**none, **margins})
+    return _SpaceSearch(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
+
+
+def _first_stance(search: _SpaceSearch):
+    """(root, stance, held): the first root and the stance of its first finger that may move to the next node."""
+    root = search.roots()[0]
+    held = {i: search.finger_reach(1, i, c, root.q[i]) for i, c in enumerate(root.contacts)}
+    n = search.scene.num_fingers
+    free = next(
+        i
+        for i in range(n)
+        if all(held[j].reachable for j in range(n) if j != i)
+        and search.closed([c for j, c in enumerate(root.contacts) if j != i]).in_closure
+    )
+    return root, tuple(j for j in range(n) if j != free), held
+
+
+def test_a_stance_over_the_torque_fraction_is_refused(scene):
+    search = _search(scene)
+    root, stance, held = _first_stance(search)
+    _, torque, why = search.rolled_stance(root, 1, stance, held)
+    assert why is None and 0.0 < torque <= TAU_MAX
+    fraction = torque / TAU_MAX
+    # the same stance with the limit just under and just over what it needs (the same root: the search's roots
+    # are checked at the limit too, so the first root is taken from the search without a margin)
+    tight = _search(scene, space_torque_fraction=0.99 * fraction)
+    assert tight.tau_limit == pytest.approx(0.99 * torque)
+    _, _, why = tight.rolled_stance(root, 1, stance, held)
+    assert why is not None and why.kind == RefusalKind.STANCE_OVER_MOTORS
+    assert why.limit == pytest.approx(0.99 * torque)
+    _, _, why = _search(scene, space_torque_fraction=min(1.0, 1.01 * fraction)).rolled_stance(root, 1, stance, held)
+    assert why is None
+
+
+def test_a_stance_that_cannot_hold_at_the_stance_friction_is_refused(scene):
+    search = _search(scene)
+    root, stance, held = _first_stance(search)
+    _, at_plan, _ = search.rolled_stance(root, 1, stance, held)
+    at_04 = _search(scene, space_stance_friction_safety=0.4 / 0.7)
+    assert at_04.mu_hold == pytest.approx(0.4)
+    _, torque, _ = at_04.rolled_stance(root, 1, stance, held)
+    assert torque >= at_plan - 1e-9  # narrower cones: the squeeze, so the torque, can only grow
+    # at friction 0.07 the stance cannot hold the cube within the motors
+    _, torque, why = _search(scene, space_stance_friction_safety=0.1).rolled_stance(root, 1, stance, held)
+    assert why is not None and why.kind == RefusalKind.STANCE_OVER_MOTORS and torque > TAU_MAX
+    # a stance friction above friction_safety does not loosen the stances past mu_plan
+    assert _search(scene, space_stance_friction_safety=1.0).mu_hold == pytest.approx(search.mu)
+
+
+def test_a_plan_with_both_margins_keeps_them_at_every_stance(scene):
+    config = Config()
+    search = replace(config.search, space_torque_fraction=0.9, space_stance_friction_safety=0.5)
+    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
+    assert plan.success, plan.reason
+    torques = [n.stance_torque for n in plan.nodes[1:]]
+    assert max(torques) <= 0.9 * TAU_MAX + 1e-9
+    # without the margins the same goal's plan uses more of the motors somewhere: the margin did bind
+    none = replace(config.search, space_torque_fraction=1.0, space_stance_friction_safety=config.search.friction_safety)
+    free = find_space_contact_plan(scene, QUARTER_ABOUT_X, none, mu_plan(config.scene, none))
+    assert max(n.stance_torque for n in free.nodes[1:]) > max(torques)
+
+
+@pytest.mark.parametrize(
+    "field, value, valid",
+    [
+        ("space_torque_fraction", 0.0, "(0, 1]"),
+        ("space_torque_fraction", 1.2, "(0, 1]"),
+        ("space_stance_friction_safety", -0.1, "(0, 1]"),
+    ],
+)
+def test_a_margin_out_of_range_is_a_config_error(field, value, valid):
+    with pytest.raises(ConfigError) as err:
+        SearchConfig(**{field: value})
+    assert f"search.{field}" in str(err.value) and valid in str(err.value)
+
+
+def test_a_margin_out_of_range_exits_2_before_any_search(tmp_path, capsys):
+    out = tmp_path / "plan"
+    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0", "0", "0.5", "--out", str(out)]
+    assert main([*argv, "--config-text", "{search: {space_torque_fraction: 1.5}}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "search.space_torque_fraction = 1.5" in err[0] and "(0, 1]" in err[0]
+    assert not out.exists()
