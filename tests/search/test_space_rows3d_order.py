@@ -1,6 +1,7 @@
 """The search in space moves the finger rolled furthest since it landed first (issue 37, branch rows3d): a node's
-switching children come in the order of their fingers' rolls; axes 18 and 19 of the 23 axis-aligned goals, which
-by push capacity alone found no plan within the 30 s budget, find one (slow)."""
+switching children come in the order of their fingers' rolls. Axis 19 of the 23 axis-aligned goals, which by push
+capacity alone found no plan within the default 30 s budget, finds one (slow; axis 18 likewise, 15 s of search:
+docs/measurements.md)."""
 
 import dataclasses
 
@@ -10,7 +11,7 @@ import pytest
 from trajectotree.config import Config, mu_plan
 from trajectotree.experiments.sweep import axis_aligned_goals
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch, find_space_contact_plan
+from trajectotree.search.tree import SearchClock, _SpaceSearch
 
 
 @pytest.fixture(scope="module")
@@ -32,9 +33,10 @@ def _switch_order(search, node, rolled) -> list[int]:
 @pytest.mark.slow  # axis 19's search first, ~3 s of CPU
 def test_the_finger_rolled_furthest_moves_first(setting):
     scene, search_config, mu = setting
+    assert search_config.time_budget_s == 30.0 and search_config.budget_clock == "cpu"
     search = _SpaceSearch(scene, axis_aligned_goals()[19], search_config, mu)
     leaf, why = search.run(search.roots()[0], SearchClock.start(search_config))
-    assert leaf is not None, why
+    assert leaf is not None, why  # within the default budget (none found before the roll order)
     path = [leaf.parent]  # the nodes before the goal's, which have children
     while path[-1].parent is not None:
         path.append(path[-1].parent)
@@ -48,14 +50,3 @@ def test_the_finger_rolled_furthest_moves_first(setting):
     flipped[:, 0] = 0.0005 - rolled[:, 0]  # the rolls' order reversed: so is the fingers'
     again = _switch_order(search, root, flipped)
     assert again == order[::-1] and np.all(np.diff(flipped[again, 0]) < 0), again
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("axis", [18, 19])
-def test_axes_18_and_19_find_a_plan_within_the_budget(setting, axis):
-    """The reproducer: each had no plan in the default 30 s of search CPU; the budget is left as it is."""
-    scene, search_config, mu = setting
-    assert search_config.time_budget_s == 30.0 and search_config.budget_clock == "cpu"
-    plan = find_space_contact_plan(scene, axis_aligned_goals()[axis], search_config, mu)
-    assert plan.success, plan.refusal
-    assert plan.stats.expanded < 1000  # 544 and 102 measured; 1296 and 1761 without a plan before
