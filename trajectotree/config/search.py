@@ -72,12 +72,12 @@ class SearchConfig:
     space_torque_fraction: float = 1.0
     # 1, the search in space's stances must hold the cube within the motors (space_torque_fraction) with their
     # friction cones at the lesser of this x scene.mu and mu_plan, while the closure tests and CITO's cones keep
-    # mu_plan: 0.5714 (about 4/7) makes plans whose stances hold at friction 0.4 when planned at 0.7 (the closed
-    # loop's friction-0.4 world; on the 30 seed-0 SO(3) goals it took the closed loop's drops at 0.4 from 28 to
-    # 7 and at mass x1.5 from 5 to 0, at the cost of goal 17's plan within the search's budget and goal 21's:
-    # docs/measurements.md "Headroom in space's stances"). Equal to friction_safety: the stances at mu_plan, no
-    # margin (the plane's search does not use it).
-    space_stance_friction_safety: float = 0.5714
+    # mu_plan. 0.7 (= friction_safety): the stances at mu_plan, no margin, the default. 0.5714 (about 4/7) makes
+    # plans whose stances hold at friction 0.4 when planned at 0.7: on the 30 seed-0 SO(3) goals the closed loop's
+    # drops at 0.4 went from 28 to 7 and at mass x1.5 from 5 to 0, but 2 of the 30 and 5 of the 23 axis-aligned
+    # goals found no plan within the search's budget, and the search took 2-3x the time (docs/measurements.md
+    # "Headroom in space's stances"). The plane's search does not use it.
+    space_stance_friction_safety: float = 0.7
     # m, the least gap between any two fingers' collision shapes (link boxes, fingertip spheres) at a node
     # and on the straight joint-space path from its parent (exact planar test, trajectotree.search.reach),
     # since the simulation's fingers collide like any other bodies; the initial grasps keep it too.
