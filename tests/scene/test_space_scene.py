@@ -89,15 +89,11 @@ def test_the_scene_command_reports_each_fingers_faces_and_workspace(capsys):
     assert np.all(low < high)
 
 
-def test_what_a_hand_in_space_cannot_do_yet_is_refused(tmp_path, capsys):
-    out = tmp_path / "sweep"  # a sweep in space plans and executes, but does not replan yet
-    argv = ["sweep", "--hand", "fingerpro4", "--goals", "2", "--controllers", "grasp", "--replan", "--out", str(out)]
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "'grasp-replan' does not execute plans in space yet" in err and "Traceback" not in err
-    assert not out.exists()
+def test_a_planar_goal_for_a_hand_in_space_is_refused(tmp_path, capsys):
+    out = tmp_path / "plan"
     assert main(["plan", "--hand", "fingerpro4", "--goal", "0.3", "--out", str(out)]) == 2  # a planar goal
     assert "--goal = 0.3 is a planar goal; valid: --goal-quat W X Y Z or --goal-rpy R P Y" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_a_hand_in_space_without_its_model_is_refused(tmp_path):
