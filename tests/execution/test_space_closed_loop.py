@@ -19,7 +19,8 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError
 from trajectotree.execution.closed_loop import SPACE_OBJECT, FrictionEstimator
 from trajectotree.execution.in_effect import PlanInEffect
-from trajectotree.execution.space_run import add_space_executor, simulate_space, space_plan_in_effect
+from trajectotree.execution.space_control import space_plan_in_effect
+from trajectotree.execution.space_run import add_space_executor, simulate_space
 from trajectotree.execution.world import Conditions, Push
 from trajectotree.geometry import matrix_quaternions, quaternion_matrices, so3_exp
 from trajectotree.results import CLOSED_LOOP_ARRAYS

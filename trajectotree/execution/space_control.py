@@ -33,9 +33,9 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import EventStatus, LeafSystem
 
-from trajectotree.config import ControllerGains
+from trajectotree.config import Config, ControllerGains
 from trajectotree.execution.control import EstimatePorts, Estimates
-from trajectotree.execution.in_effect import declare_plan_input
+from trajectotree.execution.in_effect import PlanInEffect, declare_plan_input
 from trajectotree.execution.reference import swing_intervals, swing_profile
 from trajectotree.geometry import (
     box_face_normals,
@@ -304,6 +304,26 @@ def space_schedule(
         unload_force=unload,
         carry=carry,
     )
+
+
+def space_plan_in_effect(
+    reference: SpaceReference, config: Config, scene: SpaceScene, *, mu_assumed: float | None = None, version: int = 0
+) -> PlanInEffect:
+    """The PlanInEffect of a plan in space: its reference and the controller's schedule of it, at the controller's
+    rate to the run's end (the plan, then config.sim.settle_time of hold), assuming friction `mu_assumed` (None:
+    config.scene.mu, the plan's), the `version`-th plan of the run (a replan's new plans: 1, 2, ...)."""
+    gains = config.controller
+    schedule = space_schedule(
+        reference,
+        tip_radius=scene.tip_radius,
+        period=1.0 / gains.rate_hz,
+        duration=reference.duration + config.sim.settle_time,
+        ramp_time=gains.grasp.ramp_time,
+        contact_distance=gains.grasp.contact_distance,
+        half=scene.object.half,
+        swing_lift=gains.grasp.swing_lift,
+    )
+    return PlanInEffect(reference, schedule, config.scene.mu if mu_assumed is None else mu_assumed, version)
 
 
 class SpaceGraspForceQp:

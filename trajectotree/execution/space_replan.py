@@ -27,7 +27,7 @@ from trajectotree.cito.spatial import SPACE_INTERVALS
 from trajectotree.config import Config, SceneConfig
 from trajectotree.execution.in_effect import PlanInEffect
 from trajectotree.execution.replan import Deadlines, Solved, schedule_rows
-from trajectotree.execution.space_control import SpaceReference
+from trajectotree.execution.space_control import SpaceReference, space_plan_in_effect
 from trajectotree.planning.spatial import SpacePlanResult, plan_space
 from trajectotree.scene.spatial import SpaceScene, build_space_scene
 from trajectotree.start import SpaceStartState
@@ -178,8 +178,6 @@ class SpacePlanning:
         return SpaceReference.from_arrays(arrays)
 
     def in_effect(self, reference: SpaceReference, mu: float, version: int) -> PlanInEffect:
-        from trajectotree.execution.space_run import space_plan_in_effect
-
         return space_plan_in_effect(reference, self.config, self.scene, mu_assumed=mu, version=version)
 
     scheduled = staticmethod(space_scheduled)

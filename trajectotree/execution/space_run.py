@@ -50,7 +50,7 @@ from trajectotree.execution.space_control import (
     SpaceClosedLoopGraspController,
     SpaceGraspController,
     SpaceReference,
-    space_schedule,
+    space_plan_in_effect,
 )
 from trajectotree.execution.world import NOMINAL, Conditions, PushSource
 from trajectotree.figures.legend import arrow_newtons_per_cm
@@ -67,26 +67,6 @@ SPACE_EXECUTORS = (Executor.GRASP, Executor.GRASP_CLOSED_LOOP, Executor.GRASP_RE
 # rad: the field's two success criteria for a reorientation in space, a run without a drop that ends within 15 deg
 # or within 0.4 rad (22.9 deg) of its goal (sim.json within_15deg, within_0p4rad)
 SUCCESS_ANGLES = (("within_15deg", math.radians(15.0)), ("within_0p4rad", 0.4))
-
-
-def space_plan_in_effect(
-    reference: SpaceReference, config: Config, scene: SpaceScene, *, mu_assumed: float | None = None, version: int = 0
-) -> PlanInEffect:
-    """The PlanInEffect of a plan in space: its reference and the controller's schedule of it, at the controller's
-    rate to the run's end (the plan, then config.sim.settle_time of hold), assuming friction `mu_assumed` (None:
-    config.scene.mu, the plan's), the `version`-th plan of the run (a replan's new plans: 1, 2, ...)."""
-    gains = config.controller
-    schedule = space_schedule(
-        reference,
-        tip_radius=scene.tip_radius,
-        period=1.0 / gains.rate_hz,
-        duration=reference.duration + config.sim.settle_time,
-        ramp_time=gains.grasp.ramp_time,
-        contact_distance=gains.grasp.contact_distance,
-        half=scene.object.half,
-        swing_lift=gains.grasp.swing_lift,
-    )
-    return PlanInEffect(reference, schedule, config.scene.mu if mu_assumed is None else mu_assumed, version)
 
 
 def space_finger_of_body(plant, hand, scene: SpaceScene) -> dict:
