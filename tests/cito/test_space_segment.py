@@ -1,7 +1,7 @@
 """The keyframes formulation in space (cito.spatial, planning.spatial) on fingerpro4: the segment rows' Jacobian
 (complex steps and the analytic lambda columns) against central differences, the fingers' closed-form gravity
-torques against the plant, the time law the trapezoidal rule integrates exactly; a 90 deg goal about a
-horizontal axis planned by `trajectotree plan --hand fingerpro4` and rechecked from its files (slow); bad input."""
+torques against the plant, the time law the trapezoidal rule integrates exactly; bad input. A plan by
+`trajectotree plan --hand fingerpro4` rechecked from its files: tests/planning/test_space_axis_aligned.py."""
 
 import json
 import math
@@ -13,7 +13,6 @@ from conftest import jacobian_against_differences
 from trajectotree.cito import spatial as sp
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, mu_plan
-from trajectotree.geometry import quaternion_angle
 from trajectotree.planning.spatial import recheck_space_plan
 from trajectotree.scene.spatial import build_space_scene
 from trajectotree.search.tree import find_space_contact_plan
@@ -58,25 +57,6 @@ def test_jacobian_against_central_differences(setting, segment):
     Z = Z + 1e-3 * np.random.default_rng(1).standard_normal(Z.shape)
     J, numeric, pattern = jacobian_against_differences(constraint, Z)
     assert not np.any(J[~pattern])  # every entry within the declared sparsity
-
-
-@pytest.mark.slow
-def test_a_quarter_turn_about_x_plans_and_passes(tmp_path, capsys):
-    out = tmp_path / "quarter"
-    code = main(["plan", "--hand", "fingerpro4", "--goal-quat", *map(str, QUARTER_ABOUT_X), "--out", str(out)])
-    assert code == 0
-    data = json.loads((out / "plan.json").read_text())
-    assert data["success"], data["status"]
-    assert data["physics_check"]["passed"] and data["integration"].startswith("trapezoidal")
-    assert set(data["object"]) >= {"size", "mass", "inertia", "mu_plan"}
-    check = recheck_space_plan(out)
-    assert check.passed, check.reason
-    assert check.newton_euler_force_N <= 1e-4 and check.newton_euler_moment_Nm <= 1e-4
-    with np.load(out / "plan.npz") as npz:
-        x, f = npz["x"], npz["f_W"]
-        assert x.shape[1] == 7 and npz["v"].shape[1] == 6 and f.shape[1:] == (4, 3)
-    assert math.degrees(quaternion_angle(x[-1, :4], QUARTER_ABOUT_X)) <= 2.0
-    assert "physics check passed" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

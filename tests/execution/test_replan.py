@@ -146,32 +146,6 @@ def test_a_replanned_plan_begins_at_the_measured_state_its_first_segment_ready_f
         np.testing.assert_allclose(getattr(new.trajectory, name), getattr(at_once.trajectory, name), atol=1e-9)
 
 
-@pytest.mark.slow
-def test_a_goal_at_friction_0_4_executes_with_replanning_without_a_drop():
-    """A world with less friction than planned: the closed loop replans from the measured state at a node
-    with the estimate, and the run (one continuous log) holds the box to the goal."""
-    from trajectotree.execution.run import run_simulation
-
-    result = plan(goal=-2.61)  # a goal none of the defaults were tuned on
-    assert result.success, result.status
-    run = run_simulation(plan=result, sim_mu=0.4, executor="grasp-replan")
-    assert not run.dropped, [e.to_json() for e in run.replans]
-    assert abs(run.final_error[2]) < np.radians(3)
-    assert all(e.latency_s <= e.compute_s + 1e-9 for e in run.replans)
-    event = run.replans[0]
-    assert event.reason is ReplanReason.FRICTION  # the estimate fell below the plan's 0.7
-    assert 0.3 <= event.mu <= 0.45 and event.mass == pytest.approx(0.05, rel=0.05)
-    # decided at a node of the plan (1.2 s segments), planned from the next one while the hand went on
-    assert event.time_s / 1.2 == pytest.approx(round(event.time_s / 1.2))
-    assert event.start_s == pytest.approx(round(event.time_s / 1.2) * 1.2 + 1.2)
-    if event.planned:  # swapped in at that node, never before its compute time had passed
-        assert event.takes_effect_s == event.start_s >= event.time_s + event.latency_s
-    else:  # the old plan went on without a hold
-        assert event.takes_effect_s == event.time_s
-    assert np.all(np.diff(run.t) > 0) and run.t[-1] >= result.trajectory.t[-1]  # one log over the whole run
-    assert run.to_json()["replans"][0]["reason"] == "friction"
-
-
 @pytest.mark.parametrize(
     "options, named",
     [

@@ -96,14 +96,11 @@ def test_sweep_executes_every_plan_per_controller_and_condition(resumed_sweep, t
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     args = ["sweep", *SMALL_SWEEP, "--out", str(out), "--workers", "2"]
-    assert main(args + ["--controllers", "grasp", "paper", "--conditions", "nominal", "push"]) == 0
-    # 2 goals x 2 methods x 4 pairs, less the 4 grasp/nominal runs --simulate already made (copied)
-    assert "executions: 12 run" in capsys.readouterr().out
+    assert main(args + ["--controllers", "grasp", "paper", "--conditions", "push"]) == 0
+    assert "executions: 8 run" in capsys.readouterr().out  # 2 goals x 2 methods x 2 controllers
     trials = sorted(p for p in (out / "trials").iterdir() if p.is_dir() and not p.name.startswith("."))
     assert len(trials) == 4
     for trial in trials:
-        copied = execution_dir(trial, "grasp", "nominal") / "sim.json"
-        assert copied.read_bytes() == (trial / "sim.json").read_bytes()
         for controller in ("grasp", "paper"):
             sim = json.loads((execution_dir(trial, controller, "push") / "sim.json").read_text())
             assert sim["controller"] == controller
@@ -112,19 +109,21 @@ def test_sweep_executes_every_plan_per_controller_and_condition(resumed_sweep, t
                 "time_s": pytest.approx(1.8),
                 "duration_s": pytest.approx(0.2),
             }
-        paper = json.loads((execution_dir(trial, "paper", "nominal") / "sim.json").read_text())
-        assert paper["controller"] == "paper" and paper["conditions"]["push"] is None
-    assert main(args + ["--controllers", "grasp", "paper", "--conditions", "nominal", "push"]) == 0
+    assert main(args + ["--controllers", "grasp", "paper", "--conditions", "push"]) == 0
     assert "executions: 0 run" in capsys.readouterr().out  # resumable: everything is there
+    assert main(args + ["--controllers", "grasp", "--conditions", "nominal"]) == 0
+    assert "executions: 0 run" in capsys.readouterr().out  # the open-loop nominal runs are the sweep's own
+    for trial in trials:
+        copied = execution_dir(trial, "grasp", "nominal") / "sim.json"
+        assert copied.read_bytes() == (trial / "sim.json").read_bytes()
 
     report = tmp_path / "report"
     assert main(["report", str(out), "--out", str(report)]) == 0
     table = (report / "executions.md").read_text()
-    for controller in ("grasp", "paper"):
-        for condition in ("nominal", "push"):
-            for method in ("TrajectoTree", "CITO, warm-start"):
-                assert f"| {method} | {controller} | {condition} | 2 |" in table
-        assert (report / f"fig3_tracking_{controller}.png").read_bytes()[:4] == b"\x89PNG"
+    for controller, condition in (("grasp", "nominal"), ("grasp", "push"), ("paper", "push")):
+        for method in ("TrajectoTree", "CITO, warm-start"):
+            assert f"| {method} | {controller} | {condition} | 2 |" in table
+    assert (report / "fig3_tracking_grasp.png").read_bytes()[:4] == b"\x89PNG"  # Fig. 3: the nominal runs
 
 
 def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
@@ -139,27 +138,6 @@ def test_unknown_condition_exits_2_before_anything_runs(tmp_path, capsys):
     assert main(closed + ["--conditions", "friction-0.5"]) == 2
     assert "condition = 'friction-0.5' is unknown" in capsys.readouterr().err
     assert not out.exists()
-
-
-@pytest.mark.slow
-def test_open_and_closed_loop_executions_side_by_side(resumed_sweep, tmp_path):
-    """The same plans executed open and closed loop under a hard push: the report lists both."""
-    out = tmp_path / "sweep"
-    shutil.copytree(resumed_sweep.out, out)
-    # TrajectoTree's plans only (the command would execute every method's; the simulations are the cost)
-    run = functools.partial(run_executions, out, conditions=["push-3N"], methods=["trajectotree"], progress=False)
-    assert run(executors=[Executor.GRASP], workers=2) == 2
-    assert run(executors=[Executor.GRASP_CLOSED_LOOP], workers=2) == 2
-    trial = out / "trials" / "0000_trajectotree"
-    closed = json.loads((execution_dir(trial, Executor.GRASP_CLOSED_LOOP, "push-3N") / "sim.json").read_text())
-    assert closed["controller"] == "grasp" and closed["closed_loop"] is not None
-    assert closed["conditions"]["push"]["force"] == [3.0, 0.0]
-    report = tmp_path / "report"
-    assert main(["report", str(out), "--out", str(report)]) == 0
-    table = (report / "executions.md").read_text()
-    rows = [line for line in table.splitlines() if line.startswith("| TrajectoTree |") and "push-3N" in line]
-    assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-closed-loop"], table
-    assert "| CITO, warm-start | grasp | push-3N |" not in table  # not executed
 
 
 def test_a_closed_loop_execution_beside_a_finished_open_loop_one_is_not_called_torn(tmp_path):
@@ -251,20 +229,22 @@ def test_a_replanning_sweep_around_another_controller_exits_2_before_anything_ru
 
 
 @pytest.mark.slow
-def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path):
-    """The same plans at friction 0.4 open loop and replanning: executions.md lists both per condition,
-    with the replans, and sim.json records each replan's typed outcome. These plans have two segments: a
-    replan at node 1 has no next node to plan from but the goal, so it plans from the measured state, for a
-    tracking error past a threshold every run exceeds."""
+def test_open_loop_closed_loop_and_replanning_executions_side_by_side(resumed_sweep, tmp_path):
+    """The same plans at friction 0.4 open loop, closed loop and replanning: executions.md lists the three per
+    condition, with the replans, and sim.json records each replan's typed outcome. These plans have two
+    segments: a replan at node 1 has no next node to plan from but the goal, so it plans from the measured
+    state, for a tracking error past a threshold every run exceeds."""
     out = tmp_path / "sweep"
     shutil.copytree(resumed_sweep.out, out)
     # The cito-warm plans only, replanned by TrajectoTree (the command would execute every method's)
     run = functools.partial(run_executions, out, conditions=["friction-0.4"], methods=["cito-warm"], progress=False)
     tight = {"replan.theta_error": 1e-4, "replan.position_error": 1e-5, "replan.measured_start_on_error": True}
     gains = with_values(Config().controller, tight)
-    assert run(executors=[Executor.GRASP], workers=2) == 2
+    assert run(executors=[Executor.GRASP, Executor.GRASP_CLOSED_LOOP], workers=2) == 4
     assert run(executors=[Executor.GRASP_REPLAN], workers=2, gains=gains) == 2
     trials = [out / "trials" / f"{i:04d}_cito-warm" for i in (0, 1)]
+    closed = json.loads((execution_dir(trials[0], Executor.GRASP_CLOSED_LOOP, "friction-0.4") / "sim.json").read_text())
+    assert closed["controller"] == "grasp" and closed["closed_loop"] is not None and closed["replans"] == []
     runs = [execution_dir(trial, Executor.GRASP_REPLAN, "friction-0.4") for trial in trials]
     replanned = [json.loads((folder / "sim.json").read_text()) for folder in runs]
     assert all(run["closed_loop"] is not None and run["conditions"]["sim_mu"] == 0.4 for run in replanned)
@@ -278,6 +258,7 @@ def test_replanning_executions_beside_the_open_loop_ones(resumed_sweep, tmp_path
     assert main(["report", str(out), "--out", str(report)]) == 0
     table, _, refused = (report / "executions.md").read_text().partition("## Replans without a plan")
     rows = [line for line in table.splitlines() if line.startswith("| CITO, warm-start |") and "friction-0.4" in line]
-    assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-replan"], table
+    assert [row.split(" | ")[1] for row in rows] == ["grasp", "grasp-closed-loop", "grasp-replan"], table
+    assert "| TrajectoTree | grasp | friction-0.4 |" not in table  # not executed
     without = [e for e in events if not e["planned"]]
     assert all(e["status"].replace("|", "/") in refused for e in without), refused  # each one's reason, per goal

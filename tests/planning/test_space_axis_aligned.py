@@ -35,11 +35,14 @@ def test_a_half_turn_about_an_edge_diagonal_plans_and_passes(tmp_path, capsys):
     assert main([*argv, "--out", str(out)]) == 0
     data = json.loads((out / "plan.json").read_text())
     assert data["success"], data["status"]
-    check = recheck_space_plan(out)
+    assert data["physics_check"]["passed"] and data["integration"].startswith("trapezoidal")
+    assert set(data["object"]) >= {"size", "mass", "inertia", "mu_plan"}
+    check = recheck_space_plan(out)  # from the files alone
     assert check.passed, check.reason
     assert check.newton_euler_force_N <= 1e-4 and check.newton_euler_moment_Nm <= 1e-4
     with np.load(out / "plan.npz") as npz:
         x = npz["x"]
+        assert x.shape[1] == 7 and npz["v"].shape[1] == 6 and npz["f_W"].shape[1:] == (4, 3)
     assert math.degrees(quaternion_angle(x[-1, :4], HALF_TURN_ABOUT_XY)) <= 2.0
     nodes = data["contact_plan"]["contact_sequence"]
     assert len(nodes) == 10  # 180 deg in segments of at most 20 deg: the geodesic, no detour

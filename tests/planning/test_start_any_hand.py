@@ -177,8 +177,9 @@ def test_the_tester_s_overflow_reproducer_warns_nothing(tmp_path):
 
 @pytest.mark.slow
 def test_planar_hand5_replans_at_friction_0_4_and_plans_from_a_state_of_its_run(tmp_path, capsys):
-    """The tester's reproducer (simulate --replan exited 2 on "must have 8 numbers"), then `state` at a
-    node of the run and `plan --start` from it."""
+    """The tester's reproducer (simulate --replan exited 2 on "must have 8 numbers"), a world with less friction
+    than planned: the closed loop replans at a node with the estimate and the run (one continuous log) holds the
+    object to the goal; then `state` at a node of the run and `plan --start` from it."""
     run = tmp_path / "h5"
     assert main(["plan", "--hand", "planar_hand5", "--goal", "2", "--out", str(run)]) == 0
     capsys.readouterr()
@@ -189,9 +190,26 @@ def test_planar_hand5_replans_at_friction_0_4_and_plans_from_a_state_of_its_run(
     assert main(["simulate", str(run), "--replan", "--sim-mu", "0.4", "--config-text", deadlines, "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert json.loads((run / "sim.json").read_text()) == summary
-    assert not summary["dropped"], summary["replans"]
+    replans = summary["replans"]
+    assert not summary["dropped"], replans
+    assert abs(summary["final_error"][2]) < math.radians(3)
     # the friction estimate falls below the plan's 0.7: the closed loop plans again from a 10-joint node state
-    assert [r["outcome"] for r in summary["replans"]].count("planned") >= 1, summary["replans"]
+    assert [r["outcome"] for r in replans].count("planned") >= 1, replans
+    event = replans[0]
+    assert event["reason"] == "friction" and 0.3 <= event["mu"] <= 0.45, event
+    assert event["mass"] == pytest.approx(hand_config("planar_hand5").scene.box_mass, rel=0.05)
+    # decided at a node of the plan (1.2 s segments), planned from the next one while the hand went on
+    node = round(event["time_s"] / 1.2)
+    assert event["time_s"] == pytest.approx(node * 1.2) and event["start_s"] == pytest.approx(node * 1.2 + 1.2)
+    if event["planned"]:  # swapped in at that node, never before its compute time had passed
+        assert event["takes_effect_s"] == event["start_s"] >= event["time_s"] + event["latency_s"]
+    else:  # the old plan went on without a hold
+        assert event["takes_effect_s"] == event["time_s"]
+    assert all(e["latency_s"] <= e["compute_s"] + 1e-9 for e in replans if e["compute_s"] is not None)
+    with np.load(run / "sim.npz") as npz:  # one log over the whole run
+        t = npz["t"]
+    with np.load(run / "plan.npz") as npz:
+        assert np.all(np.diff(t) > 0) and t[-1] >= npz["t"][-1]
     start = tmp_path / "start.json"
     assert main(["state", str(run), "--time", "2.4", "--out", str(start)]) == 0  # node 2 of 1.2 s segments
     assert len(load_start(start).q) == 10
