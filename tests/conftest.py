@@ -219,3 +219,27 @@ def jacobian_against_differences(constraint, Z: np.ndarray):
     pattern = np.zeros(J.shape, dtype=bool)
     pattern[tuple(np.array(constraint.sparsity()).T)] = True
     return J, numeric, pattern
+
+
+def holding_torque(scene, pose, p_BC, n_B, q, fingers, mu) -> float:
+    """The least largest joint torque (N m) with which the fingertips of `fingers` (p_BC, n_B and q: their rows,
+    one per finger, B's contact points and normals and the joints) hold the cube at `pose` against gravity within
+    friction `mu`: the search's holding LP built here from its parts."""
+    from trajectotree.scene.statics import edge_wrenches_W
+    from trajectotree.search.spatial_reach import box_transform
+    from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
+    from trajectotree.search.tree import PYRAMID_EDGES as edges
+
+    R = box_transform(pose).rotation().matrix()
+    p, n = p_BC @ R.T, n_B @ R.T
+    J = np.array([scene.fingers[i].jacobian(q_i, -scene.tip_radius * n_i) for i, q_i, n_i in zip(fingers, q, n)])
+    w_hold = np.r_[0, 0, scene.object.mass * scene.gravity, 0, 0, 0]
+    all_q = np.zeros((scene.num_fingers, 3))
+    all_q[list(fingers)] = q
+    torque, _ = SpatialHoldingLp(len(fingers), edges, 3).solve(
+        edge_wrenches_W(p, n, mu, edges),
+        spatial_torque_rows(J, n, mu, edges),
+        scene.gravity_torques(all_q)[list(fingers)],
+        w_hold,
+    )
+    return torque

@@ -8,13 +8,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import holding_torque
 
 from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import BOX_FACE_NAMES, BOX_FACE_NORMALS, so3_exp
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.kinematics import SerialFinger
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.scene.statics import edge_wrenches_W
 from trajectotree.search.spatial_reach import box_transform
 from trajectotree.search.spatial_rolling import (
     chain,
@@ -24,7 +24,6 @@ from trajectotree.search.spatial_rolling import (
     on_face,
     rolled_step,
 )
-from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
 from trajectotree.search.tree import _SpaceSearch, find_space_contact_plan
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
@@ -114,22 +113,6 @@ def test_the_search_refuses_a_stance_whose_contacts_roll_off_their_face(scene):
     assert why is None and torque == 0.0 and not rolled.any()
 
 
-def _holding_torque(scene, pose, p_BC, n_B, q, fingers, mu):
-    R = box_transform(pose).rotation().matrix()
-    p, n = p_BC @ R.T, n_B @ R.T
-    J = np.array([scene.fingers[i].jacobian(q_i, -scene.tip_radius * n_i) for i, q_i, n_i in zip(fingers, q, n)])
-    w_hold = np.r_[0, 0, scene.object.mass * scene.gravity, 0, 0, 0]
-    all_q = np.zeros((scene.num_fingers, 3))
-    all_q[list(fingers)] = q
-    torque, _ = SpatialHoldingLp(len(fingers), EDGES, 3).solve(
-        edge_wrenches_W(p, n, mu, EDGES),
-        spatial_torque_rows(J, n, mu, EDGES),
-        scene.gravity_torques(all_q)[fingers],
-        w_hold,
-    )
-    return torque
-
-
 def test_a_planned_quarter_turn_holds_within_the_motors_where_its_fingertips_roll(scene):
     config = Config()
     mu = mu_plan(config.scene, config.search)
@@ -150,7 +133,7 @@ def test_a_planned_quarter_turn_holds_within_the_motors_where_its_fingertips_rol
             assert on_face(p_BC, n_B[stance], scene.object.half, config.search.rolled_corner_gap).all()
             p_WF = box_transform(node.object_pose).multiply((p_BC + r * n_B[stance]).T).T
             q = [moved_joints(fingers[i], node.q[i], p) for i, p in zip(stance, p_WF)]
-            torque = _holding_torque(scene, node.object_pose, p_BC, n_B[stance], q, stance, mu)
+            torque = holding_torque(scene, node.object_pose, p_BC, n_B[stance], q, stance, mu)
             assert torque <= 0.396 + 1e-9
             assert b.stance_torque >= torque - 1e-6
             largest = max(largest, float(np.max(np.linalg.norm(offsets, axis=1))))

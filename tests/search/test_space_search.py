@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import holding_torque
 from pydrake.math import RollPitchYaw
 
 from trajectotree.cli import main
@@ -14,10 +15,8 @@ from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import BOX_FACE_NAMES, BOX_FACE_NORMALS, box_face_grid, quaternion_angle
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import START_POSE, build_space_scene
-from trajectotree.scene.statics import edge_wrenches_W
 from trajectotree.search.grasp import SpatialClosure
 from trajectotree.search.spatial_reach import CLEARANCE, SpatialReach, box_transform
-from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
 from trajectotree.search.tree import SPACE_MAX_SEGMENT_ROTATION, find_space_contact_plan, space_object_path
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
@@ -117,21 +116,6 @@ def test_two_fingers_on_one_point_collide(scene):
     assert clash.kind is RefusalKind.FINGERS_COLLIDE and set(clash.fingers) == {0, 1}
 
 
-def _holding_torque(scene, pose, p_BC, n_B, q, fingers, mu):
-    R = box_transform(pose).rotation().matrix()
-    p, n = p_BC[fingers] @ R.T, n_B[fingers] @ R.T
-    J = np.array([scene.fingers[i].jacobian(q[i], -scene.tip_radius * n_i) for i, n_i in zip(fingers, n)])
-    w_hold = np.r_[0, 0, scene.object.mass * scene.gravity, 0, 0, 0]
-    lp = SpatialHoldingLp(len(fingers), EDGES, 3)
-    torque, _ = lp.solve(
-        edge_wrenches_W(p, n, mu, EDGES),
-        spatial_torque_rows(J, n, mu, EDGES),
-        scene.gravity_torques(q)[fingers],
-        w_hold,
-    )
-    return torque
-
-
 def test_a_quarter_turn_about_a_horizontal_axis_plans_and_every_node_checks(scene):
     config = Config()
     mu = mu_plan(config.scene, config.search)
@@ -160,7 +144,7 @@ def test_a_quarter_turn_about_a_horizontal_axis_plans_and_every_node_checks(scen
         assert moved == ([] if node.switching_finger is None else [node.switching_finger])
         stance = [i for i in range(4) if i != node.switching_finger]
         for end in (previous, node):  # the holding fingers carry the cube within the motors at both ends
-            torque = _holding_torque(scene, end.object_pose, end.p_BC, n_B, end.q, stance, mu)
+            torque = holding_torque(scene, end.object_pose, end.p_BC[stance], n_B[stance], end.q[stance], stance, mu)
             assert torque <= 0.396 + 1e-9
             assert node.stance_torque >= torque - 1e-6
 
