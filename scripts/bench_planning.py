@@ -320,7 +320,8 @@ def phase_report(measured: dict[str, dict], methods: list[str], cli_goals: int) 
             worst = max(rows, key=lambda r: r["wall_s"])
             lines.append(
                 f"{method:13s} {label:10s} plan() {stats([r['wall_s'] for r in rows])}   {phases}; "
-                f"plans with retries {sum(r['retry_rounds'] > 0 for r in rows)}/{len(rows)}, "
+                f"plans with retries {sum(r['retries'] > 0 for r in rows)}/{len(rows)} "
+                f"(with retry rounds {sum(r['retry_rounds'] > 0 for r in rows)}), "
                 f"success {sum(r['success'] for r in rows)}/{len(rows)}, "
                 f"physics check passed {sum(r['physics_passed'] for r in rows)}/{len(rows)}, "
                 f"slowest goal {worst['goal']:+.3f}"

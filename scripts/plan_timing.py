@@ -2,14 +2,17 @@
 whichever trajectotree package PYTHONPATH names (this checkout or an older one, --compare) and
 writes one JSON row per plan: plan()'s wall-clock time split into search, first round, retries,
 pool and other, and the plan's outcome. It uses only what every version of the package has:
-plan(), build_scene, GraspTables and keyframes.run_pieces, which it wraps to time each round.
+plan(), build_scene, GraspTables and keyframes.run_pieces, which it wraps to time each round, and
+keyframes.run_chains where the package has it (issue 35: each segment's retries in its own task).
 
     PYTHONPATH=TREE python scripts/plan_timing.py --goals 0.86,-1.45 --methods trajectotree --out rows.json
 
 Phases of one keyframes plan (s): search (the contact search's own time); each call of run_pieces
-is a round (the first the first round, later ones retries); of a round, the part the busiest worker
-process spent in its pieces (build and solve, summed per pid) counts to its round and the rest of
-the round's wall-clock time (starting and stopping processes, sending tasks and results) to pool;
+or run_chains is a round (the first the first round, later ones retries); of a round, the part the
+busiest worker process spent in its pieces (build and solve, summed per pid) counts to its round
+(of the first round of chains, the busiest process's time in the segments' first attempts counts to
+the first round and the rest of its busy time to retries) and the rest of the round's wall-clock time
+(starting and stopping processes, sending tasks and results) to pool;
 other is plan()'s wall-clock time outside the search and the rounds (checks, the guess, the stitch
 and the physics check). start_up (per process): importing the planner and building the scene.
 """
@@ -33,24 +36,36 @@ from trajectotree.search.initial_grasp import GraspTables  # noqa: E402
 IMPORTED = time.perf_counter()
 
 
-def timed_rounds(rounds: list[dict]):
-    """keyframes.run_pieces, recording each call's wall-clock time and its busiest worker's time in `rounds`."""
-    original = keyframes.run_pieces
+def busiest(results) -> float:
+    """s, the most any one process spent building and solving `results`."""
+    busy = {}
+    for r in results:
+        busy[r.pid] = busy.get(r.pid, 0.0) + r.build_time_s + r.solve_time_s
+    return max(busy.values())
 
-    def run_pieces(tasks, *args, **kwargs):
+
+def timed_rounds(rounds: list[dict], original):
+    """keyframes.run_pieces or run_chains (`original`), recording each call's wall-clock time, its busiest
+    worker's time and, of chains, the busiest worker's time in their first attempts in `rounds`."""
+
+    def run(tasks, *args, **kwargs):
         t0 = time.perf_counter()
         results = original(tasks, *args, **kwargs)
         if not tasks:  # a retry round with nothing to retry
             return results
-        busy = {}
-        for r in results:
-            busy[r.pid] = busy.get(r.pid, 0.0) + r.build_time_s + r.solve_time_s
+        chains = [r if isinstance(r, tuple) else (r,) for r in results]
+        busy = busiest([a for chain in chains for a in chain])
         rounds.append(
-            {"wall_s": time.perf_counter() - t0, "busy_s": max(busy.values()), "kinds": sorted({t.kind for t in tasks})}
+            {
+                "wall_s": time.perf_counter() - t0,
+                "busy_s": busy,
+                "first_busy_s": busiest([chain[0] for chain in chains]),
+                "kinds": sorted({t.kind for t in tasks}),
+            }
         )
         return results
 
-    return run_pieces
+    return run
 
 
 def plan_row(goal: float, method: str, scene, tables, rounds: list[dict]) -> dict:
@@ -70,11 +85,12 @@ def plan_row(goal: float, method: str, scene, tables, rounds: list[dict]) -> dic
         "success": bool(r.success),
         "wall_s": wall,
         "search_s": r.search_time_s,
-        "first_round_s": sum(x["busy_s"] for x in first),
-        "retries_s": sum(x["busy_s"] for x in later),
+        "first_round_s": sum(x["first_busy_s"] for x in first),
+        "retries_s": sum(x["busy_s"] - x["first_busy_s"] for x in first) + sum(x["busy_s"] for x in later),
         "pool_s": sum(x["wall_s"] - x["busy_s"] for x in rounds),
         "other_s": wall - r.search_time_s - in_rounds,
         "retry_rounds": len(later),
+        "retries": sum(s["retries"] for s in segments),  # attempts after each segment's first (a joint one per segment)
         "retry_kinds": sorted({k for x in later for k in x["kinds"]}),
         "iterations": r.iterations,
         "segment_iterations": [s["iterations"] for s in segments],
@@ -92,7 +108,9 @@ def main() -> None:
     scene, tables = build_scene(), GraspTables()
     start_up = time.perf_counter() - T_START
     rounds: list[dict] = []
-    keyframes.run_pieces = timed_rounds(rounds)
+    keyframes.run_pieces = timed_rounds(rounds, keyframes.run_pieces)
+    if hasattr(keyframes, "run_chains"):
+        keyframes.run_chains = timed_rounds(rounds, keyframes.run_chains)
     rows = [
         plan_row(float(g), m, scene, tables, rounds) for g in args.goals.split(",") for m in args.methods.split(",")
     ]

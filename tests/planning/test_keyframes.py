@@ -187,9 +187,9 @@ def test_segments_on_a_dask_cluster_equal_the_serial_solve(scene, contact_plan, 
 
 
 def test_a_failing_segment_is_retried_and_recorded(scene, contact_plan, tmp_path):
-    # max_iter 3: no attempt converges; every segment is tried 4 times (its own program, a restart
-    # from its last iterate, the joint program with its neighbours: here both segments at once,
-    # and that joint program again with the pinned fingers held harder).
+    # max_iter 3: no attempt converges; every segment is tried 5 times (its own program, a restart
+    # from its last iterate, itself with the pinned fingers held harder, the joint program with its
+    # neighbours: here both segments at once, and that joint program again held harder).
     config = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, max_iter=3))
     result = plan(
         scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=contact_plan, segment_workers=1
@@ -200,15 +200,16 @@ def test_a_failing_segment_is_retried_and_recorded(scene, contact_plan, tmp_path
     data = json.loads((tmp_path / "plan.json").read_text())
     assert data["formulation"] == "keyframes" and data["config"]["cito"]["formulation"] == "keyframes"
     for s, record in enumerate(data["segments"]):
-        assert record["retries"] == 3 and record["nodes"] == [s, s + 1] and not record["success"]
+        assert record["retries"] == 4 and record["nodes"] == [s, s + 1] and not record["success"]
         assert [(r["kind"], r["nodes"]) for r in record["attempts"]] == [
             ("keyframes", [s, s + 1]),
             ("restart", [s, s + 1]),
+            ("strict", [s, s + 1]),
             ("joint", [0, 2]),
             ("strict", [0, 2]),
         ]
         assert all(r["iterations"] == 3 for r in record["attempts"])
-    assert data["iterations"] == 6 * 3  # 2 segments x 2 attempts + a joint and a strict retry
+    assert data["iterations"] == 8 * 3  # 2 segments x 3 attempts + a joint and a strict joint retry
     assert load_plan(tmp_path).segments == tuple(data["segments"])
     assert result.trajectory.x.shape == (2 * CONFIG.cito.knots_per_segment + 1, 3)  # still saved, as joint's
 
@@ -232,8 +233,9 @@ def test_a_restart_rescues_segments_stopped_short(scene, contact_plan):
 @pytest.mark.slow  # a plan whose joint retry converges (seconds; the quick suite runs the retries to their end above)
 def test_a_segment_failing_the_physics_check_is_retried_with_its_neighbours(scene, contact_plan):
     # Node 1's finger 2 turned 0.1 rad off its grasp (a keyframe the search would not make): segment
-    # 1-2 converges but its fingertip pushes from a distance, so (no restart: it converged) the joint
-    # program over nodes 0-2, which frees node 1, replaces both segments.
+    # 1-2 converges but its fingertip pushes from a distance, so (no restart: it converged), after its
+    # strict attempt alone fails too (so does segment 0-1's), the joint program over nodes 0-2, which frees
+    # node 1, replaces both.
     node = contact_plan.nodes[1]
     q = node.q.copy()
     q[4] += 0.1
@@ -244,10 +246,18 @@ def test_a_segment_failing_the_physics_check_is_retried_with_its_neighbours(scen
     result = plan(scene=scene, goal=GOAL, method="trajectotree", config=config, contact_plan=bad, segment_workers=1)
     assert result.success and result.physics_check.passed, result.status
     first, second = result.segments
-    assert [(r["kind"], r["success"]) for r in second["attempts"]] == [("keyframes", False), ("joint", True)]
+    assert [(r["kind"], r["success"]) for r in second["attempts"]] == [
+        ("keyframes", False),
+        ("strict", False),
+        ("joint", True),
+    ]
     assert second["attempts"][0]["status"] in ("Success", "Stop at acceptable point")  # converged
-    assert [(r["kind"], r["nodes"]) for r in first["attempts"]] == [("keyframes", [0, 1]), ("joint", [0, 2])]
-    assert first["success"] and second["success"] and first["retries"] == second["retries"] == 1
+    assert [(r["kind"], r["nodes"]) for r in first["attempts"]] == [
+        ("keyframes", [0, 1]),
+        ("strict", [0, 1]),
+        ("joint", [0, 2]),
+    ]
+    assert first["success"] and second["success"] and first["retries"] == second["retries"] == 2
     np.testing.assert_array_equal(result.trajectory.x[-1], contact_plan.nodes[-1].object_pose)
 
 
@@ -256,8 +266,7 @@ def test_joint_retries_take_the_neighbours_and_merge_overlaps():
     assert _neighbour_ranges([0], 9) == [(0, 2)] and _neighbour_ranges([8], 9) == [(7, 9)]
     assert _neighbour_ranges([2, 4], 9) == [(1, 6)]  # overlapping: one program
     assert _neighbour_ranges([1, 5], 9) == [(0, 3), (4, 7)]  # apart: two
-    assert _neighbour_ranges([0], 1) == []  # one segment: nothing to free
-    assert _neighbour_ranges([0], 1, min_segments=1) == [(0, 1)]  # but a strict retry holds it harder
+    assert _neighbour_ranges([0], 1) == []  # one segment: nothing to free (its chain held it harder alone)
 
 
 @pytest.mark.slow

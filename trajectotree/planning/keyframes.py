@@ -23,11 +23,15 @@ too, with rows for every pair.
 
 A segment that fails is retried: one IPOPT did not converge first from its last iterate
 ("restart": IPOPT's barrier and L-BFGS memory start afresh; a converged one would only converge
-there again), then, still failing or converged with arrays that fail the physics check, with the
-joint formulation over it and its neighbours ("joint": nodes s-1..s+2, ends still fixed at those
-nodes), which frees the two keyframes next to it; one that still fails gets that joint retry
-once more with its pinned fingers held STRICT_PINNING times harder ("strict":
-cito.weight_contact_slack x 100). The L1 penalty on a pinned fingertip's drift off its contact
+there again), then, with a link or finger overlapping, with the link rows ("links", above), then,
+still failing or converged with arrays that fail the physics check, alone with its pinned fingers
+held STRICT_PINNING times harder ("strict": cito.weight_contact_slack x 100). These attempts run
+in the segment's own task (piece.solve_chain), so a segment's retry starts as soon as it failed
+and no segment waits for a round of the others' (issue 35: rounds made every retry wait for the
+slowest segment). One whose chain still fails is solved with the joint formulation over it and
+its neighbours ("joint": nodes s-1..s+2, ends still fixed at those nodes), which frees the two
+keyframes next to it, and if that fails too, so again with its pinned fingers held harder
+("strict"). The L1 penalty on a pinned fingertip's drift off its contact
 is exact only above the pinning constraint's multiplier; below it a fixed finger may drift 1 mm
 and push from there (goal pi/2, the demo's: 9.35 N from 0.19 mm). As the default for every
 segment that weight doubled the iterations on 24 seed-0 goals and broke one, hence only here.
@@ -47,20 +51,19 @@ from trajectotree.cito.solve import LogObserver
 from trajectotree.config import Config, mu_plan
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.planning.physics import ObjectModel, check_physics
-from trajectotree.planning.piece import PieceResult, PieceTask
-from trajectotree.planning.segment_pool import run_pieces
-from trajectotree.results import FINGER_OVERLAP_TOL, LINK_PENETRATION_TOL, PlanResult, Trajectory
+from trajectotree.planning.piece import PieceResult, PieceTask, attempt_config
+from trajectotree.planning.segment_pool import run_chains, run_pieces
+from trajectotree.results import PlanResult, Trajectory
 from trajectotree.scene.plant import Scene
 
 AVERAGED = ("tau", "lambda_n", "lambda_t", "f_W")  # the shared knot's forces: the mean of both segments'
 SHARED = ("x", "xdot", "q", "qdot", "p_W_tip", "p_W_C")  # equal in both segments at a shared knot
-STRICT_PINNING = 100.0  # the last retry's factor on cito.weight_contact_slack (a stricter program)
 
 
-def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[tuple[int, int]]:
+def _neighbour_ranges(failed: list[int], n: int) -> list[tuple[int, int]]:
     """Node ranges (first, last) of the joint retries: each failed segment with its neighbours,
-    overlapping ranges merged; ranges of fewer than min_segments segments dropped (a joint
-    retry of one segment frees nothing; a strict one still holds its fingers harder)."""
+    overlapping ranges merged; ranges of one segment dropped (a joint retry of one segment frees
+    nothing, and its chain made the strict attempt of it alone)."""
     merged = []
     for s in sorted(failed):
         a, b = max(s - 1, 0), min(s + 2, n)
@@ -68,7 +71,7 @@ def _neighbour_ranges(failed: list[int], n: int, min_segments: int = 2) -> list[
             merged[-1] = (merged[-1][0], max(b, merged[-1][1]))
         else:
             merged.append((a, b))
-    return [r for r in merged if r[1] - r[0] >= min_segments]
+    return [r for r in merged if r[1] - r[0] >= 2]
 
 
 def solve_segments(
@@ -81,60 +84,29 @@ def solve_segments(
     log_observer: LogObserver | None = None,
     deadline: float | None = None,
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
-    """(the pieces to stitch, in order; every attempt per segment), with the retries; pieces
-    solved in this process use `scene` when given (run_pieces). With a `deadline` (a
+    """(the pieces to stitch, in order; every attempt per segment): each segment's chain of
+    attempts (piece.solve_chain), then the joint retries of the segments whose chain failed;
+    pieces solved in this process use `scene` when given (run_pieces). With a `deadline` (a
     time.perf_counter() value) each solve stops there and no retry starts after it."""
     n = len(plan.nodes) - 1
     mu = mu_plan(config.scene, config.search)
 
-    cito = config.cito
-    on_demand = cito.link_rows and cito.link_rows_on_demand
-    configs = {
-        "strict": dataclasses.replace(cito, weight_contact_slack=cito.weight_contact_slack * STRICT_PINNING),
-        "keyframes": dataclasses.replace(cito, link_rows=False) if on_demand else cito,
-    }
-    configs["restart"] = configs["keyframes"]
-
-    def task(first: int, last: int, kind: str, guess: np.ndarray | None = None) -> PieceTask:
-        return PieceTask(config.scene, configs.get(kind, cito), mu, plan, first, last, kind, guess, deadline)
+    def task(first: int, last: int, kind: str) -> PieceTask:
+        # a chain ("keyframes") derives each attempt's config from the plan's (attempt_config)
+        cito = config.cito if kind == "keyframes" else attempt_config(config.cito, kind)
+        return PieceTask(config.scene, cito, mu, plan, first, last, kind, None, deadline)
 
     def late() -> bool:
         return deadline is not None and time.perf_counter() >= deadline
 
-    def retry(segments: list[int], kind: str, from_last_iterate: bool) -> None:
-        """Each of `segments` solved again as `kind`, from its best attempt's last iterate or the plan's guess."""
-        if late():
-            return
-        guesses = [best[s].solution if from_last_iterate else None for s in segments]
-        for s, r in zip(
-            segments,
-            run_pieces(
-                [task(s, s + 1, kind, g) for s, g in zip(segments, guesses)], executor, workers, scene, log_observer
-            ),
-        ):
-            attempts[s].append(r)
-            best[s] = r
-
-    best = run_pieces([task(s, s + 1, "keyframes") for s in range(n)], executor, workers, scene, log_observer)
-    attempts = {s: [best[s]] for s in range(n)}
-    retry([s for s in range(n) if not best[s].converged], "restart", from_last_iterate=True)
-    if on_demand:  # from the guess: from a link deep inside the object IPOPT may not recover
-        retry(
-            [
-                s
-                for s in range(n)
-                if best[s].check.link_penetration_m > LINK_PENETRATION_TOL
-                or -best[s].check.finger_distance_m > FINGER_OVERLAP_TOL
-            ],
-            "links",
-            from_last_iterate=False,
-        )
-    pieces = {s: best[s] for s in range(n)}  # keyed by each piece's first node
+    chains = run_chains([task(s, s + 1, "keyframes") for s in range(n)], executor, workers, scene, log_observer)
+    attempts = {s: list(chain) for s, chain in enumerate(chains)}
+    pieces = {s: chain[-1] for s, chain in enumerate(chains)}  # keyed by each piece's first node
     for kind in ("joint", "strict"):
         if late():
             break
         failed = [s for s, p in sorted(pieces.items()) if not p.success]  # single segments: a joint piece passed
-        ranges = _neighbour_ranges(failed, n, min_segments=2 if kind == "joint" else 1)
+        ranges = _neighbour_ranges(failed, n)
         joint = run_pieces([task(a, b, kind) for a, b in ranges], executor, workers, scene, log_observer)
         for (a, b), r in zip(ranges, joint):
             for s in range(a, b):

@@ -1,6 +1,7 @@
 """One piece of a keyframes plan: the program of nodes first..last (a segment, or a retry's range)
-built and solved in one process (`solve_piece`, a worker's entry point), its arrays physics-checked.
-A task and its result are plain values, so that they pickle to any executor.
+built and solved in one process (`solve_piece`, a worker's entry point), its arrays physics-checked;
+a segment's first solve and its own retries in one task (`solve_chain`). A task and its result are
+plain values, so that they pickle to any executor.
 """
 
 from __future__ import annotations
@@ -25,10 +26,11 @@ from trajectotree.cito.variables import CitoVariables
 from trajectotree.config import CitoConfig, SceneConfig
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.planning.physics import ObjectModel, check_physics, contact_points
-from trajectotree.results import PhysicsCheck, Trajectory
+from trajectotree.results import FINGER_OVERLAP_TOL, LINK_PENETRATION_TOL, PhysicsCheck, Trajectory
 from trajectotree.scene.plant import Scene, build_scene
 
 WORKER_SCENES = 4  # scenes a worker process keeps built (a pool usually serves the plans of one scene)
+STRICT_PINNING = 100.0  # a "strict" attempt's factor on cito.weight_contact_slack (a stricter program)
 
 
 @dataclass(frozen=True)
@@ -43,7 +45,7 @@ class PieceTask:
     last: int
     kind: str  # "keyframes", "restart" (from `guess`), "links" (with the link rows),
     #                                   "joint" (with the neighbours)
-    #                                   or "strict" (a joint one, pinned fingers keyframes.STRICT_PINNING times harder)
+    #                                   or "strict" (pinned fingers STRICT_PINNING times harder: alone or joint)
     guess: np.ndarray | None = None  # (K, KNOT_SIZE) initial guess (None: the plan's guess)
     # s, a time.perf_counter() value on this machine (the process that made the task, or a worker beside it)
     # at which IPOPT stops, for a solve with a deadline; None: never
@@ -69,6 +71,9 @@ class PieceResult:
     solution: np.ndarray  # (K, KNOT_SIZE) the last iterate, for a restart
     max_rss_mb: float  # MB, peak resident memory of the process that solved it
     pid: int
+    # s, time.perf_counter() in the process that solved it when its build began (CLOCK_MONOTONIC on
+    # Linux: comparable across the processes of this machine), to order the attempts of a plan
+    started_s: float = float("nan")
     # s (time.perf_counter in the planning process), when the planning process had this result (run_pieces):
     # a first-segment-first plan times each segment's readiness from it
     finished_s: float = float("nan")
@@ -160,4 +165,51 @@ def solve_piece(task: PieceTask, scene: Scene | None = None, log_observer: LogOb
         solution=outcome.solution.stacked(),
         max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         pid=os.getpid(),
+        started_s=t0,
     )
+
+
+def attempt_config(cito: CitoConfig, kind: str) -> CitoConfig:
+    """The CITO config of an attempt of `kind` in a plan of `cito`: a segment's first solve and its
+    restart without the link rows when they come on demand (cito.link_rows_on_demand), a "strict"
+    one with its pinned fingers held STRICT_PINNING times harder (cito.weight_contact_slack), the
+    others (with the link rows where cito has them) as `cito`."""
+    if kind in ("keyframes", "restart") and cito.link_rows and cito.link_rows_on_demand:
+        return dataclasses.replace(cito, link_rows=False)
+    if kind == "strict":
+        return dataclasses.replace(cito, weight_contact_slack=cito.weight_contact_slack * STRICT_PINNING)
+    return cito
+
+
+def solve_chain(
+    task: PieceTask, scene: Scene | None = None, log_observer: LogObserver | None = None
+) -> tuple[PieceResult, ...]:
+    """A segment's attempts, in one task (solve_piece's arguments; task.cito is the plan's config,
+    attempt_config derives each attempt's), so that its retries start as soon as it fails instead
+    of after a round of every segment (issue 35): its first solve (task.kind); where IPOPT did not
+    converge, again from the last iterate ("restart"); then, where a link overlaps the object or two
+    fingers overlap and the link rows come on demand, with every row from the plan's guess
+    ("links": from a link deep inside the object IPOPT may not recover); then, still failing, alone
+    with its pinned fingers held harder ("strict", from the guess). No retry starts after the
+    task's deadline."""
+
+    def attempt(kind: str, guess: np.ndarray | None) -> PieceResult:
+        retry = dataclasses.replace(task, kind=kind, cito=attempt_config(task.cito, kind), guess=guess)
+        return solve_piece(retry, scene, log_observer)
+
+    def late() -> bool:
+        return task.deadline is not None and time.perf_counter() >= task.deadline
+
+    tried = [attempt(task.kind, task.guess)]
+    if not tried[-1].converged and not late():
+        tried.append(attempt("restart", tried[-1].solution))
+    if task.cito.link_rows and task.cito.link_rows_on_demand and overlaps(tried[-1].check) and not late():
+        tried.append(attempt("links", None))
+    if not tried[-1].success and not late():
+        tried.append(attempt("strict", None))
+    return tuple(tried)
+
+
+def overlaps(check: PhysicsCheck) -> bool:
+    """A link inside the object or two fingers inside each other beyond the physics check's tolerances."""
+    return check.link_penetration_m > LINK_PENETRATION_TOL or -check.finger_distance_m > FINGER_OVERLAP_TOL

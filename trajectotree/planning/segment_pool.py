@@ -1,6 +1,7 @@
 """The segment pool: local worker processes that solve a plan's pieces at once (planning.piece's
-`solve_piece`), kept by the main thread across plans (`kept_pool`), or started for one call
-(`local_pool`); `run_pieces` runs tasks on them, on a given executor, or in this process.
+`solve_piece`, or `solve_chain`: a segment with its own retries), kept by the main thread across
+plans (`kept_pool`), or started for one call (`local_pool`); `run_pieces` and `run_chains` run
+tasks on them, on a given executor, or in this process.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import TypeVar
 
 from trajectotree.cito.solve import LogObserver
 from trajectotree.config import SceneConfig, check_integer
-from trajectotree.planning.piece import PieceResult, PieceTask, solve_piece, worker_scene
+from trajectotree.planning.piece import PieceResult, PieceTask, solve_chain, solve_piece, worker_scene
 from trajectotree.planning.workers import TiedPool, kill_pool, process_pool
 from trajectotree.scene.plant import Scene
 
@@ -63,15 +64,31 @@ def run_pieces(
     task; in `scene`, watched by `log_observer`), else on local processes: from the main thread
     on the pool it keeps (kept_pool: one process per core), from another on a pool of `workers`
     started for these tasks. Progress is shown only in this process: a terminal has one progress line."""
+    return _run(solve_piece, tasks, executor, workers, scene, log_observer, _received)
+
+
+def run_chains(
+    tasks: list[PieceTask],
+    executor: Executor | None,
+    workers: int | None,
+    scene: Scene | None = None,
+    log_observer: LogObserver | None = None,
+) -> list[tuple[PieceResult, ...]]:
+    """Each task's chain of attempts (piece.solve_chain), in order, where run_pieces would run its piece."""
+    return _run(solve_chain, tasks, executor, workers, scene, log_observer, _received_chain)
+
+
+def _run(solve, tasks, executor, workers, scene, log_observer, received):
+    """run_pieces with `solve` (solve_piece or solve_chain) and `received` (its results' stamp)."""
     if executor is not None:
-        return [_received(r) for r in executor.map(solve_piece, tasks)]
+        return [received(r) for r in executor.map(solve, tasks)]
     size = (os.cpu_count() or 1) if workers is None else workers  # a kept pool's, whatever the tasks
     workers = min(len(tasks), size)
     if workers <= 1:
-        return [_received(solve_piece(t, scene, log_observer)) for t in tasks]
+        return [received(solve(t, scene, log_observer)) for t in tasks]
     for t in tasks:  # a forked worker inherits the scene built here
         worker_scene(t.scene)
-    return run_on_pool(solve_piece, tasks, size, _received)
+    return run_on_pool(solve, tasks, size, received)
 
 
 def _as_is(result):
@@ -124,3 +141,9 @@ def kept_pool(workers: int, pid: int) -> TiedPool:
 def _received(result: PieceResult) -> PieceResult:
     """`result` stamped with the time this process has it (no earlier than its solve ended)."""
     return dataclasses.replace(result, finished_s=time.perf_counter())
+
+
+def _received_chain(chain: tuple[PieceResult, ...]) -> tuple[PieceResult, ...]:
+    """Each attempt of a chain stamped with the time this process has the chain."""
+    now = time.perf_counter()
+    return tuple(dataclasses.replace(r, finished_s=now) for r in chain)
