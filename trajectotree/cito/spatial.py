@@ -744,7 +744,7 @@ def finger_overlap(rows: SpaceSegmentRows, Z) -> float:
 
 def solve_space_segment(scene, fingers, spec: SegmentSpec, mu: float, config: CitoConfig) -> SpaceSegmentResult:
     """One segment's program, built and solved by IPOPT (cito.solve's options) from the guess; `scene` a
-    SpaceScene or its SpaceHandModel, `fingers` the chains of space_fingers."""
+    SpaceScene or its SpaceHandModel (cito.space_hand), `fingers` the chains of space_hand.space_fingers."""
     program, result, Z, times = solve_with_link_retry(
         lambda links, Z: build_space_segment(scene, fingers, spec, mu, links, Z),
         lambda program, Z: max(link_depth(program.rows, Z), finger_overlap(program.rows, Z)),
