@@ -1,4 +1,4 @@
-"""General CITO in space (cito.spatial.SpaceCitoRows, planning.spatial.plan_space_cito) on fingerpro4: its knot rows'
+"""General CITO in space (cito.space_cito.SpaceCitoRows, planning.spatial.plan_space_cito) on fingerpro4: its knot rows'
 analytic Jacobian against central differences within its declared sparsity, the cold start keeping every knot
 row; `trajectotree plan --hand fingerpro4 --method cito` on a small goal writes a result with a reason or a plan
 that passes the check redone from its files (slow); an unknown method exits 2 and writes nothing."""
@@ -10,7 +10,9 @@ import pytest
 from conftest import jacobian_against_differences
 from pydrake.math import RollPitchYaw
 
-from trajectotree.cito import spatial as sp
+from trajectotree.cito.space_cito import SpaceCitoRows, cito_cold_start
+from trajectotree.cito.space_hand import space_fingers
+from trajectotree.cito.spatial import SPACE_DT
 from trajectotree.cli import main
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.spatial import recheck_space_plan
@@ -24,7 +26,7 @@ SMALL_GOAL = RollPitchYaw(SMALL_GOAL_RPY).ToQuaternion().wxyz()  # [w, x, y, z]
 class _Knots:
     """Knots first..stop-1 of the rows as one constraint (values, jacobian, sparsity), for the differences."""
 
-    def __init__(self, rows: sp.SpaceCitoRows, first: int, stop: int):
+    def __init__(self, rows: SpaceCitoRows, first: int, stop: int):
         self.part = rows.knots(first, stop)
         self.shape = (stop - first, rows.layout.width)
 
@@ -52,15 +54,15 @@ def cold():
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
     grasp = space_initial_grasp(scene, SMALL_GOAL, config.search, mu)
     assert grasp.success and len(grasp.nodes) == 1
-    fingers = sp.space_fingers(scene)
-    spec, Z = sp.cito_cold_start(scene, fingers, grasp.nodes[0], SMALL_GOAL, mu)
+    fingers = space_fingers(scene)
+    spec, Z = cito_cold_start(scene, fingers, grasp.nodes[0], SMALL_GOAL, mu)
     return scene, fingers, spec, Z, mu
 
 
 @pytest.mark.parametrize("links", [False, True])
 def test_knot_jacobian_against_central_differences(cold, links):
     scene, fingers, spec, Z, mu = cold
-    rows = sp.SpaceCitoRows(scene, fingers, spec, mu, sp.SPACE_DT, links)
+    rows = SpaceCitoRows(scene, fingers, spec, mu, SPACE_DT, links)
     assert rows.K == 21
     lo, hi = rows.knot_bounds()
     values = rows.knot_values(Z)[0]

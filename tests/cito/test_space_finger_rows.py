@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from conftest import jacobian_against_differences
 
+from trajectotree.cito import space_hand
 from trajectotree.cito import spatial as sp
 from trajectotree.cito.space_fingers import CLEARANCE, FingerParts, SpaceFingerRows, all_part_pairs, near_parts
 from trajectotree.config import Config, mu_plan
@@ -24,7 +25,7 @@ SAMPLES = 20001  # points along one axis of a brute-force pair (10 um apart at m
 def hand():
     config = Config()
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
-    fingers = sp.space_fingers(scene)
+    fingers = space_hand.space_fingers(scene)
     return scene, fingers, mu_plan(config.scene, config.search)
 
 
@@ -33,7 +34,7 @@ def _close_joints(scene, fingers, seed: int, knots: int) -> np.ndarray:
     other (overlapping or close: where the rows bind), drawn from uniform samples."""
     lower, upper = (np.array([getattr(c, name) for c in scene.fingers]) for name in ("q_lower", "q_upper"))
     q = np.random.default_rng(seed).uniform(lower, upper, (4000, 4, 3))
-    chain = sp._stacked(fingers)
+    chain = space_hand.stacked(fingers)
     parts = FingerParts.of(chain, scene.tip_radius)
     _, _, tip, _, link_ends = chain.chain(q)
     least = SpaceFingerRows(parts, all_part_pairs(4, len(parts.radius))).values(tip, link_ends).min(axis=1)
@@ -77,7 +78,7 @@ def test_nearest_points_of_segments_against_sampling():
 def test_rows_against_the_plants_capsules(hand):
     scene, fingers, _ = hand
     q = _close_joints(scene, fingers, 1, 6)
-    chain = sp._stacked(fingers)
+    chain = space_hand.stacked(fingers)
     _, _, tip, _, link_ends = chain.chain(q)
     parts = FingerParts.of(chain, scene.tip_radius)
     pairs = all_part_pairs(4, len(parts.radius))
@@ -99,7 +100,7 @@ def test_rows_against_the_plants_capsules(hand):
 
 def test_row_gradients_against_central_differences(hand):
     scene, fingers, _ = hand
-    chain = sp._stacked(fingers)
+    chain = space_hand.stacked(fingers)
     parts = FingerParts.of(chain, scene.tip_radius)
     q = _close_joints(scene, fingers, 2, 4)
     rows = SpaceFingerRows(parts, all_part_pairs(4, len(parts.radius)))
@@ -132,7 +133,7 @@ def test_segment_constraint_jacobian_with_every_pair(hand):
     Z = np.zeros((rows.K, layout.width))
     Z[:, layout.slice("q")] = q.ravel()
     Z = Z + 1e-2 * np.random.default_rng(4).standard_normal(Z.shape)
-    J, _, pattern = jacobian_against_differences(sp._SegmentConstraint(rows), Z)
+    J, _, pattern = jacobian_against_differences(sp.SegmentConstraint(rows), Z)
     assert not np.any(J[~pattern])
     lower, _ = rows.knot_bounds()
     apart = slice(rows.apart_row, rows.apart_row + len(pairs))
@@ -144,7 +145,7 @@ def test_the_check_refuses_fingers_inside_each_other(hand):
     inside the other's): the check in space names the two fingers, the depth and the knot."""
     scene, fingers, mu = hand
     q = np.tile(np.array([0.0, 0.6, -1.4]), (3, 4, 1))
-    _, _, tip, _, link_ends = sp._stacked(fingers).chain(q)
+    _, _, tip, _, link_ends = space_hand.stacked(fingers).chain(q)
     f_W = np.zeros((3, 4, 3))
     arrays = {
         "t": np.array([0.0, 0.5, 1.0]),

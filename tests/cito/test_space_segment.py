@@ -11,6 +11,7 @@ import pytest
 from conftest import jacobian_against_differences
 
 from trajectotree.cito import spatial as sp
+from trajectotree.cito.space_hand import space_fingers
 from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, mu_plan
 from trajectotree.planning.spatial import recheck_space_plan
@@ -27,7 +28,7 @@ def setting():
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
     plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)
     assert plan.success
-    return scene, sp.space_fingers(scene), plan, mu
+    return scene, space_fingers(scene), plan, mu
 
 
 def test_gravity_torques_match_the_plant(setting):
@@ -49,8 +50,8 @@ def test_jacobian_against_central_differences(setting, segment):
     scene, fingers, plan, mu = setting
     spec = sp.segment_spec(scene, fingers, plan.nodes[segment], plan.nodes[segment + 1])
     rows = sp.SpaceSegmentRows(scene, fingers, spec, mu, 4, sp.SPACE_DT)
-    constraint = sp._SegmentConstraint(rows)
-    Z = sp._guess(rows)
+    constraint = sp.SegmentConstraint(rows)
+    Z = sp.guess(rows)
     lo, hi = rows.knot_bounds()
     values = rows.knot_values(Z)[0]
     assert np.all(values >= lo - 1e-9) and np.all(values <= hi + 1e-9)  # the guess keeps the knot rows

@@ -13,6 +13,7 @@ from pydrake.solvers import IpoptSolver
 from scipy.spatial.transform import Rotation
 
 from trajectotree.cito import spatial as sp
+from trajectotree.cito.space_hand import space_fingers
 from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import box_signed_distances, quaternion_matrices, segment_box_distances, segment_box_nearest
 from trajectotree.results import LINK_PENETRATION_TOL
@@ -30,7 +31,7 @@ def setting():
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
     plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)
     assert plan.success
-    return scene, sp.space_fingers(scene), plan, mu, config
+    return scene, space_fingers(scene), plan, mu, config
 
 
 def _switching_segment(plan) -> int:
@@ -43,7 +44,7 @@ def test_ipopt_starts_from_the_guess_knot_by_knot(setting):
     program = sp.build_space_segment(
         scene, fingers, sp.segment_spec(scene, fingers, plan.nodes[s], plan.nodes[s + 1]), mu
     )
-    guess = sp._guess(program.rows)
+    guess = sp.guess(program.rows)
     assert np.array_equal(program.prog.GetInitialGuess(program.z), guess)
     # what IPOPT starts from: the program's initial guess in its decision variables' order
     start = program.prog.GetInitialGuess(program.prog.decision_variables())
@@ -76,9 +77,9 @@ def test_analytic_jacobian_in_its_sparsity(setting, rotated, links):
     s = _switching_segment(plan)
     spec = sp.segment_spec(scene, fingers, plan.nodes[s], plan.nodes[s + 1])
     rows = sp.SpaceSegmentRows(scene, fingers, spec, mu, sp.SPACE_INTERVALS, sp.SPACE_DT, links)
-    constraint = sp._SegmentConstraint(rows)
+    constraint = sp.SegmentConstraint(rows)
     rng = np.random.default_rng(2)
-    Z = sp._guess(rows) + 1e-3 * rng.standard_normal((rows.K, rows.layout.width))
+    Z = sp.guess(rows) + 1e-3 * rng.standard_normal((rows.K, rows.layout.width))
     if rotated:
         Z[:, rows.layout.slice("phi")] += rng.uniform(-0.25, 0.25, (rows.K, 3))
     assert np.any(rows.knot_values(Z)[0][:, rows.clearance_row] > 0)  # the clearance row is live
@@ -146,7 +147,7 @@ def test_the_end_knots_pyramids_are_the_searchs(setting, goal_28_segment_6):
     (> 0.396) and IPOPT failed; now the guess (the holding LP at each knot) keeps every row, torques included."""
     scene, fingers, _, mu, _ = setting
     rows = sp.SpaceSegmentRows(scene, fingers, goal_28_segment_6, mu, sp.SPACE_INTERVALS, sp.SPACE_DT)
-    values = rows.knot_values(sp._guess(rows))[0]
+    values = rows.knot_values(sp.guess(rows))[0]
     lo, hi = rows.knot_bounds()
     assert np.all(values >= lo - 1e-9) and np.all(values <= hi + 1e-9)
     for k in (0, -1):  # the search's construction in W at the nodes' orientations

@@ -1,5 +1,5 @@
 """The joint formulation in space (issue 36 item 3): `plan --hand fingerpro4 --formulation joint` solves the
-search's segments as one IPOPT program (cito.spatial.build_space_joint), the nodes free but the start and the
+search's segments as one IPOPT program (cito.space_joint.build_space_joint), the nodes free but the start and the
 goal; the plan passes the physics check redone from its files, and plan.json records the formulation."""
 
 import json
@@ -7,7 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from trajectotree.cito.spatial import SPACE_INTERVALS, build_space_joint, hand_model, joint_knots, segment_spec
+from trajectotree.cito.space_hand import hand_model
+from trajectotree.cito.space_joint import build_space_joint, joint_knots
+from trajectotree.cito.spatial import SPACE_INTERVALS, segment_spec
 from trajectotree.cli import main
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.spatial import PLAN_JSON, PLAN_NPZ, recheck_space_plan

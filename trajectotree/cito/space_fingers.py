@@ -49,7 +49,7 @@ class FingerParts:
 
     @staticmethod
     def of(hand, tip_radius: float) -> FingerParts:
-        """The parts of the stacked chains `hand` (cito.spatial._Finger with a leading axis of fingers)."""
+        """The parts of the stacked chains `hand` (cito.space_hand.Finger with a leading axis of fingers)."""
         n = hand.a_W.shape[-2]
         link_joint, link_radius = np.asarray(hand.link_joint)[0], np.asarray(hand.link_radius)[0]
         return FingerParts(np.r_[link_joint, n - 1].astype(int), np.r_[link_radius, tip_radius].astype(float))

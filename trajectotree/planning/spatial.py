@@ -4,7 +4,7 @@ ends the search's nodes: solved at once in the segment pool of segment_pool.py),
 nodes into one trajectory, checked from its arrays alone (planning.physics.check_space_physics) and written as
 plan.npz (results.SPACE_TRAJECTORY_ARRAYS) and plan.json (the object, the integration rule, the check,
 the solve report per segment and the contact sequence). With cito.formulation joint (`plan --formulation joint`)
-the segments are one program instead (cito.spatial.solve_space_joint: the nodes free but the start and the goal),
+the segments are one program instead (cito.space_joint.solve_space_joint: the nodes free but the start and the goal),
 reported as one solve.
 """
 
@@ -18,18 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.cito.spatial import (
-    SegmentSpec,
-    SpaceHandModel,
-    SpaceSegmentResult,
-    cito_cold_start,
-    cito_warm_start,
-    hand_model,
-    segment_spec,
-    solve_space_cito,
-    solve_space_joint,
-    solve_space_segment,
-)
+from trajectotree.cito.space_cito import cito_cold_start, cito_warm_start, solve_space_cito
+from trajectotree.cito.space_hand import SpaceHandModel, hand_model
+from trajectotree.cito.space_joint import solve_space_joint
+from trajectotree.cito.spatial import SegmentSpec, SpaceSegmentResult, segment_spec, solve_space_segment
 from trajectotree.config import CitoConfig, Config, config_to_dict, mu_plan
 from trajectotree.contact_plan import SpaceContactPlan
 from trajectotree.geometry import quaternion_angle
@@ -204,7 +196,7 @@ def _checked(scene, results, solve_time: float, t0: float, common: dict) -> Spac
 def plan_space_cito(
     scene, goal_quaternion, config: Config, method: str, workers: int | None = None, warm: SpacePlanResult | None = None
 ) -> SpacePlanResult:
-    """General CITO in space (cito.spatial.SpaceCitoRows: one program over the whole horizon, no contact plan), the
+    """General CITO in space (cito.space_cito.SpaceCitoRows: one program over the whole horizon, no contact plan), the
     plane's baselines in space: "cito" from the search's best initial grasp held along the straight slerp
     (search.tree.space_initial_grasp: no tree search, its time counted as the search's), "cito-warm" from
     TrajectoTree's plan's trajectory (`warm`, else planned here by plan_space on `workers`: its whole time is
