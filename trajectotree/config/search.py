@@ -84,6 +84,11 @@ class SearchConfig:
     # stance that meets it holds the cube within the motors where the world has friction 0.4, not the planned 0.7.
     # Used with space_stance_margin prefer and require only.
     space_stance_friction_safety: float = 0.5714
+    # 1, in [0, 1): the share of the search's budgets (max_expansions, time_budget_s) in which space_stance_margin
+    # prefer first searches margin stances alone, as require does, before it allows the others after them: a greedy
+    # pass alone (0) turns to a stance under the margin at the first node without a margin child, so its plans kept
+    # about half their stances at the margin (docs/measurements.md "The stance margin as a preference").
+    space_margin_first_share: float = 0.33
     # m, the least gap between any two fingers' collision shapes (link boxes, fingertip spheres) at a node
     # and on the straight joint-space path from its parent (exact planar test, trajectotree.search.reach),
     # since the simulation's fingers collide like any other bodies; the initial grasps keep it too.
@@ -160,6 +165,7 @@ class SearchConfig:
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.space_torque_fraction", self.space_torque_fraction, 0.0, 1.0, low_open=True)
         check_range("search.space_stance_friction_safety", self.space_stance_friction_safety, 0.0, 1.0, low_open=True)
+        check_range("search.space_margin_first_share", self.space_margin_first_share, 0.0, 1.0, high_open=True)
         if self.space_stance_margin not in STANCE_MARGINS:
             raise ConfigError(
                 field="search.space_stance_margin",
