@@ -39,8 +39,11 @@ short of the corners, where its sticking fingertips roll to (search.rolled_stanc
 carry the object's weight with at most search.max_stance_force newtons of total normal force at
 its planned contacts. In space the stances (and the roots' four fingers) must hold the object at
 their planned and rolled contacts with every joint within search.space_torque_fraction of its
-motor's limit and with friction cones at search.space_stance_friction_safety x scene.mu (at most
-mu_plan): headroom for the closed loop in a heavier or more slippery world than the plan assumed.
+motor's limit and, with search.space_stance_margin require, with friction cones at
+search.space_stance_friction_safety x scene.mu (at most mu_plan): headroom for the closed loop in a heavier or more
+slippery world than the plan assumed. With prefer, a stance that holds only at mu_plan is kept but ordered after
+those at the margin, and the search first looks for a plan of margin stances alone within
+search.space_margin_first_share of its budgets (_SpaceSearch.passes).
 
 Push order (trajectotree.search.stance; not in the paper): among the children of a node, SelectNode
 takes first those whose holding fingers resist a push of search.push_capacity newtons along each of
@@ -1033,7 +1036,8 @@ class _SpaceSearch:
 
     # -- GetNeighbors ---------------------------------------------------------------------------
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
-        """The children of `node`, best first: no switch, then each free finger's moves (the finger rolled
+        """The children of `node`, best first: those whose stance holds at the margin's friction (prefer), then no
+        switch, then each free finger's moves (the finger rolled
         furthest since it landed first, then its stance's push capacity, larger first), each finger's new contacts
         on faces turned to its base before those turned away, then freeing more fingers (freedom), then facing it
         more squarely, first. A stance holds the cube within the motors at its planned contacts and at those its
