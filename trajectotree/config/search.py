@@ -74,9 +74,10 @@ class SearchConfig:
     # How the search in space uses the stance margin (space_stance_friction_safety): "none", its stances hold the cube
     # within the motors (space_torque_fraction) at mu_plan, as before the margin; "require", only stances that hold it
     # with their friction cones at the margin are kept; "prefer", such stances are tried first and one that holds
-    # only at mu_plan after them (children ordered, the roots likewise), so a goal keeps a plan wherever "none" finds
-    # one within the budgets. The closure tests and CITO's cones keep mu_plan in every mode. "require" on the 30
-    # seed-0 SO(3) goals: the closed loop's drops at friction 0.4 went from 28 to 7 and at mass x1.5 from 5 to 0,
+    # only at mu_plan after them (children ordered, the roots likewise), after a first pass of margin stances alone
+    # (space_margin_first_share), so a goal keeps the plan "none" finds within the budget that pass leaves. The
+    # closure tests and CITO's cones keep mu_plan in every mode. "require" on the 30 seed-0 SO(3) goals: the closed
+    # loop's drops at friction 0.4 went from 28 to 7 and at mass x1.5 from 5 to 0,
     # but 2 of the 30 and 5 of the 23 axis-aligned goals found no plan within the budget (docs/measurements.md
     # "Headroom in space's stances"). "prefer": 30/30 and 23/23 planned and held open loop, 190 of the 30 plans' 246
     # stances at the margin, friction 0.4 16/30 and mass x1.5 3/30 dropped (none: 26/30, 3/30; "The stance margin
