@@ -154,6 +154,9 @@ class SpaceContactNode:
     stance_torque: float | None = None
     # N (or N m), the hardest push along +-x, +-y, +-z in W that stance resists at node n; None for node 0
     stance_push_capacity: float | None = None
+    # whether that stance (node 0: the four fingers' initial grasp) holds the box within the motors with friction
+    # cones at the search's stance margin (search.space_stance_margin), not only at mu_plan
+    stance_margin: bool = True
 
     def to_json(self) -> dict:
         return {
@@ -166,6 +169,7 @@ class SpaceContactNode:
             "closure_margin": float(self.closure_margin),
             "stance_torque": self.stance_torque,
             "stance_push_capacity": self.stance_push_capacity,
+            "stance_margin": self.stance_margin,
         }
 
 
@@ -180,10 +184,16 @@ class SpaceContactPlan:
     stats: SearchStats = field(default_factory=SearchStats)
     mu_plan: float = float("nan")
     max_segment_rotation: float = float("nan")  # rad, the largest rotation between two nodes
+    mu_margin: float = float("nan")  # the stances' margin friction (search.space_stance_margin; mu_plan: none)
 
     @property
     def reason(self) -> str:
         return "" if self.refusal is None else str(self.refusal)
+
+    @property
+    def margin_stances(self) -> int:
+        """How many of the nodes' stances (the initial grasp's included) hold the box at the margin's friction."""
+        return sum(n.stance_margin for n in self.nodes)
 
     def to_json(self) -> dict:
         return {
@@ -194,6 +204,9 @@ class SpaceContactPlan:
             "refusal": None if self.refusal is None else self.refusal.to_json(),
             "mu_plan": _finite_or_none(self.mu_plan),
             "max_segment_rotation": _finite_or_none(self.max_segment_rotation),
+            "mu_margin": _finite_or_none(self.mu_margin),
+            "margin_stances": self.margin_stances,
+            "stances": len(self.nodes),
             "stats": self.stats.to_json(),
             "contact_sequence": [n.to_json() for n in self.nodes],
         }

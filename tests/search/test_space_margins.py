@@ -1,6 +1,7 @@
 """Headroom in the search in space's stances (issue 37: closed loop at mass x1.5 and friction 0.4):
 search.space_torque_fraction (a stance holds the cube within that fraction of the motors' limit) and
-search.space_stance_friction_safety (with cones at that x scene.mu); the search refuses a stance over either, the
+search.space_stance_friction_safety (with cones at that x scene.mu, space_stance_margin require); the search refuses a
+stance over either, the
 fields' bad values exit 2 naming the value and the range, and a plan with both margins keeps them at every stance."""
 
 from dataclasses import replace
@@ -25,9 +26,10 @@ def scene():
 
 
 def _search(scene, **margins) -> _SpaceSearch:
-    """The search for a quarter turn about x with `margins` set, the others at no margin."""
+    """The search for a quarter turn about x with `margins` set (the stance friction's required), the others at no
+    margin."""
     config = Config()
-    none = dict(space_torque_fraction=1.0, space_stance_friction_safety=config.search.friction_safety)
+    none = dict(space_torque_fraction=1.0, space_stance_margin="require", space_stance_friction_safety=1.0)
     search = replace(config.search, **{**none, **margins})
     return _SpaceSearch(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
 
@@ -49,30 +51,32 @@ def _first_stance(search: _SpaceSearch):
 def test_a_stance_over_the_torque_fraction_is_refused(scene):
     search = _search(scene)
     root, stance, held = _first_stance(search)
-    _, torque, why = search.rolled_stance(root, 1, stance, held)
+    _, torque, why = search.rolled_stance(root, 1, stance, held, search.mu_hold)
     assert why is None and 0.0 < torque <= TAU_MAX
     fraction = torque / TAU_MAX
     # the same stance with the limit just under and just over what it needs (the same root: the search's roots
     # are checked at the limit too, so the first root is taken from the search without a margin)
     tight = _search(scene, space_torque_fraction=0.99 * fraction)
     assert tight.tau_limit == pytest.approx(0.99 * torque)
-    _, _, why = tight.rolled_stance(root, 1, stance, held)
+    _, _, why = tight.rolled_stance(root, 1, stance, held, tight.mu_hold)
     assert why is not None and why.kind == RefusalKind.STANCE_OVER_MOTORS
     assert why.limit == pytest.approx(0.99 * torque)
-    _, _, why = _search(scene, space_torque_fraction=min(1.0, 1.01 * fraction)).rolled_stance(root, 1, stance, held)
+    loose = _search(scene, space_torque_fraction=min(1.0, 1.01 * fraction))
+    _, _, why = loose.rolled_stance(root, 1, stance, held, loose.mu_hold)
     assert why is None
 
 
 def test_a_stance_that_cannot_hold_at_the_stance_friction_is_refused(scene):
     search = _search(scene)
     root, stance, held = _first_stance(search)
-    _, at_plan, _ = search.rolled_stance(root, 1, stance, held)
+    _, at_plan, _ = search.rolled_stance(root, 1, stance, held, search.mu_hold)
     at_04 = _search(scene, space_stance_friction_safety=0.4 / 0.7)
     assert at_04.mu_hold == pytest.approx(0.4)
-    _, torque, _ = at_04.rolled_stance(root, 1, stance, held)
+    _, torque, _ = at_04.rolled_stance(root, 1, stance, held, at_04.mu_hold)
     assert torque >= at_plan - 1e-9  # narrower cones: the squeeze, so the torque, can only grow
     # at friction 0.07 the stance cannot hold the cube within the motors
-    _, torque, why = _search(scene, space_stance_friction_safety=0.1).rolled_stance(root, 1, stance, held)
+    at_007 = _search(scene, space_stance_friction_safety=0.1)
+    _, torque, why = at_007.rolled_stance(root, 1, stance, held, at_007.mu_hold)
     assert why is not None and why.kind == RefusalKind.STANCE_OVER_MOTORS and torque > TAU_MAX
     # a stance friction above friction_safety does not loosen the stances past mu_plan
     assert _search(scene, space_stance_friction_safety=1.0).mu_hold == pytest.approx(search.mu)
@@ -80,13 +84,15 @@ def test_a_stance_that_cannot_hold_at_the_stance_friction_is_refused(scene):
 
 def test_a_plan_with_both_margins_keeps_them_at_every_stance(scene):
     config = Config()
-    search = replace(config.search, space_torque_fraction=0.9, space_stance_friction_safety=0.5)
+    search = replace(
+        config.search, space_torque_fraction=0.9, space_stance_margin="require", space_stance_friction_safety=0.5
+    )
     plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
     assert plan.success, plan.reason
     torques = [n.stance_torque for n in plan.nodes[1:]]
     assert max(torques) <= 0.9 * TAU_MAX + 1e-9
     # without the margins the same goal's plan uses more of the motors somewhere: the margin did bind
-    none = replace(config.search, space_torque_fraction=1.0, space_stance_friction_safety=config.search.friction_safety)
+    none = replace(config.search, space_torque_fraction=1.0, space_stance_margin="none")
     free = find_space_contact_plan(scene, QUARTER_ABOUT_X, none, mu_plan(config.scene, none))
     assert max(n.stance_torque for n in free.nodes[1:]) > max(torques)
 

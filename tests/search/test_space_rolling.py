@@ -96,7 +96,7 @@ def test_the_search_refuses_a_stance_whose_contacts_roll_off_their_face(scene):
         and search.closed([c for j, c in enumerate(root.contacts) if j != i]).in_closure
     ]
     stance = tuple(j for j in range(scene.num_fingers) if j != free[0])
-    _, torque, why = search.rolled_stance(root, 1, stance, held)
+    _, torque, why = search.rolled_stance(root, 1, stance, held, search.mu)
     assert why is None and 0.0 < torque <= search.tau_limit
     # a holder's contact rolled to 1 mm from its face's edge (the gap is 2 mm): refused
     c = root.contacts[stance[0]]
@@ -105,11 +105,11 @@ def test_the_search_refuses_a_stance_whose_contacts_roll_off_their_face(scene):
     offset[stance[0], axis] = (
         math.copysign(scene.object.half[axis] - 0.001, search.p_BC[c][axis] or 1.0) - search.p_BC[c][axis]
     )
-    _, _, why = search.rolled_stance(replace(root, rolled=offset), 1, stance, held)
+    _, _, why = search.rolled_stance(replace(root, rolled=offset), 1, stance, held, search.mu)
     assert why is not None and why.kind == RefusalKind.STANCE_ROLLS_OFF
     # without rolled stances, nothing is checked
     off = _SpaceSearch(scene, QUARTER_ABOUT_X, replace(config.search, rolled_stances=False), search.mu)
-    rolled, torque, why = off.rolled_stance(replace(root, rolled=offset), 1, stance, held)
+    rolled, torque, why = off.rolled_stance(replace(root, rolled=offset), 1, stance, held, search.mu)
     assert why is None and torque == 0.0 and not rolled.any()
 
 

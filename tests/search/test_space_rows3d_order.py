@@ -35,7 +35,7 @@ def test_the_finger_rolled_furthest_moves_first(setting):
     scene, search_config, mu = setting
     assert search_config.time_budget_s == 30.0 and search_config.budget_clock == "cpu"
     search = _SpaceSearch(scene, axis_aligned_goals()[19], search_config, mu)
-    leaf, why = search.run(search.roots()[0], SearchClock.start(search_config))
+    leaf, why = search.run(search.roots()[0], SearchClock.start(search_config), search_config)
     assert leaf is not None, why  # within the default budget (none found before the roll order)
     path = [leaf.parent]  # the nodes before the goal's, which have children
     while path[-1].parent is not None:

@@ -19,6 +19,7 @@ from trajectotree.config.scene import SceneConfig
 
 MAX_GOAL_ROTATION = 20 * math.pi  # rad, the largest goal rotation either way: ten turns
 BUDGET_CLOCKS = ("cpu", "wall")  # search.budget_clock
+STANCE_MARGINS = ("none", "prefer", "require")  # search.space_stance_margin
 MAX_NODES = 400  # search.num_nodes at most: a ten-turn goal takes 238 with the default segment rotations
 
 
@@ -70,14 +71,27 @@ class SearchConfig:
     # torque grows about in proportion to the weight; the plane's search does not use it). 1.0: no headroom, the
     # default: 0.8 alone, and 0.67 with space_stance_friction_safety, lost plans (docs/measurements.md, as below).
     space_torque_fraction: float = 1.0
-    # 1, the search in space's stances must hold the cube within the motors (space_torque_fraction) with their
-    # friction cones at the lesser of this x scene.mu and mu_plan, while the closure tests and CITO's cones keep
-    # mu_plan. 0.7 (= friction_safety): the stances at mu_plan, no margin, the default. 0.5714 (about 4/7) makes
-    # plans whose stances hold at friction 0.4 when planned at 0.7: on the 30 seed-0 SO(3) goals the closed loop's
-    # drops at 0.4 went from 28 to 7 and at mass x1.5 from 5 to 0, but 2 of the 30 and 5 of the 23 axis-aligned
-    # goals found no plan within the search's budget, and the search took 2-3x the time (docs/measurements.md
-    # "Headroom in space's stances"). The plane's search does not use it.
-    space_stance_friction_safety: float = 0.7
+    # How the search in space uses the stance margin (space_stance_friction_safety): "none", its stances hold the cube
+    # within the motors (space_torque_fraction) at mu_plan, as before the margin; "require", only stances that hold it
+    # with their friction cones at the margin are kept; "prefer", such stances are tried first and one that holds
+    # only at mu_plan after them (children ordered, the roots likewise), after a first pass of margin stances alone
+    # (space_margin_first_share), so a goal keeps the plan "none" finds within the budget that pass leaves. The
+    # closure tests and CITO's cones keep mu_plan in every mode. "require" on the 30 seed-0 SO(3) goals: the closed
+    # loop's drops at friction 0.4 went from 28 to 7 and at mass x1.5 from 5 to 0,
+    # but 2 of the 30 and 5 of the 23 axis-aligned goals found no plan within the budget (docs/measurements.md
+    # "Headroom in space's stances"). "prefer": 30/30 and 23/23 planned and held open loop, 190 of the 30 plans' 246
+    # stances at the margin, friction 0.4 16/30 and mass x1.5 3/30 dropped (none: 26/30, 3/30; "The stance margin
+    # as a preference"). none by default: prefer changes the plans every test in space makes. The plane ignores it.
+    space_stance_margin: str = "none"
+    # 1, the margin's friction as a fraction of scene.mu (at most mu_plan): 0.5714 (about 4/7) x 0.7 = 0.4, so a
+    # stance that meets it holds the cube within the motors where the world has friction 0.4, not the planned 0.7.
+    # Used with space_stance_margin prefer and require only.
+    space_stance_friction_safety: float = 0.5714
+    # 1, in [0, 1): the share of the search's budgets (max_expansions, time_budget_s) in which space_stance_margin
+    # prefer first searches margin stances alone, as require does, before it allows the others after them: a greedy
+    # pass alone (0) turns to a stance under the margin at the first node without a margin child, so its plans kept
+    # about half their stances at the margin (docs/measurements.md "The stance margin as a preference").
+    space_margin_first_share: float = 0.33
     # m, the least gap between any two fingers' collision shapes (link boxes, fingertip spheres) at a node
     # and on the straight joint-space path from its parent (exact planar test, trajectotree.search.reach),
     # since the simulation's fingers collide like any other bodies; the initial grasps keep it too.
@@ -154,6 +168,14 @@ class SearchConfig:
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.space_torque_fraction", self.space_torque_fraction, 0.0, 1.0, low_open=True)
         check_range("search.space_stance_friction_safety", self.space_stance_friction_safety, 0.0, 1.0, low_open=True)
+        check_range("search.space_margin_first_share", self.space_margin_first_share, 0.0, 1.0, high_open=True)
+        if self.space_stance_margin not in STANCE_MARGINS:
+            raise ConfigError(
+                field="search.space_stance_margin",
+                value=self.space_stance_margin,
+                problem="is unknown",
+                choices=STANCE_MARGINS,
+            )
         check_range("search.finger_clearance", self.finger_clearance, 0.0, 0.05)
         check_range("search.max_stance_force", self.max_stance_force, 0.0, 1000.0)
         check_range("search.push_capacity", self.push_capacity, 0.0, 100.0)

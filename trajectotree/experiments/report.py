@@ -363,6 +363,7 @@ def space_method_summary(rows: list[dict], method: str) -> dict:
     reference = _values([r for r in rows if r["method"] == REFERENCE], "total_time_s")
     errors = [r.get("final_error_deg") for r in mine]
     median = float(np.median(times)) if times.size else None
+    planned = [r for r in mine if r.get("success")]
     return {
         "method": method,
         "label": METHOD_LABELS.get(method, method),
@@ -371,6 +372,9 @@ def space_method_summary(rows: list[dict], method: str) -> dict:
         "planned": sum(bool(r.get("success")) for r in mine),
         "checked": sum(bool(r.get("check_passed")) for r in mine),
         "within_2_deg": sum(e is not None and e <= SPACE_GOAL_TOLERANCE_DEG for e in errors),
+        # the planned trials' stances (nodes) that hold at the search's stance margin, of their stances
+        "margin_stances": int(_values(planned, "margin_stances").sum()),
+        "stances": int(_values(planned, "stances").sum()),
         "mean_time_s": float(times.mean()) if times.size else None,
         "median_time_s": median,
         "p90_time_s": float(np.percentile(times, 90)) if times.size else None,
@@ -382,8 +386,8 @@ def space_method_summary(rows: list[dict], method: str) -> dict:
 
 def space_table_markdown(table: list[dict]) -> str:
     header = (
-        "| method | trials | errors | planned | checked | within 2 deg | mean time [s] | median time [s] "
-        "| p90 time [s] | median / TrajectoTree's |"
+        "| method | trials | errors | planned | checked | within 2 deg | stances at the margin | mean time [s] "
+        "| median time [s] | p90 time [s] | median / TrajectoTree's |"
     )
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     for s in table:
@@ -392,6 +396,7 @@ def space_table_markdown(table: list[dict]) -> str:
             str(s["trials"]),
             str(s["errors"]),
             *(f"{s[k]}/{s['trials']}" for k in ("planned", "checked", "within_2_deg")),
+            f"{s['margin_stances']}/{s['stances']}",
             _fmt(s["mean_time_s"], ".2f"),
             _fmt(s["median_time_s"], ".2f"),
             _fmt(s["p90_time_s"], ".2f"),
@@ -406,7 +411,9 @@ SPACE_TABLE_NOTES = """
 A sweep of a hand in space (planning only). Planned: the search found a contact sequence, every program
 solved, the plan passed the 3D physics check (planning.physics.check_space_physics) and ends within 2 deg
 of its goal orientation. Checked: the plan's arrays passed that check. Within 2 deg: the last knot's
-orientation is at most 2 deg from the goal. Planning time = search + the programs (a trial's segments one
+orientation is at most 2 deg from the goal. Stances at the margin: of the planned trials' nodes, those whose stance
+(node 0: the initial grasp) holds the cube within the motors at the search's stance margin friction
+(search.space_stance_margin; all of them with none). Planning time = search + the programs (a trial's segments one
 after another in its process), over every trial that returned a plan result; median / TrajectoTree's is
 the ratio of the method's median planning time over TrajectoTree's, over all their trials.
 The planar report's Fig. 2 (box plots of time and cost) and Fig. 3 (tracking errors) are not drawn for a

@@ -51,8 +51,9 @@ ROW_FIELDS = (
     + ("trial_wall_s", "error")
 )
 # A trial in space adds these (plan.json's check and final error; plan_arrays: whether plan.npz was written, which a
-# plan whose search found no contact sequence has not).
-SPACE_FIELDS = ("check_passed", "final_error_deg", "plan_arrays")
+# plan whose search found no contact sequence has not; its contact plan's nodes whose stances hold at the search's
+# stance margin, of its nodes: search.space_stance_margin).
+SPACE_FIELDS = ("check_passed", "final_error_deg", "plan_arrays", "margin_stances", "stances")
 # ... and with --simulate its open-loop run's (sim.json of execution.space_run; dropped, drop_time_s and sim_time_s
 # are SIM_FIELDS): the final orientation error (rad) and position error (m), and the field's two success criteria.
 SPACE_SIM_FIELDS = ("final_orientation_error_rad", "final_position_error_m", "within_15deg", "within_0p4rad")
@@ -148,6 +149,7 @@ def space_row_from_files(task: TrialTask, out_dir: Path) -> dict:
     row["final_error_deg"] = None if error is None else math.degrees(error)
     row["plan_arrays"] = (out_dir / PLAN_NPZ).is_file()
     row["switching_fingers"] = [n.get("switching_finger") for n in plan_json["contact_plan"]["contact_sequence"]]
+    row.update({k: plan_json["contact_plan"].get(k) for k in ("margin_stances", "stances")})
     sim_path = out_dir / SIM_JSON
     if sim_path.is_file():
         sim_json = json.loads(sim_path.read_text())

@@ -39,8 +39,11 @@ short of the corners, where its sticking fingertips roll to (search.rolled_stanc
 carry the object's weight with at most search.max_stance_force newtons of total normal force at
 its planned contacts. In space the stances (and the roots' four fingers) must hold the object at
 their planned and rolled contacts with every joint within search.space_torque_fraction of its
-motor's limit and with friction cones at search.space_stance_friction_safety x scene.mu (at most
-mu_plan): headroom for the closed loop in a heavier or more slippery world than the plan assumed.
+motor's limit and, with search.space_stance_margin require, with friction cones at
+search.space_stance_friction_safety x scene.mu (at most mu_plan): headroom for the closed loop in a heavier or more
+slippery world than the plan assumed. With prefer, a stance that holds only at mu_plan is kept but ordered after
+those at the margin, and the search first looks for a plan of margin stances alone within
+search.space_margin_first_share of its budgets (_SpaceSearch.passes).
 
 Push order (trajectotree.search.stance; not in the paper): among the children of a node, SelectNode
 takes first those whose holding fingers resist a push of search.push_capacity newtons along each of
@@ -862,6 +865,7 @@ class _SpaceNode:
     stance_torque: float | None = None  # N m
     push: float | None = None  # N
     rolled: np.ndarray | None = None  # (F, 3) m in B, each fingertip rolled off its contact since it landed
+    margin: bool = True  # its stance holds the cube within the motors at the margin's friction (mu_hold)
 
 
 @dataclass(frozen=True)
@@ -875,6 +879,7 @@ class _SpaceChild:
     stance_torque: float
     push: float
     rolled: np.ndarray  # (F, 3) m in B, the child's rolled offsets (_SpaceSearch.rolled_stance)
+    margin: bool  # its stance holds the cube within the motors at mu_hold, not only at mu_plan
 
 
 class _SpaceSearch:
@@ -902,9 +907,13 @@ class _SpaceSearch:
         # N m, the torque a stance may use: search.space_torque_fraction of the weakest motor, the rest left to the
         # closed loop for a heavier cube than planned
         self.tau_limit = config.space_torque_fraction * float(np.min(scene.tau_max))
-        # the friction the stances hold the cube with (search.space_stance_friction_safety x the world's, at most
-        # mu_plan): a stance that holds at it holds where the world has that much less friction than planned
-        self.mu_hold = min(mu, config.space_stance_friction_safety * scene.object.mu)
+        # the stance margin's friction (search.space_stance_friction_safety x the world's, at most mu_plan): a stance
+        # that holds at it holds where the world has that much less friction than planned
+        margin = config.space_stance_margin != "none"
+        self.mu_hold = min(mu, config.space_stance_friction_safety * scene.object.mu) if margin else mu
+        # the frictions a stance is tried at, in order: the margin's, then (prefer) mu_plan's when the margin's fails
+        prefer = config.space_stance_margin == "prefer" and self.mu_hold < mu
+        self.hold_frictions = (self.mu_hold, mu) if prefer else (self.mu_hold,)
         self._reach: dict[tuple, object] = {}
         self._closure: dict[tuple, object] = {}
         self.refused: Counter[Refusal] = Counter()
@@ -937,13 +946,13 @@ class _SpaceSearch:
         to_base = self.scene.fingers[finger].p_W_joint[0] - self.p_BC @ R.T - self.poses[depth][4:]
         return np.einsum("kc,kc->k", self.n_B @ R.T, to_base / np.linalg.norm(to_base, axis=1, keepdims=True))
 
-    def holding(self, depth: int, contacts, fingers, q_rows) -> tuple[float, float]:
+    def holding(self, depth: int, contacts, fingers, q_rows, mu: float) -> tuple[float, float]:
         """(N m, N): the least largest joint torque with which `fingers` on `contacts` at angles q_rows
         hold the box at rest at pose `depth` (their own weight included), and the hardest push along
-        +-x, +-y, +-z in W they resist within their motors, both with friction cones at mu_hold."""
-        return self.holding_at(depth, self.p_BC[list(contacts)], self.n_B[list(contacts)], fingers, q_rows)
+        +-x, +-y, +-z in W they resist within their motors, both with friction cones at `mu`."""
+        return self.holding_at(depth, self.p_BC[list(contacts)], self.n_B[list(contacts)], fingers, q_rows, mu)
 
-    def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows, J=None) -> tuple[float, float]:
+    def holding_at(self, depth: int, p_BC, n_B, fingers, q_rows, mu: float, J=None) -> tuple[float, float]:
         """holding's (N m, N) for `fingers` on the points p_BC (k, 3) m in B of the faces of outward normals n_B;
         J (k, 3, n): the contact points' Jacobians where the caller has them."""
         R = box_transform(self.poses[depth]).rotation().matrix()
@@ -955,8 +964,8 @@ class _SpaceSearch:
             J = np.array(
                 [self.scene.fingers[i].jacobian(q[i], -self.scene.tip_radius * n) for i, n in zip(fingers, n_W)]
             )
-        W = edge_wrenches_W(p_WC, n_W, self.mu_hold, PYRAMID_EDGES)
-        A = spatial_torque_rows(J, n_W, self.mu_hold, PYRAMID_EDGES)
+        W = edge_wrenches_W(p_WC, n_W, mu, PYRAMID_EDGES)
+        A = spatial_torque_rows(J, n_W, mu, PYRAMID_EDGES)
         tau_g = self.scene.gravity_torques(q)[list(fingers)]
         k = len(fingers)
         torque, _ = self.hold_lps[k].solve(W, A, tau_g, self.w_hold)
@@ -984,7 +993,15 @@ class _SpaceSearch:
         if clash:
             return None, clash
         node = _SpaceNode(
-            depth, child.contacts, q, child.finger, child.parent, child.stance_torque, child.push, child.rolled
+            depth,
+            child.contacts,
+            q,
+            child.finger,
+            child.parent,
+            child.stance_torque,
+            child.push,
+            child.rolled,
+            child.margin,
         )
         return node, None
 
@@ -1019,7 +1036,8 @@ class _SpaceSearch:
 
     # -- GetNeighbors ---------------------------------------------------------------------------
     def neighbors(self, node: _SpaceNode) -> list[_SpaceChild]:
-        """The children of `node`, best first: no switch, then each free finger's moves (the finger rolled
+        """The children of `node`, best first: those whose stance holds at the margin's friction (prefer), then no
+        switch, then each free finger's moves (the finger rolled
         furthest since it landed first, then its stance's push capacity, larger first), each finger's new contacts
         on faces turned to its base before those turned away, then freeing more fingers (freedom), then facing it
         more squarely, first. A stance holds the cube within the motors at its planned contacts and at those its
@@ -1038,31 +1056,22 @@ class _SpaceSearch:
             if finger is not None and not self.closed(contacts).in_closure:
                 self.refused[Refusal(RefusalKind.FINGER_HELD, fingers=(finger,), stance=stance, mu_plan=self.mu)] += 1
                 continue
-            torque0, _ = self.holding(node.depth, contacts, stance, node.q[list(stance)])
-            if torque0 > self.tau_limit:
-                self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
-                continue
-            rolled, rolled_torque, why = self.rolled_stance(node, depth, stance, held)  # before the push's six LPs
+            held_stance, why = self.stance(node, depth, stance, held)
             if why is not None:
                 self.refused[why] += 1
                 continue
-            torque1, push = self.holding(depth, contacts, stance, [held[i].q for i in stance])
-            torque = max(torque0, torque1)
-            if torque > self.tau_limit:
-                self.refused[Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)] += 1
-                continue
+            torque, push, rolled, margin = held_stance
             # the finger rolled furthest since it landed moves first (it lands back on a grid point, its roll reset):
             # by push capacity alone axes 18 and 19 found no plan in the 30 s budget (1296, 1761 expansions), so
-            # ordered in 544 and 102 (all rolls are 0 with search.rolled_stances off: the push's order)
+            # ordered in 544 and 102 (all rolls are 0 with search.rolled_stances off: the push's order); a stance
+            # within the margin before any that holds only at mu_plan (search.space_stance_margin prefer)
             rolled_far = 0.0 if finger is None else -float(np.linalg.norm(node.rolled[finger]))  # m
-            ranked.append(
-                (finger is not None, rolled_far, -push, finger, stance, max(torque, rolled_torque), push, rolled)
-            )
+            ranked.append((not margin, finger is not None, rolled_far, -push, finger, stance, torque, push, rolled))
         out = []
-        for _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:3]):
+        for not_margin, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
             q_held = {i: held[i].q for i in stance}
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, not not_margin))
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
@@ -1077,16 +1086,41 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, not not_margin))
         return out
 
-    def rolled_stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[np.ndarray, float, Refusal | None]:
+    def stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[tuple | None, Refusal | None]:
+        """((largest joint torque N m, push capacity N, the child's rolled offsets (F, 3) m in B, whether it holds at
+        the margin's friction), None) for `stance` holding the cube from `node` to the child at `depth` at angles
+        held[i].q: within the motors at its planned contacts at both ends and at those its fingertips roll to
+        (rolled_stance), at the first of hold_frictions at which it does; or (None, why it holds at none)."""
+        contacts = [node.contacts[i] for i in stance]
+        for mu in self.hold_frictions:
+            torque0, _ = self.holding(node.depth, contacts, stance, node.q[list(stance)], mu)
+            if torque0 > self.tau_limit:
+                why = Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
+                continue
+            rolled, rolled_torque, why = self.rolled_stance(node, depth, stance, held, mu)  # before the push's LPs
+            if why is not None:
+                if why.kind != RefusalKind.STANCE_OVER_MOTORS:
+                    return None, why  # off its faces or open: the same at any friction
+                continue
+            torque1, push = self.holding(depth, contacts, stance, [held[i].q for i in stance], mu)
+            if torque1 > self.tau_limit:
+                why = Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
+                continue
+            return (max(torque0, torque1, rolled_torque), push, rolled, mu == self.mu_hold), None
+        return None, why
+
+    def rolled_stance(
+        self, node: _SpaceNode, depth: int, stance, held, mu: float
+    ) -> tuple[np.ndarray, float, Refusal | None]:
         """(the child's rolled offsets (F, 3) m in B, the largest joint torque (N m) with which `stance` holds the cube
         at its rolled contacts, why it cannot (None when it can)) for the transition from `node` to the child at
         `depth` in which `stance` holds at angles held[i].q (spatial_rolling): at both ends each rolled contact on its
         face and search.rolled_corner_gap short of its edges (a sphere that rolls onto an edge pivots over it), the
-        stance in closure at mu_plan and held within the motors there. The finger that moves lands on its planned
-        point (offset 0). With search.rolled_stances false: no offsets, no checks."""
+        stance in closure at mu_plan and held within the motors there with friction cones at `mu`. The finger that
+        moves lands on its planned point (offset 0). With search.rolled_stances false: no offsets, no checks."""
         offsets = np.zeros_like(node.rolled)
         if not self.config.rolled_stances:
             return offsets, 0.0, None
@@ -1115,7 +1149,7 @@ class _SpaceSearch:
         )
         q_rolled = np.stack(q_rolled, axis=1)
         torque = max(
-            self.holding_at(d, p, n_B, stance, q, J[e])[0] for e, (d, p, q) in enumerate(zip(ends, p_BC, q_rolled))
+            self.holding_at(d, p, n_B, stance, q, mu, J[e])[0] for e, (d, p, q) in enumerate(zip(ends, p_BC, q_rolled))
         )
         if torque > self.tau_limit:
             return offsets, torque, Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
@@ -1130,13 +1164,16 @@ class _SpaceSearch:
     def roots(self) -> list[_SpaceNode]:
         """Initial grasps at the start pose, best first: each finger's SPACE_ROOT_CHOICES reachable contacts
         facing it most squarely, combined; distinct contacts in closure at mu_plan that free a finger at least,
-        links clear, held by the four within the motors; those that free more fingers, then resist harder
-        pushes, first. With a measured `root`, that grasp alone, whatever it frees and holds (the tree decides)."""
+        links clear, held by the four within the motors (at the first of hold_frictions at which they are); those held
+        at the margin's friction, then those that free more fingers, then resist harder pushes, first. With a measured
+        `root`, that grasp alone, whatever it frees and holds (the tree decides)."""
+        fingers = tuple(range(self.scene.num_fingers))
         if self.root is not None:
             contacts = tuple(range(len(self.p_BC) - self.scene.num_fingers, len(self.p_BC)))
             q = np.asarray(self.root.q, dtype=float)
-            torque, push = self.holding(0, contacts, tuple(range(self.scene.num_fingers)), q)
-            return [_SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)))]
+            torque, push = self.holding(0, contacts, fingers, q, self.mu_hold)
+            rolled = np.zeros((len(contacts), 3))
+            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, torque <= self.tau_limit)]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -1156,24 +1193,45 @@ class _SpaceSearch:
             q = np.array([self.finger_reach(0, i, c).q for i, c in enumerate(contacts)])
             if self.reach.links_clear(self.poses[0], q):
                 continue
-            fingers = tuple(range(self.scene.num_fingers))
-            torque, push = self.holding(0, contacts, fingers, q)
-            if torque <= self.tau_limit:
-                node = _SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)))
-                out.append(((-freedom, -push), node))
+            for mu in self.hold_frictions:
+                torque, push = self.holding(0, contacts, fingers, q, mu)
+                if torque <= self.tau_limit:
+                    margin = mu == self.mu_hold
+                    node = _SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)), margin)
+                    out.append(((not margin, -freedom, -push), node))
+                    break
             if len(out) == SPACE_MAX_ROOTS:
                 break
         return [node for _, node in sorted(out, key=lambda r: r[0])]
 
-    def run(self, root: _SpaceNode, t0: SearchClock) -> tuple[_SpaceNode | None, Refusal | None]:
-        """Depth-first search from `root` to the last node, within search.max_expansions and time_budget_s."""
+    def passes(self) -> tuple[tuple[tuple[float, ...], SearchConfig], ...]:
+        """The search's passes, each (the frictions its stances are tried at, its budgets: max_expansions and
+        time_budget_s, counted from the search's start): with search.space_stance_margin prefer, margin stances alone
+        (as require) within search.space_margin_first_share of the budgets, then those that hold only at mu_plan
+        after them within the rest (a goal whose margin plan lies under another root than the first gets it: the
+        quarter turn about x has 6 of 6 stances at the margin from its second root, 2 of 6 from its first); one
+        pass otherwise."""
+        share = self.config.space_margin_first_share
+        if len(self.hold_frictions) == 1 or share == 0.0:
+            return ((self.hold_frictions, self.config),)
+        expansions = max(1, math.floor(share * self.config.max_expansions))
+        first = replace(self.config, time_budget_s=share * self.config.time_budget_s, max_expansions=expansions)
+        return (((self.mu_hold,), first), (self.hold_frictions, self.config))
+
+    def begin_pass(self, frictions: tuple[float, ...]) -> None:
+        """A new pass whose stances are tried at `frictions`: the states seen before are seen afresh (a state dead
+        with margin stances alone may live with the others)."""
+        self.hold_frictions, self.visited = frictions, set()
+
+    def run(self, root: _SpaceNode, t0: SearchClock, budgets: SearchConfig) -> tuple[_SpaceNode | None, Refusal | None]:
+        """Depth-first search from `root` to the last node, within budgets.max_expansions and time_budget_s."""
         goal = len(self.poses) - 1
         stack: list = [root]
         while stack:
-            if self.expanded >= self.config.max_expansions:
+            if self.expanded >= budgets.max_expansions:
                 return None, Refusal(RefusalKind.NODE_BUDGET, count=self.expanded)
-            if t0.over(self.config):
-                return None, Refusal(RefusalKind.TIME_BUDGET, limit=self.config.time_budget_s)
+            if t0.over(budgets):
+                return None, Refusal(RefusalKind.TIME_BUDGET, limit=budgets.time_budget_s)
             item = stack.pop()
             if isinstance(item, _SpaceChild):
                 key = (item.parent.depth + 1, item.contacts)
@@ -1209,6 +1267,7 @@ class _SpaceSearch:
                 closure_margin=float(self.closed(n.contacts).margin),
                 stance_torque=None if n.depth == 0 else n.stance_torque,
                 stance_push_capacity=None if n.depth == 0 else n.push,
+                stance_margin=n.margin,
             )
             for n in reversed(path)
         )
@@ -1223,13 +1282,18 @@ def find_space_contact_plan(
     t0 = SearchClock.start(config)
     goal = tuple(float(v) for v in goal_quaternion)
     search = _SpaceSearch(scene, goal, config, mu, root)
-    roots = search.roots()
-    leaf, last, searched = None, None, 0
-    for root in roots:
-        searched += 1
-        leaf, why = search.run(root, t0)
-        last = AtRoot(tuple(float(c) for c in root.contacts), why) if why else None
-        if leaf is not None or (why and why.kind in (RefusalKind.TIME_BUDGET, RefusalKind.NODE_BUDGET)):
+    leaf, last, searched, candidates = None, None, 0, 0
+    for frictions, budgets in search.passes():
+        search.begin_pass(frictions)
+        roots = search.roots()
+        candidates += len(roots)
+        for root in roots:
+            searched += 1
+            leaf, why = search.run(root, t0, budgets)
+            last = AtRoot(tuple(float(c) for c in root.contacts), why) if why else None
+            if leaf is not None or (why and why.kind in (RefusalKind.TIME_BUDGET, RefusalKind.NODE_BUDGET)):
+                break
+        if leaf is not None:
             break
     stats = SearchStats(
         expanded=search.expanded,
@@ -1238,14 +1302,16 @@ def find_space_contact_plan(
         ik_calls=search.reach.ik_calls,
         time_s=t0.elapsed(),
         initial_grasps_searched=searched,
-        initial_grasp_candidates=len(roots),
+        initial_grasp_candidates=candidates,
     )
-    common = dict(goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION)
+    common = dict(
+        goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION, mu_margin=search.mu_hold
+    )
     if leaf is not None:
         return SpaceContactPlan(success=True, nodes=search.plan_nodes(leaf), **common)
     refusal = NoPlan(
         searched=stats.initial_grasps_searched,
-        candidates=len(roots),
+        candidates=candidates,
         skipped=0,
         first_skipped=None,
         last_searched=last,
@@ -1269,7 +1335,9 @@ def space_initial_grasp(scene, goal_quaternion, config: SearchConfig, mu: float)
         time_s=t0.elapsed(),
         initial_grasp_candidates=len(roots),
     )
-    common = dict(goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION)
+    common = dict(
+        goal=goal, stats=stats, mu_plan=mu, max_segment_rotation=SPACE_MAX_SEGMENT_ROTATION, mu_margin=search.mu_hold
+    )
     if roots:
         return SpaceContactPlan(success=True, nodes=search.plan_nodes(roots[0]), **common)
     refusal = NoPlan(0, 0, 0, None, None, mu, tuple(search.refused.most_common(5)))

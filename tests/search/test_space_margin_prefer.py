@@ -1,0 +1,151 @@
+"""The stance margin as a preference (search.space_stance_margin prefer, issue 37): a stance that holds the cube within
+the motors only at mu_plan is taken where no stance at the margin's friction is found, so a goal keeps the plan
+the search without the margin finds; where a plan with margin stances alone exists, prefer's is require's; plan.json
+counts the stances at the margin; the options' bad values exit 2 naming the value and the valid ones."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from trajectotree.cli import main
+from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
+from trajectotree.refusal import RefusalKind
+from trajectotree.scene.spatial import build_space_scene
+from trajectotree.search.tree import SearchClock, _SpaceSearch, find_space_contact_plan
+
+QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
+AT_04 = 0.5714  # search.space_stance_friction_safety: 0.5714 x scene.mu 0.7 = friction 0.4
+AT_021 = 0.3  # 0.3 x 0.7 = 0.21: the quarter turn's first root holds there, the stances after it do not
+
+
+@pytest.fixture(scope="module")
+def scene():
+    config = Config()
+    return build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
+
+
+def _config(mode: str, safety: float = AT_04, **more) -> SearchConfig:
+    return replace(Config().search, space_stance_margin=mode, space_stance_friction_safety=safety, **more)
+
+
+def _plan(scene, mode: str, safety: float = AT_04, **more):
+    config = _config(mode, safety, **more)
+    return find_space_contact_plan(scene, QUARTER_ABOUT_X, config, mu_plan(Config().scene, config))
+
+
+def _search(scene, mode: str, safety: float = AT_04) -> _SpaceSearch:
+    config = _config(mode, safety)
+    return _SpaceSearch(scene, QUARTER_ABOUT_X, config, mu_plan(Config().scene, config))
+
+
+def _sequence(plan) -> list:
+    return [(n.switching_finger, n.faces, n.p_BC.round(9).tolist()) for n in plan.nodes]
+
+
+def _none_path(search: _SpaceSearch) -> list:
+    """The nodes, root first, of the plan the search without a margin finds from its first root (goal's excluded)."""
+    leaf, why = search.run(search.roots()[0], SearchClock.start(search.config), search.config)
+    assert leaf is not None, why
+    path = [leaf.parent]
+    while path[-1].parent is not None:
+        path.append(path[-1].parent)
+    return path[::-1]
+
+
+def test_prefer_orders_the_stances_under_the_margin_after_the_others_and_keeps_them(scene):
+    prefer, require, none = (_search(scene, mode) for mode in ("prefer", "require", "none"))
+    assert prefer.hold_frictions == pytest.approx((0.4, 0.49), abs=1e-4)
+    assert none.hold_frictions == pytest.approx((0.49,))
+    # a node of none's plan with children on both sides of the margin (some stances hold at 0.4, some only at 0.49)
+    node, children = next(
+        (n, c) for n in _none_path(none) for c in [prefer.neighbors(n)] if len({child.margin for child in c}) == 2
+    )
+    margins = [c.margin for c in children]
+    assert margins == sorted(margins, reverse=True)  # every margin stance before any that holds only at mu_plan
+    # the same children as without the margin (none is lost), each marked as require's check says
+    assert sorted((-1 if c.finger is None else c.finger, c.contacts) for c in children) == sorted(
+        (-1 if c.finger is None else c.finger, c.contacts) for c in none.neighbors(node)
+    )
+    held = {i: require.finger_reach(node.depth + 1, i, c, node.q[i]) for i, c in enumerate(node.contacts)}
+    for child in children:
+        stance = tuple(i for i in range(scene.num_fingers) if i != child.finger)
+        kept, why = require.stance(node, node.depth + 1, stance, held)
+        assert (kept is not None) == child.margin
+        if not child.margin:
+            assert why.kind == RefusalKind.STANCE_OVER_MOTORS
+
+
+@pytest.mark.slow  # three searches, ~7 s of CPU
+def test_prefer_finds_require_s_plan_where_one_exists(scene):
+    require, prefer = _plan(scene, "require"), _plan(scene, "prefer")
+    assert require.success and prefer.success, prefer.reason
+    assert _sequence(prefer) == _sequence(require)
+    assert prefer.margin_stances == len(prefer.nodes) == require.margin_stances
+    assert prefer.mu_margin == pytest.approx(0.4, abs=1e-4)
+    # the greedy pass alone (share 0) takes a stance under the margin at the first node without a margin child: its
+    # first root has no plan with margin stances alone, so it keeps fewer at the margin than the first pass finds
+    greedy = _plan(scene, "prefer", space_margin_first_share=0.0)
+    assert greedy.success and greedy.margin_stances < prefer.margin_stances
+
+
+@pytest.mark.slow  # four searches, ~7 s of CPU
+def test_prefer_keeps_a_plan_where_the_margin_allows_none(scene):
+    # at friction 0.07 no stance holds the cube within the motors: require has no plan, prefer has none's
+    require, prefer, none = (_plan(scene, mode, 0.1) for mode in ("require", "prefer", "none"))
+    assert not require.success
+    assert prefer.success and none.success, prefer.reason
+    assert _sequence(prefer) == _sequence(none)
+    assert prefer.margin_stances == 0 and none.margin_stances == len(none.nodes)  # none's margin is mu_plan
+    saved = prefer.to_json()
+    assert saved["margin_stances"] == 0 and saved["stances"] == len(prefer.nodes)
+    assert saved["mu_margin"] == pytest.approx(0.07)
+    assert [n["stance_margin"] for n in saved["contact_sequence"]] == [False] * len(prefer.nodes)
+    # where the margin binds on some stances only, the plan keeps those that meet it and says how many
+    some = _plan(scene, "prefer", AT_021)
+    assert some.success and 0 < some.margin_stances < len(some.nodes)
+
+
+@pytest.mark.parametrize(
+    "field, value, valid",
+    [
+        ("space_stance_margin", "sometimes", "none, prefer, require"),
+        ("space_stance_margin", False, "none, prefer, require"),
+        ("space_margin_first_share", 1.0, "[0, 1)"),
+        ("space_margin_first_share", -0.1, "[0, 1)"),
+    ],
+)
+def test_bad_margin_options_are_config_errors(field, value, valid):
+    with pytest.raises(ConfigError) as err:
+        SearchConfig(**{field: value})
+    assert f"search.{field}" in str(err.value) and valid in str(err.value)
+
+
+@pytest.mark.parametrize(
+    "text, named",
+    [
+        ("{search: {space_stance_margin: sometimes}}", "search.space_stance_margin = 'sometimes'"),
+        ("{search: {space_margin_first_share: 1.5}}", "search.space_margin_first_share = 1.5"),
+    ],
+)
+def test_bad_margin_options_exit_2_before_any_search(tmp_path, capsys, text, named):
+    out = tmp_path / "plan"
+    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0", "0", "0.5", "--out", str(out), "--config-text", text]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and named in err[0], err
+    assert not out.exists()
+
+
+def test_the_sweep_row_reads_the_margin_count(tmp_path, scene):
+    from trajectotree.experiments.trial import TrialTask, space_row_from_files
+
+    plan = _plan(scene, "prefer", AT_021)
+    fields = dict(key="0000_trajectotree", goal_index=0, goal=QUARTER_ABOUT_X.tolist(), method="trajectotree")
+    task = TrialTask(**fields, simulate=False, config={}, time_limit_s=60.0, space={})
+    (tmp_path / "plan.json").write_text(
+        json.dumps({"segments": [], "contact_plan": plan.to_json(), "physics_check": None, "final_error_rad": None})
+    )
+    row = space_row_from_files(task, tmp_path)
+    assert (row["margin_stances"], row["stances"]) == (plan.margin_stances, len(plan.nodes))
