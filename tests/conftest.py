@@ -5,6 +5,7 @@ from one. `shared_computations`: each scene's initial-grasp table and reach repo
 Test modules import the argument lists from here as `from conftest import ...` (tests/ is on
 sys.path under `pytest` and `python -m pytest` alike; the package `tests` is not)."""
 
+import json
 import os
 import shutil
 import signal
@@ -174,11 +175,9 @@ def trial_files(out: Path) -> dict[str, dict[str, tuple[int, int, int]]]:
     )
 
 
-@pytest.fixture(scope="session")
-def resumed_sweep(tmp_path_factory):
+def _run_resumed_sweep(out: Path) -> SimpleNamespace:
     """Runs the small sweep on one worker, kills its whole process group (SIGKILL) once
     the first trial is stored, then reruns the same command on two workers."""
-    out = tmp_path_factory.mktemp("sweep") / "small"
     command = [sys.executable, "-m", "trajectotree.cli", "sweep", *SMALL_SWEEP, "--out", str(out)]
     first = subprocess.Popen(
         command + ["--workers", "1"],
@@ -201,6 +200,45 @@ def resumed_sweep(tmp_path_factory):
     before = trial_files(out)
     rerun = subprocess.run(command + ["--workers", "2"], capture_output=True, text=True, timeout=900)
     return SimpleNamespace(out=out, before=before, rerun=rerun, command=command)
+
+
+def _read_resumed_sweep(done: Path) -> SimpleNamespace:
+    saved = json.loads(done.read_text())
+    if "error" in saved:
+        pytest.fail(f"the resumed sweep failed in the process that built it: {saved['error']}")
+    before = {key: {name: tuple(stat) for name, stat in files.items()} for key, files in saved["before"].items()}
+    return SimpleNamespace(
+        out=Path(saved["out"]), before=before, rerun=SimpleNamespace(**saved["rerun"]), command=saved["command"]
+    )
+
+
+@pytest.fixture(scope="session")
+def resumed_sweep(tmp_path_factory, worker_id):
+    """The small sweep killed mid-way and rerun (_run_resumed_sweep), once for the whole run: under pytest-xdist
+    the first process that asks builds it in the run's shared temporary folder, the others wait for it and read
+    it (15 s of a core each before; the tests only read it, copying it to change it)."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base if worker_id == "master" else base.parent) / "resumed_sweep"
+    done = folder / "done.json"
+    try:
+        folder.mkdir()  # atomic: the process that makes the folder builds the sweep
+    except FileExistsError:
+        deadline = time.monotonic() + 1200
+        while not done.exists():
+            assert time.monotonic() < deadline, f"{done} was not written within 1200 s"
+            time.sleep(0.1)
+        return _read_resumed_sweep(done)
+    try:
+        sweep = _run_resumed_sweep(folder / "small")
+        rerun = {k: getattr(sweep.rerun, k) for k in ("returncode", "stdout", "stderr")}
+        saved = {"out": str(sweep.out), "before": sweep.before, "rerun": rerun, "command": sweep.command}
+    except BaseException as error:  # the waiting processes fail at once instead of at their deadline
+        saved = {"error": repr(error)}
+        raise
+    finally:
+        (folder / "done.tmp").write_text(json.dumps(saved))
+        (folder / "done.tmp").replace(done)
+    return _read_resumed_sweep(done)
 
 
 def jacobian_against_differences(constraint, Z: np.ndarray):

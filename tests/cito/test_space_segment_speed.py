@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from trajectotree.cito import spatial as sp
 from trajectotree.cito.space_hand import space_fingers
-from trajectotree.config import Config, mu_plan
+from trajectotree.config import Config, mu_plan, with_values
 from trajectotree.geometry import box_signed_distances, quaternion_matrices, segment_box_distances, segment_box_nearest
 from trajectotree.results import LINK_PENETRATION_TOL
 from trajectotree.scene.spatial import build_space_scene
@@ -26,7 +26,8 @@ QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0
 
 @pytest.fixture(scope="module")
 def setting():
-    config = Config()
+    # the segments below (seed 0's goals 11 and 28) are those of the search without the stance margin's preference
+    config = with_values(Config(), {"search.space_stance_margin": "none"})
     mu = mu_plan(config.scene, config.search)
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
     plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)

@@ -112,8 +112,10 @@ def test_orientation_error_turns_the_measured_onto_the_plan():
 def _initial_grasp_hold(scene, duration: float) -> SpaceReference:
     """The search's initial grasp for a small turn (node 0), held still with the forces of the search's statics
     (SpatialHoldingLp: the weight held within the motors, the fingers' own weight included, at the planning
-    friction)."""
+    friction). The search without the stance margin's preference: the grasp the closed loop's push reflex was
+    measured on (the margin's first root engages it 10 ms later)."""
     config = Config()
+    config = dataclasses.replace(config, search=dataclasses.replace(config.search, space_stance_margin="none"))
     mu = mu_plan(config.scene, config.search)
     goal = np.array([math.cos(0.15), 0.0, 0.0, math.sin(0.15)])  # 0.3 rad about z
     plan = find_space_contact_plan(scene, goal, config.search, mu)
