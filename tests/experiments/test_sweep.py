@@ -91,6 +91,13 @@ def test_controller_settings_are_part_of_a_simulating_sweep_only(tmp_path):
     assert prepare_dir(planning, with_gain(small_spec(), 123.0)) == []
     with pytest.raises(ConfigError, match="config.controller.impedance.kp: 400.0 there, 123.0 now"):
         prepare_dir(simulating, with_gain(small_spec(simulate=True), 123.0))
+    # resumed without --simulate: the difference is that flag (and the sections it records), not every setting
+    with pytest.raises(ConfigError) as refused:
+        prepare_dir(simulating, small_spec())
+    differences = str(refused.value).split("different arguments (")[1].split("); rerun")[0].split("; ")
+    assert "simulate: True there, False now" in differences
+    assert [d.split(":")[0] for d in differences] == ["config.controller", "config.sim", "simulate"]
+    assert differences[0].startswith("config.controller: a section of ") and differences[0].endswith("there, None now")
 
 
 @pytest.mark.slow

@@ -34,37 +34,41 @@ class CorruptTrialError(ConfigError):
         self.path, self.reason = path, reason
 
 
-def _flatten(data: dict, prefix: str = "") -> dict:
-    flat = {}
-    for key, value in data.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
-
-
 # Config sections that only executions read: a planning-only sweep's trials do not depend on
 # them (its executions are run later, with the controller settings given then).
 EXECUTION_SECTIONS = ("controller", "sim")
 
 
 def _identity(manifest: dict) -> dict:
-    """The manifest's fields that decide its trials, flattened ('config.cito.dt': 0.1)."""
+    """The manifest's fields that decide its trials (nested as in the manifest)."""
     identity = {k: v for k, v in manifest.items() if k not in RUN_SETTINGS}
     if not manifest.get("simulate"):
         identity["config"] = {k: v for k, v in manifest.get("config", {}).items() if k not in EXECUTION_SECTIONS}
-    return _flatten(identity)
+    return identity
+
+
+def _brief(value) -> str:
+    """A value as a difference names it: a whole section by its size (not its every field)."""
+    return f"a section of {len(value)} settings" if isinstance(value, dict) else repr(value)
+
+
+def _differences(old: dict, new: dict, prefix: str = "") -> list[str]:
+    """'name: old there, new now' for each differing field, descending into sections both sides have; a section
+    one side lacks is one difference (a sweep that simulates records the controller's settings, one that does not
+    omits them: its ~60 fields once listed one by one)."""
+    differences = []
+    for key in sorted(set(old) | set(new)):
+        a, b, name = old.get(key), new.get(key), f"{prefix}{key}"
+        if isinstance(a, dict) and isinstance(b, dict):
+            differences += _differences(a, b, f"{name}.")
+        elif a != b:
+            differences.append(f"{name}: {_brief(a)} there, {_brief(b)} now")
+    return differences
 
 
 def _manifest_differences(old: dict, new: dict) -> list[str]:
     """'name: old there, new now' for each differing argument or config field."""
-    old, new = _identity(old), _identity(new)
-    return [
-        f"{key}: {old.get(key)!r} there, {new.get(key)!r} now"
-        for key in sorted(set(old) | set(new))
-        if old.get(key) != new.get(key)
-    ]
+    return _differences(_identity(old), _identity(new))
 
 
 def _made_by_a_sweep(path: Path) -> bool:
