@@ -369,7 +369,7 @@ def space_method_summary(rows: list[dict], method: str) -> dict:
         "label": METHOD_LABELS.get(method, method),
         "trials": len(mine),
         "errors": sum(r.get("error") is not None for r in mine),
-        "planned": sum(bool(r.get("success")) for r in mine),
+        "planned": len(planned),
         "checked": sum(bool(r.get("check_passed")) for r in mine),
         "within_2_deg": sum(e is not None and e <= SPACE_GOAL_TOLERANCE_DEG for e in errors),
         # the planned trials' stances (nodes) that hold at the search's stance margin, of their stances

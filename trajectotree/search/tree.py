@@ -1068,10 +1068,10 @@ class _SpaceSearch:
             rolled_far = 0.0 if finger is None else -float(np.linalg.norm(node.rolled[finger]))  # m
             ranked.append((not margin, finger is not None, rolled_far, -push, finger, stance, torque, push, rolled))
         out = []
-        for not_margin, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
-            q_held = {i: held[i].q for i in stance}
+        for under_margin, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
+            q_held, margin = {i: held[i].q for i in stance}, not under_margin
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, not not_margin))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, margin))
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
@@ -1086,7 +1086,7 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, not not_margin))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, margin))
         return out
 
     def stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[tuple | None, Refusal | None]:
