@@ -97,12 +97,7 @@ class SpaceCitoRows(SpaceSegmentRows):
         self.pinned = np.zeros((self.K, F), dtype=bool)
         self.gap_row, self.product_row, self.torque_row = 9, 9 + F, 9 + 2 * F
         self.link_row = self.torque_row + F * n
-        self.inertia = scene.object.inertia
-        self.half = scene.object.half
-        self.momentum_unit = float(np.max(np.diag(self.inertia)))
-        self.r, self.g = scene.tip_radius, scene.gravity
-        self.tau_max = scene.tau_max
-        self.mu = mu
+        self.set_object(scene, mu)
 
     def knots(self, first: int, stop: int) -> SpaceCitoRows:
         """These rows restricted to knots first..stop-1 (a shallow copy: one knot's binding evaluates alone)."""

@@ -239,6 +239,10 @@ class SpaceSegmentRows:
         # 1/m: the squared gap's row divided by twice the largest gap, so that its gradient is about one, as the
         # pins' (20 segments of three seed-0 goals: 887 IPOPT iterations in all, 1046 unscaled)
         self.clearance_scale = 1.0 / (2 * (scene.tip_radius + SWITCH_CLEARANCE))
+        self.set_object(scene, mu)
+
+    def set_object(self, scene, mu: float) -> None:
+        """The cube's, the fingertips' and the motors' constants the rows read, and the friction `mu`."""
         self.inertia = scene.object.inertia
         self.half = scene.object.half
         # kg m^2: L is in units of the cube's largest principal inertia (rad/s), its row's gradients near one
