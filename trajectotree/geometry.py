@@ -565,6 +565,17 @@ def box_signed_distances(half, p_B) -> np.ndarray:
     return outside + np.minimum(d.max(axis=-1), 0.0)
 
 
+def box_signed_distance_gradient(half, p_B) -> np.ndarray:
+    """(..., 3) the gradient of box_signed_distances at p_B (..., 3): outside the unit vector from the nearest
+    box point, inside the deepest face's normal."""
+    sign = np.where(p_B < 0, -1.0, 1.0)
+    d = np.abs(p_B) - half
+    out = np.maximum(d, 0.0)
+    norm = np.linalg.norm(out, axis=-1, keepdims=True)
+    face = np.eye(3)[np.argmax(d, axis=-1)]
+    return np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), face) * sign
+
+
 def box_face_normals(half, p_B) -> np.ndarray:
     """(..., 3) the outward unit normal in B of the box face nearest each point p_B (..., 3)."""
     p = np.asarray(p_B, dtype=float)

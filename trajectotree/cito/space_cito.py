@@ -51,6 +51,7 @@ from trajectotree.geometry import (
     BOX_FACE_NAMES,
     BOX_FACE_NORMALS,
     box_face_normals,
+    box_signed_distance_gradient,
     box_signed_distances,
     quaternion_matrices,
     so3_log,
@@ -190,7 +191,7 @@ class SpaceCitoRows(SpaceSegmentRows):
         Jk[:, 6:9, lay.slice("w")] = -R @ self.inertia @ np.swapaxes(R, -1, -2) / self.momentum_unit
         edges_W = np.einsum("kij,kfej->kfei", R, self.edges_B)  # (K, F, m, 3)
         tips_B, gaps = self._gaps(x, R, tips)
-        g = _box_distance_gradient(self.half, tips_B)  # (K, F, 3) d gap / d tips_B
+        g = box_signed_distance_gradient(self.half, tips_B)  # (K, F, 3) d gap / d tips_B
         gR = np.einsum("kfi,kji->kfj", g, R)  # d gap / d tip in W
         g_phi = np.einsum("kfi,kfij->kfj", g, skew(tips_B) @ J_r[:, None])
         normal = x["lam"].sum(-1)  # (K, F) N
@@ -231,17 +232,6 @@ class SpaceCitoRows(SpaceSegmentRows):
         x = self.split(Z)
         R = self.rotations(x["phi"])
         return (self.pair_values(Z), *self._pair_jacobians(x, R, right_jacobian(x["phi"])))
-
-
-def _box_distance_gradient(half, p_B) -> np.ndarray:
-    """(..., 3) the gradient of geometry.box_signed_distances at p_B (..., 3): outside the unit vector from the
-    nearest box point, inside the deepest face's normal."""
-    sign = np.where(p_B < 0, -1.0, 1.0)
-    d = np.abs(p_B) - half
-    out = np.maximum(d, 0.0)
-    norm = np.linalg.norm(out, axis=-1, keepdims=True)
-    face = np.eye(3)[np.argmax(d, axis=-1)]
-    return np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), face) * sign
 
 
 class _CitoCache:

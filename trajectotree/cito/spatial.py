@@ -72,6 +72,7 @@ from trajectotree.config import CitoConfig
 from trajectotree.geometry import (
     BOX_FACE_NAMES,
     BOX_FACE_NORMALS,
+    box_signed_distance_gradient,
     box_signed_distances,
     matrix_quaternions,
     quaternion_matrices,
@@ -313,12 +314,7 @@ class SpaceSegmentRows:
         value = box_signed_distances(self.half, x_B)
         if J_r is None:
             return (value,)
-        sign = np.where(x_B < 0, -1.0, 1.0)
-        d = np.abs(x_B) - self.half
-        out = np.maximum(d, 0.0)
-        norm = np.linalg.norm(out, axis=-1, keepdims=True)
-        face = np.eye(3)[np.argmax(d, axis=-1)]  # inside: the nearest face's axis
-        g = np.where(norm > 0, out / np.where(norm > 0, norm, 1.0), face) * sign  # d value / d x_B
+        g = box_signed_distance_gradient(self.half, x_B)  # d value / d x_B
         x_W = (1 - t) * ends[..., 0, :] + t * ends[..., 1, :]  # (K, F, L, 3)
         lever = cross(axes[:, :, None], x_W[:, :, :, None, :] - points[:, :, None])  # (K, F, L, n, 3)
         n = self.layout.joints
