@@ -202,43 +202,70 @@ def _run_resumed_sweep(out: Path) -> SimpleNamespace:
     return SimpleNamespace(out=out, before=before, rerun=rerun, command=command)
 
 
-def _read_resumed_sweep(done: Path) -> SimpleNamespace:
+def _built_once(tmp_path_factory, worker_id, name: str, build) -> dict:
+    """build(folder) -> a JSON-able dict, run once for the whole run: under pytest-xdist the first process that asks
+    builds it in the run's shared temporary folder `name`, the others wait for it and read what it returned."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base if worker_id == "master" else base.parent) / name
+    done = folder / "done.json"
+    try:
+        folder.mkdir()  # atomic: the process that makes the folder builds it
+    except FileExistsError:
+        deadline = time.monotonic() + 1200
+        while not done.exists():
+            assert time.monotonic() < deadline, f"{done} was not written within 1200 s"
+            time.sleep(0.1)
+    else:
+        try:
+            saved = build(folder)
+        except BaseException as error:  # the waiting processes fail at once instead of at their deadline
+            saved = {"error": repr(error)}
+            raise
+        finally:
+            (folder / "done.tmp").write_text(json.dumps(saved))
+            (folder / "done.tmp").replace(done)
     saved = json.loads(done.read_text())
     if "error" in saved:
-        pytest.fail(f"the resumed sweep failed in the process that built it: {saved['error']}")
+        pytest.fail(f"{name} failed in the process that built it: {saved['error']}")
+    return saved
+
+
+def _build_resumed_sweep(folder: Path) -> dict:
+    sweep = _run_resumed_sweep(folder / "small")
+    rerun = {k: getattr(sweep.rerun, k) for k in ("returncode", "stdout", "stderr")}
+    return {"out": str(sweep.out), "before": sweep.before, "rerun": rerun, "command": sweep.command}
+
+
+@pytest.fixture(scope="session")
+def resumed_sweep(tmp_path_factory, worker_id):
+    """The small sweep killed mid-way and rerun (_run_resumed_sweep), once for the whole run (_built_once: 15 s of
+    a core each before; the tests only read it, copying it to change it)."""
+    saved = _built_once(tmp_path_factory, worker_id, "resumed_sweep", _build_resumed_sweep)
     before = {key: {name: tuple(stat) for name, stat in files.items()} for key, files in saved["before"].items()}
     return SimpleNamespace(
         out=Path(saved["out"]), before=before, rerun=SimpleNamespace(**saved["rerun"]), command=saved["command"]
     )
 
 
+# The plan in space that the simulate, closed-loop, replan, watch and joint-formulation tests start from: a 34 deg
+# turn about x (2 segments), as `trajectotree plan` writes it.
+SPACE_PLAN = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0.6", "0", "0", "--segment-workers", "1"]
+
+
+def _build_space_plan(folder: Path) -> dict:
+    from trajectotree.cli import main
+
+    out = folder / "plan"
+    return {"out": str(out), "code": main([*SPACE_PLAN, "--out", str(out)])}
+
+
 @pytest.fixture(scope="session")
-def resumed_sweep(tmp_path_factory, worker_id):
-    """The small sweep killed mid-way and rerun (_run_resumed_sweep), once for the whole run: under pytest-xdist
-    the first process that asks builds it in the run's shared temporary folder, the others wait for it and read
-    it (15 s of a core each before; the tests only read it, copying it to change it)."""
-    base = tmp_path_factory.getbasetemp()
-    folder = (base if worker_id == "master" else base.parent) / "resumed_sweep"
-    done = folder / "done.json"
-    try:
-        folder.mkdir()  # atomic: the process that makes the folder builds the sweep
-    except FileExistsError:
-        deadline = time.monotonic() + 1200
-        while not done.exists():
-            assert time.monotonic() < deadline, f"{done} was not written within 1200 s"
-            time.sleep(0.1)
-        return _read_resumed_sweep(done)
-    try:
-        sweep = _run_resumed_sweep(folder / "small")
-        rerun = {k: getattr(sweep.rerun, k) for k in ("returncode", "stdout", "stderr")}
-        saved = {"out": str(sweep.out), "before": sweep.before, "rerun": rerun, "command": sweep.command}
-    except BaseException as error:  # the waiting processes fail at once instead of at their deadline
-        saved = {"error": repr(error)}
-        raise
-    finally:
-        (folder / "done.tmp").write_text(json.dumps(saved))
-        (folder / "done.tmp").replace(done)
-    return _read_resumed_sweep(done)
+def space_plan(tmp_path_factory, worker_id) -> Path:
+    """`trajectotree plan SPACE_PLAN`'s folder (plan.json, plan.npz), once for the whole run (_built_once: 3-6 s of a
+    core each before, in five modules): read only, copy it before changing it."""
+    saved = _built_once(tmp_path_factory, worker_id, "space_plan", _build_space_plan)
+    assert saved["code"] == 0
+    return Path(saved["out"])
 
 
 def jacobian_against_differences(constraint, Z: np.ndarray):

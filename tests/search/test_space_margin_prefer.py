@@ -3,6 +3,7 @@ the motors only at mu_plan is taken where no stance at the margin's friction is 
 the search without the margin finds; where a plan with margin stances alone exists, prefer's is require's; plan.json
 counts the stances at the margin; the options' bad values exit 2 naming the value and the valid ones."""
 
+import functools
 import json
 from dataclasses import replace
 
@@ -33,6 +34,12 @@ def _config(mode: str, safety: float = AT_04, **more) -> SearchConfig:
 def _plan(scene, mode: str, safety: float = AT_04, **more):
     config = _config(mode, safety, **more)
     return find_space_contact_plan(scene, QUARTER_ABOUT_X, config, mu_plan(Config().scene, config))
+
+
+@pytest.fixture(scope="module")
+def plan_of(scene):
+    """_plan on the module's scene, each (mode, safety, options) searched once: the tests only read the plans."""
+    return functools.cache(functools.partial(_plan, scene))
 
 
 def _search(scene, mode: str, safety: float = AT_04) -> _SpaceSearch:
@@ -78,22 +85,22 @@ def test_prefer_orders_the_stances_under_the_margin_after_the_others_and_keeps_t
 
 
 @pytest.mark.slow  # three searches, ~7 s of CPU
-def test_prefer_finds_require_s_plan_where_one_exists(scene):
-    require, prefer = _plan(scene, "require"), _plan(scene, "prefer")
+def test_prefer_finds_require_s_plan_where_one_exists(plan_of):
+    require, prefer = plan_of("require"), plan_of("prefer")
     assert require.success and prefer.success, prefer.reason
     assert _sequence(prefer) == _sequence(require)
     assert prefer.margin_stances == len(prefer.nodes) == require.margin_stances
     assert prefer.mu_margin == pytest.approx(0.4, abs=1e-4)
     # the greedy pass alone (share 0) takes a stance under the margin at the first node without a margin child: its
     # first root has no plan with margin stances alone, so it keeps fewer at the margin than the first pass finds
-    greedy = _plan(scene, "prefer", space_margin_first_share=0.0)
+    greedy = plan_of("prefer", space_margin_first_share=0.0)
     assert greedy.success and greedy.margin_stances < prefer.margin_stances
 
 
 @pytest.mark.slow  # four searches, ~7 s of CPU
-def test_prefer_keeps_a_plan_where_the_margin_allows_none(scene):
+def test_prefer_keeps_a_plan_where_the_margin_allows_none(plan_of):
     # at friction 0.07 no stance holds the cube within the motors: require has no plan, prefer has none's
-    require, prefer, none = (_plan(scene, mode, 0.1) for mode in ("require", "prefer", "none"))
+    require, prefer, none = (plan_of(mode, 0.1) for mode in ("require", "prefer", "none"))
     assert not require.success
     assert prefer.success and none.success, prefer.reason
     assert _sequence(prefer) == _sequence(none)
@@ -103,7 +110,7 @@ def test_prefer_keeps_a_plan_where_the_margin_allows_none(scene):
     assert saved["mu_margin"] == pytest.approx(0.07)
     assert [n["stance_margin"] for n in saved["contact_sequence"]] == [False] * len(prefer.nodes)
     # where the margin binds on some stances only, the plan keeps those that meet it and says how many
-    some = _plan(scene, "prefer", AT_021)
+    some = plan_of("prefer", AT_021)
     assert some.success and 0 < some.margin_stances < len(some.nodes)
 
 
@@ -138,10 +145,10 @@ def test_bad_margin_options_exit_2_before_any_search(tmp_path, capsys, text, nam
     assert not out.exists()
 
 
-def test_the_sweep_row_reads_the_margin_count(tmp_path, scene):
+def test_the_sweep_row_reads_the_margin_count(tmp_path, plan_of):
     from trajectotree.experiments.trial import TrialTask, space_row_from_files
 
-    plan = _plan(scene, "prefer", AT_021)
+    plan = plan_of("prefer", AT_021)  # the plan test_prefer_keeps_a_plan_where_the_margin_allows_none searched
     fields = dict(key="0000_trajectotree", goal_index=0, goal=QUARTER_ABOUT_X.tolist(), method="trajectotree")
     task = TrialTask(**fields, simulate=False, config={}, time_limit_s=60.0, space={})
     (tmp_path / "plan.json").write_text(
