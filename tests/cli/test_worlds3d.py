@@ -142,22 +142,22 @@ def test_a_sweep_in_space_executes_each_plan_in_its_worlds(space_sweep):
 
 
 @pytest.mark.slow
-def test_a_resumed_sweep_in_space_runs_no_finished_execution_and_reports(space_sweep):
+def test_a_resumed_sweep_in_space_runs_no_finished_execution_and_reports(space_sweep, capsys):
+    """The resumed sweep and the report through the CLI's main in this process (the sweep was its own process)."""
     pushed = space_sweep / "trials" / "0000_trajectotree" / "exec" / "grasp_push-1N" / "sim.json"
     before = pushed.stat().st_mtime_ns
-    again = _cli(
-        "sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "nominal", "--no-progress", "--out", str(space_sweep)
-    )
-    assert again.returncode == 0, again.stderr
+    argv = ["sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "nominal", "--no-progress", "--out", str(space_sweep)]
+    assert main(argv) == 0
+    again = capsys.readouterr().out
     # nothing planned again; push-1N finished; nominal is the trial's own run, copied
-    assert "2/2 trials done (0 now, 2 before)" in again.stdout and "executions: 0 run" in again.stdout
+    assert "2/2 trials done (0 now, 2 before)" in again and "executions: 0 run" in again
     assert pushed.stat().st_mtime_ns == before
     trial = space_sweep / "trials" / "0000_trajectotree"
     assert (trial / "exec" / "grasp_nominal" / "sim.json").read_bytes() == (trial / "sim.json").read_bytes()
 
-    report = _cli("report", str(space_sweep))
-    assert report.returncode == 0, report.stderr
-    assert "executions: " in report.stdout and "fig_final_error.png" in report.stdout
+    assert main(["report", str(space_sweep)]) == 0
+    report = capsys.readouterr().out
+    assert "executions: " in report and "fig_final_error.png" in report
     folder = space_sweep / "report"
     assert (folder / "fig_final_error.png").stat().st_size > 0 and (folder / "fig_final_error.pdf").is_file()
     table = (folder / "executions.md").read_text()
