@@ -5,8 +5,6 @@ written."""
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -35,13 +33,11 @@ def _argv(out, *extra) -> list[str]:
 
 @pytest.mark.slow
 def test_sweep_in_space_plans_resumes_and_reports(tmp_path, capsys):
-    """The sweep in its own process (its trials in theirs); the resumed sweep, the refused one and the report
-    through the CLI's main in this process (each an interpreter's start-up, 1-2 s, less)."""
+    """Every command through the CLI's main in this process (an interpreter's start-up, 1-2 s, less each), each
+    trial in a process of its own as the sweep runs them."""
     out = tmp_path / "sweep"
-    argv = _argv(out)
-    first = subprocess.run([sys.executable, "-m", "trajectotree.cli", *argv], capture_output=True, text=True)
-    assert first.returncode == 0, first.stderr
-    assert "2/2 trials done (2 now, 0 before)" in first.stdout
+    assert main(_argv(out)) == 0
+    assert "2/2 trials done (2 now, 0 before)" in capsys.readouterr().out
     manifest = json.loads((out / "manifest.json").read_text())
     goals = np.array(manifest["goal_values"])
     assert manifest["space"] == {"size": None, "mass": None} and goals.shape == (1, 4)

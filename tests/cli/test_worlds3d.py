@@ -3,10 +3,10 @@ mass and a 3-component push; `sweep --hand fingerpro4 --simulate` and `--conditi
 in the worlds of conditions.SPACE_SPEC, resumably; the report's table and figure of those executions; bad input
 exits 2 naming it, writing nothing."""
 
+import contextlib
+import io
 import json
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -95,17 +95,16 @@ def test_bad_sweep_input_exits_2_naming_it_and_writes_nothing(tmp_path, capsys, 
     assert not out.exists()
 
 
-def _cli(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "trajectotree.cli", *argv], capture_output=True, text=True)
-
-
 @pytest.fixture(scope="module")
 def space_sweep(tmp_path_factory):
     """A 2-goal sweep in space, executed open loop and under push-1N (about 30 s on the loaded 2 cores)."""
     out = tmp_path_factory.mktemp("worlds3d") / "sweep"
-    done = _cli("sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "--no-progress", "--out", str(out))
-    assert done.returncode == 0, done.stderr
-    assert "2/2 trials done (2 now, 0 before)" in done.stdout and "executions: 2 run (grasp x push-1N)" in done.stdout
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):  # the CLI's main in this process, each trial in its own
+        code = main(["sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "--no-progress", "--out", str(out)])
+    assert code == 0
+    done = printed.getvalue()
+    assert "2/2 trials done (2 now, 0 before)" in done and "executions: 2 run (grasp x push-1N)" in done
     return out
 
 
