@@ -78,6 +78,35 @@ def shared_computations():
         step()
 
 
+# The quarter turn about x that six modules search on fingerpro4 (tests/search, figures, cito), most of them with the
+# default search settings or without the stance margin: 2-3 s a search.
+QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
+
+
+@pytest.fixture(scope="session")
+def quarter_turn():
+    """search -> the contact plan find_space_contact_plan finds for QUARTER_ABOUT_X on fingerpro4 (Config()'s scene)
+    with that SearchConfig at its mu_plan: each settings' plan searched once per process (shared as
+    shared_computations shares its values: only read; a fresh test searches its own)."""
+    from trajectotree.config import Config, mu_plan
+    from trajectotree.scene.spatial import build_space_scene
+    from trajectotree.search.tree import find_space_contact_plan
+
+    config = Config()
+    scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
+
+    def plan_of(search):
+        key = ("quarter_turn", search)
+        plan = None if _shared["fresh"] else _shared["values"].get(key)
+        if plan is None:
+            plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
+            if not _shared["fresh"]:
+                _shared["values"][key] = plan
+        return plan
+
+    return plan_of
+
+
 @pytest.fixture(autouse=True)
 def _fresh(request):
     """A test marked fresh computes every shared value it asks for itself."""

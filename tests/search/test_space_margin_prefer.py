@@ -3,7 +3,6 @@ the motors only at mu_plan is taken where no stance at the margin's friction is 
 the search without the margin finds; where a plan with margin stances alone exists, prefer's is require's; plan.json
 counts the stances at the margin; the options' bad values exit 2 naming the value and the valid ones."""
 
-import functools
 import json
 from dataclasses import replace
 
@@ -14,7 +13,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch, find_space_contact_plan
+from trajectotree.search.tree import SearchClock, _SpaceSearch
 
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 AT_04 = 0.5714  # search.space_stance_friction_safety: 0.5714 x scene.mu 0.7 = friction 0.4
@@ -31,15 +30,11 @@ def _config(mode: str, safety: float = AT_04, **more) -> SearchConfig:
     return replace(Config().search, space_stance_margin=mode, space_stance_friction_safety=safety, **more)
 
 
-def _plan(scene, mode: str, safety: float = AT_04, **more):
-    config = _config(mode, safety, **more)
-    return find_space_contact_plan(scene, QUARTER_ABOUT_X, config, mu_plan(Config().scene, config))
-
-
-@pytest.fixture(scope="module")
-def plan_of(scene):
-    """_plan on the module's scene, each (mode, safety, options) searched once: the tests only read the plans."""
-    return functools.cache(functools.partial(_plan, scene))
+@pytest.fixture
+def plan_of(quarter_turn):
+    """(mode, safety, options) -> the quarter turn's plan with _config's settings: conftest's, each settings' plan
+    searched once per process (prefer at AT_04 is the default search's)."""
+    return lambda mode, safety=AT_04, **more: quarter_turn(_config(mode, safety, **more))
 
 
 def _search(scene, mode: str, safety: float = AT_04) -> _SpaceSearch:
