@@ -78,7 +78,7 @@ def shared_computations():
         step()
 
 
-# The quarter turn about x that six modules search on fingerpro4 (tests/search, figures, cito), most of them with the
+# The quarter turn about x that seven modules search on fingerpro4 (tests/search, figures, cito), most of them with the
 # default search settings or without the stance margin: 2-3 s a search.
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 
