@@ -129,22 +129,15 @@ TIMED_OUT_SWEEP = [
 
 
 @pytest.fixture(scope="session")
-def tiny_plan(tmp_path_factory) -> Path:
-    """`trajectotree plan TINY_PLAN`'s folder (plan.json, plan.npz), shared: copy it before changing it."""
-    from trajectotree.cli import main
-
-    out = tmp_path_factory.mktemp("tiny_plan") / "plan"
-    assert main(["plan", *TINY_PLAN, "--out", str(out)]) == 0
-    return out
+def tiny_plan(tmp_path_factory, worker_id) -> Path:
+    """`trajectotree plan TINY_PLAN`'s folder (plan.json, plan.npz), once for the whole run (_written_once, in eight
+    modules): copy it before changing it."""
+    return _written_once(tmp_path_factory, worker_id, "tiny_plan", ["plan", *TINY_PLAN], "plan")
 
 
 @pytest.fixture(scope="session")
-def _timed_out_sweep(tmp_path_factory) -> Path:
-    from trajectotree.cli import main
-
-    out = tmp_path_factory.mktemp("timed_out_sweep") / "sweep"
-    assert main(["sweep", "--out", str(out), *TIMED_OUT_SWEEP]) == 0
-    return out
+def _timed_out_sweep(tmp_path_factory, worker_id) -> Path:
+    return _written_once(tmp_path_factory, worker_id, "timed_out_sweep", ["sweep", *TIMED_OUT_SWEEP], "sweep")
 
 
 @pytest.fixture
@@ -259,6 +252,20 @@ def _built_once(tmp_path_factory, worker_id, name: str, build) -> dict:
     return saved
 
 
+def _written_once(tmp_path_factory, worker_id, name: str, argv: list[str], out: str) -> Path:
+    """FOLDER/out, which `trajectotree ARGV --out FOLDER/out` writes (the CLI's main, its exit code 0), once for the
+    whole run (_built_once under `name`)."""
+
+    def build(folder: Path) -> dict:
+        from trajectotree.cli import main
+
+        return {"out": str(folder / out), "code": main([*argv, "--out", str(folder / out)])}
+
+    saved = _built_once(tmp_path_factory, worker_id, name, build)
+    assert saved["code"] == 0, f"trajectotree {' '.join(argv)} exited {saved['code']}"
+    return Path(saved["out"])
+
+
 def _build_resumed_sweep(folder: Path) -> dict:
     sweep = _run_resumed_sweep(folder / "small")
     rerun = {k: getattr(sweep.rerun, k) for k in ("returncode", "stdout", "stderr")}
@@ -281,20 +288,11 @@ def resumed_sweep(tmp_path_factory, worker_id):
 SPACE_PLAN = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0.6", "0", "0", "--segment-workers", "1"]
 
 
-def _build_space_plan(folder: Path) -> dict:
-    from trajectotree.cli import main
-
-    out = folder / "plan"
-    return {"out": str(out), "code": main([*SPACE_PLAN, "--out", str(out)])}
-
-
 @pytest.fixture(scope="session")
 def space_plan(tmp_path_factory, worker_id) -> Path:
-    """`trajectotree plan SPACE_PLAN`'s folder (plan.json, plan.npz), once for the whole run (_built_once: 3-6 s of a
-    core each before, in five modules): read only, copy it before changing it."""
-    saved = _built_once(tmp_path_factory, worker_id, "space_plan", _build_space_plan)
-    assert saved["code"] == 0
-    return Path(saved["out"])
+    """`trajectotree plan SPACE_PLAN`'s folder (plan.json, plan.npz), once for the whole run (_written_once: 3-6 s of
+    a core each before, in five modules): read only, copy it before changing it."""
+    return _written_once(tmp_path_factory, worker_id, "space_plan", SPACE_PLAN, "plan")
 
 
 def jacobian_against_differences(constraint, Z: np.ndarray):
