@@ -1,7 +1,9 @@
 """Shared fixtures. `resumed_sweep`: one small real sweep, killed mid-way and rerun,
 which the sweep tests (resume, seeds, Dask) and the report tests all read. `tiny_plan` and
 `timed_out_sweep`: the cheapest plan folder and sweep folder, made once for the tests that start
-from one. `shared_computations`: each scene's initial-grasp table and reach report, once per session.
+from one; `space_plan`: the plan in space the simulate, replan and watch tests start from. Each of these once for the
+whole run, under pytest-xdist too (_built_once). `shared_computations`: each scene's initial-grasp table and reach
+report, once per session; `quarter_turn`: the contact plans in space of a quarter turn, once per process.
 Test modules import the argument lists from here as `from conftest import ...` (tests/ is on
 sys.path under `pytest` and `python -m pytest` alike; the package `tests` is not)."""
 
