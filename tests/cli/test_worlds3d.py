@@ -142,7 +142,7 @@ def test_a_sweep_in_space_executes_each_plan_in_its_worlds(space_sweep):
 
 @pytest.mark.slow
 def test_a_resumed_sweep_in_space_runs_no_finished_execution_and_reports(space_sweep, capsys):
-    """The resumed sweep and the report through the CLI's main in this process (the sweep was its own process)."""
+    """The resumed sweep and the report through the CLI's main in this process, as the sweep itself."""
     pushed = space_sweep / "trials" / "0000_trajectotree" / "exec" / "grasp_push-1N" / "sim.json"
     before = pushed.stat().st_mtime_ns
     argv = ["sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "nominal", "--no-progress", "--out", str(space_sweep)]
