@@ -1,7 +1,9 @@
 """Shared fixtures. `resumed_sweep`: one small real sweep, killed mid-way and rerun,
 which the sweep tests (resume, seeds, Dask) and the report tests all read. `tiny_plan` and
 `timed_out_sweep`: the cheapest plan folder and sweep folder, made once for the tests that start
-from one. `shared_computations`: each scene's initial-grasp table and reach report, once per session.
+from one; `space_plan`: the plan in space the simulate, replan and watch tests start from. Each of these once for the
+whole run, under pytest-xdist too (_built_once). `shared_computations`: each scene's initial-grasp table and reach
+report, once per session; `quarter_turn`: the contact plans in space of a quarter turn, once per process.
 Test modules import the argument lists from here as `from conftest import ...` (tests/ is on
 sys.path under `pytest` and `python -m pytest` alike; the package `tests` is not)."""
 
@@ -78,6 +80,35 @@ def shared_computations():
         step()
 
 
+# The quarter turn about x that seven modules search on fingerpro4 (tests/search, figures, cito), most of them with the
+# default search settings or without the stance margin: 2-3 s a search.
+QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
+
+
+@pytest.fixture(scope="session")
+def quarter_turn():
+    """search -> the contact plan find_space_contact_plan finds for QUARTER_ABOUT_X on fingerpro4 (Config()'s scene)
+    with that SearchConfig at its mu_plan: each settings' plan searched once per process (shared as
+    shared_computations shares its values: only read; a fresh test searches its own)."""
+    from trajectotree.config import Config, mu_plan
+    from trajectotree.scene.spatial import build_space_scene
+    from trajectotree.search.tree import find_space_contact_plan
+
+    config = Config()
+    scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
+
+    def plan_of(search):
+        key = ("quarter_turn", search)
+        plan = None if _shared["fresh"] else _shared["values"].get(key)
+        if plan is None:
+            plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
+            if not _shared["fresh"]:
+                _shared["values"][key] = plan
+        return plan
+
+    return plan_of
+
+
 @pytest.fixture(autouse=True)
 def _fresh(request):
     """A test marked fresh computes every shared value it asks for itself."""
@@ -100,22 +131,15 @@ TIMED_OUT_SWEEP = [
 
 
 @pytest.fixture(scope="session")
-def tiny_plan(tmp_path_factory) -> Path:
-    """`trajectotree plan TINY_PLAN`'s folder (plan.json, plan.npz), shared: copy it before changing it."""
-    from trajectotree.cli import main
-
-    out = tmp_path_factory.mktemp("tiny_plan") / "plan"
-    assert main(["plan", *TINY_PLAN, "--out", str(out)]) == 0
-    return out
+def tiny_plan(tmp_path_factory, worker_id) -> Path:
+    """`trajectotree plan TINY_PLAN`'s folder (plan.json, plan.npz), once for the whole run (_written_once, in eight
+    modules): copy it before changing it."""
+    return _written_once(tmp_path_factory, worker_id, "tiny_plan", ["plan", *TINY_PLAN], "plan")
 
 
 @pytest.fixture(scope="session")
-def _timed_out_sweep(tmp_path_factory) -> Path:
-    from trajectotree.cli import main
-
-    out = tmp_path_factory.mktemp("timed_out_sweep") / "sweep"
-    assert main(["sweep", "--out", str(out), *TIMED_OUT_SWEEP]) == 0
-    return out
+def _timed_out_sweep(tmp_path_factory, worker_id) -> Path:
+    return _written_once(tmp_path_factory, worker_id, "timed_out_sweep", ["sweep", *TIMED_OUT_SWEEP], "sweep")
 
 
 @pytest.fixture
@@ -202,43 +226,75 @@ def _run_resumed_sweep(out: Path) -> SimpleNamespace:
     return SimpleNamespace(out=out, before=before, rerun=rerun, command=command)
 
 
-def _read_resumed_sweep(done: Path) -> SimpleNamespace:
+def _built_once(tmp_path_factory, worker_id, name: str, build) -> dict:
+    """build(folder) -> a JSON-able dict, run once for the whole run: under pytest-xdist the first process that asks
+    builds it in the run's shared temporary folder `name`, the others wait for it and read what it returned."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base if worker_id == "master" else base.parent) / name
+    done = folder / "done.json"
+    try:
+        folder.mkdir()  # atomic: the process that makes the folder builds it
+    except FileExistsError:
+        deadline = time.monotonic() + 1200
+        while not done.exists():
+            assert time.monotonic() < deadline, f"{done} was not written within 1200 s"
+            time.sleep(0.1)
+    else:
+        try:
+            saved = build(folder)
+        except BaseException as error:  # the waiting processes fail at once instead of at their deadline
+            saved = {"error": repr(error)}
+            raise
+        finally:
+            (folder / "done.tmp").write_text(json.dumps(saved))
+            (folder / "done.tmp").replace(done)
     saved = json.loads(done.read_text())
     if "error" in saved:
-        pytest.fail(f"the resumed sweep failed in the process that built it: {saved['error']}")
+        pytest.fail(f"{name} failed in the process that built it: {saved['error']}")
+    return saved
+
+
+def _written_once(tmp_path_factory, worker_id, name: str, argv: list[str], out: str) -> Path:
+    """FOLDER/out, which `trajectotree ARGV --out FOLDER/out` writes (the CLI's main, its exit code 0), once for the
+    whole run (_built_once under `name`)."""
+
+    def build(folder: Path) -> dict:
+        from trajectotree.cli import main
+
+        return {"out": str(folder / out), "code": main([*argv, "--out", str(folder / out)])}
+
+    saved = _built_once(tmp_path_factory, worker_id, name, build)
+    assert saved["code"] == 0, f"trajectotree {' '.join(argv)} exited {saved['code']}"
+    return Path(saved["out"])
+
+
+def _build_resumed_sweep(folder: Path) -> dict:
+    sweep = _run_resumed_sweep(folder / "small")
+    rerun = {k: getattr(sweep.rerun, k) for k in ("returncode", "stdout", "stderr")}
+    return {"out": str(sweep.out), "before": sweep.before, "rerun": rerun, "command": sweep.command}
+
+
+@pytest.fixture(scope="session")
+def resumed_sweep(tmp_path_factory, worker_id):
+    """The small sweep killed mid-way and rerun (_run_resumed_sweep), once for the whole run (_built_once: 15 s of
+    a core each before; the tests only read it, copying it to change it)."""
+    saved = _built_once(tmp_path_factory, worker_id, "resumed_sweep", _build_resumed_sweep)
     before = {key: {name: tuple(stat) for name, stat in files.items()} for key, files in saved["before"].items()}
     return SimpleNamespace(
         out=Path(saved["out"]), before=before, rerun=SimpleNamespace(**saved["rerun"]), command=saved["command"]
     )
 
 
+# The plan in space that the simulate, closed-loop, replan, watch and joint-formulation tests start from: a 34 deg
+# turn about x (2 segments), as `trajectotree plan` writes it.
+SPACE_PLAN = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0.6", "0", "0", "--segment-workers", "1"]
+
+
 @pytest.fixture(scope="session")
-def resumed_sweep(tmp_path_factory, worker_id):
-    """The small sweep killed mid-way and rerun (_run_resumed_sweep), once for the whole run: under pytest-xdist
-    the first process that asks builds it in the run's shared temporary folder, the others wait for it and read
-    it (15 s of a core each before; the tests only read it, copying it to change it)."""
-    base = tmp_path_factory.getbasetemp()
-    folder = (base if worker_id == "master" else base.parent) / "resumed_sweep"
-    done = folder / "done.json"
-    try:
-        folder.mkdir()  # atomic: the process that makes the folder builds the sweep
-    except FileExistsError:
-        deadline = time.monotonic() + 1200
-        while not done.exists():
-            assert time.monotonic() < deadline, f"{done} was not written within 1200 s"
-            time.sleep(0.1)
-        return _read_resumed_sweep(done)
-    try:
-        sweep = _run_resumed_sweep(folder / "small")
-        rerun = {k: getattr(sweep.rerun, k) for k in ("returncode", "stdout", "stderr")}
-        saved = {"out": str(sweep.out), "before": sweep.before, "rerun": rerun, "command": sweep.command}
-    except BaseException as error:  # the waiting processes fail at once instead of at their deadline
-        saved = {"error": repr(error)}
-        raise
-    finally:
-        (folder / "done.tmp").write_text(json.dumps(saved))
-        (folder / "done.tmp").replace(done)
-    return _read_resumed_sweep(done)
+def space_plan(tmp_path_factory, worker_id) -> Path:
+    """`trajectotree plan SPACE_PLAN`'s folder (plan.json, plan.npz), once for the whole run (_written_once: 3-6 s of
+    a core each before, in five modules): read only, copy it before changing it."""
+    return _written_once(tmp_path_factory, worker_id, "space_plan", SPACE_PLAN, "plan")
 
 
 def jacobian_against_differences(constraint, Z: np.ndarray):

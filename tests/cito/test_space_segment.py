@@ -16,17 +16,16 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, mu_plan
 from trajectotree.planning.spatial import recheck_space_plan
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import find_space_contact_plan
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 
 
 @pytest.fixture(scope="module")
-def setting():
+def setting(quarter_turn):
     config = Config()
     mu = mu_plan(config.scene, config.search)
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
-    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)
+    plan = quarter_turn(config.search)  # conftest's: searched once per process
     assert plan.success
     return scene, space_fingers(scene), plan, mu
 

@@ -25,12 +25,12 @@ QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0
 
 
 @pytest.fixture(scope="module")
-def setting():
+def setting(quarter_turn):
     # the segments below (seed 0's goals 11 and 28) are those of the search without the stance margin's preference
     config = with_values(Config(), {"search.space_stance_margin": "none"})
     mu = mu_plan(config.scene, config.search)
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
-    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)
+    plan = quarter_turn(config.search)  # conftest's: searched once per process
     assert plan.success
     return scene, space_fingers(scene), plan, mu, config
 

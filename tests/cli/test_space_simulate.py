@@ -11,17 +11,6 @@ import pytest
 
 from trajectotree.cli import main
 
-GOAL = ["--goal-rpy", "0.6", "0", "0"]  # rad: 34 deg about x
-
-
-@pytest.fixture(scope="module")
-def space_plan(tmp_path_factory):
-    """A fingerpro4 plan folder (plan.json, plan.npz) of GOAL, shared: copy it before changing it (~6 s: the tests
-    that use it are slow)."""
-    out = tmp_path_factory.mktemp("space_plan") / "plan"
-    assert main(["plan", "--hand", "fingerpro4", *GOAL, "--out", str(out), "--segment-workers", "1"]) == 0
-    return out
-
 
 def _copy(folder, tmp_path):
     target = tmp_path / "plan"

@@ -5,8 +5,6 @@ written."""
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -29,17 +27,17 @@ def test_goals_are_scipys_uniform_rotations_and_max_goal_bounds_their_angle():
     assert np.array_equal(near, sample_space_goals(4, 3, 0.3))  # the seed decides them
 
 
-def _sweep(out, *extra) -> subprocess.CompletedProcess:
-    argv = ["sweep", *SPACE, *SMALL, "--workers", "2", "--no-progress", "--out", str(out), *extra]
-    return subprocess.run([sys.executable, "-m", "trajectotree.cli", *argv], capture_output=True, text=True)
+def _argv(out, *extra) -> list[str]:
+    return ["sweep", *SPACE, *SMALL, "--workers", "2", "--no-progress", "--out", str(out), *extra]
 
 
 @pytest.mark.slow
-def test_sweep_in_space_plans_resumes_and_reports(tmp_path):
+def test_sweep_in_space_plans_resumes_and_reports(tmp_path, capsys):
+    """Every command through the CLI's main in this process (an interpreter's start-up, 1-2 s, less each), each
+    trial in a process of its own as the sweep runs them."""
     out = tmp_path / "sweep"
-    first = _sweep(out)
-    assert first.returncode == 0, first.stderr
-    assert "2/2 trials done (2 now, 0 before)" in first.stdout
+    assert main(_argv(out)) == 0
+    assert "2/2 trials done (2 now, 0 before)" in capsys.readouterr().out
     manifest = json.loads((out / "manifest.json").read_text())
     goals = np.array(manifest["goal_values"])
     assert manifest["space"] == {"size": None, "mass": None} and goals.shape == (1, 4)
@@ -57,18 +55,14 @@ def test_sweep_in_space_plans_resumes_and_reports(tmp_path):
     tree_row = json.loads((out / "trials" / "0000_trajectotree" / "trial.json").read_text())
     assert tree_row["success"] and tree_row["check_passed"] and tree_row["final_error_deg"] <= 2.0
 
-    again = _sweep(out)  # resumed: every trial finished, none rerun
-    assert again.returncode == 0, again.stderr
-    assert "2/2 trials done (0 now, 2 before)" in again.stdout
+    assert main(_argv(out)) == 0  # resumed: every trial finished, none rerun
+    assert "2/2 trials done (0 now, 2 before)" in capsys.readouterr().out
     assert json.loads((out / "trials" / "0000_trajectotree" / "trial.json").read_text()) == tree_row
 
-    other = _sweep(out, "--mass", "0.05")  # another box is another sweep: refused, nothing touched
-    assert other.returncode == 2 and "space.mass: None there, 0.05 now" in other.stderr
+    assert main(_argv(out, "--mass", "0.05")) == 2  # another box is another sweep: refused, nothing touched
+    assert "space.mass: None there, 0.05 now" in capsys.readouterr().err
 
-    report = subprocess.run(
-        [sys.executable, "-m", "trajectotree.cli", "report", str(out)], capture_output=True, text=True
-    )
-    assert report.returncode == 0, report.stderr
+    assert main(["report", str(out)]) == 0
     summary = (out / "report" / "summary.md").read_text()
     assert "| TrajectoTree | 1 | 0 | 1/1 | 1/1 | 1/1 |" in summary
     assert "are not drawn for a\nsweep in space" in summary

@@ -81,12 +81,9 @@ def test_simulate_of_a_plan_in_space_with_a_playback_file_of_the_wrong_kind_exit
 
 
 @pytest.fixture(scope="module")
-def shared_space_plan(tmp_path_factory) -> Path:
-    """A plan folder in space (plan.json, plan.npz) of a 34 deg turn, shared: the tests copy it."""
-    out = tmp_path_factory.mktemp("space_plan") / "plan"
-    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0.6", "0", "0", "--out", str(out), "--segment-workers", "1"]
-    assert main(argv) == 0
-    assert json.loads((out / "plan.json").read_text())["success"]
-    with np.load(out / "plan.npz") as npz:
+def shared_space_plan(space_plan) -> Path:
+    """conftest's plan folder in space (plan.json, plan.npz) of a 34 deg turn, shared: the tests copy it."""
+    assert json.loads((space_plan / "plan.json").read_text())["success"]
+    with np.load(space_plan / "plan.npz") as npz:
         assert npz["x"].shape[1] == 7
-    return out
+    return space_plan

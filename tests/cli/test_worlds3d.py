@@ -3,10 +3,10 @@ mass and a 3-component push; `sweep --hand fingerpro4 --simulate` and `--conditi
 in the worlds of conditions.SPACE_SPEC, resumably; the report's table and figure of those executions; bad input
 exits 2 naming it, writing nothing."""
 
+import contextlib
+import io
 import json
 import shutil
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -95,17 +95,16 @@ def test_bad_sweep_input_exits_2_naming_it_and_writes_nothing(tmp_path, capsys, 
     assert not out.exists()
 
 
-def _cli(*argv) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "trajectotree.cli", *argv], capture_output=True, text=True)
-
-
 @pytest.fixture(scope="module")
 def space_sweep(tmp_path_factory):
     """A 2-goal sweep in space, executed open loop and under push-1N (about 30 s on the loaded 2 cores)."""
     out = tmp_path_factory.mktemp("worlds3d") / "sweep"
-    done = _cli("sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "--no-progress", "--out", str(out))
-    assert done.returncode == 0, done.stderr
-    assert "2/2 trials done (2 now, 0 before)" in done.stdout and "executions: 2 run (grasp x push-1N)" in done.stdout
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):  # the CLI's main in this process, each trial in its own
+        code = main(["sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "--no-progress", "--out", str(out)])
+    assert code == 0
+    done = printed.getvalue()
+    assert "2/2 trials done (2 now, 0 before)" in done and "executions: 2 run (grasp x push-1N)" in done
     return out
 
 
@@ -142,22 +141,22 @@ def test_a_sweep_in_space_executes_each_plan_in_its_worlds(space_sweep):
 
 
 @pytest.mark.slow
-def test_a_resumed_sweep_in_space_runs_no_finished_execution_and_reports(space_sweep):
+def test_a_resumed_sweep_in_space_runs_no_finished_execution_and_reports(space_sweep, capsys):
+    """The resumed sweep and the report through the CLI's main in this process, as the sweep itself."""
     pushed = space_sweep / "trials" / "0000_trajectotree" / "exec" / "grasp_push-1N" / "sim.json"
     before = pushed.stat().st_mtime_ns
-    again = _cli(
-        "sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "nominal", "--no-progress", "--out", str(space_sweep)
-    )
-    assert again.returncode == 0, again.stderr
+    argv = ["sweep", *SPACE, *SWEEP, "--conditions", "push-1N", "nominal", "--no-progress", "--out", str(space_sweep)]
+    assert main(argv) == 0
+    again = capsys.readouterr().out
     # nothing planned again; push-1N finished; nominal is the trial's own run, copied
-    assert "2/2 trials done (0 now, 2 before)" in again.stdout and "executions: 0 run" in again.stdout
+    assert "2/2 trials done (0 now, 2 before)" in again and "executions: 0 run" in again
     assert pushed.stat().st_mtime_ns == before
     trial = space_sweep / "trials" / "0000_trajectotree"
     assert (trial / "exec" / "grasp_nominal" / "sim.json").read_bytes() == (trial / "sim.json").read_bytes()
 
-    report = _cli("report", str(space_sweep))
-    assert report.returncode == 0, report.stderr
-    assert "executions: " in report.stdout and "fig_final_error.png" in report.stdout
+    assert main(["report", str(space_sweep)]) == 0
+    report = capsys.readouterr().out
+    assert "executions: " in report and "fig_final_error.png" in report
     folder = space_sweep / "report"
     assert (folder / "fig_final_error.png").stat().st_size > 0 and (folder / "fig_final_error.pdf").is_file()
     table = (folder / "executions.md").read_text()

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -111,13 +112,13 @@ def test_the_space_tracking_error_is_an_angle_and_a_distance():
 
 
 @pytest.mark.slow
-def test_a_3d_plan_replans_at_friction_0p4_end_to_end_with_typed_outcomes(tmp_path, capsys):
-    """`plan --hand fingerpro4` (a 34 deg turn about x), then `simulate --replan --sim-mu 0.4`: the run ends, sim.json
-    records each replan with its reason, outcome and compute times; the friction estimate's fall starts them. A
-    replan deadline out of its range first: exit 2 naming it, no sim.json."""
+def test_a_3d_plan_replans_at_friction_0p4_end_to_end_with_typed_outcomes(space_plan, tmp_path, capsys):
+    """`plan --hand fingerpro4` (a 34 deg turn about x: conftest's space_plan, planned once for the run), then
+    `simulate --replan --sim-mu 0.4`: the run ends, sim.json records each replan with its reason, outcome and compute
+    times; the friction estimate's fall starts them. A replan deadline out of its range first: exit 2 naming it, no
+    sim.json."""
     plan = tmp_path / "plan"
-    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0.6", "0", "0", "--out", str(plan), "--segment-workers", "1"]
-    assert main(argv) == 0
+    shutil.copytree(space_plan, plan)
     bad = "controller: {replan: {space_search_deadline_s: 0}}"  # bad input: exit 2 naming it, nothing written
     assert main(["simulate", str(plan), "--replan", "--config-text", bad]) == 2
     err = capsys.readouterr().err

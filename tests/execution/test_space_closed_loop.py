@@ -172,15 +172,6 @@ def test_the_space_executor_s_closed_loop_ports(scene, hold):
         add_space_executor(DiagramBuilder(), plant, hold, config, scene, executor="paper")
 
 
-@pytest.fixture(scope="module")
-def space_plan(tmp_path_factory):
-    """A fingerpro4 plan folder of a 34 deg turn about x (~6 s): copy it before changing it."""
-    out = tmp_path_factory.mktemp("space_plan") / "plan"
-    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0.6", "0", "0", "--out", str(out), "--segment-workers", "1"]
-    assert main(argv) == 0
-    return out
-
-
 @pytest.mark.slow
 def test_a_plan_in_space_executes_closed_loop_without_a_drop(space_plan, tmp_path, capsys):
     """`simulate PLAN_DIR --executor grasp-closed-loop`: held within 3 deg and 3 mm of the goal, the estimates

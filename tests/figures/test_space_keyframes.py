@@ -11,20 +11,19 @@ import pytest
 matplotlib.use("Agg")
 
 from trajectotree.cli import main  # noqa: E402
-from trajectotree.config import Config, mu_plan  # noqa: E402
+from trajectotree.config import Config  # noqa: E402
 from trajectotree.figures.space import box_corners_W, figure_space_keyframes, finger_polylines  # noqa: E402
 from trajectotree.geometry import box_signed_distances, quaternion_matrices  # noqa: E402
 from trajectotree.scene.spatial import build_space_scene  # noqa: E402
-from trajectotree.search.tree import find_space_contact_plan  # noqa: E402
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 
 
 @pytest.fixture(scope="module")
-def scene_plan():
+def scene_plan(quarter_turn):
     config = Config()
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
-    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu_plan(config.scene, config.search))
+    plan = quarter_turn(config.search)  # conftest's: searched once per process
     assert plan.success
     return scene, plan
 

@@ -5,13 +5,13 @@ off the box, the lifted switching finger), the files, the paper's config, and ba
 
 import dataclasses
 import json
-import subprocess
-import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from trajectotree.cli import main
 from trajectotree.config import (
     CitoConfig,
     Config,
@@ -317,32 +317,33 @@ def test_contact_plan_not_matching_the_scene_is_rejected(scene):
         plan(scene=flat, goal=0.3, method="trajectotree", config=config, contact_plan=two)
 
 
-def run_cli(*args, cwd):
-    return subprocess.run(
-        [sys.executable, "-m", "trajectotree.cli", "plan", *args], cwd=cwd, capture_output=True, text=True, timeout=600
-    )
+def run_cli(capsys, *args) -> SimpleNamespace:
+    """`trajectotree plan ARGS` through the CLI's main in this process: its exit code, stdout and stderr."""
+    code = main(["plan", *args])
+    printed = capsys.readouterr()
+    return SimpleNamespace(returncode=code, stdout=printed.out, stderr=printed.err)
 
 
 @pytest.mark.slow
-def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path):
+def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys):
     for args in (
         ["--goal", "nan"],
         ["--goal", "0.3", "--method", "chomp"],
         ["--goal", "70"],
         ["--goal-pose", "1", "0", "0"],
     ):
-        proc = run_cli(*args, "--out", str(tmp_path / "out"), cwd=tmp_path)
+        proc = run_cli(capsys, *args, "--out", str(tmp_path / "out"))
         assert proc.returncode == 2, proc.stderr
         assert "error" in proc.stderr
     assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.slow
-def test_cli_non_converged_plan_is_written_with_status(tmp_path):
+def test_cli_non_converged_plan_is_written_with_status(tmp_path, capsys):
     config = dataclasses.replace(CONFIG, cito=CitoConfig(max_iter=3, formulation="joint"))  # one program
     save_config(config, tmp_path / "c.yaml")
     proc = run_cli(
-        "--goal", "0.2", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "p"), "--json", cwd=tmp_path
+        capsys, "--goal", "0.2", "--config", str(tmp_path / "c.yaml"), "--out", str(tmp_path / "p"), "--json"
     )
     assert proc.returncode == 0, proc.stderr
     data = json.loads(proc.stdout)

@@ -20,25 +20,25 @@ SMALL_GOAL = ["--goal-rpy", "0.6", "0", "0"]  # rad about x: 2 segments
 SMALL_QUATERNION = (float(np.cos(0.3)), float(np.sin(0.3)), 0.0, 0.0)
 
 
-def _plan(tmp_path, capsys, formulation: str):
-    out = tmp_path / formulation
-    argv = ["plan", "--hand", "fingerpro4", *SMALL_GOAL, "--formulation", formulation, "--segment-workers", "1"]
-    assert main([*argv, "--out", str(out)]) == 0
-    capsys.readouterr()
+def _read(out):
     with np.load(out / PLAN_NPZ) as npz:
         arrays = {name: npz[name] for name in npz.files}
     return out, json.loads((out / PLAN_JSON).read_text()), arrays
 
 
 @pytest.mark.slow
-def test_joint_formulation_plans_a_small_goal_that_passes_the_check_its_nodes_free(tmp_path, capsys):
-    joint, data, arrays = _plan(tmp_path, capsys, "joint")
+def test_joint_formulation_plans_a_small_goal_that_passes_the_check_its_nodes_free(space_plan, tmp_path):
+    """The joint formulation's plan of SMALL_GOAL beside the keyframes formulation's (the default: conftest's
+    space_plan, `plan` of the same goal, planned once for the run)."""
+    argv = ["plan", "--hand", "fingerpro4", *SMALL_GOAL, "--formulation", "joint", "--segment-workers", "1"]
+    assert main([*argv, "--out", str(tmp_path / "joint")]) == 0
+    joint, data, arrays = _read(tmp_path / "joint")
     assert data["formulation"] == "joint" and data["success"], data["status"]
     assert len(data["segments"]) == 1  # one program
     assert data["physics_check"]["passed"] and recheck_space_plan(joint).passed
     nodes = len(data["contact_plan"]["contact_sequence"])
     assert nodes >= 3 and len(arrays["t"]) == SPACE_INTERVALS * (nodes - 1) + 1
-    _, keyframes, kf_arrays = _plan(tmp_path, capsys, "keyframes")
+    _, keyframes, kf_arrays = _read(space_plan)
     assert keyframes["formulation"] == "keyframes" and len(keyframes["segments"]) == nodes - 1
     inner = SPACE_INTERVALS * np.arange(1, nodes - 1)  # the knots of the nodes between start and goal
     # keyframes pins each node at rest; the joint program moves the cube through them (rad/s, m/s)

@@ -3,13 +3,13 @@
 SceneGraph), on positive and negative goals and a non-default box and friction."""
 
 import json
-import subprocess
-import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from test_reach import signed_distances
 
+from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, GoalPose, SceneConfig, SearchConfig, segments_for
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.geometry import ConvexPolygon, box_to_world, rotation_2d
@@ -221,16 +221,18 @@ def test_failures_are_results_with_a_reason(scene):
         find_contact_plan(scene, float("nan"), SearchConfig())
 
 
-def run_cli(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "trajectotree.cli", "search", *args], capture_output=True, text=True, timeout=300
-    )
+def run_cli(capsys, *args) -> SimpleNamespace:
+    """`trajectotree search ARGS` through the CLI's main in this process: its exit code, stdout and stderr."""
+    code = main(["search", *args])
+    printed = capsys.readouterr()
+    return SimpleNamespace(returncode=code, stdout=printed.out, stderr=printed.err)
 
 
 @pytest.mark.slow
-def test_cli_json_and_figure(tmp_path):
+def test_cli_json_and_figure(tmp_path, capsys):
     figure = tmp_path / "plan.png"
-    out = run_cli("--goal", "-1.2", "--json", "--figure", str(figure), "--box-size", "0.16", "0.08", "--mu", "0.5")
+    argv = ["--goal", "-1.2", "--json", "--figure", str(figure), "--box-size", "0.16", "0.08", "--mu", "0.5"]
+    out = run_cli(capsys, *argv)
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)
     assert data["success"] and len(data["contact_sequence"]) == 10
@@ -241,8 +243,8 @@ def test_cli_json_and_figure(tmp_path):
     )
     assert figure.stat().st_size > 10_000
     # a failed search still exits 0, with the reason
-    out = run_cli("--goal", "3.0", "--segments", "2", "--json")
+    out = run_cli(capsys, "--goal", "3.0", "--segments", "2", "--json")
     assert out.returncode == 0 and json.loads(out.stdout)["success"] is False
     # invalid input exits 2 and names the valid range
-    out = run_cli("--goal", "64")
+    out = run_cli(capsys, "--goal", "64")
     assert out.returncode == 2 and "[-20 pi, 20 pi]" in out.stderr

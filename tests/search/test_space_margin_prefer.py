@@ -13,7 +13,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch, find_space_contact_plan
+from trajectotree.search.tree import SearchClock, _SpaceSearch
 
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 AT_04 = 0.5714  # search.space_stance_friction_safety: 0.5714 x scene.mu 0.7 = friction 0.4
@@ -30,9 +30,11 @@ def _config(mode: str, safety: float = AT_04, **more) -> SearchConfig:
     return replace(Config().search, space_stance_margin=mode, space_stance_friction_safety=safety, **more)
 
 
-def _plan(scene, mode: str, safety: float = AT_04, **more):
-    config = _config(mode, safety, **more)
-    return find_space_contact_plan(scene, QUARTER_ABOUT_X, config, mu_plan(Config().scene, config))
+@pytest.fixture
+def plan_of(quarter_turn):
+    """(mode, safety, options) -> the quarter turn's plan with _config's settings: conftest's, each settings' plan
+    searched once per process (prefer at AT_04 is the default search's)."""
+    return lambda mode, safety=AT_04, **more: quarter_turn(_config(mode, safety, **more))
 
 
 def _search(scene, mode: str, safety: float = AT_04) -> _SpaceSearch:
@@ -78,22 +80,22 @@ def test_prefer_orders_the_stances_under_the_margin_after_the_others_and_keeps_t
 
 
 @pytest.mark.slow  # three searches, ~7 s of CPU
-def test_prefer_finds_require_s_plan_where_one_exists(scene):
-    require, prefer = _plan(scene, "require"), _plan(scene, "prefer")
+def test_prefer_finds_require_s_plan_where_one_exists(plan_of):
+    require, prefer = plan_of("require"), plan_of("prefer")
     assert require.success and prefer.success, prefer.reason
     assert _sequence(prefer) == _sequence(require)
     assert prefer.margin_stances == len(prefer.nodes) == require.margin_stances
     assert prefer.mu_margin == pytest.approx(0.4, abs=1e-4)
     # the greedy pass alone (share 0) takes a stance under the margin at the first node without a margin child: its
     # first root has no plan with margin stances alone, so it keeps fewer at the margin than the first pass finds
-    greedy = _plan(scene, "prefer", space_margin_first_share=0.0)
+    greedy = plan_of("prefer", space_margin_first_share=0.0)
     assert greedy.success and greedy.margin_stances < prefer.margin_stances
 
 
 @pytest.mark.slow  # four searches, ~7 s of CPU
-def test_prefer_keeps_a_plan_where_the_margin_allows_none(scene):
+def test_prefer_keeps_a_plan_where_the_margin_allows_none(plan_of):
     # at friction 0.07 no stance holds the cube within the motors: require has no plan, prefer has none's
-    require, prefer, none = (_plan(scene, mode, 0.1) for mode in ("require", "prefer", "none"))
+    require, prefer, none = (plan_of(mode, 0.1) for mode in ("require", "prefer", "none"))
     assert not require.success
     assert prefer.success and none.success, prefer.reason
     assert _sequence(prefer) == _sequence(none)
@@ -103,7 +105,7 @@ def test_prefer_keeps_a_plan_where_the_margin_allows_none(scene):
     assert saved["mu_margin"] == pytest.approx(0.07)
     assert [n["stance_margin"] for n in saved["contact_sequence"]] == [False] * len(prefer.nodes)
     # where the margin binds on some stances only, the plan keeps those that meet it and says how many
-    some = _plan(scene, "prefer", AT_021)
+    some = plan_of("prefer", AT_021)
     assert some.success and 0 < some.margin_stances < len(some.nodes)
 
 
@@ -138,10 +140,10 @@ def test_bad_margin_options_exit_2_before_any_search(tmp_path, capsys, text, nam
     assert not out.exists()
 
 
-def test_the_sweep_row_reads_the_margin_count(tmp_path, scene):
+def test_the_sweep_row_reads_the_margin_count(tmp_path, plan_of):
     from trajectotree.experiments.trial import TrialTask, space_row_from_files
 
-    plan = _plan(scene, "prefer", AT_021)
+    plan = plan_of("prefer", AT_021)  # the plan test_prefer_keeps_a_plan_where_the_margin_allows_none searched
     fields = dict(key="0000_trajectotree", goal_index=0, goal=QUARTER_ABOUT_X.tolist(), method="trajectotree")
     task = TrialTask(**fields, simulate=False, config={}, time_limit_s=60.0, space={})
     (tmp_path / "plan.json").write_text(

@@ -13,7 +13,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import _SpaceSearch, find_space_contact_plan
+from trajectotree.search.tree import _SpaceSearch
 
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 TAU_MAX = 0.396  # N m, fingerpro4's motors
@@ -82,18 +82,18 @@ def test_a_stance_that_cannot_hold_at_the_stance_friction_is_refused(scene):
     assert _search(scene, space_stance_friction_safety=1.0).mu_hold == pytest.approx(search.mu)
 
 
-def test_a_plan_with_both_margins_keeps_them_at_every_stance(scene):
+def test_a_plan_with_both_margins_keeps_them_at_every_stance(quarter_turn):
     config = Config()
     search = replace(
         config.search, space_torque_fraction=0.9, space_stance_margin="require", space_stance_friction_safety=0.5
     )
-    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, search, mu_plan(config.scene, search))
+    plan = quarter_turn(search)  # conftest's: searched once per process
     assert plan.success, plan.reason
     torques = [n.stance_torque for n in plan.nodes[1:]]
     assert max(torques) <= 0.9 * TAU_MAX + 1e-9
     # without the margins the same goal's plan uses more of the motors somewhere: the margin did bind
     none = replace(config.search, space_torque_fraction=1.0, space_stance_margin="none")
-    free = find_space_contact_plan(scene, QUARTER_ABOUT_X, none, mu_plan(config.scene, none))
+    free = quarter_turn(none)
     assert max(n.stance_torque for n in free.nodes[1:]) > max(torques)
 
 

@@ -24,7 +24,7 @@ from trajectotree.search.spatial_rolling import (
     on_face,
     rolled_step,
 )
-from trajectotree.search.tree import _SpaceSearch, find_space_contact_plan
+from trajectotree.search.tree import _SpaceSearch
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 EDGES = 8
@@ -113,10 +113,10 @@ def test_the_search_refuses_a_stance_whose_contacts_roll_off_their_face(scene):
     assert why is None and torque == 0.0 and not rolled.any()
 
 
-def test_a_planned_quarter_turn_holds_within_the_motors_where_its_fingertips_roll(scene):
+def test_a_planned_quarter_turn_holds_within_the_motors_where_its_fingertips_roll(scene, quarter_turn):
     config = Config()
     mu = mu_plan(config.scene, config.search)
-    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)
+    plan = quarter_turn(config.search)  # conftest's: searched once per process
     assert plan.success, plan.reason
     r, fingers = scene.tip_radius, scene.fingers
     rolled = np.zeros((scene.num_fingers, 3))  # m in B, each fingertip's roll since it landed

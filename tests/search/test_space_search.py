@@ -17,7 +17,7 @@ from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import START_POSE, build_space_scene
 from trajectotree.search.grasp import SpatialClosure
 from trajectotree.search.spatial_reach import CLEARANCE, SpatialReach, box_transform
-from trajectotree.search.tree import SPACE_MAX_SEGMENT_ROTATION, find_space_contact_plan, space_object_path
+from trajectotree.search.tree import SPACE_MAX_SEGMENT_ROTATION, space_object_path
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 EDGES = 8
@@ -116,10 +116,10 @@ def test_two_fingers_on_one_point_collide(scene):
     assert clash.kind is RefusalKind.FINGERS_COLLIDE and set(clash.fingers) == {0, 1}
 
 
-def test_a_quarter_turn_about_a_horizontal_axis_plans_and_every_node_checks(scene):
+def test_a_quarter_turn_about_a_horizontal_axis_plans_and_every_node_checks(scene, quarter_turn):
     config = Config()
     mu = mu_plan(config.scene, config.search)
-    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, config.search, mu)
+    plan = quarter_turn(config.search)  # conftest's: searched once per process
     assert plan.success, plan.reason
     nodes = plan.nodes
     np.testing.assert_allclose(nodes[-1].object_pose[:4], QUARTER_ABOUT_X, atol=1e-12)
