@@ -40,7 +40,7 @@ def write_gif(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.animation import PillowWriter
 
     from trajectotree.figures.run import plot_run_frame
     from trajectotree.figures.space import plot_space_frame, view_bounds
@@ -76,12 +76,17 @@ def write_gif(
         fig.text(0.5, 0.01, "\n".join(notes), ha="center", va="bottom", fontsize=7.5, color="0.25")
     draw(frames[0])
     fig.tight_layout(rect=(0, 0.045 * len(notes), 1, 1))
-    animation = FuncAnimation(fig, draw, frames=frames)
+    fig.set_layout_engine(None)  # the layout is fixed: tight_layout's placeholder engine made each savefig draw twice
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.gif")
+    writer = PillowWriter(fps=fps)
     try:
-        animation.save(tmp, writer=PillowWriter(fps=fps), dpi=GIF_DPI)
+        # Each frame drawn once, by the writer's savefig (FuncAnimation drew it three times).
+        with writer.saving(fig, tmp, GIF_DPI):
+            for k in frames:
+                draw(k)
+                writer.grab_frame()
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
