@@ -155,7 +155,7 @@ class SpacePlanning:
         assumed = dataclasses.replace(
             self.config,
             scene=scene_config,
-            search=dataclasses.replace(self.config.search, time_budget_s=deadlines.search_s, budget_clock="wall"),
+            search=dataclasses.replace(self.config.search, space_time_budget_s=deadlines.search_s, budget_clock="wall"),
         )
         # the executed hand (its model file), whatever the config names: the plan's scene is the one executed
         hand = self.scene.hand_file.source

@@ -886,7 +886,8 @@ class _SpaceSearch:
     """One run of Algorithm 1 in space; holds the reach, closure and holding caches and the counters."""
 
     def __init__(self, scene, goal_quaternion, config: SearchConfig, mu: float, root: SpaceRoot | None = None):
-        self.scene, self.config, self.mu, self.root = scene, config, mu, root
+        self.scene, self.mu, self.root = scene, mu, root
+        self.config = replace(config, time_budget_s=config.space_time_budget_s)  # the budget in space
         self.poses = space_object_path(goal_quaternion, START_POSE if root is None else root.pose)
         p_BC, n_B = box_face_grid(scene.object.half, SPACE_GRID_PER_SIDE, scene.tip_radius)
         per_face = p_BC.shape[1]
@@ -1206,11 +1207,11 @@ class _SpaceSearch:
 
     def passes(self) -> tuple[tuple[tuple[float, ...], SearchConfig], ...]:
         """The search's passes, each (the frictions its stances are tried at, its budgets: max_expansions and
-        time_budget_s, counted from the search's start): with search.space_stance_margin prefer, margin stances alone
-        (as require) within search.space_margin_first_share of the budgets, then those that hold only at mu_plan
-        after them within the rest (a goal whose margin plan lies under another root than the first gets it: the
-        quarter turn about x has 6 of 6 stances at the margin from its second root, 2 of 6 from its first); one
-        pass otherwise."""
+        time_budget_s, here search.space_time_budget_s, counted from the search's start): with
+        search.space_stance_margin prefer, margin stances alone (as require) within search.space_margin_first_share
+        of the budgets, then those that hold only at mu_plan after them within the rest (a goal whose margin plan
+        lies under another root than the first gets it: the quarter turn about x has 6 of 6 stances at the margin
+        from its second root, 2 of 6 from its first); one pass otherwise."""
         share = self.config.space_margin_first_share
         if len(self.hold_frictions) == 1 or share == 0.0:
             return ((self.hold_frictions, self.config),)
