@@ -1,7 +1,8 @@
 """The stance margin as a preference (search.space_stance_margin prefer, issue 37): a stance that holds the cube within
 the motors only at mu_plan is taken where no stance at the margin's friction is found, so a goal keeps the plan
 the search without the margin finds; where a plan with margin stances alone exists, prefer's is require's; plan.json
-counts the stances at the margin; the options' bad values exit 2 naming the value and the valid ones."""
+counts the stances at the margin; the search in space spends its own budget (search.space_time_budget_s), its margin
+pass a share of it; the options' bad values exit 2 naming the value and the valid ones."""
 
 import json
 from dataclasses import replace
@@ -13,7 +14,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch
+from trajectotree.search.tree import SearchClock, _SpaceSearch, find_space_contact_plan
 
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 AT_04 = 0.5714  # search.space_stance_friction_safety: 0.5714 x scene.mu 0.7 = friction 0.4
@@ -109,9 +110,23 @@ def test_prefer_keeps_a_plan_where_the_margin_allows_none(plan_of):
     assert some.success and 0 < some.margin_stances < len(some.nodes)
 
 
+def test_the_search_in_space_spends_its_own_budget_its_margin_pass_a_share_of_it(scene):
+    config = replace(Config().search, time_budget_s=0.5, space_time_budget_s=50.0, space_margin_first_share=0.6)
+    search = _SpaceSearch(scene, QUARTER_ABOUT_X, config, mu_plan(Config().scene, config))
+    (margin, first), (both, rest) = search.passes()
+    assert margin == pytest.approx((0.4,), abs=1e-4) and both == pytest.approx((0.4, 0.49), abs=1e-4)
+    assert first.time_budget_s == pytest.approx(30.0) and rest.time_budget_s == 50.0  # the plane's 0.5 s unused
+    # a budget in space spent before the first expansion refuses, however long the plane's
+    spent = replace(Config().search, space_time_budget_s=1e-6, time_budget_s=600.0)
+    plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, spent, mu_plan(Config().scene, spent))
+    assert not plan.success and plan.refusal.last_searched.refusal.kind == RefusalKind.TIME_BUDGET, plan.reason
+    assert plan.stats.expanded == 0
+
+
 @pytest.mark.parametrize(
     "field, value, valid",
     [
+        ("space_time_budget_s", 0.0, "86400"),
         ("space_stance_margin", "sometimes", "none, prefer, require"),
         ("space_stance_margin", False, "none, prefer, require"),
         ("space_margin_first_share", 1.0, "[0, 1)"),
