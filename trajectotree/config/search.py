@@ -85,10 +85,13 @@ class SearchConfig:
     # the search's time where a goal needs a stance under the margin (CPU mean 4.6 -> 8.6 s over the 30 goals).
     # The plane ignores it.
     space_stance_margin: str = "prefer"
-    # 1, the margin's friction as a fraction of scene.mu (at most mu_plan): 0.5714 (about 4/7) x 0.7 = 0.4, so a
-    # stance that meets it holds the cube within the motors where the world has friction 0.4, not the planned 0.7.
+    # 1, the margin's friction as a fraction of scene.mu (at most mu_plan): 0.4571 (about 16/35) x 0.7 = 0.32, the
+    # friction the closed loop's grasp QP gives its cones where the world has 0.4 (controller.grasp.friction_safety
+    # 0.8 x the estimate 0.4), so a stance that meets it is one that QP can make within the motors there. At 0.5714
+    # (0.4, the world's own) the plans whose every stance met it still dropped at friction 0.4: their swings' stances
+    # needed 0.35-0.37 and the QP's cones allowed 0.32 (docs/measurements.md "Why plans at the margin drop").
     # Used with space_stance_margin prefer and require only.
-    space_stance_friction_safety: float = 0.5714
+    space_stance_friction_safety: float = 0.4571
     # 1, in [0, 1): the share of the search's budgets (max_expansions, time_budget_s) in which space_stance_margin
     # prefer first searches margin stances alone, as require does, before it allows the others after them: a greedy
     # pass alone (0) turns to a stance under the margin at the first node without a margin child, so its plans kept
