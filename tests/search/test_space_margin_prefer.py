@@ -92,8 +92,11 @@ def test_prefer_finds_require_s_plan_where_one_exists(scene):
 
 @pytest.mark.slow  # four searches, ~7 s of CPU
 def test_prefer_keeps_a_plan_where_the_margin_allows_none(scene):
-    # at friction 0.07 no stance holds the cube within the motors: require has no plan, prefer has none's
-    require, prefer, none = (_plan(scene, mode, 0.1) for mode in ("require", "prefer", "none"))
+    # at friction 0.07 no stance holds the cube within the motors: require has no plan, prefer has none's (no fallback
+    # friction between the margin's and mu_plan: search.space_stance_fallback_safety at the margin's is ignored)
+    require, prefer, none = (
+        _plan(scene, mode, 0.1, space_stance_fallback_safety=0.1) for mode in ("require", "prefer", "none")
+    )
     assert not require.success
     assert prefer.success and none.success, prefer.reason
     assert _sequence(prefer) == _sequence(none)

@@ -92,6 +92,12 @@ class SearchConfig:
     # needed 0.35-0.37 and the QP's cones allowed 0.32 (docs/measurements.md "Why plans at the margin drop").
     # Used with space_stance_margin prefer and require only.
     space_stance_friction_safety: float = 0.4571
+    # 1, with space_stance_margin prefer: a stance under the margin that holds the cube within the motors with its
+    # cones at this fraction of scene.mu (0.5714 x 0.7 = 0.4, the slippery world's own friction) comes before one that
+    # holds only at mu_plan, and the search's second pass takes such stances alone (_SpaceSearch.passes); ignored
+    # where not between the margin's friction and mu_plan. Goals 7 and 8 of seed 0 have no plan at the margin within
+    # the first pass: their plans at 0.4 held at friction 0.4, those that took stances at mu_plan dropped.
+    space_stance_fallback_safety: float = 0.5714
     # 1, in [0, 1): the share of the search's budgets (max_expansions, time_budget_s) in which space_stance_margin
     # prefer first searches margin stances alone, as require does, before it allows the others after them: a greedy
     # pass alone (0) turns to a stance under the margin at the first node without a margin child, so its plans kept
@@ -173,6 +179,7 @@ class SearchConfig:
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.space_torque_fraction", self.space_torque_fraction, 0.0, 1.0, low_open=True)
         check_range("search.space_stance_friction_safety", self.space_stance_friction_safety, 0.0, 1.0, low_open=True)
+        check_range("search.space_stance_fallback_safety", self.space_stance_fallback_safety, 0.0, 1.0, low_open=True)
         check_range("search.space_margin_first_share", self.space_margin_first_share, 0.0, 1.0, high_open=True)
         if self.space_stance_margin not in STANCE_MARGINS:
             raise ConfigError(
