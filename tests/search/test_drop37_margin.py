@@ -12,7 +12,7 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, mu_plan
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch
+from trajectotree.search.tree import SearchClock, _SpaceSearch, space_initial_grasp
 
 WORLD_MU = 0.4  # the closed loop's slippery world (planned at scene.mu 0.7)
 # seed-0 SO(3) goal 13 ([qw, qx, qy, qz]): its plan at the margin 0.4 had 9/9 stances there and dropped at friction
@@ -32,6 +32,9 @@ def test_the_margin_is_the_closed_loop_s_cones_in_the_slippery_world():
     assert search.mu_hold == pytest.approx(closed_loop_cones, abs=1e-4)
     # prefer: then the fallback, the world's own friction, then mu_plan
     assert search.hold_frictions == pytest.approx((closed_loop_cones, WORLD_MU, 0.49), abs=1e-4)
+    # plan.json says at which of them each stance holds (the initial grasp's here)
+    node = space_initial_grasp(scene, GOAL_13, config.search, search.mu).to_json()["contact_sequence"][0]
+    assert node["stance_mu"] in search.hold_frictions and node["stance_margin"] == (node["stance_mu"] == search.mu_hold)
 
 
 def test_prefer_searches_the_margin_then_the_fallback_then_every_stance():
@@ -56,6 +59,7 @@ def test_goal_13_planned_at_the_margin_holds_in_both_worlds_closed_loop(tmp_path
     contact_plan = json.loads((out / "plan.json").read_text())["contact_plan"]
     assert contact_plan["mu_margin"] == pytest.approx(0.32, abs=1e-3)
     assert contact_plan["margin_stances"] == contact_plan["stances"]
+    assert [n["stance_mu"] for n in contact_plan["contact_sequence"]] == [contact_plan["mu_margin"]] * 9
     for world in (["--sim-mu", str(WORLD_MU)], ["--sim-mass", "0.141"]):
         assert main(["simulate", str(out), "--closed-loop", *world]) == 0
         sim = json.loads((out / "sim.json").read_text())

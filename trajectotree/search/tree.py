@@ -867,6 +867,7 @@ class _SpaceNode:
     push: float | None = None  # N
     rolled: np.ndarray | None = None  # (F, 3) m in B, each fingertip rolled off its contact since it landed
     margin: bool = True  # its stance holds the cube within the motors at the margin's friction (mu_hold)
+    stance_mu: float = float("nan")  # the least of hold_frictions at which it does (nan: at none)
 
 
 @dataclass(frozen=True)
@@ -881,6 +882,7 @@ class _SpaceChild:
     push: float
     rolled: np.ndarray  # (F, 3) m in B, the child's rolled offsets (_SpaceSearch.rolled_stance)
     margin: bool  # its stance holds the cube within the motors at mu_hold, not only at mu_plan
+    stance_mu: float  # the least of hold_frictions at which it does
 
 
 class _SpaceSearch:
@@ -1007,6 +1009,7 @@ class _SpaceSearch:
             child.push,
             child.rolled,
             child.margin,
+            child.stance_mu,
         )
         return node, None
 
@@ -1075,9 +1078,9 @@ class _SpaceSearch:
             ranked.append((rank, finger is not None, rolled_far, -push, finger, stance, torque, push, rolled))
         out = []
         for rank, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
-            q_held, margin = {i: held[i].q for i in stance}, rank == 0
+            q_held, margin, stance_mu = {i: held[i].q for i in stance}, rank == 0, self.hold_frictions[rank]
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, margin))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, margin, stance_mu))
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
@@ -1092,7 +1095,7 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, margin))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, margin, stance_mu))
         return out
 
     def stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[tuple | None, Refusal | None]:
@@ -1180,7 +1183,9 @@ class _SpaceSearch:
             q = np.asarray(self.root.q, dtype=float)
             torque, push = self.holding(0, contacts, fingers, q, self.mu_hold)
             rolled = np.zeros((len(contacts), 3))
-            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, torque <= self.tau_limit)]
+            held = torque <= self.tau_limit
+            stance_mu = self.mu_hold if held else float("nan")
+            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, held, stance_mu)]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -1203,7 +1208,8 @@ class _SpaceSearch:
             for rank, mu in enumerate(self.hold_frictions):
                 torque, push = self.holding(0, contacts, fingers, q, mu)
                 if torque <= self.tau_limit:
-                    node = _SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)), rank == 0)
+                    rolled = np.zeros((len(contacts), 3))
+                    node = _SpaceNode(0, contacts, q, None, None, torque, push, rolled, rank == 0, mu)
                     out.append(((rank, -freedom, -push), node))
                     break
             if len(out) == SPACE_MAX_ROOTS:
@@ -1279,6 +1285,7 @@ class _SpaceSearch:
                 stance_torque=None if n.depth == 0 else n.stance_torque,
                 stance_push_capacity=None if n.depth == 0 else n.push,
                 stance_margin=n.margin,
+                stance_mu=n.stance_mu,
             )
             for n in reversed(path)
         )
