@@ -157,6 +157,10 @@ class SpaceContactNode:
     # whether that stance (node 0: the four fingers' initial grasp) holds the box within the motors with friction
     # cones at the search's stance margin (search.space_stance_margin), not only at mu_plan
     stance_margin: bool = True
+    # the least of the search's stance frictions (the margin's, search.space_stance_fallback_safety's, mu_plan) at
+    # which that stance holds the box within the motors (space_stance_margin none: mu_plan; nan: a measured grasp
+    # that holds at none)
+    stance_mu: float = float("nan")
 
     def to_json(self) -> dict:
         return {
@@ -170,6 +174,7 @@ class SpaceContactNode:
             "stance_torque": self.stance_torque,
             "stance_push_capacity": self.stance_push_capacity,
             "stance_margin": self.stance_margin,
+            "stance_mu": _finite_or_none(self.stance_mu),
         }
 
 

@@ -85,17 +85,27 @@ class SearchConfig:
     # the search's time where a goal needs a stance under the margin (CPU mean 4.6 -> 8.6 s over the 30 goals).
     # The plane ignores it.
     space_stance_margin: str = "prefer"
-    # 1, the margin's friction as a fraction of scene.mu (at most mu_plan): 0.5714 (about 4/7) x 0.7 = 0.4, so a
-    # stance that meets it holds the cube within the motors where the world has friction 0.4, not the planned 0.7.
+    # 1, the margin's friction as a fraction of scene.mu (at most mu_plan): 0.4571 (about 16/35) x 0.7 = 0.32, the
+    # friction the closed loop's grasp QP gives its cones where the world has 0.4 (controller.grasp.friction_safety
+    # 0.8 x the estimate 0.4), so a stance that meets it is one that QP can make within the motors there. At 0.5714
+    # (0.4, the world's own) the plans whose every stance met it still dropped at friction 0.4: their swings' stances
+    # needed 0.35-0.37 and the QP's cones allowed 0.32 (docs/measurements.md "Why plans at the margin drop").
     # Used with space_stance_margin prefer and require only.
-    space_stance_friction_safety: float = 0.5714
+    space_stance_friction_safety: float = 0.4571
+    # 1, with space_stance_margin prefer: a stance under the margin that holds the cube within the motors with its
+    # cones at this fraction of scene.mu (0.5714 x 0.7 = 0.4, the slippery world's own friction) comes before one that
+    # holds only at mu_plan, and the search's second pass takes such stances alone (_SpaceSearch.passes); ignored
+    # where not between the margin's friction and mu_plan. Goals 7 and 8 of seed 0 have no plan at the margin within
+    # the first pass: their plans at 0.4 held at friction 0.4, those that took stances at mu_plan dropped.
+    space_stance_fallback_safety: float = 0.5714
     # 1, in [0, 1): the share of the search's budgets (max_expansions, space_time_budget_s) in which
-    # space_stance_margin prefer first searches margin stances alone, as require does, before it allows the others
-    # after them: a greedy pass alone (0) turns to a stance under the margin at the first node without a margin
-    # child, so its plans kept about half their stances at the margin (docs/measurements.md "The stance margin as a
-    # preference"); 0.6 of 60 s gives 29 of the 30 seed-0 SO(3) goals every stance at the margin, and the one
-    # without a margin plan 24 s for the others ("A longer margin pass in space").
-    space_margin_first_share: float = 0.6
+    # space_stance_margin prefer first searches margin stances alone, as require does, then each later pass with the
+    # next friction's stances too, of the budgets the passes before it left (at 0.5 the passes end at 30, 45 and 60 s):
+    # a greedy pass alone (0) turns to a stance under the margin at the first node without a margin child, so its
+    # plans kept about half their stances at the margin (docs/measurements.md "The stance margin as a preference");
+    # plans of every stance at 0.4 took 17-29 s of CPU on 6 of the 30 seed-0 SO(3) goals ("A longer margin pass in
+    # space").
+    space_margin_first_share: float = 0.5
     # m, the least gap between any two fingers' collision shapes (link boxes, fingertip spheres) at a node
     # and on the straight joint-space path from its parent (exact planar test, trajectotree.search.reach),
     # since the simulation's fingers collide like any other bodies; the initial grasps keep it too.
@@ -176,6 +186,7 @@ class SearchConfig:
         check_range("search.rolled_corner_gap", self.rolled_corner_gap, 0.0, 0.05)
         check_range("search.space_torque_fraction", self.space_torque_fraction, 0.0, 1.0, low_open=True)
         check_range("search.space_stance_friction_safety", self.space_stance_friction_safety, 0.0, 1.0, low_open=True)
+        check_range("search.space_stance_fallback_safety", self.space_stance_fallback_safety, 0.0, 1.0, low_open=True)
         check_range("search.space_margin_first_share", self.space_margin_first_share, 0.0, 1.0, high_open=True)
         if self.space_stance_margin not in STANCE_MARGINS:
             raise ConfigError(

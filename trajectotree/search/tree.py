@@ -42,8 +42,9 @@ their planned and rolled contacts with every joint within search.space_torque_fr
 motor's limit and, with search.space_stance_margin require, with friction cones at
 search.space_stance_friction_safety x scene.mu (at most mu_plan): headroom for the closed loop in a heavier or more
 slippery world than the plan assumed. With prefer, a stance that holds only at mu_plan is kept but ordered after
-those at the margin, and the search first looks for a plan of margin stances alone within
-search.space_margin_first_share of its budgets (_SpaceSearch.passes).
+those at the margin and those at search.space_stance_fallback_safety x scene.mu, and the search first looks for a
+plan of margin stances alone, then of those and the fallback's, each within search.space_margin_first_share of the
+budgets left (_SpaceSearch.passes).
 
 Push order (trajectotree.search.stance; not in the paper): among the children of a node, SelectNode
 takes first those whose holding fingers resist a push of search.push_capacity newtons along each of
@@ -866,6 +867,7 @@ class _SpaceNode:
     push: float | None = None  # N
     rolled: np.ndarray | None = None  # (F, 3) m in B, each fingertip rolled off its contact since it landed
     margin: bool = True  # its stance holds the cube within the motors at the margin's friction (mu_hold)
+    stance_mu: float = float("nan")  # the least of hold_frictions at which it does (nan: at none)
 
 
 @dataclass(frozen=True)
@@ -880,6 +882,7 @@ class _SpaceChild:
     push: float
     rolled: np.ndarray  # (F, 3) m in B, the child's rolled offsets (_SpaceSearch.rolled_stance)
     margin: bool  # its stance holds the cube within the motors at mu_hold, not only at mu_plan
+    stance_mu: float  # the least of hold_frictions at which it does
 
 
 class _SpaceSearch:
@@ -912,9 +915,13 @@ class _SpaceSearch:
         # that holds at it holds where the world has that much less friction than planned
         margin = config.space_stance_margin != "none"
         self.mu_hold = min(mu, config.space_stance_friction_safety * scene.object.mu) if margin else mu
-        # the frictions a stance is tried at, in order: the margin's, then (prefer) mu_plan's when the margin's fails
+        # the frictions a stance is tried at, lowest first: the margin's, then (prefer) the fallback's
+        # (search.space_stance_fallback_safety, where it lies between) and mu_plan's; a stance's rank is the index of
+        # the first at which it holds
         prefer = config.space_stance_margin == "prefer" and self.mu_hold < mu
-        self.hold_frictions = (self.mu_hold, mu) if prefer else (self.mu_hold,)
+        fallback = min(mu, config.space_stance_fallback_safety * scene.object.mu)
+        levels = {f for f in (self.mu_hold, fallback, mu) if f >= self.mu_hold}
+        self.hold_frictions = tuple(sorted(levels)) if prefer else (self.mu_hold,)
         self._reach: dict[tuple, object] = {}
         self._closure: dict[tuple, object] = {}
         self.refused: Counter[Refusal] = Counter()
@@ -1003,6 +1010,7 @@ class _SpaceSearch:
             child.push,
             child.rolled,
             child.margin,
+            child.stance_mu,
         )
         return node, None
 
@@ -1061,18 +1069,19 @@ class _SpaceSearch:
             if why is not None:
                 self.refused[why] += 1
                 continue
-            torque, push, rolled, margin = held_stance
+            torque, push, rolled, rank = held_stance
             # the finger rolled furthest since it landed moves first (it lands back on a grid point, its roll reset):
             # by push capacity alone axes 18 and 19 found no plan in the 30 s budget (1296, 1761 expansions), so
             # ordered in 544 and 102 (all rolls are 0 with search.rolled_stances off: the push's order); a stance
-            # within the margin before any that holds only at mu_plan (search.space_stance_margin prefer)
+            # within the margin before one at the fallback's friction, before one that holds only at mu_plan
+            # (search.space_stance_margin prefer)
             rolled_far = 0.0 if finger is None else -float(np.linalg.norm(node.rolled[finger]))  # m
-            ranked.append((not margin, finger is not None, rolled_far, -push, finger, stance, torque, push, rolled))
+            ranked.append((rank, finger is not None, rolled_far, -push, finger, stance, torque, push, rolled))
         out = []
-        for under_margin, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
-            q_held, margin = {i: held[i].q for i in stance}, not under_margin
+        for rank, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
+            q_held, margin, stance_mu = {i: held[i].q for i in stance}, rank == 0, self.hold_frictions[rank]
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, margin))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, margin, stance_mu))
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
@@ -1087,12 +1096,13 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, margin))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, margin, stance_mu))
         return out
 
     def stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[tuple | None, Refusal | None]:
-        """((largest joint torque N m, push capacity N, the child's rolled offsets (F, 3) m in B, whether it holds at
-        the margin's friction), None) for `stance` holding the cube from `node` to the child at `depth` at angles
+        """((largest joint torque N m, push capacity N, the child's rolled offsets (F, 3) m in B, its rank: the index
+        in hold_frictions of the friction it holds at), None) for `stance` holding the cube from `node` to the child at
+        `depth` at angles
         held[i].q: within the motors at its planned contacts at both ends and at those its fingertips roll to
         (rolled_stance), at the first of hold_frictions at which it does; or (None, why it holds at none)."""
         contacts = [node.contacts[i] for i in stance]
@@ -1110,7 +1120,7 @@ class _SpaceSearch:
             if torque1 > self.tau_limit:
                 why = Refusal(RefusalKind.STANCE_OVER_MOTORS, stance=stance, limit=self.tau_limit)
                 continue
-            return (max(torque0, torque1, rolled_torque), push, rolled, mu == self.mu_hold), None
+            return (max(torque0, torque1, rolled_torque), push, rolled, self.hold_frictions.index(mu)), None
         return None, why
 
     def rolled_stance(
@@ -1174,7 +1184,9 @@ class _SpaceSearch:
             q = np.asarray(self.root.q, dtype=float)
             torque, push = self.holding(0, contacts, fingers, q, self.mu_hold)
             rolled = np.zeros((len(contacts), 3))
-            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, torque <= self.tau_limit)]
+            held = torque <= self.tau_limit
+            stance_mu = self.mu_hold if held else float("nan")
+            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, held, stance_mu)]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -1194,12 +1206,12 @@ class _SpaceSearch:
             q = np.array([self.finger_reach(0, i, c).q for i, c in enumerate(contacts)])
             if self.reach.links_clear(self.poses[0], q):
                 continue
-            for mu in self.hold_frictions:
+            for rank, mu in enumerate(self.hold_frictions):
                 torque, push = self.holding(0, contacts, fingers, q, mu)
                 if torque <= self.tau_limit:
-                    margin = mu == self.mu_hold
-                    node = _SpaceNode(0, contacts, q, None, None, torque, push, np.zeros((len(contacts), 3)), margin)
-                    out.append(((not margin, -freedom, -push), node))
+                    rolled = np.zeros((len(contacts), 3))
+                    node = _SpaceNode(0, contacts, q, None, None, torque, push, rolled, rank == 0, mu)
+                    out.append(((rank, -freedom, -push), node))
                     break
             if len(out) == SPACE_MAX_ROOTS:
                 break
@@ -1208,16 +1220,22 @@ class _SpaceSearch:
     def passes(self) -> tuple[tuple[tuple[float, ...], SearchConfig], ...]:
         """The search's passes, each (the frictions its stances are tried at, its budgets: max_expansions and
         time_budget_s, here search.space_time_budget_s, counted from the search's start): with
-        search.space_stance_margin prefer, margin stances alone (as require) within search.space_margin_first_share
-        of the budgets, then those that hold only at mu_plan after them within the rest (a goal whose margin plan
-        lies under another root than the first gets it: the quarter turn about x has 6 of 6 stances at the margin
-        from its second root, 2 of 6 from its first); one pass otherwise."""
-        share = self.config.space_margin_first_share
-        if len(self.hold_frictions) == 1 or share == 0.0:
-            return ((self.hold_frictions, self.config),)
-        expansions = max(1, math.floor(share * self.config.max_expansions))
-        first = replace(self.config, time_budget_s=share * self.config.time_budget_s, max_expansions=expansions)
-        return (((self.mu_hold,), first), (self.hold_frictions, self.config))
+        search.space_stance_margin prefer, margin stances alone (as require), then those at the fallback's friction
+        after them, each pass within search.space_margin_first_share of the budgets the passes before it left (0.5 and
+        0.75 of them at 0.5),
+        then those that hold only at mu_plan after them within the rest (a goal whose margin plan lies under another
+        root than the first gets it: the quarter turn about x has 6 of 6 stances at the margin from its second root,
+        2 of 6 from its first); one pass otherwise."""
+        share, frictions = self.config.space_margin_first_share, self.hold_frictions
+        if len(frictions) == 1 or share == 0.0:
+            return ((frictions, self.config),)
+        out = []
+        for k in range(1, len(frictions)):
+            spent = 1.0 - (1.0 - share) ** k  # the budgets' share spent by the end of this pass
+            expansions = max(1, math.floor(spent * self.config.max_expansions))
+            budgets = replace(self.config, time_budget_s=spent * self.config.time_budget_s, max_expansions=expansions)
+            out.append((frictions[:k], budgets))
+        return (*out, (frictions, self.config))
 
     def begin_pass(self, frictions: tuple[float, ...]) -> None:
         """A new pass whose stances are tried at `frictions`: the states seen before are seen afresh (a state dead
@@ -1269,6 +1287,7 @@ class _SpaceSearch:
                 stance_torque=None if n.depth == 0 else n.stance_torque,
                 stance_push_capacity=None if n.depth == 0 else n.push,
                 stance_margin=n.margin,
+                stance_mu=n.stance_mu,
             )
             for n in reversed(path)
         )
