@@ -20,7 +20,7 @@ from trajectotree.config import Config, mu_plan
 from trajectotree.experiments.sweep import axis_aligned_goals
 from trajectotree.geometry import quaternion_angle
 from trajectotree.scene.spatial import START_POSE, build_space_scene
-from trajectotree.search.tree import find_space_contact_plan
+from trajectotree.search.space_tree import find_space_contact_plan
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ import numpy as np
 
 from trajectotree.config import Config, mu_plan
 from trajectotree.scene.spatial import START_POSE, build_space_scene
-from trajectotree.search.tree import space_initial_grasp
+from trajectotree.search.space_tree import space_initial_grasp
 
 
 def main() -> None:

@@ -92,7 +92,7 @@ def quarter_turn():
     shared_computations shares its values: only read; a fresh test searches its own)."""
     from trajectotree.config import Config, mu_plan
     from trajectotree.scene.spatial import build_space_scene
-    from trajectotree.search.tree import find_space_contact_plan
+    from trajectotree.search.space_tree import find_space_contact_plan
 
     config = Config()
     scene = build_space_scene("fingerpro4", mu=config.scene.mu, gravity=config.scene.gravity)
@@ -320,9 +320,9 @@ def holding_torque(scene, pose, p_BC, n_B, q, fingers, mu) -> float:
     one per finger, B's contact points and normals and the joints) hold the cube at `pose` against gravity within
     friction `mu`: the search's holding LP built here from its parts."""
     from trajectotree.scene.statics import edge_wrenches_W
+    from trajectotree.search.space_tree import PYRAMID_EDGES as edges
     from trajectotree.search.spatial_reach import box_transform
     from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
-    from trajectotree.search.tree import PYRAMID_EDGES as edges
 
     R = box_transform(pose).rotation().matrix()
     p, n = p_BC @ R.T, n_B @ R.T

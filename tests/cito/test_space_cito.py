@@ -17,7 +17,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.spatial import recheck_space_plan
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import space_initial_grasp
+from trajectotree.search.space_tree import space_initial_grasp
 
 SMALL_GOAL_RPY = (0.3, 0.2, 0.1)  # rad: 21 deg from the start, two segments' worth of knots (21)
 SMALL_GOAL = RollPitchYaw(SMALL_GOAL_RPY).ToQuaternion().wxyz()  # [w, x, y, z]

@@ -19,7 +19,7 @@ from trajectotree.geometry import box_signed_distances, quaternion_matrices, seg
 from trajectotree.results import LINK_PENETRATION_TOL
 from trajectotree.scene.spatial import build_space_scene
 from trajectotree.scene.statics import pyramid_edges
-from trajectotree.search.tree import find_space_contact_plan
+from trajectotree.search.space_tree import find_space_contact_plan
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 

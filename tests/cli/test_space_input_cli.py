@@ -16,8 +16,8 @@ from trajectotree.config import Config, mu_plan
 from trajectotree.geometry import quaternion_angle
 from trajectotree.planning.start import SPACE_TOUCH_DISTANCE, StartRefused, space_start_root
 from trajectotree.scene.spatial import START_POSE, build_space_scene
+from trajectotree.search.space_tree import find_space_contact_plan
 from trajectotree.search.spatial_reach import SpatialReach, box_transform
-from trajectotree.search.tree import find_space_contact_plan
 from trajectotree.start import SpaceStartState, StartProblem
 
 SPACE = ["--hand", "fingerpro4"]

@@ -22,8 +22,8 @@ from trajectotree.scene.statics import (
     pyramid_edges,
     tangent_basis,
 )
+from trajectotree.search.space_tree import find_space_contact_plan
 from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
-from trajectotree.search.tree import find_space_contact_plan
 
 HALF = 0.0325  # m, the cube's half size
 MASS, GRAVITY = 0.094, 9.81

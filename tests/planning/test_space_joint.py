@@ -14,7 +14,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.spatial import PLAN_JSON, PLAN_NPZ, recheck_space_plan
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import find_space_contact_plan
+from trajectotree.search.space_tree import find_space_contact_plan
 
 SMALL_GOAL = ["--goal-rpy", "0.6", "0", "0"]  # rad about x: 2 segments
 SMALL_QUATERNION = (float(np.cos(0.3)), float(np.sin(0.3)), 0.0, 0.0)

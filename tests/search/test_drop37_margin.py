@@ -12,7 +12,8 @@ import pytest
 from trajectotree.cli import main
 from trajectotree.config import Config, mu_plan
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch, space_initial_grasp
+from trajectotree.search.space_tree import _SpaceSearch, space_initial_grasp
+from trajectotree.search.tree import SearchClock
 
 WORLD_MU = 0.4  # the closed loop's slippery world (planned at scene.mu 0.7)
 # seed-0 SO(3) goal 13 ([qw, qx, qy, qz]): its plan at the margin 0.4 had 9/9 stances there and dropped at friction

@@ -14,7 +14,8 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch, find_space_contact_plan
+from trajectotree.search.space_tree import _SpaceSearch, find_space_contact_plan
+from trajectotree.search.tree import SearchClock
 
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 AT_04 = 0.5714  # search.space_stance_friction_safety: 0.5714 x scene.mu 0.7 = friction 0.4

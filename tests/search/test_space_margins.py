@@ -13,7 +13,7 @@ from trajectotree.cli import main
 from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import _SpaceSearch
+from trajectotree.search.space_tree import _SpaceSearch
 
 QUARTER_ABOUT_X = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0])
 TAU_MAX = 0.396  # N m, fingerpro4's motors

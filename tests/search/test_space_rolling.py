@@ -15,6 +15,7 @@ from trajectotree.geometry import BOX_FACE_NAMES, BOX_FACE_NORMALS, so3_exp
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.kinematics import SerialFinger
 from trajectotree.scene.spatial import build_space_scene
+from trajectotree.search.space_tree import _SpaceSearch
 from trajectotree.search.spatial_reach import box_transform
 from trajectotree.search.spatial_rolling import (
     chain,
@@ -24,7 +25,6 @@ from trajectotree.search.spatial_rolling import (
     on_face,
     rolled_step,
 )
-from trajectotree.search.tree import _SpaceSearch
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 EDGES = 8

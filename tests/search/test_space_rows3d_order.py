@@ -11,7 +11,8 @@ import pytest
 from trajectotree.config import Config, mu_plan
 from trajectotree.experiments.sweep import axis_aligned_goals
 from trajectotree.scene.spatial import build_space_scene
-from trajectotree.search.tree import SearchClock, _SpaceSearch
+from trajectotree.search.space_tree import _SpaceSearch
+from trajectotree.search.tree import SearchClock
 
 
 @pytest.fixture(scope="module")

@@ -16,8 +16,8 @@ from trajectotree.geometry import BOX_FACE_NAMES, BOX_FACE_NORMALS, box_face_gri
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import START_POSE, build_space_scene
 from trajectotree.search.grasp import SpatialClosure
+from trajectotree.search.space_tree import SPACE_MAX_SEGMENT_ROTATION, space_object_path
 from trajectotree.search.spatial_reach import CLEARANCE, SpatialReach, box_transform
-from trajectotree.search.tree import SPACE_MAX_SEGMENT_ROTATION, space_object_path
 
 QUARTER_ABOUT_X = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
 EDGES = 8

@@ -57,8 +57,8 @@ from trajectotree.geometry import (
     so3_log,
 )
 from trajectotree.scene.statics import pyramid_edges
+from trajectotree.search.space_tree import space_object_path
 from trajectotree.search.stance import SpatialHoldingLp, spatial_torque_rows
-from trajectotree.search.tree import space_object_path
 
 COMPLEMENTARITY_TOL = 1e-5  # N m, the most normal force times gap: 0.01 N (the check's FORCE_TOL) at 1 mm
 

@@ -315,7 +315,7 @@ def space_initial_grasps(scene, config) -> dict:
     `search` and `plan` refuse a box by: cli.space_options.check_space_graspable), at mu_plan."""
     from trajectotree.config import mu_plan
     from trajectotree.scene.spatial import START_POSE
-    from trajectotree.search.tree import space_initial_grasp
+    from trajectotree.search.space_tree import space_initial_grasp
 
     mu = mu_plan(config.scene, config.search)
     plan = space_initial_grasp(scene, START_POSE[:4], config.search, mu)

@@ -137,7 +137,7 @@ def run_space(args) -> int:
     """`trajectotree search` for a hand in space: Algorithm 1 in space toward the goal orientation."""
     from trajectotree.cli.space_options import build_args_scene, check_space_graspable, space_config
     from trajectotree.config import mu_plan
-    from trajectotree.search.tree import find_space_contact_plan
+    from trajectotree.search.space_tree import find_space_contact_plan
 
     goal = space_goal(args)
     if args.figure:

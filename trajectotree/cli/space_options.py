@@ -133,7 +133,7 @@ def check_space_graspable(scene, config: Config, args: argparse.Namespace) -> No
     within the motors; under a second of IK), naming the size, or the mass when a light box of that size has one."""
     from trajectotree.config import MIN_BOX_MASS, mu_plan
     from trajectotree.scene.spatial import START_POSE, build_space_scene
-    from trajectotree.search.tree import space_initial_grasp
+    from trajectotree.search.space_tree import space_initial_grasp
 
     mu = mu_plan(config.scene, config.search)
     if space_initial_grasp(scene, START_POSE[:4], config.search, mu).success:

@@ -29,7 +29,7 @@ from trajectotree.planning.physics import SpaceObjectModel, check_space_physics
 from trajectotree.planning.segment_pool import run_on_pool
 from trajectotree.planning.start import space_start_root
 from trajectotree.results import SPACE_INTEGRATION, SpacePhysicsCheck, SpaceTrajectory
-from trajectotree.search.tree import find_space_contact_plan, space_initial_grasp
+from trajectotree.search.space_tree import find_space_contact_plan, space_initial_grasp
 from trajectotree.start import SpaceStartState
 
 GOAL_TOLERANCE = np.radians(2.0)  # rad, how close to its goal orientation a plan in space ends to count
