@@ -1,5 +1,5 @@
 """Which cube sizes the hand in space has an initial grasp of at the grasp point: the check `plan` and `search`
-run before planning (cli.space_options.check_space_graspable: search.tree.space_initial_grasp, four reachable
+run before planning (cli.space_options.check_space_graspable: search.space_tree.space_initial_grasp, four reachable
 contacts in closure at mu_plan, links clear, held within the motors), on cubes every `--step` m from `--low` to
 `--high`, the default config's friction, the hand's own mass; prints each size's answer and the ranges that have
 one, one process, this machine's CPU.

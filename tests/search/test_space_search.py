@@ -1,4 +1,4 @@
-"""Algorithm 1 in space (search.tree, in space) and its reach (search.spatial_reach.SpatialReach) on
+"""Algorithm 1 in space (search.space_tree) and its reach (search.spatial_reach.SpatialReach) on
 fingerpro4: the geodesic path, IK reach against Drake's own kinematics and signed distances, a 90 deg
 goal about a horizontal axis planned with every node re-checked, and the search command's goals."""
 

@@ -368,7 +368,7 @@ def cito_knots(rows: SpaceCitoRows, p, v, q, f_W) -> np.ndarray:
 def cito_cold_start(scene, fingers, node, goal_quaternion, mu: float):
     """(CitoSpec, knots' values (K, width)) of general CITO from the start grasp `node` (a SpaceContactNode) to
     the goal: the nominal is the straight slerp under one rest-to-rest time law (time_law) over as many segments
-    as the search's path has (search.tree.space_object_path), and the guess the start grasp held: each fingertip
+    as the search's path has (search.space_tree.space_object_path), and the guess the start grasp held: each fingertip
     kept on its contact as the cube turns (refine_ik, within the limits), the forces of the holding LP."""
     segments = len(space_object_path(goal_quaternion, node.object_pose)) - 1
     K = segments * SPACE_INTERVALS + 1

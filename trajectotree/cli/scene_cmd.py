@@ -311,7 +311,7 @@ def space_summary(scene) -> dict:
 
 
 def space_initial_grasps(scene, config) -> dict:
-    """How many initial grasps the search finds at the grasp point (search.tree.space_initial_grasp, the check
+    """How many initial grasps the search finds at the grasp point (search.space_tree.space_initial_grasp, the check
     `search` and `plan` refuse a box by: cli.space_options.check_space_graspable), at mu_plan."""
     from trajectotree.config import mu_plan
     from trajectotree.scene.spatial import START_POSE

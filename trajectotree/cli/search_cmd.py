@@ -5,7 +5,7 @@ not a plan was found (`"success": false` with a reason), 2 on invalid input.
 
 A hand in space (`--hand fingerpro4`, or a description of kind: space) takes its goal orientation as
 `--goal-quat W X Y Z` (Drake's order, normalized) or `--goal-rpy R P Y` (rad, Drake's RollPitchYaw),
-the cube's position unchanged (trajectotree.search.tree, in space).
+the cube's position unchanged (trajectotree.search.space_tree).
 """
 
 from __future__ import annotations

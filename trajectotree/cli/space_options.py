@@ -13,7 +13,7 @@ from trajectotree.config import MAX_OBJECT_SIZE, Config, ConfigError, check_rang
 
 # The planar options each command takes that a hand in space has no use for (argparse dests): the object's
 # shape in the plane, the planar path's segment count (in space the segments follow from the angle:
-# search.tree.SPACE_MAX_SEGMENT_ROTATION) and the planar scene's figure and rotation sweep.
+# search.space_tree.SPACE_MAX_SEGMENT_ROTATION) and the planar scene's figure and rotation sweep.
 PLANAR_SHAPES = ("polygon", "circle", "ellipse")
 PLANAR_ONLY = {
     "scene": (*PLANAR_SHAPES, "figure", "rotations"),
@@ -129,7 +129,7 @@ def build_args_scene(args: argparse.Namespace, config: Config):
 
 def check_space_graspable(scene, config: Config, args: argparse.Namespace) -> None:
     """ConfigError (exit 2, before any planning) when the search finds no initial grasp of the box at the grasp
-    point (search.tree.space_initial_grasp: four reachable contacts in closure at mu_plan, links clear, held
+    point (search.space_tree.space_initial_grasp: four reachable contacts in closure at mu_plan, links clear, held
     within the motors; under a second of IK), naming the size, or the mass when a light box of that size has one."""
     from trajectotree.config import MIN_BOX_MASS, mu_plan
     from trajectotree.scene.spatial import START_POSE, build_space_scene

@@ -1,4 +1,4 @@
-"""Figures of a plan or a run in space: a contact sequence's keyframes (search.tree, in space), one 3D view per
+"""Figures of a plan or a run in space: a contact sequence's keyframes (search.space_tree), one 3D view per
 node, the fingers coloured as in the plane (figures.legend.FINGER_COLORS), the switching finger drawn thick; and
 one frame of a run (the GIF's): the cube as simulated, the planned cube's edges dashed, each finger's force on
 the cube as an arrow at the run's scale.

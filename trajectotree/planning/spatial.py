@@ -1,4 +1,4 @@
-"""Planning for a hand in space: the contact search in space (search.tree, find_space_contact_plan), then the
+"""Planning for a hand in space: the contact search in space (search.space_tree, find_space_contact_plan), then the
 keyframes formulation in space (cito.spatial: one IPOPT program per segment, the segments independent, their
 ends the search's nodes: solved at once in the segment pool of segment_pool.py), the segments joined at their
 nodes into one trajectory, checked from its arrays alone (planning.physics.check_space_physics) and written as
@@ -198,7 +198,7 @@ def plan_space_cito(
 ) -> SpacePlanResult:
     """General CITO in space (cito.space_cito.SpaceCitoRows: one program over the whole horizon, no contact plan), the
     plane's baselines in space: "cito" from the search's best initial grasp held along the straight slerp
-    (search.tree.space_initial_grasp: no tree search, its time counted as the search's), "cito-warm" from
+    (search.space_tree.space_initial_grasp: no tree search, its time counted as the search's), "cito-warm" from
     TrajectoTree's plan's trajectory (`warm`, else planned here by plan_space on `workers`: its whole time is
     the search's). A program IPOPT does not solve, or whose plan fails the physics check or ends off the goal,
     is a result with the reason; the result's contact_plan is the initial grasp's or the warm start's."""

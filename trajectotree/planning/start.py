@@ -209,7 +209,7 @@ def space_required_mu(p_BC: np.ndarray, faces: tuple[int, ...], half, num_edges:
 
 
 def space_start_root(scene, start: SpaceStartState, config: Config) -> SpaceRoot:
-    """The measured grasp the search in space roots at (search.tree.SpaceRoot); StartRefused when the start is not
+    """The measured grasp the search in space roots at (search.space_tree.SpaceRoot); StartRefused when the start is not
     a state of this scene (check_fits_space_scene), the cube moves or turns, a fingertip does not touch it (within
     SPACE_TOUCH_DISTANCE) or the four contacts are not in 6-D closure at mu_plan."""
     from trajectotree.search.space_tree import PYRAMID_EDGES

@@ -4,7 +4,7 @@ the finger's links (every collision geometry of its bodies but the fingertip sph
 `clearance` from the box. The box is held at its pose; the other fingers are left out (a per-finger
 question: which faces each finger reaches, what the scene reports).
 
-`SpatialReach` answers the search's question (trajectotree.search.tree, in space), cheap checks first:
+`SpatialReach` answers the search's question (trajectotree.search.space_tree), cheap checks first:
 1. the fingertip workspace: the finger's fingertip centre over a grid of its joint ranges (forward
    kinematics, `WORKSPACE_SAMPLES` per joint); a target farther from every sample than
    the most a fingertip moves within half a grid step (sum_j of joint j's largest lever times half its

@@ -1,4 +1,4 @@
-"""Rolling contacts in space (search.rolled_stances, for the search in space of trajectotree.search.tree).
+"""Rolling contacts in space (search.rolled_stances, for the search in space of trajectotree.search.space_tree).
 
 The plan keeps a holding fingertip's contact point fixed on the cube, but a fingertip sphere of radius r that
 sticks to a face rolls along it as the finger's last link turns relative to the cube: without slip, its centre
