@@ -73,17 +73,12 @@ class SearchConfig:
     space_torque_fraction: float = 1.0
     # How the search in space uses the stance margin (space_stance_friction_safety): "none", its stances hold the cube
     # within the motors (space_torque_fraction) at mu_plan, as before the margin; "require", only stances that hold it
-    # with their friction cones at the margin are kept; "prefer", such stances are tried first and one that holds
-    # only at mu_plan after them (children ordered, the roots likewise), after a first pass of margin stances alone
-    # (space_margin_first_share), so a goal keeps the plan "none" finds within the budget that pass leaves. The
-    # closure tests and CITO's cones keep mu_plan in every mode. "require" on the 30 seed-0 SO(3) goals: the closed
-    # loop's drops at friction 0.4 went from 28 to 7 and at mass x1.5 from 5 to 0,
-    # but 2 of the 30 and 5 of the 23 axis-aligned goals found no plan within the budget (docs/measurements.md
-    # "Headroom in space's stances"). "prefer": 30/30 and 23/23 planned and held open loop, 190 of the 30 plans' 246
-    # stances at the margin, friction 0.4 16/30 and mass x1.5 3/30 dropped (none: 26/30, 3/30; "The stance margin
-    # as a preference"). prefer by default: the same goals planned and held, ten fewer drops at friction 0.4; its cost
-    # the search's time where a goal needs a stance under the margin (CPU mean 4.6 -> 8.6 s over the 30 goals).
-    # The plane ignores it.
+    # with their friction cones at the margin are kept; "prefer", such stances first, then those at the fallback's
+    # friction (space_stance_fallback_safety), then those that hold only at mu_plan (children and roots ordered so),
+    # searched in passes (space_margin_first_share), so a goal keeps a plan wherever "none" has one. The closure tests
+    # and CITO's cones keep mu_plan in every mode. On the 30 seed-0 SO(3) goals, closed loop, friction 0.4 / mass x1.5
+    # dropped: none 26/30 and 3/30; prefer 3/30 and 0/30, every goal planned and held nominally (docs/measurements.md
+    # "Issue 37's acceptance on the default"); require leaves goals without a plan. The plane ignores it.
     space_stance_margin: str = "prefer"
     # 1, the margin's friction as a fraction of scene.mu (at most mu_plan): 0.4571 (about 16/35) x 0.7 = 0.32, the
     # friction the closed loop's grasp QP gives its cones where the world has 0.4 (controller.grasp.friction_safety
