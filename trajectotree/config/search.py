@@ -90,8 +90,8 @@ class SearchConfig:
     # 1, with space_stance_margin prefer: a stance under the margin that holds the cube within the motors with its
     # cones at this fraction of scene.mu (0.5714 x 0.7 = 0.4, the slippery world's own friction) comes before one that
     # holds only at mu_plan, and the search's second pass adds such stances to the margin's (_SpaceSearch.passes);
-    # ignored where not between the margin's friction and mu_plan. Goals 7 and 8 of seed 0 have no plan at the margin within
-    # the first pass: their plans at 0.4 held at friction 0.4, those that took stances at mu_plan dropped.
+    # ignored where not between the margin's friction and mu_plan. Goals 7 and 8 of seed 0 have no plan at the margin
+    # within the first pass: their plans at 0.4 held at friction 0.4, those that took stances at mu_plan dropped.
     space_stance_fallback_safety: float = 0.5714
     # 1, in [0, 1): the share of the search's budgets (max_expansions, space_time_budget_s) in which
     # space_stance_margin prefer first searches margin stances alone, as require does, then each later pass with the
