@@ -78,9 +78,10 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from trajectotree.io import folder_lock, load_start
+    from trajectotree.planning.piece import worker_scene
     from trajectotree.planning.segment_pool import check_workers
-    from trajectotree.scene.plant import build_scene
     from trajectotree.scene.spatial import is_space_hand
+    from trajectotree.search.initial_grasp import GraspTables
 
     if args.hand is not None and is_space_hand(args.hand):
         return run_space(args)
@@ -93,22 +94,29 @@ def run(args) -> int:
     if args.html:  # it may go into --out, which save_plan creates before the playback is written
         check_output_file("--html", args.html, HTML_SUFFIXES, created=(out,))
     start = load_start(args.start) if args.start else None
-    scene = build_scene(config.scene)
+    # The scene the segment workers solve in too: they fork from this process and inherit it, where
+    # a scene of its own for them would be built a second time (~0.05 s, issue 35).
+    scene = worker_scene(config.scene)
     if args.html:
         check_executable_hand(scene, "--html's playback")
+    # The initial grasps the checks rank, kept for the search (ranking them again costs ~0.04 s, issue 35).
+    tables = GraspTables()
     # refused here, before any planning, when the start or the object cannot be planned from (tt.plan's checks)
-    request = plan_request_from_args(args, scene, config, goal, method=method, start=start, segment_workers=workers)
+    request = plan_request_from_args(
+        args, scene, config, goal, method=method, start=start, segment_workers=workers, grasp_tables=tables
+    )
     with folder_lock(out, "--out", "trajectotree plan"):  # no `simulate` or other `plan` writes there meanwhile
-        return plan_into(args, request, out)
+        return plan_into(args, request, out, tables)
 
 
-def plan_into(args, request, out: Path) -> int:
-    """Plans the checked request and writes it into `out`, whose lock this command holds."""
+def plan_into(args, request, out: Path, tables) -> int:
+    """Plans the checked request, with the initial grasps its checks ranked (GraspTables), and writes
+    it into `out`, whose lock this command holds."""
     from trajectotree.io import plan_to_json, save_plan
     from trajectotree.planning.planners import plan_request
 
     method, goal, config = request.method, request.goal, request.config
-    result = plan_request(request, log_observer=ipopt_progress(progress_wanted(args)))
+    result = plan_request(request, grasp_tables=tables, log_observer=ipopt_progress(progress_wanted(args)))
     removed = remove_derived_files(out)
     save_plan(result, out)
     if removed:
