@@ -80,19 +80,8 @@ def test_prefer_orders_children_by_the_least_friction_their_stance_holds_at():
             stance = tuple(i for i in range(scene.num_fingers) if i != child.finger)
             kept, _ = prefer.stance(node, depth, stance, held)
             ranks.append(kept[3])
-            assert child.margin == (kept[3] == 0)
+            assert child.stance_mu == prefer.hold_frictions[kept[3]]
         assert ranks == sorted(ranks)  # the margin's stances, then the fallback's, then those at mu_plan alone
         seen |= set(ranks)
         node = node.parent
     assert seen == {0, 1, 2}  # the quarter turn's plan passes nodes with children at each friction
-
-
-@pytest.mark.parametrize("value", [0.0, 1.2, -0.5])
-def test_a_bad_fallback_exits_2_naming_it_before_any_search(tmp_path, capsys, value):
-    out = tmp_path / "plan"
-    text = f"{{search: {{space_stance_fallback_safety: {value}}}}}"
-    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0", "0", "0.5", "--out", str(out), "--config-text", text]
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"search.space_stance_fallback_safety = {value}" in err[0] and "(0, 1]" in err[0], err
-    assert not out.exists()

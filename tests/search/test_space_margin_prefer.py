@@ -2,16 +2,14 @@
 the motors only at mu_plan is taken where no stance at the margin's friction is found, so a goal keeps the plan
 the search without the margin finds; where a plan with margin stances alone exists, prefer's is require's; plan.json
 counts the stances at the margin; the search in space spends its own budget (search.space_time_budget_s), its margin
-pass a share of it; the options' bad values exit 2 naming the value and the valid ones."""
+pass a share of it (the options' bad values: test_space_margins)."""
 
-import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from trajectotree.cli import main
-from trajectotree.config import Config, ConfigError, SearchConfig, mu_plan
+from trajectotree.config import Config, SearchConfig, mu_plan
 from trajectotree.refusal import RefusalKind
 from trajectotree.scene.spatial import build_space_scene
 from trajectotree.search.space_tree import _SpaceSearch, find_space_contact_plan
@@ -64,9 +62,9 @@ def test_prefer_orders_the_stances_under_the_margin_after_the_others_and_keeps_t
     assert none.hold_frictions == pytest.approx((0.49,))
     # a node of none's plan with children on both sides of the margin (some stances hold at 0.4, some only at 0.49)
     node, children = next(
-        (n, c) for n in _none_path(none) for c in [prefer.neighbors(n)] if len({child.margin for child in c}) == 2
+        (n, c) for n in _none_path(none) for c in [prefer.neighbors(n)] if len({child.stance_mu for child in c}) == 2
     )
-    margins = [c.margin for c in children]
+    margins = [c.stance_mu == prefer.mu_hold for c in children]
     assert margins == sorted(margins, reverse=True)  # every margin stance before any that holds only at mu_plan
     # the same children as without the margin (none is lost), each marked as require's check says
     assert sorted((-1 if c.finger is None else c.finger, c.contacts) for c in children) == sorted(
@@ -76,8 +74,8 @@ def test_prefer_orders_the_stances_under_the_margin_after_the_others_and_keeps_t
     for child in children:
         stance = tuple(i for i in range(scene.num_fingers) if i != child.finger)
         kept, why = require.stance(node, node.depth + 1, stance, held)
-        assert (kept is not None) == child.margin
-        if not child.margin:
+        assert (kept is not None) == (child.stance_mu == prefer.mu_hold)
+        if kept is None:
             assert why.kind == RefusalKind.STANCE_OVER_MOTORS
 
 
@@ -124,48 +122,3 @@ def test_the_search_in_space_spends_its_own_budget_its_margin_pass_a_share_of_it
     plan = find_space_contact_plan(scene, QUARTER_ABOUT_X, spent, mu_plan(Config().scene, spent))
     assert not plan.success and plan.refusal.last_searched.refusal.kind == RefusalKind.TIME_BUDGET, plan.reason
     assert plan.stats.expanded == 0
-
-
-@pytest.mark.parametrize(
-    "field, value, valid",
-    [
-        ("space_time_budget_s", 0.0, "86400"),
-        ("space_stance_margin", "sometimes", "none, prefer, require"),
-        ("space_stance_margin", False, "none, prefer, require"),
-        ("space_margin_first_share", 1.0, "[0, 1)"),
-        ("space_margin_first_share", -0.1, "[0, 1)"),
-    ],
-)
-def test_bad_margin_options_are_config_errors(field, value, valid):
-    with pytest.raises(ConfigError) as err:
-        SearchConfig(**{field: value})
-    assert f"search.{field}" in str(err.value) and valid in str(err.value)
-
-
-@pytest.mark.parametrize(
-    "text, named",
-    [
-        ("{search: {space_stance_margin: sometimes}}", "search.space_stance_margin = 'sometimes'"),
-        ("{search: {space_margin_first_share: 1.5}}", "search.space_margin_first_share = 1.5"),
-    ],
-)
-def test_bad_margin_options_exit_2_before_any_search(tmp_path, capsys, text, named):
-    out = tmp_path / "plan"
-    argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0", "0", "0.5", "--out", str(out), "--config-text", text]
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and named in err[0], err
-    assert not out.exists()
-
-
-def test_the_sweep_row_reads_the_margin_count(tmp_path, plan_of):
-    from trajectotree.experiments.trial import TrialTask, space_row_from_files
-
-    plan = plan_of("prefer", AT_021)  # the plan test_prefer_keeps_a_plan_where_the_margin_allows_none searched
-    fields = dict(key="0000_trajectotree", goal_index=0, goal=QUARTER_ABOUT_X.tolist(), method="trajectotree")
-    task = TrialTask(**fields, simulate=False, config={}, time_limit_s=60.0, space={})
-    (tmp_path / "plan.json").write_text(
-        json.dumps({"segments": [], "contact_plan": plan.to_json(), "physics_check": None, "final_error_rad": None})
-    )
-    row = space_row_from_files(task, tmp_path)
-    assert (row["margin_stances"], row["stances"]) == (plan.margin_stances, len(plan.nodes))

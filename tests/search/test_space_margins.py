@@ -1,8 +1,9 @@
 """Headroom in the search in space's stances (issue 37: closed loop at mass x1.5 and friction 0.4):
 search.space_torque_fraction (a stance holds the cube within that fraction of the motors' limit) and
 search.space_stance_friction_safety (with cones at that x scene.mu, space_stance_margin require); the search refuses a
-stance over either, the
-fields' bad values exit 2 naming the value and the range, and a plan with both margins keeps them at every stance."""
+stance over either, a plan with both margins keeps them at every stance, and every stance-margin field's bad value
+(these two, space_stance_margin, space_stance_fallback_safety, space_margin_first_share, space_time_budget_s) is a
+ConfigError and exits 2 naming the value and the valid range or choices."""
 
 from dataclasses import replace
 
@@ -103,6 +104,11 @@ def test_a_plan_with_both_margins_keeps_them_at_every_stance(quarter_turn):
         ("space_torque_fraction", 0.0, "(0, 1]"),
         ("space_torque_fraction", 1.2, "(0, 1]"),
         ("space_stance_friction_safety", -0.1, "(0, 1]"),
+        ("space_time_budget_s", 0.0, "86400"),
+        ("space_stance_margin", "sometimes", "none, prefer, require"),
+        ("space_stance_margin", False, "none, prefer, require"),
+        ("space_margin_first_share", 1.0, "[0, 1)"),
+        ("space_margin_first_share", -0.1, "[0, 1)"),
     ],
 )
 def test_a_margin_out_of_range_is_a_config_error(field, value, valid):
@@ -111,10 +117,26 @@ def test_a_margin_out_of_range_is_a_config_error(field, value, valid):
     assert f"search.{field}" in str(err.value) and valid in str(err.value)
 
 
-def test_a_margin_out_of_range_exits_2_before_any_search(tmp_path, capsys):
+@pytest.mark.parametrize(
+    "text, named, valid",
+    [
+        ("{search: {space_torque_fraction: 1.5}}", "search.space_torque_fraction = 1.5", "(0, 1]"),
+        ("{search: {space_stance_margin: sometimes}}", "search.space_stance_margin = 'sometimes'", ""),
+        ("{search: {space_margin_first_share: 1.5}}", "search.space_margin_first_share = 1.5", ""),
+        *(
+            (
+                f"{{search: {{space_stance_fallback_safety: {v}}}}}",
+                f"search.space_stance_fallback_safety = {v}",
+                "(0, 1]",
+            )
+            for v in (0.0, 1.2, -0.5)
+        ),
+    ],
+)
+def test_a_margin_out_of_range_exits_2_before_any_search(tmp_path, capsys, text, named, valid):
     out = tmp_path / "plan"
     argv = ["plan", "--hand", "fingerpro4", "--goal-rpy", "0", "0", "0.5", "--out", str(out)]
-    assert main([*argv, "--config-text", "{search: {space_torque_fraction: 1.5}}"]) == 2
+    assert main([*argv, "--config-text", text]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "search.space_torque_fraction = 1.5" in err[0] and "(0, 1]" in err[0]
+    assert len(err) == 1 and named in err[0] and valid in err[0], err
     assert not out.exists()

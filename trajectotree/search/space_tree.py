@@ -94,8 +94,9 @@ class _SpaceNode:
     stance_torque: float | None = None  # N m
     push: float | None = None  # N
     rolled: np.ndarray | None = None  # (F, 3) m in B, each fingertip rolled off its contact since it landed
-    margin: bool = True  # its stance holds the cube within the motors at the margin's friction (mu_hold)
-    stance_mu: float = float("nan")  # the least of hold_frictions at which it does (nan: at none)
+    # the least of hold_frictions at which its stance holds the cube within the motors (nan: at none); mu_hold: at
+    # the margin's friction
+    stance_mu: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -109,8 +110,7 @@ class _SpaceChild:
     stance_torque: float
     push: float
     rolled: np.ndarray  # (F, 3) m in B, the child's rolled offsets (_SpaceSearch.rolled_stance)
-    margin: bool  # its stance holds the cube within the motors at mu_hold, not only at mu_plan
-    stance_mu: float  # the least of hold_frictions at which it does
+    stance_mu: float  # the least of hold_frictions at which its stance holds the cube within the motors
 
 
 class _SpaceSearch:
@@ -237,7 +237,6 @@ class _SpaceSearch:
             child.stance_torque,
             child.push,
             child.rolled,
-            child.margin,
             child.stance_mu,
         )
         return node, None
@@ -307,9 +306,9 @@ class _SpaceSearch:
             ranked.append((rank, finger is not None, rolled_far, -push, finger, stance, torque, push, rolled))
         out = []
         for rank, _, _, _, finger, stance, torque, push, rolled in sorted(ranked, key=lambda r: r[:4]):
-            q_held, margin, stance_mu = {i: held[i].q for i in stance}, rank == 0, self.hold_frictions[rank]
+            q_held, stance_mu = {i: held[i].q for i in stance}, self.hold_frictions[rank]
             if finger is None:
-                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, margin, stance_mu))
+                out.append(_SpaceChild(node, node.contacts, None, q_held, torque, push, rolled, stance_mu))
                 continue
             others = self.p_BF[[node.contacts[i] for i in stance]] + rolled[list(stance)]  # where they rolled to
             facing, moves = self.facing(depth, finger), []
@@ -324,7 +323,7 @@ class _SpaceSearch:
                 # down are reached from under (IsFeasible's reach decides), so they come after those turned to it
                 moves.append((bool(facing[c] <= 0.0), -self.freedom(contacts), -facing[c], tuple(contacts)))
             for *_, contacts in sorted(moves):
-                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, margin, stance_mu))
+                out.append(_SpaceChild(node, contacts, finger, q_held, torque, push, rolled, stance_mu))
         return out
 
     def stance(self, node: _SpaceNode, depth: int, stance, held) -> tuple[tuple | None, Refusal | None]:
@@ -412,9 +411,8 @@ class _SpaceSearch:
             q = np.asarray(self.root.q, dtype=float)
             torque, push = self.holding(0, contacts, fingers, q, self.mu_hold)
             rolled = np.zeros((len(contacts), 3))
-            held = torque <= self.tau_limit
-            stance_mu = self.mu_hold if held else float("nan")
-            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, held, stance_mu)]
+            stance_mu = self.mu_hold if torque <= self.tau_limit else float("nan")
+            return [_SpaceNode(0, contacts, q, None, None, torque, push, rolled, stance_mu)]
         choices = []
         for i in range(self.scene.num_fingers):
             mine = []
@@ -438,7 +436,7 @@ class _SpaceSearch:
                 torque, push = self.holding(0, contacts, fingers, q, mu)
                 if torque <= self.tau_limit:
                     rolled = np.zeros((len(contacts), 3))
-                    node = _SpaceNode(0, contacts, q, None, None, torque, push, rolled, rank == 0, mu)
+                    node = _SpaceNode(0, contacts, q, None, None, torque, push, rolled, mu)
                     out.append(((rank, -freedom, -push), node))
                     break
             if len(out) == SPACE_MAX_ROOTS:
@@ -514,7 +512,7 @@ class _SpaceSearch:
                 closure_margin=float(self.closed(n.contacts).margin),
                 stance_torque=None if n.depth == 0 else n.stance_torque,
                 stance_push_capacity=None if n.depth == 0 else n.push,
-                stance_margin=n.margin,
+                stance_margin=n.stance_mu == self.mu_hold,
                 stance_mu=n.stance_mu,
             )
             for n in reversed(path)
