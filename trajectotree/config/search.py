@@ -122,7 +122,11 @@ class SearchConfig:
     # candidate initial grasps the search is rooted at, best first (per contact grid), many because a
     # small polygon's trees die within a few expansions, so more roots are cheap.
     max_initial_grasps: int = 200
-    root_expansions: int = 2000  # node budget of the search from one initial grasp (of each window of it)
+    # node budget of the search from one initial grasp (of each window of it): no plan of the 76 box goals (60 seed-0,
+    # 16 held-out) needs more than 823 from its root, while goal +3.021's two fruitless 0.01 m roots spent 2000 each
+    # (6.2 s of search, 4.1 s at 1000); 1000 left every plan of those, the other hands' and the five polygons'
+    # seed-0 goals unchanged (docs/measurements.md "Initial grasps", scripts/compare_root_expansions.py).
+    root_expansions: int = 1000
     # Segments one depth-first search looks ahead: the paper's 9, so a path of up to 9 segments is
     # searched as Algorithm 1 does; a longer one window by window (trajectotree.search.tree), which
     # keeps its search time linear in its length.
