@@ -1,6 +1,8 @@
 """The `trajectotree` process ends without the interpreter's teardown (trajectotree.cli.end_without_teardown,
 issue 35) yet as Python's exit would: its output all there through a pipe, its exit handlers run, its threads
-and segment workers ended, its exit codes and messages the same. Real processes throughout."""
+and segment workers ended, its exit codes and messages the same; and its garbage collector is paused for
+`plan`'s start-up alone (console, resume_collector), never for a program that calls main(). Real processes
+throughout."""
 
 import json
 import subprocess
@@ -87,3 +89,48 @@ def test_bad_input_still_exits_2_with_one_line(tmp_path):
     assert done.stdout == ""
     assert done.stderr.startswith("trajectotree plan: error: --segment-workers") and done.stderr.count("\n") == 1
     assert not out.exists()
+
+
+# console() with `plan`, recording the collector's passes from its start to the planning's.
+PAUSED = """
+import gc, sys
+import trajectotree.cli.plan_cmd as plan_cmd
+from trajectotree.cli import console
+
+passes = []
+gc.callbacks.append(lambda phase, info: phase == "start" and passes.append(info["generation"]))
+planning = plan_cmd.plan_into
+
+def plan_into(*args):
+    print(f"start-up passes {len(passes)}, enabled {gc.isenabled()}, frozen {gc.get_freeze_count() > 0}", flush=True)
+    return planning(*args)
+
+plan_cmd.plan_into = plan_into
+sys.argv = ["trajectotree", "plan", "--goal", "0.1", "--segments", "1", "--out", sys.argv[1]]
+console()
+"""
+
+# main() called by a program: the collector as the program has it.
+CALLED = """
+import gc, sys
+from trajectotree.cli import main
+
+code = main(["plan", "--goal", "0.1", "--segments", "1", "--out", sys.argv[1]])
+print(f"code {code}, enabled {gc.isenabled()}, frozen {gc.get_freeze_count()}")
+"""
+
+
+def test_collector_paused_for_the_start_up_only(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-c", PAUSED, str(tmp_path / "p")], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.splitlines()[0] == "start-up passes 0, enabled True, frozen True"
+    assert (tmp_path / "p" / "plan.npz").is_file()
+
+
+def test_main_leaves_the_programs_collector_alone(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-c", CALLED, str(tmp_path / "p")], capture_output=True, text=True, timeout=120
+    )
+    assert done.stdout.splitlines()[-1] == "code 0, enabled True, frozen 0", done.stderr[-2000:]
