@@ -126,7 +126,7 @@ def resume_collector() -> None:
 
 def end_without_teardown(code: int) -> None:
     """Ends this process with `code` as Python's exit would, less the teardown of its modules and objects
-    (Drake's plants, about 1500 modules: 0.2-0.4 s of a `plan` process, issue 35), which the end of the
+    (Drake's plants, about 600 modules: 0.2-0.4 s of a `plan` process, issue 35), which the end of the
     process frees anyway. First what that exit runs before the teardown: the threads' exit (the kept segment
     pool shut down, its workers joined; other threads joined), the atexit handlers, stdout and stderr
     flushed, and the C library's buffers (IPOPT's output at print_level > 0). Returns, leaving it to
