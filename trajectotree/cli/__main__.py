@@ -1,5 +1,3 @@
-import sys
+from trajectotree.cli import console
 
-from trajectotree.cli import main
-
-sys.exit(main())
+console()

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from trajectotree.cli import resume_collector
 from trajectotree.cli.common import (
     HTML_SUFFIXES,
     add_config_options,
@@ -73,7 +74,8 @@ def register(subparsers) -> None:
     )
     p.add_argument("--json", action="store_true", help="print plan.json to stdout")
     p.add_argument("--html", metavar="FILE", help="write a self-contained Meshcat playback of the planned trajectory")
-    p.set_defaults(run=run)
+    # resumes the collector after its start-up (the imports, the scene, the checks), in run and run_space
+    p.set_defaults(run=run, resumes_collector=True)
 
 
 def run(args) -> int:
@@ -105,6 +107,7 @@ def run(args) -> int:
     request = plan_request_from_args(
         args, scene, config, goal, method=method, start=start, segment_workers=workers, grasp_tables=tables
     )
+    resume_collector()
     with folder_lock(out, "--out", "trajectotree plan"):  # no `simulate` or other `plan` writes there meanwhile
         return plan_into(args, request, out, tables)
 
@@ -174,6 +177,7 @@ def run_space(args) -> int:
     from trajectotree.planning.segment_pool import check_workers
     from trajectotree.planning.spatial import plan_space, plan_space_cito, save_space_plan
 
+    resume_collector()  # at once: a plan in space has its start-up with the collector (not measured, issue 35)
     goal = space_goal(args)
     workers = check_workers(args.segment_workers, "--segment-workers")
     method = check_method(args.method)

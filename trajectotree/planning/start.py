@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,8 +23,10 @@ from trajectotree.geometry import world_to_box
 from trajectotree.scene.hand import JOINTS_PER_FINGER
 from trajectotree.scene.plant import Scene
 from trajectotree.search.grasp import FormClosure
-from trajectotree.search.space_tree import SpaceRoot
 from trajectotree.start import SpaceStartState, StartProblem, StartRefusal, StartState
+
+if TYPE_CHECKING:  # the search in space is imported by the plans in space alone (a planar `plan` starts quicker)
+    from trajectotree.search.space_tree import SpaceRoot
 
 # The plan's nodes are static grasps (CITO holds every node's velocities at zero), so a start must be
 # nearly at rest; a closed loop measures 0.02-0.05 m/s at nodes where contacts slide, a falling box
@@ -212,7 +215,7 @@ def space_start_root(scene, start: SpaceStartState, config: Config) -> SpaceRoot
     """The measured grasp the search in space roots at (search.space_tree.SpaceRoot); StartRefused when the start is not
     a state of this scene (check_fits_space_scene), the cube moves or turns, a fingertip does not touch it (within
     SPACE_TOUCH_DISTANCE) or the four contacts are not in 6-D closure at mu_plan."""
-    from trajectotree.search.space_tree import PYRAMID_EDGES
+    from trajectotree.search.space_tree import PYRAMID_EDGES, SpaceRoot
 
     check_fits_space_scene(scene, start)
     spin, speed = (float(np.linalg.norm(start.object_velocity[k : k + 3])) for k in (0, 3))
