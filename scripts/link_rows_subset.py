@@ -2,10 +2,12 @@
 A segment is flagged where the straight joint path between its nodes, with the object held at the first
 node's pose, puts a finger's link inside the object (scripts/link_rows_predictors.py's "at_start", the
 only predictor that caught all 41 segments needing the rows on the 76 goals); its flagged fingers are
-those whose links that path puts inside. Each chosen segment's program is solved alone three ways:
-(a) without the link rows (today's first solve), (b) with every finger's rows (today's "links" retry),
-(c) with the flagged fingers' rows only; for each: IPOPT iterations, build + solve time (s), the physics
-check passed, and whether a link or finger still overlaps (would need the "links" retry).
+those whose links that path puts inside. Each chosen segment's program is solved alone four ways:
+(a) without the link rows (the first solve before), (b) with every finger's rows (the "links" retry),
+(c) with the flagged fingers' rows only, (d) with the rows of piece.predicted_link_fingers (the flagged
+fingers and those within NEAR_NODE_M of the object at a node: cito.link_rows_predicted's first solve).
+For each: IPOPT iterations, build + solve time (s), the physics check passed, whether a link or finger
+still overlaps (it would need the "links" retry), and the fingers with a link inside.
 
     python scripts/link_rows_subset.py --goal-list-file goals.txt --per-class 12
 """
@@ -20,12 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from trajectotree.cito.guess import rest_to_rest_progress
-from trajectotree.cito.knot import BodyParams
-from trajectotree.cito.links import LinkRows
 from trajectotree.cito.transition import piece_spec
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.physics import link_penetrations
-from trajectotree.planning.piece import PieceTask, overlaps, solve_piece
+from trajectotree.planning.piece import PieceTask, overlaps, predicted_link_fingers, solve_piece
 from trajectotree.planning.planners import plan
 from trajectotree.results import LINK_PENETRATION_TOL
 from trajectotree.scene.plant import build_scene
@@ -42,33 +42,12 @@ def flagged_fingers(contact_plan, s: int, scene, config: Config) -> tuple[int, .
     return tuple(int(i) for i in np.flatnonzero(depth.max(axis=(0, 2)) > 0.0))
 
 
-NEAR_NODE = 0.012  # m, way d's link clearance at either node below which a finger gets its rows too
-
-
-def near_at_nodes(contact_plan, s: int, body, threshold: float) -> tuple[int, ...]:
-    """The fingers whose link rows (smooth distances, m) are below `threshold` at node s or s + 1: links the
-    search left near the object, which the solve's path between the nodes pushed inside in the segments seen."""
-    near = []
-    for i in range(len(body.fingers)):
-        rows = LinkRows(body, 2, (i,))
-        nodes = contact_plan.nodes[s : s + 2]
-        if min(rows.values_one(rows.block(n.object_pose, n.q)).min() for n in nodes) < threshold:
-            near.append(i)
-    return tuple(near)
-
-
 def solve_way(config: Config, mu: float, contact_plan, s: int, way: str, fingers, scene) -> dict:
     cito = dataclasses.replace(config.cito, link_rows=way != "a", link_rows_on_demand=False)
     kind = "links" if way == "b" else "keyframes"
-    subset = {
-        "c": fingers,
-        "d": tuple(
-            sorted(
-                set(fingers)
-                | set(near_at_nodes(contact_plan, s, BodyParams(scene, config.cito.sdf_sharpness, mu=mu), NEAR_NODE))
-            )
-        ),
-    }
+    # d: the package's prediction (the path's fingers and those within NEAR_NODE_M of the object at a node)
+    plain = PieceTask(config.scene, config.cito, mu, contact_plan, s, s + 1, "keyframes")
+    subset = {"c": fingers, "d": predicted_link_fingers(plain, scene)}
     task = PieceTask(config.scene, cito, mu, contact_plan, s, s + 1, kind, link_fingers=subset.get(way))
     r = solve_piece(task, scene)
     return {
