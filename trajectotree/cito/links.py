@@ -132,16 +132,26 @@ def link_columns(num_fingers: int) -> tuple[int, np.ndarray]:
 class LinkRows:
     """The link rows of K knots on their (x, q) blocks: P point rows per finger (phi(p_BL) - w),
     then V vertex rows per finger (psi_i(p_GV)), both finger-major, with the interface
-    program._KnotCache and _KnotConstraint use: evaluate, knot, values_one, num_rows."""
+    program._KnotCache and _KnotConstraint use: evaluate, knot, values_one, num_rows. `fingers`:
+    the fingers whose rows these are (None: every finger), in the same order with the others'
+    left out: a segment where one finger's links come near the object needs no rows on the others'."""
 
-    def __init__(self, body, num_knots: int):
+    def __init__(self, body, num_knots: int, fingers: tuple[int, ...] | None = None):
         self.body = body
         self.num_fingers = len(body.fingers)
         self.link_size, self.col_q = link_columns(self.num_fingers)
         self.points = LinkPoints.from_boxes(body.link_boxes)
         self._box2 = _Box2.from_boxes(body.link_boxes)
         self._vertices = np.asarray(body.shape.vertices, dtype=float)  # (V, 2) m, in B
-        self.num_rows = np.full(num_knots, self.num_fingers * (self.points.per_finger + len(self._vertices)))
+        kept = tuple(range(self.num_fingers)) if fingers is None else tuple(sorted(set(fingers)))
+        self.fingers = kept
+        P, V = self.points.per_finger, len(self._vertices)
+        # the kept rows' indices among every finger's (point rows, then vertex rows, finger-major)
+        self._kept = np.concatenate(
+            [np.arange(i * P, (i + 1) * P) for i in kept]
+            + [self.num_fingers * P + np.arange(i * V, (i + 1) * V) for i in kept]
+        )
+        self.num_rows = np.full(num_knots, self._kept.size)
         f = body.hand.fingers
         self._p_W_base, self._psi, self._l1 = f.p_W_base, f.psi, f.l1  # (4, 2), (4,), (4,)
         # per face (n_x, n_y, offset) as floats: the sums over faces run elementwise, left to right
@@ -201,7 +211,8 @@ class LinkRows:
                 for j in range(V)
                 for c in (*COL_P, COL_TH, *map(int, self.col_q[i]))
             ]
-        return out
+        position = {int(row): n for n, row in enumerate(self._kept)}
+        return [(position[row], col) for row, col in out if row in position]
 
     def _lse(self, d: list):
         """(phi, weights) of the log-sum-exp of the face distances d (arrays), elementwise and
@@ -235,8 +246,8 @@ class LinkRows:
             elbow_y=self._p_W_base[:, 1] + self._l1 * s1,
         )
         parts = [self._point_rows(Z, kin, with_jacobian), self._vertex_rows(Z, kin, a12, with_jacobian)]
-        val = np.concatenate([v for v, _ in parts], axis=1)
-        return val, (np.concatenate([j for _, j in parts], axis=1) if with_jacobian else None)
+        val = np.concatenate([v for v, _ in parts], axis=1)[:, self._kept]
+        return val, (np.concatenate([j for _, j in parts], axis=1)[:, self._kept] if with_jacobian else None)
 
     def _joint_columns(self, jac, d_q1, d_q2) -> None:
         """jac (K, F, n, link size)[..., col_q[i]] = d_q1, d_q2 (K, F, n) of each finger i."""
@@ -310,7 +321,8 @@ class LinkRows:
         k, faces = self.body.sharpness, self._faces
         vertices = [(px + (ct * vx - st * vy), py + (st * vx + ct * vy)) for vx, vy in self._vertices.tolist()]
         point_rows, vertex_rows = [], []
-        for i, (psi, l1, base_x, base_y, points, box) in enumerate(self._scalars):
+        for i in self.fingers:
+            psi, l1, base_x, base_y, points, box = self._scalars[i]
             a1 = psi + q[2 * i]
             a12 = a1 + q[2 * i + 1]
             c1, s1, c12, s12 = math.cos(a1), math.sin(a1), math.cos(a12), math.sin(a12)

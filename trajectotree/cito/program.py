@@ -63,6 +63,8 @@ class ProgramSpec:
     # joint angles (2F each) the finger rows admit besides the fixed end knots: the search's nodes, which a
     # joint program's pinned knots reach without fixing them (its rows held 1 mm where a node had less)
     finger_nodes: tuple = ()
+    # the fingers whose links the link rows keep off the object (None: every finger)
+    link_fingers: tuple | None = None
 
     @property
     def num_knots(self) -> int:
@@ -243,7 +245,11 @@ def build_program(config: CitoConfig, spec: ProgramSpec, body: BodyParams) -> Ci
         binding = prog.AddConstraint(evaluator, lower, upper, v.knot(k), description=f"knot{k}")
         binding.evaluator().SetGradientSparsityPattern(pattern)
         bindings.append(binding)
-    link_bindings = _add_link_rows(prog, v, spec, LinkRows(body, K), config.link_clearance) if config.link_rows else []
+    link_bindings = (
+        _add_link_rows(prog, v, spec, LinkRows(body, K, spec.link_fingers), config.link_clearance)
+        if config.link_rows
+        else []
+    )
     finger_bindings = (
         _add_finger_rows(prog, v, spec, FingerRows(body, spec.finger_pairs, K), config.link_clearance)
         if spec.finger_pairs

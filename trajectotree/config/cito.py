@@ -50,6 +50,13 @@ class CitoConfig:
     # most segments never bring a link near it and the rows cost iterations. false: in every segment
     # program from the start.
     link_rows_on_demand: bool = True
+    # With link_rows_on_demand: a segment whose straight joint path between its nodes, the object held at the
+    # first node's pose, puts a link inside the object is first solved with the link rows of that path's
+    # fingers and of the fingers whose links lie within planning.piece.NEAR_NODE_M of the object at either
+    # node, because those are the segments whose solve without rows left a link inside (all 41 of 76 goals),
+    # and one or two fingers' rows cost 1.3x a solve without rows, against 2.3x for every row. false: every
+    # segment first without rows.
+    link_rows_predicted: bool = True
     # m, the link rows' margin, so that a link the rows hold off the object does not end up touching it.
     link_clearance: float = 0.001
     # IPOPT tol, on the scaled optimality error, loose because constraints are held to constr_viol_tol regardless.
@@ -73,7 +80,7 @@ class CitoConfig:
             check_range(f"cito.{name}", getattr(self, name), 0.0, MAX_WEIGHT)
         check_range("cito.sdf_sharpness", self.sdf_sharpness, 10.0, 1e5)
         check_range("cito.switch_clearance", self.switch_clearance, 0.0, 0.05)
-        for name in ("link_rows", "link_rows_on_demand"):
+        for name in ("link_rows", "link_rows_on_demand", "link_rows_predicted"):
             check_bool(f"cito.{name}", getattr(self, name))
         check_range("cito.link_clearance", self.link_clearance, 0.0, 0.02)
         for name in ("tol", "constr_viol_tol", "acceptable_tol", "acceptable_constr_viol_tol"):

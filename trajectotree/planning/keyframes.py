@@ -15,7 +15,9 @@ joint program's constraints wherever both segments do. The final pose is the goa
 
 The link rows (cito.link_rows) are added on demand (cito.link_rows_on_demand): a segment is
 first solved without them and, when one of its links then overlaps the object (the physics
-check's exact test), again with them from the plan's guess ("links"). The finger-finger rows
+check's exact test), again with them from the plan's guess ("links"); a segment whose straight joint
+path between its nodes already puts a link inside gets the rows of the fingers at risk in its first
+solve (cito.link_rows_predicted, piece.predicted_link_fingers). The finger-finger rows
 (cito/fingers.py) keep the pairs of fingers that come within cito.fingers.NEAR_MARGIN of each
 other on the straight joint-space path between the piece's nodes apart from the first solve
 (`finger_pairs`); a piece whose fingers then overlap (the physics check) is retried as "links"
