@@ -53,9 +53,9 @@ class CitoConfig:
     # With link_rows_on_demand: a segment whose straight joint path between its nodes, the object held at the
     # first node's pose, puts a link inside the object is first solved with the link rows of that path's
     # fingers and of the fingers whose links lie within planning.piece.NEAR_NODE_M of the object at either
-    # node, because those are the segments whose solve without rows left a link inside (all 41 of 76 goals),
-    # and one or two fingers' rows cost 1.3x a solve without rows, against 2.3x for every row. false: every
-    # segment first without rows.
+    # node: it catches all 41 of the 684 segments of the 76 benchmark goals whose solve without rows left a
+    # link inside (a retry each), and one to three fingers' rows cost 1.3x a solve without rows, every row
+    # 2.3x (docs/measurements.md). false: every segment first without rows.
     link_rows_predicted: bool = True
     # m, the link rows' margin, so that a link the rows hold off the object does not end up touching it.
     link_clearance: float = 0.001
