@@ -34,9 +34,9 @@ time has passed in simulated time after the update that started it. From the nex
 compute time exceeds the simulated time to that node is refused as late; from the measured state, the
 plan swapped in at the update's time t_switch holds the measured state (with the old plan's forces at
 the node) until t_switch + that time, as the hand would hold while a real planner ran. Each later
-segment begins no earlier than its own measured readiness (the last attempt of it and of its two
-neighbours, whose joint retries could replace it), counted from the same update, so the hand holds at a
-node while a segment is not ready. A start the planner refuses, a search without a plan (in time or at
+segment begins no earlier than its own measured readiness (its own last attempt: no joint retry of a
+neighbour replaces it, keyframes.solve_first_segment_first), counted from the same update, so the hand
+holds at a node while a segment is not ready. A start the planner refuses, a search without a plan (in time or at
 all) or a first segment that fails (or is not solved in time) is recorded with its typed reason
 (results.ReplanOutcome, the refusal); a plan whose later segment failed is executed up to that segment
 and planned again from there (from the measured state). The run ends at the end of the plan in effect
