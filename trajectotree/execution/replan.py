@@ -587,11 +587,25 @@ def replan(
     if new.trajectory is None or not np.isfinite(ready[0]) or not (solved.partial or new.success):
         outcome = ReplanOutcome.FIRST_SEGMENT_LATE if solved.late else ReplanOutcome.FIRST_SEGMENT_FAILED
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
-        return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None
+        event = dataclasses.replace(event, compute_s=total, search_s=new.search_time_s, **first_segment_work(new))
+        return event, None
     outcome = ReplanOutcome.PLANNED if new.success else ReplanOutcome.PARTIAL
     event = ReplanEvent(t_switch, reason, mu, mass, ready[0], t_switch + ready[0], outcome, new.status)
-    event = dataclasses.replace(event, segment_ready_s=tuple(ready), compute_s=total, search_s=new.search_time_s)
-    return event, solved
+    timing = dict(compute_s=total, search_s=new.search_time_s, **first_segment_work(new))
+    return dataclasses.replace(event, segment_ready_s=tuple(ready), **timing), solved
+
+
+def first_segment_work(new) -> dict:
+    """The ReplanEvent fields first_segment_s and first_segment_iterations of the plan `new`: its segment 0's
+    attempts, from its segment records (none, as in space: the fields' defaults)."""
+    records = getattr(new, "segments", ())
+    if not records:
+        return {}
+    attempts = records[0]["attempts"]
+    return dict(
+        first_segment_s=sum(a["time_s"] for a in attempts),
+        first_segment_iterations=sum(a["iterations"] for a in attempts),
+    )
 
 
 def out_of_time(refusal) -> bool:

@@ -192,7 +192,7 @@ def plan_keyframes(
             first_deadline_s=first_segment_deadline_s,
         )
         if not pieces[0].success:  # the rest is not solved: nothing of this plan can be executed
-            return _first_segment_failed(scene, goal, contact_plan, config, search_time, pieces[0], ready, t0)
+            return _first_segment_failed(scene, goal, contact_plan, config, search_time, attempts, ready, t0)
     else:
         pieces, attempts = solve_segments(
             contact_plan, config, executor, workers, scene=scene, log_observer=log_observer
@@ -241,8 +241,10 @@ def plan_keyframes(
     )
 
 
-def _first_segment_failed(scene, goal, contact_plan, config, search_time, first, ready, t0) -> PlanResult:
-    """The PlanResult of a first-segment-first plan whose first segment failed after its retries."""
+def _first_segment_failed(scene, goal, contact_plan, config, search_time, attempts, ready, t0) -> PlanResult:
+    """The PlanResult of a first-segment-first plan whose first segment failed after its retries (`attempts`:
+    segment 0's, which its segment records list)."""
+    first = attempts[0][-1]
     why = first.status if not first.converged else f"physics check failed: {first.check.reason}"
     return PlanResult(
         method="trajectotree",
@@ -261,6 +263,7 @@ def _first_segment_failed(scene, goal, contact_plan, config, search_time, first,
         violations=first.violations,
         config=config,
         formulation="keyframes",
+        segments=segment_records(attempts, [first]),
         segment_ready_s=ready,
     )
 
