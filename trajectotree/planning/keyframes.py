@@ -316,7 +316,7 @@ def solve_first_segment_first(
     for s in range(n - 1):  # the rest's segment s is the plan's s + 1
         failed = failed or not rest[s].success
         ready.append(math.inf if failed else max(r.finished_s for r in rest_attempts[s]) - since)
-    shifted = {}  # id -> the attempt with the plan's node numbers (a joint attempt is listed under each segment)
+    shifted = {}  # id -> the attempt with the plan's node numbers (a piece is its chain's last attempt: one copy)
 
     def moved(r: PieceResult) -> PieceResult:
         return shifted.setdefault(id(r), dataclasses.replace(r, first=r.first + 1, last=r.last + 1))
