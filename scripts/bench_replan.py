@@ -90,6 +90,25 @@ def print_runs(runs: list[dict], sim_mu: float, label: str) -> None:
                 f"{label}: replan latency over {len(values)} ({name}): median {np.median(values):.3f} s, "
                 f"p95 {np.percentile(values, 95):.3f} s, max {np.max(values):.3f} s"
             )
+    print_split([e for run in runs if run["planned"] for e in run["replans"]], label)
+
+
+def print_split(events: list[dict], label: str) -> None:
+    """Per outcome, medians of the latency and its parts: the search, the first segment's attempts (their
+    builds and IPOPT solves; the iterations) and the rest (the start's checks, the pool, the physics check).
+    Events of a tree that does not record a part count it as 0."""
+    for outcome in sorted({e["outcome"] for e in events}):
+        rows = [e for e in events if e["outcome"] == outcome]
+        part = {
+            name: np.array([e.get(name) or 0.0 for e in rows]) for name in ("latency_s", "search_s", "first_segment_s")
+        }
+        other = part["latency_s"] - part["search_s"] - part["first_segment_s"]
+        iterations = np.median([e.get("first_segment_iterations") or 0 for e in rows])
+        print(
+            f"{label}: {outcome} ({len(rows)}): latency {np.median(part['latency_s']):.3f} s = search "
+            f"{np.median(part['search_s']):.3f} + first segment {np.median(part['first_segment_s']):.3f} "
+            f"({iterations:.0f} iterations) + other {np.median(other):.3f} (medians)"
+        )
 
 
 def runs_in(tree: Path, plan_dir: str, sim_mu: float) -> list[dict]:

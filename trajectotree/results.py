@@ -326,6 +326,9 @@ class ReplanEvent:
     segment_ready_s: tuple[float, ...] = ()
     compute_s: float = float("nan")  # s, wall-clock time of the whole replan (every segment of a new plan)
     search_s: float = float("nan")  # s, of latency_s, the contact search's (nan: none ran)
+    # s, of latency_s, the new plan's first segment's attempts (their programs' builds and IPOPT solves; nan: none ran)
+    first_segment_s: float = float("nan")
+    first_segment_iterations: int = 0  # IPOPT iterations of those attempts
     # s, simulated time of the state the new plan starts from: the next node's (its planned state) or time_s (the
     # measured state); nan: not recorded
     start_s: float = float("nan")
@@ -350,6 +353,8 @@ class ReplanEvent:
             "segment_ready_s": [t if math.isfinite(t) else None for t in self.segment_ready_s],
             "compute_s": self.compute_s if math.isfinite(self.compute_s) else None,
             "search_s": self.search_s if math.isfinite(self.search_s) else None,
+            "first_segment_s": self.first_segment_s if math.isfinite(self.first_segment_s) else None,
+            "first_segment_iterations": self.first_segment_iterations,
             "start_s": self.start_s if math.isfinite(self.start_s) else None,
         }
 

@@ -34,9 +34,9 @@ time has passed in simulated time after the update that started it. From the nex
 compute time exceeds the simulated time to that node is refused as late; from the measured state, the
 plan swapped in at the update's time t_switch holds the measured state (with the old plan's forces at
 the node) until t_switch + that time, as the hand would hold while a real planner ran. Each later
-segment begins no earlier than its own measured readiness (the last attempt of it and of its two
-neighbours, whose joint retries could replace it), counted from the same update, so the hand holds at a
-node while a segment is not ready. A start the planner refuses, a search without a plan (in time or at
+segment begins no earlier than its own measured readiness (its own last attempt: no joint retry of a
+neighbour replaces it, keyframes.solve_first_segment_first), counted from the same update, so the hand
+holds at a node while a segment is not ready. A start the planner refuses, a search without a plan (in time or at
 all) or a first segment that fails (or is not solved in time) is recorded with its typed reason
 (results.ReplanOutcome, the refusal); a plan whose later segment failed is executed up to that segment
 and planned again from there (from the measured state). The run ends at the end of the plan in effect
@@ -587,11 +587,25 @@ def replan(
     if new.trajectory is None or not np.isfinite(ready[0]) or not (solved.partial or new.success):
         outcome = ReplanOutcome.FIRST_SEGMENT_LATE if solved.late else ReplanOutcome.FIRST_SEGMENT_FAILED
         event = ReplanEvent(t_switch, reason, mu, mass, total, t_switch + total, outcome, new.status)
-        return dataclasses.replace(event, compute_s=total, search_s=new.search_time_s), None
+        event = dataclasses.replace(event, compute_s=total, search_s=new.search_time_s, **first_segment_work(new))
+        return event, None
     outcome = ReplanOutcome.PLANNED if new.success else ReplanOutcome.PARTIAL
     event = ReplanEvent(t_switch, reason, mu, mass, ready[0], t_switch + ready[0], outcome, new.status)
-    event = dataclasses.replace(event, segment_ready_s=tuple(ready), compute_s=total, search_s=new.search_time_s)
-    return event, solved
+    timing = dict(compute_s=total, search_s=new.search_time_s, **first_segment_work(new))
+    return dataclasses.replace(event, segment_ready_s=tuple(ready), **timing), solved
+
+
+def first_segment_work(new) -> dict:
+    """The ReplanEvent fields first_segment_s and first_segment_iterations of the plan `new`: its segment 0's
+    attempts, from its segment records (none, as in space: the fields' defaults)."""
+    records = getattr(new, "segments", ())
+    if not records:
+        return {}
+    attempts = records[0]["attempts"]
+    return dict(
+        first_segment_s=sum(a["time_s"] for a in attempts),
+        first_segment_iterations=sum(a["iterations"] for a in attempts),
+    )
 
 
 def out_of_time(refusal) -> bool:

@@ -33,7 +33,8 @@ and no segment waits for a round of the others' (issue 35: rounds made every ret
 slowest segment). One whose chain still fails is solved with the joint formulation over it and
 its neighbours ("joint": nodes s-1..s+2, ends still fixed at those nodes), which frees the two
 keyframes next to it, and if that fails too, so again with its pinned fingers held harder
-("strict"). The L1 penalty on a pinned fingertip's drift off its contact
+("strict"); not in a plan executed while it is solved (solve_first_segment_first), whose segments
+may be executing by then. The L1 penalty on a pinned fingertip's drift off its contact
 is exact only above the pinning constraint's multiplier; below it a fixed finger may drift 1 mm
 and push from there (goal pi/2, the demo's: 9.35 N from 0.19 mm). As the default for every
 segment that weight doubled the iterations on 24 seed-0 goals and broke one, hence only here.
@@ -85,11 +86,12 @@ def solve_segments(
     scene: Scene | None = None,
     log_observer: LogObserver | None = None,
     deadline: float | None = None,
+    joint_retries: bool = True,
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]]]:
     """(the pieces to stitch, in order; every attempt per segment): each segment's chain of
-    attempts (piece.solve_chain), then the joint retries of the segments whose chain failed;
-    pieces solved in this process use `scene` when given (run_pieces). With a `deadline` (a
-    time.perf_counter() value) each solve stops there and no retry starts after it."""
+    attempts (piece.solve_chain), then, with `joint_retries`, the joint retries of the segments
+    whose chain failed; pieces solved in this process use `scene` when given (run_pieces). With a
+    `deadline` (a time.perf_counter() value) each solve stops there and no retry starts after it."""
     n = len(plan.nodes) - 1
     mu = mu_plan(config.scene, config.search)
 
@@ -104,7 +106,7 @@ def solve_segments(
     chains = run_chains([task(s, s + 1, "keyframes") for s in range(n)], executor, workers, scene, log_observer)
     attempts = {s: list(chain) for s, chain in enumerate(chains)}
     pieces = {s: chain[-1] for s, chain in enumerate(chains)}  # keyed by each piece's first node
-    for kind in ("joint", "strict"):
+    for kind in ("joint", "strict") if joint_retries else ():
         if late():
             break
         failed = [s for s, p in sorted(pieces.items()) if not p.success]  # single segments: a joint piece passed
@@ -192,7 +194,7 @@ def plan_keyframes(
             first_deadline_s=first_segment_deadline_s,
         )
         if not pieces[0].success:  # the rest is not solved: nothing of this plan can be executed
-            return _first_segment_failed(scene, goal, contact_plan, config, search_time, pieces[0], ready, t0)
+            return _first_segment_failed(scene, goal, contact_plan, config, search_time, attempts, ready, t0)
     else:
         pieces, attempts = solve_segments(
             contact_plan, config, executor, workers, scene=scene, log_observer=log_observer
@@ -241,8 +243,10 @@ def plan_keyframes(
     )
 
 
-def _first_segment_failed(scene, goal, contact_plan, config, search_time, first, ready, t0) -> PlanResult:
-    """The PlanResult of a first-segment-first plan whose first segment failed after its retries."""
+def _first_segment_failed(scene, goal, contact_plan, config, search_time, attempts, ready, t0) -> PlanResult:
+    """The PlanResult of a first-segment-first plan whose first segment failed after its retries (`attempts`:
+    segment 0's, which its segment records list)."""
+    first = attempts[0][-1]
     why = first.status if not first.converged else f"physics check failed: {first.check.reason}"
     return PlanResult(
         method="trajectotree",
@@ -261,6 +265,7 @@ def _first_segment_failed(scene, goal, contact_plan, config, search_time, first,
         violations=first.violations,
         config=config,
         formulation="keyframes",
+        segments=segment_records(attempts, [first]),
         segment_ready_s=ready,
     )
 
@@ -278,14 +283,14 @@ def solve_first_segment_first(
 ) -> tuple[list[PieceResult], dict[int, list[PieceResult]], tuple[float, ...]]:
     """solve_segments for a plan that is executed while it is being solved (replanning): segment 0
     first, alone, in this process (its retries too: restart, links, strict), then, if it passed,
-    segments 1.. as a plan of their own (so that no joint retry reaches back into segment 0, which is
-    executing by then) on `executor` / `workers`. Also returns when each segment was ready, in s after
-    `since` (a time.perf_counter() value), inf for one that cannot be executed: segment 0 when its
-    last attempt came back; segment s >= 1 when the last attempt of segments s-1, s and s+1 (of the
-    rest) came back, since a joint retry of a failed neighbour replaces it; after the first segment
-    that failed, none (an executor cannot skip a segment). Segment 0 must be ready within
-    `first_deadline_s` of `since` (solve_segments' deadline: its attempts stop there), so the hand
-    does not hold for long."""
+    segments 1.. on `executor` / `workers`, each with its own chain of attempts and no joint retry
+    (one would replace a segment that may be executing by then: a plan whose chain failed is executed
+    up to that segment). Also returns when each segment was ready, in s after `since` (a
+    time.perf_counter() value), inf for one that cannot be executed: each segment when its own last
+    attempt came back (no neighbour's retry replaces it, so none waits for a neighbour: issue 35's
+    mid-way holds); after the first segment that failed, none (an executor cannot skip a segment).
+    Segment 0 must be ready within `first_deadline_s` of `since` (solve_segments' deadline: its
+    attempts stop there), so the hand does not hold for long."""
     deadline = None if first_deadline_s is None else since + first_deadline_s
     first, first_attempts = solve_segments(
         dataclasses.replace(plan, nodes=plan.nodes[:2]),
@@ -307,14 +312,13 @@ def solve_first_segment_first(
         workers,
         scene=scene,
         log_observer=log_observer,
+        joint_retries=False,
     )
     failed = False
     for s in range(n - 1):  # the rest's segment s is the plan's s + 1
-        final = next(p for p in rest if p.first <= s < p.last)
-        failed = failed or not final.success
-        settled = [r.finished_s for j in (s - 1, s, s + 1) for r in rest_attempts.get(j, ())]
-        ready.append(math.inf if failed else max(settled) - since)
-    shifted = {}  # id -> the attempt with the plan's node numbers (a joint attempt is listed under each segment)
+        failed = failed or not rest[s].success
+        ready.append(math.inf if failed else max(r.finished_s for r in rest_attempts[s]) - since)
+    shifted = {}  # id -> the attempt with the plan's node numbers (a piece is its chain's last attempt: one copy)
 
     def moved(r: PieceResult) -> PieceResult:
         return shifted.setdefault(id(r), dataclasses.replace(r, first=r.first + 1, last=r.last + 1))

@@ -28,7 +28,7 @@ from trajectotree.config import CitoConfig, SceneConfig
 from trajectotree.contact_plan import ContactPlan
 from trajectotree.planning.physics import ObjectModel, check_physics, contact_points, link_penetrations
 from trajectotree.results import FINGER_OVERLAP_TOL, LINK_PENETRATION_TOL, PhysicsCheck, Trajectory
-from trajectotree.scene.plant import Scene, build_scene
+from trajectotree.scene.plant import Scene, build_scene, plant_key
 
 WORKER_SCENES = 4  # scenes a worker process keeps built (a pool usually serves the plans of one scene)
 STRICT_PINNING = 100.0  # a "strict" attempt's factor on cito.weight_contact_slack (a stricter program)
@@ -119,11 +119,16 @@ def trajectory(program, sol, scene: Scene) -> Trajectory:
     )
 
 
-@functools.lru_cache(maxsize=WORKER_SCENES)
 def worker_scene(config: SceneConfig) -> Scene:
-    """The scene a worker process solves `config`'s pieces in, built on its first piece and kept
-    for the next ones (a forked worker inherits the ones its parent built)."""
-    return build_scene(config)
+    """The scene a worker process solves `config`'s pieces in, on the plant built for the first piece of
+    its plant_key and kept for the next ones (a forked worker inherits the ones its parent built): a
+    replan's pieces (a new start pose, new estimates) plan on the plant of the plan before."""
+    return _worker_plant(plant_key(config)).for_planning(config)
+
+
+@functools.lru_cache(maxsize=WORKER_SCENES)
+def _worker_plant(key: SceneConfig) -> Scene:
+    return build_scene(key)
 
 
 def finger_pairs(task: PieceTask, scene: Scene) -> tuple:

@@ -22,7 +22,7 @@ from trajectotree.io import load_start
 from trajectotree.planning.segment_pool import check_workers
 from trajectotree.planning.start import start_config
 from trajectotree.results import check_goal, check_method
-from trajectotree.scene.plant import Scene, build_scene, describe_object
+from trajectotree.scene.plant import Scene, build_scene, describe_object, plant_key
 from trajectotree.search.initial_grasp import GraspCandidates, GraspTables, initial_grasp_candidates
 from trajectotree.search.payload import payload
 from trajectotree.search.workspace import check_goal_position
@@ -36,7 +36,7 @@ class PlanRequest:
     method: str
     goal: GoalPose
     config: Config  # with a start: rooted at its pose and grasp (planning.start.start_config)
-    scene: Scene  # built from config.scene
+    scene: Scene  # config.scene's (with a start on the plant of the scene given: Scene.for_planning)
     start: StartState | None
     segment_workers: int | None
     # the object is heavier than three fingers hold while the fourth lets go: only plans that
@@ -101,7 +101,8 @@ def check_plan_request(
     scene = scene or build_scene(config.scene)
     if start is not None:  # the scene given is the object's, for the start's contacts
         config = start_config(scene, start, config)
-        scene = build_scene(config.scene)
+        same_plant = plant_key(config.scene) == plant_key(scene.config)
+        scene = scene.for_planning(config.scene) if same_plant else build_scene(config.scene)
     elif scene.config != config.scene:
         raise ConfigError("scene was built from a different SceneConfig than config.scene")
     check_cito_hand(scene)
