@@ -68,6 +68,9 @@ def three_segments():
         "controller.replan.theta_error": 1e-4,
         "controller.replan.position_error": 1e-5,
         "controller.replan.max_replans": 1,
+        # the deadlines a 2.4 s segment allows, not the 1.2 s ones' defaults: the test is about the next node
+        "controller.replan.search_deadline_s": 1.0,
+        "controller.replan.first_segment_deadline_s": 2.0,
     }
     return result, with_values(result.config, tight)
 

@@ -193,11 +193,14 @@ class ReplanConfig:
     measured_start_on_error: bool = flag(False)
     # A replan's wall-clock budget for its contact search (its search.time_budget_s; from the next node at most
     # this too, so the latency stays bounded); a search without a plan by then is refused (the old plan goes on).
-    search_deadline_s: float = ranged(0.5, "s", 0.0, 60.0, low_open=True)
+    # 0.25 s and the first segment's 0.37 s keep a replan's latency p95 within 0.4 s (issue 35): on 20 paper goals
+    # at friction 0.4 the same 5 drops as at 0.5 s and 1.0 s, 26 planned replans instead of 32 (a search that needs
+    # more than 0.25 s rarely finds a plan: docs/measurements.md, "Replanning latency: where a replan's time goes").
+    search_deadline_s: float = ranged(0.25, "s", 0.0, 60.0, low_open=True)
     # and its first segment must be solved (all its attempts) this long after the state was measured, the search
     # included, or it is refused too: the hand holds no longer than about this, less than a segment lasts
-    # (cito.knots_per_segment x cito.dt, 1.2 s)
-    first_segment_deadline_s: float = ranged(1.0, "s", 0.0, 600.0, low_open=True)
+    # (cito.knots_per_segment x cito.dt, 1.2 s); the first segment's IPOPT takes 0.12-0.3 s (15 iterations)
+    first_segment_deadline_s: float = ranged(0.37, "s", 0.0, 600.0, low_open=True)
     # In space a plan (its search, then every segment at once) takes 5-30 s, far more than a segment lasts (1 s): a
     # replan there always plans from the measured state, the hand holding, its search given this (wall clock) ...
     space_search_deadline_s: float = ranged(30.0, "s", 0.0, 600.0, low_open=True)
