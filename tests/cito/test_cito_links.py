@@ -192,9 +192,11 @@ def test_segment_whose_link_cut_the_box_is_clear_with_the_rows(scene, goal_plan)
 
 @pytest.mark.slow
 def test_on_demand_that_segment_alone_is_solved_again_with_the_rows(goal_plan):
-    """On demand (the default) segment 5 alone is solved again with the rows, and every segment of
-    GOAL's plan ends clear of the box: all nine solved (seconds; the quick suite sees the "links"
-    attempt on tests/planning/test_keyframes.py's two-segment plan)."""
-    pieces, attempts = solve_segments(goal_plan, CONFIG, workers=1)
+    """On demand segment 5 alone is solved again with the rows, and every segment of GOAL's plan ends
+    clear of the box: all nine solved (seconds; the quick suite sees the "links" attempt on
+    tests/planning/test_keyframes.py's two-segment plan). Without the rows predicted before the first
+    solve (cito.link_rows_predicted, which gives this segment its rows at once: test_link_rows_predicted)."""
+    on_demand = dataclasses.replace(CONFIG, cito=dataclasses.replace(CONFIG.cito, link_rows_predicted=False))
+    pieces, attempts = solve_segments(goal_plan, on_demand, workers=1)
     assert [r.kind for r in attempts[SEGMENT]] == ["keyframes", "links"] and all(p.success for p in pieces)
     assert all(p.check.link_penetration_m <= 1e-3 for p in pieces)
