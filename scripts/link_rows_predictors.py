@@ -23,6 +23,7 @@ from trajectotree.cito.knot import BodyParams, KnotRows
 from trajectotree.cito.transition import piece_spec
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.physics import link_penetrations
+from trajectotree.planning.piece import straight_path_link_depths
 from trajectotree.planning.planners import plan
 from trajectotree.scene.plant import build_scene
 from trajectotree.search.initial_grasp import GraspTables
@@ -43,7 +44,7 @@ def predictors(contact_plan, s: int, scene, body, config: Config) -> dict[str, f
     return {
         "guess": float(link_penetrations(guess.x, guess.q, scene.fingers, shape)[1:-1].max()),
         "straight": float(link_penetrations(x, q, scene.fingers, shape)[1:-1].max()),
-        "at_start": float(link_penetrations(np.tile(n0.object_pose, (len(u), 1)), q, scene.fingers, shape).max()),
+        "at_start": float(straight_path_link_depths(n0, n1, spec.segment_length, scene).max()),
     }
 
 
@@ -53,11 +54,13 @@ def main() -> None:
     args = parser.parse_args()
     goals = [float(g) for g in open(args.goal_list_file).read().split()]
     config = Config()
+    # the first solves without rows, as before cito.link_rows_predicted: which segments then need the links retry
+    unpredicted = dataclasses.replace(config, cito=dataclasses.replace(config.cito, link_rows_predicted=False))
     scene, tables = build_scene(config.scene), GraspTables()
     body = BodyParams(scene, config.cito.sdf_sharpness, mu=mu_plan(config.scene, config.search))
     need, values = [], []
     for goal in goals:
-        result = plan(goal=goal, config=config, scene=scene, segment_workers=1, grasp_tables=tables)
+        result = plan(goal=goal, config=unpredicted, scene=scene, segment_workers=1, grasp_tables=tables)
         for s, record in enumerate(result.segments):
             need.append(any(a["kind"] == "links" for a in record["attempts"]))
             values.append(predictors(result.contact_plan, s, scene, body, config))

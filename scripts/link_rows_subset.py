@@ -21,11 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from trajectotree.cito.guess import rest_to_rest_progress
 from trajectotree.cito.transition import piece_spec
 from trajectotree.config import Config, mu_plan
 from trajectotree.planning.physics import link_penetrations
-from trajectotree.planning.piece import PieceTask, overlaps, predicted_link_fingers, solve_piece
+from trajectotree.planning.piece import (
+    PieceTask,
+    overlaps,
+    predicted_link_fingers,
+    solve_piece,
+    straight_path_link_depths,
+)
 from trajectotree.planning.planners import plan
 from trajectotree.results import LINK_PENETRATION_TOL
 from trajectotree.scene.plant import build_scene
@@ -34,11 +39,9 @@ from trajectotree.search.initial_grasp import GraspTables
 
 def flagged_fingers(contact_plan, s: int, scene, config: Config) -> tuple[int, ...]:
     """The fingers whose links the straight joint path of segment s, object at node s's pose, puts inside."""
-    n0, n1 = contact_plan.nodes[s], contact_plan.nodes[s + 1]
     spec = piece_spec(contact_plan, s, s + 1, radius=scene.tip_radius, config=config.cito)
-    u = rest_to_rest_progress(spec.segment_length)
-    q = n0.q + np.outer(u, n1.q - n0.q)
-    depth = link_penetrations(np.tile(n0.object_pose, (len(u), 1)), q, scene.fingers, config.scene.shape)
+    nodes = contact_plan.nodes[s], contact_plan.nodes[s + 1]
+    depth = straight_path_link_depths(*nodes, spec.segment_length, scene)
     return tuple(int(i) for i in np.flatnonzero(depth.max(axis=(0, 2)) > 0.0))
 
 
@@ -74,6 +77,8 @@ def main() -> None:
     args = parser.parse_args()
     goals = [float(g) for g in open(args.goal_list_file).read().split()]
     config = Config()
+    # the first solves without rows, as before cito.link_rows_predicted: which segments then need the links retry
+    unpredicted = dataclasses.replace(config, cito=dataclasses.replace(config.cito, link_rows_predicted=False))
     scene, tables = build_scene(config.scene), GraspTables()
     mu = mu_plan(config.scene, config.search)
     rows = []
@@ -82,7 +87,7 @@ def main() -> None:
         rows = pickle.loads(cache.read_bytes())
         goals = []
     for goal in goals:
-        result = plan(goal=goal, config=config, scene=scene, segment_workers=1, grasp_tables=tables)
+        result = plan(goal=goal, config=unpredicted, scene=scene, segment_workers=1, grasp_tables=tables)
         for s, record in enumerate(result.segments):
             need = any(a["kind"] == "links" for a in record["attempts"])
             fingers = flagged_fingers(result.contact_plan, s, scene, config)

@@ -187,20 +187,25 @@ def predicted_link_fingers(task: PieceTask, scene: Scene) -> tuple[int, ...]:
     the straight joint path between its two nodes, the object held at the first node's pose, puts a link
     inside the object, that path's fingers and those whose links are within NEAR_NODE_M of it at either node."""
     c = task.cito
-    if task.kind != "keyframes" or task.last != task.first + 1 or not (c.link_rows and c.link_rows_on_demand):
-        return ()
-    if not c.link_rows_predicted:
+    single = task.kind == "keyframes" and task.last == task.first + 1
+    if not (single and c.link_rows and c.link_rows_on_demand and c.link_rows_predicted):
         return ()
     n0, n1 = task.plan.nodes[task.first], task.plan.nodes[task.last]
-    u = rest_to_rest_progress(c.knots_per_segment)  # the segment's knots (piece_spec)
-    q = n0.q + np.outer(u, n1.q - n0.q)
-    depth = link_penetrations(np.tile(n0.object_pose, (len(u), 1)), q, scene.fingers, scene.config.shape)
+    depth = straight_path_link_depths(n0, n1, c.knots_per_segment, scene)  # the segment's knots (piece_spec)
     on_path = set(np.flatnonzero(depth.max(axis=(0, 2)) > 0.0))
     if not on_path:
         return ()
     body = BodyParams(scene, c.sdf_sharpness, mu=task.mu)
     near = {i for i in range(scene.num_fingers) if _node_clearance(body, i, (n0, n1)) < NEAR_NODE_M}
     return tuple(int(i) for i in sorted(on_path | near))
+
+
+def straight_path_link_depths(n0, n1, knots: int, scene: Scene) -> np.ndarray:
+    """(knots, F, L) m, how deep each finger's links are inside the object (physics.link_penetrations) along the
+    straight joint-space path from node n0 to node n1 under the rest-to-rest time law, the object held at n0's pose."""
+    u = rest_to_rest_progress(knots)
+    q = n0.q + np.outer(u, n1.q - n0.q)
+    return link_penetrations(np.tile(n0.object_pose, (len(u), 1)), q, scene.fingers, scene.config.shape)
 
 
 def _node_clearance(body: BodyParams, finger: int, nodes) -> float:
